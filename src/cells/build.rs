@@ -1,0 +1,445 @@
+//! Rasterization of the shape into the adaptive complex (paper §5).
+//!
+//! 1. The grid: finest cells of the user's size `S`; `max_level` levels above them (level-0 cells
+//!    of size `S·2^max_level`); the grid is centered on the input's bounding box with at least one
+//!    empty finest cell of margin on every side, so the exterior is connected around the shape.
+//! 2. Occupancy at the finest level: the cell of every sample point, and every cell a triangle
+//!    overlaps (exact test, so large triangles crossing many cells leave no gaps).
+//! 3. Inside/outside of the empty finest cells by [`classify_inside`].
+//! 4. A pyramid of states from the finest level up; leaves are emitted top-down: a cell that is
+//!    all inside is an interior leaf at the coarsest level where that holds, a cell with occupied
+//!    descendants is split down to `max_level`, a cell all outside is dropped.
+//!
+//! The finest level is held as a dense byte grid; that bounds the extent/cell-size ratio (about
+//! 2·10⁹ finest cells), which [`build`] checks up front. Streaming occupancy for inputs larger
+//! than memory is a later stage's job; this one takes the samples in memory.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+/// How empty cells are classified.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Inside {
+    /// Exterior flood fill on the finest grid: an empty cell is inside when no path of empty
+    /// face-adjacent cells leads from it to the grid's border.
+    #[default]
+    Flood,
+    /// Keep occupied cells only (a shell; paper Fig. 10 right).
+    None,
+}
+
+/// Parameters of [`build`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BuildParams {
+    /// Edge length of the finest cells, in input units. Default (`None`): the longest extent of
+    /// the input's bounding box / 32.
+    pub cell_size: Option<f64>,
+    /// Levels of the tree above the finest cells. Default (`None`): enough for one level-0 cell
+    /// to span the longest extent.
+    pub max_level: Option<u8>,
+    /// Inside classification of empty cells. Default: flood fill.
+    pub inside: Inside,
+}
+
+impl Default for BuildParams {
+    fn default() -> Self {
+        Self {
+            cell_size: None,
+            max_level: None,
+            inside: Inside::Flood,
+        }
+    }
+}
+
+/// What [`build`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BuildInfo {
+    /// Finest cells along each axis.
+    pub finest_dims: Vec<i64>,
+    /// Occupied finest cells.
+    pub occupied: usize,
+    /// Boundary leaves.
+    pub boundary_cells: usize,
+    /// Interior leaves (at any level).
+    pub interior_cells: usize,
+    /// Seconds spent.
+    pub seconds: f64,
+}
+
+const OUT: u8 = 0;
+const IN: u8 = 1;
+const OCCUPIED: u8 = 2;
+/// Largest finest grid [`build`] allocates (one byte per cell).
+const MAX_FINEST_CELLS: u128 = 1 << 31;
+
+/// Builds the cell complex of a shape given by `points` (world coordinates) and, in 3D,
+/// `triangles` (indices into `points`; pass `&[]` for a point cloud).
+pub fn build<const D: usize>(
+    points: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    params: &BuildParams,
+) -> Result<(CellComplex<D>, BuildInfo)> {
+    let start = Instant::now();
+    let grid = frame(points, params)?;
+    let dims = grid.dims(grid.max_level);
+    let mut state = vec![OUT; dims.iter().product::<i64>() as usize];
+    let index = |c: &[i64; D]| linear(c, &dims);
+
+    for p in points {
+        if let Some(k) = grid.locate(&(p - grid.origin), grid.max_level) {
+            state[index(&k.coord)] = OCCUPIED;
+        }
+    }
+    if D == 3 && !triangles.is_empty() {
+        for idx in triangle_cells(&grid, points, triangles)? {
+            state[idx] = OCCUPIED;
+        }
+    }
+    let occupied = state.iter().filter(|&&s| s == OCCUPIED).count();
+    classify_inside(&dims, &mut state, params.inside);
+
+    let pyramid = pyramid(&grid, state);
+    let mut leaves = Vec::new();
+    let mut stack: Vec<CellKey<D>> = Vec::new();
+    for_each_coord(&grid.dims0, |coord| stack.push(CellKey { level: 0, coord }));
+    while let Some(key) = stack.pop() {
+        let s = pyramid[key.level as usize][linear(&key.coord, &grid.dims(key.level))];
+        match s {
+            IN => leaves.push((key, CellKind::Interior)),
+            OCCUPIED if key.level == grid.max_level => leaves.push((key, CellKind::Boundary)),
+            OCCUPIED => stack.extend(key.children()),
+            _ => {}
+        }
+    }
+    leaves.sort_unstable_by_key(|(k, _)| *k);
+    let boundary_cells = leaves
+        .iter()
+        .filter(|(_, k)| *k == CellKind::Boundary)
+        .count();
+    let info = BuildInfo {
+        finest_dims: dims.to_vec(),
+        occupied,
+        boundary_cells,
+        interior_cells: leaves.len() - boundary_cells,
+        seconds: 0.0,
+    };
+    let complex = CellComplex::from_keys(grid, leaves);
+    Ok((
+        complex,
+        BuildInfo {
+            seconds: start.elapsed().as_secs_f64(),
+            ..info
+        },
+    ))
+}
+
+/// The grid for `points` under `params`.
+fn frame<const D: usize>(points: &[Vect<D>], params: &BuildParams) -> Result<Grid<D>> {
+    if points.is_empty() {
+        return Err(Error::Input("the input has no points".into()));
+    }
+    if let Some(i) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+        return Err(Error::Input(format!(
+            "point {i} has a coordinate that is not a finite number"
+        )));
+    }
+    let mut lo = points[0];
+    let mut hi = points[0];
+    for p in points {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let extent = hi - lo;
+    let longest = extent.max();
+    let size = match params.cell_size {
+        Some(s) if s.is_finite() && s > 0.0 => s,
+        Some(s) => return Err(Error::Param(format!("cell size {s} must be positive"))),
+        None if longest > 0.0 => longest / 32.0,
+        None => 1.0,
+    };
+    let levels = match params.max_level {
+        Some(l) if l <= 20 => l,
+        Some(l) => return Err(Error::Param(format!("max level {l} is above 20"))),
+        None => (longest / size).max(1.0).log2().ceil().min(20.0) as u8,
+    };
+    let block = (1i64 << levels) as f64;
+    let mut dims0 = [0i64; D];
+    let mut finest = 1u128;
+    for a in 0..D {
+        let needed = (extent[a] / size).ceil() + 2.0;
+        dims0[a] = (needed / block).ceil().max(1.0) as i64;
+        finest = finest.saturating_mul((dims0[a] as u128) << levels);
+    }
+    if finest > MAX_FINEST_CELLS {
+        return Err(Error::GridTooLarge {
+            cell_size: size,
+            cells: finest,
+        });
+    }
+    let size0 = size * block;
+    let origin = (lo + hi) * 0.5;
+    let lower = Vect::<D>::from_fn(|a, _| -0.5 * dims0[a] as f64 * size0);
+    Ok(Grid {
+        origin,
+        lower,
+        size0,
+        dims0,
+        max_level: levels,
+    })
+}
+
+/// Indices of the finest cells overlapped by `triangles`.
+fn triangle_cells<const D: usize>(
+    grid: &Grid<D>,
+    points: &[Vect<D>],
+    triangles: &[[u32; 3]],
+) -> Result<Vec<usize>> {
+    let dims = grid.dims(grid.max_level);
+    let size = grid.finest_size();
+    let n = points.len();
+    if let Some(t) = triangles.iter().find(|t| t.iter().any(|&v| v as usize >= n)) {
+        return Err(Error::Input(format!(
+            "a face refers to vertex {} but there are {n} vertices",
+            t.iter().max().unwrap_or(&0)
+        )));
+    }
+    let cells: Vec<usize> = triangles
+        .par_iter()
+        .flat_map_iter(|t| {
+            let tri: [[f64; 3]; 3] = t.map(|v| {
+                let p = points[v as usize] - grid.origin;
+                std::array::from_fn(|a| if a < D { p[a] } else { 0.0 })
+            });
+            let mut lo = [0i64; 3];
+            let mut hi = [0i64; 3];
+            for a in 0..D {
+                let (mn, mx) = tri
+                    .iter()
+                    .fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p[a]), h.max(p[a])));
+                lo[a] = (((mn - grid.lower[a]) / size).floor() as i64 - 1).max(0);
+                hi[a] = (((mx - grid.lower[a]) / size).floor() as i64 + 1).min(dims[a] - 1);
+            }
+            let mut out = Vec::new();
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        let c3 = [x, y, z];
+                        let coord: [i64; D] = std::array::from_fn(|a| c3[a]);
+                        let center = grid.center(&CellKey {
+                            level: grid.max_level,
+                            coord,
+                        });
+                        let c: [f64; 3] = std::array::from_fn(|a| center[a]);
+                        if triangle_box_overlap(&tri, c, 0.5 * size) {
+                            out.push(linear(&coord, &dims));
+                        }
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    Ok(cells)
+}
+
+/// Classifies the empty cells of a dense finest grid in place: `state` holds `2` for occupied
+/// cells and `0` elsewhere on entry; on return every empty cell is `0` (outside) or `1`
+/// (inside). This is the one place where inside/outside is decided; other classifiers (winding
+/// numbers for meshes) replace it here.
+pub fn classify_inside<const D: usize>(dims: &[i64; D], state: &mut [u8], mode: Inside) {
+    if mode == Inside::None {
+        return;
+    }
+    // Everything empty starts inside; the flood from the border marks the outside.
+    for s in state.iter_mut() {
+        if *s == OUT {
+            *s = IN;
+        }
+    }
+    let mut stack = Vec::new();
+    for_each_coord(dims, |c| {
+        if (0..D).any(|a| c[a] == 0 || c[a] == dims[a] - 1) {
+            let i = linear(&c, dims);
+            if state[i] == IN {
+                state[i] = OUT;
+                stack.push(c);
+            }
+        }
+    });
+    while let Some(c) = stack.pop() {
+        for a in 0..D {
+            for d in [-1, 1] {
+                let mut n = c;
+                n[a] += d;
+                if n[a] < 0 || n[a] >= dims[a] {
+                    continue;
+                }
+                let i = linear(&n, dims);
+                if state[i] == IN {
+                    state[i] = OUT;
+                    stack.push(n);
+                }
+            }
+        }
+    }
+}
+
+/// States of all levels, coarsest first: a cell is `IN`/`OUT` when all its finest descendants
+/// are, `OCCUPIED` otherwise (it must be split).
+fn pyramid<const D: usize>(grid: &Grid<D>, finest: Vec<u8>) -> Vec<Vec<u8>> {
+    let mut levels = vec![finest];
+    for level in (0..grid.max_level).rev() {
+        let dims = grid.dims(level);
+        let fine_dims = grid.dims(level + 1);
+        let fine = levels.last().expect("finest level present");
+        let mut coarse = vec![OUT; dims.iter().product::<i64>() as usize];
+        for_each_coord(&dims, |coord| {
+            let key = CellKey { level, coord };
+            let mut all = None;
+            let mut mixed = false;
+            for child in key.children() {
+                let s = fine[linear(&child.coord, &fine_dims)];
+                mixed |= s == OCCUPIED || all.is_some_and(|a| a != s);
+                all = Some(s);
+            }
+            coarse[linear(&coord, &dims)] = if mixed {
+                OCCUPIED
+            } else {
+                all.unwrap_or(OUT)
+            };
+        });
+        levels.push(coarse);
+    }
+    levels.reverse();
+    levels
+}
+
+#[inline]
+fn linear<const D: usize>(c: &[i64; D], dims: &[i64; D]) -> usize {
+    let mut i = 0i64;
+    for a in (0..D).rev() {
+        i = i * dims[a] + c[a];
+    }
+    i as usize
+}
+
+fn for_each_coord<const D: usize>(dims: &[i64; D], mut f: impl FnMut([i64; D])) {
+    if dims.iter().any(|&n| n <= 0) {
+        return;
+    }
+    let mut c = [0i64; D];
+    loop {
+        f(c);
+        let mut a = 0;
+        loop {
+            c[a] += 1;
+            if c[a] < dims[a] {
+                break;
+            }
+            c[a] = 0;
+            a += 1;
+            if a == D {
+                return;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn box_surface_points(n: usize, size: [f64; 3]) -> Vec<Vect<3>> {
+        // Dense samples on the six faces of an axis-aligned box at the origin.
+        let mut pts = Vec::new();
+        for a in 0..3 {
+            for side in [0.0, 1.0] {
+                for i in 0..=n {
+                    for j in 0..=n {
+                        let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+                        let mut p = [0.0; 3];
+                        p[a] = side * size[a];
+                        p[(a + 1) % 3] = u * size[(a + 1) % 3];
+                        p[(a + 2) % 3] = v * size[(a + 2) % 3];
+                        pts.push(Vect::<3>::from(p));
+                    }
+                }
+            }
+        }
+        pts
+    }
+
+    #[test]
+    fn closed_box_gets_interior_cells_and_validates() {
+        let pts = box_surface_points(60, [4.0, 4.0, 4.0]);
+        let params = BuildParams {
+            cell_size: Some(0.25),
+            ..Default::default()
+        };
+        let (complex, info) = build(&pts, &[], &params).unwrap();
+        complex.validate().unwrap();
+        assert!(info.interior_cells > 0);
+        // Interior cells are coarse: fewer than the finest interior count.
+        let coarse = complex
+            .cells
+            .iter()
+            .filter(|c| c.kind == CellKind::Interior && c.key.level < complex.grid.max_level)
+            .count();
+        assert!(coarse > 0);
+        // Every sample lies in a cell and the complex is one component.
+        assert!(pts.iter().all(|p| complex.locate(&(p - complex.grid.origin)).is_some()));
+        assert_eq!(complex.components().1, 1);
+        // The cells cover the box volume (boundary cells overhang by up to one layer).
+        let vol: f64 = complex.cells.iter().map(|c| c.volume()).sum();
+        assert!(vol > 64.0 && vol < 4.6f64.powi(3), "volume {vol}");
+    }
+
+    #[test]
+    fn shell_mode_has_no_interior() {
+        let pts = box_surface_points(40, [2.0, 2.0, 2.0]);
+        let params = BuildParams {
+            cell_size: Some(0.25),
+            inside: Inside::None,
+            ..Default::default()
+        };
+        let (_, info) = build(&pts, &[], &params).unwrap();
+        assert_eq!(info.interior_cells, 0);
+    }
+
+    #[test]
+    fn rejects_bad_input() {
+        assert!(build::<3>(&[], &[], &BuildParams::default()).is_err());
+        let nan = [Vect::<3>::new(f64::NAN, 0.0, 0.0)];
+        assert!(build(&nan, &[], &BuildParams::default()).is_err());
+        let tiny = BuildParams {
+            cell_size: Some(1e-9),
+            ..Default::default()
+        };
+        let pts = [Vect::<3>::zeros(), Vect::<3>::new(1.0, 1.0, 1.0)];
+        assert!(matches!(
+            build(&pts, &[], &tiny),
+            Err(Error::GridTooLarge { .. })
+        ));
+    }
+
+    #[test]
+    fn disjoint_parts_stay_separate_components() {
+        let mut pts = box_surface_points(20, [1.0, 1.0, 1.0]);
+        pts.extend(
+            box_surface_points(20, [1.0, 1.0, 1.0])
+                .into_iter()
+                .map(|p| p + Vect::<3>::new(3.0, 0.0, 0.0)),
+        );
+        let params = BuildParams {
+            cell_size: Some(0.2),
+            ..Default::default()
+        };
+        let (complex, _) = build(&pts, &[], &params).unwrap();
+        assert_eq!(complex.components().1, 2);
+    }
+}

@@ -1,0 +1,98 @@
+//! The library's error type. Every error names what is wrong and, where a file is involved, the
+//! file; the binary turns them into messages and exit codes.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in rigidcells.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An operating-system error on a file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A file's content is not what its format requires.
+    #[error("{path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A file has an extension rigidcells does not read or write.
+    #[error("{path}: unsupported format (expected .ply or .xyz)")]
+    UnsupportedFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// The edit spec is malformed.
+    #[error("{path}: {message}")]
+    Spec {
+        /// The spec file (or `<edit spec>` for an in-memory spec).
+        path: PathBuf,
+        /// What is wrong, with the line where known.
+        message: String,
+    },
+    /// A parameter is out of range.
+    #[error("invalid parameter: {0}")]
+    Param(String),
+    /// The input holds no samples, or samples that are not finite.
+    #[error("invalid input: {0}")]
+    Input(String),
+    /// The finest grid would be too large for memory.
+    #[error(
+        "the cell size {cell_size} gives a finest grid of {cells} cells over the input's extent; use a larger --cell-size"
+    )]
+    GridTooLarge {
+        /// The finest cell size.
+        cell_size: f64,
+        /// The number of finest cells the grid would need.
+        cells: u128,
+    },
+    /// The edit spec constrains nothing.
+    #[error(
+        "the edit spec has no constraint that selects any cell: add a [[fixed]], [[handle]], [[pin]] or [[target]] entry that touches the shape"
+    )]
+    NoConstraints,
+    /// A cell is claimed by two different hard constraints.
+    #[error(
+        "{first} and {second} both claim the cell at {at:?} (size {size}); move the regions apart or use a smaller --cell-size"
+    )]
+    ConstraintConflict {
+        /// The first constraint (e.g. `fixed #1`).
+        first: String,
+        /// The second constraint.
+        second: String,
+        /// The cell's center (input coordinates).
+        at: Vec<f64>,
+        /// The cell's edge length.
+        size: f64,
+    },
+    /// A numerical failure that damping could not repair.
+    #[error("solver failure: {0}")]
+    Solver(String),
+}
+
+/// `Result` with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl Error {
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A format error in `path`.
+    pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        Self::Format {
+            path: path.into(),
+            message: message.into(),
+        }
+    }
+}

@@ -1,0 +1,273 @@
+//! Rigid motions in 2D and 3D, and the one place where the two dimensions differ.
+//!
+//! Everything else in the crate is generic over `const D: usize` and asks [`Rigid`] for the
+//! handful of operations that depend on the dimension:
+//!
+//! - the angular part of a velocity: `ω ∈ ℝ³` in 3D (3 DoF), a scalar in 2D (1 DoF);
+//! - the linearized rotation `δ(R y) = ω × y` and its Jacobian with respect to `ω`;
+//! - the update `R ← polar(I + [ω]×) · R`, the projection of the affine step onto the
+//!   rotations (paper §4; Horn's shape matching of `A_i(C_i)` and `T_i(C_i)` reduces to this
+//!   polar decomposition for a box). `I + [ω]×` is a normal matrix whose polar rotation is the
+//!   rotation by `atan |ω|` about `ω`, so the projection is closed-form and caps a single step's
+//!   rotation below 90°, a natural damping of large Gauss-Newton steps;
+//! - the rotation nearest to a general linear map (polar decomposition; SVD in 3D, closed form
+//!   in 2D), used for handles with scale or a general affine matrix.
+
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3};
+
+/// A point or vector in `D` dimensions (f64).
+pub type Vect<const D: usize> = SVector<f64, D>;
+/// A `D × D` matrix (f64).
+pub type Mat<const D: usize> = SMatrix<f64, D, D>;
+
+/// Marker type for a supported dimension; see [`Rigid`].
+#[derive(Debug, Clone, Copy)]
+pub struct Dim<const D: usize>;
+
+/// The largest number of degrees of freedom of a rigid motion (3D: 3 translational + 3 rotational).
+pub const MAX_DOF: usize = 6;
+
+/// Dimension-specific operations on rigid motions. Implemented for `Dim<2>` and `Dim<3>`.
+pub trait Rigid<const D: usize>: Send + Sync + 'static {
+    /// Rotational degrees of freedom: 1 in 2D, 3 in 3D.
+    const ROT: usize;
+    /// Degrees of freedom of a free rigid motion: `D + ROT`.
+    const DOF: usize = D + Self::ROT;
+
+    /// The derivative of the rotated offset `y` with respect to each angular velocity component:
+    /// `∂(ω × y)/∂ω_r` for `r < ROT` (unused columns are zero).
+    fn cross_jacobian(y: &Vect<D>) -> [Vect<D>; 3];
+
+    /// `polar(I + [ω]×)`: the rotation by `atan |ω|` about `ω` (2D: by `atan ω`).
+    fn step_rotation(omega: &[f64]) -> Mat<D>;
+
+    /// The rotation nearest to `m` in the Frobenius norm (polar decomposition), with
+    /// determinant +1. Returns the identity for a matrix with no definite orientation.
+    fn nearest_rotation(m: &Mat<D>) -> Mat<D>;
+
+    /// The rotation by `radians` about `axis` (the axis is ignored in 2D). `axis` need not be
+    /// normalized; a zero axis gives the identity.
+    fn axis_angle(axis: &Vect<D>, radians: f64) -> Mat<D>;
+
+    /// The rotation angle of `r` in radians, in `[0, π]`.
+    fn angle(r: &Mat<D>) -> f64;
+
+    /// The determinant of `m`.
+    fn determinant(m: &Mat<D>) -> f64;
+
+    /// An axis and a signed angle with `axis_angle(axis, angle) == r` (2D: the axis is unused).
+    fn axis_angle_of(r: &Mat<D>) -> (Vect<D>, f64);
+}
+
+impl Rigid<2> for Dim<2> {
+    const ROT: usize = 1;
+
+    fn cross_jacobian(y: &Vect<2>) -> [Vect<2>; 3] {
+        [Vect::<2>::new(-y.y, y.x), Vect::<2>::zeros(), Vect::<2>::zeros()]
+    }
+
+    fn step_rotation(omega: &[f64]) -> Mat<2> {
+        rotation_2d(omega[0].atan())
+    }
+
+    fn nearest_rotation(m: &Mat<2>) -> Mat<2> {
+        // Polar factor of a 2×2 matrix: the rotation whose angle maximizes tr(Rᵀ M).
+        let (s, c) = (m[(1, 0)] - m[(0, 1)], m[(0, 0)] + m[(1, 1)]);
+        if s == 0.0 && c == 0.0 {
+            return Matrix2::identity();
+        }
+        rotation_2d(s.atan2(c))
+    }
+
+    fn axis_angle(_axis: &Vect<2>, radians: f64) -> Mat<2> {
+        rotation_2d(radians)
+    }
+
+    fn angle(r: &Mat<2>) -> f64 {
+        r[(1, 0)].atan2(r[(0, 0)]).abs()
+    }
+
+    fn determinant(m: &Mat<2>) -> f64 {
+        m.determinant()
+    }
+
+    fn axis_angle_of(r: &Mat<2>) -> (Vect<2>, f64) {
+        (Vect::<2>::zeros(), r[(1, 0)].atan2(r[(0, 0)]))
+    }
+}
+
+impl Rigid<3> for Dim<3> {
+    const ROT: usize = 3;
+
+    fn cross_jacobian(y: &Vect<3>) -> [Vect<3>; 3] {
+        // ω × y = −[y]× ω; the columns of −[y]× are e_r × y.
+        [
+            Vector3::new(0.0, -y.z, y.y),
+            Vector3::new(y.z, 0.0, -y.x),
+            Vector3::new(-y.y, y.x, 0.0),
+        ]
+    }
+
+    fn step_rotation(omega: &[f64]) -> Mat<3> {
+        let w = Vector3::new(omega[0], omega[1], omega[2]);
+        let n = w.norm();
+        if n == 0.0 {
+            return Matrix3::identity();
+        }
+        Self::axis_angle(&w, n.atan())
+    }
+
+    fn nearest_rotation(m: &Mat<3>) -> Mat<3> {
+        if !m.iter().all(|v| v.is_finite()) || m.norm() == 0.0 {
+            return Matrix3::identity();
+        }
+        let svd = m.svd(true, true);
+        let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
+            return Matrix3::identity();
+        };
+        let mut r = u * vt;
+        if r.determinant() < 0.0 {
+            // Flip the axis of the smallest singular value (nalgebra sorts them descending).
+            let mut u2 = u;
+            let k = (0..3)
+                .min_by(|&a, &b| svd.singular_values[a].total_cmp(&svd.singular_values[b]))
+                .unwrap_or(2);
+            u2.column_mut(k).neg_mut();
+            r = u2 * vt;
+        }
+        r
+    }
+
+    fn axis_angle(axis: &Vect<3>, radians: f64) -> Mat<3> {
+        let n = axis.norm();
+        if n == 0.0 || radians == 0.0 {
+            return Matrix3::identity();
+        }
+        let k = axis / n;
+        let (s, c) = radians.sin_cos();
+        let kx = Matrix3::new(0.0, -k.z, k.y, k.z, 0.0, -k.x, -k.y, k.x, 0.0);
+        Matrix3::identity() + kx * s + kx * kx * (1.0 - c)
+    }
+
+    fn angle(r: &Mat<3>) -> f64 {
+        ((r.trace() - 1.0) * 0.5).clamp(-1.0, 1.0).acos()
+    }
+
+    fn determinant(m: &Mat<3>) -> f64 {
+        m.determinant()
+    }
+
+    fn axis_angle_of(r: &Mat<3>) -> (Vect<3>, f64) {
+        let rot = nalgebra::Rotation3::from_matrix_unchecked(*r);
+        match rot.axis_angle() {
+            Some((axis, angle)) => (axis.into_inner(), angle),
+            None => (Vector3::x(), 0.0),
+        }
+    }
+}
+
+fn rotation_2d(theta: f64) -> Mat<2> {
+    let (s, c) = theta.sin_cos();
+    Matrix2::new(c, -s, s, c)
+}
+
+/// A rigid motion of one cell: `T(x) = R (x − c) + p`, with `c` the cell's rest center and `p`
+/// where the center goes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Motion<const D: usize> {
+    /// The rotation `R`.
+    pub rot: Mat<D>,
+    /// The deformed position `p = T(c)` of the rest center `c`.
+    pub pos: Vect<D>,
+}
+
+impl<const D: usize> Motion<D> {
+    /// The motion that leaves the cell centered at `center` in place.
+    pub fn rest(center: &Vect<D>) -> Self {
+        Self {
+            rot: Mat::<D>::identity(),
+            pos: *center,
+        }
+    }
+
+    /// `T(x) = R (x − c) + p` for the cell with rest center `center`.
+    #[inline]
+    pub fn apply(&self, center: &Vect<D>, x: &Vect<D>) -> Vect<D> {
+        self.rot * (x - center) + self.pos
+    }
+}
+
+/// An affine map `A(x) = L x + t`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Affine<const D: usize> {
+    /// The linear part `L`.
+    pub linear: Mat<D>,
+    /// The translation `t`.
+    pub translation: Vect<D>,
+}
+
+impl<const D: usize> Affine<D> {
+    /// The identity map.
+    pub fn identity() -> Self {
+        Self {
+            linear: Mat::<D>::identity(),
+            translation: Vect::<D>::zeros(),
+        }
+    }
+
+    /// `A(x) = L x + t`.
+    #[inline]
+    pub fn apply(&self, x: &Vect<D>) -> Vect<D> {
+        self.linear * x + self.translation
+    }
+
+    /// The rigid motion a cell with rest center `center` follows under this map (DESIGN §4):
+    /// its center goes to `A(c)` and it turns by the rotation nearest to `L`.
+    pub fn cell_motion(&self, center: &Vect<D>) -> Motion<D>
+    where
+        Dim<D>: Rigid<D>,
+    {
+        Motion {
+            rot: <Dim<D> as Rigid<D>>::nearest_rotation(&self.linear),
+            pos: self.apply(center),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_rotation_is_polar_of_linearized_step() {
+        let w = [0.3, -0.7, 0.2];
+        let lin = Matrix3::identity()
+            + Matrix3::new(0.0, -w[2], w[1], w[2], 0.0, -w[0], -w[1], w[0], 0.0);
+        let polar = <Dim<3> as Rigid<3>>::nearest_rotation(&lin);
+        let closed = <Dim<3> as Rigid<3>>::step_rotation(&w);
+        assert!((polar - closed).norm() < 1e-12);
+
+        let lin2 = Matrix2::new(1.0, -0.4, 0.4, 1.0);
+        let polar2 = <Dim<2> as Rigid<2>>::nearest_rotation(&lin2);
+        assert!((polar2 - <Dim<2> as Rigid<2>>::step_rotation(&[0.4])).norm() < 1e-12);
+    }
+
+    #[test]
+    fn cross_jacobian_matches_cross_product() {
+        let y = Vector3::new(0.3, -1.2, 2.0);
+        let w = Vector3::new(-0.5, 0.25, 1.5);
+        let j = <Dim<3> as Rigid<3>>::cross_jacobian(&y);
+        let lin = j[0] * w.x + j[1] * w.y + j[2] * w.z;
+        assert!((lin - w.cross(&y)).norm() < 1e-15);
+    }
+
+    #[test]
+    fn nearest_rotation_of_scaled_rotation() {
+        let r = <Dim<3> as Rigid<3>>::axis_angle(&Vector3::new(1.0, 2.0, -0.5), 2.5);
+        let got = <Dim<3> as Rigid<3>>::nearest_rotation(&(r * 3.0));
+        assert!((got - r).norm() < 1e-12);
+        assert!((<Dim<3> as Rigid<3>>::angle(&r) - 2.5).abs() < 1e-12);
+        let m = Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0);
+        assert!((<Dim<3> as Rigid<3>>::nearest_rotation(&m).determinant() - 1.0).abs() < 1e-12);
+    }
+}

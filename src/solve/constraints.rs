@@ -1,0 +1,347 @@
+//! Maps the edit spec onto the cells (DESIGN §4): "surface constraints mapped to the cells that
+//! intersect them".
+//!
+//! A cell gets a region's constraint when it holds a sample the region selects or, for the
+//! geometric regions (box, sphere, half-space), when its center lies in the region — so that a
+//! box around the end of a solid fixes the interior cells there too, not only the surface layer.
+//!
+//! - `fixed` and `handle` cells are prescribed (0 DoF); a cell claimed by two different hard
+//!   constraints is an error that names both and the cell.
+//! - a `pin` prescribes one point of the cell containing it; the cell may rotate about it.
+//! - a `target` adds a soft residual on the cell containing its `from` point. Its weight is
+//!   relative to the glue between two finest cells: `λ · S^(D−1)` with `S` the finest size, so a
+//!   weight of 1 pulls as hard as one face of glue whatever the units.
+//! - stiffness scales multiply on cells in several regions; a pair's scale is the geometric mean
+//!   of its cells' scales.
+//! - a connected component of cells with no constraint at all keeps its rest pose, with a
+//!   warning; no constrained cell anywhere is [`Error::NoConstraints`].
+//!
+//! Everything here is in the local frame of the complex.
+
+use crate::cells::CellComplex;
+use crate::error::{Error, Result};
+use crate::rigid::{Affine, Dim, Rigid, Vect};
+use crate::spec::{EditSpec, HandleMotion};
+
+/// What constrains a cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// Free: `D + ROT` degrees of freedom.
+    Free,
+    /// Fixed at its rest pose.
+    Fixed,
+    /// Follows handle `k` (an index into [`Constraints::handles`]).
+    Handle(u32),
+    /// Rotates about pin `k` (an index into [`Constraints::pins`]).
+    Pin(u32),
+    /// In a component without any constraint: kept at its rest pose.
+    Rest,
+}
+
+impl Role {
+    /// Whether the cell's motion is prescribed entirely (no degrees of freedom).
+    pub fn is_prescribed(&self) -> bool {
+        matches!(self, Self::Fixed | Self::Handle(_) | Self::Rest)
+    }
+}
+
+/// A handle in the local frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Handle<const D: usize> {
+    /// The motion as specified (input coordinates).
+    pub motion: HandleMotion<D>,
+    /// The pivot in input coordinates (the spec's, or the centroid of the selected samples).
+    pub pivot: Vect<D>,
+    /// The line of the spec entry.
+    pub line: usize,
+}
+
+/// A pin in the local frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PinLocal<const D: usize> {
+    /// The pinned point (local rest position).
+    pub point: Vect<D>,
+    /// Where it goes at full load (local).
+    pub to: Vect<D>,
+    /// The cell holding it.
+    pub cell: u32,
+}
+
+/// A soft target in the local frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetLocal<const D: usize> {
+    /// The point (local rest position).
+    pub from: Vect<D>,
+    /// Where it should go at full load (local).
+    pub to: Vect<D>,
+    /// The effective weight `λ · S^(D−1)`.
+    pub weight: f64,
+    /// The cell holding `from`.
+    pub cell: u32,
+}
+
+/// The edit spec resolved onto a cell complex.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Constraints<const D: usize> {
+    /// One role per cell.
+    pub roles: Vec<Role>,
+    /// Handles.
+    pub handles: Vec<Handle<D>>,
+    /// Pins.
+    pub pins: Vec<PinLocal<D>>,
+    /// Soft targets.
+    pub targets: Vec<TargetLocal<D>>,
+    /// Stiffness scale per cell.
+    pub stiffness: Vec<f64>,
+    /// The world position of the local frame's origin.
+    pub origin: Vect<D>,
+    /// Messages for the user (e.g. components kept at rest).
+    pub warnings: Vec<String>,
+}
+
+impl<const D: usize> Constraints<D>
+where
+    Dim<D>: Rigid<D>,
+{
+    /// The affine map of handle `k` at load fraction `f`, in the local frame.
+    pub fn handle_map(&self, k: usize, f: f64) -> Affine<D> {
+        let h = &self.handles[k];
+        let world = h.motion.at(f, &h.pivot);
+        // A_local(x) = A(x + o) − o.
+        Affine {
+            linear: world.linear,
+            translation: world.linear * self.origin + world.translation - self.origin,
+        }
+    }
+}
+
+/// Resolves `spec` onto `complex`. `points` are the samples in input coordinates; `classes`
+/// their LAS classes when the input has them.
+pub fn resolve<const D: usize>(
+    complex: &CellComplex<D>,
+    spec: &EditSpec<D>,
+    points: &[Vect<D>],
+    classes: Option<&[u8]>,
+) -> Result<Constraints<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let n = complex.len();
+    let origin = complex.grid.origin;
+    let mut owner: Vec<Option<(String, Role)>> = vec![None; n];
+    let mut stiffness = vec![1.0f64; n];
+    let mut warnings = Vec::new();
+    let uses_classes = spec
+        .fixed
+        .iter()
+        .map(|e| &e.region)
+        .chain(spec.handles.iter().map(|e| &e.region))
+        .chain(spec.stiffness.iter().map(|e| &e.region))
+        .any(|r| matches!(r, crate::spec::Region::Classification(_)));
+    if uses_classes && classes.is_none() {
+        return Err(Error::Param(
+            "a `classification` region needs an input with LAS classes".into(),
+        ));
+    }
+    let sample_cells: Vec<Option<usize>> = points
+        .iter()
+        .map(|p| complex.locate(&(p - origin)))
+        .collect();
+
+    // Cells selected by a region: through samples, or by center for geometric regions.
+    let select = |region: &crate::spec::Region<D>| -> (Vec<bool>, Vect<D>, usize) {
+        let mut hit = vec![false; n];
+        let mut sum = Vect::<D>::zeros();
+        let mut count = 0usize;
+        for (i, p) in points.iter().enumerate() {
+            if region.selects(i as u64, p, classes.map(|c| c[i])) {
+                sum += p;
+                count += 1;
+                if let Some(c) = sample_cells[i] {
+                    hit[c] = true;
+                }
+            }
+        }
+        if region.is_geometric() {
+            for (c, cell) in complex.cells.iter().enumerate() {
+                hit[c] |= region.contains_point(&(cell.center + origin));
+            }
+        }
+        (hit, sum, count)
+    };
+
+    let mut claim = |cell: usize, name: &str, role: Role| -> Result<()> {
+        match &owner[cell] {
+            Some((other, r)) if *r != role => Err(Error::ConstraintConflict {
+                first: other.clone(),
+                second: name.to_string(),
+                at: (complex.cells[cell].center + origin).iter().copied().collect(),
+                size: 2.0 * complex.cells[cell].half,
+            }),
+            _ => {
+                owner[cell] = Some((name.to_string(), role));
+                Ok(())
+            }
+        }
+    };
+
+    for (k, e) in spec.fixed.iter().enumerate() {
+        let name = format!("fixed #{} (line {})", k + 1, e.line);
+        let (hit, _, _) = select(&e.region);
+        if !hit.iter().any(|&h| h) {
+            warnings.push(format!("{name} selects no cell"));
+        }
+        for c in (0..n).filter(|&c| hit[c]) {
+            claim(c, &name, Role::Fixed)?;
+        }
+    }
+    let mut handles = Vec::new();
+    for (k, e) in spec.handles.iter().enumerate() {
+        let name = format!("handle #{} (line {})", k + 1, e.line);
+        let (hit, sum, count) = select(&e.region);
+        if !hit.iter().any(|&h| h) {
+            warnings.push(format!("{name} selects no cell"));
+        }
+        let cells_centroid = || {
+            let (s, m) = (0..n).filter(|&c| hit[c]).fold((Vect::<D>::zeros(), 0usize), |(s, m), c| {
+                (s + complex.cells[c].center + origin, m + 1)
+            });
+            s / m.max(1) as f64
+        };
+        let pivot = match e.value.pivot {
+            Some(p) if !e.value.from_matrix => p,
+            _ if count > 0 => sum / count as f64,
+            _ => cells_centroid(),
+        };
+        handles.push(Handle {
+            motion: e.value,
+            pivot,
+            line: e.line,
+        });
+        for c in (0..n).filter(|&c| hit[c]) {
+            claim(c, &name, Role::Handle(k as u32))?;
+        }
+    }
+    let locate = |x: &Vect<D>, what: &str, line: usize| {
+        complex.locate(&(x - origin)).ok_or_else(|| {
+            Error::Param(format!(
+                "{what} (line {line}) at {:?} lies outside every cell of the shape",
+                x.iter().collect::<Vec<_>>()
+            ))
+        })
+    };
+    let mut pins = Vec::new();
+    for (k, p) in spec.pins.iter().enumerate() {
+        let cell = locate(&p.point, "pin", p.line)?;
+        claim(cell, &format!("pin #{} (line {})", k + 1, p.line), Role::Pin(k as u32))?;
+        pins.push(PinLocal {
+            point: p.point - origin,
+            to: p.to - origin,
+            cell: cell as u32,
+        });
+    }
+    let glue = complex.grid.finest_size().powi(D as i32 - 1);
+    let targets = spec
+        .targets
+        .iter()
+        .map(|t| {
+            Ok(TargetLocal {
+                from: t.from - origin,
+                to: t.to - origin,
+                weight: t.weight * glue,
+                cell: locate(&t.from, "target", t.line)? as u32,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    for e in &spec.stiffness {
+        let (hit, _, _) = select(&e.region);
+        for c in (0..n).filter(|&c| hit[c]) {
+            stiffness[c] *= e.value;
+        }
+    }
+
+    let mut roles: Vec<Role> = owner
+        .into_iter()
+        .map(|o| o.map_or(Role::Free, |(_, r)| r))
+        .collect();
+    let (component, count) = complex.components();
+    let mut anchored = vec![false; count];
+    for (c, r) in roles.iter().enumerate() {
+        anchored[component[c] as usize] |= *r != Role::Free;
+    }
+    for t in &targets {
+        anchored[component[t.cell as usize] as usize] = true;
+    }
+    if !anchored.iter().any(|&a| a) {
+        return Err(Error::NoConstraints);
+    }
+    let loose: Vec<usize> = (0..n)
+        .filter(|&c| !anchored[component[c] as usize])
+        .collect();
+    if !loose.is_empty() {
+        let parts = anchored.iter().filter(|&&a| !a).count();
+        warnings.push(format!(
+            "{parts} of {count} connected parts ({} cells) have no constraint and keep their rest pose",
+            loose.len()
+        ));
+        for c in loose {
+            roles[c] = Role::Rest;
+        }
+    }
+    Ok(Constraints {
+        roles,
+        handles,
+        pins,
+        targets,
+        stiffness,
+        origin,
+        warnings,
+    })
+}
+
+/// The constraints of a complex made by [`CellComplex::split`]: children inherit their parent's
+/// role and stiffness, except that a pin stays with the child holding the pinned point; targets
+/// move to the child holding their point.
+pub fn inherit<const D: usize>(
+    old: &Constraints<D>,
+    complex: &CellComplex<D>,
+    parent: &[u32],
+) -> Constraints<D> {
+    let mut roles: Vec<Role> = parent.iter().map(|&p| old.roles[p as usize]).collect();
+    let stiffness = parent.iter().map(|&p| old.stiffness[p as usize]).collect();
+    let mut pins = old.pins.clone();
+    for (k, pin) in pins.iter_mut().enumerate() {
+        let cell = complex
+            .locate(&pin.point)
+            .filter(|&c| parent[c] == pin.cell)
+            .or_else(|| parent.iter().position(|&p| p == pin.cell))
+            .unwrap_or(0);
+        for (c, r) in roles.iter_mut().enumerate() {
+            if *r == Role::Pin(k as u32) && c != cell {
+                *r = Role::Free;
+            }
+        }
+        pin.cell = cell as u32;
+    }
+    let targets = old
+        .targets
+        .iter()
+        .map(|t| TargetLocal {
+            cell: complex
+                .locate(&t.from)
+                .filter(|&c| parent[c] == t.cell)
+                .or_else(|| parent.iter().position(|&p| p == t.cell))
+                .unwrap_or(0) as u32,
+            ..*t
+        })
+        .collect();
+    Constraints {
+        roles,
+        handles: old.handles.clone(),
+        pins,
+        targets,
+        stiffness,
+        origin: old.origin,
+        warnings: old.warnings.clone(),
+    }
+}

@@ -1,0 +1,381 @@
+//! Minimizing the glue energy under the user's constraints (paper §4–5, DESIGN §5).
+//!
+//! [`solve`] runs load steps: each handle's transform (and each pin's and target's destination)
+//! is interpolated from the identity in steps of at most [`SolveParams::max_step_degrees`] of
+//! rotation, and each step is solved by Gauss-Newton from the previous step's result. Solved
+//! straight from rest, a symmetric edit such as a 180° twist leaves Gauss-Newton at a saddle
+//! where the middle never turns; the paper's interactive setting avoids this because handles move
+//! a little per frame, and load steps do the same for a batch tool.
+//!
+//! Every Gauss-Newton step is followed by a backtracking line search, so the energy never
+//! increases across accepted iterations; a step that cannot decrease the energy ends the load
+//! step. With `refine_strain`, cells whose strain exceeds the threshold are split after the last
+//! load step (children inherit motion and constraint) and the solve continues.
+
+pub mod constraints;
+pub mod energy;
+mod system;
+
+use std::time::Instant;
+
+pub use constraints::{Constraints, Role, inherit, resolve};
+pub use energy::{cell_strain, glue_energy, pair_energy};
+
+use crate::cells::CellComplex;
+use crate::error::{Error, Result};
+use crate::progress::Observer;
+use crate::rigid::{Dim, Motion, Rigid, Vect};
+use system::System;
+
+/// Parameters of [`solve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveParams {
+    /// Gauss-Newton iterations per load step at most. Default 50.
+    pub max_iterations: usize,
+    /// Stop a load step when an iteration lowers the energy by less than this fraction of it.
+    /// Default 1e-6.
+    pub tolerance: f64,
+    /// Most rotation of any handle per load step, in degrees. Default 30.
+    pub max_step_degrees: f64,
+    /// Most handle, pin or target displacement per load step, as a fraction of the longest
+    /// extent of the cells. Default 0.25.
+    pub max_step_fraction: f64,
+    /// Split cells whose strain exceeds this; `None` (default): no refinement.
+    pub refine_strain: Option<f64>,
+    /// Levels refinement may add below the finest static level. Default 2.
+    pub refine_levels: u8,
+    /// Rounds of refinement at most. Default 4.
+    pub max_refinements: usize,
+}
+
+impl Default for SolveParams {
+    fn default() -> Self {
+        Self {
+            max_iterations: 50,
+            tolerance: 1e-6,
+            max_step_degrees: 30.0,
+            max_step_fraction: 0.25,
+            refine_strain: None,
+            refine_levels: 2,
+            max_refinements: 4,
+        }
+    }
+}
+
+/// What [`solve`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SolverInfo {
+    /// Accepted Gauss-Newton iterations over all load steps and refinements.
+    pub iterations: usize,
+    /// Load steps.
+    pub load_steps: usize,
+    /// The energy at the start of every load step (and refinement round) and after every
+    /// accepted iteration.
+    pub energies: Vec<f64>,
+    /// Where each load step (and refinement round) starts in `energies`. Within a step the
+    /// energy never increases; between steps it jumps as the handles move on.
+    pub step_starts: Vec<usize>,
+    /// Iterations in each load step (and each refinement round after the last step).
+    pub iterations_per_step: Vec<usize>,
+    /// Cells before refinement.
+    pub cells_initial: usize,
+    /// Cells after refinement.
+    pub cells_final: usize,
+    /// Cell counts after each refinement round.
+    pub refinements: Vec<usize>,
+    /// Unknowns of the last system.
+    pub unknowns: usize,
+    /// Seconds spent in symbolic analysis.
+    pub seconds_symbolic: f64,
+    /// Seconds spent assembling and factoring.
+    pub seconds_factor: f64,
+    /// Seconds in total.
+    pub seconds: f64,
+    /// Whether the last load step stopped on the tolerance (not on the iteration limit).
+    pub converged: bool,
+}
+
+impl SolverInfo {
+    /// Mean seconds per Gauss-Newton iteration.
+    pub fn seconds_per_iteration(&self) -> f64 {
+        self.seconds / self.iterations.max(1) as f64
+    }
+}
+
+/// A solved cell complex.
+#[derive(Debug, Clone)]
+pub struct Solution<const D: usize> {
+    /// The cells (after refinement).
+    pub complex: CellComplex<D>,
+    /// One rigid motion per cell (local frame).
+    pub motions: Vec<Motion<D>>,
+    /// The constraints on the final cells.
+    pub constraints: Constraints<D>,
+    /// What the solver did.
+    pub info: SolverInfo,
+}
+
+/// Solves for the rigid motions of `complex` under `constraints`, with load steps and optional
+/// refinement.
+pub fn solve<const D: usize>(
+    complex: CellComplex<D>,
+    constraints: Constraints<D>,
+    params: &SolveParams,
+    observer: &dyn Observer,
+) -> Result<Solution<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let start = Instant::now();
+    let steps = load_steps(&complex, &constraints, params);
+    let mut info = SolverInfo {
+        cells_initial: complex.len(),
+        load_steps: steps,
+        ..Default::default()
+    };
+    let mut motions: Vec<Motion<D>> = complex.cells.iter().map(|c| Motion::rest(&c.center)).collect();
+    let mut complex = complex;
+    let mut constraints = constraints;
+    let mut system = timed(&mut info.seconds_symbolic, || System::new(&complex, &constraints))?;
+    observer.stage("solving", steps as u64);
+    for s in 1..=steps {
+        let f = s as f64 / steps as f64;
+        let it = minimize_with(&mut system, &complex, &constraints, &mut motions, f, params, &mut info)?;
+        info.iterations_per_step.push(it);
+        observer.advance(1);
+    }
+    if let Some(tau) = params.refine_strain {
+        let limit = complex.grid.max_level + params.refine_levels;
+        for _ in 0..params.max_refinements {
+            let strain = cell_strain(&complex, &motions);
+            let split: Vec<bool> = complex
+                .cells
+                .iter()
+                .zip(&strain)
+                .map(|(c, &s)| s > tau && c.key.level < limit)
+                .collect();
+            if !split.iter().any(|&s| s) {
+                break;
+            }
+            let (fine, parent) = complex.split(&split);
+            motions = fine
+                .cells
+                .iter()
+                .zip(&parent)
+                .map(|(cell, &p)| {
+                    let old = &complex.cells[p as usize];
+                    let m = &motions[p as usize];
+                    Motion {
+                        rot: m.rot,
+                        pos: m.apply(&old.center, &cell.center),
+                    }
+                })
+                .collect();
+            constraints = inherit(&constraints, &fine, &parent);
+            complex = fine;
+            info.refinements.push(complex.len());
+            system = timed(&mut info.seconds_symbolic, || System::new(&complex, &constraints))?;
+            let it = minimize_with(&mut system, &complex, &constraints, &mut motions, 1.0, params, &mut info)?;
+            info.iterations_per_step.push(it);
+        }
+    }
+    observer.finish();
+    info.cells_final = complex.len();
+    info.unknowns = system.unknowns();
+    info.seconds = start.elapsed().as_secs_f64();
+    Ok(Solution {
+        complex,
+        motions,
+        constraints,
+        info,
+    })
+}
+
+/// Runs Gauss-Newton at load fraction `f` from the given `motions` (prescribed cells are set to
+/// their prescribed motions first). Returns the accepted iterations. This is the whole solver
+/// without load steps: the robustness tests start it from collapsed, randomly rotated cells.
+pub fn minimize<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &mut [Motion<D>],
+    f: f64,
+    params: &SolveParams,
+    info: &mut SolverInfo,
+) -> Result<usize>
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut system = timed(&mut info.seconds_symbolic, || System::new(complex, constraints))?;
+    minimize_with(&mut system, complex, constraints, motions, f, params, info)
+}
+
+/// The total energy: glue plus soft targets.
+pub fn total_energy<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &[Motion<D>],
+    targets_to: &[Vect<D>],
+) -> f64 {
+    let glue = glue_energy(complex, motions, &constraints.stiffness);
+    let soft: f64 = constraints
+        .targets
+        .iter()
+        .zip(targets_to)
+        .map(|(t, to)| {
+            let c = t.cell as usize;
+            t.weight * (motions[c].apply(&complex.cells[c].center, &t.from) - to).norm_squared()
+        })
+        .sum();
+    glue + soft
+}
+
+fn minimize_with<const D: usize>(
+    system: &mut System<D>,
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &mut [Motion<D>],
+    f: f64,
+    params: &SolveParams,
+    info: &mut SolverInfo,
+) -> Result<usize>
+where
+    Dim<D>: Rigid<D>,
+{
+    prescribe(complex, constraints, motions, f);
+    let pins_to: Vec<Vect<D>> = constraints
+        .pins
+        .iter()
+        .map(|p| p.point + (p.to - p.point) * f)
+        .collect();
+    for (c, role) in constraints.roles.iter().enumerate() {
+        if let Role::Pin(k) = role {
+            let pin = &constraints.pins[*k as usize];
+            motions[c].pos = motions[c].rot * (complex.cells[c].center - pin.point) + pins_to[*k as usize];
+        }
+    }
+    let targets_to: Vec<Vect<D>> = constraints
+        .targets
+        .iter()
+        .map(|t| t.from + (t.to - t.from) * f)
+        .collect();
+    let mut energy = total_energy(complex, constraints, motions, &targets_to);
+    info.step_starts.push(info.energies.len());
+    info.energies.push(energy);
+    if system.unknowns() == 0 {
+        info.converged = true;
+        return Ok(0);
+    }
+    // The energy of every pair being off by 1e-12 of a cell: rigid to rounding.
+    let size = complex.grid.finest_size();
+    let floor = (1e-12 * size).powi(2) * complex.pairs.iter().map(|p| p.weight).sum::<f64>();
+    let mut iterations = 0;
+    info.converged = false;
+    while iterations < params.max_iterations {
+        if energy <= floor {
+            info.converged = true;
+            break;
+        }
+        let t0 = Instant::now();
+        let delta = system.step(complex, constraints, motions, &targets_to, 0.0)?;
+        info.seconds_factor += t0.elapsed().as_secs_f64();
+        let mut t = 1.0;
+        let mut accepted = None;
+        for _ in 0..30 {
+            let trial = system.advance(complex, constraints, motions, &pins_to, &delta, t);
+            let e = total_energy(complex, constraints, &trial, &targets_to);
+            if !e.is_finite() {
+                return Err(Error::Solver("the energy became non-finite".into()));
+            }
+            if e < energy {
+                accepted = Some((trial, e));
+                break;
+            }
+            t *= 0.5;
+        }
+        let Some((trial, e)) = accepted else {
+            // No step lowers the energy: a minimum to machine precision.
+            info.converged = true;
+            break;
+        };
+        motions.copy_from_slice(&trial);
+        let decrease = energy - e;
+        energy = e;
+        iterations += 1;
+        info.iterations += 1;
+        info.energies.push(energy);
+        if decrease <= params.tolerance * (energy + decrease) {
+            info.converged = true;
+            break;
+        }
+    }
+    Ok(iterations)
+}
+
+/// Sets the motions of fixed, rest and handle cells for load fraction `f`.
+fn prescribe<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &mut [Motion<D>],
+    f: f64,
+) where
+    Dim<D>: Rigid<D>,
+{
+    let maps: Vec<_> = (0..constraints.handles.len())
+        .map(|k| constraints.handle_map(k, f))
+        .collect();
+    for (c, role) in constraints.roles.iter().enumerate() {
+        let center = &complex.cells[c].center;
+        match role {
+            Role::Fixed | Role::Rest => motions[c] = Motion::rest(center),
+            Role::Handle(k) => motions[c] = maps[*k as usize].cell_motion(center),
+            _ => {}
+        }
+    }
+}
+
+/// The number of load steps: enough that no handle turns by more than `max_step_degrees` and
+/// no handle cell, pin or target moves by more than `max_step_fraction` of the extent per step.
+fn load_steps<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    params: &SolveParams,
+) -> usize
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut lo = Vect::<D>::repeat(f64::MAX);
+    let mut hi = Vect::<D>::repeat(f64::MIN);
+    for c in &complex.cells {
+        lo = lo.inf(&(c.center.add_scalar(-c.half)));
+        hi = hi.sup(&(c.center.add_scalar(c.half)));
+    }
+    let extent = (hi - lo).max().max(f64::MIN_POSITIVE);
+    let mut turn = 0.0f64;
+    let mut travel = 0.0f64;
+    for (k, h) in constraints.handles.iter().enumerate() {
+        turn = turn.max(<Dim<D> as Rigid<D>>::angle(&h.motion.rotation).to_degrees());
+        let map = constraints.handle_map(k, 1.0);
+        for (c, role) in constraints.roles.iter().enumerate() {
+            if *role == Role::Handle(k as u32) {
+                let x = complex.cells[c].center;
+                travel = travel.max((map.apply(&x) - x).norm());
+            }
+        }
+    }
+    for p in &constraints.pins {
+        travel = travel.max((p.to - p.point).norm());
+    }
+    for t in &constraints.targets {
+        travel = travel.max((t.to - t.from).norm());
+    }
+    let by_turn = (turn / params.max_step_degrees.max(1e-3)).ceil();
+    let by_travel = (travel / (params.max_step_fraction.max(1e-6) * extent)).ceil();
+    by_turn.max(by_travel).clamp(1.0, 1000.0) as usize
+}
+
+fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {
+    let t = Instant::now();
+    let r = f();
+    *acc += t.elapsed().as_secs_f64();
+    r
+}

@@ -1,0 +1,399 @@
+//! The Gauss-Newton normal equations on rigid motions (paper §4, DESIGN §5).
+//!
+//! Each cell with freedom is linearized by a linear velocity `v_i` and an angular velocity `ω_i`
+//! about its rotation center `z_i` (its rest center `c_i` when free, the pinned point when pinned):
+//!
+//! ```text
+//! T_i(x) ≈ T_i(x) + v_i + ω_i × R_i (x − z_i)        (v_i = 0 for a pinned cell)
+//! ```
+//!
+//! Every quadrature point `q` of a pair (see [`super::energy::quadrature`]) gives the residual
+//! `√(s w α) (T_i(q) − T_j(q))`, every soft target the residual `√λ (T_i(q) − q')`. The normal
+//! equations `(JᵀJ + μ diag(JᵀJ) + ε I) δ = −Jᵀr` are sparse with `DOF × DOF` blocks
+//! (6×6 in 3D, 3×3 in 2D) and are factored by faer's supernodal Cholesky. The sparsity pattern
+//! depends only on the cell topology and the roles, so the symbolic analysis (AMD ordering,
+//! elimination tree, supernodes) is computed once per [`System`] and reused by every iteration
+//! and load step; it is rebuilt only when refinement changes the cells.
+//!
+//! Assembly writes each pair's blocks into its own fixed-size slot of the value array (in
+//! parallel, no locking); faer's `new_from_argsort` sums the duplicate entries.
+
+use faer::Side;
+use faer::prelude::*;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
+use rayon::prelude::*;
+
+use super::constraints::{Constraints, Role};
+use super::energy::quadrature;
+use crate::cells::CellComplex;
+use crate::error::{Error, Result};
+use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
+
+/// Degrees of freedom of a cell and where they start in the global vector.
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    offset: usize,
+    len: usize,
+}
+
+/// The sparse system of one cell topology.
+pub(crate) struct System<const D: usize> {
+    slots: Vec<Slot>,
+    /// Pairs with at least one side having freedom.
+    pairs: Vec<u32>,
+    /// Cells with freedom.
+    free_cells: Vec<u32>,
+    /// Targets of each free cell: ranges into `target_order`.
+    target_order: Vec<u32>,
+    target_range: Vec<(u32, u32)>,
+    n: usize,
+    symbolic: Option<(SymbolicSparseColMat<usize>, Argsort<usize>, SymbolicLlt<usize>)>,
+    values: Vec<f64>,
+}
+
+/// Entries of a diagonal block's lower triangle, and of a full block, for `DOF` unknowns.
+const fn tri(n: usize) -> usize {
+    n * (n + 1) / 2
+}
+
+impl<const D: usize> System<D>
+where
+    Dim<D>: Rigid<D>,
+{
+    const DOF: usize = <Dim<D> as Rigid<D>>::DOF;
+    const CELL_SLOT: usize = tri(Self::DOF);
+    const PAIR_SLOT: usize = 2 * tri(Self::DOF) + Self::DOF * Self::DOF;
+
+    /// The layout and symbolic factorization for `complex` under `constraints`.
+    pub fn new(complex: &CellComplex<D>, constraints: &Constraints<D>) -> Result<Self> {
+        let mut n = 0;
+        let slots: Vec<Slot> = constraints
+            .roles
+            .iter()
+            .map(|r| {
+                let len = match r {
+                    Role::Free => Self::DOF,
+                    Role::Pin(_) => <Dim<D> as Rigid<D>>::ROT,
+                    _ => 0,
+                };
+                let s = Slot { offset: n, len };
+                n += len;
+                s
+            })
+            .collect();
+        let free_cells: Vec<u32> = (0..slots.len() as u32)
+            .filter(|&c| slots[c as usize].len > 0)
+            .collect();
+        let pairs: Vec<u32> = (0..complex.pairs.len() as u32)
+            .filter(|&p| {
+                let pr = &complex.pairs[p as usize];
+                slots[pr.i as usize].len + slots[pr.j as usize].len > 0
+            })
+            .collect();
+        let mut by_cell: Vec<Vec<u32>> = vec![Vec::new(); slots.len()];
+        for (t, target) in constraints.targets.iter().enumerate() {
+            by_cell[target.cell as usize].push(t as u32);
+        }
+        let mut target_order = Vec::new();
+        let target_range = free_cells
+            .iter()
+            .map(|&c| {
+                let start = target_order.len() as u32;
+                target_order.extend(&by_cell[c as usize]);
+                (start, target_order.len() as u32)
+            })
+            .collect();
+        let mut system = Self {
+            slots,
+            pairs,
+            free_cells,
+            target_order,
+            target_range,
+            n,
+            symbolic: None,
+            values: Vec::new(),
+        };
+        if n > 0 {
+            let indices = system.pattern(complex);
+            let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &indices)
+                .map_err(|e| Error::Solver(format!("sparsity pattern: {e:?}")))?;
+            let llt = SymbolicLlt::try_new(sym.as_ref(), Side::Lower)
+                .map_err(|e| Error::Solver(format!("symbolic Cholesky: {e:?}")))?;
+            system.values = vec![0.0; indices.len()];
+            system.symbolic = Some((sym, argsort, llt));
+        }
+        Ok(system)
+    }
+
+    /// Number of unknowns.
+    pub fn unknowns(&self) -> usize {
+        self.n
+    }
+
+    /// The (row, column) of every value slot, lower triangle; unused slots point at (0, 0) and
+    /// always carry 0.
+    fn pattern(&self, complex: &CellComplex<D>) -> Vec<Pair<usize, usize>> {
+        let mut idx = Vec::with_capacity(
+            self.free_cells.len() * Self::CELL_SLOT + self.pairs.len() * Self::PAIR_SLOT,
+        );
+        let dummy = Pair { row: 0, col: 0 };
+        let diag = |idx: &mut Vec<Pair<usize, usize>>, s: Slot| {
+            for a in 0..Self::DOF {
+                for b in 0..=a {
+                    idx.push(if a < s.len {
+                        Pair {
+                            row: s.offset + a,
+                            col: s.offset + b,
+                        }
+                    } else {
+                        dummy
+                    });
+                }
+            }
+        };
+        for &c in &self.free_cells {
+            diag(&mut idx, self.slots[c as usize]);
+        }
+        for &p in &self.pairs {
+            let pr = &complex.pairs[p as usize];
+            let (si, sj) = (self.slots[pr.i as usize], self.slots[pr.j as usize]);
+            diag(&mut idx, si);
+            diag(&mut idx, sj);
+            for a in 0..Self::DOF {
+                for b in 0..Self::DOF {
+                    idx.push(if a < si.len && b < sj.len {
+                        let (r, c) = (si.offset + a, sj.offset + b);
+                        Pair {
+                            row: r.max(c),
+                            col: r.min(c),
+                        }
+                    } else {
+                        dummy
+                    });
+                }
+            }
+        }
+        idx
+    }
+
+    /// The Jacobian columns of `T_i(q)` for cell `c` (`len` of them) and `T_i(q)` itself.
+    #[inline]
+    fn jacobian(
+        &self,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        motions: &[Motion<D>],
+        c: usize,
+        q: &Vect<D>,
+    ) -> ([Vect<D>; MAX_DOF], Vect<D>) {
+        let cell = &complex.cells[c];
+        let m = &motions[c];
+        let value = m.apply(&cell.center, q);
+        let mut cols = [Vect::<D>::zeros(); MAX_DOF];
+        let rot = <Dim<D> as Rigid<D>>::ROT;
+        match constraints.roles[c] {
+            Role::Free => {
+                for a in 0..D {
+                    cols[a][a] = 1.0;
+                }
+                let w = <Dim<D> as Rigid<D>>::cross_jacobian(&(m.rot * (q - cell.center)));
+                cols[D..D + rot].copy_from_slice(&w[..rot]);
+            }
+            Role::Pin(k) => {
+                let o = constraints.pins[k as usize].point;
+                let w = <Dim<D> as Rigid<D>>::cross_jacobian(&(m.rot * (q - o)));
+                cols[..rot].copy_from_slice(&w[..rot]);
+            }
+            _ => {}
+        }
+        (cols, value)
+    }
+
+    /// Assembles and solves the damped normal equations at `motions`; returns the step `δ`
+    /// (one entry per unknown), or an error when even strong damping cannot make the system
+    /// positive definite.
+    pub fn step(
+        &mut self,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        motions: &[Motion<D>],
+        targets_to: &[Vect<D>],
+        damping: f64,
+    ) -> Result<Vec<f64>> {
+        let cell_part = self.free_cells.len() * Self::CELL_SLOT;
+        let mut values = std::mem::take(&mut self.values);
+        let result = self.step_into(&mut values, cell_part, complex, constraints, motions, targets_to, damping);
+        self.values = values;
+        result
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn step_into(
+        &self,
+        values: &mut [f64],
+        cell_part: usize,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        motions: &[Motion<D>],
+        targets_to: &[Vect<D>],
+        damping: f64,
+    ) -> Result<Vec<f64>> {
+        let dof = Self::DOF;
+        let (cell_vals, pair_vals) = values.split_at_mut(cell_part);
+        let mut pair_grad = vec![0.0f64; self.pairs.len() * 2 * dof];
+        let this = self;
+        pair_vals
+            .par_chunks_exact_mut(Self::PAIR_SLOT)
+            .zip(pair_grad.par_chunks_exact_mut(2 * dof))
+            .zip(this.pairs.par_iter())
+            .for_each(|((vals, grad), &p)| {
+                vals.fill(0.0);
+                grad.fill(0.0);
+                let pr = &complex.pairs[p as usize];
+                let (i, j) = (pr.i as usize, pr.j as usize);
+                let (ni, nj) = (this.slots[i].len, this.slots[j].len);
+                let s = (constraints.stiffness[i] * constraints.stiffness[j]).sqrt() * pr.weight;
+                let (ci, cj) = (&complex.cells[i], &complex.cells[j]);
+                let (hii, rest) = vals.split_at_mut(Self::CELL_SLOT);
+                let (hjj, hij) = rest.split_at_mut(Self::CELL_SLOT);
+                for (q, w) in quadrature(ci, cj) {
+                    let a = s * w;
+                    let (ji, ti) = this.jacobian(complex, constraints, motions, i, &q);
+                    let (jj, tj) = this.jacobian(complex, constraints, motions, j, &q);
+                    let r = ti - tj;
+                    accumulate_diag(hii, &ji, ni, a);
+                    accumulate_diag(hjj, &jj, nj, a);
+                    for x in 0..ni {
+                        grad[x] += a * ji[x].dot(&r);
+                        for y in 0..nj {
+                            hij[x * dof + y] -= a * ji[x].dot(&jj[y]);
+                        }
+                    }
+                    for y in 0..nj {
+                        grad[dof + y] -= a * jj[y].dot(&r);
+                    }
+                }
+            });
+
+        let mut grad = vec![0.0f64; self.n];
+        let mut diag = vec![0.0f64; self.n];
+        for (k, &p) in self.pairs.iter().enumerate() {
+            let pr = &complex.pairs[p as usize];
+            let vals = &pair_vals[k * Self::PAIR_SLOT..(k + 1) * Self::PAIR_SLOT];
+            for (side, cell, base) in [(0, pr.i, 0), (1, pr.j, Self::CELL_SLOT)] {
+                let s = self.slots[cell as usize];
+                for a in 0..s.len {
+                    grad[s.offset + a] += pair_grad[k * 2 * dof + side * dof + a];
+                    diag[s.offset + a] += vals[base + tri(a + 1) - 1];
+                }
+            }
+        }
+        // Soft targets and the damping live in the free cells' own slots.
+        for (k, &c) in self.free_cells.iter().enumerate() {
+            let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
+            vals.fill(0.0);
+            let s = self.slots[c as usize];
+            let (lo, hi) = self.target_range[k];
+            for &t in &self.target_order[lo as usize..hi as usize] {
+                let target = &constraints.targets[t as usize];
+                let (jc, value) = self.jacobian(complex, constraints, motions, c as usize, &target.from);
+                let r = value - targets_to[t as usize];
+                accumulate_diag(vals, &jc, s.len, target.weight);
+                for a in 0..s.len {
+                    grad[s.offset + a] += target.weight * jc[a].dot(&r);
+                    diag[s.offset + a] += target.weight * jc[a].norm_squared();
+                }
+            }
+        }
+        let scale = diag.iter().fold(0.0f64, |m, &d| m.max(d)).max(f64::MIN_POSITIVE);
+        let (sym, argsort, llt) = self.symbolic.as_ref().expect("a system with unknowns");
+        let mut mu = damping;
+        for _ in 0..12 {
+            for (k, &c) in self.free_cells.iter().enumerate() {
+                let s = self.slots[c as usize];
+                let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
+                for a in 0..s.len {
+                    // Levenberg–Marquardt on the diagonal, plus a floor for singular directions.
+                    vals[tri(a + 1) - 1] += mu * diag[s.offset + a] + 1e-12 * scale;
+                }
+            }
+            let all = [&cell_vals[..], &pair_vals[..]].concat();
+            let matrix = SparseColMat::new_from_argsort(sym.clone(), argsort, &all)
+                .map_err(|e| Error::Solver(format!("assembly: {e:?}")))?;
+            if let Ok(factor) = Llt::try_new_with_symbolic(llt.clone(), matrix.as_ref(), Side::Lower) {
+                let rhs = Mat::<f64>::from_fn(self.n, 1, |r, _| -grad[r]);
+                let x = factor.solve(&rhs);
+                let step: Vec<f64> = (0..self.n).map(|r| x[(r, 0)]).collect();
+                if step.iter().all(|v| v.is_finite()) {
+                    return Ok(step);
+                }
+            }
+            // Undo this round's damping before trying a stronger one.
+            for (k, &c) in self.free_cells.iter().enumerate() {
+                let s = self.slots[c as usize];
+                let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
+                for a in 0..s.len {
+                    vals[tri(a + 1) - 1] -= mu * diag[s.offset + a] + 1e-12 * scale;
+                }
+            }
+            mu = (mu * 100.0).max(1e-6);
+        }
+        Err(Error::Solver(
+            "the Gauss-Newton system stayed indefinite under damping".into(),
+        ))
+    }
+
+    /// `motions` advanced by `t·δ`: `p += t v`, `R ← polar(I + [t ω]×) R` (pinned cells keep
+    /// their pinned point in place at `pin_to`).
+    pub fn advance(
+        &self,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        motions: &[Motion<D>],
+        pins_to: &[Vect<D>],
+        delta: &[f64],
+        t: f64,
+    ) -> Vec<Motion<D>> {
+        let rot = <Dim<D> as Rigid<D>>::ROT;
+        motions
+            .par_iter()
+            .enumerate()
+            .map(|(c, m)| {
+                let s = self.slots[c];
+                let d = &delta[s.offset..s.offset + s.len];
+                match constraints.roles[c] {
+                    Role::Free => {
+                        let w: Vec<f64> = d[D..].iter().map(|x| x * t).collect();
+                        Motion {
+                            rot: <Dim<D> as Rigid<D>>::step_rotation(&w) * m.rot,
+                            pos: m.pos + Vect::<D>::from_fn(|a, _| t * d[a]),
+                        }
+                    }
+                    Role::Pin(k) => {
+                        let w: Vec<f64> = d[..rot].iter().map(|x| x * t).collect();
+                        let r = <Dim<D> as Rigid<D>>::step_rotation(&w) * m.rot;
+                        let pin = &constraints.pins[k as usize];
+                        Motion {
+                            rot: r,
+                            pos: r * (complex.cells[c].center - pin.point) + pins_to[k as usize],
+                        }
+                    }
+                    _ => *m,
+                }
+            })
+            .collect()
+    }
+}
+
+/// `H += a · JᵀJ` on the lower triangle of a diagonal block stored row by row.
+#[inline]
+fn accumulate_diag<const D: usize>(h: &mut [f64], j: &[Vect<D>; MAX_DOF], n: usize, a: f64) {
+    let mut k = 0;
+    for x in 0..n {
+        for y in 0..=x {
+            h[k] += a * j[x].dot(&j[y]);
+            k += 1;
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! The solver's invariants: paper Fig. 4 (collapse and recover), rigid edits give rigid
+//! motions, energy never increases, no NaN.
+
+use rand::{Rng, SeedableRng, rngs::StdRng};
+use rigidcells::cells::{BuildParams, CellComplex, build};
+use rigidcells::progress::Silent;
+use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
+use rigidcells::solve::{self, Role, SolveParams, SolverInfo};
+use rigidcells::spec::parse_spec;
+
+/// Dense samples on the surface of an ellipsoid-like blob with semi-axes `radii`.
+fn blob<const D: usize>(radii: [f64; D], n: usize) -> Vec<Vect<D>> {
+    let mut rng = StdRng::seed_from_u64(3);
+    (0..n)
+        .map(|_| {
+            let mut v = Vect::<D>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            while v.norm() < 1e-3 {
+                v = Vect::<D>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            }
+            let u = v.normalize();
+            Vect::<D>::from_fn(|a, _| u[a] * radii[a] * (1.0 + 0.15 * (3.0 * u[0]).sin()))
+        })
+        .collect()
+}
+
+fn complex<const D: usize>(radii: [f64; D], cell: f64) -> CellComplex<D> {
+    let pts = blob(radii, 40_000);
+    let params = BuildParams {
+        cell_size: Some(cell),
+        ..Default::default()
+    };
+    build(&pts, &[], &params).unwrap().0
+}
+
+/// Paper Fig. 4: every cell collapsed to one point with a random rotation, one cell fixed.
+fn collapse_and_recover<const D: usize>(radii: [f64; D], cell: f64, min_cells: usize)
+where
+    Dim<D>: Rigid<D>,
+{
+    let complex = complex(radii, cell);
+    assert!(complex.len() >= min_cells, "only {} cells", complex.len());
+    assert_eq!(complex.components().1, 1);
+    let mut roles = vec![Role::Free; complex.len()];
+    roles[complex.len() / 2] = Role::Fixed;
+    let constraints = solve::Constraints {
+        roles,
+        handles: vec![],
+        pins: vec![],
+        targets: vec![],
+        stiffness: vec![1.0; complex.len()],
+        origin: complex.grid.origin,
+        warnings: vec![],
+    };
+    let mut rng = StdRng::seed_from_u64(std::env::var("FIG4_SEED").map(|v| v.parse().unwrap()).unwrap_or(11));
+    let point = Vect::<D>::from_fn(|_, _| rng.random_range(-0.1..0.1));
+    let mut motions: Vec<Motion<D>> = complex
+        .cells
+        .iter()
+        .map(|_| {
+            let axis = Vect::<D>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            Motion {
+                rot: <Dim<D> as Rigid<D>>::axis_angle(&axis, rng.random_range(-3.1..3.1)),
+                pos: point,
+            }
+        })
+        .collect();
+    let mut info = SolverInfo::default();
+    let params = SolveParams {
+        max_iterations: std::env::var("FIG4_ITERS").map(|v| v.parse().unwrap()).unwrap_or(30),
+        tolerance: 0.0,
+        ..Default::default()
+    };
+    let iterations =
+        solve::minimize(&complex, &constraints, &mut motions, 1.0, &params, &mut info).unwrap();
+    let e0 = info.energies[0];
+    let e = *info.energies.last().unwrap();
+    eprintln!("D={D}: {} cells, {iterations} iterations, energy {e0:.3e} -> {e:.3e}", complex.len());
+    assert!(iterations <= 30);
+    assert!(e <= 1e-8 * e0, "energy {e} from {e0} after {iterations} iterations");
+    monotone(&info);
+    // The fixed cell is at rest, so the rest shape is recovered exactly.
+    let size = complex.grid.finest_size();
+    for (c, m) in complex.cells.iter().zip(&motions) {
+        assert!((m.pos - c.center).norm() < 1e-4 * size, "cell at {:?} off", c.center);
+        assert!((m.rot - nalgebra::SMatrix::<f64, D, D>::identity()).norm() < 1e-4);
+    }
+}
+
+fn monotone(info: &SolverInfo) {
+    assert!(info.energies.iter().all(|e| e.is_finite()));
+    let mut bounds = info.step_starts.clone();
+    bounds.push(info.energies.len());
+    for step in bounds.windows(2) {
+        for w in info.energies[step[0]..step[1]].windows(2) {
+            assert!(w[1] <= w[0], "energy rose from {} to {}", w[0], w[1]);
+        }
+    }
+}
+
+#[test]
+fn fig4_collapsed_cells_recover_3d() {
+    collapse_and_recover::<3>([2.0, 1.2, 1.0], 0.25, 500);
+}
+
+#[test]
+fn fig4_collapsed_cells_recover_2d() {
+    collapse_and_recover::<2>([2.0, 1.0], 0.04, 500);
+}
+
+/// If every constraint is the same rigid motion, every cell ends in that motion.
+fn rigid_edit<const D: usize>(radii: [f64; D], spec: &str, rot: nalgebra::SMatrix<f64, D, D>, shift: Vect<D>)
+where
+    Dim<D>: Rigid<D>,
+{
+    let pts = blob(radii, 20_000);
+    let (complex, _) = build(
+        &pts,
+        &[],
+        &BuildParams {
+            cell_size: Some(0.2),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let spec = parse_spec::<D>(spec, std::path::Path::new("."), std::path::Path::new("t.toml")).unwrap();
+    let constraints = solve::resolve(&complex, &spec, &pts, None).unwrap();
+    let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent).unwrap();
+    monotone(&sol.info);
+    let origin = sol.complex.grid.origin;
+    let extent = 2.0 * radii.iter().cloned().fold(0.0, f64::max);
+    for (c, m) in sol.complex.cells.iter().zip(&sol.motions) {
+        // The world map: x ↦ R (x − pivot) + pivot + shift with pivot at the origin of the spec.
+        let world = c.center + origin;
+        let want = rot * world + shift - origin;
+        assert!(
+            (m.pos - want).norm() < 1e-6 * extent,
+            "cell at {world:?}: {:?} vs {want:?}",
+            m.pos
+        );
+        assert!((m.rot - rot).norm() < 1e-6);
+    }
+}
+
+#[test]
+fn same_rigid_motion_everywhere_3d() {
+    let r = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::new(0.0, 0.0, 1.0), 50f64.to_radians());
+    let spec = r#"
+[[handle]]
+box = { min = [-3.0, -3.0, -3.0], max = [-1.5, 3.0, 3.0] }
+rotate = { axis = [0.0, 0.0, 1.0], degrees = 50.0 }
+pivot = [0.0, 0.0, 0.0]
+translate = [1.0, 2.0, 3.0]
+[[handle]]
+sphere = { center = [2.0, 0.0, 0.0], radius = 0.5 }
+rotate = { axis = [0.0, 0.0, 1.0], degrees = 50.0 }
+pivot = [0.0, 0.0, 0.0]
+translate = [1.0, 2.0, 3.0]
+"#;
+    rigid_edit::<3>([2.0, 1.0, 1.0], spec, r, Vect::<3>::new(1.0, 2.0, 3.0));
+}
+
+#[test]
+fn same_rigid_motion_everywhere_2d() {
+    let r = <Dim<2> as Rigid<2>>::axis_angle(&Vect::<2>::zeros(), 120f64.to_radians());
+    let spec = r#"
+[[handle]]
+box = { min = [-3.0, -3.0], max = [-1.5, 3.0] }
+rotate = { degrees = 120.0 }
+pivot = [0.0, 0.0]
+translate = [-1.0, 0.5]
+[[handle]]
+box = { min = [1.5, -3.0], max = [3.0, 3.0] }
+rotate = { degrees = 120.0 }
+pivot = [0.0, 0.0]
+translate = [-1.0, 0.5]
+"#;
+    rigid_edit::<2>([2.0, 1.0], spec, r, Vect::<2>::new(-1.0, 0.5));
+}
