@@ -1,8 +1,60 @@
-//! rigidcells
+//! # rigidcells
+//!
+//! Deforms point clouds, triangle soups and meshes by the method of *Adaptive Space
+//! Deformations Based on Rigid Cells* (M. Botsch, M. Pauly, M. Wicke, M. Gross, Computer
+//! Graphics Forum 26(3), Eurographics 2007).
+//!
+//! The shape is embedded in an adaptive octree (quadtree in 2D) of rigid cells ([`cells`]); the
+//! cells are coupled by an elastic glue energy ([`solve::energy`]) and solved for under the
+//! user's constraints ([`spec`], [`solve`]) by Gauss-Newton on rigid motions; the resulting space
+//! warp ([`field`]) moves every sample of the input. One code path serves 2D and 3D: everything
+//! is generic over `const D: usize`, and [`rigid::Rigid`] holds the few operations that differ.
+//!
+//! ```text
+//! samples ─► cells::build ─► solve::resolve (edit spec) ─► solve::solve ─► field::{Blend,Rbf} ─► samples'
+//! ```
+//!
+//! ```
+//! use rigidcells::cells::BuildParams;
+//! use rigidcells::pipeline::{deform, DeformParams};
+//! use rigidcells::progress::Silent;
+//! use rigidcells::rigid::Vect;
+//! use rigidcells::spec::parse_spec;
+//! use std::path::Path;
+//!
+//! // A 4×1×1 bar surface, sampled densely.
+//! let mesh = data_gen::bar([4.0, 1.0, 1.0], 4.0);
+//! let points: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+//! // Fix the left end, lift the right end by 1.
+//! let spec = parse_spec::<3>(
+//!     "[[fixed]]\nbox = { min = [-1.0, -1.0, -1.0], max = [0.5, 2.0, 2.0] }\n\
+//!      [[handle]]\nbox = { min = [3.5, -1.0, -1.0], max = [5.0, 2.0, 2.0] }\n\
+//!      translate = [0.0, 0.0, 1.0]\n",
+//!     Path::new("."),
+//!     Path::new("edit.toml"),
+//! )?;
+//! let params = DeformParams {
+//!     build: BuildParams { cell_size: Some(0.25), ..Default::default() },
+//!     ..Default::default()
+//! };
+//! let (moved, solution, info) = deform(&points, &mesh.triangles, &spec, &params, &Silent)?;
+//! assert_eq!(moved.len(), points.len());
+//! assert!(info.solver.converged && solution.complex.len() > 100);
+//! // The right end went up by 1; the left end stayed.
+//! let (a, b) = (points.iter().position(|p| p.x == 4.0).unwrap(), points.iter().position(|p| p.x == 0.0).unwrap());
+//! assert!((moved[a].z - points[a].z - 1.0).abs() < 0.05);
+//! assert!((moved[b] - points[b]).norm() < 0.02);
+//! # Ok::<(), rigidcells::Error>(())
+//! ```
+
 pub mod cells;
 pub mod error;
+pub mod field;
+pub mod io;
+pub mod pipeline;
 pub mod progress;
 pub mod rigid;
 pub mod solve;
 pub mod spec;
+
 pub use error::{Error, Result};

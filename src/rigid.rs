@@ -63,7 +63,11 @@ impl Rigid<2> for Dim<2> {
     const ROT: usize = 1;
 
     fn cross_jacobian(y: &Vect<2>) -> [Vect<2>; 3] {
-        [Vect::<2>::new(-y.y, y.x), Vect::<2>::zeros(), Vect::<2>::zeros()]
+        [
+            Vect::<2>::new(-y.y, y.x),
+            Vect::<2>::zeros(),
+            Vect::<2>::zeros(),
+        ]
     }
 
     fn step_rotation(omega: &[f64]) -> Mat<2> {

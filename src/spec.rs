@@ -75,7 +75,10 @@ impl<const D: usize> Region<D> {
     /// Whether the region is a region of space (a box, sphere or half-space), as opposed to a
     /// selection of samples by index or attribute.
     pub fn is_geometric(&self) -> bool {
-        matches!(self, Self::Box { .. } | Self::Sphere { .. } | Self::Plane { .. })
+        matches!(
+            self,
+            Self::Box { .. } | Self::Sphere { .. } | Self::Plane { .. }
+        )
     }
 
     /// Whether the point `x` (input coordinates) lies in a geometric region (always false for a
@@ -126,7 +129,11 @@ impl<const D: usize> HandleMotion<D> {
     where
         Dim<D>: Rigid<D>,
     {
-        let c = if self.from_matrix { *pivot } else { self.pivot.unwrap_or(*pivot) };
+        let c = if self.from_matrix {
+            *pivot
+        } else {
+            self.pivot.unwrap_or(*pivot)
+        };
         let linear_full = self.rotation * self.stretch;
         // The translation that makes the motion about `c` equal to the specified map.
         let t_full = if self.from_matrix {
@@ -312,7 +319,10 @@ where
         ctx.allow(t.get_ref(), &["scale"], line)?;
         let scale: f64 = ctx.field(t.get_ref(), "scale", line)?;
         if !(scale.is_finite() && scale > 0.0) {
-            return Err(ctx.error(Some(line), format!("stiffness scale {scale} must be positive")));
+            return Err(ctx.error(
+                Some(line),
+                format!("stiffness scale {scale} must be positive"),
+            ));
         }
         spec.stiffness.push(Entry {
             region: ctx.region(t.get_ref(), line)?,
@@ -477,11 +487,7 @@ impl Ctx<'_> {
             .collect()
     }
 
-    fn handle_motion<const D: usize>(
-        &self,
-        t: &toml::Table,
-        line: usize,
-    ) -> Result<HandleMotion<D>>
+    fn handle_motion<const D: usize>(&self, t: &toml::Table, line: usize) -> Result<HandleMotion<D>>
     where
         Dim<D>: Rigid<D>,
     {
@@ -558,7 +564,10 @@ impl Ctx<'_> {
         {
             return Err(self.error(
                 Some(line),
-                format!("`matrix` must be finite with last row [0 … 0 1], got {:?}", m[D]),
+                format!(
+                    "`matrix` must be finite with last row [0 … 0 1], got {:?}",
+                    m[D]
+                ),
             ));
         }
         let linear = Mat::<D>::from_fn(|r, c| m[r][c]);
@@ -588,7 +597,10 @@ impl Ctx<'_> {
         }
         if let Some(file) = t.get("file") {
             if t.contains_key("from") || t.contains_key("to") {
-                return Err(self.error(Some(line), "`file` and `from`/`to` exclude each other".into()));
+                return Err(self.error(
+                    Some(line),
+                    "`file` and `from`/`to` exclude each other".into(),
+                ));
             }
             let file: String = file
                 .clone()
@@ -626,7 +638,12 @@ impl Ctx<'_> {
             let bad = || {
                 Error::format(
                     &path,
-                    format!("line {}: expected {} or {} numbers", k + 1, 2 * D, 2 * D + 1),
+                    format!(
+                        "line {}: expected {} or {} numbers",
+                        k + 1,
+                        2 * D,
+                        2 * D + 1
+                    ),
                 )
             };
             let vals = match vals {
@@ -635,11 +652,16 @@ impl Ctx<'_> {
                 Err(_) if out.is_empty() && k == 0 => continue,
                 Err(_) => return Err(bad()),
             };
-            if (vals.len() != 2 * D && vals.len() != 2 * D + 1) || vals.iter().any(|v| !v.is_finite())
+            if (vals.len() != 2 * D && vals.len() != 2 * D + 1)
+                || vals.iter().any(|v| !v.is_finite())
             {
                 return Err(bad());
             }
-            let w = if vals.len() > 2 * D { vals[2 * D] } else { weight };
+            let w = if vals.len() > 2 * D {
+                vals[2 * D]
+            } else {
+                weight
+            };
             out.push(Target {
                 from: Vect::<D>::from_column_slice(&vals[..D]),
                 to: Vect::<D>::from_column_slice(&vals[D..2 * D]),
@@ -693,7 +715,11 @@ scale = 0.2
         assert!((x - Vect::<3>::new(0.0, 0.0, -1.0)).norm() < 1e-12);
         assert_eq!(spec.pins.len(), 1);
         assert_eq!(spec.targets[0].weight, 1.0);
-        assert!(spec.stiffness[0].region.contains_point(&Vect::<3>::new(4.0, 9.0, 9.0)));
+        assert!(
+            spec.stiffness[0]
+                .region
+                .contains_point(&Vect::<3>::new(4.0, 9.0, 9.0))
+        );
     }
 
     #[test]
@@ -701,11 +727,19 @@ scale = 0.2
         let e = parse("[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n\n[[handle]]\nsphere = { center = [0.0, 0.0], radius = 1.0 }\n")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("line 4") && e.contains("3 finite numbers"), "{e}");
-        let e = parse("[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nradius = 3\n")
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("line 1") && e.contains("unknown key `radius`"), "{e}");
+        assert!(
+            e.contains("line 4") && e.contains("3 finite numbers"),
+            "{e}"
+        );
+        let e = parse(
+            "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nradius = 3\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("line 1") && e.contains("unknown key `radius`"),
+            "{e}"
+        );
         let e = parse("[[fixed]\n").unwrap_err().to_string();
         assert!(e.contains("line 1"), "{e}");
         let e = parse("[[handle]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nmatrix = [[1.0,0.0,0.0,0.0],[0.0,1.0,0.0,0.0],[0.0,0.0,1.0,0.0],[0.0,0.0,0.0,1.0]]\nscale = 2.0\n")
@@ -718,7 +752,9 @@ scale = 0.2
     fn no_constraint_is_an_error() {
         assert!(matches!(parse(""), Err(Error::NoConstraints)));
         assert!(matches!(
-            parse("[[stiffness]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nscale = 2.0\n"),
+            parse(
+                "[[stiffness]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nscale = 2.0\n"
+            ),
             Err(Error::NoConstraints)
         ));
     }

@@ -1,1 +1,220 @@
-pub fn x(){}
+//! Generators of synthetic shapes for rigidcells' demo, tests and benchmarks.
+//!
+//! Shapes are plain vertex and triangle lists; [`write_ply`] writes them as binary
+//! little-endian or ASCII PLY. Nothing here depends on rigidcells, so tests can check the
+//! library against shapes it did not make.
+
+#![deny(missing_docs)]
+
+use std::io::Write;
+use std::path::Path;
+
+/// A triangle mesh (or soup: vertices need not be shared).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex positions.
+    pub vertices: Vec<[f64; 3]>,
+    /// Triangles, counter-clockwise seen from outside for closed shapes.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    /// The signed volume enclosed by a closed, outward-oriented mesh (divergence theorem).
+    pub fn volume(&self) -> f64 {
+        signed_volume(&self.vertices, &self.triangles)
+    }
+}
+
+/// The signed volume enclosed by triangles over `vertices` (divergence theorem).
+pub fn signed_volume(vertices: &[[f64; 3]], triangles: &[[u32; 3]]) -> f64 {
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| vertices[i as usize]);
+            (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                / 6.0
+        })
+        .sum()
+}
+
+/// A closed, welded box surface `[0, size]` with `per_unit` grid divisions per unit length on
+/// every face, triangulated, oriented outwards.
+pub fn bar(size: [f64; 3], per_unit: f64) -> Mesh {
+    let mut mesh = Mesh::default();
+    let mut index = std::collections::HashMap::new();
+    let n: [usize; 3] = size.map(|s| ((s * per_unit).round() as usize).max(1));
+    let mut vertex = |p: [usize; 3], mesh: &mut Mesh| -> u32 {
+        *index.entry(p).or_insert_with(|| {
+            mesh.vertices
+                .push(std::array::from_fn(|a| size[a] * p[a] as f64 / n[a] as f64));
+            (mesh.vertices.len() - 1) as u32
+        })
+    };
+    for axis in 0..3 {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        for side in [0, 1] {
+            for i in 0..n[u] {
+                for j in 0..n[v] {
+                    let corner = |di: usize, dj: usize| {
+                        let mut p = [0usize; 3];
+                        p[axis] = side * n[axis];
+                        p[u] = i + di;
+                        p[v] = j + dj;
+                        p
+                    };
+                    let q = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)]
+                        .map(|p| vertex(p, &mut mesh));
+                    // (u, v, axis) is right-handed: u × v = +axis, so counter-clockwise in
+                    // (u, v) faces +axis; flip on the lower side.
+                    if side == 1 {
+                        mesh.triangles.push([q[0], q[1], q[2]]);
+                        mesh.triangles.push([q[0], q[2], q[3]]);
+                    } else {
+                        mesh.triangles.push([q[0], q[2], q[1]]);
+                        mesh.triangles.push([q[0], q[3], q[2]]);
+                    }
+                }
+            }
+        }
+    }
+    mesh
+}
+
+/// A non-manifold triangle soup: the bar of [`bar`] with every triangle unwelded (three
+/// vertices of its own), plus two internal fins — a lengthwise one and a crosswise one — that
+/// meet the walls and each other along non-manifold edges, plus a few loose triangles floating
+/// near the bar as disconnected parts.
+pub fn soup(size: [f64; 3], per_unit: f64) -> Mesh {
+    let welded = bar(size, per_unit);
+    let mut mesh = Mesh::default();
+    let push = |tri: [[f64; 3]; 3], mesh: &mut Mesh| {
+        let base = mesh.vertices.len() as u32;
+        mesh.vertices.extend(tri);
+        mesh.triangles.push([base, base + 1, base + 2]);
+    };
+    for t in &welded.triangles {
+        push(t.map(|i| welded.vertices[i as usize]), &mut mesh);
+    }
+    let fin = |mesh: &mut Mesh, a: [f64; 3], du: [f64; 3], dv: [f64; 3], nu: usize, nv: usize| {
+        for i in 0..nu {
+            for j in 0..nv {
+                let p = |di: f64, dj: f64| -> [f64; 3] {
+                    std::array::from_fn(|k| {
+                        a[k] + du[k] * (i as f64 + di) / nu as f64
+                            + dv[k] * (j as f64 + dj) / nv as f64
+                    })
+                };
+                let base = mesh.vertices.len() as u32;
+                mesh.vertices
+                    .extend([p(0.0, 0.0), p(1.0, 0.0), p(1.0, 1.0), p(0.0, 1.0)]);
+                mesh.triangles.push([base, base + 1, base + 2]);
+                mesh.triangles.push([base, base + 2, base + 3]);
+            }
+        }
+    };
+    let nx = (size[0] * per_unit).round().max(1.0) as usize;
+    let ny = (size[1] * per_unit).round().max(1.0) as usize;
+    let nz = (size[2] * per_unit).round().max(1.0) as usize;
+    fin(
+        &mut mesh,
+        [0.0, 0.5 * size[1], 0.0],
+        [size[0], 0.0, 0.0],
+        [0.0, 0.0, size[2]],
+        nx,
+        nz,
+    );
+    fin(
+        &mut mesh,
+        [0.5 * size[0], 0.0, 0.0],
+        [0.0, size[1], 0.0],
+        [0.0, 0.0, size[2]],
+        ny,
+        nz,
+    );
+    for k in 0..8 {
+        let x = size[0] * (k as f64 + 0.5) / 8.0;
+        let z = size[2] + 0.3 + 0.05 * k as f64;
+        push(
+            [[x, 0.2, z], [x + 0.2, 0.2, z], [x, 0.4, z + 0.1]],
+            &mut mesh,
+        );
+    }
+    mesh
+}
+
+/// Writes `mesh` as PLY (`float x y z` vertices, `uchar int` face lists), binary
+/// little-endian or ASCII.
+pub fn write_ply(path: &Path, mesh: &Mesh, binary: bool) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    write!(
+        out,
+        "ply\nformat {} 1.0\ncomment generated by rigidcells data_gen\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        if binary {
+            "binary_little_endian"
+        } else {
+            "ascii"
+        },
+        mesh.vertices.len(),
+        mesh.triangles.len()
+    )?;
+    for v in &mesh.vertices {
+        if binary {
+            for c in v {
+                out.write_all(&(*c as f32).to_le_bytes())?;
+            }
+        } else {
+            writeln!(out, "{} {} {}", v[0] as f32, v[1] as f32, v[2] as f32)?;
+        }
+    }
+    for t in &mesh.triangles {
+        if binary {
+            out.write_all(&[3u8])?;
+            for i in t {
+                out.write_all(&(*i as i32).to_le_bytes())?;
+            }
+        } else {
+            writeln!(out, "3 {} {} {}", t[0], t[1], t[2])?;
+        }
+    }
+    out.flush()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bar_is_closed_and_outward() {
+        let m = bar([10.0, 1.0, 1.0], 4.0);
+        assert!((m.volume() - 10.0).abs() < 1e-9);
+        // Every edge is shared by exactly two triangles, in opposite directions.
+        let mut edges = std::collections::HashMap::new();
+        for t in &m.triangles {
+            for k in 0..3 {
+                *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+            }
+        }
+        assert!(
+            edges
+                .iter()
+                .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
+        );
+    }
+
+    #[test]
+    fn soup_keeps_the_volume_of_its_walls() {
+        let m = soup([10.0, 1.0, 1.0], 4.0);
+        let walls = bar([10.0, 1.0, 1.0], 4.0).triangles.len();
+        assert!((signed_volume(&m.vertices, &m.triangles[..walls]) - 10.0).abs() < 1e-9);
+        // Unwelded: no two wall triangles share a vertex index.
+        let mut seen = std::collections::HashSet::new();
+        assert!(
+            m.triangles[..walls]
+                .iter()
+                .flatten()
+                .all(|i| seen.insert(*i))
+        );
+        assert!(m.triangles.len() > walls);
+    }
+}

@@ -202,7 +202,10 @@ fn triangle_cells<const D: usize>(
     let dims = grid.dims(grid.max_level);
     let size = grid.finest_size();
     let n = points.len();
-    if let Some(t) = triangles.iter().find(|t| t.iter().any(|&v| v as usize >= n)) {
+    if let Some(t) = triangles
+        .iter()
+        .find(|t| t.iter().any(|&v| v as usize >= n))
+    {
         return Err(Error::Input(format!(
             "a face refers to vertex {} but there are {n} vertices",
             t.iter().max().unwrap_or(&0)
@@ -307,11 +310,7 @@ fn pyramid<const D: usize>(grid: &Grid<D>, finest: Vec<u8>) -> Vec<Vec<u8>> {
                 mixed |= s == OCCUPIED || all.is_some_and(|a| a != s);
                 all = Some(s);
             }
-            coarse[linear(&coord, &dims)] = if mixed {
-                OCCUPIED
-            } else {
-                all.unwrap_or(OUT)
-            };
+            coarse[linear(&coord, &dims)] = if mixed { OCCUPIED } else { all.unwrap_or(OUT) };
         });
         levels.push(coarse);
     }
@@ -392,7 +391,10 @@ mod tests {
             .count();
         assert!(coarse > 0);
         // Every sample lies in a cell and the complex is one component.
-        assert!(pts.iter().all(|p| complex.locate(&(p - complex.grid.origin)).is_some()));
+        assert!(
+            pts.iter()
+                .all(|p| complex.locate(&(p - complex.grid.origin)).is_some())
+        );
         assert_eq!(complex.components().1, 1);
         // The cells cover the box volume (boundary cells overhang by up to one layer).
         let vol: f64 = complex.cells.iter().map(|c| c.volume()).sum();

@@ -170,15 +170,63 @@ where
         (hit, sum, count)
     };
 
+    // Handles first, so that two handles with the same motion may share cells.
+    let mut handles = Vec::new();
+    let mut handle_hits = Vec::new();
+    for (k, e) in spec.handles.iter().enumerate() {
+        let (hit, sum, count) = select(&e.region);
+        if !hit.iter().any(|&h| h) {
+            warnings.push(format!(
+                "handle #{} (line {}) selects no cell",
+                k + 1,
+                e.line
+            ));
+        }
+        let pivot = match e.value.pivot {
+            Some(p) if !e.value.from_matrix => p,
+            _ if count > 0 => sum / count as f64,
+            _ => {
+                let (s, m) = (0..n)
+                    .filter(|&c| hit[c])
+                    .fold((Vect::<D>::zeros(), 0usize), |(s, m), c| {
+                        (s + complex.cells[c].center + origin, m + 1)
+                    });
+                s / m.max(1) as f64
+            }
+        };
+        handles.push(Handle {
+            motion: e.value,
+            pivot,
+            line: e.line,
+        });
+        handle_hits.push(hit);
+    }
+    let same = |a: Role, b: Role| match (a, b) {
+        (Role::Handle(x), Role::Handle(y)) => {
+            // The same map at full load and halfway: the same motion whatever the pivots.
+            let (hx, hy) = (&handles[x as usize], &handles[y as usize]);
+            [0.5, 1.0].iter().all(|&f| {
+                let (a, b) = (hx.motion.at(f, &hx.pivot), hy.motion.at(f, &hy.pivot));
+                (a.linear - b.linear).norm() <= 1e-12
+                    && (a.translation - b.translation).norm()
+                        <= 1e-12 * (1.0 + a.translation.norm())
+            })
+        }
+        _ => a == b,
+    };
     let mut claim = |cell: usize, name: &str, role: Role| -> Result<()> {
         match &owner[cell] {
-            Some((other, r)) if *r != role => Err(Error::ConstraintConflict {
+            Some((other, r)) if !same(*r, role) => Err(Error::ConstraintConflict {
                 first: other.clone(),
                 second: name.to_string(),
-                at: (complex.cells[cell].center + origin).iter().copied().collect(),
+                at: (complex.cells[cell].center + origin)
+                    .iter()
+                    .copied()
+                    .collect(),
                 size: 2.0 * complex.cells[cell].half,
             }),
-            _ => {
+            Some(_) => Ok(()),
+            None => {
                 owner[cell] = Some((name.to_string(), role));
                 Ok(())
             }
@@ -195,29 +243,8 @@ where
             claim(c, &name, Role::Fixed)?;
         }
     }
-    let mut handles = Vec::new();
-    for (k, e) in spec.handles.iter().enumerate() {
-        let name = format!("handle #{} (line {})", k + 1, e.line);
-        let (hit, sum, count) = select(&e.region);
-        if !hit.iter().any(|&h| h) {
-            warnings.push(format!("{name} selects no cell"));
-        }
-        let cells_centroid = || {
-            let (s, m) = (0..n).filter(|&c| hit[c]).fold((Vect::<D>::zeros(), 0usize), |(s, m), c| {
-                (s + complex.cells[c].center + origin, m + 1)
-            });
-            s / m.max(1) as f64
-        };
-        let pivot = match e.value.pivot {
-            Some(p) if !e.value.from_matrix => p,
-            _ if count > 0 => sum / count as f64,
-            _ => cells_centroid(),
-        };
-        handles.push(Handle {
-            motion: e.value,
-            pivot,
-            line: e.line,
-        });
+    for (k, hit) in handle_hits.iter().enumerate() {
+        let name = format!("handle #{} (line {})", k + 1, handles[k].line);
         for c in (0..n).filter(|&c| hit[c]) {
             claim(c, &name, Role::Handle(k as u32))?;
         }
@@ -233,7 +260,11 @@ where
     let mut pins = Vec::new();
     for (k, p) in spec.pins.iter().enumerate() {
         let cell = locate(&p.point, "pin", p.line)?;
-        claim(cell, &format!("pin #{} (line {})", k + 1, p.line), Role::Pin(k as u32))?;
+        claim(
+            cell,
+            &format!("pin #{} (line {})", k + 1, p.line),
+            Role::Pin(k as u32),
+        )?;
         pins.push(PinLocal {
             point: p.point - origin,
             to: p.to - origin,

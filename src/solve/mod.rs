@@ -133,14 +133,28 @@ where
         load_steps: steps,
         ..Default::default()
     };
-    let mut motions: Vec<Motion<D>> = complex.cells.iter().map(|c| Motion::rest(&c.center)).collect();
+    let mut motions: Vec<Motion<D>> = complex
+        .cells
+        .iter()
+        .map(|c| Motion::rest(&c.center))
+        .collect();
     let mut complex = complex;
     let mut constraints = constraints;
-    let mut system = timed(&mut info.seconds_symbolic, || System::new(&complex, &constraints))?;
+    let mut system = timed(&mut info.seconds_symbolic, || {
+        System::new(&complex, &constraints)
+    })?;
     observer.stage("solving", steps as u64);
     for s in 1..=steps {
         let f = s as f64 / steps as f64;
-        let it = minimize_with(&mut system, &complex, &constraints, &mut motions, f, params, &mut info)?;
+        let it = minimize_with(
+            &mut system,
+            &complex,
+            &constraints,
+            &mut motions,
+            f,
+            params,
+            &mut info,
+        )?;
         info.iterations_per_step.push(it);
         observer.advance(1);
     }
@@ -174,8 +188,18 @@ where
             constraints = inherit(&constraints, &fine, &parent);
             complex = fine;
             info.refinements.push(complex.len());
-            system = timed(&mut info.seconds_symbolic, || System::new(&complex, &constraints))?;
-            let it = minimize_with(&mut system, &complex, &constraints, &mut motions, 1.0, params, &mut info)?;
+            system = timed(&mut info.seconds_symbolic, || {
+                System::new(&complex, &constraints)
+            })?;
+            let it = minimize_with(
+                &mut system,
+                &complex,
+                &constraints,
+                &mut motions,
+                1.0,
+                params,
+                &mut info,
+            )?;
             info.iterations_per_step.push(it);
         }
     }
@@ -205,7 +229,9 @@ pub fn minimize<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let mut system = timed(&mut info.seconds_symbolic, || System::new(complex, constraints))?;
+    let mut system = timed(&mut info.seconds_symbolic, || {
+        System::new(complex, constraints)
+    })?;
     minimize_with(&mut system, complex, constraints, motions, f, params, info)
 }
 
@@ -250,7 +276,8 @@ where
     for (c, role) in constraints.roles.iter().enumerate() {
         if let Role::Pin(k) = role {
             let pin = &constraints.pins[*k as usize];
-            motions[c].pos = motions[c].rot * (complex.cells[c].center - pin.point) + pins_to[*k as usize];
+            motions[c].pos =
+                motions[c].rot * (complex.cells[c].center - pin.point) + pins_to[*k as usize];
         }
     }
     let targets_to: Vec<Vect<D>> = constraints

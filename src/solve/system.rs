@@ -48,7 +48,11 @@ pub(crate) struct System<const D: usize> {
     target_order: Vec<u32>,
     target_range: Vec<(u32, u32)>,
     n: usize,
-    symbolic: Option<(SymbolicSparseColMat<usize>, Argsort<usize>, SymbolicLlt<usize>)>,
+    symbolic: Option<(
+        SymbolicSparseColMat<usize>,
+        Argsort<usize>,
+        SymbolicLlt<usize>,
+    )>,
     values: Vec<f64>,
 }
 
@@ -223,7 +227,15 @@ where
     ) -> Result<Vec<f64>> {
         let cell_part = self.free_cells.len() * Self::CELL_SLOT;
         let mut values = std::mem::take(&mut self.values);
-        let result = self.step_into(&mut values, cell_part, complex, constraints, motions, targets_to, damping);
+        let result = self.step_into(
+            &mut values,
+            cell_part,
+            complex,
+            constraints,
+            motions,
+            targets_to,
+            damping,
+        );
         self.values = values;
         result
     }
@@ -297,7 +309,8 @@ where
             let (lo, hi) = self.target_range[k];
             for &t in &self.target_order[lo as usize..hi as usize] {
                 let target = &constraints.targets[t as usize];
-                let (jc, value) = self.jacobian(complex, constraints, motions, c as usize, &target.from);
+                let (jc, value) =
+                    self.jacobian(complex, constraints, motions, c as usize, &target.from);
                 let r = value - targets_to[t as usize];
                 accumulate_diag(vals, &jc, s.len, target.weight);
                 for a in 0..s.len {
@@ -306,7 +319,10 @@ where
                 }
             }
         }
-        let scale = diag.iter().fold(0.0f64, |m, &d| m.max(d)).max(f64::MIN_POSITIVE);
+        let scale = diag
+            .iter()
+            .fold(0.0f64, |m, &d| m.max(d))
+            .max(f64::MIN_POSITIVE);
         let (sym, argsort, llt) = self.symbolic.as_ref().expect("a system with unknowns");
         let mut mu = damping;
         for _ in 0..12 {
@@ -321,7 +337,9 @@ where
             let all = [&cell_vals[..], &pair_vals[..]].concat();
             let matrix = SparseColMat::new_from_argsort(sym.clone(), argsort, &all)
                 .map_err(|e| Error::Solver(format!("assembly: {e:?}")))?;
-            if let Ok(factor) = Llt::try_new_with_symbolic(llt.clone(), matrix.as_ref(), Side::Lower) {
+            if let Ok(factor) =
+                Llt::try_new_with_symbolic(llt.clone(), matrix.as_ref(), Side::Lower)
+            {
                 let rhs = Mat::<f64>::from_fn(self.n, 1, |r, _| -grad[r]);
                 let x = factor.solve(&rhs);
                 let step: Vec<f64> = (0..self.n).map(|r| x[(r, 0)]).collect();

@@ -1,0 +1,107 @@
+//! Transfer of the cells' rigid motions to the samples (paper §6, DESIGN §6).
+//!
+//! A [`Field`] is the solved state that defines the space warp: the cells' rest centers and
+//! rigid motions in the local frame. Two transfers turn it into a map of space:
+//!
+//! - [`Blend`] (preview, fast): `x' = Σ w_k T_k(x) / Σ w_k` over the `k = 4` nearest rest
+//!   centers, `w_k = 1/d_k`;
+//! - [`Rbf`] (final, smooth): triharmonic `φ(r) = r³` plus a linear polynomial interpolating
+//!   the center displacements `T_i(c_i) − c_i` exactly.
+//!
+//! Both implement [`Warp`], the one per-sample kernel; [`apply`] is the one driver that runs it
+//! over a slice of world-coordinate samples in parallel, so in-memory and streaming callers give
+//! identical results.
+
+mod blend;
+mod rbf;
+
+pub use blend::Blend;
+pub use rbf::Rbf;
+
+use rayon::prelude::*;
+
+use crate::error::Result;
+use crate::rigid::{Motion, Vect};
+use crate::solve::Solution;
+
+/// The solved deformation: cells and their rigid motions, in the local frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Field<const D: usize> {
+    /// World position of the local frame's origin.
+    pub origin: Vect<D>,
+    /// Rest centers of the cells (local).
+    pub centers: Vec<Vect<D>>,
+    /// Half edge lengths of the cells.
+    pub halves: Vec<f64>,
+    /// Rigid motion of each cell (local).
+    pub motions: Vec<Motion<D>>,
+}
+
+impl<const D: usize> Field<D> {
+    /// The field of a solution.
+    pub fn from_solution(solution: &Solution<D>) -> Self {
+        Self {
+            origin: solution.complex.grid.origin,
+            centers: solution.complex.cells.iter().map(|c| c.center).collect(),
+            halves: solution.complex.cells.iter().map(|c| c.half).collect(),
+            motions: solution.motions.clone(),
+        }
+    }
+}
+
+/// Which transfer to use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Transfer {
+    /// Inverse-distance blend of the 4 nearest cells' motions (fast preview).
+    #[default]
+    Blend,
+    /// Triharmonic RBF interpolation of the cell-center displacements (smooth, final).
+    Rbf,
+}
+
+/// A map of space in the local frame: the per-sample kernel of every driver.
+pub trait Warp<const D: usize>: Sync {
+    /// Where the local point `x` goes.
+    fn warp(&self, x: &Vect<D>) -> Vect<D>;
+}
+
+/// A transfer built for a field, ready to warp samples.
+pub enum Deformer<const D: usize> {
+    /// See [`Blend`].
+    Blend(Blend<D>),
+    /// See [`Rbf`].
+    Rbf(Rbf<D>),
+}
+
+impl<const D: usize> Deformer<D> {
+    /// Builds `transfer` for `field` (the RBF factors its dense system here).
+    pub fn new(field: &Field<D>, transfer: Transfer) -> Result<Self> {
+        Ok(match transfer {
+            Transfer::Blend => Self::Blend(Blend::new(field)?),
+            Transfer::Rbf => Self::Rbf(Rbf::new(field)?),
+        })
+    }
+}
+
+impl<const D: usize> Warp<D> for Deformer<D> {
+    #[inline]
+    fn warp(&self, x: &Vect<D>) -> Vect<D> {
+        match self {
+            Self::Blend(b) => b.warp(x),
+            Self::Rbf(r) => r.warp(x),
+        }
+    }
+}
+
+/// Samples per parallel task.
+const CHUNK: usize = 4096;
+
+/// Moves world-coordinate `points` in place by `warp`, whose local frame has its origin at
+/// `origin`. Parallel over chunks; the result of each sample depends on that sample alone.
+pub fn apply<const D: usize>(warp: &impl Warp<D>, origin: &Vect<D>, points: &mut [Vect<D>]) {
+    points.par_chunks_mut(CHUNK).for_each(|chunk| {
+        for p in chunk {
+            *p = warp.warp(&(*p - origin)) + origin;
+        }
+    });
+}

@@ -1,0 +1,352 @@
+//! PLY: ASCII, binary little- and big-endian; every scalar and list type; any element order.
+//!
+//! The header is parsed by `ply-rs-bw` and kept verbatim. The body is walked once, record by
+//! record, to find where the vertices' `x y z` live (byte offsets in binary, token spans in
+//! ASCII) and to decode faces (`vertex_indices`/`vertex_index` lists, fan-triangulated) and
+//! triangle strips (`tristrips`, `-1` restarts). Writing copies the input and replaces only those
+//! coordinates, so faces, other elements, every other property and the header's comments and
+//! obj_info come out byte for byte.
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use ply_rs_bw::parser::{Parser, Reader};
+use ply_rs_bw::ply::{DefaultElement, Encoding, PropertyType, ScalarType};
+
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+/// Where one coordinate lives in the body.
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    start: usize,
+    end: usize,
+}
+
+/// A PLY file held in memory with the locations of its vertex coordinates.
+#[derive(Debug)]
+pub struct PlyFile {
+    path: PathBuf,
+    bytes: Vec<u8>,
+    encoding: Encoding,
+    /// Whether x, y, z are doubles (else floats).
+    doubles: [bool; 3],
+    coords: Vec<[Span; 3]>,
+    positions: Vec<Vect<3>>,
+    triangles: Vec<[u32; 3]>,
+}
+
+impl PlyFile {
+    /// Reads and indexes `path`.
+    pub fn read(path: &Path) -> Result<Self> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Self::parse(path, bytes)
+    }
+
+    /// Indexes the PLY file `bytes` (named `path` in errors).
+    pub fn parse(path: &Path, bytes: Vec<u8>) -> Result<Self> {
+        let err = |m: String| Error::format(path, m);
+        if !bytes.starts_with(b"ply") {
+            return Err(err("not a PLY file (no `ply` magic line)".into()));
+        }
+        let mut reader = Reader::new(Cursor::new(&bytes[..]));
+        let header = Parser::<DefaultElement>::new()
+            .read_header(&mut reader)
+            .map_err(|e| err(format!("bad header: {e}")))?;
+        let body = reader.get_ref().position() as usize;
+        let vertex = header
+            .elements
+            .get("vertex")
+            .ok_or_else(|| err("no `vertex` element".into()))?;
+        let mut doubles = [false; 3];
+        for (k, name) in ["x", "y", "z"].iter().enumerate() {
+            match vertex.properties.get(*name).map(|p| &p.data_type) {
+                Some(PropertyType::Scalar(ScalarType::Float)) => {}
+                Some(PropertyType::Scalar(ScalarType::Double)) => doubles[k] = true,
+                Some(t) => {
+                    return Err(err(format!(
+                        "vertex property `{name}` is {t:?}; rigidcells moves float or double coordinates"
+                    )));
+                }
+                None => return Err(err(format!("vertex element has no `{name}` property"))),
+            }
+        }
+        let mut walker = Walker {
+            bytes: &bytes,
+            pos: body,
+            encoding: header.encoding,
+            path,
+        };
+        let mut coords = Vec::new();
+        let mut positions = Vec::new();
+        let mut triangles = Vec::new();
+        for (name, element) in header.elements.iter() {
+            let props: Vec<(&str, &PropertyType)> = element
+                .properties
+                .iter()
+                .map(|(n, p)| (n.as_str(), &p.data_type))
+                .collect();
+            let is_vertex = name == "vertex";
+            if is_vertex {
+                coords.reserve(element.count);
+                positions.reserve(element.count);
+            }
+            let mut list = Vec::new();
+            for record in 0..element.count {
+                let mut spans = [Span { start: 0, end: 0 }; 3];
+                let mut xyz = [0.0f64; 3];
+                for &(pname, ptype) in &props {
+                    let at = |e: Error| match e {
+                        Error::Format { path, message } => Error::Format {
+                            path,
+                            message: format!(
+                                "{name} {record} of {}, property `{pname}`: {message}",
+                                element.count
+                            ),
+                        },
+                        other => other,
+                    };
+                    match ptype {
+                        PropertyType::Scalar(t) => {
+                            let (value, span) = walker.scalar(t).map_err(at)?;
+                            if is_vertex
+                                && let Some(k) = ["x", "y", "z"].iter().position(|n| *n == pname)
+                            {
+                                spans[k] = span;
+                                xyz[k] = value;
+                            }
+                        }
+                        PropertyType::List(count_type, item_type) => {
+                            let (count, _) = walker.scalar(count_type).map_err(at)?;
+                            if !(count >= 0.0 && count.fract() == 0.0) {
+                                return Err(at(Error::format(
+                                    path,
+                                    format!("list length {count} is not a count"),
+                                )));
+                            }
+                            let keep = matches!(
+                                (name.as_str(), pname),
+                                ("face", "vertex_indices" | "vertex_index")
+                                    | ("tristrips", "vertex_indices" | "vertex_index")
+                            );
+                            list.clear();
+                            for _ in 0..count as usize {
+                                let (v, _) = walker.scalar(item_type).map_err(at)?;
+                                if keep {
+                                    list.push(v);
+                                }
+                            }
+                            if keep {
+                                collect_triangles(name, &list, &mut triangles);
+                            }
+                        }
+                    }
+                }
+                if is_vertex {
+                    if !xyz.iter().all(|v| v.is_finite()) {
+                        return Err(err(format!(
+                            "vertex {record} has a coordinate that is not finite: {xyz:?}"
+                        )));
+                    }
+                    coords.push(spans);
+                    positions.push(Vect::<3>::from(xyz));
+                }
+            }
+        }
+        let n = positions.len();
+        if let Some(t) = triangles
+            .iter()
+            .find(|t| t.iter().any(|&v| v as usize >= n))
+        {
+            return Err(err(format!(
+                "a face refers to vertex {} but there are {n} vertices",
+                t.iter().max().unwrap_or(&0)
+            )));
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            bytes,
+            encoding: header.encoding,
+            doubles,
+            coords,
+            positions,
+            triangles,
+        })
+    }
+
+    /// Vertex positions.
+    pub fn positions(&self) -> &[Vect<3>] {
+        &self.positions
+    }
+
+    /// Triangles of the faces and strips.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// The file's bytes with the vertex positions replaced by `positions`.
+    pub fn encode(&self, positions: &[Vect<3>]) -> Result<Vec<u8>> {
+        if positions.len() != self.coords.len() {
+            return Err(Error::Param(format!(
+                "{}: {} positions for {} vertices",
+                self.path.display(),
+                positions.len(),
+                self.coords.len()
+            )));
+        }
+        match self.encoding {
+            Encoding::Ascii => Ok(self.encode_ascii(positions)),
+            Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
+                let mut out = self.bytes.clone();
+                let big = self.encoding == Encoding::BinaryBigEndian;
+                for (spans, p) in self.coords.iter().zip(positions) {
+                    for k in 0..3 {
+                        let dst = &mut out[spans[k].start..spans[k].end];
+                        match (self.doubles[k], big) {
+                            (true, false) => dst.copy_from_slice(&p[k].to_le_bytes()),
+                            (true, true) => dst.copy_from_slice(&p[k].to_be_bytes()),
+                            (false, false) => dst.copy_from_slice(&(p[k] as f32).to_le_bytes()),
+                            (false, true) => dst.copy_from_slice(&(p[k] as f32).to_be_bytes()),
+                        }
+                    }
+                }
+                Ok(out)
+            }
+        }
+    }
+
+    fn encode_ascii(&self, positions: &[Vect<3>]) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.bytes.len() + self.bytes.len() / 8);
+        let mut last = 0;
+        let mut edits: Vec<(Span, f64, bool)> = Vec::with_capacity(3 * positions.len());
+        for (spans, p) in self.coords.iter().zip(positions) {
+            for k in 0..3 {
+                edits.push((spans[k], p[k], self.doubles[k]));
+            }
+        }
+        edits.sort_unstable_by_key(|e| e.0.start);
+        for (span, value, double) in edits {
+            out.extend_from_slice(&self.bytes[last..span.start]);
+            let text = if double {
+                format!("{value}")
+            } else {
+                format!("{}", value as f32)
+            };
+            out.extend_from_slice(text.as_bytes());
+            last = span.end;
+        }
+        out.extend_from_slice(&self.bytes[last..]);
+        out
+    }
+}
+
+fn collect_triangles(element: &str, list: &[f64], out: &mut Vec<[u32; 3]>) {
+    let idx = |v: f64| v as u32;
+    if element == "tristrips" {
+        let mut strip: Vec<u32> = Vec::new();
+        for &v in list.iter().chain(std::iter::once(&-1.0)) {
+            if v < 0.0 {
+                for k in 2..strip.len() {
+                    let t = if k % 2 == 0 {
+                        [strip[k - 2], strip[k - 1], strip[k]]
+                    } else {
+                        [strip[k - 1], strip[k - 2], strip[k]]
+                    };
+                    if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
+                        out.push(t);
+                    }
+                }
+                strip.clear();
+            } else {
+                strip.push(idx(v));
+            }
+        }
+    } else if list.iter().all(|&v| v >= 0.0) {
+        for k in 2..list.len() {
+            out.push([idx(list[0]), idx(list[k - 1]), idx(list[k])]);
+        }
+    }
+}
+
+/// Walks scalars of the body in either encoding.
+struct Walker<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    encoding: Encoding,
+    path: &'a Path,
+}
+
+impl Walker<'_> {
+    fn scalar(&mut self, t: &ScalarType) -> Result<(f64, Span)> {
+        match self.encoding {
+            Encoding::Ascii => self.ascii(t),
+            Encoding::BinaryLittleEndian => self.binary(t, false),
+            Encoding::BinaryBigEndian => self.binary(t, true),
+        }
+    }
+
+    fn binary(&mut self, t: &ScalarType, big: bool) -> Result<(f64, Span)> {
+        let size = match t {
+            ScalarType::Char | ScalarType::UChar => 1,
+            ScalarType::Short | ScalarType::UShort => 2,
+            ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+            ScalarType::Double => 8,
+        };
+        let start = self.pos;
+        let end = start + size;
+        let Some(b) = self.bytes.get(start..end) else {
+            return Err(Error::format(
+                self.path,
+                "the body ends early (truncated file, or a header count that is too large)",
+            ));
+        };
+        macro_rules! num {
+            ($ty:ty) => {{
+                let a = b.try_into().expect("size checked");
+                (if big {
+                    <$ty>::from_be_bytes(a)
+                } else {
+                    <$ty>::from_le_bytes(a)
+                }) as f64
+            }};
+        }
+        let v = match t {
+            ScalarType::Char => num!(i8),
+            ScalarType::UChar => num!(u8),
+            ScalarType::Short => num!(i16),
+            ScalarType::UShort => num!(u16),
+            ScalarType::Int => num!(i32),
+            ScalarType::UInt => num!(u32),
+            ScalarType::Float => num!(f32),
+            ScalarType::Double => num!(f64),
+        };
+        self.pos = end;
+        Ok((v, Span { start, end }))
+    }
+
+    fn ascii(&mut self, t: &ScalarType) -> Result<(f64, Span)> {
+        let b = self.bytes;
+        let mut start = self.pos;
+        while start < b.len() && b[start].is_ascii_whitespace() {
+            start += 1;
+        }
+        let mut end = start;
+        while end < b.len() && !b[end].is_ascii_whitespace() {
+            end += 1;
+        }
+        if start == end {
+            return Err(Error::format(
+                self.path,
+                "the body ends early (truncated file, or a header count that is too large)",
+            ));
+        }
+        let text = std::str::from_utf8(&b[start..end]).unwrap_or("");
+        let v = match t {
+            ScalarType::Float | ScalarType::Double => text.parse::<f64>().ok(),
+            _ => text.parse::<i64>().ok().map(|v| v as f64),
+        }
+        .ok_or_else(|| Error::format(self.path, format!("`{text}` is not a {t:?}")))?;
+        self.pos = end;
+        Ok((v, Span { start, end }))
+    }
+}

@@ -1,0 +1,372 @@
+//! The CLI on real files: deform, then check the geometry of what was written.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use rigidcells::io::Document;
+use rigidcells::rigid::{Dim, Rigid, Vect};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_rigidcells"))
+}
+
+fn shared(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel)
+}
+
+struct Run {
+    code: i32,
+    stderr: String,
+}
+
+fn run(args: &[&str]) -> Run {
+    let out = bin().args(args).output().expect("run rigidcells");
+    Run {
+        code: out.status.code().unwrap_or(-1),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+fn edges(tris: &[[u32; 3]]) -> Vec<(u32, u32)> {
+    let mut e: Vec<(u32, u32)> = tris
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
+        .collect();
+    e.sort_unstable();
+    e.dedup();
+    e
+}
+
+fn volume(p: &[Vect<3>], tris: &[[u32; 3]]) -> f64 {
+    let v: Vec<[f64; 3]> = p.iter().map(|x| [x.x, x.y, x.z]).collect();
+    data_gen::signed_volume(&v, tris)
+}
+
+/// Bends or twists the 10×1×1 bar from the CLI and checks the output's geometry. `handle` maps
+/// a rest point of the handle to where it was sent.
+fn bar_edit(
+    transfer: &str,
+    rotate: &str,
+    translate: [f64; 3],
+    handle: impl Fn(&Vect<3>) -> Vect<3>,
+) -> (Vec<Vect<3>>, Vec<Vect<3>>) {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    let output = dir.path().join("out.ply");
+    let edit = dir.path().join("edit.toml");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    std::fs::write(
+        &edit,
+        format!(
+            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }}\n\
+             [[handle]]\nbox = {{ min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
+             rotate = {rotate}\npivot = [9.75, 0.5, 0.5]\ntranslate = {translate:?}\n"
+        ),
+    )
+    .unwrap();
+    let r = run(&[
+        "deform",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+        "--cell-size",
+        "0.25",
+        "--transfer",
+        transfer,
+        "-q",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let before = Document::read(&input).unwrap();
+    let after = Document::read(&output).unwrap();
+    let (p0, p1) = (before.positions().to_vec(), after.positions().to_vec());
+    let tris = before.triangles();
+    assert_eq!(tris, after.triangles(), "faces must be copied through");
+    assert!(p1.iter().all(|p| p.iter().all(|v| v.is_finite())));
+
+    let ratio = volume(&p1, tris) / volume(&p0, tris);
+    assert!(
+        (ratio - 1.0).abs() <= 0.05,
+        "{transfer}: volume ratio {ratio}"
+    );
+    let thickness = 1.0;
+    let fixed = p0
+        .iter()
+        .zip(&p1)
+        .filter(|(a, _)| a.x <= 0.5)
+        .map(|(a, b)| (a - b).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        fixed <= 0.02 * thickness,
+        "{transfer}: fixed end moved {fixed}"
+    );
+    let miss = p0
+        .iter()
+        .zip(&p1)
+        .filter(|(a, _)| a.x >= 9.5)
+        .map(|(a, b)| (handle(a) - b).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        miss <= 0.05 * thickness,
+        "{transfer}: handle is {miss} from where it was sent"
+    );
+    let stretch = edges(tris)
+        .iter()
+        .map(|&(a, b)| {
+            let (a, b) = (a as usize, b as usize);
+            (p1[a] - p1[b]).norm() / (p0[a] - p0[b]).norm()
+        })
+        .fold((f64::MAX, 0.0f64), |(lo, hi), r| (lo.min(r), hi.max(r)));
+    assert!(
+        stretch.0 > 0.5 && stretch.1 < 1.6,
+        "{transfer}: edge length ratios in {stretch:?}"
+    );
+    eprintln!(
+        "{transfer} {rotate}: volume ratio {ratio:.4}, fixed {fixed:.2e}, handle {miss:.2e}, edges {stretch:.3?}"
+    );
+    (p0, p1)
+}
+
+fn bend(transfer: &str) {
+    // The centerline from the end of the fixed region (x = 0.5) to the handle's center (9.75)
+    // becomes a quarter circle of the same length.
+    let radius = 9.25 / std::f64::consts::FRAC_PI_2;
+    let end = Vect::<3>::new(0.5 + radius, 0.5, 0.5 + radius);
+    let pivot = Vect::<3>::new(9.75, 0.5, 0.5);
+    let t = end - pivot;
+    let r = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::y(), -90f64.to_radians());
+    bar_edit(
+        transfer,
+        "{ axis = [0.0, 1.0, 0.0], degrees = -90.0 }",
+        [t.x, t.y, t.z],
+        |x| r * (x - pivot) + pivot + t,
+    );
+}
+
+#[test]
+fn bend_bar_90_degrees_blend() {
+    bend("blend");
+}
+
+#[test]
+fn bend_bar_90_degrees_rbf() {
+    bend("rbf");
+}
+
+fn twist(transfer: &str) {
+    let pivot = Vect::<3>::new(9.75, 0.5, 0.5);
+    let r = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::x(), 180f64.to_radians());
+    let (p0, p1) = bar_edit(
+        transfer,
+        "{ axis = [1.0, 0.0, 0.0], degrees = 180.0 }",
+        [0.0; 3],
+        |x| r * (x - pivot) + pivot,
+    );
+    // The ring in the middle turns by about half the twist.
+    let (mut sum, mut n) = (0.0, 0);
+    for (a, b) in p0.iter().zip(&p1) {
+        if (a.x - 5.0).abs() < 0.07 && ((a.y - 0.5).abs() > 0.3 || (a.z - 0.5).abs() > 0.3) {
+            let u = (a.y - 0.5).atan2(a.z - 0.5);
+            let v = (b.y - 0.5).atan2(b.z - 0.5);
+            let mut d = (v - u).to_degrees();
+            while d < 0.0 {
+                d += 360.0;
+            }
+            sum += d.min(360.0 - d);
+            n += 1;
+        }
+    }
+    let turn = sum / n as f64;
+    assert!(
+        (turn - 90.0).abs() < 15.0,
+        "{transfer}: middle turned {turn}°"
+    );
+}
+
+#[test]
+fn twist_bar_180_degrees_blend() {
+    twist("blend");
+}
+
+#[test]
+fn twist_bar_180_degrees_rbf() {
+    twist("rbf");
+}
+
+/// A translate-only edit of real PLY files: faces and every non-coordinate byte unchanged,
+/// coordinates moved by the translation.
+#[test]
+fn ply_translate_round_trip_keeps_everything_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("move.toml");
+    std::fs::write(
+        &edit,
+        "[[handle]]\nplane = { point = [0.0, 0.0, 0.0], normal = [0.0, 0.0, 0.0001] }\ntranslate = [0.5, -0.25, 2.0]\n\
+         [[handle]]\nplane = { point = [0.0, 0.0, 0.0], normal = [0.0, 0.0, -0.0001] }\ntranslate = [0.5, -0.25, 2.0]\n",
+    )
+    .unwrap();
+    for name in [
+        "meshes/dragon_11k_binary.ply",
+        "meshes/tetrahedron_big_endian.ply",
+        "meshes/bunny_duplicates_face_first.ply",
+        "meshes/doubles_shorts.ply",
+        "meshes/greg_turk_example2_ok_ascii.ply",
+    ] {
+        let input = shared(name);
+        let output = dir.path().join("out.ply");
+        let r = run(&[
+            "deform",
+            input.to_str().unwrap(),
+            "-o",
+            output.to_str().unwrap(),
+            "--edit",
+            edit.to_str().unwrap(),
+            "--transfer",
+            "blend",
+            "-q",
+        ]);
+        assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+        let a = Document::read(&input).unwrap();
+        let b = Document::read(&output).unwrap();
+        assert_eq!(a.triangles(), b.triangles(), "{name}");
+        let shift = Vect::<3>::new(0.5, -0.25, 2.0);
+        for (p, q) in a.positions().iter().zip(b.positions()) {
+            let err = (p + shift - q).norm();
+            assert!(err <= 1e-6 * (1.0 + p.norm()), "{name}: moved by {err} off");
+        }
+        let (ra, rb) = (
+            std::fs::read(&input).unwrap(),
+            std::fs::read(&output).unwrap(),
+        );
+        if !name.contains("ascii") && !name.contains("doubles") {
+            // Binary: the same length, and the bytes differ only inside vertex records.
+            assert_eq!(ra.len(), rb.len(), "{name}");
+            let header = ra.windows(10).position(|w| w == b"end_header").unwrap();
+            assert_eq!(ra[..header], rb[..header], "{name}: header changed");
+        }
+    }
+}
+
+#[test]
+fn malformed_and_empty_inputs_give_an_error_and_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("e.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n",
+    )
+    .unwrap();
+    for name in [
+        "malformed/empty.ply",
+        "malformed/ply_empty_header.ply",
+        "malformed/points_emptyascii.ply",
+        "malformed/single_elements_err_ascii.ply",
+        "malformed/unsized_dims.ply",
+        "malformed/crash-30d6d0f7c529b3b66b4131700b7a4580cd7082df.ply",
+        "malformed/cube-ply-1.0_ascii-comment_renamed_to_remark-invalid.ply",
+    ] {
+        let output = dir.path().join("out.ply");
+        let r = run(&[
+            "deform",
+            shared(name).to_str().unwrap(),
+            "-o",
+            output.to_str().unwrap(),
+            "--edit",
+            edit.to_str().unwrap(),
+            "-q",
+        ]);
+        assert!(
+            r.code == 3 || r.code == 4,
+            "{name}: exit {} ({})",
+            r.code,
+            r.stderr
+        );
+        assert!(
+            r.stderr.contains("error:") && !r.stderr.contains("panicked"),
+            "{name}: {}",
+            r.stderr
+        );
+        assert!(!output.exists(), "{name}: wrote an output");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "{name}: left a temporary file"
+        );
+    }
+}
+
+#[test]
+fn refuses_to_overwrite_the_input_and_reports_spec_lines() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([2.0, 1.0, 1.0], 4.0), false).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let edit = dir.path().join("e.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [0.5, 1.0, 1.0] }\n",
+    )
+    .unwrap();
+    let r = run(&[
+        "deform",
+        input.to_str().unwrap(),
+        "-o",
+        input.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("overwrite"), "{}", r.stderr);
+    assert_eq!(std::fs::read(&input).unwrap(), before);
+
+    std::fs::write(&edit, "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [0.5, 1.0, 1.0] }\n\n[[handle]]\nsphere = { center = [2.0, 0.5], radius = 0.3 }\n").unwrap();
+    let out = dir.path().join("o.ply");
+    let r = run(&[
+        "deform",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 4);
+    assert!(r.stderr.contains("line 4"), "{}", r.stderr);
+
+    // Fixed and handle regions sharing a cell.
+    std::fs::write(&edit, "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n[[handle]]\nbox = { min = [0.9, 0.0, 0.0], max = [2.0, 1.0, 1.0] }\ntranslate = [0.0, 0.0, 1.0]\n").unwrap();
+    let r = run(&[
+        "deform",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+        "--cell-size",
+        "0.25",
+    ]);
+    assert_eq!(r.code, 4);
+    assert!(r.stderr.contains("both claim"), "{}", r.stderr);
+    assert!(!out.exists());
+}
+
+#[test]
+fn demo_writes_inputs_and_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = run(&["demo", "--out", dir.path().to_str().unwrap(), "-q"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    for f in [
+        "bar.ply",
+        "soup.ply",
+        "bar_bent.ply",
+        "soup_bent.ply",
+        "bend.toml",
+    ] {
+        assert!(dir.path().join(f).exists(), "{f} missing");
+    }
+    let a = Document::read(&dir.path().join("soup.ply")).unwrap();
+    let b = Document::read(&dir.path().join("soup_bent.ply")).unwrap();
+    assert_eq!(a.positions().len(), b.positions().len());
+}
