@@ -74,9 +74,7 @@ fn collapse_and_recover<const D: usize>(
         .collect();
     let mut info = SolverInfo::default();
     let params = SolveParams {
-        max_iterations: std::env::var("FIG4_ITERS")
-            .map(|v| v.parse().unwrap())
-            .unwrap_or(30),
+        max_iterations,
         tolerance: 0.0,
         ..Default::default()
     };
