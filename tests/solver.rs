@@ -55,11 +55,7 @@ fn collapse_and_recover<const D: usize>(
         origin: complex.grid.origin,
         warnings: vec![],
     };
-    let mut rng = StdRng::seed_from_u64(
-        std::env::var("FIG4_SEED")
-            .map(|v| v.parse().unwrap())
-            .unwrap_or(11),
-    );
+    let mut rng = StdRng::seed_from_u64(11);
     let point = Vect::<D>::from_fn(|_, _| rng.random_range(-0.1..0.1));
     let mut motions: Vec<Motion<D>> = complex
         .cells

@@ -1,1 +1,155 @@
-fn main() {}
+//! Measures the engine on a real scan: the solve (seconds per Gauss-Newton iteration and
+//! iterations to converge) at about 1.2k and 5.5k cells, and the blend and RBF transfers to
+//! 50k points — the quantities of the paper's Table 1.
+//!
+//! `cargo run --release -p rigidcells-tools --bin bench [MODEL.ply]`; the default model is the
+//! decimated Stanford dragon in `../shared/data/meshes`. The edit bends the model: the lowest
+//! 15% along its longest axis is fixed, the highest 15% turns by 60° and lifts.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use rand::{Rng, SeedableRng, rngs::StdRng};
+use rigidcells::cells::{BuildParams, build};
+use rigidcells::field::{Deformer, Field, Transfer, apply};
+use rigidcells::io::Document;
+use rigidcells::progress::Silent;
+use rigidcells::rigid::Vect;
+use rigidcells::solve::{self, SolveParams};
+use rigidcells::spec::parse_spec;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let model = std::env::args()
+        .nth(1)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("../../shared/data/meshes/dragon_11k_binary.ply")
+        });
+    let doc = Document::read(&model)?;
+    let (points, tris) = (doc.positions(), doc.triangles());
+    let (mut lo, mut hi) = (points[0], points[0]);
+    for p in points {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let ext = hi - lo;
+    let axis = ext.imax();
+    let up = (axis + 1) % 3;
+    let side = 3 - axis - up;
+    let low = lo[axis] + 0.15 * ext[axis];
+    let high = hi[axis] - 0.15 * ext[axis];
+    let bounds = |a: f64, b: f64| {
+        let mut min = lo - ext * 0.1;
+        let mut max = hi + ext * 0.1;
+        min[axis] = a;
+        max[axis] = b;
+        format!(
+            "{{ min = {:?}, max = {:?} }}",
+            min.as_slice(),
+            max.as_slice()
+        )
+    };
+    let mut rot_axis = [0.0; 3];
+    rot_axis[side] = 1.0;
+    let mut lift = [0.0; 3];
+    lift[up] = 0.25 * ext[axis];
+    let spec_text = format!(
+        "[[fixed]]\nbox = {}\n[[handle]]\nbox = {}\nrotate = {{ axis = {rot_axis:?}, degrees = 60.0 }}\ntranslate = {lift:?}\n",
+        bounds(lo[axis] - ext[axis], low),
+        bounds(high, hi[axis] + ext[axis])
+    );
+    let spec = parse_spec::<3>(
+        &spec_text,
+        std::path::Path::new("."),
+        std::path::Path::new("bench.toml"),
+    )?;
+    println!(
+        "model {} ({} vertices, {} triangles), {} threads",
+        model.display(),
+        points.len(),
+        tris.len(),
+        rayon::current_num_threads()
+    );
+
+    // 50k query points: random points on the model's triangles.
+    let mut rng = StdRng::seed_from_u64(5);
+    let samples: Vec<Vect<3>> = (0..50_000)
+        .map(|_| {
+            let t = tris[rng.random_range(0..tris.len())];
+            let (mut u, mut v) = (rng.random::<f64>(), rng.random::<f64>());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let [a, b, c] = t.map(|i| points[i as usize]);
+            a + (b - a) * u + (c - a) * v
+        })
+        .collect();
+
+    println!(
+        "| cells | build s | unknowns | load steps | GN iterations | s/iteration | solve s | blend 50k s | RBF factor s | RBF eval 50k s |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for target in [1200usize, 5500] {
+        let size = cell_size_for(points, tris, ext.max(), target)?;
+        let t = Instant::now();
+        let (complex, _) = build(
+            points,
+            tris,
+            &BuildParams {
+                cell_size: Some(size),
+                ..Default::default()
+            },
+        )?;
+        let t_build = t.elapsed().as_secs_f64();
+        let cells = complex.len();
+        let constraints = solve::resolve(&complex, &spec, points, None)?;
+        let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent)?;
+        let field = Field::from_solution(&sol);
+        let t = Instant::now();
+        let blend = Deformer::new(&field, Transfer::Blend)?;
+        let mut moved = samples.clone();
+        apply(&blend, &field.origin, &mut moved);
+        let t_blend = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let rbf = Deformer::new(&field, Transfer::Rbf)?;
+        let t_factor = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let mut moved = samples.clone();
+        apply(&rbf, &field.origin, &mut moved);
+        let t_eval = t.elapsed().as_secs_f64();
+        let info = &sol.info;
+        println!(
+            "| {cells} | {t_build:.3} | {} | {} | {} | {:.4} | {:.2} | {t_blend:.3} | {t_factor:.2} | {t_eval:.2} |",
+            info.unknowns,
+            info.load_steps,
+            info.iterations,
+            info.seconds_per_iteration(),
+            info.seconds,
+        );
+    }
+    Ok(())
+}
+
+/// The finest cell size that gives about `target` cells (bisection on the size).
+fn cell_size_for(
+    points: &[Vect<3>],
+    tris: &[[u32; 3]],
+    extent: f64,
+    target: usize,
+) -> Result<f64, rigidcells::Error> {
+    let (mut a, mut b) = (extent / 400.0, extent / 4.0);
+    for _ in 0..18 {
+        let mid = (a * b).sqrt();
+        let (c, _) = build(
+            points,
+            tris,
+            &BuildParams {
+                cell_size: Some(mid),
+                ..Default::default()
+            },
+        )?;
+        if c.len() > target { a = mid } else { b = mid }
+    }
+    Ok((a * b).sqrt())
+}
