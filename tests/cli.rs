@@ -29,6 +29,21 @@ fn run(args: &[&str]) -> Run {
     }
 }
 
+/// `rigidcells deform INPUT -o OUTPUT --edit EDIT -q` plus `extra` arguments.
+fn deform(input: &Path, output: &Path, edit: &Path, extra: &[&str]) -> Run {
+    let mut args = vec![
+        "deform",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 fn edges(tris: &[[u32; 3]]) -> Vec<(u32, u32)> {
     let mut e: Vec<(u32, u32)> = tris
         .iter()
@@ -66,19 +81,12 @@ fn bar_edit(
         ),
     )
     .unwrap();
-    let r = run(&[
-        "deform",
-        input.to_str().unwrap(),
-        "-o",
-        output.to_str().unwrap(),
-        "--edit",
-        edit.to_str().unwrap(),
-        "--cell-size",
-        "0.25",
-        "--transfer",
-        transfer,
-        "-q",
-    ]);
+    let r = deform(
+        &input,
+        &output,
+        &edit,
+        &["--cell-size", "0.25", "--transfer", transfer],
+    );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let before = Document::read(&input).unwrap();
     let after = Document::read(&output).unwrap();
@@ -217,17 +225,7 @@ fn ply_translate_round_trip_keeps_everything_else() {
     ] {
         let input = shared(name);
         let output = dir.path().join("out.ply");
-        let r = run(&[
-            "deform",
-            input.to_str().unwrap(),
-            "-o",
-            output.to_str().unwrap(),
-            "--edit",
-            edit.to_str().unwrap(),
-            "--transfer",
-            "blend",
-            "-q",
-        ]);
+        let r = deform(&input, &output, &edit, &["--transfer", "blend"]);
         assert_eq!(r.code, 0, "{name}: {}", r.stderr);
         let a = Document::read(&input).unwrap();
         let b = Document::read(&output).unwrap();
@@ -269,15 +267,7 @@ fn malformed_and_empty_inputs_give_an_error_and_no_output() {
         "malformed/cube-ply-1.0_ascii-comment_renamed_to_remark-invalid.ply",
     ] {
         let output = dir.path().join("out.ply");
-        let r = run(&[
-            "deform",
-            shared(name).to_str().unwrap(),
-            "-o",
-            output.to_str().unwrap(),
-            "--edit",
-            edit.to_str().unwrap(),
-            "-q",
-        ]);
+        let r = deform(&shared(name), &output, &edit, &[]);
         assert!(
             r.code == 3 || r.code == 4,
             "{name}: exit {} ({})",
@@ -310,43 +300,20 @@ fn refuses_to_overwrite_the_input_and_reports_spec_lines() {
         "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [0.5, 1.0, 1.0] }\n",
     )
     .unwrap();
-    let r = run(&[
-        "deform",
-        input.to_str().unwrap(),
-        "-o",
-        input.to_str().unwrap(),
-        "--edit",
-        edit.to_str().unwrap(),
-    ]);
+    let r = deform(&input, &input, &edit, &[]);
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(r.stderr.contains("overwrite"), "{}", r.stderr);
     assert_eq!(std::fs::read(&input).unwrap(), before);
 
     std::fs::write(&edit, "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [0.5, 1.0, 1.0] }\n\n[[handle]]\nsphere = { center = [2.0, 0.5], radius = 0.3 }\n").unwrap();
     let out = dir.path().join("o.ply");
-    let r = run(&[
-        "deform",
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--edit",
-        edit.to_str().unwrap(),
-    ]);
+    let r = deform(&input, &out, &edit, &[]);
     assert_eq!(r.code, 4);
     assert!(r.stderr.contains("line 4"), "{}", r.stderr);
 
     // Fixed and handle regions sharing a cell.
     std::fs::write(&edit, "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n[[handle]]\nbox = { min = [0.9, 0.0, 0.0], max = [2.0, 1.0, 1.0] }\ntranslate = [0.0, 0.0, 1.0]\n").unwrap();
-    let r = run(&[
-        "deform",
-        input.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "--edit",
-        edit.to_str().unwrap(),
-        "--cell-size",
-        "0.25",
-    ]);
+    let r = deform(&input, &out, &edit, &["--cell-size", "0.25"]);
     assert_eq!(r.code, 4);
     assert!(r.stderr.contains("both claim"), "{}", r.stderr);
     assert!(!out.exists());

@@ -326,14 +326,8 @@ where
         let (sym, argsort, llt) = self.symbolic.as_ref().expect("a system with unknowns");
         let mut mu = damping;
         for _ in 0..12 {
-            for (k, &c) in self.free_cells.iter().enumerate() {
-                let s = self.slots[c as usize];
-                let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
-                for a in 0..s.len {
-                    // Levenberg–Marquardt on the diagonal, plus a floor for singular directions.
-                    vals[tri(a + 1) - 1] += mu * diag[s.offset + a] + 1e-12 * scale;
-                }
-            }
+            // Levenberg–Marquardt on the diagonal, plus a floor for singular directions.
+            self.damp(cell_vals, &diag, mu, 1e-12 * scale);
             let all = [&cell_vals[..], &pair_vals[..]].concat();
             let matrix = SparseColMat::new_from_argsort(sym.clone(), argsort, &all)
                 .map_err(|e| Error::Solver(format!("assembly: {e:?}")))?;
@@ -348,18 +342,23 @@ where
                 }
             }
             // Undo this round's damping before trying a stronger one.
-            for (k, &c) in self.free_cells.iter().enumerate() {
-                let s = self.slots[c as usize];
-                let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
-                for a in 0..s.len {
-                    vals[tri(a + 1) - 1] -= mu * diag[s.offset + a] + 1e-12 * scale;
-                }
-            }
+            self.damp(cell_vals, &diag, -mu, -1e-12 * scale);
             mu = (mu * 100.0).max(1e-6);
         }
         Err(Error::Solver(
             "the Gauss-Newton system stayed indefinite under damping".into(),
         ))
+    }
+
+    /// Adds `mu · diag + floor` to the diagonal of every free cell's own block.
+    fn damp(&self, cell_vals: &mut [f64], diag: &[f64], mu: f64, floor: f64) {
+        for (k, &c) in self.free_cells.iter().enumerate() {
+            let s = self.slots[c as usize];
+            let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
+            for a in 0..s.len {
+                vals[tri(a + 1) - 1] += mu * diag[s.offset + a] + floor;
+            }
+        }
     }
 
     /// `motions` advanced by `t·δ`: `p += t v`, `R ← polar(I + [t ω]×) R` (pinned cells keep
