@@ -381,14 +381,16 @@ where
                 let d = &delta[s.offset..s.offset + s.len];
                 match constraints.roles[c] {
                     Role::Free => {
-                        let w: Vec<f64> = d[D..].iter().map(|x| x * t).collect();
+                        let w: [f64; 3] =
+                            std::array::from_fn(|r| if r < rot { t * d[D + r] } else { 0.0 });
                         Motion {
                             rot: <Dim<D> as Rigid<D>>::step_rotation(&w) * m.rot,
                             pos: m.pos + Vect::<D>::from_fn(|a, _| t * d[a]),
                         }
                     }
                     Role::Pin(k) => {
-                        let w: Vec<f64> = d[..rot].iter().map(|x| x * t).collect();
+                        let w: [f64; 3] =
+                            std::array::from_fn(|r| if r < rot { t * d[r] } else { 0.0 });
                         let r = <Dim<D> as Rigid<D>>::step_rotation(&w) * m.rot;
                         let pin = &constraints.pins[k as usize];
                         Motion {
