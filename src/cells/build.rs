@@ -121,21 +121,16 @@ pub fn build<const D: usize>(
         .iter()
         .filter(|(_, k)| *k == CellKind::Boundary)
         .count();
+    let interior_cells = leaves.len() - boundary_cells;
+    let complex = CellComplex::from_keys(grid, leaves);
     let info = BuildInfo {
         finest_dims: dims.to_vec(),
         occupied,
         boundary_cells,
-        interior_cells: leaves.len() - boundary_cells,
-        seconds: 0.0,
+        interior_cells,
+        seconds: start.elapsed().as_secs_f64(),
     };
-    let complex = CellComplex::from_keys(grid, leaves);
-    Ok((
-        complex,
-        BuildInfo {
-            seconds: start.elapsed().as_secs_f64(),
-            ..info
-        },
-    ))
+    Ok((complex, info))
 }
 
 /// The grid for `points` under `params`.
