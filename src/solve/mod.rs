@@ -7,13 +7,16 @@
 //! where the middle never turns; the paper's interactive setting avoids this because handles move
 //! a little per frame, and load steps do the same for a batch tool.
 //!
-//! Every Gauss-Newton step is followed by a backtracking line search, so the energy never
-//! increases across accepted iterations; a step that cannot decrease the energy ends the load
-//! step. With `refine_strain`, cells whose strain exceeds the threshold are split after the last
+//! Every Gauss-Newton step is followed by a line search along the step (halving from the full
+//! step, or doubling up to 8× while a full step keeps lowering the energy), and every trial has
+//! its free positions replaced by their optimum for its rotations (variable projection, see
+//! [`positions`]). The energy never increases across accepted iterations; a step that cannot
+//! decrease the energy ends the load step. With `refine_strain`, cells whose strain exceeds the threshold are split after the last
 //! load step (children inherit motion and constraint) and the solve continues.
 
 pub mod constraints;
 pub mod energy;
+mod positions;
 mod system;
 
 use std::time::Instant;
@@ -308,7 +311,8 @@ where
         let mut t = 1.0;
         let mut accepted = None;
         for _ in 0..30 {
-            let trial = system.advance(complex, constraints, motions, &pins_to, &delta, t);
+            let mut trial = system.advance(complex, constraints, motions, &pins_to, &delta, t);
+            system.project_positions(complex, constraints, &mut trial, &targets_to);
             let e = total_energy(complex, constraints, &trial, &targets_to);
             if !e.is_finite() {
                 return Err(Error::Solver("the energy became non-finite".into()));
@@ -318,6 +322,25 @@ where
                 break;
             }
             t *= 0.5;
+        }
+        // A full step that lowers the energy may be too short (a slowly drifting vortex in
+        // 2D): extrapolate while the energy keeps falling.
+        if t == 1.0 {
+            while let Some((_, best)) = &accepted {
+                let longer = t * 2.0;
+                if longer > 8.0 {
+                    break;
+                }
+                let mut trial =
+                    system.advance(complex, constraints, motions, &pins_to, &delta, longer);
+                system.project_positions(complex, constraints, &mut trial, &targets_to);
+                let e = total_energy(complex, constraints, &trial, &targets_to);
+                if e >= *best || e.is_nan() {
+                    break;
+                }
+                t = longer;
+                accepted = Some((trial, e));
+            }
         }
         let Some((trial, e)) = accepted else {
             // No step lowers the energy: a minimum to machine precision.

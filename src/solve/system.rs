@@ -26,6 +26,7 @@ use rayon::prelude::*;
 
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
+use super::positions::Positions;
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
@@ -54,6 +55,8 @@ pub(crate) struct System<const D: usize> {
         SymbolicLlt<usize>,
     )>,
     values: Vec<f64>,
+    /// The position-only system, for variable projection.
+    positions: Positions,
 }
 
 /// Entries of a diagonal block's lower triangle, and of a full block, for `DOF` unknowns.
@@ -117,6 +120,7 @@ where
             n,
             symbolic: None,
             values: Vec::new(),
+            positions: Positions::new(complex, constraints),
         };
         if n > 0 {
             let indices = system.pattern(complex);
@@ -128,6 +132,18 @@ where
             system.symbolic = Some((sym, argsort, llt));
         }
         Ok(system)
+    }
+
+    /// Sets the free cells' positions to their optimum for the current rotations.
+    pub fn project_positions(
+        &self,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        motions: &mut [Motion<D>],
+        targets_to: &[Vect<D>],
+    ) {
+        self.positions
+            .project(complex, constraints, motions, targets_to);
     }
 
     /// Number of unknowns.
