@@ -84,57 +84,15 @@ pub fn build<const D: usize>(
     triangles: &[[u32; 3]],
     params: &BuildParams,
 ) -> Result<(CellComplex<D>, BuildInfo)> {
-    let start = Instant::now();
-    let grid = frame(points, params)?;
-    let dims = grid.dims(grid.max_level);
-    let mut state = vec![OUT; dims.iter().product::<i64>() as usize];
-    let index = |c: &[i64; D]| linear(c, &dims);
-
-    for p in points {
-        if let Some(k) = grid.locate(&(p - grid.origin), grid.max_level) {
-            state[index(&k.coord)] = OCCUPIED;
-        }
-    }
-    if D == 3 && !triangles.is_empty() {
-        for idx in triangle_cells(&grid, points, triangles)? {
-            state[idx] = OCCUPIED;
-        }
-    }
-    let occupied = state.iter().filter(|&&s| s == OCCUPIED).count();
-    classify_inside(&dims, &mut state, params.inside);
-
-    let pyramid = pyramid(&grid, state);
-    let mut leaves = Vec::new();
-    let mut stack: Vec<CellKey<D>> = Vec::new();
-    for_each_coord(&grid.dims0, |coord| stack.push(CellKey { level: 0, coord }));
-    while let Some(key) = stack.pop() {
-        let s = pyramid[key.level as usize][linear(&key.coord, &grid.dims(key.level))];
-        match s {
-            IN => leaves.push((key, CellKind::Interior)),
-            OCCUPIED if key.level == grid.max_level => leaves.push((key, CellKind::Boundary)),
-            OCCUPIED => stack.extend(key.children()),
-            _ => {}
-        }
-    }
-    leaves.sort_unstable_by_key(|(k, _)| *k);
-    let boundary_cells = leaves
-        .iter()
-        .filter(|(_, k)| *k == CellKind::Boundary)
-        .count();
-    let interior_cells = leaves.len() - boundary_cells;
-    let complex = CellComplex::from_keys(grid, leaves);
-    let info = BuildInfo {
-        finest_dims: dims.to_vec(),
-        occupied,
-        boundary_cells,
-        interior_cells,
-        seconds: start.elapsed().as_secs_f64(),
-    };
-    Ok((complex, info))
+    let (lo, hi) = bounds(points)?;
+    let mut occupancy = Occupancy::new(&lo, &hi, params)?;
+    occupancy.add_points(points);
+    occupancy.add_triangles(points, triangles)?;
+    Ok(occupancy.finish())
 }
 
-/// The grid for `points` under `params`.
-fn frame<const D: usize>(points: &[Vect<D>], params: &BuildParams) -> Result<Grid<D>> {
+/// The bounding box of `points`; an error for no points or a coordinate that is not finite.
+pub fn bounds<const D: usize>(points: &[Vect<D>]) -> Result<(Vect<D>, Vect<D>)> {
     if points.is_empty() {
         return Err(Error::Input("the input has no points".into()));
     }
@@ -149,6 +107,136 @@ fn frame<const D: usize>(points: &[Vect<D>], params: &BuildParams) -> Result<Gri
         lo = lo.inf(p);
         hi = hi.sup(p);
     }
+    Ok((lo, hi))
+}
+
+/// The finest-level occupancy of a shape, filled a batch of samples at a time: the first pass
+/// of the streaming pipeline, which never holds all samples. [`Occupancy::finish`] classifies
+/// the empty cells and emits the adaptive complex.
+#[derive(Debug, Clone)]
+pub struct Occupancy<const D: usize> {
+    grid: Grid<D>,
+    dims: [i64; D],
+    state: Vec<u8>,
+    inside: Inside,
+    start: Instant,
+}
+
+impl<const D: usize> Occupancy<D> {
+    /// An empty grid over the box `lo..hi` (world coordinates) under `params`.
+    pub fn new(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Result<Self> {
+        let grid = frame(lo, hi, params)?;
+        let dims = grid.dims(grid.max_level);
+        Ok(Self {
+            grid,
+            dims,
+            state: vec![OUT; dims.iter().product::<i64>() as usize],
+            inside: params.inside,
+            start: Instant::now(),
+        })
+    }
+
+    /// The grid (its origin is the local frame's).
+    pub fn grid(&self) -> &Grid<D> {
+        &self.grid
+    }
+
+    /// The linear index of the finest cell holding the world point `p`, if inside the grid.
+    #[inline]
+    pub fn finest_index(&self, p: &Vect<D>) -> Option<usize> {
+        self.grid
+            .locate(&(p - self.grid.origin), self.grid.max_level)
+            .map(|k| linear(&k.coord, &self.dims))
+    }
+
+    /// The key of the finest cell with linear index `i`.
+    pub fn finest_key(&self, i: usize) -> CellKey<D> {
+        let mut coord = [0i64; D];
+        let mut rest = i as i64;
+        for a in (0..D).rev() {
+            coord[a] = rest % self.dims[a];
+            rest /= self.dims[a];
+        }
+        CellKey {
+            level: self.grid.max_level,
+            coord,
+        }
+    }
+
+    /// Marks the cells of world-coordinate samples. Returns how many fell outside the grid.
+    pub fn add_points(&mut self, points: &[Vect<D>]) -> usize {
+        let mut outside = 0;
+        for p in points {
+            match self.finest_index(p) {
+                Some(i) => self.state[i] = OCCUPIED,
+                None => outside += 1,
+            }
+        }
+        outside
+    }
+
+    /// Marks every finest cell a triangle over `points` overlaps (3D; ignored in 2D).
+    pub fn add_triangles(&mut self, points: &[Vect<D>], triangles: &[[u32; 3]]) -> Result<()> {
+        if D == 3 && !triangles.is_empty() {
+            for idx in triangle_cells(&self.grid, points, triangles)? {
+                self.state[idx] = OCCUPIED;
+            }
+        }
+        Ok(())
+    }
+
+    /// Classifies the empty cells and emits the leaves of the adaptive complex.
+    pub fn finish(self) -> (CellComplex<D>, BuildInfo) {
+        let Self {
+            grid,
+            dims,
+            mut state,
+            inside,
+            start,
+        } = self;
+        let occupied = state.iter().filter(|&&s| s == OCCUPIED).count();
+        classify_inside(&dims, &mut state, inside);
+        let pyramid = pyramid(&grid, state);
+        let mut leaves = Vec::new();
+        let mut stack: Vec<CellKey<D>> = Vec::new();
+        for_each_coord(&grid.dims0, |coord| stack.push(CellKey { level: 0, coord }));
+        while let Some(key) = stack.pop() {
+            let s = pyramid[key.level as usize][linear(&key.coord, &grid.dims(key.level))];
+            match s {
+                IN => leaves.push((key, CellKind::Interior)),
+                OCCUPIED if key.level == grid.max_level => leaves.push((key, CellKind::Boundary)),
+                OCCUPIED => stack.extend(key.children()),
+                _ => {}
+            }
+        }
+        leaves.sort_unstable_by_key(|(k, _)| *k);
+        let boundary_cells = leaves
+            .iter()
+            .filter(|(_, k)| *k == CellKind::Boundary)
+            .count();
+        let interior_cells = leaves.len() - boundary_cells;
+        let complex = CellComplex::from_keys(grid, leaves);
+        let info = BuildInfo {
+            finest_dims: dims.to_vec(),
+            occupied,
+            boundary_cells,
+            interior_cells,
+            seconds: start.elapsed().as_secs_f64(),
+        };
+        (complex, info)
+    }
+}
+
+/// The grid for the box `lo..hi` under `params`.
+fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Result<Grid<D>> {
+    if !(lo.iter().chain(hi.iter()).all(|v| v.is_finite())) || (0..D).any(|a| lo[a] > hi[a]) {
+        return Err(Error::Input(format!(
+            "the bounding box {:?}..{:?} is not finite",
+            lo.as_slice(),
+            hi.as_slice()
+        )));
+    }
+    let (lo, hi) = (*lo, *hi);
     let extent = hi - lo;
     let longest = extent.max();
     let size = match params.cell_size {

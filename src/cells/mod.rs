@@ -19,7 +19,7 @@ mod adjacency;
 mod build;
 mod tri_box;
 
-pub use build::{BuildInfo, BuildParams, Inside, build, classify_inside};
+pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, classify_inside};
 pub use tri_box::triangle_box_overlap;
 
 use std::collections::HashMap;

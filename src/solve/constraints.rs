@@ -18,10 +18,12 @@
 //!
 //! Everything here is in the local frame of the complex.
 
-use crate::cells::CellComplex;
+use std::collections::HashSet;
+
+use crate::cells::{CellComplex, CellKey, Grid};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Rigid, Vect};
-use crate::spec::{EditSpec, HandleMotion};
+use crate::spec::{EditSpec, HandleMotion, Region};
 
 /// What constrains a cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -115,6 +117,77 @@ where
     }
 }
 
+/// What the samples select, region by region (in the order fixed, handles, stiffness), gathered
+/// a batch of samples at a time so that a streaming pass needs no sample twice: the finest grid
+/// cells holding selected samples, and their sum and count (a handle's default pivot is their
+/// centroid).
+#[derive(Debug, Clone)]
+pub struct Selections<const D: usize> {
+    regions: Vec<RegionSamples<D>>,
+}
+
+#[derive(Debug, Clone)]
+struct RegionSamples<const D: usize> {
+    cells: HashSet<[i64; D]>,
+    sum: Vect<D>,
+    count: u64,
+}
+
+impl<const D: usize> Selections<D> {
+    /// Empty selections for `spec`. Fails when a region selects by LAS class and the input has
+    /// no classes.
+    pub fn new(spec: &EditSpec<D>, has_classes: bool) -> Result<Self> {
+        let regions: Vec<&Region<D>> = regions(spec).collect();
+        if !has_classes && regions.iter().any(|r| matches!(r, Region::Classification(_))) {
+            return Err(Error::Param(
+                "a `classification` region needs an input with LAS classes".into(),
+            ));
+        }
+        Ok(Self {
+            regions: regions
+                .iter()
+                .map(|_| RegionSamples {
+                    cells: HashSet::new(),
+                    sum: Vect::<D>::zeros(),
+                    count: 0,
+                })
+                .collect(),
+        })
+    }
+
+    /// Adds the samples `points` (world coordinates), numbered from `first`, with their LAS
+    /// `classes` when the input has them; `grid` is the frame of the cells to come.
+    pub fn add(
+        &mut self,
+        spec: &EditSpec<D>,
+        grid: &Grid<D>,
+        first: u64,
+        points: &[Vect<D>],
+        classes: Option<&[u8]>,
+    ) {
+        for (region, acc) in regions(spec).zip(&mut self.regions) {
+            for (i, p) in points.iter().enumerate() {
+                if region.selects(first + i as u64, p, classes.map(|c| c[i])) {
+                    acc.sum += p;
+                    acc.count += 1;
+                    if let Some(k) = grid.locate(&(p - grid.origin), grid.max_level) {
+                        acc.cells.insert(k.coord);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The sample-selecting regions of `spec`, in the order of [`Selections`].
+fn regions<const D: usize>(spec: &EditSpec<D>) -> impl Iterator<Item = &Region<D>> {
+    spec.fixed
+        .iter()
+        .map(|e| &e.region)
+        .chain(spec.handles.iter().map(|e| &e.region))
+        .chain(spec.stiffness.iter().map(|e| &e.region))
+}
+
 /// Resolves `spec` onto `complex`. `points` are the samples in input coordinates; `classes`
 /// their LAS classes when the input has them.
 pub fn resolve<const D: usize>(
@@ -126,40 +199,37 @@ pub fn resolve<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
+    let mut selections = Selections::new(spec, classes.is_some())?;
+    selections.add(spec, &complex.grid, 0, points, classes);
+    resolve_selected(complex, spec, &selections)
+}
+
+/// Resolves `spec` onto `complex` from the samples' [`Selections`].
+pub fn resolve_selected<const D: usize>(
+    complex: &CellComplex<D>,
+    spec: &EditSpec<D>,
+    selections: &Selections<D>,
+) -> Result<Constraints<D>>
+where
+    Dim<D>: Rigid<D>,
+{
     let n = complex.len();
     let origin = complex.grid.origin;
     let mut owner: Vec<Option<(String, Role)>> = vec![None; n];
     let mut stiffness = vec![1.0f64; n];
     let mut warnings = Vec::new();
-    let uses_classes = spec
-        .fixed
-        .iter()
-        .map(|e| &e.region)
-        .chain(spec.handles.iter().map(|e| &e.region))
-        .chain(spec.stiffness.iter().map(|e| &e.region))
-        .any(|r| matches!(r, crate::spec::Region::Classification(_)));
-    if uses_classes && classes.is_none() {
-        return Err(Error::Param(
-            "a `classification` region needs an input with LAS classes".into(),
-        ));
-    }
-    let sample_cells: Vec<Option<usize>> = points
-        .iter()
-        .map(|p| complex.locate(&(p - origin)))
-        .collect();
 
     // Cells selected by a region: through samples, or by center for geometric regions.
-    let select = |region: &crate::spec::Region<D>| -> (Vec<bool>, Vect<D>, usize) {
+    let select = |k: usize, region: &Region<D>| -> (Vec<bool>, Vect<D>, u64) {
+        let acc = &selections.regions[k];
         let mut hit = vec![false; n];
-        let mut sum = Vect::<D>::zeros();
-        let mut count = 0usize;
-        for (i, p) in points.iter().enumerate() {
-            if region.selects(i as u64, p, classes.map(|c| c[i])) {
-                sum += p;
-                count += 1;
-                if let Some(c) = sample_cells[i] {
-                    hit[c] = true;
-                }
+        for coord in &acc.cells {
+            let key = CellKey {
+                level: complex.grid.max_level,
+                coord: *coord,
+            };
+            if let Some(c) = complex.locate(&complex.grid.center(&key)) {
+                hit[c] = true;
             }
         }
         if region.is_geometric() {
@@ -167,14 +237,15 @@ where
                 hit[c] |= region.contains_point(&(cell.center + origin));
             }
         }
-        (hit, sum, count)
+        (hit, acc.sum, acc.count)
     };
+    let (nf, nh) = (spec.fixed.len(), spec.handles.len());
 
     // Handles first, so that two handles with the same motion may share cells.
     let mut handles = Vec::new();
     let mut handle_hits = Vec::new();
     for (k, e) in spec.handles.iter().enumerate() {
-        let (hit, sum, count) = select(&e.region);
+        let (hit, sum, count) = select(nf + k, &e.region);
         if !hit.iter().any(|&h| h) {
             warnings.push(format!(
                 "handle #{} (line {}) selects no cell",
@@ -235,7 +306,7 @@ where
 
     for (k, e) in spec.fixed.iter().enumerate() {
         let name = format!("fixed #{} (line {})", k + 1, e.line);
-        let (hit, _, _) = select(&e.region);
+        let (hit, _, _) = select(k, &e.region);
         if !hit.iter().any(|&h| h) {
             warnings.push(format!("{name} selects no cell"));
         }
@@ -284,8 +355,8 @@ where
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    for e in &spec.stiffness {
-        let (hit, _, _) = select(&e.region);
+    for (k, e) in spec.stiffness.iter().enumerate() {
+        let (hit, _, _) = select(nf + nh + k, &e.region);
         for c in (0..n).filter(|&c| hit[c]) {
             stiffness[c] *= e.value;
         }

@@ -21,7 +21,7 @@ mod system;
 
 use std::time::Instant;
 
-pub use constraints::{Constraints, Role, inherit, resolve};
+pub use constraints::{Constraints, Role, Selections, inherit, resolve, resolve_selected};
 pub use energy::{cell_strain, glue_energy, pair_energy};
 
 use crate::cells::CellComplex;
