@@ -23,7 +23,7 @@ pub enum Error {
         message: String,
     },
     /// A file has an extension rigidcells does not read or write.
-    #[error("{path}: unsupported format (expected .ply or .xyz)")]
+    #[error("{path}: unsupported format (expected .las, .laz, .ply, .obj or .xyz)")]
     UnsupportedFormat {
         /// The file.
         path: PathBuf,
@@ -70,6 +70,13 @@ pub enum Error {
         at: Vec<f64>,
         /// The cell's edge length.
         size: f64,
+    },
+    /// A moved coordinate does not fit the output's integer encoding (LAS) with its scale and
+    /// offset; the pipeline retries with an offset chosen from the moved bounds.
+    #[error("{path}: a moved coordinate does not fit the output's scale and offset")]
+    CoordinateOverflow {
+        /// The output file.
+        path: PathBuf,
     },
     /// A numerical failure that damping could not repair.
     #[error("solver failure: {0}")]

@@ -9,9 +9,9 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, Inside};
-use rigidcells::field::Transfer;
-use rigidcells::io::{Document, refuse_overwrite};
-use rigidcells::pipeline::{DeformInfo, DeformParams, deform};
+use rigidcells::field::{SavedField, Transfer};
+use rigidcells::io::{LasHeader, Source, refuse_overwrite};
+use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
 use rigidcells::progress::Observer;
 use rigidcells::solve::SolveParams;
 use rigidcells::spec::read_spec;
@@ -29,8 +29,30 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Deform a PLY mesh/point cloud or an XYZ point cloud under an edit spec.
+    /// Deform a LAS/LAZ scan, a PLY or OBJ mesh or point cloud, or an XYZ point cloud under an
+    /// edit spec.
     Deform(DeformArgs),
+    /// Apply a field saved by `deform --save-field` to a file (the same, a denser one, a tile).
+    Apply {
+        /// The field file.
+        field: PathBuf,
+        /// Input file.
+        input: PathBuf,
+        /// Output file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Transfer of the cells' motions to the samples.
+        #[arg(long, value_enum, default_value_t = TransferArg::Rbf)]
+        transfer: TransferArg,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Describe a file: format, version, counts, attributes, bounds, CRS.
+    Info {
+        /// Input file.
+        input: PathBuf,
+    },
     /// Generate a bar and a non-manifold soup, bend them, and write inputs and results.
     Demo {
         /// Folder for the files (created if missing).
@@ -44,9 +66,9 @@ enum Command {
 
 #[derive(clap::Args)]
 struct DeformArgs {
-    /// Input file (.ply, .xyz).
+    /// Input file (.las, .laz, .ply, .obj, .xyz).
     input: PathBuf,
-    /// Output file (same format as the input).
+    /// Output file (the input's format; .las and .laz convert into each other).
     #[arg(short, long)]
     output: PathBuf,
     /// Edit spec (TOML): fixed regions, handles, pins, targets, stiffness.
@@ -67,6 +89,12 @@ struct DeformArgs {
     /// Keep only cells that hold samples (a shell; no interior cells).
     #[arg(long)]
     shell: bool,
+    /// Also write the solved field to this file, for `rigidcells apply`.
+    #[arg(long)]
+    save_field: Option<PathBuf>,
+    /// Samples per streamed chunk.
+    #[arg(long, default_value_t = CHUNK)]
+    chunk: usize,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
@@ -84,6 +112,14 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Deform(args) => run_deform(&args),
+        Command::Apply {
+            field,
+            input,
+            output,
+            transfer,
+            quiet,
+        } => run_apply(&field, &input, &output, transfer.into(), quiet),
+        Command::Info { input } => run_info(&input),
         Command::Demo { out, quiet } => run_demo(&out, quiet),
     };
     match result {
@@ -131,12 +167,29 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
             refine_strain: args.refine_strain,
             ..Default::default()
         },
-        transfer: match args.transfer {
+        transfer: args.transfer.into(),
+    };
+    if let Some(f) = &args.save_field {
+        refuse_overwrite(&args.input, f)?;
+    }
+    deform_file(
+        &args.input,
+        &args.output,
+        &args.edit,
+        &params,
+        args.chunk.max(1),
+        args.save_field.as_deref(),
+        args.quiet,
+    )
+}
+
+impl From<TransferArg> for Transfer {
+    fn from(t: TransferArg) -> Self {
+        match t {
             TransferArg::Blend => Transfer::Blend,
             TransferArg::Rbf => Transfer::Rbf,
-        },
-    };
-    deform_file(&args.input, &args.output, &args.edit, &params, args.quiet)
+        }
+    }
 }
 
 fn deform_file(
@@ -144,22 +197,111 @@ fn deform_file(
     output: &Path,
     edit: &Path,
     params: &DeformParams,
+    chunk: usize,
+    save_field: Option<&Path>,
     quiet: bool,
 ) -> anyhow::Result<()> {
     let spec = read_spec::<3>(edit)?;
-    let doc = Document::read(input)?;
     let bar = Bar::new(quiet);
-    let (moved, _, info) = deform(doc.positions(), doc.triangles(), &spec, params, &bar)?;
-    doc.write(&moved, output)?;
+    let (_, info) = pipeline::deform_file(input, output, &spec, params, chunk, save_field, &bar)?;
     if !quiet {
-        report(input, output, doc.positions().len(), &info);
+        report(input, output, &info);
     }
     Ok(())
 }
 
-fn report(input: &Path, output: &Path, points: usize, info: &DeformInfo) {
+fn run_apply(
+    field: &Path,
+    input: &Path,
+    output: &Path,
+    transfer: Transfer,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    let saved = SavedField::<3>::load(field)?;
+    let bar = Bar::new(quiet);
+    let info = pipeline::apply_file(saved, input, output, transfer, CHUNK, &bar)?;
+    if !quiet {
+        for n in &info.notes {
+            println!("note: {n}");
+        }
+        println!(
+            "{} -> {}: {} samples, {:.2} s",
+            input.display(),
+            output.display(),
+            info.samples,
+            info.seconds_write
+        );
+    }
+    Ok(())
+}
+
+fn run_info(input: &Path) -> anyhow::Result<()> {
+    let ext = input
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase());
+    if matches!(ext.as_deref(), Some("las") | Some("laz")) {
+        let h = LasHeader::read(input)?;
+        println!("{}", input.display());
+        println!(
+            "  format: {} {}.{}, point data record format {}, {} bytes per record",
+            if h.compressed { "LAZ" } else { "LAS" },
+            h.version.0,
+            h.version.1,
+            h.format,
+            h.record_len
+        );
+        println!("  points: {}", h.count);
+        println!(
+            "  bounds: x [{}, {}]  y [{}, {}]  z [{}, {}]",
+            h.min[0], h.max[0], h.min[1], h.max[1], h.min[2], h.max[2]
+        );
+        println!("  scale: {:?}  offset: {:?}", h.scale, h.offset);
+        println!(
+            "  VLRs: {} ({}), EVLRs: {}",
+            h.vlrs.len(),
+            h.vlrs
+                .iter()
+                .map(|v| format!("{}:{}", v.user_id, v.record_id))
+                .collect::<Vec<_>>()
+                .join(", "),
+            h.evlr_count
+        );
+        println!(
+            "  CRS: {}",
+            if h.vlrs.iter().any(|v| v.is_crs()) {
+                "present"
+            } else {
+                "none"
+            }
+        );
+        println!("  software: {} / {}", h.system, h.software);
+        return Ok(());
+    }
+    let source = rigidcells::io::open(input)?;
+    print_summary(input, source.as_ref());
+    Ok(())
+}
+
+fn print_summary(input: &Path, source: &dyn Source) {
+    println!("{}", input.display());
+    println!("  samples: {}", source.len());
+    println!("  triangles: {}", source.triangles().len());
+    let properties = rigidcells::io::describe(input).unwrap_or_default();
+    if !properties.is_empty() {
+        println!("  {properties}");
+    }
+}
+
+fn report(input: &Path, output: &Path, file: &FileInfo) {
+    let info = &file.deform;
+    let points = file.samples;
     for w in &info.warnings {
         eprintln!("warning: {w}");
+    }
+    for n in &file.notes {
+        println!("note: {n}");
     }
     let s = &info.solver;
     println!(
@@ -224,7 +366,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             transfer,
             ..Default::default()
         };
-        deform_file(&input, &output, &edit, &params, quiet)?;
+        deform_file(&input, &output, &edit, &params, CHUNK, None, quiet)?;
     }
     if !quiet {
         println!(

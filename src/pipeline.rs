@@ -1,14 +1,18 @@
 //! The whole method on samples in memory: cells → constraints → solve → transfer.
 //!
-//! [`deform`] is what the CLI's `deform` and `demo` run; file handling stays with the caller.
+//! [`deform`] works on samples in memory; [`deform_file`] and [`apply_file`] stream files in
+//! two passes and one (DESIGN §7).
 
+use std::path::Path;
 use std::time::Instant;
 
-use crate::cells::{BuildInfo, BuildParams, build};
-use crate::error::Result;
-use crate::field::{Deformer, Field, Transfer, apply};
+use crate::cells::{BuildInfo, BuildParams, Occupancy, build};
+use crate::error::{Error, Result};
+use crate::field::{Deformer, Field, Rbf, SavedField, Transfer, Warp, apply, apply_into};
+use crate::io::{self, Bounds, Chunk, Source};
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
+use crate::solve::Selections;
 use crate::solve::{self, Solution, SolveParams, SolverInfo};
 use crate::spec::EditSpec;
 
@@ -64,4 +68,283 @@ where
         warnings,
     };
     Ok((moved, solution, info))
+}
+
+/// Samples per streamed chunk by default.
+pub const CHUNK: usize = 1 << 20;
+
+/// What [`deform_file`] and [`apply_file`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FileInfo {
+    /// Samples read and written.
+    pub samples: u64,
+    /// Cells, solve and transfer (empty for [`apply_file`]).
+    pub deform: DeformInfo,
+    /// Notes on the output (moved offsets, dropped indices, header fixes).
+    pub notes: Vec<String>,
+    /// Seconds of the first pass (bounds, occupancy, selections).
+    pub seconds_read: f64,
+    /// Seconds of the second pass (transfer and writing).
+    pub seconds_write: f64,
+}
+
+/// Deforms the file `input` into `output` in two streaming passes (DESIGN §7): pass 1 builds
+/// the cells from occupancy and gathers what the spec's regions select, never holding all
+/// samples (meshes excepted: their triangles need the vertices); the solve runs on the cells;
+/// pass 2 streams chunks of `chunk` samples through the field, in file order, into the output.
+/// With `save_field`, the solved field (with RBF coefficients) is written there too.
+pub fn deform_file(
+    input: &Path,
+    output: &Path,
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: Option<&Path>,
+    observer: &dyn Observer,
+) -> Result<(Solution<3>, FileInfo)> {
+    let t0 = Instant::now();
+    let mut source = io::open(input)?;
+    let mut info = FileInfo {
+        samples: source.len(),
+        ..Default::default()
+    };
+    let (lo, hi) = match source.bounds_hint() {
+        Some(b) => b,
+        None => scan_bounds(source.as_mut(), chunk)?,
+    };
+    let mut pass = first_pass(
+        source.as_mut(),
+        spec,
+        &params.build,
+        (lo, hi),
+        chunk,
+        observer,
+    )?;
+    if pass.outside > 0 {
+        info.notes.push(format!(
+            "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
+            pass.outside
+        ));
+        let b = pass.bounds;
+        pass = first_pass(source.as_mut(), spec, &params.build, b, chunk, observer)?;
+    }
+    let FirstPass {
+        mut occupancy,
+        selections,
+        positions,
+        ..
+    } = pass;
+    occupancy.add_triangles(&positions, source.triangles())?;
+    drop(positions);
+    let (complex, build_info) = occupancy.finish();
+    info.seconds_read = t0.elapsed().as_secs_f64();
+    let constraints = solve::resolve_selected(&complex, spec, &selections)?;
+    let warnings = constraints.warnings.clone();
+    let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+
+    let t1 = Instant::now();
+    let field = Field::from_solution(&solution);
+    let rbf = match (params.transfer, save_field) {
+        (Transfer::Rbf, _) | (_, Some(_)) => Some(Rbf::new(&field)?),
+        _ => None,
+    };
+    let saved = SavedField::new(field, rbf);
+    if let Some(path) = save_field {
+        saved.save(path)?;
+    }
+    let origin = saved.field.origin;
+    let deformer = saved.deformer(params.transfer)?;
+    let t2 = Instant::now();
+    info.notes.extend(transfer_pass(
+        source.as_mut(),
+        output,
+        &deformer,
+        &origin,
+        chunk,
+        observer,
+    )?);
+    info.seconds_write = t2.elapsed().as_secs_f64();
+    info.deform = DeformInfo {
+        build: build_info,
+        solver: solution.info.clone(),
+        seconds_transfer: t1.elapsed().as_secs_f64(),
+        warnings,
+    };
+    Ok((solution, info))
+}
+
+/// Applies a saved field to the file `input`, writing `output` (one streaming pass).
+pub fn apply_file(
+    field: SavedField<3>,
+    input: &Path,
+    output: &Path,
+    transfer: Transfer,
+    chunk: usize,
+    observer: &dyn Observer,
+) -> Result<FileInfo> {
+    let t = Instant::now();
+    let mut source = io::open(input)?;
+    let origin = field.field.origin;
+    let deformer = field.deformer(transfer)?;
+    let notes = transfer_pass(source.as_mut(), output, &deformer, &origin, chunk, observer)?;
+    Ok(FileInfo {
+        samples: source.len(),
+        notes,
+        seconds_write: t.elapsed().as_secs_f64(),
+        ..Default::default()
+    })
+}
+
+struct FirstPass {
+    occupancy: Occupancy<3>,
+    selections: Selections<3>,
+    /// All positions, kept only when the source has triangles.
+    positions: Vec<Vect<3>>,
+    bounds: Bounds,
+    outside: usize,
+}
+
+/// Checks that every coordinate of a chunk is finite.
+fn check_finite(path: &Path, chunk: &Chunk) -> Result<()> {
+    match chunk
+        .positions
+        .iter()
+        .position(|p| !p.iter().all(|v| v.is_finite()))
+    {
+        Some(i) => Err(Error::format(
+            path,
+            format!(
+                "sample {} has a coordinate that is not a finite number",
+                chunk.first + i as u64
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+fn scan_bounds(source: &mut dyn Source, chunk_len: usize) -> Result<Bounds> {
+    source.rewind()?;
+    let mut chunk = Chunk::default();
+    let mut lo = Vect::<3>::repeat(f64::INFINITY);
+    let mut hi = Vect::<3>::repeat(f64::NEG_INFINITY);
+    while source.read(chunk_len, &mut chunk)? > 0 {
+        check_finite(source.path(), &chunk)?;
+        for p in &chunk.positions {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+    }
+    if lo[0] > hi[0] {
+        return Err(Error::format(source.path(), "the file holds no samples"));
+    }
+    Ok((lo, hi))
+}
+
+fn first_pass(
+    source: &mut dyn Source,
+    spec: &EditSpec<3>,
+    build: &BuildParams,
+    (lo, hi): Bounds,
+    chunk_len: usize,
+    observer: &dyn Observer,
+) -> Result<FirstPass> {
+    source.rewind()?;
+    let mut occupancy = Occupancy::new(&lo, &hi, build)?;
+    let mut selections = Selections::new(spec, source.has_classes())?;
+    let keep = !source.triangles().is_empty();
+    let mut positions = Vec::new();
+    let mut bounds = (
+        Vect::<3>::repeat(f64::INFINITY),
+        Vect::<3>::repeat(f64::NEG_INFINITY),
+    );
+    let mut outside = 0;
+    let mut chunk = Chunk::default();
+    observer.stage("reading", source.len());
+    while source.read(chunk_len, &mut chunk)? > 0 {
+        check_finite(source.path(), &chunk)?;
+        for p in &chunk.positions {
+            bounds.0 = bounds.0.inf(p);
+            bounds.1 = bounds.1.sup(p);
+        }
+        outside += occupancy.add_points(&chunk.positions);
+        let classes = (!chunk.classes.is_empty()).then_some(&chunk.classes[..]);
+        selections.add(
+            spec,
+            occupancy.grid(),
+            chunk.first,
+            &chunk.positions,
+            classes,
+        );
+        if keep {
+            positions.extend_from_slice(&chunk.positions);
+        }
+        observer.advance(chunk.len() as u64);
+    }
+    observer.finish();
+    Ok(FirstPass {
+        occupancy,
+        selections,
+        positions,
+        bounds,
+        outside,
+    })
+}
+
+/// Pass 2: streams the source through `warp` into `output`. When a moved coordinate overflows
+/// the output's encoding, the pass finishes computing the moved bounds and runs again with a
+/// sink chosen for them.
+fn transfer_pass(
+    source: &mut dyn Source,
+    output: &Path,
+    warp: &impl Warp<3>,
+    origin: &Vect<3>,
+    chunk_len: usize,
+    observer: &dyn Observer,
+) -> Result<Vec<String>> {
+    let mut bounds = None;
+    loop {
+        source.rewind()?;
+        let mut sink = Some(source.sink(output, bounds)?);
+        let mut moved_bounds = (
+            Vect::<3>::repeat(f64::INFINITY),
+            Vect::<3>::repeat(f64::NEG_INFINITY),
+        );
+        let mut chunk = Chunk::default();
+        let (mut moved, mut normals) = (Vec::new(), Vec::new());
+        observer.stage("writing", source.len());
+        while source.read(chunk_len, &mut chunk)? > 0 {
+            apply_into(
+                warp,
+                origin,
+                &chunk.positions,
+                &chunk.normals,
+                &mut moved,
+                &mut normals,
+            );
+            for p in &moved {
+                moved_bounds.0 = moved_bounds.0.inf(p);
+                moved_bounds.1 = moved_bounds.1.sup(p);
+            }
+            if let Some(s) = sink.as_mut() {
+                match s.write(&chunk, &moved, &normals) {
+                    Err(Error::CoordinateOverflow { .. }) if bounds.is_none() => sink = None,
+                    other => other?,
+                }
+            }
+            observer.advance(chunk.len() as u64);
+        }
+        observer.finish();
+        match sink {
+            Some(mut s) => {
+                let loose: Vec<Vect<3>> = source
+                    .loose_normals()
+                    .iter()
+                    .map(|(at, n)| warp.warp_normal(&(at - origin), n))
+                    .collect();
+                s.loose_normals(loose);
+                return s.finish();
+            }
+            None => bounds = Some(moved_bounds),
+        }
+    }
 }

@@ -84,4 +84,18 @@ impl<const D: usize> Warp<D> for Blend<D> {
             acc + self.motions[c].apply(&self.centers[c], x) * wk
         })
     }
+
+    /// The normal turned by the blended rotation `Σ w_k R_k`, renormalized.
+    fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
+        let (w, k) = self.weights(x);
+        let turned = w[..k].iter().fold(Vect::<D>::zeros(), |acc, &(c, wk)| {
+            acc + self.motions[c].rot * n * wk
+        });
+        let len = turned.norm();
+        if len > 0.0 && len.is_finite() {
+            turned / len
+        } else {
+            *n
+        }
+    }
 }

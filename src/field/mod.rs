@@ -13,9 +13,11 @@
 //! identical results.
 
 mod blend;
+mod file;
 mod rbf;
 
 pub use blend::Blend;
+pub use file::SavedField;
 pub use rbf::Rbf;
 
 use rayon::prelude::*;
@@ -63,6 +65,9 @@ pub enum Transfer {
 pub trait Warp<const D: usize>: Sync {
     /// Where the local point `x` goes.
     fn warp(&self, x: &Vect<D>) -> Vect<D>;
+
+    /// The unit normal `n` at the local point `x` after the warp (DESIGN §6).
+    fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D>;
 }
 
 /// A transfer built for a field, ready to warp samples.
@@ -91,10 +96,49 @@ impl<const D: usize> Warp<D> for Deformer<D> {
             Self::Rbf(r) => r.warp(x),
         }
     }
+
+    #[inline]
+    fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
+        match self {
+            Self::Blend(b) => b.warp_normal(x, n),
+            Self::Rbf(r) => r.warp_normal(x, n),
+        }
+    }
 }
 
 /// Samples per parallel task.
 const CHUNK: usize = 4096;
+
+/// Moves world-coordinate `points` and their `normals` (empty, or one per point) by `warp`
+/// into `moved` and `moved_normals`. Parallel over chunks; each sample's result depends on that
+/// sample alone, so any chunking gives the same bits.
+pub fn apply_into<const D: usize>(
+    warp: &impl Warp<D>,
+    origin: &Vect<D>,
+    points: &[Vect<D>],
+    normals: &[Vect<D>],
+    moved: &mut Vec<Vect<D>>,
+    moved_normals: &mut Vec<Vect<D>>,
+) {
+    moved.resize(points.len(), Vect::<D>::zeros());
+    moved
+        .par_chunks_mut(CHUNK)
+        .zip(points.par_chunks(CHUNK))
+        .for_each(|(out, inp)| {
+            for (o, p) in out.iter_mut().zip(inp) {
+                *o = warp.warp(&(p - origin)) + origin;
+            }
+        });
+    moved_normals.resize(normals.len(), Vect::<D>::zeros());
+    moved_normals
+        .par_chunks_mut(CHUNK)
+        .zip(normals.par_chunks(CHUNK).zip(points.par_chunks(CHUNK)))
+        .for_each(|(out, (ns, ps))| {
+            for ((o, n), p) in out.iter_mut().zip(ns).zip(ps) {
+                *o = warp.warp_normal(&(p - origin), n);
+            }
+        });
+}
 
 /// Moves world-coordinate `points` in place by `warp`, whose local frame has its origin at
 /// `origin`. Parallel over chunks; the result of each sample depends on that sample alone.

@@ -134,4 +134,83 @@ impl<const D: usize> Warp<D> for Rbf<D> {
     fn warp(&self, x: &Vect<D>) -> Vect<D> {
         x + self.displacement(x)
     }
+
+    /// The normal mapped by the inverse transpose of the field's Jacobian, renormalized.
+    fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
+        let j = self.jacobian(x);
+        let mapped = j.try_inverse().map(|inv| inv.transpose() * n).unwrap_or(*n);
+        let len = mapped.norm();
+        if len > 0.0 && len.is_finite() {
+            mapped / len
+        } else {
+            *n
+        }
+    }
+}
+
+impl<const D: usize> Rbf<D> {
+    /// The Jacobian `I + ∂d/∂x` at the local point `x`: `∇_y |y − c|³ = 3 |y − c| (y − c)` in
+    /// scaled coordinates, whose scale cancels with the displacement's.
+    pub fn jacobian(&self, x: &Vect<D>) -> nalgebra::SMatrix<f64, D, D> {
+        let y: [f64; D] = ((x - self.shift) * self.inv_scale).into();
+        let mut j = nalgebra::SMatrix::<f64, D, D>::identity();
+        for i in 0..self.centers[0].len() {
+            let d: [f64; D] = std::array::from_fn(|a| y[a] - self.centers[a][i]);
+            let r = d.iter().map(|v| v * v).sum::<f64>().sqrt();
+            for k in 0..D {
+                let w = 3.0 * r * self.weights[k][i];
+                for a in 0..D {
+                    j[(k, a)] += w * d[a];
+                }
+            }
+        }
+        for k in 0..D {
+            for a in 0..D {
+                j[(k, a)] += self.linear[k][a];
+            }
+        }
+        j
+    }
+
+    /// The coefficients, for saving: `(shift, inv_scale, constant, linear, weights)`.
+    #[allow(clippy::type_complexity)]
+    pub fn parts(&self) -> (Vect<D>, f64, Vect<D>, [[f64; D]; D], &[Vec<f64>; D]) {
+        (
+            self.shift,
+            self.inv_scale,
+            self.constant,
+            self.linear,
+            &self.weights,
+        )
+    }
+
+    /// Rebuilds the transfer from saved coefficients over the field's centers.
+    pub fn from_parts(
+        field: &Field<D>,
+        shift: Vect<D>,
+        inv_scale: f64,
+        constant: Vect<D>,
+        linear: [[f64; D]; D],
+        weights: [Vec<f64>; D],
+    ) -> Result<Self> {
+        let n = field.centers.len();
+        if weights.iter().any(|w| w.len() != n) {
+            return Err(Error::Solver(
+                "the saved RBF weights do not match the cells".into(),
+            ));
+        }
+        let c: Vec<Vect<D>> = field
+            .centers
+            .iter()
+            .map(|x| (x - shift) * inv_scale)
+            .collect();
+        Ok(Self {
+            centers: std::array::from_fn(|a| c.iter().map(|v| v[a]).collect()),
+            weights,
+            constant,
+            linear,
+            shift,
+            inv_scale,
+        })
+    }
 }

@@ -5,14 +5,115 @@
 //! output's folder that is renamed over the target at the end: a failure never leaves a partial
 //! file under the output's name, and the input is never opened for writing.
 
+mod las;
+mod mapped;
 mod ply;
+mod stream;
 mod xyz;
 
+pub use las::{LasHeader, LasSource, VlrInfo};
 pub use ply::PlyFile;
+pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
 pub use xyz::XyzFile;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ stream
+/// from the file; PLY, OBJ and XYZ are read whole (their faces need random access to vertices)
+/// and served in chunks.
+pub fn open(path: &Path) -> Result<Box<dyn Source>> {
+    match extension(path).as_deref() {
+        Some("las") | Some("laz") => Ok(Box::new(LasSource::open(path)?)),
+        _ => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
+    }
+}
+
+/// A [`Document`] held in memory, served as a [`Source`].
+pub struct DocumentSource {
+    path: PathBuf,
+    doc: Arc<Document>,
+    next: usize,
+}
+
+impl DocumentSource {
+    /// Serves `doc`, read from `path`.
+    pub fn new(path: &Path, doc: Document) -> Result<Self> {
+        if doc.positions().is_empty() {
+            return Err(Error::format(path, "the file holds no vertices or points"));
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            doc: Arc::new(doc),
+            next: 0,
+        })
+    }
+}
+
+impl Source for DocumentSource {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn len(&self) -> u64 {
+        self.doc.positions().len() as u64
+    }
+
+    fn triangles(&self) -> &[[u32; 3]] {
+        self.doc.triangles()
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        self.next = 0;
+        Ok(())
+    }
+
+    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        let all = self.doc.positions();
+        let end = (self.next + max).min(all.len());
+        chunk.clear(self.next as u64);
+        chunk.positions.extend_from_slice(&all[self.next..end]);
+        if let Some(normals) = self.doc.normals() {
+            chunk.normals.extend_from_slice(&normals[self.next..end]);
+        }
+        let n = end - self.next;
+        self.next = end;
+        Ok(n)
+    }
+
+    fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
+        self.doc.check_output(output)?;
+        Ok(Box::new(DocumentSink {
+            doc: self.doc.clone(),
+            output: output.to_path_buf(),
+            positions: Vec::with_capacity(self.doc.positions().len()),
+            normals: Vec::new(),
+        }))
+    }
+}
+
+/// Collects the moved samples of a [`DocumentSource`] and writes the document at the end.
+struct DocumentSink {
+    doc: Arc<Document>,
+    output: PathBuf,
+    positions: Vec<Vect<3>>,
+    normals: Vec<Vect<3>>,
+}
+
+impl Sink for DocumentSink {
+    fn write(&mut self, _chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
+        self.positions.extend_from_slice(moved);
+        self.normals.extend_from_slice(normals);
+        Ok(())
+    }
+
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+        let normals = (!self.normals.is_empty()).then_some(&self.normals[..]);
+        self.doc.write(&self.positions, normals, &self.output)?;
+        Ok(Vec::new())
+    }
+}
 
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
@@ -46,20 +147,19 @@ impl Document {
         }
     }
 
-    /// Triangles over the positions (empty for point clouds).
-    pub fn triangles(&self) -> &[[u32; 3]] {
+    /// Per-vertex normals, when the file has them.
+    pub fn normals(&self) -> Option<&[Vect<3>]> {
         match self {
-            Self::Ply(p) => p.triangles(),
-            Self::Xyz(_) => &[],
+            Self::Ply(p) => p.normals(),
+            Self::Xyz(_) => None,
         }
     }
 
-    /// Writes the document with its positions replaced by `positions` to `path`, atomically.
-    /// The output format must be the input's.
-    pub fn write(&self, positions: &[Vect<3>], path: &Path) -> Result<()> {
-        let (want, bytes) = match self {
-            Self::Ply(p) => ("ply", p.encode(positions)?),
-            Self::Xyz(x) => ("xyz", x.encode(positions)?),
+    /// Fails unless `path` names this document's format.
+    pub fn check_output(&self, path: &Path) -> Result<()> {
+        let want = match self {
+            Self::Ply(_) => "ply",
+            Self::Xyz(_) => "xyz",
         };
         let ext = extension(path);
         if ext.as_deref() != Some(want) && !(want == "xyz" && ext.as_deref() == Some("txt")) {
@@ -68,11 +168,35 @@ impl Document {
                 path.display()
             )));
         }
+        Ok(())
+    }
+
+    /// Triangles over the positions (empty for point clouds).
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        match self {
+            Self::Ply(p) => p.triangles(),
+            Self::Xyz(_) => &[],
+        }
+    }
+
+    /// Writes the document with its positions (and normals, when given) replaced to `path`,
+    /// atomically. The output format must be the input's.
+    pub fn write(
+        &self,
+        positions: &[Vect<3>],
+        normals: Option<&[Vect<3>]>,
+        path: &Path,
+    ) -> Result<()> {
+        self.check_output(path)?;
+        let bytes = match self {
+            Self::Ply(p) => p.encode(positions, normals)?,
+            Self::Xyz(x) => x.encode(positions)?,
+        };
         write_atomic(path, &bytes)
     }
 }
 
-fn extension(path: &Path) -> Option<String> {
+pub(crate) fn extension(path: &Path) -> Option<String> {
     path.extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase())
@@ -100,27 +224,47 @@ pub fn refuse_overwrite(input: &Path, output: &Path) -> Result<()> {
 
 /// Writes `bytes` to a temporary file beside `path` and renames it over `path`.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::Param(format!("{}: not a file name", path.display())))?;
-    let tmp = dir.join(format!(
-        ".{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, e));
+    let (tmp, mut out) = TempFile::create(path)?;
+    out.write_all(bytes)
+        .and_then(|_| out.flush())
+        .map_err(|e| Error::io(path, e))?;
+    drop(out);
+    tmp.commit()
+}
+
+/// A short description of a file's layout for `rigidcells info`: a PLY's header lines, an
+/// OBJ's counts of each kind of line.
+pub fn describe(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    match extension(path).as_deref() {
+        Some("ply") => {
+            let end = bytes
+                .windows(10)
+                .position(|w| w == b"end_header")
+                .ok_or_else(|| Error::format(path, "no `end_header` line"))?;
+            Ok(String::from_utf8_lossy(&bytes[..end])
+                .lines()
+                .filter(|l| !l.trim().is_empty())
+                .collect::<Vec<_>>()
+                .join("\n  "))
+        }
+        Some("obj") => {
+            let mut counts = std::collections::BTreeMap::<String, usize>::new();
+            for line in bytes.split(|&b| b == b'\n') {
+                let key = line
+                    .split(|b| b.is_ascii_whitespace())
+                    .find(|t| !t.is_empty())
+                    .map(|t| String::from_utf8_lossy(t).into_owned());
+                if let Some(k) = key.filter(|k| !k.starts_with('#')) {
+                    *counts.entry(k).or_default() += 1;
+                }
+            }
+            Ok(counts
+                .iter()
+                .map(|(k, n)| format!("{k}: {n}"))
+                .collect::<Vec<_>>()
+                .join(", "))
+        }
+        _ => Ok(String::new()),
     }
-    Ok(())
 }

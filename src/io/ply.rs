@@ -33,6 +33,10 @@ pub struct PlyFile {
     doubles: [bool; 3],
     coords: Vec<[Span; 3]>,
     positions: Vec<Vect<3>>,
+    /// Whether nx, ny, nz are doubles, when the vertices have normals.
+    normal_doubles: Option<[bool; 3]>,
+    normal_spans: Vec<[Span; 3]>,
+    normals: Vec<Vect<3>>,
     triangles: Vec<[u32; 3]>,
 }
 
@@ -71,6 +75,20 @@ impl PlyFile {
                 None => return Err(err(format!("vertex element has no `{name}` property"))),
             }
         }
+        let mut normal_doubles = Some([false; 3]);
+        for (k, name) in ["nx", "ny", "nz"].iter().enumerate() {
+            match vertex.properties.get(*name).map(|p| &p.data_type) {
+                Some(PropertyType::Scalar(ScalarType::Float)) => {}
+                Some(PropertyType::Scalar(ScalarType::Double)) => {
+                    if let Some(d) = normal_doubles.as_mut() {
+                        d[k] = true
+                    }
+                }
+                _ => normal_doubles = None,
+            }
+        }
+        let mut normal_spans = Vec::new();
+        let mut normals = Vec::new();
         let mut walker = Walker {
             bytes: &bytes,
             pos: body,
@@ -95,6 +113,8 @@ impl PlyFile {
             for record in 0..element.count {
                 let mut spans = [Span { start: 0, end: 0 }; 3];
                 let mut xyz = [0.0f64; 3];
+                let mut nspans = [Span { start: 0, end: 0 }; 3];
+                let mut nxyz = [0.0f64; 3];
                 for &(pname, ptype) in &props {
                     let at = |e: Error| match e {
                         Error::Format { path, message } => Error::Format {
@@ -114,6 +134,11 @@ impl PlyFile {
                             {
                                 spans[k] = span;
                                 xyz[k] = value;
+                            } else if is_vertex
+                                && let Some(k) = ["nx", "ny", "nz"].iter().position(|n| *n == pname)
+                            {
+                                nspans[k] = span;
+                                nxyz[k] = value;
                             }
                         }
                         PropertyType::List(count_type, item_type) => {
@@ -150,6 +175,10 @@ impl PlyFile {
                     }
                     coords.push(spans);
                     positions.push(Vect::<3>::from(xyz));
+                    if normal_doubles.is_some() {
+                        normal_spans.push(nspans);
+                        normals.push(Vect::<3>::from(nxyz));
+                    }
                 }
             }
         }
@@ -170,6 +199,9 @@ impl PlyFile {
             doubles,
             coords,
             positions,
+            normal_doubles,
+            normal_spans,
+            normals,
             triangles,
         })
     }
@@ -179,14 +211,22 @@ impl PlyFile {
         &self.positions
     }
 
+    /// Vertex normals (`nx ny nz`), when the vertices have them.
+    pub fn normals(&self) -> Option<&[Vect<3>]> {
+        self.normal_doubles.map(|_| &self.normals[..])
+    }
+
     /// Triangles of the faces and strips.
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.triangles
     }
 
-    /// The file's bytes with the vertex positions replaced by `positions`.
-    pub fn encode(&self, positions: &[Vect<3>]) -> Result<Vec<u8>> {
-        if positions.len() != self.coords.len() {
+    /// The file's bytes with the vertex positions replaced by `positions` and, when given and
+    /// the vertices have normals, the normals by `normals`.
+    pub fn encode(&self, positions: &[Vect<3>], normals: Option<&[Vect<3>]>) -> Result<Vec<u8>> {
+        if positions.len() != self.coords.len()
+            || normals.is_some_and(|n| n.len() != self.coords.len())
+        {
             return Err(Error::Param(format!(
                 "{}: {} positions for {} vertices",
                 self.path.display(),
@@ -194,20 +234,31 @@ impl PlyFile {
                 self.coords.len()
             )));
         }
+        let mut edits: Vec<(Span, f64, bool)> = Vec::with_capacity(6 * positions.len());
+        for (spans, p) in self.coords.iter().zip(positions) {
+            for k in 0..3 {
+                edits.push((spans[k], p[k], self.doubles[k]));
+            }
+        }
+        if let (Some(normals), Some(doubles)) = (normals, self.normal_doubles) {
+            for (spans, n) in self.normal_spans.iter().zip(normals) {
+                for k in 0..3 {
+                    edits.push((spans[k], n[k], doubles[k]));
+                }
+            }
+        }
         match self.encoding {
-            Encoding::Ascii => Ok(self.encode_ascii(positions)),
+            Encoding::Ascii => Ok(self.encode_ascii(edits)),
             Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
                 let mut out = self.bytes.clone();
                 let big = self.encoding == Encoding::BinaryBigEndian;
-                for (spans, p) in self.coords.iter().zip(positions) {
-                    for k in 0..3 {
-                        let dst = &mut out[spans[k].start..spans[k].end];
-                        match (self.doubles[k], big) {
-                            (true, false) => dst.copy_from_slice(&p[k].to_le_bytes()),
-                            (true, true) => dst.copy_from_slice(&p[k].to_be_bytes()),
-                            (false, false) => dst.copy_from_slice(&(p[k] as f32).to_le_bytes()),
-                            (false, true) => dst.copy_from_slice(&(p[k] as f32).to_be_bytes()),
-                        }
+                for (span, v, double) in edits {
+                    let dst = &mut out[span.start..span.end];
+                    match (double, big) {
+                        (true, false) => dst.copy_from_slice(&v.to_le_bytes()),
+                        (true, true) => dst.copy_from_slice(&v.to_be_bytes()),
+                        (false, false) => dst.copy_from_slice(&(v as f32).to_le_bytes()),
+                        (false, true) => dst.copy_from_slice(&(v as f32).to_be_bytes()),
                     }
                 }
                 Ok(out)
@@ -215,15 +266,9 @@ impl PlyFile {
         }
     }
 
-    fn encode_ascii(&self, positions: &[Vect<3>]) -> Vec<u8> {
+    fn encode_ascii(&self, mut edits: Vec<(Span, f64, bool)>) -> Vec<u8> {
         let mut out = Vec::with_capacity(self.bytes.len() + self.bytes.len() / 8);
         let mut last = 0;
-        let mut edits: Vec<(Span, f64, bool)> = Vec::with_capacity(3 * positions.len());
-        for (spans, p) in self.coords.iter().zip(positions) {
-            for k in 0..3 {
-                edits.push((spans[k], p[k], self.doubles[k]));
-            }
-        }
         edits.sort_unstable_by_key(|e| e.0.start);
         for (span, value, double) in edits {
             out.extend_from_slice(&self.bytes[last..span.start]);

@@ -138,7 +138,11 @@ impl<const D: usize> Selections<D> {
     /// no classes.
     pub fn new(spec: &EditSpec<D>, has_classes: bool) -> Result<Self> {
         let regions: Vec<&Region<D>> = regions(spec).collect();
-        if !has_classes && regions.iter().any(|r| matches!(r, Region::Classification(_))) {
+        if !has_classes
+            && regions
+                .iter()
+                .any(|r| matches!(r, Region::Classification(_)))
+        {
             return Err(Error::Param(
                 "a `classification` region needs an input with LAS classes".into(),
             ));

@@ -1,0 +1,760 @@
+//! LAS 1.0–1.4 and LAZ, point data record formats 0–10.
+//!
+//! Every point record is read and written as raw bytes; only `X Y Z` (the first 12 bytes of every
+//! format) are rewritten, so intensity, flags, classes, GPS time, colors, NIR, wave packet
+//! descriptors and extra bytes, described or not, pass through bit for bit (the `las` crate's
+//! `Point` type is never used: it loses information, see CRATES.md).
+//!
+//! - **LAS → LAS** is handled here without the `las` crate: the input is memory-mapped, the output
+//!   is the input's header and VLRs byte for byte, the records with new coordinates, and every
+//!   byte after the points (internal waveform data, EVLRs) byte for byte. Only the header's
+//!   bounds change, and scale/offset when the moved coordinates would not fit (then the offset
+//!   moves, and the scale doubles only if the range needs it; the notes say so).
+//! - **LAZ in or out** goes through `las`/`laz` (parallel chunk (de)compression): the header
+//!   and VLRs are rebuilt by the crate from the input's, without the LASzip VLR (the writer adds
+//!   its own) and without COPC VLRs/EVLRs (a rewritten file is no longer COPC-ordered); the
+//!   global encoding word, which the crate reduces, is restored after writing.
+//!
+//! The header is parsed here for every input: it gives precise errors for malformed files
+//! (counts that lie, VLRs that overrun the point data, truncated bodies, LAS 1.5).
+
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use las::{Builder, LazParallelism, PointData, PointDataBuilder, ReaderOptions, WriterOptions};
+use memmap2::Mmap;
+
+use super::mapped;
+use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+/// Minimum record length of each point data record format.
+const RECORD_LEN: [u16; 11] = [20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67];
+
+/// One variable-length record's header.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VlrInfo {
+    /// User id.
+    pub user_id: String,
+    /// Record id.
+    pub record_id: u16,
+    /// Payload length in bytes.
+    pub len: u64,
+    /// Description.
+    pub description: String,
+}
+
+impl VlrInfo {
+    /// Whether this record describes a coordinate reference system.
+    pub fn is_crs(&self) -> bool {
+        self.user_id == "LASF_Projection"
+    }
+}
+
+/// The fields of a LAS header that rigidcells reads or rewrites.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LasHeader {
+    /// Major and minor version.
+    pub version: (u8, u8),
+    /// Header size in bytes.
+    pub header_size: u16,
+    /// Offset of the first point record.
+    pub point_offset: u32,
+    /// Point data record format (0–10).
+    pub format: u8,
+    /// Whether the points are LAZ-compressed.
+    pub compressed: bool,
+    /// Bytes per record.
+    pub record_len: u16,
+    /// Number of points.
+    pub count: u64,
+    /// Scale per axis.
+    pub scale: [f64; 3],
+    /// Offset per axis.
+    pub offset: [f64; 3],
+    /// Declared minimum per axis.
+    pub min: [f64; 3],
+    /// Declared maximum per axis.
+    pub max: [f64; 3],
+    /// Global encoding word.
+    pub global_encoding: u16,
+    /// The VLRs.
+    pub vlrs: Vec<VlrInfo>,
+    /// Number of EVLRs (LAS 1.4).
+    pub evlr_count: u32,
+    /// System identifier.
+    pub system: String,
+    /// Generating software.
+    pub software: String,
+}
+
+fn le_u16(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([b[at], b[at + 1]])
+}
+fn le_u32(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"))
+}
+fn le_u64(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
+}
+fn le_f64(b: &[u8], at: usize) -> f64 {
+    f64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
+}
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b)
+        .trim_end_matches('\0')
+        .trim()
+        .to_string()
+}
+
+impl LasHeader {
+    /// Parses the header and VLRs at the start of a file of `file_len` bytes; `prefix` holds at
+    /// least the bytes up to the first point record (or the whole file if shorter).
+    pub fn parse(path: &Path, prefix: &[u8], file_len: u64) -> Result<Self> {
+        let err = |m: String| Error::format(path, m);
+        if file_len == 0 {
+            return Err(err("the file is empty".into()));
+        }
+        if !prefix.starts_with(b"LASF") {
+            return Err(err("not a LAS/LAZ file (no `LASF` signature)".into()));
+        }
+        if prefix.len() < 227 {
+            return Err(err(format!(
+                "the header is truncated ({} bytes; a LAS header has at least 227)",
+                prefix.len()
+            )));
+        }
+        let version = (prefix[24], prefix[25]);
+        if version.0 != 1 || version.1 > 4 {
+            return Err(err(format!(
+                "LAS {}.{} is not supported (rigidcells reads LAS 1.0 to 1.4)",
+                version.0, version.1
+            )));
+        }
+        let header_size = le_u16(prefix, 94);
+        let needed = match version.1 {
+            0..=2 => 227,
+            3 => 235,
+            _ => 375,
+        };
+        if (header_size as usize) < needed || (header_size as usize) > prefix.len() {
+            return Err(err(format!(
+                "header size {header_size} is wrong for LAS {}.{} (at least {needed}) or the header is truncated",
+                version.0, version.1
+            )));
+        }
+        let point_offset = le_u32(prefix, 96);
+        if point_offset < header_size as u32 || point_offset as u64 > file_len {
+            return Err(err(format!(
+                "the offset to the point data ({point_offset}) lies outside the file ({file_len} bytes) or inside the header"
+            )));
+        }
+        if (point_offset as usize) > prefix.len() {
+            return Err(err("the VLRs are truncated".into()));
+        }
+        let vlr_count = le_u32(prefix, 100);
+        let mut vlrs = Vec::new();
+        let mut at = header_size as usize;
+        for k in 0..vlr_count {
+            if at + 54 > point_offset as usize {
+                return Err(err(format!(
+                    "VLR {} of {vlr_count} would start past the point data at byte {point_offset}: the header's VLR count or a VLR length is wrong",
+                    k + 1
+                )));
+            }
+            let len = le_u16(prefix, at + 20) as u64;
+            vlrs.push(VlrInfo {
+                user_id: text(&prefix[at + 2..at + 18]),
+                record_id: le_u16(prefix, at + 18),
+                len,
+                description: text(&prefix[at + 22..at + 54]),
+            });
+            at += 54 + len as usize;
+            if at > point_offset as usize {
+                return Err(err(format!(
+                    "VLR {} of {vlr_count} runs past the start of the point data (byte {point_offset})",
+                    k + 1
+                )));
+            }
+        }
+        let format_byte = prefix[104];
+        let format = format_byte & 0x3f;
+        let compressed = format_byte & 0x80 != 0
+            || vlrs
+                .iter()
+                .any(|v| v.user_id == "laszip encoded" && v.record_id == 22204);
+        if format > 10 {
+            return Err(err(format!(
+                "point data record format {format} is not 0–10"
+            )));
+        }
+        let record_len = le_u16(prefix, 105);
+        if record_len < RECORD_LEN[format as usize] {
+            return Err(err(format!(
+                "records of {record_len} bytes are too short for point format {format} (at least {})",
+                RECORD_LEN[format as usize]
+            )));
+        }
+        let legacy = le_u32(prefix, 107) as u64;
+        let count = if version.1 >= 4 && le_u64(prefix, 247) != 0 {
+            le_u64(prefix, 247)
+        } else {
+            legacy
+        };
+        if count == 0 {
+            return Err(err("the file holds no points".into()));
+        }
+        let f3 = |at: usize| {
+            [
+                le_f64(prefix, at),
+                le_f64(prefix, at + 8),
+                le_f64(prefix, at + 16),
+            ]
+        };
+        let scale = f3(131);
+        let offset = f3(155);
+        if !scale.iter().all(|s| s.is_finite() && *s != 0.0)
+            || !offset.iter().all(|o| o.is_finite())
+        {
+            return Err(err(format!(
+                "scale {scale:?} / offset {offset:?} are not finite and non-zero"
+            )));
+        }
+        let b = |at: usize| le_f64(prefix, at);
+        let max = [b(179), b(195), b(211)];
+        let min = [b(187), b(203), b(219)];
+        if !compressed {
+            let body = file_len - point_offset as u64;
+            let need = count.saturating_mul(record_len as u64);
+            if body < need {
+                return Err(err(format!(
+                    "truncated: the header says {count} points of {record_len} bytes but the file holds {} complete records",
+                    body / record_len as u64
+                )));
+            }
+        }
+        let evlr_count = if version.1 >= 4 {
+            le_u32(prefix, 243)
+        } else {
+            0
+        };
+        Ok(Self {
+            version,
+            header_size,
+            point_offset,
+            format,
+            compressed,
+            record_len,
+            count,
+            scale,
+            offset,
+            min,
+            max,
+            global_encoding: le_u16(prefix, 6),
+            vlrs,
+            evlr_count,
+            system: text(&prefix[26..58]),
+            software: text(&prefix[58..90]),
+        })
+    }
+
+    /// Reads and parses the header of `path` without reading the points.
+    pub fn read(path: &Path) -> Result<Self> {
+        let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+        let mut prefix = vec![0u8; len.min(375) as usize];
+        file.read_exact(&mut prefix)
+            .map_err(|e| Error::io(path, e))?;
+        if prefix.len() >= 100 && prefix.starts_with(b"LASF") {
+            let offset = le_u32(&prefix, 96) as u64;
+            if offset > prefix.len() as u64 && offset <= len {
+                prefix.resize(offset as usize, 0);
+                file.seek(SeekFrom::Start(0))
+                    .and_then(|_| file.read_exact(&mut prefix))
+                    .map_err(|e| Error::io(path, e))?;
+            }
+        }
+        Self::parse(path, &prefix, len)
+    }
+
+    /// Byte offset of the class in a record.
+    fn class_at(&self) -> usize {
+        if self.format >= 6 { 16 } else { 15 }
+    }
+}
+
+enum Body {
+    Mapped(Arc<Mmap>),
+    Laz(Box<las::Reader>, PointData),
+}
+
+/// A LAS or LAZ file as a [`Source`].
+pub struct LasSource {
+    path: PathBuf,
+    header: LasHeader,
+    body: Body,
+    next: u64,
+}
+
+impl LasSource {
+    /// Opens `path` (LAS or LAZ, decided by the header).
+    pub fn open(path: &Path) -> Result<Self> {
+        let header = LasHeader::read(path)?;
+        let body = if header.compressed {
+            let file = File::open(path).map_err(|e| Error::io(path, e))?;
+            let reader = las::Reader::with_options(
+                BufReader::with_capacity(1 << 20, file),
+                ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes),
+            )
+            .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
+            let slab = PointDataBuilder::new().for_header(reader.header()).build();
+            Body::Laz(Box::new(reader), slab)
+        } else {
+            Body::Mapped(Arc::new(mapped::map(path)?))
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            header,
+            body,
+            next: 0,
+        })
+    }
+
+    /// The parsed header.
+    pub fn header(&self) -> &LasHeader {
+        &self.header
+    }
+}
+
+impl Source for LasSource {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn len(&self) -> u64 {
+        self.header.count
+    }
+
+    fn bounds_hint(&self) -> Option<Bounds> {
+        let h = &self.header;
+        let ok =
+            (0..3).all(|a| h.min[a].is_finite() && h.max[a].is_finite() && h.min[a] <= h.max[a]);
+        ok.then(|| (Vect::<3>::from(h.min), Vect::<3>::from(h.max)))
+    }
+
+    fn has_classes(&self) -> bool {
+        true
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        if let Body::Laz(reader, _) = &mut self.body {
+            reader
+                .seek(0)
+                .map_err(|e| Error::format(&self.path, format!("LAZ: {e}")))?;
+        }
+        self.next = 0;
+        Ok(())
+    }
+
+    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        let h = &self.header;
+        let rl = h.record_len as usize;
+        let n = (h.count - self.next).min(max as u64) as usize;
+        chunk.clear(self.next);
+        chunk.record_len = rl;
+        if n == 0 {
+            return Ok(0);
+        }
+        match &mut self.body {
+            Body::Mapped(map) => {
+                let start = h.point_offset as usize + self.next as usize * rl;
+                chunk.raw.extend_from_slice(&map[start..start + n * rl]);
+            }
+            Body::Laz(reader, slab) => {
+                let got = reader.fill_points(n as u64, slab).map_err(|e| {
+                    Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
+                })? as usize;
+                if got != n {
+                    return Err(Error::format(
+                        &self.path,
+                        format!(
+                            "truncated: the header says {} points but the data ends after {}",
+                            h.count,
+                            self.next + got as u64
+                        ),
+                    ));
+                }
+                chunk.raw.extend_from_slice(slab.raw_bytes());
+            }
+        }
+        let class_at = h.class_at();
+        let five_bits = h.format < 6;
+        for rec in chunk.raw.chunks_exact(rl) {
+            let c = |at: usize| i32::from_le_bytes(rec[at..at + 4].try_into().expect("4 bytes"));
+            chunk.positions.push(Vect::<3>::new(
+                c(0) as f64 * h.scale[0] + h.offset[0],
+                c(4) as f64 * h.scale[1] + h.offset[1],
+                c(8) as f64 * h.scale[2] + h.offset[2],
+            ));
+            let class = rec[class_at];
+            chunk
+                .classes
+                .push(if five_bits { class & 0x1f } else { class });
+        }
+        self.next += n as u64;
+        Ok(n)
+    }
+
+    fn sink(&self, output: &Path, bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
+        let ext = super::extension(output);
+        let out_laz = match ext.as_deref() {
+            Some("laz") => true,
+            Some("las") => false,
+            _ => {
+                return Err(Error::Param(format!(
+                    "{}: a LAS/LAZ input is written as .las or .laz",
+                    output.display()
+                )));
+            }
+        };
+        let mut notes = Vec::new();
+        let (scale, offset) = output_frame(&self.header, bounds, &mut notes);
+        match (&self.body, out_laz) {
+            (Body::Mapped(map), false) => Ok(Box::new(RawSink::new(
+                output,
+                map.clone(),
+                self.header.clone(),
+                scale,
+                offset,
+                notes,
+            )?)),
+            _ => Ok(Box::new(CrateSink::new(
+                &self.path,
+                output,
+                &self.header,
+                out_laz,
+                scale,
+                offset,
+                notes,
+            )?)),
+        }
+    }
+}
+
+/// The output's scale and offset: the input's, unless `bounds` (of the moved samples, known
+/// after an overflow) do not fit them.
+fn output_frame(
+    header: &LasHeader,
+    bounds: Option<Bounds>,
+    notes: &mut Vec<String>,
+) -> ([f64; 3], [f64; 3]) {
+    let (mut scale, mut offset) = (header.scale, header.offset);
+    let Some((lo, hi)) = bounds else {
+        return (scale, offset);
+    };
+    let fits = |s: f64, o: f64, v: f64| {
+        let r = ((v - o) / s).round();
+        r >= i32::MIN as f64 && r <= i32::MAX as f64
+    };
+    for a in 0..3 {
+        if fits(scale[a], offset[a], lo[a]) && fits(scale[a], offset[a], hi[a]) {
+            continue;
+        }
+        let old = (scale[a], offset[a]);
+        while (hi[a] - lo[a]) / scale[a] > 4.0e9 {
+            scale[a] *= 2.0;
+        }
+        // The center, on the old grid of representable values, so unmoved bits stay exact.
+        let center = 0.5 * (lo[a] + hi[a]);
+        offset[a] = old.1 + ((center - old.1) / old.0).round() * old.0;
+        notes.push(format!(
+            "axis {}: moved coordinates overflow the input's encoding; offset {} -> {}{}",
+            ["x", "y", "z"][a],
+            old.1,
+            offset[a],
+            if scale[a] != old.0 {
+                format!(", scale {} -> {}", old.0, scale[a])
+            } else {
+                String::new()
+            }
+        ));
+    }
+    (scale, offset)
+}
+
+/// Writes the moved coordinates into the first 12 bytes of each record of `raw`, tracking
+/// the bounds of the encoded values.
+fn encode(
+    raw: &mut [u8],
+    record_len: usize,
+    moved: &[Vect<3>],
+    scale: &[f64; 3],
+    offset: &[f64; 3],
+    lo: &mut [f64; 3],
+    hi: &mut [f64; 3],
+    path: &Path,
+) -> Result<()> {
+    for (rec, p) in raw.chunks_exact_mut(record_len).zip(moved) {
+        for a in 0..3 {
+            let r = ((p[a] - offset[a]) / scale[a]).round();
+            if !(r >= i32::MIN as f64 && r <= i32::MAX as f64) {
+                return Err(Error::CoordinateOverflow {
+                    path: path.to_path_buf(),
+                });
+            }
+            let v = r as i32;
+            rec[4 * a..4 * a + 4].copy_from_slice(&v.to_le_bytes());
+            let x = v as f64 * scale[a] + offset[a];
+            lo[a] = lo[a].min(x);
+            hi[a] = hi[a].max(x);
+        }
+    }
+    Ok(())
+}
+
+/// LAS → LAS without the `las` crate: header, VLRs and trailing bytes copied verbatim.
+struct RawSink {
+    tmp: TempFile,
+    out: std::io::BufWriter<File>,
+    input: Arc<Mmap>,
+    header: LasHeader,
+    scale: [f64; 3],
+    offset: [f64; 3],
+    lo: [f64; 3],
+    hi: [f64; 3],
+    buf: Vec<u8>,
+    notes: Vec<String>,
+}
+
+impl RawSink {
+    fn new(
+        output: &Path,
+        input: Arc<Mmap>,
+        header: LasHeader,
+        scale: [f64; 3],
+        offset: [f64; 3],
+        notes: Vec<String>,
+    ) -> Result<Self> {
+        let (tmp, mut out) = TempFile::create(output)?;
+        out.write_all(&input[..header.point_offset as usize])
+            .map_err(|e| Error::io(output, e))?;
+        Ok(Self {
+            tmp,
+            out,
+            input,
+            header,
+            scale,
+            offset,
+            lo: [f64::INFINITY; 3],
+            hi: [f64::NEG_INFINITY; 3],
+            buf: Vec::new(),
+            notes,
+        })
+    }
+}
+
+impl Sink for RawSink {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
+        self.buf.clear();
+        self.buf.extend_from_slice(&chunk.raw);
+        let target = self.tmp.target().to_path_buf();
+        encode(
+            &mut self.buf,
+            chunk.record_len,
+            moved,
+            &self.scale,
+            &self.offset,
+            &mut self.lo,
+            &mut self.hi,
+            &target,
+        )?;
+        self.out
+            .write_all(&self.buf)
+            .map_err(|e| Error::io(&target, e))
+    }
+
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+        let Self {
+            tmp,
+            mut out,
+            input,
+            header,
+            scale,
+            offset,
+            lo,
+            hi,
+            notes,
+            ..
+        } = *self;
+        let target = tmp.target().to_path_buf();
+        let io = |e| Error::io(&target, e);
+        let end = header.point_offset as usize + header.count as usize * header.record_len as usize;
+        out.write_all(&input[end..]).map_err(io)?;
+        let mut file = out.into_inner().map_err(|e| io(e.into_error()))?;
+        let mut patch = Vec::with_capacity(96);
+        for v in scale.iter().chain(&offset) {
+            patch.extend_from_slice(&v.to_le_bytes());
+        }
+        for a in 0..3 {
+            patch.extend_from_slice(&hi[a].to_le_bytes());
+            patch.extend_from_slice(&lo[a].to_le_bytes());
+        }
+        file.seek(SeekFrom::Start(131))
+            .and_then(|_| file.write_all(&patch))
+            .and_then(|_| file.flush())
+            .map_err(io)?;
+        drop(file);
+        tmp.commit()?;
+        Ok(notes)
+    }
+}
+
+/// LAZ in or out, through the `las` crate's raw slab path.
+struct CrateSink {
+    tmp: Option<TempFile>,
+    writer: Option<las::Writer<std::io::BufWriter<File>>>,
+    format: las::point::Format,
+    transforms: las::Vector<las::Transform>,
+    scale: [f64; 3],
+    offset: [f64; 3],
+    global_encoding: u16,
+    notes: Vec<String>,
+}
+
+impl CrateSink {
+    fn new(
+        input: &Path,
+        output: &Path,
+        header: &LasHeader,
+        out_laz: bool,
+        scale: [f64; 3],
+        offset: [f64; 3],
+        mut notes: Vec<String>,
+    ) -> Result<Self> {
+        let reader = las::Reader::new(BufReader::new(
+            File::open(input).map_err(|e| Error::io(input, e))?,
+        ))
+        .map_err(|e| Error::format(input, format!("{e}")))?;
+        let mut b = Builder::from(reader.header().clone());
+        drop(reader);
+        b.point_format.is_compressed = out_laz;
+        let before = b.vlrs.len() + b.evlrs.len();
+        b.vlrs.retain(|v| {
+            !(v.user_id == "laszip encoded" && v.record_id == 22204) && v.user_id != "copc"
+        });
+        b.evlrs.retain(|v| v.user_id != "copc");
+        let copc = before - b.vlrs.len() - b.evlrs.len() > usize::from(header.compressed);
+        if copc {
+            notes.push(
+                "the COPC index is dropped: the output is a plain LAZ in the input's point order"
+                    .into(),
+            );
+        }
+        for a in 0..3 {
+            let t = las::Transform {
+                scale: scale[a],
+                offset: offset[a],
+            };
+            match a {
+                0 => b.transforms.x = t,
+                1 => b.transforms.y = t,
+                _ => b.transforms.z = t,
+            }
+        }
+        let las_header = b
+            .into_header()
+            .map_err(|e| Error::format(input, format!("header: {e}")))?;
+        let format = *las_header.point_format();
+        let transforms = *las_header.transforms();
+        let (tmp, out) = TempFile::create(output)?;
+        let writer = las::Writer::with_options(
+            out,
+            las_header,
+            WriterOptions::default().with_laz_parallelism(LazParallelism::Yes),
+        )
+        .map_err(|e| Error::format(output, format!("{e}")))?;
+        Ok(Self {
+            tmp: Some(tmp),
+            writer: Some(writer),
+            format,
+            transforms,
+            scale,
+            offset,
+            global_encoding: header.global_encoding,
+            notes,
+        })
+    }
+}
+
+impl CrateSink {
+    fn target(&self) -> PathBuf {
+        self.tmp
+            .as_ref()
+            .map(|t| t.target().to_path_buf())
+            .unwrap_or_default()
+    }
+}
+
+impl Sink for CrateSink {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
+        let target = self.target();
+        let mut bytes = chunk.raw.clone();
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        encode(
+            &mut bytes,
+            chunk.record_len,
+            moved,
+            &self.scale,
+            &self.offset,
+            &mut lo,
+            &mut hi,
+            &target,
+        )?;
+        let slab = PointDataBuilder::new()
+            .with_format(self.format)
+            .with_transforms(self.transforms)
+            .build_from_bytes(bytes)
+            .map_err(|e| Error::format(&target, format!("{e}")))?;
+        self.writer
+            .as_mut()
+            .expect("writer open until finish")
+            .write_points(&slab)
+            .map_err(|e| Error::format(&target, format!("{e}")))
+    }
+
+    fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
+        let target = self.target();
+        let mut writer = self.writer.take().expect("writer open until finish");
+        if let Err(e) = writer.close() {
+            std::mem::forget(writer);
+            return Err(Error::format(&target, format!("{e}")));
+        }
+        drop(writer);
+        // Restore the global encoding word (waveform bits) that the crate reduces.
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .open(self.tmp.as_ref().expect("open until finish").path())
+            .map_err(|e| Error::io(&target, e))?;
+        file.seek(SeekFrom::Start(6))
+            .and_then(|_| file.write_all(&self.global_encoding.to_le_bytes()))
+            .map_err(|e| Error::io(&target, e))?;
+        drop(file);
+        self.tmp.take().expect("open until finish").commit()?;
+        Ok(std::mem::take(&mut self.notes))
+    }
+}
+
+impl Drop for CrateSink {
+    fn drop(&mut self) {
+        // An abandoned writer is closed quietly; one whose close fails is leaked, because the
+        // crate's own drop would panic.
+        if let Some(mut w) = self.writer.take()
+            && w.close().is_err()
+        {
+            std::mem::forget(w);
+        }
+    }
+}

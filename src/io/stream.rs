@@ -1,0 +1,167 @@
+//! The streaming interface between files and the pipeline.
+//!
+//! A [`Source`] hands out the samples of a file in file order, a chunk at a time: decoded world
+//! coordinates (f64), per-sample normals and LAS classes where the format has them, and the raw
+//! records for sinks that copy them through. A [`Sink`] made by the source takes the chunks back,
+//! in the same order, with the moved coordinates and normals, and writes a file that differs from
+//! the input only there. Sinks write to a temporary file beside the target; [`Sink::finish`]
+//! renames it over the target, and a sink dropped before that removes it.
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+/// A batch of consecutive samples.
+#[derive(Debug, Default, Clone)]
+pub struct Chunk {
+    /// Index of the first sample in the file.
+    pub first: u64,
+    /// World coordinates.
+    pub positions: Vec<Vect<3>>,
+    /// Per-sample normals (empty when the format has none).
+    pub normals: Vec<Vect<3>>,
+    /// Per-sample LAS classes (empty when the format has none).
+    pub classes: Vec<u8>,
+    /// Raw records (LAS), `record_len` bytes each; empty for other formats.
+    pub raw: Vec<u8>,
+    /// Length of one raw record.
+    pub record_len: usize,
+}
+
+impl Chunk {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Whether the chunk holds no sample.
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    pub(crate) fn clear(&mut self, first: u64) {
+        self.first = first;
+        self.positions.clear();
+        self.normals.clear();
+        self.classes.clear();
+        self.raw.clear();
+    }
+}
+
+/// An axis-aligned box in world coordinates.
+pub type Bounds = (Vect<3>, Vect<3>);
+
+/// The samples of an input file, in file order.
+pub trait Source {
+    /// The file.
+    fn path(&self) -> &Path;
+    /// Number of samples.
+    fn len(&self) -> u64;
+    /// Whether the file holds no sample.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// The bounds the file's header declares, if it declares any (LAS); a hint that the
+    /// pipeline checks against the samples.
+    fn bounds_hint(&self) -> Option<Bounds> {
+        None
+    }
+    /// Whether chunks carry LAS classes.
+    fn has_classes(&self) -> bool {
+        false
+    }
+    /// Triangles over the samples (empty for point sets).
+    fn triangles(&self) -> &[[u32; 3]] {
+        &[]
+    }
+    /// Normals not attached to one sample (OBJ `vn`): each with the world point where it is
+    /// transformed.
+    fn loose_normals(&self) -> Vec<(Vect<3>, Vect<3>)> {
+        Vec::new()
+    }
+    /// Starts over at the first sample.
+    fn rewind(&mut self) -> Result<()>;
+    /// Fills `chunk` with up to `max` next samples; returns how many (0 at the end).
+    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize>;
+    /// A sink writing `output` in the format its extension names. `bounds`: the moved samples'
+    /// bounds when known (after a first attempt overflowed the output's coordinate range).
+    fn sink(&self, output: &Path, bounds: Option<Bounds>) -> Result<Box<dyn Sink>>;
+}
+
+/// The output of a [`Source`]'s samples after deformation.
+pub trait Sink {
+    /// Writes the next chunk with its moved samples and normals (empty when the chunk has
+    /// none). Returns [`Error::CoordinateOverflow`] when a coordinate does not fit the output's
+    /// encoding; the caller then makes a new sink with the moved bounds.
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()>;
+    /// The moved [`Source::loose_normals`], after every chunk.
+    fn loose_normals(&mut self, _normals: Vec<Vect<3>>) {}
+    /// Completes the file and renames it over the target; returns notes for the user.
+    fn finish(self: Box<Self>) -> Result<Vec<String>>;
+}
+
+/// A temporary file beside a target, renamed over it by [`TempFile::commit`] and removed when
+/// dropped uncommitted.
+#[derive(Debug)]
+pub struct TempFile {
+    tmp: PathBuf,
+    target: PathBuf,
+    committed: bool,
+}
+
+impl TempFile {
+    /// Creates the temporary file for `target`.
+    pub fn create(target: &Path) -> Result<(Self, BufWriter<File>)> {
+        let dir = match target.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let name = target
+            .file_name()
+            .ok_or_else(|| Error::Param(format!("{}: not a file name", target.display())))?;
+        let tmp = dir.join(format!(
+            ".{}.{}.tmp",
+            name.to_string_lossy(),
+            std::process::id()
+        ));
+        let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        Ok((
+            Self {
+                tmp,
+                target: target.to_path_buf(),
+                committed: false,
+            },
+            BufWriter::with_capacity(1 << 20, file),
+        ))
+    }
+
+    /// The temporary path.
+    pub fn path(&self) -> &Path {
+        &self.tmp
+    }
+
+    /// The target path.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+
+    /// Syncs the temporary file and renames it over the target.
+    pub fn commit(mut self) -> Result<()> {
+        let sync = File::open(&self.tmp).and_then(|f| f.sync_all());
+        sync.and_then(|_| std::fs::rename(&self.tmp, &self.target))
+            .map_err(|e| Error::io(&self.target, e))?;
+        self.committed = true;
+        Ok(())
+    }
+}
+
+impl Drop for TempFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
