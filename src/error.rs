@@ -78,6 +78,10 @@ pub enum Error {
         /// The output file.
         path: PathBuf,
     },
+    /// The output must be written again, now that the whole input has been seen (a LAS header
+    /// that must change with what the points hold).
+    #[error("{0}: the output must be written again")]
+    Retry(PathBuf),
     /// A numerical failure that damping could not repair.
     #[error("solver failure: {0}")]
     Solver(String),

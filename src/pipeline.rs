@@ -302,6 +302,7 @@ fn transfer_pass(
     observer: &dyn Observer,
 ) -> Result<Vec<String>> {
     let mut bounds = None;
+    let mut retried = false;
     loop {
         source.rewind()?;
         let mut sink = Some(source.sink(output, bounds)?);
@@ -342,7 +343,10 @@ fn transfer_pass(
                     .map(|(at, n)| warp.warp_normal(&(at - origin), n))
                     .collect();
                 s.loose_normals(loose);
-                return s.finish();
+                match s.finish() {
+                    Err(Error::Retry(_)) if !retried => retried = true,
+                    other => return other,
+                }
             }
             None => bounds = Some(moved_bounds),
         }

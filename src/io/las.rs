@@ -85,6 +85,8 @@ pub struct LasHeader {
     pub vlrs: Vec<VlrInfo>,
     /// Number of EVLRs (LAS 1.4).
     pub evlr_count: u32,
+    /// The LASzip compressor type (1 point-wise, 2 point-wise chunked, 3 layered chunked).
+    pub laz_compressor: Option<u16>,
     /// System identifier.
     pub system: String,
     /// Generating software.
@@ -157,6 +159,7 @@ impl LasHeader {
         }
         let vlr_count = le_u32(prefix, 100);
         let mut vlrs = Vec::new();
+        let mut laz_compressor = None;
         let mut at = header_size as usize;
         for k in 0..vlr_count {
             if at + 54 > point_offset as usize {
@@ -166,6 +169,13 @@ impl LasHeader {
                 )));
             }
             let len = le_u16(prefix, at + 20) as u64;
+            if text(&prefix[at + 2..at + 18]) == "laszip encoded"
+                && le_u16(prefix, at + 18) == 22204
+                && len >= 2
+                && at + 56 <= point_offset as usize
+            {
+                laz_compressor = Some(le_u16(prefix, at + 54));
+            }
             vlrs.push(VlrInfo {
                 user_id: text(&prefix[at + 2..at + 18]),
                 record_id: le_u16(prefix, at + 18),
@@ -256,6 +266,7 @@ impl LasHeader {
             global_encoding: le_u16(prefix, 6),
             vlrs,
             evlr_count,
+            laz_compressor,
             system: text(&prefix[26..58]),
             software: text(&prefix[58..90]),
         })
@@ -297,6 +308,8 @@ pub struct LasSource {
     header: LasHeader,
     body: Body,
     next: u64,
+    /// The largest return number seen so far.
+    max_return: u8,
 }
 
 impl LasSource {
@@ -305,9 +318,15 @@ impl LasSource {
         let header = LasHeader::read(path)?;
         let body = if header.compressed {
             let file = File::open(path).map_err(|e| Error::io(path, e))?;
+            // laz's parallel decompressor handles chunked files only.
+            let parallel = if header.laz_compressor == Some(1) {
+                LazParallelism::No
+            } else {
+                LazParallelism::Yes
+            };
             let reader = las::Reader::with_options(
                 BufReader::with_capacity(1 << 20, file),
-                ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes),
+                ReaderOptions::default().with_laz_parallelism(parallel),
             )
             .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
             let slab = PointDataBuilder::new().for_header(reader.header()).build();
@@ -320,6 +339,7 @@ impl LasSource {
             header,
             body,
             next: 0,
+            max_return: 0,
         })
     }
 
@@ -403,6 +423,12 @@ impl Source for LasSource {
             chunk
                 .classes
                 .push(if five_bits { class & 0x1f } else { class });
+            let ret = if five_bits {
+                rec[14] & 0x07
+            } else {
+                rec[14] & 0x0f
+            };
+            self.max_return = self.max_return.max(ret);
         }
         self.next += n as u64;
         Ok(n)
@@ -436,6 +462,7 @@ impl Source for LasSource {
                 output,
                 &self.header,
                 out_laz,
+                self.max_return,
                 scale,
                 offset,
                 notes,
@@ -630,6 +657,7 @@ impl CrateSink {
         output: &Path,
         header: &LasHeader,
         out_laz: bool,
+        max_return: u8,
         scale: [f64; 3],
         offset: [f64; 3],
         mut notes: Vec<String>,
@@ -641,6 +669,14 @@ impl CrateSink {
         let mut b = Builder::from(reader.header().clone());
         drop(reader);
         b.point_format.is_compressed = out_laz;
+        if max_return > 5 && header.version.1 < 4 {
+            // The `las` writer cannot count returns 6 and 7 in a legacy header (CRATES.md).
+            b.version = las::Version::new(1, 4);
+            notes.push(format!(
+                "return numbers up to {max_return} do not fit a LAS 1.{} header's counts; the output header is LAS 1.4",
+                header.version.1
+            ));
+        }
         let before = b.vlrs.len() + b.evlrs.len();
         b.vlrs.retain(|v| {
             !(v.user_id == "laszip encoded" && v.record_id == 22204) && v.user_id != "copc"
@@ -730,7 +766,10 @@ impl Sink for CrateSink {
         let mut writer = self.writer.take().expect("writer open until finish");
         if let Err(e) = writer.close() {
             std::mem::forget(writer);
-            return Err(Error::format(&target, format!("{e}")));
+            return Err(match e {
+                las::Error::ReturnNumber { .. } => Error::Retry(target),
+                e => Error::format(&target, format!("{e}")),
+            });
         }
         drop(writer);
         // Restore the global encoding word (waveform bits) that the crate reduces.

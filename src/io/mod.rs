@@ -7,11 +7,13 @@
 
 mod las;
 mod mapped;
+mod obj;
 mod ply;
 mod stream;
 mod xyz;
 
 pub use las::{LasHeader, LasSource, VlrInfo};
+pub use obj::ObjFile;
 pub use ply::PlyFile;
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
 pub use xyz::XyzFile;
@@ -64,6 +66,13 @@ impl Source for DocumentSource {
         self.doc.triangles()
     }
 
+    fn loose_normals(&self) -> Vec<(Vect<3>, Vect<3>)> {
+        match &*self.doc {
+            Document::Obj(o) => o.loose_normals(),
+            _ => Vec::new(),
+        }
+    }
+
     fn rewind(&mut self) -> Result<()> {
         self.next = 0;
         Ok(())
@@ -89,6 +98,7 @@ impl Source for DocumentSource {
             output: output.to_path_buf(),
             positions: Vec::with_capacity(self.doc.positions().len()),
             normals: Vec::new(),
+            loose: Vec::new(),
         }))
     }
 }
@@ -99,6 +109,7 @@ struct DocumentSink {
     output: PathBuf,
     positions: Vec<Vect<3>>,
     normals: Vec<Vect<3>>,
+    loose: Vec<Vect<3>>,
 }
 
 impl Sink for DocumentSink {
@@ -108,9 +119,14 @@ impl Sink for DocumentSink {
         Ok(())
     }
 
+    fn loose_normals(&mut self, normals: Vec<Vect<3>>) {
+        self.loose = normals;
+    }
+
     fn finish(self: Box<Self>) -> Result<Vec<String>> {
         let normals = (!self.normals.is_empty()).then_some(&self.normals[..]);
-        self.doc.write(&self.positions, normals, &self.output)?;
+        self.doc
+            .write(&self.positions, normals, &self.loose, &self.output)?;
         Ok(Vec::new())
     }
 }
@@ -125,6 +141,8 @@ pub enum Document {
     Ply(PlyFile),
     /// A text point cloud.
     Xyz(XyzFile),
+    /// A Wavefront OBJ mesh.
+    Obj(ObjFile),
 }
 
 impl Document {
@@ -133,6 +151,7 @@ impl Document {
         match extension(path).as_deref() {
             Some("ply") => Ok(Self::Ply(PlyFile::read(path)?)),
             Some("xyz") | Some("txt") => Ok(Self::Xyz(XyzFile::read(path)?)),
+            Some("obj") => Ok(Self::Obj(ObjFile::read(path)?)),
             _ => Err(Error::UnsupportedFormat {
                 path: path.to_path_buf(),
             }),
@@ -144,6 +163,7 @@ impl Document {
         match self {
             Self::Ply(p) => p.positions(),
             Self::Xyz(x) => x.positions(),
+            Self::Obj(o) => o.positions(),
         }
     }
 
@@ -151,7 +171,7 @@ impl Document {
     pub fn normals(&self) -> Option<&[Vect<3>]> {
         match self {
             Self::Ply(p) => p.normals(),
-            Self::Xyz(_) => None,
+            Self::Xyz(_) | Self::Obj(_) => None,
         }
     }
 
@@ -160,6 +180,7 @@ impl Document {
         let want = match self {
             Self::Ply(_) => "ply",
             Self::Xyz(_) => "xyz",
+            Self::Obj(_) => "obj",
         };
         let ext = extension(path);
         if ext.as_deref() != Some(want) && !(want == "xyz" && ext.as_deref() == Some("txt")) {
@@ -176,6 +197,7 @@ impl Document {
         match self {
             Self::Ply(p) => p.triangles(),
             Self::Xyz(_) => &[],
+            Self::Obj(o) => o.triangles(),
         }
     }
 
@@ -185,12 +207,14 @@ impl Document {
         &self,
         positions: &[Vect<3>],
         normals: Option<&[Vect<3>]>,
+        loose_normals: &[Vect<3>],
         path: &Path,
     ) -> Result<()> {
         self.check_output(path)?;
         let bytes = match self {
             Self::Ply(p) => p.encode(positions, normals)?,
             Self::Xyz(x) => x.encode(positions)?,
+            Self::Obj(o) => o.encode(positions, loose_normals)?,
         };
         write_atomic(path, &bytes)
     }

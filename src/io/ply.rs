@@ -53,11 +53,7 @@ impl PlyFile {
         if !bytes.starts_with(b"ply") {
             return Err(err("not a PLY file (no `ply` magic line)".into()));
         }
-        let mut reader = Reader::new(Cursor::new(&bytes[..]));
-        let header = Parser::<DefaultElement>::new()
-            .read_header(&mut reader)
-            .map_err(|e| err(format!("bad header: {e}")))?;
-        let body = reader.get_ref().position() as usize;
+        let (header, body) = parse_header(&bytes).map_err(err)?;
         let vertex = header
             .elements
             .get("vertex")
@@ -182,6 +178,13 @@ impl PlyFile {
                 }
             }
         }
+        if header.encoding == Encoding::Ascii
+            && bytes[walker.pos..].iter().any(|b| !b.is_ascii_whitespace())
+        {
+            return Err(err(
+                "data after the last element: the header's counts are smaller than the body".into(),
+            ));
+        }
         let n = positions.len();
         if let Some(t) = triangles
             .iter()
@@ -283,6 +286,54 @@ impl PlyFile {
         out.extend_from_slice(&self.bytes[last..]);
         out
     }
+}
+
+/// Parses the header; returns it and the offset of the body. Exporters (Blender 2.4) write
+/// comments that run over several lines: a header line of free text (its first word is not a
+/// lowercase identifier) is read as a comment, its bytes kept as they are. A line that starts
+/// with an unknown lowercase word is a misspelled keyword and an error.
+fn parse_header(bytes: &[u8]) -> std::result::Result<(ply_rs_bw::ply::Header, usize), String> {
+    let end = bytes
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .ok_or("no `end_header` line (truncated or not a PLY header)")?;
+    let mut body = end + 10;
+    if bytes.get(body) == Some(&b'\r') {
+        body += 1;
+    }
+    if bytes.get(body) == Some(&b'\n') {
+        body += 1;
+    }
+    const KEYWORDS: [&str; 7] = [
+        "ply",
+        "format",
+        "comment",
+        "obj_info",
+        "element",
+        "property",
+        "end_header",
+    ];
+    let mut text = String::new();
+    for line in String::from_utf8_lossy(&bytes[..end]).lines() {
+        let first = line.split_whitespace().next().unwrap_or("");
+        if line.trim().is_empty() {
+            continue;
+        }
+        if !KEYWORDS.contains(&first) {
+            if first.chars().all(|c| c.is_ascii_lowercase() || c == '_') {
+                return Err(format!("unknown header keyword `{first}`"));
+            }
+            text.push_str("comment ");
+        }
+        text.push_str(line.trim_end());
+        text.push('\n');
+    }
+    text.push_str("end_header\n");
+    let mut reader = Reader::new(Cursor::new(text.as_bytes()));
+    let header = Parser::<DefaultElement>::new()
+        .read_header(&mut reader)
+        .map_err(|e| format!("bad header: {e}"))?;
+    Ok((header, body))
 }
 
 fn collect_triangles(element: &str, list: &[f64], out: &mut Vec<[u32; 3]>) {

@@ -1,0 +1,205 @@
+//! Wavefront OBJ: `v` lines moved, `vn` lines transformed, every other byte kept.
+//!
+//! Positions are the `v` lines in order; faces (`f`, any number of corners, `v/vt/vn` forms,
+//! negative relative indices) are fan-triangulated for the cells. A normal `vn k` is transformed
+//! at the vertex of its first face corner; normals no face refers to are kept as they are.
+//! Writing replaces the number tokens of `v` and `vn` lines and copies everything else.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    start: usize,
+    end: usize,
+}
+
+/// An OBJ file held in memory with the locations of its coordinates.
+#[derive(Debug)]
+pub struct ObjFile {
+    path: PathBuf,
+    bytes: Vec<u8>,
+    coords: Vec<[Span; 3]>,
+    positions: Vec<Vect<3>>,
+    normal_spans: Vec<[Span; 3]>,
+    normals: Vec<Vect<3>>,
+    /// For each normal, the vertex of its first face corner.
+    normal_vertex: Vec<Option<u32>>,
+    triangles: Vec<[u32; 3]>,
+}
+
+/// The three number tokens after the keyword of `line` (starting at byte `at` of the file).
+fn three(bytes: &[u8], line: Span, skip: usize) -> Option<([Span; 3], [f64; 3])> {
+    let mut spans = [Span { start: 0, end: 0 }; 3];
+    let mut values = [0.0; 3];
+    let mut pos = line.start + skip;
+    for k in 0..3 {
+        while pos < line.end && bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        let start = pos;
+        while pos < line.end && !bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        let text = std::str::from_utf8(&bytes[start..pos]).ok()?;
+        values[k] = text.parse().ok()?;
+        spans[k] = Span { start, end: pos };
+    }
+    Some((spans, values))
+}
+
+impl ObjFile {
+    /// Reads and indexes `path`.
+    pub fn read(path: &Path) -> Result<Self> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let err = |line: usize, m: String| Error::format(path, format!("line {line}: {m}"));
+        let (mut coords, mut positions) = (Vec::new(), Vec::new());
+        let (mut normal_spans, mut normals) = (Vec::new(), Vec::new());
+        let mut normal_vertex: Vec<Option<u32>> = Vec::new();
+        let mut faces: Vec<(usize, Vec<(i64, Option<i64>)>, usize, usize)> = Vec::new();
+        let mut start = 0;
+        for (number, raw) in bytes.split(|&b| b == b'\n').enumerate() {
+            let line = Span {
+                start,
+                end: start + raw.len(),
+            };
+            start = line.end + 1;
+            let trimmed = raw.trim_ascii_start();
+            let lead = raw.len() - trimmed.len();
+            let keyword = trimmed
+                .split(|b| b.is_ascii_whitespace())
+                .next()
+                .unwrap_or(&[]);
+            match keyword {
+                b"v" => {
+                    let (s, v) = three(&bytes, line, lead + 1)
+                        .ok_or_else(|| err(number + 1, "a `v` line needs three numbers".into()))?;
+                    if !v.iter().all(|x| x.is_finite()) {
+                        return Err(err(number + 1, "a coordinate is not finite".into()));
+                    }
+                    coords.push(s);
+                    positions.push(Vect::<3>::from(v));
+                }
+                b"vn" => {
+                    let (s, v) = three(&bytes, line, lead + 2)
+                        .ok_or_else(|| err(number + 1, "a `vn` line needs three numbers".into()))?;
+                    normal_spans.push(s);
+                    normals.push(Vect::<3>::from(v));
+                    normal_vertex.push(None);
+                }
+                b"f" => {
+                    let text = String::from_utf8_lossy(&trimmed[1..]);
+                    let mut corners = Vec::new();
+                    for token in text.split_ascii_whitespace() {
+                        let mut parts = token.split('/');
+                        let v = parts
+                            .next()
+                            .and_then(|p| p.parse::<i64>().ok())
+                            .ok_or_else(|| {
+                                err(
+                                    number + 1,
+                                    format!("face corner `{token}` has no vertex index"),
+                                )
+                            })?;
+                        let vn = parts.nth(1).and_then(|p| p.parse::<i64>().ok());
+                        corners.push((v, vn));
+                    }
+                    faces.push((number + 1, corners, positions.len(), normals.len()));
+                }
+                _ => {}
+            }
+        }
+        let mut triangles = Vec::new();
+        for (line, corners, nv, nn) in faces {
+            // Indices are 1-based; negative ones count back from the last defined element.
+            let resolve = |i: i64, n: usize, what: &str| -> Result<u32> {
+                let k = if i > 0 { i - 1 } else { n as i64 + i };
+                if i == 0 || k < 0 || k >= n as i64 {
+                    return Err(err(
+                        line,
+                        format!("{what} index {i} is out of range (there are {n})"),
+                    ));
+                }
+                Ok(k as u32)
+            };
+            let mut vs = Vec::with_capacity(corners.len());
+            for (v, vn) in corners {
+                let v = resolve(v, nv, "vertex")?;
+                if let Some(vn) = vn {
+                    let k = resolve(vn, nn, "normal")? as usize;
+                    normal_vertex[k].get_or_insert(v);
+                }
+                vs.push(v);
+            }
+            for k in 2..vs.len() {
+                triangles.push([vs[0], vs[k - 1], vs[k]]);
+            }
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            bytes,
+            coords,
+            positions,
+            normal_spans,
+            normals,
+            normal_vertex,
+            triangles,
+        })
+    }
+
+    /// Vertex positions.
+    pub fn positions(&self) -> &[Vect<3>] {
+        &self.positions
+    }
+
+    /// Triangles of the faces.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// The normals some face refers to, each with the position it is transformed at.
+    pub fn loose_normals(&self) -> Vec<(Vect<3>, Vect<3>)> {
+        self.normals
+            .iter()
+            .zip(&self.normal_vertex)
+            .filter_map(|(n, v)| v.map(|v| (self.positions[v as usize], *n)))
+            .collect()
+    }
+
+    /// The file with positions and the referenced normals (in the order of
+    /// [`ObjFile::loose_normals`]) replaced.
+    pub fn encode(&self, positions: &[Vect<3>], normals: &[Vect<3>]) -> Result<Vec<u8>> {
+        if positions.len() != self.positions.len() {
+            return Err(Error::Param(format!(
+                "{}: {} positions for {} vertices",
+                self.path.display(),
+                positions.len(),
+                self.positions.len()
+            )));
+        }
+        let mut edits: Vec<(Span, f64)> = Vec::new();
+        for (spans, p) in self.coords.iter().zip(positions) {
+            edits.extend((0..3).map(|k| (spans[k], p[k])));
+        }
+        let referenced = self
+            .normal_spans
+            .iter()
+            .zip(&self.normal_vertex)
+            .filter(|(_, v)| v.is_some());
+        for ((spans, _), n) in referenced.zip(normals) {
+            edits.extend((0..3).map(|k| (spans[k], n[k])));
+        }
+        edits.sort_unstable_by_key(|e| e.0.start);
+        let mut out = Vec::with_capacity(self.bytes.len() + self.bytes.len() / 4);
+        let mut last = 0;
+        for (span, value) in edits {
+            out.extend_from_slice(&self.bytes[last..span.start]);
+            out.extend_from_slice(format!("{value}").as_bytes());
+            last = span.end;
+        }
+        out.extend_from_slice(&self.bytes[last..]);
+        Ok(out)
+    }
+}
