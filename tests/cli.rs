@@ -1,48 +1,11 @@
 //! The CLI on real files: deform, then check the geometry of what was written.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
+
+use common::{deform, run, shared};
 
 use rigidcells::io::Document;
 use rigidcells::rigid::{Dim, Rigid, Vect};
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_rigidcells"))
-}
-
-fn shared(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(rel)
-}
-
-struct Run {
-    code: i32,
-    stderr: String,
-}
-
-fn run(args: &[&str]) -> Run {
-    let out = bin().args(args).output().expect("run rigidcells");
-    Run {
-        code: out.status.code().unwrap_or(-1),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-/// `rigidcells deform INPUT -o OUTPUT --edit EDIT -q` plus `extra` arguments.
-fn deform(input: &Path, output: &Path, edit: &Path, extra: &[&str]) -> Run {
-    let mut args = vec![
-        "deform",
-        input.to_str().unwrap(),
-        "-o",
-        output.to_str().unwrap(),
-        "--edit",
-        edit.to_str().unwrap(),
-        "-q",
-    ];
-    args.extend_from_slice(extra);
-    run(&args)
-}
 
 fn edges(tris: &[[u32; 3]]) -> Vec<(u32, u32)> {
     let mut e: Vec<(u32, u32)> = tris

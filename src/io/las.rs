@@ -105,11 +105,10 @@ fn le_u64(b: &[u8], at: usize) -> u64 {
 fn le_f64(b: &[u8], at: usize) -> f64 {
     f64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
 }
+/// A NUL-terminated text field (bytes after the first NUL are padding).
 fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b)
-        .trim_end_matches('\0')
-        .trim()
-        .to_string()
+    let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+    String::from_utf8_lossy(&b[..end]).trim().to_string()
 }
 
 impl LasHeader {
@@ -463,8 +462,7 @@ impl Source for LasSource {
                 &self.header,
                 out_laz,
                 self.max_return,
-                scale,
-                offset,
+                (scale, offset),
                 notes,
             )?)),
         }
@@ -514,14 +512,15 @@ fn output_frame(
 
 /// Writes the moved coordinates into the first 12 bytes of each record of `raw`, tracking
 /// the bounds of the encoded values.
+/// A scale and an offset per axis.
+type Frame = ([f64; 3], [f64; 3]);
+
 fn encode(
     raw: &mut [u8],
     record_len: usize,
     moved: &[Vect<3>],
-    scale: &[f64; 3],
-    offset: &[f64; 3],
-    lo: &mut [f64; 3],
-    hi: &mut [f64; 3],
+    (scale, offset): &Frame,
+    (lo, hi): (&mut [f64; 3], &mut [f64; 3]),
     path: &Path,
 ) -> Result<()> {
     for (rec, p) in raw.chunks_exact_mut(record_len).zip(moved) {
@@ -592,10 +591,8 @@ impl Sink for RawSink {
             &mut self.buf,
             chunk.record_len,
             moved,
-            &self.scale,
-            &self.offset,
-            &mut self.lo,
-            &mut self.hi,
+            &(self.scale, self.offset),
+            (&mut self.lo, &mut self.hi),
             &target,
         )?;
         self.out
@@ -658,8 +655,7 @@ impl CrateSink {
         header: &LasHeader,
         out_laz: bool,
         max_return: u8,
-        scale: [f64; 3],
-        offset: [f64; 3],
+        (scale, offset): Frame,
         mut notes: Vec<String>,
     ) -> Result<Self> {
         let reader = las::Reader::new(BufReader::new(
@@ -743,10 +739,8 @@ impl Sink for CrateSink {
             &mut bytes,
             chunk.record_len,
             moved,
-            &self.scale,
-            &self.offset,
-            &mut lo,
-            &mut hi,
+            &(self.scale, self.offset),
+            (&mut lo, &mut hi),
             &target,
         )?;
         let slab = PointDataBuilder::new()

@@ -58,7 +58,9 @@ impl ObjFile {
         let (mut coords, mut positions) = (Vec::new(), Vec::new());
         let (mut normal_spans, mut normals) = (Vec::new(), Vec::new());
         let mut normal_vertex: Vec<Option<u32>> = Vec::new();
-        let mut faces: Vec<(usize, Vec<(i64, Option<i64>)>, usize, usize)> = Vec::new();
+        // (line, corners (vertex, normal), vertices and normals defined before the face)
+        type Face = (usize, Vec<(i64, Option<i64>)>, usize, usize);
+        let mut faces: Vec<Face> = Vec::new();
         let mut start = 0;
         for (number, raw) in bytes.split(|&b| b == b'\n').enumerate() {
             let line = Span {

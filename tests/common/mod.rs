@@ -1,0 +1,43 @@
+//! Helpers shared by the integration tests: run the CLI, find the shared data.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_rigidcells"))
+}
+
+pub fn shared(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel)
+}
+
+pub struct Run {
+    pub code: i32,
+    pub stderr: String,
+}
+
+pub fn run(args: &[&str]) -> Run {
+    let out = bin().args(args).output().expect("run rigidcells");
+    Run {
+        code: out.status.code().unwrap_or(-1),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+/// `rigidcells deform INPUT -o OUTPUT --edit EDIT -q` plus `extra` arguments.
+pub fn deform(input: &Path, output: &Path, edit: &Path, extra: &[&str]) -> Run {
+    let mut args = vec![
+        "deform",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+        "-q",
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}

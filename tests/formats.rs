@@ -1,0 +1,382 @@
+//! Every shared LAS/LAZ, PLY and OBJ file through the CLI: nothing but coordinates changes;
+//! malformed files give their specific errors; saved fields applied to tiles reproduce the whole.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{deform, run, shared};
+use rigidcells::io::{Chunk, Document, LasHeader, LasSource, Source};
+use rigidcells::rigid::Vect;
+
+const T: [f64; 3] = [1.5, -2.25, 0.75];
+
+fn translate_spec(dir: &Path) -> PathBuf {
+    let p = dir.join("translate.toml");
+    std::fs::write(
+        &p,
+        format!(
+            "[[handle]]\nbox = {{ min = [-1e12, -1e12, -1e12], max = [1e12, 1e12, 1e12] }}\ntranslate = {T:?}\n"
+        ),
+    )
+    .unwrap();
+    p
+}
+
+fn files(dir: &str) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(shared(dir))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    v.sort();
+    v
+}
+
+/// All records of a LAS/LAZ file: raw bytes and decoded coordinates.
+fn records(path: &Path) -> (LasHeader, Vec<u8>, Vec<Vect<3>>, usize) {
+    let mut src = LasSource::open(path).unwrap();
+    let mut chunk = Chunk::default();
+    let (mut raw, mut pos) = (Vec::new(), Vec::new());
+    while src.read(100_000, &mut chunk).unwrap() > 0 {
+        raw.extend_from_slice(&chunk.raw);
+        pos.extend_from_slice(&chunk.positions);
+    }
+    (src.header().clone(), raw, pos, chunk.record_len)
+}
+
+/// Refused LAS inputs, each with its message.
+const LAS_REFUSED: [(&str, &str); 2] = [
+    ("pdrf9-1.5.las", "LAS 1.5 is not supported"),
+    ("point-version-1-point-wise.laz", "LAZ:"),
+];
+
+#[test]
+fn every_las_file_round_trips_a_translation() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = translate_spec(dir.path());
+    for input in files("las") {
+        let name = input.file_name().unwrap().to_str().unwrap().to_string();
+        let output = dir.path().join(format!("out_{name}"));
+        let r = deform(&input, &output, &spec, &["--transfer", "blend"]);
+        if let Some((_, msg)) = LAS_REFUSED.iter().find(|(f, _)| *f == name) {
+            assert_eq!(r.code, 3, "{name}: {}", r.stderr);
+            assert!(r.stderr.contains(msg), "{name}: {}", r.stderr);
+            assert!(!output.exists());
+            continue;
+        }
+        assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+        let (hin, rin, pin, rl) = records(&input);
+        let (hout, rout, pout, rl2) = records(&output);
+        assert_eq!(
+            (hin.count, rl, hin.format),
+            (hout.count, rl2, hout.format),
+            "{name}"
+        );
+        assert_eq!(rin.len(), rout.len(), "{name}");
+        for (k, (a, b)) in rin.chunks_exact(rl).zip(rout.chunks_exact(rl)).enumerate() {
+            assert_eq!(a[12..], b[12..], "{name}: record {k} changed beyond X Y Z");
+        }
+        for (k, (a, b)) in pin.iter().zip(&pout).enumerate() {
+            for ax in 0..3 {
+                let err = (b[ax] - a[ax] - T[ax]).abs();
+                let tol = 0.5 * hout.scale[ax] + 1e-9 * a[ax].abs().max(1.0);
+                assert!(err <= tol, "{name}: point {k} axis {ax} off by {err}");
+            }
+        }
+        // Header bounds describe the output.
+        for ax in 0..3 {
+            let lo = pout.iter().map(|p| p[ax]).fold(f64::INFINITY, f64::min);
+            let tol = 1.5 * hout.scale[ax];
+            assert!(
+                (hout.min[ax] - lo).abs() <= tol,
+                "{name}: bounds {} vs {lo}",
+                hout.min[ax]
+            );
+        }
+        if !hin.compressed {
+            // LAS -> LAS: header and VLRs verbatim but for scale/offset/bounds, and the bytes
+            // after the points (waveform data, EVLRs) verbatim.
+            let (a, b) = (
+                std::fs::read(&input).unwrap(),
+                std::fs::read(&output).unwrap(),
+            );
+            assert_eq!(a.len(), b.len(), "{name}");
+            assert_eq!(a[..131], b[..131], "{name}: header start");
+            let off = hin.point_offset as usize;
+            assert_eq!(a[227..off], b[227..off], "{name}: VLRs");
+            let end = off + hin.count as usize * rl;
+            assert_eq!(a[end..], b[end..], "{name}: bytes after the points");
+        } else {
+            let names = |h: &LasHeader| {
+                h.vlrs
+                    .iter()
+                    .filter(|v| v.user_id != "laszip encoded" && v.user_id != "copc")
+                    .map(|v| (v.user_id.clone(), v.record_id, v.len))
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(names(&hin), names(&hout), "{name}: VLRs");
+        }
+    }
+}
+
+/// Mesh inputs without anything to deform, each with its message.
+const MESH_REFUSED: [(&str, &str); 1] = [("all_atomic_types_ok_ascii.ply", "no `vertex` element")];
+
+#[test]
+fn every_mesh_file_round_trips_a_translation() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = translate_spec(dir.path());
+    for input in files("meshes") {
+        let name = input.file_name().unwrap().to_str().unwrap().to_string();
+        let output = dir.path().join(format!("out_{name}"));
+        let r = deform(&input, &output, &spec, &["--transfer", "blend"]);
+        if let Some((_, msg)) = MESH_REFUSED.iter().find(|(f, _)| *f == name) {
+            assert_eq!(r.code, 3, "{name}: {}", r.stderr);
+            assert!(r.stderr.contains(msg), "{name}: {}", r.stderr);
+            continue;
+        }
+        assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+        let a = Document::read(&input).unwrap();
+        let b = Document::read(&output).unwrap();
+        assert_eq!(a.positions().len(), b.positions().len(), "{name}");
+        assert_eq!(a.triangles(), b.triangles(), "{name}");
+        for (p, q) in a.positions().iter().zip(b.positions()) {
+            for ax in 0..3 {
+                let tol = 1e-6 * (p[ax].abs() + 3.0);
+                assert!(
+                    (q[ax] - p[ax] - T[ax]).abs() <= tol,
+                    "{name}: {p:?} -> {q:?}"
+                );
+            }
+        }
+        if let (Some(na), Some(nb)) = (a.normals(), b.normals()) {
+            for (m, n) in na.iter().zip(nb) {
+                let unit = m.norm();
+                assert!(
+                    (m - n * unit).norm() <= 1e-5 * unit.max(1.0),
+                    "{name}: normal"
+                );
+            }
+        }
+        // Everything but the numbers of vertex lines is kept: binary PLY keeps its length, and
+        // text files keep every line that is not a vertex or normal line.
+        let (ba, bb) = (
+            std::fs::read(&input).unwrap(),
+            std::fs::read(&output).unwrap(),
+        );
+        let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+        if text(&ba[..ba.len().min(300)]).contains("format binary") {
+            assert_eq!(ba.len(), bb.len(), "{name}");
+        } else {
+            let keep = |s: &str| {
+                s.lines()
+                    .filter(|l| !l.starts_with("v ") && !l.starts_with("vn "))
+                    .count()
+            };
+            assert_eq!(
+                ba.split(|&c| c == b'\n').count(),
+                bb.split(|&c| c == b'\n').count()
+            );
+            if name.ends_with(".obj") {
+                let (ta, tb) = (text(&ba), text(&bb));
+                assert_eq!(keep(&ta), keep(&tb), "{name}");
+                let other = |s: &str| {
+                    s.lines()
+                        .filter(|l| !l.starts_with("v ") && !l.starts_with("vn "))
+                        .map(str::to_string)
+                        .collect::<Vec<_>>()
+                };
+                assert_eq!(other(&ta), other(&tb), "{name}: non-vertex lines");
+            }
+        }
+    }
+}
+
+#[test]
+fn malformed_files_give_their_specific_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = translate_spec(dir.path());
+    let expected = [
+        ("1.2-no-points.las", "the file holds 0 complete records"),
+        ("1.2-with-color-clipped.las", "holds 1064 complete records"),
+        ("bad_vlr_count.las", "VLR count"),
+        ("broken_coder.laz", "LAZ"),
+        ("broken_compressor.laz", "Compressor type 16"),
+        ("broken_version.laz", "compression version: 6"),
+        (
+            "crash-30d6d0f7c529b3b66b4131700b7a4580cd7082df.ply",
+            "no `end_header`",
+        ),
+        (
+            "cube-ply-1.0_ascii-comment_renamed_to_remark-invalid.ply",
+            "unknown header keyword `remark`",
+        ),
+        ("empty.obj", "no vertices"),
+        ("empty.ply", "not a PLY file"),
+        ("fuze_ascii.ply", "is not a Int"),
+        ("issue623.ply", "is not a UChar"),
+        ("malformed.obj", "vertex index 12 is out of range"),
+        ("no-points.las", "holds no points"),
+        ("payload_JVN42386607.ply", "bad header"),
+        ("ply_empty_header.ply", "no `vertex` element"),
+        ("points_emptyascii.ply", "data after the last element"),
+        ("single_elements_err_ascii.ply", "no `vertex` element"),
+        ("unsized_dims.ply", "moves float or double coordinates"),
+    ];
+    assert_eq!(expected.len(), files("malformed").len());
+    for (file, msg) in expected {
+        let input = shared(&format!("malformed/{file}"));
+        let output = dir.path().join(format!("out_{file}"));
+        let r = deform(&input, &output, &spec, &[]);
+        assert_eq!(r.code, 3, "{file}: {}", r.stderr);
+        assert!(r.stderr.contains(msg), "{file}: {}", r.stderr);
+        assert!(r.stderr.contains(file), "{file}: the error names the file");
+        assert!(!output.exists(), "{file}: no output");
+    }
+}
+
+#[test]
+fn georeferenced_coordinates_survive_identity_and_small_edits() {
+    let dir = tempfile::tempdir().unwrap();
+    let identity = dir.path().join("identity.toml");
+    std::fs::write(
+        &identity,
+        "[[fixed]]\nbox = { min = [-1e12, -1e12, -1e12], max = [1e12, 1e12, 1e12] }\n",
+    )
+    .unwrap();
+    let small = dir.path().join("small.toml");
+    std::fs::write(
+        &small,
+        "[[handle]]\nbox = { min = [-1e12, -1e12, -1e12], max = [1e12, 1e12, 1e12] }\ntranslate = [0.001, -0.002, 0.0005]\n",
+    )
+    .unwrap();
+    for name in [
+        "certainty3d-color-utm-feet-navd88.las",
+        "test1_4.las",
+        "Topography.laz",
+    ] {
+        let input = shared(&format!("las/{name}"));
+        for transfer in ["blend", "rbf"] {
+            let out = dir.path().join(format!("id_{transfer}_{name}"));
+            let r = deform(&input, &out, &identity, &["--transfer", transfer]);
+            assert_eq!(r.code, 0, "{}", r.stderr);
+            let ((_, a, _, rl), (_, b, _, _)) = (records(&input), records(&out));
+            assert_eq!(a.len(), b.len());
+            for (x, y) in a.chunks_exact(rl).zip(b.chunks_exact(rl)) {
+                assert_eq!(
+                    x[..12],
+                    y[..12],
+                    "{name} {transfer}: identity moved a point"
+                );
+            }
+        }
+        let out = dir.path().join(format!("small_{name}"));
+        let r = deform(&input, &out, &small, &["--transfer", "rbf"]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let ((_, _, p, _), (h, _, q, _)) = (records(&input), records(&out));
+        let t = [0.001, -0.002, 0.0005];
+        for (a, b) in p.iter().zip(&q) {
+            for ax in 0..3 {
+                assert!((b[ax] - a[ax] - t[ax]).abs() <= 0.5 * h.scale[ax] + 1e-9);
+            }
+        }
+    }
+}
+
+/// Writes the records `keep` of the LAS 1.2 file `input` as a LAS file (header and VLRs
+/// copied, count patched; bounds as in the input, which `apply` rewrites anyway).
+fn write_tile(input: &Path, keep: &[usize], out: &Path) {
+    let h = LasHeader::read(input).unwrap();
+    let bytes = std::fs::read(input).unwrap();
+    let off = h.point_offset as usize;
+    let rl = h.record_len as usize;
+    let mut tile = bytes[..off].to_vec();
+    tile[107..111].copy_from_slice(&(keep.len() as u32).to_le_bytes());
+    for &k in keep {
+        tile.extend_from_slice(&bytes[off + k * rl..off + (k + 1) * rl]);
+    }
+    std::fs::write(out, tile).unwrap();
+}
+
+#[test]
+fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.las");
+    let spec = dir.path().join("bend.toml");
+    // Lift the east end by 20 m and turn it, keeping the west end fixed.
+    std::fs::write(
+        &spec,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
+         translate = [0, 0, 20]\nrotate = { axis = [0, 1, 0], degrees = 5 }\n",
+    )
+    .unwrap();
+    let field = dir.path().join("bend.field");
+    let whole = dir.path().join("whole.las");
+    let r = deform(
+        &input,
+        &whole,
+        &spec,
+        &["--save-field", field.to_str().unwrap(), "--chunk", "7777"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    // The same field applied by `apply` (another chunking) gives the same bytes.
+    let again = dir.path().join("again.las");
+    let a = run(&[
+        "apply",
+        field.to_str().unwrap(),
+        input.to_str().unwrap(),
+        "-o",
+        again.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(a.code, 0, "{}", a.stderr);
+    assert_eq!(
+        std::fs::read(&whole).unwrap(),
+        std::fs::read(&again).unwrap()
+    );
+
+    // Four spatial tiles, each applied alone, merge into the whole.
+    let (_, raw, pos, rl) = records(&input);
+    let mid = |ax: usize| {
+        let mut v: Vec<f64> = pos.iter().map(|p| p[ax]).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (mx, my) = (mid(0), mid(1));
+    let (_, moved, _, _) = records(&whole);
+    let mut covered = 0;
+    for q in 0..4 {
+        let keep: Vec<usize> = (0..pos.len())
+            .filter(|&k| ((pos[k].x >= mx) as usize) + 2 * ((pos[k].y >= my) as usize) == q)
+            .collect();
+        let tile = dir.path().join(format!("tile{q}.las"));
+        let out = dir.path().join(format!("tile{q}_out.las"));
+        write_tile(&input, &keep, &tile);
+        let a = run(&[
+            "apply",
+            field.to_str().unwrap(),
+            tile.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "-q",
+        ]);
+        assert_eq!(a.code, 0, "{}", a.stderr);
+        let (_, tile_raw, _, _) = records(&out);
+        for (i, &k) in keep.iter().enumerate() {
+            assert_eq!(
+                tile_raw[i * rl..(i + 1) * rl],
+                moved[k * rl..(k + 1) * rl],
+                "tile {q} record {i}"
+            );
+        }
+        covered += keep.len();
+    }
+    assert_eq!(covered, raw.len() / rl);
+    // And the bend happened: the east end rose.
+    let (_, _, out_pos, _) = records(&whole);
+    let east = pos.iter().zip(&out_pos).filter(|(p, _)| p.x > 637000.0);
+    let rise: Vec<f64> = east.map(|(p, q)| q.z - p.z).collect();
+    let mean = rise.iter().sum::<f64>() / rise.len() as f64;
+    assert!(mean > 10.0, "east end rose by {mean}");
+}
