@@ -218,3 +218,94 @@ mod tests {
         assert!(m.triangles.len() > walls);
     }
 }
+
+/// Height of the synthetic terrain at `(x, y)` (metres; a 2 km square): rolling hills, a river
+/// valley along y = 1000, flat-roofed buildings on a grid, and a bridge deck across the valley.
+pub fn terrain_height(x: f64, y: f64) -> (f64, u8) {
+    let hills = 20.0 * (x / 170.0).sin() * (y / 230.0).cos() + 8.0 * (x / 53.0 + y / 71.0).sin();
+    let valley = -25.0 * (-((y - 1000.0) / 60.0).powi(2)).exp();
+    let ground = 100.0 + hills + valley;
+    // Bridge: a deck 12 m wide at x in [990, 1002], y in [850, 1150].
+    if (990.0..1002.0).contains(&x) && (850.0..1150.0).contains(&y) {
+        return (112.0, 17);
+    }
+    // Buildings: 40 m blocks every 150 m, away from the valley.
+    let (bx, by) = (x.rem_euclid(150.0), y.rem_euclid(150.0));
+    if bx < 40.0 && by < 40.0 && (y - 1000.0).abs() > 150.0 {
+        let storeys = 3.0 + ((x / 150.0).floor() + (y / 150.0).floor()).rem_euclid(5.0) * 3.0;
+        return (ground + storeys * 3.0, 6);
+    }
+    (ground, 2)
+}
+
+/// Writes a LAS 1.2 (or LAZ) scan of `n` points of [`terrain_height`] (point format 3: GPS time
+/// and RGB; UTM-like offsets around 500 000 / 5 000 000, scale 1 mm), streaming in chunks.
+pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), las::Error> {
+    use las::{Builder, LazParallelism, PointDataBuilder, Transform, Vector, WriterOptions};
+    let mut b = Builder::from((1, 2));
+    b.point_format = las::point::Format::new(3)?;
+    b.point_format.is_compressed = compressed;
+    let t = |o: f64| Transform {
+        scale: 0.001,
+        offset: o,
+    };
+    b.transforms = Vector {
+        x: t(500_000.0),
+        y: t(5_000_000.0),
+        z: t(0.0),
+    };
+    b.generating_software = "rigidcells data_gen".into();
+    let header = b.into_header()?;
+    let transforms = *header.transforms();
+    let format = *header.point_format();
+    let file = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(path)?);
+    let mut w = las::Writer::with_options(
+        file,
+        header,
+        WriterOptions::default().with_laz_parallelism(LazParallelism::Yes),
+    )?;
+    let side = (n as f64).sqrt().ceil() as u64;
+    let step = 2000.0 / side as f64;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut rand = move || {
+        // xorshift64*: reproducible jitter.
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let chunk = 1u64 << 20;
+    let mut i = 0u64;
+    while i < n {
+        let m = chunk.min(n - i);
+        let mut bytes = Vec::with_capacity(m as usize * 34);
+        for k in i..i + m {
+            let x = (k % side) as f64 * step + rand() * step;
+            let y = (k / side) as f64 * step + rand() * step;
+            let (z, class) = terrain_height(x, y);
+            let z = z + 0.02 * (rand() - 0.5);
+            let raw = |v: f64| (v / 0.001).round() as i32;
+            bytes.extend_from_slice(&raw(x).to_le_bytes());
+            bytes.extend_from_slice(&raw(y).to_le_bytes());
+            bytes.extend_from_slice(&raw(z).to_le_bytes());
+            bytes.extend_from_slice(&((z * 100.0) as u16).to_le_bytes()); // intensity
+            bytes.push(0b0000_1001); // return 1 of 1
+            bytes.push(class);
+            bytes.push(0); // scan angle
+            bytes.push((k % 251) as u8); // user data
+            bytes.extend_from_slice(&((k / 100_000) as u16).to_le_bytes()); // point source
+            bytes.extend_from_slice(&(k as f64 * 1e-5).to_le_bytes()); // GPS time
+            let c = (class as u16) * 4000;
+            for v in [c, (z * 300.0) as u16, 65535 - c] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let pd = PointDataBuilder::new()
+            .with_format(format)
+            .with_transforms(transforms)
+            .build_from_bytes(bytes)?;
+        w.write_points(&pd)?;
+        i += m;
+    }
+    w.close()
+}

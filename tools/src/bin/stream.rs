@@ -1,0 +1,105 @@
+//! Streaming throughput: `deform` with blend on a LAS/LAZ file against a plain read-and-write
+//! copy with the `las` crate, in the same run.
+//!
+//! `cargo run --release -p rigidcells-tools --bin stream -- FILE.las|laz [EDIT.toml]`
+//! (default edit: fix the western 15 %, lift and turn the eastern 15 %).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use las::{Builder, LazParallelism, PointDataBuilder, ReaderOptions, WriterOptions};
+use rigidcells::field::Transfer;
+use rigidcells::pipeline::{CHUNK, DeformParams, deform_file};
+use rigidcells::progress::Silent;
+use rigidcells::spec::{parse_spec, read_spec};
+
+fn plain_copy(input: &Path, output: &Path) -> u64 {
+    let opts = ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes);
+    let file = std::io::BufReader::with_capacity(1 << 20, std::fs::File::open(input).unwrap());
+    let mut r = las::Reader::with_options(file, opts).unwrap();
+    let mut b = Builder::from(r.header().clone());
+    b.point_format.is_compressed = output.extension().is_some_and(|e| e == "laz");
+    b.vlrs
+        .retain(|v| !(v.user_id == "laszip encoded" && v.record_id == 22204));
+    let out = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(output).unwrap());
+    let mut w = las::Writer::with_options(
+        out,
+        b.into_header().unwrap(),
+        WriterOptions::default().with_laz_parallelism(LazParallelism::Yes),
+    )
+    .unwrap();
+    let mut pd = PointDataBuilder::new().for_header(r.header()).build();
+    let mut n = 0;
+    while r.fill_points(CHUNK as u64, &mut pd).unwrap() > 0 {
+        n += pd.len() as u64;
+        w.write_points(&pd).unwrap();
+    }
+    w.close().unwrap();
+    n
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let input = PathBuf::from(args.get(1).expect("usage: stream FILE.las|laz [EDIT.toml]"));
+    let ext = input.extension().unwrap().to_str().unwrap().to_string();
+    let dir = std::env::temp_dir();
+    let spec = match args.get(2) {
+        Some(p) => read_spec::<3>(Path::new(p)).unwrap(),
+        None => {
+            let h = rigidcells::io::LasHeader::read(&input).unwrap();
+            let (lo, hi) = (h.min, h.max);
+            let w = hi[0] - lo[0];
+            let text = format!(
+                "[[fixed]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
+                 [[handle]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
+                 translate = [0, 0, {}]\nrotate = {{ axis = [0, 1, 0], degrees = -10 }}\n",
+                lo[0] - 1.0,
+                lo[1] - 1.0,
+                lo[2] - 1.0,
+                lo[0] + 0.15 * w,
+                hi[1] + 1.0,
+                hi[2] + 1.0,
+                hi[0] - 0.15 * w,
+                lo[1] - 1.0,
+                lo[2] - 1.0,
+                hi[0] + 1.0,
+                hi[1] + 1.0,
+                hi[2] + 1.0,
+                0.025 * w
+            );
+            parse_spec::<3>(&text, Path::new("."), Path::new("<default edit>")).unwrap()
+        }
+    };
+    let copy_out = dir.join(format!("rigidcells-stream-copy.{ext}"));
+    let t = Instant::now();
+    let n = plain_copy(&input, &copy_out);
+    let copy_s = t.elapsed().as_secs_f64();
+    let out = dir.join(format!("rigidcells-stream-deform.{ext}"));
+    let params = DeformParams {
+        transfer: Transfer::Blend,
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let (_, info) = deform_file(&input, &out, &spec, &params, CHUNK, None, &Silent).unwrap();
+    let deform_s = t.elapsed().as_secs_f64();
+    let _ = std::fs::remove_file(&copy_out);
+    let _ = std::fs::remove_file(&out);
+    println!(
+        "{} ({n} points), {} threads",
+        input.display(),
+        rayon::current_num_threads()
+    );
+    println!("| run | seconds | points/s |\n|---|---|---|");
+    println!(
+        "| plain copy (las crate) | {copy_s:.2} | {:.2e} |",
+        n as f64 / copy_s
+    );
+    println!(
+        "| deform, blend (pass 1 {:.2} s, solve {:.2} s, pass 2 {:.2} s) | {deform_s:.2} | {:.2e} |",
+        info.seconds_read,
+        info.deform.solver.seconds,
+        info.seconds_write,
+        n as f64 / deform_s
+    );
+    println!("deform / copy throughput: {:.2}", copy_s / deform_s);
+}
