@@ -180,45 +180,6 @@ pub fn write_ply(path: &Path, mesh: &Mesh, binary: bool) -> std::io::Result<()> 
     out.flush()
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn bar_is_closed_and_outward() {
-        let m = bar([10.0, 1.0, 1.0], 4.0);
-        assert!((m.volume() - 10.0).abs() < 1e-9);
-        // Every edge is shared by exactly two triangles, in opposite directions.
-        let mut edges = std::collections::HashMap::new();
-        for t in &m.triangles {
-            for k in 0..3 {
-                *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
-            }
-        }
-        assert!(
-            edges
-                .iter()
-                .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
-        );
-    }
-
-    #[test]
-    fn soup_keeps_the_volume_of_its_walls() {
-        let m = soup([10.0, 1.0, 1.0], 4.0);
-        let walls = bar([10.0, 1.0, 1.0], 4.0).triangles.len();
-        assert!((signed_volume(&m.vertices, &m.triangles[..walls]) - 10.0).abs() < 1e-9);
-        // Unwelded: no two wall triangles share a vertex index.
-        let mut seen = std::collections::HashSet::new();
-        assert!(
-            m.triangles[..walls]
-                .iter()
-                .flatten()
-                .all(|i| seen.insert(*i))
-        );
-        assert!(m.triangles.len() > walls);
-    }
-}
-
 /// Height of the synthetic terrain at `(x, y)` (metres; a 2 km square): rolling hills, a river
 /// valley along y = 1000, flat-roofed buildings on a grid, and a bridge deck across the valley.
 pub fn terrain_height(x: f64, y: f64) -> (f64, u8) {
@@ -308,4 +269,43 @@ pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), la
         i += m;
     }
     w.close()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bar_is_closed_and_outward() {
+        let m = bar([10.0, 1.0, 1.0], 4.0);
+        assert!((m.volume() - 10.0).abs() < 1e-9);
+        // Every edge is shared by exactly two triangles, in opposite directions.
+        let mut edges = std::collections::HashMap::new();
+        for t in &m.triangles {
+            for k in 0..3 {
+                *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+            }
+        }
+        assert!(
+            edges
+                .iter()
+                .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
+        );
+    }
+
+    #[test]
+    fn soup_keeps_the_volume_of_its_walls() {
+        let m = soup([10.0, 1.0, 1.0], 4.0);
+        let walls = bar([10.0, 1.0, 1.0], 4.0).triangles.len();
+        assert!((signed_volume(&m.vertices, &m.triangles[..walls]) - 10.0).abs() < 1e-9);
+        // Unwelded: no two wall triangles share a vertex index.
+        let mut seen = std::collections::HashSet::new();
+        assert!(
+            m.triangles[..walls]
+                .iter()
+                .flatten()
+                .all(|i| seen.insert(*i))
+        );
+        assert!(m.triangles.len() > walls);
+    }
 }
