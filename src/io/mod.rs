@@ -10,6 +10,7 @@ mod mapped;
 mod obj;
 mod ply;
 mod stream;
+mod text;
 mod xyz;
 
 pub use las::{LasHeader, LasSource, VlrInfo};

@@ -7,14 +7,9 @@
 
 use std::path::{Path, PathBuf};
 
+use super::text::{Edit, Span, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
-
-#[derive(Debug, Clone, Copy)]
-struct Span {
-    start: usize,
-    end: usize,
-}
 
 /// An OBJ file held in memory with the locations of its coordinates.
 #[derive(Debug)]
@@ -181,9 +176,10 @@ impl ObjFile {
                 self.positions.len()
             )));
         }
-        let mut edits: Vec<(Span, f64)> = Vec::new();
+        let at = |spans: &[Span; 3], v: &Vect<3>| edits3(spans, v, [false; 3]);
+        let mut edits: Vec<Edit> = Vec::with_capacity(3 * positions.len());
         for (spans, p) in self.coords.iter().zip(positions) {
-            edits.extend((0..3).map(|k| (spans[k], p[k])));
+            edits.extend(at(spans, p));
         }
         let referenced = self
             .normal_spans
@@ -191,17 +187,8 @@ impl ObjFile {
             .zip(&self.normal_vertex)
             .filter(|(_, v)| v.is_some());
         for ((spans, _), n) in referenced.zip(normals) {
-            edits.extend((0..3).map(|k| (spans[k], n[k])));
+            edits.extend(at(spans, n));
         }
-        edits.sort_unstable_by_key(|e| e.0.start);
-        let mut out = Vec::with_capacity(self.bytes.len() + self.bytes.len() / 4);
-        let mut last = 0;
-        for (span, value) in edits {
-            out.extend_from_slice(&self.bytes[last..span.start]);
-            out.extend_from_slice(format!("{value}").as_bytes());
-            last = span.end;
-        }
-        out.extend_from_slice(&self.bytes[last..]);
-        Ok(out)
+        Ok(splice(&self.bytes, edits))
     }
 }

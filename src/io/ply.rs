@@ -13,15 +13,9 @@ use std::path::{Path, PathBuf};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, Encoding, PropertyType, ScalarType};
 
+use super::text::{Edit, Span, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
-
-/// Where one coordinate lives in the body.
-#[derive(Debug, Clone, Copy)]
-struct Span {
-    start: usize,
-    end: usize,
-}
 
 /// A PLY file held in memory with the locations of its vertex coordinates.
 #[derive(Debug)]
@@ -237,54 +231,35 @@ impl PlyFile {
                 self.coords.len()
             )));
         }
-        let mut edits: Vec<(Span, f64, bool)> = Vec::with_capacity(6 * positions.len());
+        let mut edits: Vec<Edit> = Vec::with_capacity(6 * positions.len());
+        let mut add = |spans: &[Span; 3], v: &Vect<3>, doubles: &[bool; 3]| {
+            edits.extend(edits3(spans, v, doubles.map(|d| !d)))
+        };
         for (spans, p) in self.coords.iter().zip(positions) {
-            for k in 0..3 {
-                edits.push((spans[k], p[k], self.doubles[k]));
-            }
+            add(spans, p, &self.doubles);
         }
         if let (Some(normals), Some(doubles)) = (normals, self.normal_doubles) {
             for (spans, n) in self.normal_spans.iter().zip(normals) {
-                for k in 0..3 {
-                    edits.push((spans[k], n[k], doubles[k]));
-                }
+                add(spans, n, &doubles);
             }
         }
         match self.encoding {
-            Encoding::Ascii => Ok(self.encode_ascii(edits)),
+            Encoding::Ascii => Ok(splice(&self.bytes, edits)),
             Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
                 let mut out = self.bytes.clone();
                 let big = self.encoding == Encoding::BinaryBigEndian;
-                for (span, v, double) in edits {
-                    let dst = &mut out[span.start..span.end];
-                    match (double, big) {
-                        (true, false) => dst.copy_from_slice(&v.to_le_bytes()),
-                        (true, true) => dst.copy_from_slice(&v.to_be_bytes()),
-                        (false, false) => dst.copy_from_slice(&(v as f32).to_le_bytes()),
-                        (false, true) => dst.copy_from_slice(&(v as f32).to_be_bytes()),
+                for e in edits {
+                    let (v, dst) = (e.value, &mut out[e.span.start..e.span.end]);
+                    match (e.single, big) {
+                        (false, false) => dst.copy_from_slice(&v.to_le_bytes()),
+                        (false, true) => dst.copy_from_slice(&v.to_be_bytes()),
+                        (true, false) => dst.copy_from_slice(&(v as f32).to_le_bytes()),
+                        (true, true) => dst.copy_from_slice(&(v as f32).to_be_bytes()),
                     }
                 }
                 Ok(out)
             }
         }
-    }
-
-    fn encode_ascii(&self, mut edits: Vec<(Span, f64, bool)>) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.bytes.len() + self.bytes.len() / 8);
-        let mut last = 0;
-        edits.sort_unstable_by_key(|e| e.0.start);
-        for (span, value, double) in edits {
-            out.extend_from_slice(&self.bytes[last..span.start]);
-            let text = if double {
-                format!("{value}")
-            } else {
-                format!("{}", value as f32)
-            };
-            out.extend_from_slice(text.as_bytes());
-            last = span.end;
-        }
-        out.extend_from_slice(&self.bytes[last..]);
-        out
     }
 }
 

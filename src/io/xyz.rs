@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::text::{Span, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -13,7 +14,7 @@ pub struct XyzFile {
     path: PathBuf,
     text: String,
     /// Byte spans of the three coordinate tokens of every point.
-    spans: Vec<[(usize, usize); 3]>,
+    spans: Vec<[Span; 3]>,
     positions: Vec<Vect<3>>,
 }
 
@@ -34,7 +35,7 @@ impl XyzFile {
                 continue;
             }
             let mut tokens = token_spans(line).map(|(a, b)| (start + a, start + b));
-            let mut s = [(0, 0); 3];
+            let mut s = [Span::default(); 3];
             let mut p = [0.0; 3];
             for k in 0..3 {
                 let Some(span) = tokens.next() else {
@@ -54,7 +55,10 @@ impl XyzFile {
                             format!("line {}: `{tok}` is not a finite number", number + 1),
                         )
                     })?;
-                s[k] = span;
+                s[k] = Span {
+                    start: span.0,
+                    end: span.1,
+                };
             }
             spans.push(s);
             positions.push(Vect::<3>::from(p));
@@ -82,17 +86,13 @@ impl XyzFile {
                 self.spans.len()
             )));
         }
-        let mut out = String::with_capacity(self.text.len() + self.text.len() / 4);
-        let mut last = 0;
-        for (s, p) in self.spans.iter().zip(positions) {
-            for k in 0..3 {
-                out.push_str(&self.text[last..s[k].0]);
-                out.push_str(&format!("{}", p[k]));
-                last = s[k].1;
-            }
-        }
-        out.push_str(&self.text[last..]);
-        Ok(out.into_bytes())
+        let edits = self
+            .spans
+            .iter()
+            .zip(positions)
+            .flat_map(|(s, p)| edits3(s, p, [false; 3]))
+            .collect();
+        Ok(splice(self.text.as_bytes(), edits))
     }
 }
 

@@ -1,0 +1,74 @@
+//! Replacing numbers inside a file's bytes: the one writer of every text format (PLY ASCII,
+//! OBJ, XYZ), so that everything between the numbers is copied as it was.
+
+use std::io::Write;
+
+use crate::rigid::Vect;
+
+/// Where a token lives in a file: bytes `start..end`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Span {
+    pub start: usize,
+    pub end: usize,
+}
+
+/// A number to write over a [`Span`]: as f64 (shortest text that reads back exactly) or, for
+/// single-precision properties, as f32.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Edit {
+    pub span: Span,
+    pub value: f64,
+    pub single: bool,
+}
+
+/// The edits writing the three components of `v` over `spans` (`single`: as f32).
+pub(crate) fn edits3(spans: &[Span; 3], v: &Vect<3>, single: [bool; 3]) -> [Edit; 3] {
+    std::array::from_fn(|k| Edit {
+        span: spans[k],
+        value: v[k],
+        single: single[k],
+    })
+}
+
+/// `bytes` with each edit's span replaced by its number; spans must not overlap.
+pub(crate) fn splice(bytes: &[u8], mut edits: Vec<Edit>) -> Vec<u8> {
+    edits.sort_unstable_by_key(|e| e.span.start);
+    let mut out = Vec::with_capacity(bytes.len() + bytes.len() / 4);
+    let mut last = 0;
+    for e in edits {
+        out.extend_from_slice(&bytes[last..e.span.start]);
+        // Writing into a Vec cannot fail.
+        let _ = if e.single {
+            write!(out, "{}", e.value as f32)
+        } else {
+            write!(out, "{}", e.value)
+        };
+        last = e.span.end;
+    }
+    out.extend_from_slice(&bytes[last..]);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn splice_replaces_only_the_spans() {
+        let text = b"v 1 2 3 # keep\nvn 0.5 x\n";
+        let at = |start, end, value, single| Edit {
+            span: Span { start, end },
+            value,
+            single,
+        };
+        let out = splice(
+            text,
+            vec![
+                at(18, 21, 0.25, true),
+                at(2, 3, -1.5, false),
+                at(6, 7, 1e-3, false),
+            ],
+        );
+        assert_eq!(out, b"v -1.5 2 0.001 # keep\nvn 0.25 x\n");
+    }
+}
