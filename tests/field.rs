@@ -100,3 +100,35 @@ fn blend_weights_sum_to_one_over_the_nearest_centers() {
     let got = blend.warp(&(c + Vect::<3>::repeat(1e-16)));
     assert!((got - f.motions[17].pos).norm() < 1e-9);
 }
+
+/// Under one rigid motion of every cell, both transfers turn normals by its rotation, and the
+/// fused position-and-normal evaluation agrees with the separate ones bit for bit.
+#[test]
+fn normals_turn_with_a_rigid_field() {
+    let mut f = field(600, 4);
+    let rot = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::new(0.3, -1.0, 0.5), 0.7);
+    let shift = Vect::<3>::new(0.2, -0.1, 0.4);
+    for (c, m) in f.centers.iter().zip(&mut f.motions) {
+        *m = Motion {
+            rot,
+            pos: rot * c + shift,
+        };
+    }
+    let blend = Blend::new(&f).unwrap();
+    let rbf = Rbf::new(&f).unwrap();
+    let mut rng = StdRng::seed_from_u64(9);
+    for _ in 0..200 {
+        let x = Vect::<3>::from_fn(|_, _| rng.random_range(0.0..4.0));
+        let n = Vect::<3>::from_fn(|_, _| rng.random_range(-1.0..1.0)).normalize();
+        let want = rot * n;
+        for (name, warp) in [
+            ("blend", &blend as &dyn Warp<3>),
+            ("rbf", &rbf as &dyn Warp<3>),
+        ] {
+            let (y, m) = warp.warp_with_normal(&x, &n);
+            assert!((m - want).norm() < 1e-6, "{name}: normal {m:?} vs {want:?}");
+            assert_eq!(y, warp.warp(&x), "{name}: fused position");
+            assert_eq!(m, warp.warp_normal(&x, &n), "{name}: fused normal");
+        }
+    }
+}

@@ -76,26 +76,39 @@ impl<const D: usize> Blend<D> {
     }
 }
 
+impl<const D: usize> Blend<D> {
+    /// `x'` and the turned normal from one set of weights: `Σ w_k T_k(x)` and the normal turned
+    /// by the blended rotation `Σ w_k R_k`, renormalized.
+    fn blend(&self, x: &Vect<D>, n: Option<&Vect<D>>) -> (Vect<D>, Vect<D>) {
+        let (w, k) = self.weights(x);
+        let mut moved = Vect::<D>::zeros();
+        let mut turned = Vect::<D>::zeros();
+        for &(c, wk) in &w[..k] {
+            moved += self.motions[c].apply(&self.centers[c], x) * wk;
+            if let Some(n) = n {
+                turned += self.motions[c].rot * n * wk;
+            }
+        }
+        let len = turned.norm();
+        match n {
+            Some(_) if len > 0.0 && len.is_finite() => (moved, turned / len),
+            Some(n) => (moved, *n),
+            None => (moved, turned),
+        }
+    }
+}
+
 impl<const D: usize> Warp<D> for Blend<D> {
     #[inline]
     fn warp(&self, x: &Vect<D>) -> Vect<D> {
-        let (w, n) = self.weights(x);
-        w[..n].iter().fold(Vect::<D>::zeros(), |acc, &(c, wk)| {
-            acc + self.motions[c].apply(&self.centers[c], x) * wk
-        })
+        self.blend(x, None).0
     }
 
-    /// The normal turned by the blended rotation `Σ w_k R_k`, renormalized.
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
-        let (w, k) = self.weights(x);
-        let turned = w[..k].iter().fold(Vect::<D>::zeros(), |acc, &(c, wk)| {
-            acc + self.motions[c].rot * n * wk
-        });
-        let len = turned.norm();
-        if len > 0.0 && len.is_finite() {
-            turned / len
-        } else {
-            *n
-        }
+        self.blend(x, Some(n)).1
+    }
+
+    fn warp_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
+        self.blend(x, Some(n))
     }
 }

@@ -68,6 +68,12 @@ pub trait Warp<const D: usize>: Sync {
 
     /// The unit normal `n` at the local point `x` after the warp (DESIGN §6).
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D>;
+
+    /// Both [`Warp::warp`] and [`Warp::warp_normal`] at `x`; transfers that find neighbors
+    /// per sample override it to find them once.
+    fn warp_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
+        (self.warp(x), self.warp_normal(x, n))
+    }
 }
 
 /// A transfer built for a field, ready to warp samples.
@@ -104,6 +110,14 @@ impl<const D: usize> Warp<D> for Deformer<D> {
             Self::Rbf(r) => r.warp_normal(x, n),
         }
     }
+
+    #[inline]
+    fn warp_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
+        match self {
+            Self::Blend(b) => b.warp_with_normal(x, n),
+            Self::Rbf(r) => r.warp_with_normal(x, n),
+        }
+    }
 }
 
 /// Samples per parallel task.
@@ -121,21 +135,27 @@ pub fn apply_into<const D: usize>(
     moved_normals: &mut Vec<Vect<D>>,
 ) {
     moved.resize(points.len(), Vect::<D>::zeros());
+    if normals.is_empty() {
+        moved_normals.clear();
+        moved
+            .par_chunks_mut(CHUNK)
+            .zip(points.par_chunks(CHUNK))
+            .for_each(|(out, inp)| {
+                for (o, p) in out.iter_mut().zip(inp) {
+                    *o = warp.warp(&(p - origin)) + origin;
+                }
+            });
+        return;
+    }
+    moved_normals.resize(normals.len(), Vect::<D>::zeros());
     moved
         .par_chunks_mut(CHUNK)
-        .zip(points.par_chunks(CHUNK))
-        .for_each(|(out, inp)| {
-            for (o, p) in out.iter_mut().zip(inp) {
-                *o = warp.warp(&(p - origin)) + origin;
-            }
-        });
-    moved_normals.resize(normals.len(), Vect::<D>::zeros());
-    moved_normals
-        .par_chunks_mut(CHUNK)
-        .zip(normals.par_chunks(CHUNK).zip(points.par_chunks(CHUNK)))
-        .for_each(|(out, (ns, ps))| {
-            for ((o, n), p) in out.iter_mut().zip(ns).zip(ps) {
-                *o = warp.warp_normal(&(p - origin), n);
+        .zip(moved_normals.par_chunks_mut(CHUNK))
+        .zip(points.par_chunks(CHUNK).zip(normals.par_chunks(CHUNK)))
+        .for_each(|((out, out_n), (ps, ns))| {
+            for (((o, on), p), n) in out.iter_mut().zip(out_n).zip(ps).zip(ns) {
+                let (x, m) = warp.warp_with_normal(&(p - origin), n);
+                (*o, *on) = (x + origin, m);
             }
         });
 }
