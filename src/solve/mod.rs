@@ -308,17 +308,22 @@ where
         let t0 = Instant::now();
         let delta = system.step(complex, constraints, motions, &targets_to, 0.0)?;
         info.seconds_factor += t0.elapsed().as_secs_f64();
+        // One trial: the step scaled by `t`, positions projected, and its energy.
+        let trial = |t: f64| {
+            let mut m = system.advance(complex, constraints, motions, &pins_to, &delta, t);
+            system.project_positions(complex, constraints, &mut m, &targets_to);
+            let e = total_energy(complex, constraints, &m, &targets_to);
+            (m, e)
+        };
         let mut t = 1.0;
         let mut accepted = None;
         for _ in 0..30 {
-            let mut trial = system.advance(complex, constraints, motions, &pins_to, &delta, t);
-            system.project_positions(complex, constraints, &mut trial, &targets_to);
-            let e = total_energy(complex, constraints, &trial, &targets_to);
+            let (m, e) = trial(t);
             if !e.is_finite() {
                 return Err(Error::Solver("the energy became non-finite".into()));
             }
             if e < energy {
-                accepted = Some((trial, e));
+                accepted = Some((m, e));
                 break;
             }
             t *= 0.5;
@@ -326,20 +331,15 @@ where
         // A full step that lowers the energy may be too short (a slowly drifting vortex in
         // 2D): extrapolate while the energy keeps falling.
         if t == 1.0 {
-            while let Some((_, best)) = &accepted {
-                let longer = t * 2.0;
-                if longer > 8.0 {
-                    break;
-                }
-                let mut trial =
-                    system.advance(complex, constraints, motions, &pins_to, &delta, longer);
-                system.project_positions(complex, constraints, &mut trial, &targets_to);
-                let e = total_energy(complex, constraints, &trial, &targets_to);
+            while let Some((_, best)) = &accepted
+                && t < 8.0
+            {
+                let (m, e) = trial(2.0 * t);
                 if e >= *best || e.is_nan() {
                     break;
                 }
-                t = longer;
-                accepted = Some((trial, e));
+                t *= 2.0;
+                accepted = Some((m, e));
             }
         }
         let Some((trial, e)) = accepted else {

@@ -24,7 +24,7 @@
 
 use faer::Side;
 use faer::prelude::*;
-use faer::sparse::linalg::solvers::Llt;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{SparseColMat, Triplet};
 
 use super::constraints::{Constraints, Role};
@@ -33,8 +33,10 @@ use crate::rigid::{Motion, Vect};
 
 /// The factored position system of one topology.
 pub(crate) struct Positions {
-    /// Row of every cell whose position is free, `u32::MAX` for the others.
-    row: Vec<u32>,
+    /// Row of every cell whose position is free.
+    row: Vec<Option<u32>>,
+    /// Free cells (rows).
+    n: usize,
     factor: Option<Llt<usize, f64>>,
 }
 
@@ -42,57 +44,41 @@ impl Positions {
     /// Factors the Laplacian of the free cells. A singular system (a free part with nothing
     /// holding its translation) leaves the projection off: [`Self::project`] does nothing.
     pub fn new<const D: usize>(complex: &CellComplex<D>, constraints: &Constraints<D>) -> Self {
-        let mut n = 0u32;
-        let row: Vec<u32> = constraints
+        let mut n = 0usize;
+        let row: Vec<Option<u32>> = constraints
             .roles
             .iter()
             .map(|r| {
-                if *r == Role::Free {
+                (*r == Role::Free).then(|| {
                     n += 1;
-                    n - 1
-                } else {
-                    u32::MAX
-                }
+                    n as u32 - 1
+                })
             })
             .collect();
         let mut triplets = Vec::new();
-        let mut diag = vec![0.0f64; n as usize];
+        let mut diag = vec![0.0f64; n];
         for pr in &complex.pairs {
             let (i, j) = (pr.i as usize, pr.j as usize);
             let k = pair_weight(constraints, pr.weight, i, j);
-            let (ri, rj) = (row[i], row[j]);
-            if ri != u32::MAX {
-                diag[ri as usize] += k;
+            for r in [row[i], row[j]].into_iter().flatten() {
+                diag[r as usize] += k;
             }
-            if rj != u32::MAX {
-                diag[rj as usize] += k;
-            }
-            if ri != u32::MAX && rj != u32::MAX {
-                let (lo, hi) = (ri.min(rj) as usize, ri.max(rj) as usize);
-                triplets.push(Triplet::new(hi, lo, -k));
+            if let (Some(ri), Some(rj)) = (row[i], row[j]) {
+                triplets.push(Triplet::new(ri.max(rj) as usize, ri.min(rj) as usize, -k));
             }
         }
         for t in &constraints.targets {
-            let r = row[t.cell as usize];
-            if r != u32::MAX {
+            if let Some(r) = row[t.cell as usize] {
                 diag[r as usize] += t.weight;
             }
         }
-        let scale = diag.iter().fold(0.0f64, |m, &d| m.max(d));
-        triplets.extend(diag.iter().enumerate().map(|(r, &d)| Triplet::new(r, r, d)));
-        let factor = (n > 0 && scale > 0.0)
-            .then(|| SparseColMat::try_new_from_triplets(n as usize, n as usize, &triplets).ok())
-            .flatten()
-            .and_then(|m| {
-                Llt::try_new_with_symbolic(
-                    faer::sparse::linalg::solvers::SymbolicLlt::try_new(m.symbolic(), Side::Lower)
-                        .ok()?,
-                    m.as_ref(),
-                    Side::Lower,
-                )
-                .ok()
-            });
-        Self { row, factor }
+        let factor = if diag.iter().any(|&d| d > 0.0) {
+            triplets.extend(diag.iter().enumerate().map(|(r, &d)| Triplet::new(r, r, d)));
+            factor(n, &triplets)
+        } else {
+            None
+        };
+        Self { row, n, factor }
     }
 
     /// Sets the position of every free cell to its optimum for the current rotations (and the
@@ -107,8 +93,7 @@ impl Positions {
         let Some(factor) = &self.factor else {
             return;
         };
-        let n = self.row.iter().filter(|&&r| r != u32::MAX).count();
-        let mut rhs = Mat::<f64>::zeros(n, D);
+        let mut rhs = Mat::<f64>::zeros(self.n, D);
         let mut add = |r: u32, v: Vect<D>| {
             for a in 0..D {
                 rhs[(r as usize, a)] += v[a];
@@ -117,7 +102,7 @@ impl Positions {
         for pr in &complex.pairs {
             let (i, j) = (pr.i as usize, pr.j as usize);
             let (ri, rj) = (self.row[i], self.row[j]);
-            if ri == u32::MAX && rj == u32::MAX {
+            if ri.is_none() && rj.is_none() {
                 continue;
             }
             let k = pair_weight(constraints, pr.weight, i, j);
@@ -128,20 +113,19 @@ impl Positions {
                 - (mj.rot * (ci.center - cj.center)) * vi)
                 / (vi + vj);
             // Gradient of k |p_i − p_j + g|² set to zero, known positions moved to the right.
-            match (ri != u32::MAX, rj != u32::MAX) {
-                (true, true) => {
+            match (ri, rj) {
+                (Some(ri), Some(rj)) => {
                     add(ri, -g * k);
                     add(rj, g * k);
                 }
-                (true, false) => add(ri, (mj.pos - g) * k),
-                (false, true) => add(rj, (mi.pos + g) * k),
-                (false, false) => unreachable!(),
+                (Some(ri), None) => add(ri, (mj.pos - g) * k),
+                (None, Some(rj)) => add(rj, (mi.pos + g) * k),
+                (None, None) => {}
             }
         }
         for (t, to) in constraints.targets.iter().zip(targets_to) {
             let c = t.cell as usize;
-            let r = self.row[c];
-            if r != u32::MAX {
+            if let Some(r) = self.row[c] {
                 let m = &motions[c];
                 add(
                     r,
@@ -153,12 +137,19 @@ impl Positions {
         if !x.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
             return;
         }
-        for (c, &r) in self.row.iter().enumerate() {
-            if r != u32::MAX {
-                motions[c].pos = Vect::<D>::from_fn(|a, _| x[(r as usize, a)]);
+        for (c, r) in self.row.iter().enumerate() {
+            if let Some(r) = r {
+                motions[c].pos = Vect::<D>::from_fn(|a, _| x[(*r as usize, a)]);
             }
         }
     }
+}
+
+/// The sparse Cholesky factor of the `n × n` matrix given by lower-triangle `triplets`.
+fn factor(n: usize, triplets: &[Triplet<usize, usize, f64>]) -> Option<Llt<usize, f64>> {
+    let m = SparseColMat::try_new_from_triplets(n, n, triplets).ok()?;
+    let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).ok()?;
+    Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower).ok()
 }
 
 fn pair_weight<const D: usize>(
