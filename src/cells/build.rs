@@ -149,20 +149,6 @@ impl<const D: usize> Occupancy<D> {
             .map(|k| linear(&k.coord, &self.dims))
     }
 
-    /// The key of the finest cell with linear index `i`.
-    pub fn finest_key(&self, i: usize) -> CellKey<D> {
-        let mut coord = [0i64; D];
-        let mut rest = i as i64;
-        for a in (0..D).rev() {
-            coord[a] = rest % self.dims[a];
-            rest /= self.dims[a];
-        }
-        CellKey {
-            level: self.grid.max_level,
-            coord,
-        }
-    }
-
     /// Marks the cells of world-coordinate samples. Returns how many fell outside the grid.
     pub fn add_points(&mut self, points: &[Vect<D>]) -> usize {
         let mut outside = 0;

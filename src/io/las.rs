@@ -281,9 +281,10 @@ impl LasHeader {
         if prefix.len() >= 100 && prefix.starts_with(b"LASF") {
             let offset = le_u32(&prefix, 96) as u64;
             if offset > prefix.len() as u64 && offset <= len {
+                // The VLRs up to the point data, after the bytes already read.
+                let have = prefix.len();
                 prefix.resize(offset as usize, 0);
-                file.seek(SeekFrom::Start(0))
-                    .and_then(|_| file.read_exact(&mut prefix))
+                file.read_exact(&mut prefix[have..])
                     .map_err(|e| Error::io(path, e))?;
             }
         }
@@ -345,6 +346,17 @@ impl LasSource {
     /// The parsed header.
     pub fn header(&self) -> &LasHeader {
         &self.header
+    }
+
+    /// The `las` crate's header: the open LAZ reader's, or read for an uncompressed input.
+    fn las_header(&self) -> Result<las::Header> {
+        if let Body::Laz(reader, _) = &self.body {
+            return Ok(reader.header().clone());
+        }
+        let file = File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
+        las::Reader::new(BufReader::new(file))
+            .map(|r| r.header().clone())
+            .map_err(|e| Error::format(&self.path, format!("{e}")))
     }
 }
 
@@ -457,11 +469,9 @@ impl Source for LasSource {
                 notes,
             )?)),
             _ => Ok(Box::new(CrateSink::new(
-                &self.path,
+                self,
                 output,
-                &self.header,
                 out_laz,
-                self.max_return,
                 (scale, offset),
                 notes,
             )?)),
@@ -640,8 +650,8 @@ impl Sink for RawSink {
 struct CrateSink {
     tmp: Option<TempFile>,
     writer: Option<las::Writer<std::io::BufWriter<File>>>,
-    format: las::point::Format,
-    transforms: las::Vector<las::Transform>,
+    /// The records of one chunk, in the writer's format and transforms; reused.
+    slab: PointData,
     scale: [f64; 3],
     offset: [f64; 3],
     global_encoding: u16,
@@ -650,20 +660,14 @@ struct CrateSink {
 
 impl CrateSink {
     fn new(
-        input: &Path,
+        source: &LasSource,
         output: &Path,
-        header: &LasHeader,
         out_laz: bool,
-        max_return: u8,
         (scale, offset): Frame,
         mut notes: Vec<String>,
     ) -> Result<Self> {
-        let reader = las::Reader::new(BufReader::new(
-            File::open(input).map_err(|e| Error::io(input, e))?,
-        ))
-        .map_err(|e| Error::format(input, format!("{e}")))?;
-        let mut b = Builder::from(reader.header().clone());
-        drop(reader);
+        let (input, header, max_return) = (&source.path, &source.header, source.max_return);
+        let mut b = Builder::from(source.las_header()?);
         b.point_format.is_compressed = out_laz;
         if max_return > 5 && header.version.1 < 4 {
             // The `las` writer cannot count returns 6 and 7 in a legacy header (CRATES.md).
@@ -699,8 +703,10 @@ impl CrateSink {
         let las_header = b
             .into_header()
             .map_err(|e| Error::format(input, format!("header: {e}")))?;
-        let format = *las_header.point_format();
-        let transforms = *las_header.transforms();
+        let slab = PointDataBuilder::new()
+            .with_format(*las_header.point_format())
+            .with_transforms(*las_header.transforms())
+            .build();
         let (tmp, out) = TempFile::create(output)?;
         let writer = las::Writer::with_options(
             out,
@@ -711,8 +717,7 @@ impl CrateSink {
         Ok(Self {
             tmp: Some(tmp),
             writer: Some(writer),
-            format,
-            transforms,
+            slab,
             scale,
             offset,
             global_encoding: header.global_encoding,
@@ -733,25 +738,22 @@ impl CrateSink {
 impl Sink for CrateSink {
     fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
         let target = self.target();
-        let mut bytes = chunk.raw.clone();
+        let bytes = self.slab.resize_for(chunk.len());
+        bytes.copy_from_slice(&chunk.raw);
+        // The writer computes its header bounds itself.
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         encode(
-            &mut bytes,
+            bytes,
             chunk.record_len,
             moved,
             &(self.scale, self.offset),
             (&mut lo, &mut hi),
             &target,
         )?;
-        let slab = PointDataBuilder::new()
-            .with_format(self.format)
-            .with_transforms(self.transforms)
-            .build_from_bytes(bytes)
-            .map_err(|e| Error::format(&target, format!("{e}")))?;
         self.writer
             .as_mut()
             .expect("writer open until finish")
-            .write_points(&slab)
+            .write_points(&self.slab)
             .map_err(|e| Error::format(&target, format!("{e}")))
     }
 
