@@ -93,14 +93,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for target in [1200usize, 5500] {
         let size = cell_size_for(points, tris, ext.max(), target)?;
         let t = Instant::now();
-        let (complex, _) = build(
-            points,
-            tris,
-            &BuildParams {
-                cell_size: Some(size),
-                ..Default::default()
-            },
-        )?;
+        let complex = build_at(points, tris, size)?;
         let t_build = t.elapsed().as_secs_f64();
         let cells = complex.len();
         let constraints = solve::resolve(&complex, &spec, points, None)?;
@@ -131,6 +124,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
+/// The cell complex with finest cells of `size`.
+fn build_at(
+    points: &[Vect<3>],
+    tris: &[[u32; 3]],
+    size: f64,
+) -> Result<rigidcells::cells::CellComplex<3>, rigidcells::Error> {
+    let params = BuildParams {
+        cell_size: Some(size),
+        ..Default::default()
+    };
+    Ok(build(points, tris, &params)?.0)
+}
+
 /// The finest cell size that gives about `target` cells (bisection on the size).
 fn cell_size_for(
     points: &[Vect<3>],
@@ -141,14 +147,7 @@ fn cell_size_for(
     let (mut a, mut b) = (extent / 400.0, extent / 4.0);
     for _ in 0..18 {
         let mid = (a * b).sqrt();
-        let (c, _) = build(
-            points,
-            tris,
-            &BuildParams {
-                cell_size: Some(mid),
-                ..Default::default()
-            },
-        )?;
+        let c = build_at(points, tris, mid)?;
         if c.len() > target { a = mid } else { b = mid }
     }
     Ok((a * b).sqrt())
