@@ -233,12 +233,19 @@ fn malformed_files_give_their_specific_errors() {
     assert_eq!(expected.len(), files("malformed").len());
     for (file, msg) in expected {
         let input = shared(&format!("malformed/{file}"));
-        let output = dir.path().join(format!("out_{file}"));
+        let out_dir = dir.path().join(file);
+        std::fs::create_dir(&out_dir).unwrap();
+        let output = out_dir.join(format!("out_{file}"));
         let r = deform(&input, &output, &spec, &[]);
         assert_eq!(r.code, 3, "{file}: {}", r.stderr);
         assert!(r.stderr.contains(msg), "{file}: {}", r.stderr);
         assert!(r.stderr.contains(file), "{file}: the error names the file");
-        assert!(!output.exists(), "{file}: no output");
+        assert!(!r.stderr.contains("panicked"), "{file}: {}", r.stderr);
+        assert_eq!(
+            std::fs::read_dir(&out_dir).unwrap().count(),
+            0,
+            "{file}: wrote an output or left a temporary file"
+        );
     }
 }
 
@@ -290,6 +297,13 @@ fn georeferenced_coordinates_survive_identity_and_small_edits() {
     }
 }
 
+/// `rigidcells apply FIELD INPUT -o OUTPUT -q`, which must succeed.
+fn apply(field: &Path, input: &Path, output: &Path) {
+    let p = |p: &Path| p.to_str().unwrap().to_string();
+    let a = run(&["apply", &p(field), &p(input), "-o", &p(output), "-q"]);
+    assert_eq!(a.code, 0, "{}", a.stderr);
+}
+
 /// Writes the records `keep` of the LAS 1.2 file `input` as a LAS file (header and VLRs
 /// copied, count patched; bounds as in the input, which `apply` rewrites anyway).
 fn write_tile(input: &Path, keep: &[usize], out: &Path) {
@@ -329,15 +343,7 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     // The same field applied by `apply` (another chunking) gives the same bytes.
     let again = dir.path().join("again.las");
-    let a = run(&[
-        "apply",
-        field.to_str().unwrap(),
-        input.to_str().unwrap(),
-        "-o",
-        again.to_str().unwrap(),
-        "-q",
-    ]);
-    assert_eq!(a.code, 0, "{}", a.stderr);
+    apply(&field, &input, &again);
     assert_eq!(
         std::fs::read(&whole).unwrap(),
         std::fs::read(&again).unwrap()
@@ -360,15 +366,7 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
         let tile = dir.path().join(format!("tile{q}.las"));
         let out = dir.path().join(format!("tile{q}_out.las"));
         write_tile(&input, &keep, &tile);
-        let a = run(&[
-            "apply",
-            field.to_str().unwrap(),
-            tile.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "-q",
-        ]);
-        assert_eq!(a.code, 0, "{}", a.stderr);
+        apply(&field, &tile, &out);
         let (_, tile_raw, _, _) = records(&out);
         for (i, &k) in keep.iter().enumerate() {
             assert_eq!(

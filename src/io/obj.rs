@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::text::{Edit, Span, edits3, splice};
+use super::text::{Edit, Span, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -168,14 +168,7 @@ impl ObjFile {
     /// The file with positions and the referenced normals (in the order of
     /// [`ObjFile::loose_normals`]) replaced.
     pub fn encode(&self, positions: &[Vect<3>], normals: &[Vect<3>]) -> Result<Vec<u8>> {
-        if positions.len() != self.positions.len() {
-            return Err(Error::Param(format!(
-                "{}: {} positions for {} vertices",
-                self.path.display(),
-                positions.len(),
-                self.positions.len()
-            )));
-        }
+        check_count(&self.path, positions.len(), self.positions.len())?;
         let at = |spans: &[Span; 3], v: &Vect<3>| edits3(spans, v, [false; 3]);
         let mut edits: Vec<Edit> = Vec::with_capacity(3 * positions.len());
         for (spans, p) in self.coords.iter().zip(positions) {

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, Encoding, PropertyType, ScalarType};
 
-use super::text::{Edit, Span, edits3, splice};
+use super::text::{Edit, Span, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -221,15 +221,9 @@ impl PlyFile {
     /// The file's bytes with the vertex positions replaced by `positions` and, when given and
     /// the vertices have normals, the normals by `normals`.
     pub fn encode(&self, positions: &[Vect<3>], normals: Option<&[Vect<3>]>) -> Result<Vec<u8>> {
-        if positions.len() != self.coords.len()
-            || normals.is_some_and(|n| n.len() != self.coords.len())
-        {
-            return Err(Error::Param(format!(
-                "{}: {} positions for {} vertices",
-                self.path.display(),
-                positions.len(),
-                self.coords.len()
-            )));
+        check_count(&self.path, positions.len(), self.coords.len())?;
+        if let Some(n) = normals {
+            check_count(&self.path, n.len(), self.coords.len())?;
         }
         let mut edits: Vec<Edit> = Vec::with_capacity(6 * positions.len());
         let mut add = |spans: &[Span; 3], v: &Vect<3>, doubles: &[bool; 3]| {

@@ -2,7 +2,9 @@
 //! OBJ, XYZ), so that everything between the numbers is copied as it was.
 
 use std::io::Write;
+use std::path::Path;
 
+use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
 /// Where a token lives in a file: bytes `start..end`.
@@ -19,6 +21,17 @@ pub(crate) struct Edit {
     pub span: Span,
     pub value: f64,
     pub single: bool,
+}
+
+/// Fails unless `given` new values match the `expected` count of a file's samples.
+pub(crate) fn check_count(path: &Path, given: usize, expected: usize) -> Result<()> {
+    if given == expected {
+        return Ok(());
+    }
+    Err(Error::Param(format!(
+        "{}: {given} new values for {expected} samples",
+        path.display()
+    )))
 }
 
 /// The edits writing the three components of `v` over `spans` (`single`: as f32).

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::text::{Span, edits3, splice};
+use super::text::{Span, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -78,14 +78,7 @@ impl XyzFile {
 
     /// The file's text with the points replaced by `positions`.
     pub fn encode(&self, positions: &[Vect<3>]) -> Result<Vec<u8>> {
-        if positions.len() != self.spans.len() {
-            return Err(Error::Param(format!(
-                "{}: {} positions for {} points",
-                self.path.display(),
-                positions.len(),
-                self.spans.len()
-            )));
-        }
+        check_count(&self.path, positions.len(), self.spans.len())?;
         let edits = self
             .spans
             .iter()
