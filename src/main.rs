@@ -102,8 +102,10 @@ struct DeformArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum TransferArg {
-    /// Inverse-distance blend of the 4 nearest cells (fast preview).
+    /// Continuous blend of the 4 nearest cells (fast preview).
     Blend,
+    /// The paper's inverse-distance blend of the 4 nearest cells (seams where the set changes).
+    BlendIdw,
     /// Triharmonic RBF interpolation (smooth, final).
     Rbf,
 }
@@ -187,6 +189,7 @@ impl From<TransferArg> for Transfer {
     fn from(t: TransferArg) -> Self {
         match t {
             TransferArg::Blend => Transfer::Blend,
+            TransferArg::BlendIdw => Transfer::BlendIdw,
             TransferArg::Rbf => Transfer::Rbf,
         }
     }

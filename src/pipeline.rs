@@ -4,12 +4,13 @@
 //! two passes and one (DESIGN §7).
 
 use std::path::Path;
+use std::sync::mpsc;
 use std::time::Instant;
 
 use crate::cells::{BuildInfo, BuildParams, Occupancy, build};
 use crate::error::{Error, Result};
 use crate::field::{Deformer, Field, Rbf, SavedField, Transfer, Warp, apply, apply_into};
-use crate::io::{self, Bounds, Chunk, Source};
+use crate::io::{self, Bounds, Chunk, Sink, Source};
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
 use crate::solve::Selections;
@@ -290,6 +291,17 @@ fn first_pass(
     })
 }
 
+/// Buffers of one chunk on its way through pass 2.
+#[derive(Default)]
+struct Job {
+    chunk: Chunk,
+    moved: Vec<Vect<3>>,
+    normals: Vec<Vect<3>>,
+}
+
+/// Chunks in flight in pass 2: one being read and warped, one queued, one being written.
+const IN_FLIGHT: usize = 3;
+
 /// Pass 2: streams the source through `warp` into `output`. When a moved coordinate overflows
 /// the output's encoding, the pass finishes computing the moved bounds and runs again with a
 /// sink chosen for them.
@@ -305,36 +317,16 @@ fn transfer_pass(
     let mut retried = false;
     loop {
         source.rewind()?;
-        let mut sink = Some(source.sink(output, bounds)?);
-        let mut moved_bounds = (
-            Vect::<3>::repeat(f64::INFINITY),
-            Vect::<3>::repeat(f64::NEG_INFINITY),
-        );
-        let mut chunk = Chunk::default();
-        let (mut moved, mut normals) = (Vec::new(), Vec::new());
-        observer.stage("writing", source.len());
-        while source.read(chunk_len, &mut chunk)? > 0 {
-            apply_into(
-                warp,
-                origin,
-                &chunk.positions,
-                &chunk.normals,
-                &mut moved,
-                &mut normals,
-            );
-            for p in &moved {
-                moved_bounds.0 = moved_bounds.0.inf(p);
-                moved_bounds.1 = moved_bounds.1.sup(p);
-            }
-            if let Some(s) = sink.as_mut() {
-                match s.write(&chunk, &moved, &normals) {
-                    Err(Error::CoordinateOverflow { .. }) if bounds.is_none() => sink = None,
-                    other => other?,
-                }
-            }
-            observer.advance(chunk.len() as u64);
-        }
-        observer.finish();
+        let sink = source.sink(output, bounds)?;
+        let (sink, moved_bounds) = pipelined_pass(
+            source,
+            sink,
+            bounds.is_none(),
+            warp,
+            origin,
+            chunk_len,
+            observer,
+        )?;
         match sink {
             Some(mut s) => {
                 let loose: Vec<Vect<3>> = source
@@ -351,4 +343,75 @@ fn transfer_pass(
             None => bounds = Some(moved_bounds),
         }
     }
+}
+
+/// Reads and warps chunks on this thread while a second thread writes the previous ones, so
+/// the sink's encoding, compression and system calls overlap the transfer. Returns the sink
+/// (`None` when it overflowed and `may_overflow` allowed giving up on it) and the moved bounds.
+fn pipelined_pass(
+    source: &mut dyn Source,
+    sink: Box<dyn Sink>,
+    may_overflow: bool,
+    warp: &impl Warp<3>,
+    origin: &Vect<3>,
+    chunk_len: usize,
+    observer: &dyn Observer,
+) -> Result<(Option<Box<dyn Sink>>, Bounds)> {
+    let mut moved_bounds = (
+        Vect::<3>::repeat(f64::INFINITY),
+        Vect::<3>::repeat(f64::NEG_INFINITY),
+    );
+    observer.stage("writing", source.len());
+    let sink = std::thread::scope(|scope| -> Result<Option<Box<dyn Sink>>> {
+        let (full, queued) = mpsc::sync_channel::<Job>(1);
+        let (done, empty) = mpsc::channel::<Job>();
+        for _ in 0..IN_FLIGHT {
+            done.send(Job::default()).expect("the receiver is alive");
+        }
+        let writer = scope.spawn(move || -> Result<Option<Box<dyn Sink>>> {
+            let mut sink = Some(sink);
+            for job in queued {
+                if let Some(s) = sink.as_mut() {
+                    match s.write(&job.chunk, &job.moved, &job.normals) {
+                        Err(Error::CoordinateOverflow { .. }) if may_overflow => sink = None,
+                        other => other?,
+                    }
+                }
+                // The reader may have stopped early on an error of its own.
+                let _ = done.send(job);
+            }
+            Ok(sink)
+        });
+        // `recv` fails only when the writer stopped on an error, which `join` returns.
+        while let Ok(mut job) = empty.recv() {
+            if source.read(chunk_len, &mut job.chunk)? == 0 {
+                break;
+            }
+            let Job {
+                chunk,
+                moved,
+                normals,
+            } = &mut job;
+            apply_into(
+                warp,
+                origin,
+                &chunk.positions,
+                &chunk.normals,
+                moved,
+                normals,
+            );
+            for p in moved.iter() {
+                moved_bounds.0 = moved_bounds.0.inf(p);
+                moved_bounds.1 = moved_bounds.1.sup(p);
+            }
+            observer.advance(chunk.len() as u64);
+            if full.send(job).is_err() {
+                break;
+            }
+        }
+        drop(full);
+        writer.join().expect("the writer thread does not panic")
+    })?;
+    observer.finish();
+    Ok((sink, moved_bounds))
 }

@@ -2,7 +2,7 @@
 //! displacements; blend weights sum to one over the true 4 nearest centers.
 
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use rigidcells::field::{Blend, Field, Rbf, Warp};
+use rigidcells::field::{Blend, Field, Nearest, Rbf, Warp, Weights};
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
 
 fn field(n: usize, seed: u64) -> Field<3> {
@@ -57,7 +57,7 @@ fn rbf_reproduces_every_center_displacement() {
 #[test]
 fn blend_weights_sum_to_one_over_the_nearest_centers() {
     let f = field(1500, 2);
-    let blend = Blend::new(&f).unwrap();
+    let blend = Blend::new(&f, Weights::InverseDistance).unwrap();
     let mut rng = StdRng::seed_from_u64(9);
     for _ in 0..500 {
         let x = Vect::<3>::new(
@@ -114,7 +114,7 @@ fn normals_turn_with_a_rigid_field() {
             pos: rot * c + shift,
         };
     }
-    let blend = Blend::new(&f).unwrap();
+    let blend = Blend::new(&f, Weights::InverseDistance).unwrap();
     let rbf = Rbf::new(&f).unwrap();
     let mut rng = StdRng::seed_from_u64(9);
     for _ in 0..200 {
@@ -131,4 +131,121 @@ fn normals_turn_with_a_rigid_field() {
             assert_eq!(m, warp.warp_normal(&x, &n), "{name}: fused normal");
         }
     }
+}
+
+/// Cells of an octree: a 10×8×6 lattice of unit cells whose first 2×2×2 blocks along x < 4 are
+/// merged into cells of edge 2, so queries see two sizes and exact ties on the lattice.
+fn octree_field() -> Field<3> {
+    let mut rng = StdRng::seed_from_u64(21);
+    let (mut centers, mut halves) = (Vec::new(), Vec::new());
+    for k in 0..6 {
+        for j in 0..8 {
+            for i in 0..10 {
+                if i < 4 {
+                    if i % 2 == 0 && j % 2 == 0 && k % 2 == 0 {
+                        centers.push(Vect::<3>::new(
+                            i as f64 + 1.0,
+                            j as f64 + 1.0,
+                            k as f64 + 1.0,
+                        ));
+                        halves.push(1.0);
+                    }
+                } else {
+                    centers.push(Vect::<3>::new(
+                        i as f64 + 0.5,
+                        j as f64 + 0.5,
+                        k as f64 + 0.5,
+                    ));
+                    halves.push(0.5);
+                }
+            }
+        }
+    }
+    let motions = centers
+        .iter()
+        .map(|c| Motion {
+            rot: <Dim<3> as Rigid<3>>::axis_angle(
+                &Vect::<3>::new(rng.random(), rng.random(), 1.0),
+                rng.random_range(0.0..0.4),
+            ),
+            pos: c + Vect::<3>::from_fn(|_, _| rng.random_range(-0.2..0.2)),
+        })
+        .collect();
+    Field {
+        origin: Vect::<3>::zeros(),
+        centers,
+        halves,
+        motions,
+    }
+}
+
+/// The tiled search finds exactly the brute-force neighbors, ties included (the order is
+/// distance, then cell index): at random points, on the lattice (where many centers tie) and
+/// outside the cells.
+#[test]
+fn tiled_nearest_centers_equal_brute_force() {
+    let f = octree_field();
+    let nearest = Nearest::new(&f.centers, &f.halves).unwrap();
+    let mut rng = StdRng::seed_from_u64(4);
+    let mut queries: Vec<[f64; 3]> = (0..20_000)
+        .map(|_| std::array::from_fn(|a| rng.random_range(-1.0..[11.0, 9.0, 7.0][a])))
+        .collect();
+    for i in 0..=20 {
+        for j in 0..=16 {
+            for k in 0..=12 {
+                queries.push([i as f64 * 0.5, j as f64 * 0.5, k as f64 * 0.5]);
+            }
+        }
+    }
+    let mut ties = 0;
+    for q in &queries {
+        let (got, want) = (nearest.find(q), nearest.brute_force(q));
+        assert_eq!(got, want, "at {q:?}");
+        ties += usize::from(got.d2[3] == got.d2[4]);
+    }
+    assert!(
+        ties > 1000,
+        "the lattice queries must exercise ties ({ties})"
+    );
+}
+
+/// The continuous blend has no seam where the 4-nearest set changes: across such a boundary,
+/// found by bisection to 1e-13, it moves by less than 1e-9 of the extent; the paper's
+/// inverse-distance blend jumps there (which shows the boundaries are found).
+#[test]
+fn continuous_blend_has_no_seams() {
+    let f = octree_field();
+    let continuous = Blend::new(&f, Weights::Continuous).unwrap();
+    let idw = Blend::new(&f, Weights::InverseDistance).unwrap();
+    let set = |x: &Vect<3>| {
+        let mut s = continuous.weights(x).0.map(|p| p.0);
+        s.sort();
+        s
+    };
+    let mut rng = StdRng::seed_from_u64(8);
+    let (mut crossings, mut worst, mut idw_jump) = (0, 0.0f64, 0.0f64);
+    while crossings < 200 {
+        let a = Vect::<3>::from_fn(|i, _| rng.random_range(0.5..[9.5, 7.5, 5.5][i]));
+        let mut b = a + Vect::<3>::from_fn(|_, _| rng.random_range(-0.3..0.3));
+        let mut a = a;
+        if set(&a) == set(&b) {
+            continue;
+        }
+        for _ in 0..60 {
+            let m = (a + b) * 0.5;
+            if set(&m) == set(&a) { a = m } else { b = m }
+        }
+        if (a - b).norm() > 1e-13 {
+            continue;
+        }
+        crossings += 1;
+        worst = worst.max((continuous.warp(&a) - continuous.warp(&b)).norm());
+        idw_jump = idw_jump.max((idw.warp(&a) - idw.warp(&b)).norm());
+    }
+    let extent = 10.0;
+    assert!(worst / extent < 1e-9, "continuous blend jumps by {worst:e}");
+    assert!(
+        idw_jump / extent > 1e-4,
+        "the paper's blend should jump ({idw_jump:e})"
+    );
 }

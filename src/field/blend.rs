@@ -1,86 +1,113 @@
-//! The paper's preview transfer: each sample follows the inverse-distance blend of the rigid
-//! motions of the 4 cells whose rest centers are nearest (kiddo kd-tree):
+//! The preview transfer: each sample follows a blend of the rigid motions of the `K = 4` cells
+//! whose rest centers are nearest:
 //!
 //! ```text
-//! x' = Σ_k w_k T_k(x) / Σ_k w_k,   w_k = 1 / d_k,   d_k = |x − c_k|
+//! x' = Σ_k w_k T_k(x) / Σ_k w_k
 //! ```
+//!
+//! Two weightings ([`Weights`]):
+//!
+//! - **continuous** (default): `w_k = 1/d_k − 1/d_5`, with `d_5` the distance of the 5th
+//!   nearest center. Where the 4-nearest set changes, the 4th and 5th are equidistant and the
+//!   weight of the one that leaves or enters is zero, so the map has no seams; where the 5th and
+//!   6th swap, `1/d_5` is the same for both. (At a point equidistant from all 5 the weights all
+//!   vanish; it takes the plain average of the 4 there.)
+//! - **inverse distance** (the paper's): `w_k = 1/d_k`, which jumps where the set changes.
 //!
 //! At `d_k → 0` the weight of that cell dominates and the limit is `T_k(x)`: a sample within
 //! `1e-12` cell sizes of a center takes that cell's motion alone, which is the limit and avoids
-//! dividing by zero. With fewer than 4 cells, all cells are blended.
+//! dividing by zero. With fewer than 5 cells, all cells are blended by inverse distance. The
+//! nearest centers come from the exact tiled search of [`super::nearest`].
 
-use std::num::NonZero;
-
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
-
+use super::nearest::{NEAR, Nearest};
 use super::{Field, Warp};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::rigid::{Motion, Vect};
 
 /// Neighbors blended per sample.
 pub const K: usize = 4;
 
+/// How the blend weighs the nearest cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Weights {
+    /// `1/d_k − 1/d_5`: continuous everywhere.
+    #[default]
+    Continuous,
+    /// `1/d_k`: the paper's, with seams where the 4-nearest set changes.
+    InverseDistance,
+}
+
 /// The blend transfer of a field.
 pub struct Blend<const D: usize> {
-    tree: ImmutableKdTree<f64, D>,
+    nearest: Nearest<D>,
     centers: Vec<Vect<D>>,
     motions: Vec<Motion<D>>,
-    k: NonZero<usize>,
-    snap: f64,
+    weights: Weights,
+    snap2: f64,
 }
 
 impl<const D: usize> Blend<D> {
-    /// Builds the kd-tree over the field's rest centers.
-    pub fn new(field: &Field<D>) -> Result<Self> {
-        let pts: Vec<[f64; D]> = field.centers.iter().map(|c| (*c).into()).collect();
-        let tree = ImmutableKdTree::new_from_slice(&pts)
-            .map_err(|e| Error::Solver(format!("kd-tree over cell centers: {e:?}")))?;
-        let k = NonZero::new(K.min(field.centers.len()))
-            .ok_or_else(|| Error::Solver("the field has no cells".into()))?;
+    /// Builds the nearest-center search over the field's rest centers.
+    pub fn new(field: &Field<D>, weights: Weights) -> Result<Self> {
         let smallest = field.halves.iter().cloned().fold(f64::MAX, f64::min);
         Ok(Self {
-            tree,
+            nearest: Nearest::new(&field.centers, &field.halves)?,
             centers: field.centers.clone(),
             motions: field.motions.clone(),
-            k,
-            snap: 1e-12 * smallest,
+            weights,
+            snap2: (1e-12 * smallest).powi(2),
         })
     }
 
+    /// The nearest-center search (for benchmarks and the brute-force comparison).
+    pub fn nearest(&self) -> &Nearest<D> {
+        &self.nearest
+    }
+
     /// The blended cells and their normalized weights (summing to one) at the local point `x`.
+    #[inline]
     pub fn weights(&self, x: &Vect<D>) -> ([(usize, f64); K], usize) {
-        let q: [f64; D] = (*x).into();
-        let near = self
-            .tree
-            .query(&q)
-            .nearest_n::<SquaredEuclidean<f64>>(self.k)
-            .execute();
+        let nb = self.nearest.find(&(*x).into());
         let mut out = [(0usize, 0.0f64); K];
-        let n = near.len().min(K);
-        if let Some(first) = near.first()
-            && first.distance.sqrt() <= self.snap
-        {
-            out[0] = (first.item as usize, 1.0);
+        if nb.n == 0 {
+            return (out, 0);
+        }
+        if nb.d2[0] <= self.snap2 {
+            out[0] = (nb.cells[0] as usize, 1.0);
             return (out, 1);
         }
+        let n = nb.n.min(K);
+        let cut = match self.weights {
+            Weights::Continuous if nb.n == NEAR => 1.0 / nb.d2[NEAR - 1].sqrt(),
+            _ => 0.0,
+        };
         let mut total = 0.0;
-        for (slot, r) in out.iter_mut().zip(&near) {
-            let w = 1.0 / r.distance.sqrt();
-            *slot = (r.item as usize, w);
+        for (slot, (&c, &d2)) in out.iter_mut().zip(nb.cells.iter().zip(&nb.d2)) {
+            let w = 1.0 / d2.sqrt() - cut;
+            *slot = (c as usize, w);
             total += w;
         }
-        for slot in &mut out[..n] {
-            slot.1 /= total;
+        if total > 0.0 {
+            for slot in &mut out[..n] {
+                slot.1 /= total;
+            }
+        } else {
+            for slot in &mut out[..n] {
+                slot.1 = 1.0 / n as f64;
+            }
         }
         (out, n)
     }
-}
 
-impl<const D: usize> Blend<D> {
     /// `x'` and the turned normal from one set of weights: `Σ w_k T_k(x)` and the normal turned
-    /// by the blended rotation `Σ w_k R_k`, renormalized.
+    /// by the blended rotation `Σ w_k R_k`, renormalized. A point with no neighbors (a
+    /// non-finite coordinate) stays where it is.
+    #[inline]
     fn blend(&self, x: &Vect<D>, n: Option<&Vect<D>>) -> (Vect<D>, Vect<D>) {
         let (w, k) = self.weights(x);
+        if k == 0 {
+            return (*x, n.copied().unwrap_or_else(Vect::<D>::zeros));
+        }
         let mut moved = Vect::<D>::zeros();
         let mut turned = Vect::<D>::zeros();
         for &(c, wk) in &w[..k] {

@@ -17,7 +17,7 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::{Blend, Deformer, Field, Rbf, Transfer};
+use super::{Deformer, Field, Rbf, Transfer};
 use crate::error::{Error, Result};
 use crate::rigid::{Mat, Motion, Vect};
 
@@ -42,7 +42,7 @@ impl<const D: usize> SavedField<D> {
         Ok(match (transfer, self.rbf) {
             (Transfer::Rbf, Some(r)) => Deformer::Rbf(r),
             (Transfer::Rbf, None) => Deformer::Rbf(Rbf::new(&self.field)?),
-            (Transfer::Blend, _) => Deformer::Blend(Blend::new(&self.field)?),
+            (t, _) => Deformer::new(&self.field, t)?,
         })
     }
 

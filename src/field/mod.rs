@@ -4,7 +4,7 @@
 //! rigid motions in the local frame. Two transfers turn it into a map of space:
 //!
 //! - [`Blend`] (preview, fast): `x' = Σ w_k T_k(x) / Σ w_k` over the `k = 4` nearest rest
-//!   centers, `w_k = 1/d_k`;
+//!   centers, `w_k = 1/d_k − 1/d_5` (continuous) or the paper's `w_k = 1/d_k`;
 //! - [`Rbf`] (final, smooth): triharmonic `φ(r) = r³` plus a linear polynomial interpolating
 //!   the center displacements `T_i(c_i) − c_i` exactly.
 //!
@@ -14,10 +14,12 @@
 
 mod blend;
 mod file;
+mod nearest;
 mod rbf;
 
-pub use blend::Blend;
+pub use blend::{Blend, Weights};
 pub use file::SavedField;
+pub use nearest::{NEAR, Nearest, Neighbors};
 pub use rbf::Rbf;
 
 use rayon::prelude::*;
@@ -54,9 +56,12 @@ impl<const D: usize> Field<D> {
 /// Which transfer to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Transfer {
-    /// Inverse-distance blend of the 4 nearest cells' motions (fast preview).
+    /// Continuous blend of the 4 nearest cells' motions (fast preview; [`Weights::Continuous`]).
     #[default]
     Blend,
+    /// The paper's inverse-distance blend of the 4 nearest cells' motions
+    /// ([`Weights::InverseDistance`]).
+    BlendIdw,
     /// Triharmonic RBF interpolation of the cell-center displacements (smooth, final).
     Rbf,
 }
@@ -79,7 +84,7 @@ pub trait Warp<const D: usize>: Sync {
 /// A transfer built for a field, ready to warp samples.
 pub enum Deformer<const D: usize> {
     /// See [`Blend`].
-    Blend(Blend<D>),
+    Blend(Box<Blend<D>>),
     /// See [`Rbf`].
     Rbf(Rbf<D>),
 }
@@ -88,7 +93,10 @@ impl<const D: usize> Deformer<D> {
     /// Builds `transfer` for `field` (the RBF factors its dense system here).
     pub fn new(field: &Field<D>, transfer: Transfer) -> Result<Self> {
         Ok(match transfer {
-            Transfer::Blend => Self::Blend(Blend::new(field)?),
+            Transfer::Blend => Self::Blend(Box::new(Blend::new(field, Weights::Continuous)?)),
+            Transfer::BlendIdw => {
+                Self::Blend(Box::new(Blend::new(field, Weights::InverseDistance)?))
+            }
             Transfer::Rbf => Self::Rbf(Rbf::new(field)?),
         })
     }

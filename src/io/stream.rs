@@ -92,7 +92,7 @@ pub trait Source {
 }
 
 /// The output of a [`Source`]'s samples after deformation.
-pub trait Sink {
+pub trait Sink: Send {
     /// Writes the next chunk with its moved samples and normals (empty when the chunk has
     /// none). Returns [`Error::CoordinateOverflow`] when a coordinate does not fit the output's
     /// encoding; the caller then makes a new sink with the moved bounds.

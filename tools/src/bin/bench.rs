@@ -6,26 +6,17 @@
 //! decimated Stanford dragon in `../shared/data/meshes`. The edit bends the model: the lowest
 //! 15% along its longest axis is fixed, the highest 15% turns by 60° and lifts.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
-use rand::{Rng, SeedableRng, rngs::StdRng};
-use rigidcells::cells::{BuildParams, build};
 use rigidcells::field::{Deformer, Field, Transfer, apply};
 use rigidcells::io::Document;
 use rigidcells::progress::Silent;
-use rigidcells::rigid::Vect;
 use rigidcells::solve::{self, SolveParams};
 use rigidcells::spec::parse_spec;
+use rigidcells_tools::{build_at, cell_size_for, model_arg, surface_samples};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let model = std::env::args()
-        .nth(1)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("../../shared/data/meshes/dragon_11k_binary.ply")
-        });
+    let model = model_arg();
     let doc = Document::read(&model)?;
     let (points, tris) = (doc.positions(), doc.triangles());
     let (mut lo, mut hi) = (points[0], points[0]);
@@ -73,18 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
 
     // 50k query points: random points on the model's triangles.
-    let mut rng = StdRng::seed_from_u64(5);
-    let samples: Vec<Vect<3>> = (0..50_000)
-        .map(|_| {
-            let t = tris[rng.random_range(0..tris.len())];
-            let (mut u, mut v) = (rng.random::<f64>(), rng.random::<f64>());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            let [a, b, c] = t.map(|i| points[i as usize]);
-            a + (b - a) * u + (c - a) * v
-        })
-        .collect();
+    let samples = surface_samples(points, tris, 50_000, 5);
 
     println!(
         "| cells | build s | unknowns | load steps | GN iterations | s/iteration | solve s | blend 50k s | RBF factor s | RBF eval 50k s |"
@@ -122,33 +102,4 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
-}
-
-/// The cell complex with finest cells of `size`.
-fn build_at(
-    points: &[Vect<3>],
-    tris: &[[u32; 3]],
-    size: f64,
-) -> Result<rigidcells::cells::CellComplex<3>, rigidcells::Error> {
-    let params = BuildParams {
-        cell_size: Some(size),
-        ..Default::default()
-    };
-    Ok(build(points, tris, &params)?.0)
-}
-
-/// The finest cell size that gives about `target` cells (bisection on the size).
-fn cell_size_for(
-    points: &[Vect<3>],
-    tris: &[[u32; 3]],
-    extent: f64,
-    target: usize,
-) -> Result<f64, rigidcells::Error> {
-    let (mut a, mut b) = (extent / 400.0, extent / 4.0);
-    for _ in 0..18 {
-        let mid = (a * b).sqrt();
-        let c = build_at(points, tris, mid)?;
-        if c.len() > target { a = mid } else { b = mid }
-    }
-    Ok((a * b).sqrt())
 }

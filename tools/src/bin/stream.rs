@@ -71,35 +71,59 @@ fn main() {
         }
     };
     let copy_out = dir.join(format!("rigidcells-stream-copy.{ext}"));
-    let t = Instant::now();
-    let n = plain_copy(&input, &copy_out);
-    let copy_s = t.elapsed().as_secs_f64();
     let out = dir.join(format!("rigidcells-stream-deform.{ext}"));
     let params = DeformParams {
         transfer: Transfer::Blend,
         ..Default::default()
     };
-    let t = Instant::now();
-    let (_, info) = deform_file(&input, &out, &spec, &params, CHUNK, None, &Silent).unwrap();
-    let deform_s = t.elapsed().as_secs_f64();
-    let _ = std::fs::remove_file(&copy_out);
-    let _ = std::fs::remove_file(&out);
+    // Alternating runs, medians reported: the copy writes as many bytes as the deform and its
+    // time swings with page-cache writeback.
+    let (mut copies, mut deforms, mut n, mut last) = (Vec::new(), Vec::new(), 0, None);
+    for _ in 0..RUNS {
+        let t = Instant::now();
+        n = plain_copy(&input, &copy_out);
+        copies.push(t.elapsed().as_secs_f64());
+        let _ = std::fs::remove_file(&copy_out);
+        let t = Instant::now();
+        let (_, info) = deform_file(&input, &out, &spec, &params, CHUNK, None, &Silent).unwrap();
+        deforms.push(t.elapsed().as_secs_f64());
+        let _ = std::fs::remove_file(&out);
+        last = Some(info);
+    }
+    let info = last.expect("RUNS > 0");
+    let (copy_s, deform_s) = (median(&mut copies), median(&mut deforms));
     println!(
-        "{} ({n} points), {} threads",
+        "{} ({n} points), {} threads, median of {RUNS} alternating runs",
         input.display(),
         rayon::current_num_threads()
     );
-    println!("| run | seconds | points/s |\n|---|---|---|");
+    println!("| run | seconds (runs) | points/s |\n|---|---|---|");
     println!(
-        "| plain copy (las crate) | {copy_s:.2} | {:.2e} |",
+        "| plain copy (las crate) | {copy_s:.2} ({}) | {:.2e} |",
+        list(&copies),
         n as f64 / copy_s
     );
     println!(
-        "| deform, blend (pass 1 {:.2} s, solve {:.2} s, pass 2 {:.2} s) | {deform_s:.2} | {:.2e} |",
+        "| deform, blend (last run: pass 1 {:.2} s, solve {:.2} s, pass 2 {:.2} s) | {deform_s:.2} ({}) | {:.2e} |",
         info.seconds_read,
         info.deform.solver.seconds,
         info.seconds_write,
+        list(&deforms),
         n as f64 / deform_s
     );
     println!("deform / copy throughput: {:.2}", copy_s / deform_s);
+}
+
+const RUNS: usize = 3;
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn list(v: &[f64]) -> String {
+    v.iter()
+        .map(|s| format!("{s:.2}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
