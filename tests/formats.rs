@@ -6,7 +6,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{deform, run, shared};
-use rigidcells::io::{Chunk, Document, LasHeader, LasSource, Source};
+use rigidcells::io::{Chunk, Document, LasHeader, LasSource, PlyStream, Source};
 use rigidcells::rigid::Vect;
 
 const T: [f64; 3] = [1.5, -2.25, 0.75];
@@ -384,4 +384,43 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
     let rise: Vec<f64> = east.map(|(p, q)| q.z - p.z).collect();
     let mean = rise.iter().sum::<f64>() / rise.len() as f64;
     assert!(mean > 10.0, "east end rose by {mean}");
+}
+
+/// Every binary PLY streams: the memory-mapped source decodes the same positions and triangles
+/// as the whole-file reader, and its sink, fed in small chunks, writes the same bytes as the
+/// whole-file encoder.
+#[test]
+fn binary_ply_streams_like_the_whole_file_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut streamed = 0;
+    for input in files("meshes") {
+        if input.extension().is_none_or(|e| e != "ply") {
+            continue;
+        }
+        let Ok(Some(mut stream)) = PlyStream::open(&input) else {
+            continue;
+        };
+        let name = input.file_name().unwrap().to_string_lossy().to_string();
+        let Ok(Document::Ply(whole)) = Document::read(&input) else {
+            panic!("{name}: the whole-file reader fails where the stream does not");
+        };
+        assert_eq!(stream.triangles(), whole.triangles(), "{name}");
+        let shift = Vect::<3>::from(T);
+        let out = dir.path().join(format!("s_{name}"));
+        let mut sink = stream.sink(&out, None).unwrap();
+        let mut chunk = Chunk::default();
+        let mut positions = Vec::new();
+        while stream.read(1000, &mut chunk).unwrap() > 0 {
+            let moved: Vec<Vect<3>> = chunk.positions.iter().map(|p| p + shift).collect();
+            positions.extend_from_slice(&chunk.positions);
+            sink.write(&chunk, &moved, &chunk.normals).unwrap();
+        }
+        sink.finish().unwrap();
+        assert_eq!(positions, whole.positions(), "{name}");
+        let moved: Vec<Vect<3>> = positions.iter().map(|p| p + shift).collect();
+        let want = whole.encode(&moved, whole.normals()).unwrap();
+        assert!(std::fs::read(&out).unwrap() == want, "{name}: bytes differ");
+        streamed += 1;
+    }
+    assert!(streamed >= 8, "only {streamed} binary PLY files streamed");
 }

@@ -199,6 +199,67 @@ pub fn terrain_height(x: f64, y: f64) -> (f64, u8) {
     (ground, 2)
 }
 
+/// The synthetic terrain's samples: `n` points on a jittered grid over 2 km × 2 km at
+/// georeferenced coordinates (x from 500 000, y from 5 000 000), z from [`terrain_height`]
+/// with 2 cm of noise. Reproducible (xorshift64*).
+pub struct Terrain {
+    side: u64,
+    step: f64,
+    state: u64,
+}
+
+impl Terrain {
+    /// The terrain of `n` samples.
+    pub fn new(n: u64) -> Self {
+        let side = (n as f64).sqrt().ceil().max(1.0) as u64;
+        Self {
+            side,
+            step: 2000.0 / side as f64,
+            state: 0x9E37_79B9_7F4A_7C15,
+        }
+    }
+
+    fn rand(&mut self) -> f64 {
+        self.state ^= self.state >> 12;
+        self.state ^= self.state << 25;
+        self.state ^= self.state >> 27;
+        (self.state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Sample `k` (call in order): local x, y, z and its LAS class.
+    pub fn sample(&mut self, k: u64) -> (f64, f64, f64, u8) {
+        let x = (k % self.side) as f64 * self.step + self.rand() * self.step;
+        let y = (k / self.side) as f64 * self.step + self.rand() * self.step;
+        let (z, class) = terrain_height(x, y);
+        (x, y, z + 0.02 * (self.rand() - 0.5), class)
+    }
+}
+
+/// Writes the terrain of `n` samples as a binary little-endian PLY point cloud as scanners
+/// export it: double `x y z` (georeferenced), `uchar red green blue`, `uchar class`,
+/// `float intensity`.
+pub fn write_ply_terrain(path: &Path, n: u64) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::BufWriter::with_capacity(1 << 20, std::fs::File::create(path)?);
+    write!(
+        out,
+        "ply\nformat binary_little_endian 1.0\ncomment rigidcells data_gen terrain\n\
+         element vertex {n}\nproperty double x\nproperty double y\nproperty double z\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\n\
+         property uchar class\nproperty float intensity\nend_header\n"
+    )?;
+    let mut terrain = Terrain::new(n);
+    for k in 0..n {
+        let (x, y, z, class) = terrain.sample(k);
+        for v in [x + 500_000.0, y + 5_000_000.0, z] {
+            out.write_all(&v.to_le_bytes())?;
+        }
+        out.write_all(&[class * 40, (z * 3.0) as u8, 255 - class * 40, class])?;
+        out.write_all(&((z * 100.0) as f32).to_le_bytes())?;
+    }
+    out.flush()
+}
+
 /// Writes a LAS 1.2 (or LAZ) scan of `n` points of [`terrain_height`] (point format 3: GPS time
 /// and RGB; UTM-like offsets around 500 000 / 5 000 000, scale 1 mm), streaming in chunks.
 pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), las::Error> {
@@ -225,26 +286,14 @@ pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), la
         header,
         WriterOptions::default().with_laz_parallelism(LazParallelism::Yes),
     )?;
-    let side = (n as f64).sqrt().ceil() as u64;
-    let step = 2000.0 / side as f64;
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut rand = move || {
-        // xorshift64*: reproducible jitter.
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut terrain = Terrain::new(n);
     let chunk = 1u64 << 20;
     let mut i = 0u64;
     while i < n {
         let m = chunk.min(n - i);
         let mut bytes = Vec::with_capacity(m as usize * 34);
         for k in i..i + m {
-            let x = (k % side) as f64 * step + rand() * step;
-            let y = (k / side) as f64 * step + rand() * step;
-            let (z, class) = terrain_height(x, y);
-            let z = z + 0.02 * (rand() - 0.5);
+            let (x, y, z, class) = terrain.sample(k);
             let raw = |v: f64| (v / 0.001).round() as i32;
             bytes.extend_from_slice(&raw(x).to_le_bytes());
             bytes.extend_from_slice(&raw(y).to_le_bytes());

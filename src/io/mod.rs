@@ -9,6 +9,7 @@ mod las;
 mod mapped;
 mod obj;
 mod ply;
+mod ply_stream;
 mod stream;
 mod text;
 mod xyz;
@@ -16,6 +17,7 @@ mod xyz;
 pub use las::{LasHeader, LasSource, VlrInfo};
 pub use obj::ObjFile;
 pub use ply::PlyFile;
+pub use ply_stream::PlyStream;
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
 pub use xyz::XyzFile;
 
@@ -23,14 +25,29 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ stream
-/// from the file; PLY, OBJ and XYZ are read whole (their faces need random access to vertices)
-/// and served in chunks.
+/// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ and
+/// binary PLY stream from the file; ASCII PLY, OBJ and XYZ are read whole and served in chunks.
 pub fn open(path: &Path) -> Result<Box<dyn Source>> {
     match extension(path).as_deref() {
         Some("las") | Some("laz") => Ok(Box::new(LasSource::open(path)?)),
+        Some("ply") => match PlyStream::open(path)? {
+            Some(stream) => Ok(Box::new(stream)),
+            None => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
+        },
         _ => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
     }
+}
+
+/// Fails unless `path` has the extension `want` (`txt` standing for `xyz` too).
+pub(crate) fn require_extension(path: &Path, want: &str) -> Result<()> {
+    let ext = extension(path);
+    if ext.as_deref() != Some(want) && !(want == "xyz" && ext.as_deref() == Some("txt")) {
+        return Err(Error::Param(format!(
+            "{}: the output must have the input's format (.{want})",
+            path.display()
+        )));
+    }
+    Ok(())
 }
 
 /// A [`Document`] held in memory, served as a [`Source`].
@@ -183,14 +200,7 @@ impl Document {
             Self::Xyz(_) => "xyz",
             Self::Obj(_) => "obj",
         };
-        let ext = extension(path);
-        if ext.as_deref() != Some(want) && !(want == "xyz" && ext.as_deref() == Some("txt")) {
-            return Err(Error::Param(format!(
-                "{}: the output must have the input's format (.{want})",
-                path.display()
-            )));
-        }
-        Ok(())
+        require_extension(path, want)
     }
 
     /// Triangles over the positions (empty for point clouds).
@@ -260,7 +270,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// A short description of a file's layout for `rigidcells info`: a PLY's header lines, an
 /// OBJ's counts of each kind of line.
 pub fn describe(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let bytes = mapped::map(path)?;
     match extension(path).as_deref() {
         Some("ply") => {
             let end = bytes

@@ -11,7 +11,7 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use ply_rs_bw::parser::{Parser, Reader};
-use ply_rs_bw::ply::{DefaultElement, Encoding, PropertyType, ScalarType};
+use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Header, PropertyType, ScalarType};
 
 use super::text::{Edit, Span, check_count, edits3, splice};
 use crate::error::{Error, Result};
@@ -48,35 +48,7 @@ impl PlyFile {
             return Err(err("not a PLY file (no `ply` magic line)".into()));
         }
         let (header, body) = parse_header(&bytes).map_err(err)?;
-        let vertex = header
-            .elements
-            .get("vertex")
-            .ok_or_else(|| err("no `vertex` element".into()))?;
-        let mut doubles = [false; 3];
-        for (k, name) in ["x", "y", "z"].iter().enumerate() {
-            match vertex.properties.get(*name).map(|p| &p.data_type) {
-                Some(PropertyType::Scalar(ScalarType::Float)) => {}
-                Some(PropertyType::Scalar(ScalarType::Double)) => doubles[k] = true,
-                Some(t) => {
-                    return Err(err(format!(
-                        "vertex property `{name}` is {t:?}; rigidcells moves float or double coordinates"
-                    )));
-                }
-                None => return Err(err(format!("vertex element has no `{name}` property"))),
-            }
-        }
-        let mut normal_doubles = Some([false; 3]);
-        for (k, name) in ["nx", "ny", "nz"].iter().enumerate() {
-            match vertex.properties.get(*name).map(|p| &p.data_type) {
-                Some(PropertyType::Scalar(ScalarType::Float)) => {}
-                Some(PropertyType::Scalar(ScalarType::Double)) => {
-                    if let Some(d) = normal_doubles.as_mut() {
-                        d[k] = true
-                    }
-                }
-                _ => normal_doubles = None,
-            }
-        }
+        let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
         let mut normal_spans = Vec::new();
         let mut normals = Vec::new();
         let mut walker = Walker {
@@ -89,88 +61,44 @@ impl PlyFile {
         let mut positions = Vec::new();
         let mut triangles = Vec::new();
         for (name, element) in header.elements.iter() {
-            let props: Vec<(&str, &PropertyType)> = element
-                .properties
-                .iter()
-                .map(|(n, p)| (n.as_str(), &p.data_type))
-                .collect();
-            let is_vertex = name == "vertex";
-            if is_vertex {
-                coords.reserve(element.count);
-                positions.reserve(element.count);
+            if name != "vertex" {
+                walk_element(&mut walker, name, element, &mut triangles, |_| Ok(()))?;
+                continue;
             }
-            let mut list = Vec::new();
-            for record in 0..element.count {
-                let mut spans = [Span { start: 0, end: 0 }; 3];
-                let mut xyz = [0.0f64; 3];
-                let mut nspans = [Span { start: 0, end: 0 }; 3];
-                let mut nxyz = [0.0f64; 3];
-                for &(pname, ptype) in &props {
-                    let at = |e: Error| match e {
-                        Error::Format { path, message } => Error::Format {
-                            path,
-                            message: format!(
-                                "{name} {record} of {}, property `{pname}`: {message}",
-                                element.count
-                            ),
-                        },
-                        other => other,
-                    };
-                    match ptype {
-                        PropertyType::Scalar(t) => {
-                            let (value, span) = walker.scalar(t).map_err(at)?;
-                            if is_vertex
-                                && let Some(k) = ["x", "y", "z"].iter().position(|n| *n == pname)
-                            {
-                                spans[k] = span;
-                                xyz[k] = value;
-                            } else if is_vertex
-                                && let Some(k) = ["nx", "ny", "nz"].iter().position(|n| *n == pname)
-                            {
-                                nspans[k] = span;
-                                nxyz[k] = value;
-                            }
+            coords.reserve(element.count);
+            positions.reserve(element.count);
+            let mut spans = [Span { start: 0, end: 0 }; 3];
+            let mut xyz = [0.0f64; 3];
+            let mut nspans = [Span { start: 0, end: 0 }; 3];
+            let mut nxyz = [0.0f64; 3];
+            walk_element(&mut walker, name, element, &mut triangles, |visit| {
+                let record = match visit {
+                    Visit::Scalar(pname, value, span) => {
+                        if let Some(k) = ["x", "y", "z"].iter().position(|n| *n == pname) {
+                            spans[k] = span;
+                            xyz[k] = value;
+                        } else if let Some(k) = ["nx", "ny", "nz"].iter().position(|n| *n == pname)
+                        {
+                            nspans[k] = span;
+                            nxyz[k] = value;
                         }
-                        PropertyType::List(count_type, item_type) => {
-                            let (count, _) = walker.scalar(count_type).map_err(at)?;
-                            if !(count >= 0.0 && count.fract() == 0.0) {
-                                return Err(at(Error::format(
-                                    path,
-                                    format!("list length {count} is not a count"),
-                                )));
-                            }
-                            let keep = matches!(
-                                (name.as_str(), pname),
-                                ("face", "vertex_indices" | "vertex_index")
-                                    | ("tristrips", "vertex_indices" | "vertex_index")
-                            );
-                            list.clear();
-                            for _ in 0..count as usize {
-                                let (v, _) = walker.scalar(item_type).map_err(at)?;
-                                if keep {
-                                    list.push(v);
-                                }
-                            }
-                            if keep {
-                                collect_triangles(name, &list, &mut triangles);
-                            }
-                        }
+                        return Ok(());
                     }
+                    Visit::End(record) => record,
+                };
+                if !xyz.iter().all(|v| v.is_finite()) {
+                    return Err(err(format!(
+                        "vertex {record} has a coordinate that is not finite: {xyz:?}"
+                    )));
                 }
-                if is_vertex {
-                    if !xyz.iter().all(|v| v.is_finite()) {
-                        return Err(err(format!(
-                            "vertex {record} has a coordinate that is not finite: {xyz:?}"
-                        )));
-                    }
-                    coords.push(spans);
-                    positions.push(Vect::<3>::from(xyz));
-                    if normal_doubles.is_some() {
-                        normal_spans.push(nspans);
-                        normals.push(Vect::<3>::from(nxyz));
-                    }
+                coords.push(spans);
+                positions.push(Vect::<3>::from(xyz));
+                if normal_doubles.is_some() {
+                    normal_spans.push(nspans);
+                    normals.push(Vect::<3>::from(nxyz));
                 }
-            }
+                Ok(())
+            })?;
         }
         if header.encoding == Encoding::Ascii
             && bytes[walker.pos..].iter().any(|b| !b.is_ascii_whitespace())
@@ -179,16 +107,7 @@ impl PlyFile {
                 "data after the last element: the header's counts are smaller than the body".into(),
             ));
         }
-        let n = positions.len();
-        if let Some(t) = triangles
-            .iter()
-            .find(|t| t.iter().any(|&v| v as usize >= n))
-        {
-            return Err(err(format!(
-                "a face refers to vertex {} but there are {n} vertices",
-                t.iter().max().unwrap_or(&0)
-            )));
-        }
+        check_triangles(path, &triangles, positions.len())?;
         Ok(Self {
             path: path.to_path_buf(),
             bytes,
@@ -257,11 +176,62 @@ impl PlyFile {
     }
 }
 
+/// Fails when a triangle refers to a vertex past the `n` there are.
+pub(super) fn check_triangles(path: &Path, triangles: &[[u32; 3]], n: usize) -> Result<()> {
+    match triangles
+        .iter()
+        .find(|t| t.iter().any(|&v| v as usize >= n))
+    {
+        Some(t) => Err(Error::format(
+            path,
+            format!(
+                "a face refers to vertex {} but there are {n} vertices",
+                t.iter().max().unwrap_or(&0)
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Whether the vertex element's `x y z` are doubles (else floats), and the same for `nx ny nz`
+/// when all three are there as floating-point scalars.
+pub(super) fn vertex_layout(
+    header: &Header,
+) -> std::result::Result<([bool; 3], Option<[bool; 3]>), String> {
+    let vertex = header.elements.get("vertex").ok_or("no `vertex` element")?;
+    let mut doubles = [false; 3];
+    for (k, name) in ["x", "y", "z"].iter().enumerate() {
+        match vertex.properties.get(*name).map(|p| &p.data_type) {
+            Some(PropertyType::Scalar(ScalarType::Float)) => {}
+            Some(PropertyType::Scalar(ScalarType::Double)) => doubles[k] = true,
+            Some(t) => {
+                return Err(format!(
+                    "vertex property `{name}` is {t:?}; rigidcells moves float or double coordinates"
+                ));
+            }
+            None => return Err(format!("vertex element has no `{name}` property")),
+        }
+    }
+    let mut normal_doubles = Some([false; 3]);
+    for (k, name) in ["nx", "ny", "nz"].iter().enumerate() {
+        match vertex.properties.get(*name).map(|p| &p.data_type) {
+            Some(PropertyType::Scalar(ScalarType::Float)) => {}
+            Some(PropertyType::Scalar(ScalarType::Double)) => {
+                if let Some(d) = normal_doubles.as_mut() {
+                    d[k] = true
+                }
+            }
+            _ => normal_doubles = None,
+        }
+    }
+    Ok((doubles, normal_doubles))
+}
+
 /// Parses the header; returns it and the offset of the body. Exporters (Blender 2.4) write
 /// comments that run over several lines: a header line of free text (its first word is not a
 /// lowercase identifier) is read as a comment, its bytes kept as they are. A line that starts
 /// with an unknown lowercase word is a misspelled keyword and an error.
-fn parse_header(bytes: &[u8]) -> std::result::Result<(ply_rs_bw::ply::Header, usize), String> {
+pub(super) fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize), String> {
     let end = bytes
         .windows(10)
         .position(|w| w == b"end_header")
@@ -305,6 +275,75 @@ fn parse_header(bytes: &[u8]) -> std::result::Result<(ply_rs_bw::ply::Header, us
     Ok((header, body))
 }
 
+/// What [`walk_element`] shows its visitor.
+pub(super) enum Visit<'a> {
+    /// A scalar property of the current record: name, value, where it lies.
+    Scalar(&'a str, f64, Span),
+    /// The end of record `.0`.
+    End(usize),
+}
+
+/// Walks the records of `element` (named `name`), collecting the triangles of faces and strips
+/// and showing `visit` every scalar and the end of every record. Errors name the element,
+/// record and property.
+pub(super) fn walk_element(
+    walker: &mut Walker,
+    name: &str,
+    element: &ElementDef,
+    triangles: &mut Vec<[u32; 3]>,
+    mut visit: impl FnMut(Visit) -> Result<()>,
+) -> Result<()> {
+    let props: Vec<(&str, &PropertyType)> = element
+        .properties
+        .iter()
+        .map(|(n, p)| (n.as_str(), &p.data_type))
+        .collect();
+    let keep_lists = matches!(name, "face" | "tristrips");
+    let mut list = Vec::new();
+    for record in 0..element.count {
+        for &(pname, ptype) in &props {
+            let at = |e: Error| match e {
+                Error::Format { path, message } => Error::Format {
+                    path,
+                    message: format!(
+                        "{name} {record} of {}, property `{pname}`: {message}",
+                        element.count
+                    ),
+                },
+                other => other,
+            };
+            match ptype {
+                PropertyType::Scalar(t) => {
+                    let (value, span) = walker.scalar(t).map_err(at)?;
+                    visit(Visit::Scalar(pname, value, span))?;
+                }
+                PropertyType::List(count_type, item_type) => {
+                    let (count, _) = walker.scalar(count_type).map_err(at)?;
+                    if !(count >= 0.0 && count.fract() == 0.0) {
+                        return Err(at(Error::format(
+                            walker.path,
+                            format!("list length {count} is not a count"),
+                        )));
+                    }
+                    let keep = keep_lists && matches!(pname, "vertex_indices" | "vertex_index");
+                    list.clear();
+                    for _ in 0..count as usize {
+                        let (v, _) = walker.scalar(item_type).map_err(at)?;
+                        if keep {
+                            list.push(v);
+                        }
+                    }
+                    if keep {
+                        collect_triangles(name, &list, triangles);
+                    }
+                }
+            }
+        }
+        visit(Visit::End(record))?;
+    }
+    Ok(())
+}
+
 fn collect_triangles(element: &str, list: &[f64], out: &mut Vec<[u32; 3]>) {
     let idx = |v: f64| v as u32;
     if element == "tristrips" {
@@ -334,15 +373,15 @@ fn collect_triangles(element: &str, list: &[f64], out: &mut Vec<[u32; 3]>) {
 }
 
 /// Walks scalars of the body in either encoding.
-struct Walker<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-    encoding: Encoding,
-    path: &'a Path,
+pub(super) struct Walker<'a> {
+    pub(super) bytes: &'a [u8],
+    pub(super) pos: usize,
+    pub(super) encoding: Encoding,
+    pub(super) path: &'a Path,
 }
 
 impl Walker<'_> {
-    fn scalar(&mut self, t: &ScalarType) -> Result<(f64, Span)> {
+    pub(super) fn scalar(&mut self, t: &ScalarType) -> Result<(f64, Span)> {
         match self.encoding {
             Encoding::Ascii => self.ascii(t),
             Encoding::BinaryLittleEndian => self.binary(t, false),
@@ -351,12 +390,7 @@ impl Walker<'_> {
     }
 
     fn binary(&mut self, t: &ScalarType, big: bool) -> Result<(f64, Span)> {
-        let size = match t {
-            ScalarType::Char | ScalarType::UChar => 1,
-            ScalarType::Short | ScalarType::UShort => 2,
-            ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
-            ScalarType::Double => 8,
-        };
+        let size = scalar_size(t);
         let start = self.pos;
         let end = start + size;
         let Some(b) = self.bytes.get(start..end) else {
@@ -413,5 +447,15 @@ impl Walker<'_> {
         .ok_or_else(|| Error::format(self.path, format!("`{text}` is not a {t:?}")))?;
         self.pos = end;
         Ok((v, Span { start, end }))
+    }
+}
+
+/// Bytes of a binary scalar.
+pub(super) fn scalar_size(t: &ScalarType) -> usize {
+    match t {
+        ScalarType::Char | ScalarType::UChar => 1,
+        ScalarType::Short | ScalarType::UShort => 2,
+        ScalarType::Int | ScalarType::UInt | ScalarType::Float => 4,
+        ScalarType::Double => 8,
     }
 }

@@ -1,5 +1,5 @@
-//! `cargo run --release -p data_gen --bin gen -- terrain N OUT.las|OUT.laz`: a synthetic scan of
-//! N points (terrain, buildings, a bridge) for benchmarks and memory checks.
+//! `cargo run --release -p data_gen --bin gen -- terrain N OUT.las|OUT.laz|OUT.ply`: a synthetic
+//! scan of N points (terrain, buildings, a bridge) for benchmarks and memory checks.
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -7,11 +7,15 @@ fn main() {
         Some("terrain") if args.len() == 4 => {
             let n: u64 = args[2].parse().expect("N is a point count");
             let out = std::path::Path::new(&args[3]);
-            let laz = out
+            let ext = out
                 .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("laz"));
+                .map(|e| e.to_string_lossy().to_ascii_lowercase());
             let t = std::time::Instant::now();
-            data_gen::write_las_terrain(out, n, laz).expect("writing the scan");
+            match ext.as_deref() {
+                Some("ply") => data_gen::write_ply_terrain(out, n).expect("writing the scan"),
+                Some("laz") => data_gen::write_las_terrain(out, n, true).expect("writing the scan"),
+                _ => data_gen::write_las_terrain(out, n, false).expect("writing the scan"),
+            }
             println!(
                 "{n} points -> {} in {:.1} s",
                 out.display(),
@@ -19,7 +23,7 @@ fn main() {
             );
         }
         _ => {
-            eprintln!("usage: gen terrain N OUT.las|OUT.laz");
+            eprintln!("usage: gen terrain N OUT.las|OUT.laz|OUT.ply");
             std::process::exit(2);
         }
     }

@@ -1,0 +1,304 @@
+//! Binary PLY streamed from a memory map: the path for PLY files of any size.
+//!
+//! When the body is binary and every property of the vertex element is a scalar, all vertex
+//! records have one size and record `i` starts at `start + i · record`. The header is parsed by
+//! `ply-rs-bw` (with the tolerance of [`super::ply`]); the other elements, before and after the
+//! vertices, are walked once to collect the triangles of faces and strips and to find where the
+//! vertex records begin. Chunks are then decoded straight from the map, and the sink copies the
+//! input's bytes through, patching `x y z` (and `nx ny nz`) of each record in place. Nothing of
+//! the body is held in memory but the chunk in flight (and, for meshes, the triangles).
+//!
+//! `tools/src/bin/ply.rs` measures this against reading the same file with `ply-rs-bw`.
+//! ASCII PLY and vertices with list properties go through [`super::PlyFile`] in memory.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use memmap2::Mmap;
+use ply_rs_bw::ply::{Encoding, PropertyType};
+
+use super::mapped::map;
+use super::ply::{Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element};
+use super::require_extension;
+use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+/// Where one floating-point property lies in a vertex record.
+#[derive(Debug, Clone, Copy)]
+struct Slot {
+    offset: usize,
+    double: bool,
+}
+
+/// The fixed layout of the vertex records.
+#[derive(Debug, Clone, Copy)]
+struct Layout {
+    big: bool,
+    /// Byte offset of the first vertex record.
+    start: usize,
+    /// Bytes per record.
+    record: usize,
+    count: usize,
+    xyz: [Slot; 3],
+    normals: Option<[Slot; 3]>,
+}
+
+impl Layout {
+    #[inline]
+    fn get(&self, rec: &[u8], s: Slot) -> f64 {
+        let b = &rec[s.offset..];
+        match (s.double, self.big) {
+            (true, false) => f64::from_le_bytes(b[..8].try_into().expect("8 bytes")),
+            (true, true) => f64::from_be_bytes(b[..8].try_into().expect("8 bytes")),
+            (false, false) => f32::from_le_bytes(b[..4].try_into().expect("4 bytes")) as f64,
+            (false, true) => f32::from_be_bytes(b[..4].try_into().expect("4 bytes")) as f64,
+        }
+    }
+
+    #[inline]
+    fn put(&self, rec: &mut [u8], s: Slot, v: f64) {
+        let b = &mut rec[s.offset..];
+        match (s.double, self.big) {
+            (true, false) => b[..8].copy_from_slice(&v.to_le_bytes()),
+            (true, true) => b[..8].copy_from_slice(&v.to_be_bytes()),
+            (false, false) => b[..4].copy_from_slice(&(v as f32).to_le_bytes()),
+            (false, true) => b[..4].copy_from_slice(&(v as f32).to_be_bytes()),
+        }
+    }
+
+    fn vector(&self, rec: &[u8], s: &[Slot; 3]) -> Vect<3> {
+        Vect::<3>::new(
+            self.get(rec, s[0]),
+            self.get(rec, s[1]),
+            self.get(rec, s[2]),
+        )
+    }
+
+    /// Byte range of records `first..first + n`.
+    fn span(&self, first: usize, n: usize) -> std::ops::Range<usize> {
+        self.start + first * self.record..self.start + (first + n) * self.record
+    }
+}
+
+/// A binary PLY file with fixed-size vertex records, streamed from a memory map.
+pub struct PlyStream {
+    path: PathBuf,
+    map: Arc<Mmap>,
+    layout: Layout,
+    triangles: Vec<[u32; 3]>,
+    next: usize,
+}
+
+impl PlyStream {
+    /// Opens `path` for streaming; `None` when it is ASCII or its vertices have list properties
+    /// (then it is read whole by [`super::PlyFile`]).
+    pub fn open(path: &Path) -> Result<Option<Self>> {
+        let map = map(path)?;
+        let err = |m: String| Error::format(path, m);
+        if !map.starts_with(b"ply") {
+            return Err(err("not a PLY file (no `ply` magic line)".into()));
+        }
+        let (header, body) = parse_header(&map).map_err(err)?;
+        let big = match header.encoding {
+            Encoding::Ascii => return Ok(None),
+            Encoding::BinaryLittleEndian => false,
+            Encoding::BinaryBigEndian => true,
+        };
+        let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
+        let vertex = &header.elements["vertex"];
+        let mut offsets = std::collections::HashMap::new();
+        let mut record = 0;
+        for (name, p) in vertex.properties.iter() {
+            let PropertyType::Scalar(t) = &p.data_type else {
+                return Ok(None);
+            };
+            offsets.insert(name.as_str(), record);
+            record += scalar_size(t);
+        }
+        let slots = |names: [&str; 3], doubles: [bool; 3]| -> [Slot; 3] {
+            std::array::from_fn(|k| Slot {
+                offset: offsets[names[k]],
+                double: doubles[k],
+            })
+        };
+        let mut walker = Walker {
+            bytes: &map,
+            pos: body,
+            encoding: header.encoding,
+            path,
+        };
+        let mut triangles = Vec::new();
+        let mut start = None;
+        for (name, element) in header.elements.iter() {
+            if name == "vertex" {
+                let end = element
+                    .count
+                    .checked_mul(record)
+                    .and_then(|n| n.checked_add(walker.pos))
+                    .filter(|&end| end <= map.len())
+                    .ok_or_else(|| {
+                        err(format!(
+                            "the body ends within the {} vertices (truncated file, or a header \
+                             count that is too large)",
+                            element.count
+                        ))
+                    })?;
+                start = Some(walker.pos);
+                walker.pos = end;
+            } else {
+                walk_element(&mut walker, name, element, &mut triangles, |_| Ok(()))?;
+            }
+        }
+        let count = vertex.count;
+        if count == 0 {
+            return Err(err("the file holds no vertices or points".into()));
+        }
+        check_triangles(path, &triangles, count)?;
+        let layout = Layout {
+            big,
+            start: start.expect("the header has a vertex element"),
+            record,
+            count,
+            xyz: slots(["x", "y", "z"], doubles),
+            normals: normal_doubles.map(|d| slots(["nx", "ny", "nz"], d)),
+        };
+        Ok(Some(Self {
+            path: path.to_path_buf(),
+            map: Arc::new(map),
+            layout,
+            triangles,
+            next: 0,
+        }))
+    }
+
+    /// All vertex positions (for tools and tests; streaming callers use [`Source::read`]).
+    pub fn positions(&self) -> Vec<Vect<3>> {
+        let l = &self.layout;
+        self.map[l.span(0, l.count)]
+            .chunks_exact(l.record)
+            .map(|rec| l.vector(rec, &l.xyz))
+            .collect()
+    }
+}
+
+impl Source for PlyStream {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn len(&self) -> u64 {
+        self.layout.count as u64
+    }
+
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        self.next = 0;
+        Ok(())
+    }
+
+    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        let l = &self.layout;
+        let n = max.min(l.count - self.next);
+        chunk.clear(self.next as u64);
+        for rec in self.map[l.span(self.next, n)].chunks_exact(l.record) {
+            chunk.positions.push(l.vector(rec, &l.xyz));
+            if let Some(s) = &l.normals {
+                chunk.normals.push(l.vector(rec, s));
+            }
+        }
+        self.next += n;
+        Ok(n)
+    }
+
+    fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
+        require_extension(output, "ply")?;
+        let (file, out) = TempFile::create(output)?;
+        Ok(Box::new(PlySink {
+            map: self.map.clone(),
+            layout: self.layout,
+            file,
+            out,
+            buf: Vec::new(),
+            next: 0,
+        }))
+    }
+}
+
+/// Copies a [`PlyStream`]'s bytes with the vertex records patched.
+struct PlySink {
+    map: Arc<Mmap>,
+    layout: Layout,
+    file: TempFile,
+    out: BufWriter<File>,
+    buf: Vec<u8>,
+    /// Records written so far.
+    next: usize,
+}
+
+impl PlySink {
+    fn put(&mut self, bytes: &[u8]) -> Result<()> {
+        self.out
+            .write_all(bytes)
+            .map_err(|e| Error::io(self.file.path(), e))
+    }
+}
+
+impl Sink for PlySink {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
+        let map = self.map.clone();
+        let l = self.layout;
+        if chunk.first as usize != self.next || self.next + moved.len() > l.count {
+            return Err(Error::Solver(format!(
+                "{}: chunks out of order (at {}, expected {})",
+                self.file.target().display(),
+                chunk.first,
+                self.next
+            )));
+        }
+        if self.next == 0 {
+            self.put(&map[..l.start])?;
+        }
+        let mut buf = std::mem::take(&mut self.buf);
+        buf.clear();
+        buf.extend_from_slice(&map[l.span(self.next, moved.len())]);
+        for (i, (rec, p)) in buf.chunks_exact_mut(l.record).zip(moved).enumerate() {
+            for k in 0..3 {
+                l.put(rec, l.xyz[k], p[k]);
+            }
+            if let (Some(s), Some(n)) = (&l.normals, normals.get(i)) {
+                for k in 0..3 {
+                    l.put(rec, s[k], n[k]);
+                }
+            }
+        }
+        self.put(&buf)?;
+        self.buf = buf;
+        self.next += moved.len();
+        Ok(())
+    }
+
+    fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
+        let l = self.layout;
+        if self.next != l.count {
+            return Err(Error::Solver(format!(
+                "{}: {} of {} vertices written",
+                self.file.target().display(),
+                self.next,
+                l.count
+            )));
+        }
+        let map = self.map.clone();
+        self.put(&map[l.span(0, l.count).end..])?;
+        let Self { file, out, .. } = *self;
+        out.into_inner()
+            .map_err(|e| Error::io(file.path(), e.into_error()))?;
+        file.commit()?;
+        Ok(Vec::new())
+    }
+}
