@@ -68,10 +68,7 @@ fn records(path: &Path) -> (LasHeader, Vec<u8>, Vec<Vect<3>>, usize) {
 }
 
 /// Refused LAS inputs, each with its message.
-const LAS_REFUSED: [(&str, &str); 2] = [
-    ("pdrf9-1.5.las", "LAS 1.5 is not supported"),
-    ("point-version-1-point-wise.laz", "LAZ:"),
-];
+const LAS_REFUSED: [(&str, &str); 1] = [("pdrf9-1.5.las", "LAS 1.5 is not supported")];
 
 #[test]
 fn every_las_file_round_trips_a_translation() {

@@ -87,6 +87,8 @@ pub struct LasHeader {
     pub evlr_count: u32,
     /// The LASzip compressor type (1 point-wise, 2 point-wise chunked, 3 layered chunked).
     pub laz_compressor: Option<u16>,
+    /// The LASzip VLR's data, when there is one.
+    pub laszip_vlr: Option<Vec<u8>>,
     /// System identifier.
     pub system: String,
     /// Generating software.
@@ -159,6 +161,7 @@ impl LasHeader {
         let vlr_count = le_u32(prefix, 100);
         let mut vlrs = Vec::new();
         let mut laz_compressor = None;
+        let mut laszip_vlr = None;
         let mut at = header_size as usize;
         for k in 0..vlr_count {
             if at + 54 > point_offset as usize {
@@ -174,6 +177,9 @@ impl LasHeader {
                 && at + 56 <= point_offset as usize
             {
                 laz_compressor = Some(le_u16(prefix, at + 54));
+                laszip_vlr = Some(
+                    prefix[at + 54..(at + 54 + len as usize).min(point_offset as usize)].to_vec(),
+                );
             }
             vlrs.push(VlrInfo {
                 user_id: text(&prefix[at + 2..at + 18]),
@@ -266,6 +272,7 @@ impl LasHeader {
             vlrs,
             evlr_count,
             laz_compressor,
+            laszip_vlr,
             system: text(&prefix[26..58]),
             software: text(&prefix[58..90]),
         })
@@ -301,12 +308,38 @@ enum Body {
     Mapped(Arc<Mmap>),
     /// The reader, its last batch of decoded records, and how many of them were handed out.
     Laz(Box<las::Reader>, PointData, usize),
+    /// Point-wise LAZ (compressor 1): one stream without a chunk table, decoded sequentially.
+    PointWise(Box<laz::LasZipDecompressor<'static, BufReader<File>>>),
 }
 
 /// Points the `las` crate decompresses or compresses per call: its parallel LAZ codec works on
 /// the LAZ chunks of one call, so batches much larger than the pipeline's chunks keep both
 /// cores busy (64k-point calls made a LAZ copy 45 % slower).
 const LAZ_BATCH: usize = 1 << 20;
+
+/// A sequential decompressor over the point data of a point-wise LAZ file.
+fn point_wise(
+    path: &Path,
+    header: &LasHeader,
+) -> Result<laz::LasZipDecompressor<'static, BufReader<File>>> {
+    let err = |e: laz::LasZipError| Error::format(path, format!("LAZ: {e}"));
+    let vlr =
+        laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default()).map_err(err)?;
+    let chunked = vlr.uses_variable_size_chunks();
+    let mut file =
+        BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?);
+    file.seek(SeekFrom::Start(header.point_offset as u64))
+        .map_err(|e| Error::io(path, e))?;
+    let decompressor = laz::LasZipDecompressor::new(file, vlr).map_err(err)?;
+    if chunked {
+        // laz panics on this contradiction: a point-wise stream has no chunks at all.
+        return Err(Error::format(
+            path,
+            "LAZ: the LASzip VLR says point-wise compression but variable-size chunks",
+        ));
+    }
+    Ok(decompressor)
+}
 
 /// A LAS or LAZ file as a [`Source`].
 pub struct LasSource {
@@ -322,17 +355,13 @@ impl LasSource {
     /// Opens `path` (LAS or LAZ, decided by the header).
     pub fn open(path: &Path) -> Result<Self> {
         let header = LasHeader::read(path)?;
-        let body = if header.compressed {
+        let body = if header.laz_compressor == Some(1) {
+            Body::PointWise(Box::new(point_wise(path, &header)?))
+        } else if header.compressed {
             let file = File::open(path).map_err(|e| Error::io(path, e))?;
-            // laz's parallel decompressor handles chunked files only.
-            let parallel = if header.laz_compressor == Some(1) {
-                LazParallelism::No
-            } else {
-                LazParallelism::Yes
-            };
             let reader = las::Reader::with_options(
                 BufReader::with_capacity(1 << 20, file),
-                ReaderOptions::default().with_laz_parallelism(parallel),
+                ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes),
             )
             .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
             let slab = PointDataBuilder::new().for_header(reader.header()).build();
@@ -356,13 +385,30 @@ impl LasSource {
 
     /// The `las` crate's header: the open LAZ reader's, or read for an uncompressed input.
     fn las_header(&self) -> Result<las::Header> {
-        if let Body::Laz(reader, ..) = &self.body {
-            return Ok(reader.header().clone());
+        let err = |e: las::Error| Error::format(&self.path, format!("{e}"));
+        match &self.body {
+            Body::Laz(reader, ..) => Ok(reader.header().clone()),
+            Body::Mapped(_) => {
+                let file = File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
+                las::Reader::new(BufReader::new(file))
+                    .map(|r| r.header().clone())
+                    .map_err(err)
+            }
+            Body::PointWise(_) => {
+                // `las::Reader` insists on a chunk table: header and VLRs are read raw.
+                let mut file =
+                    BufReader::new(File::open(&self.path).map_err(|e| Error::io(&self.path, e))?);
+                let raw = las::raw::Header::read_from(&mut file).map_err(err)?;
+                file.seek(SeekFrom::Start(self.header.header_size as u64))
+                    .map_err(|e| Error::io(&self.path, e))?;
+                let mut b = Builder::new(raw).map_err(err)?;
+                for _ in 0..self.header.vlrs.len() {
+                    let vlr = las::raw::Vlr::read_from(&mut file, false).map_err(err)?;
+                    b.vlrs.push(las::Vlr::new(vlr));
+                }
+                b.into_header().map_err(err)
+            }
         }
-        let file = File::open(&self.path).map_err(|e| Error::io(&self.path, e))?;
-        las::Reader::new(BufReader::new(file))
-            .map(|r| r.header().clone())
-            .map_err(|e| Error::format(&self.path, format!("{e}")))
     }
 }
 
@@ -393,6 +439,9 @@ impl Source for LasSource {
                 .map_err(|e| Error::format(&self.path, format!("LAZ: {e}")))?;
             slab.resize_for(0);
             *used = 0;
+        }
+        if let Body::PointWise(d) = &mut self.body {
+            **d = point_wise(&self.path, &self.header)?;
         }
         self.next = 0;
         Ok(())
@@ -436,6 +485,12 @@ impl Source for LasSource {
                     .extend_from_slice(&slab.raw_bytes()[*used * rl..(*used + take) * rl]);
                 *used += take;
                 n = take;
+            }
+            Body::PointWise(d) => {
+                chunk.raw.resize(n * rl, 0);
+                d.decompress_many(&mut chunk.raw).map_err(|e| {
+                    Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
+                })?;
             }
         }
         let class_at = h.class_at();
