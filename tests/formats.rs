@@ -6,7 +6,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{deform, run, shared};
-use rigidcells::io::{Chunk, Document, LasHeader, LasSource, PlyStream, Source};
+use rigidcells::io::{Chunk, Document, LasHeader, LasSource, PlyStream, Source, XyzStream};
 use rigidcells::rigid::Vect;
 
 const T: [f64; 3] = [1.5, -2.25, 0.75];
@@ -420,4 +420,66 @@ fn binary_ply_streams_like_the_whole_file_reader() {
         streamed += 1;
     }
     assert!(streamed >= 8, "only {streamed} binary PLY files streamed");
+}
+
+/// An XYZ file with a header comment, `//` comments, blank lines, CRLF line ends, commas,
+/// extra columns and no newline at the end streams in chunks of 7 points to the same bytes as
+/// the whole-file encoder; through the CLI, every line but the numbers is kept.
+#[test]
+fn xyz_streams_like_the_whole_file_reader() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("cloud.xyz");
+    let mut text = String::from("# x y z r g b\n\n");
+    for i in 0..100 {
+        let (x, y, z) = (i as f64 * 0.1, (i % 7) as f64 * 0.3, (i % 3) as f64 * 0.05);
+        match i % 4 {
+            0 => text += &format!("{x} {y} {z} 255 0 {i}\n"),
+            1 => text += &format!("  {x},{y},{z}\r\n"),
+            2 => text += &format!("{x}\t{y}\t{z}\t0.5\n// a comment\n"),
+            _ => text += &format!("{x} {y} {z}\n\n"),
+        }
+    }
+    text += "1 2 3 end";
+    std::fs::write(&input, &text).unwrap();
+    let whole = rigidcells::io::XyzFile::read(&input).unwrap();
+    let mut stream = XyzStream::open(&input).unwrap();
+    assert_eq!(stream.len(), 101);
+    let shift = Vect::<3>::from(T);
+    let out = dir.path().join("streamed.xyz");
+    let mut sink = stream.sink(&out, None).unwrap();
+    let mut chunk = Chunk::default();
+    let mut positions = Vec::new();
+    while stream.read(7, &mut chunk).unwrap() > 0 {
+        let moved: Vec<Vect<3>> = chunk.positions.iter().map(|p| p + shift).collect();
+        positions.extend_from_slice(&chunk.positions);
+        sink.write(&chunk, &moved, &[]).unwrap();
+    }
+    sink.finish().unwrap();
+    assert_eq!(positions, whole.positions());
+    let moved: Vec<Vect<3>> = positions.iter().map(|p| p + shift).collect();
+    assert!(std::fs::read(&out).unwrap() == whole.encode(&moved).unwrap());
+
+    let spec = translate_spec(dir.path());
+    let (_, output) = translate(dir.path(), &spec, &input, &[]).unwrap();
+    let after = std::fs::read_to_string(&output).unwrap();
+    let (a, b): (Vec<&str>, Vec<&str>) = (text.split('\n').collect(), after.split('\n').collect());
+    assert_eq!(a.len(), b.len());
+    for (before, after) in a.iter().zip(&b) {
+        let words = |l: &str| {
+            l.split([' ', ',', '\t'])
+                .filter(|w| !w.is_empty())
+                .skip(3)
+                .map(str::to_string)
+                .collect::<Vec<_>>()
+        };
+        if before.trim().is_empty() || before.starts_with('#') || before.starts_with("//") {
+            assert_eq!(before, after);
+        } else {
+            assert_eq!(words(before), words(after), "{before:?} -> {after:?}");
+        }
+    }
+    let moved_cli = rigidcells::io::XyzFile::read(&output).unwrap();
+    for (p, q) in whole.positions().iter().zip(moved_cli.positions()) {
+        assert!((q - p - shift).norm() < 1e-9, "{p:?} -> {q:?}");
+    }
 }

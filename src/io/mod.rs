@@ -19,14 +19,14 @@ pub use obj::ObjFile;
 pub use ply::PlyFile;
 pub use ply_stream::PlyStream;
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
-pub use xyz::XyzFile;
+pub use xyz::{XyzFile, XyzStream};
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ and
-/// binary PLY stream from the file; ASCII PLY, OBJ and XYZ are read whole and served in chunks.
+/// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ, binary
+/// PLY and XYZ stream from the file; ASCII PLY and OBJ are read whole and served in chunks.
 pub fn open(path: &Path) -> Result<Box<dyn Source>> {
     match extension(path).as_deref() {
         Some("las") | Some("laz") => Ok(Box::new(LasSource::open(path)?)),
@@ -34,6 +34,7 @@ pub fn open(path: &Path) -> Result<Box<dyn Source>> {
             Some(stream) => Ok(Box::new(stream)),
             None => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
         },
+        Some("xyz") | Some("txt") => Ok(Box::new(XyzStream::open(path)?)),
         _ => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
     }
 }

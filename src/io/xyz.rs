@@ -1,18 +1,118 @@
 //! XYZ text point clouds: one point per line, `x y z` first (spaces, tabs or commas between),
 //! anything after them (colors, normals, intensities) kept verbatim, as are blank lines and
 //! comment lines starting with `#` or `//`.
+//!
+//! [`XyzStream`] streams a file of any size from a memory map: a chunk carries the bytes of its
+//! lines (from the end of the previous chunk through its last point's line, and to the end of
+//! the file for the last one), and the sink writes them back with the three numbers of each
+//! point line replaced, so the chunks' bytes partition the file. [`XyzFile`] holds a file in
+//! memory for the in-memory API. Both read lines through [`PointLines`].
 
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
+use memmap2::Mmap;
+
+use super::mapped::map;
+use super::require_extension;
+use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
 use super::text::{Span, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
+
+/// The point lines of a text, in order: each with the spans of its first three tokens and, when
+/// asked, their values. Errors name the line (counted from `first_line`).
+struct PointLines<'a> {
+    text: &'a [u8],
+    pos: usize,
+    line: usize,
+    path: &'a Path,
+    parse: bool,
+}
+
+/// One point line: the spans of `x y z` (absolute in the text), their values (zeros unless
+/// parsed), and the end of the line (after its newline).
+type PointLine = ([Span; 3], [f64; 3], usize);
+
+impl<'a> PointLines<'a> {
+    fn new(text: &'a [u8], pos: usize, first_line: usize, path: &'a Path, parse: bool) -> Self {
+        Self {
+            text,
+            pos,
+            line: first_line,
+            path,
+            parse,
+        }
+    }
+}
+
+impl Iterator for PointLines<'_> {
+    type Item = Result<PointLine>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let b = self.text;
+        while self.pos < b.len() {
+            let start = self.pos;
+            let end = b[start..]
+                .iter()
+                .position(|&c| c == b'\n')
+                .map_or(b.len(), |i| start + i + 1);
+            self.pos = end;
+            self.line += 1;
+            let line = &b[start..end];
+            let first = line.iter().position(|c| !c.is_ascii_whitespace());
+            let Some(first) = first else { continue };
+            if line[first..].starts_with(b"#") || line[first..].starts_with(b"//") {
+                continue;
+            }
+            return Some(self.point(start, line, end));
+        }
+        None
+    }
+}
+
+impl PointLines<'_> {
+    fn point(&self, start: usize, line: &[u8], end: usize) -> Result<PointLine> {
+        let number = self.line;
+        let mut tokens = token_spans(line);
+        let mut spans = [Span::default(); 3];
+        let mut values = [0.0; 3];
+        for k in 0..3 {
+            let Some((a, b)) = tokens.next() else {
+                return Err(Error::format(
+                    self.path,
+                    format!("line {number}: fewer than 3 coordinates"),
+                ));
+            };
+            spans[k] = Span {
+                start: start + a,
+                end: start + b,
+            };
+            if self.parse {
+                let tok = String::from_utf8_lossy(&line[a..b]);
+                values[k] = tok
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        Error::format(
+                            self.path,
+                            format!("line {number}: `{tok}` is not a finite number"),
+                        )
+                    })?;
+            }
+        }
+        Ok((spans, values, end))
+    }
+}
 
 /// An XYZ file held in memory with the locations of its coordinates.
 #[derive(Debug)]
 pub struct XyzFile {
     path: PathBuf,
-    text: String,
+    text: Vec<u8>,
     /// Byte spans of the three coordinate tokens of every point.
     spans: Vec<[Span; 3]>,
     positions: Vec<Vect<3>>,
@@ -21,45 +121,11 @@ pub struct XyzFile {
 impl XyzFile {
     /// Reads and indexes `path`.
     pub fn read(path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let text = String::from_utf8(bytes)
-            .map_err(|_| Error::format(path, "not a text file (invalid UTF-8)"))?;
+        let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let mut spans = Vec::new();
         let mut positions = Vec::new();
-        let mut offset = 0;
-        for (number, line) in text.split_inclusive('\n').enumerate() {
-            let start = offset;
-            offset += line.len();
-            let t = line.trim();
-            if t.is_empty() || t.starts_with('#') || t.starts_with("//") {
-                continue;
-            }
-            let mut tokens = token_spans(line).map(|(a, b)| (start + a, start + b));
-            let mut s = [Span::default(); 3];
-            let mut p = [0.0; 3];
-            for k in 0..3 {
-                let Some(span) = tokens.next() else {
-                    return Err(Error::format(
-                        path,
-                        format!("line {}: fewer than 3 coordinates", number + 1),
-                    ));
-                };
-                let tok = &text[span.0..span.1];
-                p[k] = tok
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite())
-                    .ok_or_else(|| {
-                        Error::format(
-                            path,
-                            format!("line {}: `{tok}` is not a finite number", number + 1),
-                        )
-                    })?;
-                s[k] = Span {
-                    start: span.0,
-                    end: span.1,
-                };
-            }
+        for point in PointLines::new(&text, 0, 0, path, true) {
+            let (s, p, _) = point?;
             spans.push(s);
             positions.push(Vect::<3>::from(p));
         }
@@ -85,23 +151,132 @@ impl XyzFile {
             .zip(positions)
             .flat_map(|(s, p)| edits3(s, p, [false; 3]))
             .collect();
-        Ok(splice(self.text.as_bytes(), edits))
+        Ok(splice(&self.text, edits))
     }
 }
 
-fn token_spans(line: &str) -> impl Iterator<Item = (usize, usize)> + '_ {
-    let b = line.as_bytes();
+/// An XYZ file streamed from a memory map.
+pub struct XyzStream {
+    path: PathBuf,
+    map: Arc<Mmap>,
+    count: u64,
+    /// Byte where the next chunk starts, its first line's number, and its first point's index.
+    pos: usize,
+    line: usize,
+    next: u64,
+}
+
+impl XyzStream {
+    /// Opens `path`, counting its point lines (the numbers are parsed chunk by chunk).
+    pub fn open(path: &Path) -> Result<Self> {
+        let map = map(path)?;
+        let mut count = 0;
+        for point in PointLines::new(&map, 0, 0, path, false) {
+            point?;
+            count += 1;
+        }
+        if count == 0 {
+            return Err(Error::format(path, "the file holds no points"));
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            map: Arc::new(map),
+            count,
+            pos: 0,
+            line: 0,
+            next: 0,
+        })
+    }
+}
+
+impl Source for XyzStream {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn len(&self) -> u64 {
+        self.count
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        (self.pos, self.line, self.next) = (0, 0, 0);
+        Ok(())
+    }
+
+    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        chunk.clear(self.next);
+        let start = self.pos;
+        let mut lines = PointLines::new(&self.map, start, self.line, &self.path, true);
+        let mut end = start;
+        while chunk.positions.len() < max {
+            let Some(point) = lines.next() else { break };
+            let (_, p, line_end) = point?;
+            chunk.positions.push(Vect::<3>::from(p));
+            end = line_end;
+        }
+        let n = chunk.positions.len();
+        self.next += n as u64;
+        if self.next == self.count {
+            // The last chunk carries the lines after the last point too.
+            end = self.map.len();
+        }
+        self.line = lines.line;
+        self.pos = end;
+        chunk.raw.extend_from_slice(&self.map[start..end]);
+        Ok(n)
+    }
+
+    fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
+        require_extension(output, "xyz")?;
+        let (file, out) = TempFile::create(output)?;
+        Ok(Box::new(XyzSink {
+            path: self.path.clone(),
+            file,
+            out,
+        }))
+    }
+}
+
+/// Writes the chunks of an [`XyzStream`] with their points replaced.
+struct XyzSink {
+    path: PathBuf,
+    file: TempFile,
+    out: BufWriter<File>,
+}
+
+impl Sink for XyzSink {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
+        let mut edits = Vec::with_capacity(3 * moved.len());
+        for (point, p) in PointLines::new(&chunk.raw, 0, 0, &self.path, false).zip(moved) {
+            edits.extend(edits3(&point?.0, p, [false; 3]));
+        }
+        check_count(&self.path, moved.len(), edits.len() / 3)?;
+        self.out
+            .write_all(&splice(&chunk.raw, edits))
+            .map_err(|e| Error::io(self.file.path(), e))
+    }
+
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+        let Self { file, out, .. } = *self;
+        out.into_inner()
+            .map_err(|e| Error::io(file.path(), e.into_error()))?;
+        file.commit()?;
+        Ok(Vec::new())
+    }
+}
+
+fn token_spans(line: &[u8]) -> impl Iterator<Item = (usize, usize)> + '_ {
     let sep = |c: u8| c.is_ascii_whitespace() || c == b',';
     let mut i = 0;
     std::iter::from_fn(move || {
-        while i < b.len() && sep(b[i]) {
+        while i < line.len() && sep(line[i]) {
             i += 1;
         }
-        if i >= b.len() {
+        if i >= line.len() {
             return None;
         }
         let start = i;
-        while i < b.len() && !sep(b[i]) {
+        while i < line.len() && !sep(line[i]) {
             i += 1;
         }
         Some((start, i))
