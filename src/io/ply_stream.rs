@@ -296,9 +296,7 @@ impl Sink for PlySink {
         let map = self.map.clone();
         self.put(&map[l.span(0, l.count).end..])?;
         let Self { file, out, .. } = *self;
-        out.into_inner()
-            .map_err(|e| Error::io(file.path(), e.into_error()))?;
-        file.commit()?;
+        file.commit_writer(out)?;
         Ok(Vec::new())
     }
 }

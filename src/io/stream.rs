@@ -148,6 +148,13 @@ impl TempFile {
         &self.target
     }
 
+    /// Flushes `out` (the writer [`TempFile::create`] gave), then commits.
+    pub fn commit_writer(self, out: BufWriter<File>) -> Result<()> {
+        out.into_inner()
+            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
+        self.commit()
+    }
+
     /// Syncs the temporary file and renames it over the target.
     pub fn commit(mut self) -> Result<()> {
         let sync = File::open(&self.tmp).and_then(|f| f.sync_all());

@@ -258,9 +258,7 @@ impl Sink for XyzSink {
 
     fn finish(self: Box<Self>) -> Result<Vec<String>> {
         let Self { file, out, .. } = *self;
-        out.into_inner()
-            .map_err(|e| Error::io(file.path(), e.into_error()))?;
-        file.commit()?;
+        file.commit_writer(out)?;
         Ok(Vec::new())
     }
 }

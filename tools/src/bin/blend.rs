@@ -67,26 +67,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
         let t = Instant::now();
         let nearest = Nearest::new(&field.centers, &field.halves)?;
-        let tiled_sum: u64 = local
-            .par_iter()
-            .map(|x| {
-                let nb = nearest.find(x);
-                nb.cells[..nb.n].iter().map(|&c| c as u64).sum::<u64>()
-            })
-            .sum();
+        // A checksum of the neighbors found, so that the queries cannot be optimized away.
+        let query = |points: &[[f64; 3]]| -> u64 {
+            points
+                .par_iter()
+                .map(|x| {
+                    let nb = nearest.find(x);
+                    nb.cells[..nb.n].iter().map(|&c| c as u64).sum::<u64>()
+                })
+                .sum()
+        };
+        let tiled_sum = query(&local);
         let t_tiled = t.elapsed().as_secs_f64();
         // The same queries again in a spatially coherent order (as scans come), tiles filled.
         let mut coherent = local.clone();
         let q = size / 2.0;
         coherent.sort_by_key(|x| x.map(|v| (v / q).floor() as i64));
         let t = Instant::now();
-        let coherent_sum: u64 = coherent
-            .par_iter()
-            .map(|x| {
-                let nb = nearest.find(x);
-                nb.cells[..nb.n].iter().map(|&c| c as u64).sum::<u64>()
-            })
-            .sum();
+        let coherent_sum = query(&coherent);
         let t_coherent = t.elapsed().as_secs_f64();
         let (_, filled) = nearest.tile_counts();
 
