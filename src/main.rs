@@ -86,9 +86,13 @@ struct DeformArgs {
     /// Split cells whose strain exceeds this threshold, and solve again.
     #[arg(long)]
     refine_strain: Option<f64>,
-    /// Keep only cells that hold samples (a shell; no interior cells).
+    /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.
     #[arg(long)]
     shell: bool,
+    /// Inside classification of empty cells: winding numbers for meshes and soups, exterior
+    /// flood fill for point clouds (auto), or as named.
+    #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
+    inside: InsideArg,
     /// Also write the solved field to this file, for `rigidcells apply`.
     #[arg(long)]
     save_field: Option<PathBuf>,
@@ -98,6 +102,18 @@ struct DeformArgs {
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum InsideArg {
+    /// Winding numbers when the input has triangles, flood fill otherwise.
+    Auto,
+    /// Generalized winding number of the triangles (meshes and soups only).
+    Winding,
+    /// Exterior flood fill on the finest grid.
+    Flood,
+    /// No interior cells (a shell).
+    None,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -159,10 +175,11 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         build: BuildParams {
             cell_size: args.cell_size,
             max_level: args.max_level,
-            inside: if args.shell {
-                Inside::None
-            } else {
-                Inside::Flood
+            inside: match (args.shell, args.inside) {
+                (true, _) | (_, InsideArg::None) => Inside::None,
+                (_, InsideArg::Auto) => Inside::Auto,
+                (_, InsideArg::Winding) => Inside::Winding,
+                (_, InsideArg::Flood) => Inside::Flood,
             },
         },
         solve: SolveParams {
@@ -308,12 +325,17 @@ fn report(input: &Path, output: &Path, file: &FileInfo) {
     }
     let s = &info.solver;
     println!(
-        "{} -> {}: {points} points, {} cells ({} boundary, {} interior){}",
+        "{} -> {}: {points} points, {} cells ({} boundary, {} interior by {}){}",
         input.display(),
         output.display(),
         s.cells_final,
         info.build.boundary_cells,
         info.build.interior_cells,
+        match info.build.inside {
+            Inside::Winding => "winding number",
+            Inside::Flood => "flood fill",
+            _ => "none",
+        },
         if s.refinements.is_empty() {
             String::new()
         } else {

@@ -5,7 +5,10 @@
 //!    empty finest cell of margin on every side, so the exterior is connected around the shape.
 //! 2. Occupancy at the finest level: the cell of every sample point, and every cell a triangle
 //!    overlaps (exact test, so large triangles crossing many cells leave no gaps).
-//! 3. Inside/outside of the empty finest cells by [`classify_inside`].
+//! 3. Inside/outside of the empty finest cells: for meshes and soups by the generalized winding
+//!    number of the triangles ([`super::winding`]; one evaluation per coarsest all-empty cell),
+//!    which holes and unwelded or non-manifold surfaces do not fool; for point clouds by the
+//!    exterior flood fill of [`classify_inside`], which leaks through gaps wider than a cell.
 //! 4. A pyramid of states from the finest level up; leaves are emitted top-down: a cell that is
 //!    all inside is an interior leaf at the coarsest level where that holds, a cell with occupied
 //!    descendants is split down to `max_level`, a cell all outside is dropped.
@@ -18,6 +21,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use super::winding::Winding;
 use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
@@ -25,9 +29,14 @@ use crate::rigid::Vect;
 /// How empty cells are classified.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Inside {
+    /// [`Inside::Winding`] for meshes and soups, [`Inside::Flood`] for point clouds.
+    #[default]
+    Auto,
+    /// Generalized winding number of the triangles, `|w| ≥ ½` (see [`super::winding`]): robust
+    /// to holes, soups, non-manifold edges and self-intersections. Needs triangles.
+    Winding,
     /// Exterior flood fill on the finest grid: an empty cell is inside when no path of empty
     /// face-adjacent cells leads from it to the grid's border.
-    #[default]
     Flood,
     /// Keep occupied cells only (a shell; paper Fig. 10 right).
     None,
@@ -42,7 +51,8 @@ pub struct BuildParams {
     /// Levels of the tree above the finest cells. Default (`None`): enough for one level-0 cell
     /// to span the longest extent.
     pub max_level: Option<u8>,
-    /// Inside classification of empty cells. Default: flood fill.
+    /// Inside classification of empty cells. Default: winding numbers for meshes, flood fill
+    /// for point clouds.
     pub inside: Inside,
 }
 
@@ -51,7 +61,7 @@ impl Default for BuildParams {
         Self {
             cell_size: None,
             max_level: None,
-            inside: Inside::Flood,
+            inside: Inside::Auto,
         }
     }
 }
@@ -67,6 +77,11 @@ pub struct BuildInfo {
     pub boundary_cells: usize,
     /// Interior leaves (at any level).
     pub interior_cells: usize,
+    /// The classification used ([`Inside::Auto`] resolved).
+    pub inside: Inside,
+    /// Winding-number evaluations (one per empty cell of the coarsest level that has no
+    /// occupied descendant).
+    pub winding_queries: usize,
     /// Seconds spent.
     pub seconds: f64,
 }
@@ -119,6 +134,8 @@ pub struct Occupancy<const D: usize> {
     dims: [i64; D],
     state: Vec<u8>,
     inside: Inside,
+    /// The triangles seen so far (local frame), for winding numbers.
+    winding: Option<Winding>,
     start: Instant,
 }
 
@@ -132,6 +149,7 @@ impl<const D: usize> Occupancy<D> {
             dims,
             state: vec![OUT; dims.iter().product::<i64>() as usize],
             inside: params.inside,
+            winding: None,
             start: Instant::now(),
         })
     }
@@ -161,11 +179,20 @@ impl<const D: usize> Occupancy<D> {
         outside
     }
 
-    /// Marks every finest cell a triangle over `points` overlaps (3D; ignored in 2D).
+    /// Marks every finest cell a triangle over `points` overlaps (3D; ignored in 2D), and keeps
+    /// the triangles for winding numbers unless the classification is flood fill or none. Call
+    /// it once, with all triangles.
     pub fn add_triangles(&mut self, points: &[Vect<D>], triangles: &[[u32; 3]]) -> Result<()> {
         if D == 3 && !triangles.is_empty() {
             for idx in triangle_cells(&self.grid, points, triangles)? {
                 self.state[idx] = OCCUPIED;
+            }
+            if matches!(self.inside, Inside::Auto | Inside::Winding) {
+                let local: Vec<Vect<3>> = points
+                    .iter()
+                    .map(|p| Vect::<3>::from_fn(|a, _| p[a] - self.grid.origin[a]))
+                    .collect();
+                self.winding = Some(Winding::new(&local, triangles));
             }
         }
         Ok(())
@@ -178,10 +205,23 @@ impl<const D: usize> Occupancy<D> {
             dims,
             mut state,
             inside,
+            winding,
             start,
         } = self;
         let occupied = state.iter().filter(|&&s| s == OCCUPIED).count();
-        classify_inside(&dims, &mut state, inside);
+        let (inside, winding_queries) = match (inside, winding) {
+            (Inside::Auto | Inside::Winding, Some(w)) => {
+                (Inside::Winding, classify_winding(&grid, &mut state, &w))
+            }
+            (Inside::Auto | Inside::Winding, None) => {
+                classify_inside(&dims, &mut state, Inside::Flood);
+                (Inside::Flood, 0)
+            }
+            (mode, _) => {
+                classify_inside(&dims, &mut state, mode);
+                (mode, 0)
+            }
+        };
         let pyramid = pyramid(&grid, state);
         let mut leaves = Vec::new();
         let mut stack: Vec<CellKey<D>> = Vec::new();
@@ -207,6 +247,8 @@ impl<const D: usize> Occupancy<D> {
             occupied,
             boundary_cells,
             interior_cells,
+            inside,
+            winding_queries,
             seconds: start.elapsed().as_secs_f64(),
         };
         (complex, info)
@@ -324,7 +366,7 @@ fn triangle_cells<const D: usize>(
 /// (inside). This is the one place where inside/outside is decided; other classifiers (winding
 /// numbers for meshes) replace it here.
 pub fn classify_inside<const D: usize>(dims: &[i64; D], state: &mut [u8], mode: Inside) {
-    if mode == Inside::None {
+    if mode == Inside::None || mode == Inside::Winding {
         return;
     }
     // Everything empty starts inside; the flood from the border marks the outside.
@@ -359,6 +401,44 @@ pub fn classify_inside<const D: usize>(dims: &[i64; D], state: &mut [u8], mode: 
             }
         }
     }
+}
+
+/// Classifies the empty finest cells by the winding number of `winding`: the surface lies in
+/// occupied cells only, so the winding number cannot cross ½ inside a cell with no occupied
+/// descendant, and one evaluation at the center of the coarsest such cell classifies all its
+/// finest cells. Returns the number of evaluations.
+fn classify_winding<const D: usize>(grid: &Grid<D>, state: &mut [u8], winding: &Winding) -> usize {
+    let levels = pyramid(grid, state.to_vec());
+    let mut empty = Vec::new();
+    let mut stack = Vec::new();
+    for_each_coord(&grid.dims0, |coord| stack.push(CellKey { level: 0, coord }));
+    while let Some(key) = stack.pop() {
+        match levels[key.level as usize][linear(&key.coord, &grid.dims(key.level))] {
+            OUT => empty.push(key),
+            _ if key.level < grid.max_level => stack.extend(key.children()),
+            _ => {}
+        }
+    }
+    let inside: Vec<bool> = empty
+        .par_iter()
+        .map(|key| {
+            let c = grid.center(key);
+            winding
+                .at(&Vect::<3>::from_fn(|a, _| if a < D { c[a] } else { 0.0 }))
+                .abs()
+                >= 0.5
+        })
+        .collect();
+    let dims = grid.dims(grid.max_level);
+    for (key, _) in empty.iter().zip(&inside).filter(|(_, i)| **i) {
+        let shift = grid.max_level - key.level;
+        let span: [i64; D] = [1i64 << shift; D];
+        for_each_coord(&span, |d| {
+            let fine: [i64; D] = std::array::from_fn(|a| (key.coord[a] << shift) + d[a]);
+            state[linear(&fine, &dims)] = IN;
+        });
+    }
+    empty.len()
 }
 
 /// States of all levels, coarsest first: a cell is `IN`/`OUT` when all its finest descendants

@@ -18,9 +18,11 @@
 mod adjacency;
 mod build;
 mod tri_box;
+mod winding;
 
 pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, classify_inside};
 pub use tri_box::triangle_box_overlap;
+pub use winding::Winding;
 
 use std::collections::HashMap;
 
