@@ -7,7 +7,7 @@ use std::path::Path;
 use std::sync::mpsc;
 use std::time::Instant;
 
-use crate::cells::{BuildInfo, BuildParams, Occupancy, build};
+use crate::cells::{BuildInfo, BuildParams, CellComplex, Occupancy, build};
 use crate::error::{Error, Result};
 use crate::field::{Deformer, Field, Rbf, SavedField, Transfer, Warp, apply, apply_into};
 use crate::io::{self, Bounds, Chunk, Sink, Source};
@@ -55,7 +55,7 @@ where
 {
     let (complex, build_info) = build(points, triangles, &params.build)?;
     let constraints = solve::resolve(&complex, spec, points, None)?;
-    let warnings = constraints.warnings.clone();
+    let warnings = build_warnings(&build_info, &complex, &constraints.warnings);
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
     let t = Instant::now();
     let field = Field::from_solution(&solution);
@@ -69,6 +69,27 @@ where
         warnings,
     };
     Ok((moved, solution, info))
+}
+
+/// The warnings of the cell construction followed by those of the constraints.
+fn build_warnings<const D: usize>(
+    build: &BuildInfo,
+    complex: &CellComplex<D>,
+    constraints: &[String],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    if build.glued_cells > 0 {
+        let size = complex.grid.finest_size();
+        let decimals = (5 - size.log10().floor() as i32).max(0) as usize;
+        out.push(format!(
+            "{} cells hold parts of the mesh that are not connected but lie closer than the finest \
+             cell size ({size:.decimals$}): the parts move together there; a smaller --cell-size \
+             keeps them apart",
+            build.glued_cells,
+        ));
+    }
+    out.extend_from_slice(constraints);
+    out
 }
 
 /// Samples per streamed chunk by default: measured on a 20M-point LAS, 64k-sample chunks ran
@@ -142,7 +163,7 @@ pub fn deform_file(
     let (complex, build_info) = occupancy.finish();
     info.seconds_read = t0.elapsed().as_secs_f64();
     let constraints = solve::resolve_selected(&complex, spec, &selections)?;
-    let warnings = constraints.warnings.clone();
+    let warnings = build_warnings(&build_info, &complex, &constraints.warnings);
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
 
     let t1 = Instant::now();

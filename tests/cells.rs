@@ -100,3 +100,60 @@ fn soup_and_mesh_give_the_same_cells_and_holes_do_not_leak() {
         flood.interior_cells
     );
 }
+
+/// A tree of 12,000 disconnected leaf triangles around a closed trunk (paper Fig. 9) bends from
+/// the CLI: counts are kept, the trunk's foot stays, the crown moves as sent.
+#[test]
+fn tree_soup_with_thousands_of_leaves_bends_from_the_cli() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("tree.ply");
+    let tree = data_gen::leafy_tree(12_000);
+    data_gen::write_ply(&input, &tree, true).unwrap();
+    let edit = dir.path().join("bend.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [1, 1, 0.5] }\n\
+         [[handle]]\nbox = { min = [-5, -5, 5.5], max = [5, 5, 9] }\ntranslate = [1.0, 0, 0]\n",
+    )
+    .unwrap();
+    let output = dir.path().join("bent.ply");
+    // Without -q, so that warnings are printed.
+    let r = common::run(&[
+        "deform",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+        "--cell-size",
+        "0.2",
+        "--transfer",
+        "blend",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("cells hold parts of the mesh that are not connected"),
+        "leaves closer than a cell are glued, and the user is told: {}",
+        r.stderr
+    );
+    let (before, after) = (
+        Document::read(&input).unwrap(),
+        Document::read(&output).unwrap(),
+    );
+    assert_eq!(before.triangles(), after.triangles());
+    assert_eq!(before.positions().len(), after.positions().len());
+    for (p, q) in before.positions().iter().zip(after.positions()) {
+        assert!(q.iter().all(|v| v.is_finite()));
+        if p.z <= 0.5 {
+            assert!((q - p).norm() < 0.05, "the foot moved: {p:?} -> {q:?}");
+        }
+        if p.z >= 5.6 {
+            let want = p + Vect::<3>::new(1.0, 0.0, 0.0);
+            assert!(
+                (q - want).norm() < 0.1,
+                "the crown: {p:?} -> {q:?}, sent to {want:?}"
+            );
+        }
+    }
+}

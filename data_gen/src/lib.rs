@@ -143,6 +143,37 @@ pub fn soup(size: [f64; 3], per_unit: f64) -> Mesh {
     mesh
 }
 
+/// A tree as in the paper's Fig. 9: a closed trunk (a welded bar of 0.4 × 0.4 × 4 along z,
+/// from the origin) and `leaves` disconnected triangles of edge about 0.15, every one with its
+/// own vertices, scattered in a ball of radius 1.5 around the trunk's top (reproducible).
+pub fn leafy_tree(leaves: usize) -> Mesh {
+    let mut mesh = bar([0.4, 0.4, 4.0], 8.0);
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut rand = move || {
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let top = [0.2, 0.2, 4.5];
+    let trunk = mesh.triangles.len();
+    while mesh.triangles.len() < trunk + leaves {
+        let c = [rand(), rand(), rand()];
+        if c.iter().map(|v| v * v).sum::<f64>() > 1.0 {
+            continue;
+        }
+        let at: [f64; 3] = std::array::from_fn(|k| top[k] + 1.5 * c[k]);
+        let base = mesh.vertices.len() as u32;
+        for _ in 0..3 {
+            let v = [rand(), rand(), rand()];
+            mesh.vertices
+                .push(std::array::from_fn(|k| at[k] + 0.1 * v[k]));
+        }
+        mesh.triangles.push([base, base + 1, base + 2]);
+    }
+    mesh
+}
+
 /// Writes `mesh` as PLY (`float x y z` vertices, `uchar int` face lists), binary
 /// little-endian or ASCII.
 pub fn write_ply(path: &Path, mesh: &Mesh, binary: bool) -> std::io::Result<()> {

@@ -82,6 +82,9 @@ pub struct BuildInfo {
     /// Winding-number evaluations (one per empty cell of the coarsest level that has no
     /// occupied descendant).
     pub winding_queries: usize,
+    /// Finest cells holding vertices of two or more parts of a mesh that are not connected
+    /// (sharing no vertex position): such parts are glued there, up to the finest cell size.
+    pub glued_cells: usize,
     /// Seconds spent.
     pub seconds: f64,
 }
@@ -136,6 +139,7 @@ pub struct Occupancy<const D: usize> {
     inside: Inside,
     /// The triangles seen so far (local frame), for winding numbers.
     winding: Option<Winding>,
+    glued: usize,
     start: Instant,
 }
 
@@ -150,6 +154,7 @@ impl<const D: usize> Occupancy<D> {
             state: vec![OUT; dims.iter().product::<i64>() as usize],
             inside: params.inside,
             winding: None,
+            glued: 0,
             start: Instant::now(),
         })
     }
@@ -187,6 +192,7 @@ impl<const D: usize> Occupancy<D> {
             for idx in triangle_cells(&self.grid, points, triangles)? {
                 self.state[idx] = OCCUPIED;
             }
+            self.glued = self.glued_cells(points, triangles);
             if matches!(self.inside, Inside::Auto | Inside::Winding) {
                 let local: Vec<Vect<3>> = points
                     .iter()
@@ -198,6 +204,46 @@ impl<const D: usize> Occupancy<D> {
         Ok(())
     }
 
+    /// Finest cells holding vertices of parts of the mesh that are not connected. Parts are the
+    /// connected components of triangles over vertex positions (an unwelded soup of a closed
+    /// surface is one part); vertices in no triangle are parts of their own.
+    fn glued_cells(&self, points: &[Vect<D>], triangles: &[[u32; 3]]) -> usize {
+        let mut parent: Vec<u32> = (0..points.len() as u32).collect();
+        fn root(parent: &mut [u32], mut i: u32) -> u32 {
+            while parent[i as usize] != i {
+                parent[i as usize] = parent[parent[i as usize] as usize];
+                i = parent[i as usize];
+            }
+            i
+        }
+        let union = |parent: &mut Vec<u32>, a: u32, b: u32| {
+            let (ra, rb) = (root(parent, a), root(parent, b));
+            parent[ra.max(rb) as usize] = ra.min(rb);
+        };
+        let mut first_at = std::collections::HashMap::new();
+        for (i, p) in points.iter().enumerate() {
+            let key: [u64; D] = std::array::from_fn(|a| p[a].to_bits());
+            let j = *first_at.entry(key).or_insert(i as u32);
+            union(&mut parent, i as u32, j);
+        }
+        for t in triangles {
+            union(&mut parent, t[0], t[1]);
+            union(&mut parent, t[1], t[2]);
+        }
+        let mut part_of_cell = std::collections::HashMap::new();
+        let mut glued = std::collections::HashSet::new();
+        for (i, p) in points.iter().enumerate() {
+            let Some(cell) = self.finest_index(p) else {
+                continue;
+            };
+            let part = root(&mut parent, i as u32);
+            if *part_of_cell.entry(cell).or_insert(part) != part {
+                glued.insert(cell);
+            }
+        }
+        glued.len()
+    }
+
     /// Classifies the empty cells and emits the leaves of the adaptive complex.
     pub fn finish(self) -> (CellComplex<D>, BuildInfo) {
         let Self {
@@ -206,6 +252,7 @@ impl<const D: usize> Occupancy<D> {
             mut state,
             inside,
             winding,
+            glued,
             start,
         } = self;
         let occupied = state.iter().filter(|&&s| s == OCCUPIED).count();
@@ -249,6 +296,7 @@ impl<const D: usize> Occupancy<D> {
             interior_cells,
             inside,
             winding_queries,
+            glued_cells: glued,
             seconds: start.elapsed().as_secs_f64(),
         };
         (complex, info)
