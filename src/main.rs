@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rigidcells::Error;
-use rigidcells::cells::{BuildParams, Inside};
+use rigidcells::cells::{BuildParams, Inside, write_cells_ply};
 use rigidcells::field::{SavedField, Transfer};
 use rigidcells::io::{LasHeader, Source, refuse_overwrite};
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
@@ -48,6 +48,20 @@ enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// Export the cell complex of a file as a PLY of boxes (per-cell level, kind, role, strain
+    /// and color); with `--edit`, solved and drawn in the solved pose, colored by strain.
+    Cells {
+        /// Input file.
+        input: PathBuf,
+        /// Output PLY file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Edit spec (TOML) to solve before exporting.
+        #[arg(long)]
+        edit: Option<PathBuf>,
+        #[command(flatten)]
+        cells: CellArgs,
+    },
     /// Describe a file: format, version, counts, attributes, bounds, CRS.
     Info {
         /// Input file.
@@ -74,25 +88,14 @@ struct DeformArgs {
     /// Edit spec (TOML): fixed regions, handles, pins, targets, stiffness.
     #[arg(long)]
     edit: PathBuf,
-    /// Edge length of the finest cells, in input units [default: longest extent / 32].
-    #[arg(long)]
-    cell_size: Option<f64>,
-    /// Octree levels above the finest cells [default: enough to span the input].
-    #[arg(long)]
-    max_level: Option<u8>,
+    #[command(flatten)]
+    cells: CellArgs,
     /// Transfer of the cells' motions to the samples.
     #[arg(long, value_enum, default_value_t = TransferArg::Rbf)]
     transfer: TransferArg,
     /// Split cells whose strain exceeds this threshold, and solve again.
     #[arg(long)]
     refine_strain: Option<f64>,
-    /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.
-    #[arg(long)]
-    shell: bool,
-    /// Inside classification of empty cells: winding numbers for meshes and soups, exterior
-    /// flood fill for point clouds (auto), or as named.
-    #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
-    inside: InsideArg,
     /// Also write the solved field to this file, for `rigidcells apply`.
     #[arg(long)]
     save_field: Option<PathBuf>,
@@ -102,6 +105,39 @@ struct DeformArgs {
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// How the cell complex is built.
+#[derive(clap::Args)]
+struct CellArgs {
+    /// Edge length of the finest cells, in input units [default: longest extent / 32].
+    #[arg(long)]
+    cell_size: Option<f64>,
+    /// Octree levels above the finest cells [default: enough to span the input].
+    #[arg(long)]
+    max_level: Option<u8>,
+    /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.
+    #[arg(long)]
+    shell: bool,
+    /// Inside classification of empty cells: winding numbers for meshes and soups, exterior
+    /// flood fill for point clouds (auto), or as named.
+    #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
+    inside: InsideArg,
+}
+
+impl CellArgs {
+    fn params(&self) -> BuildParams {
+        BuildParams {
+            cell_size: self.cell_size,
+            max_level: self.max_level,
+            inside: match (self.shell, self.inside) {
+                (true, _) | (_, InsideArg::None) => Inside::None,
+                (_, InsideArg::Auto) => Inside::Auto,
+                (_, InsideArg::Winding) => Inside::Winding,
+                (_, InsideArg::Flood) => Inside::Flood,
+            },
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -138,6 +174,12 @@ fn main() -> ExitCode {
             quiet,
         } => run_apply(&field, &input, &output, transfer.into(), quiet),
         Command::Info { input } => run_info(&input),
+        Command::Cells {
+            input,
+            output,
+            edit,
+            cells,
+        } => run_cells(&input, &output, edit.as_deref(), &cells),
         Command::Demo { out, quiet } => run_demo(&out, quiet),
     };
     match result {
@@ -169,19 +211,56 @@ fn exit_code(e: &anyhow::Error) -> u8 {
     }
 }
 
+fn run_cells(
+    input: &Path,
+    output: &Path,
+    edit: Option<&Path>,
+    cells: &CellArgs,
+) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    let ply = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    if !ply {
+        return Err(Error::Param(format!(
+            "{}: the cells are written as .ply",
+            output.display()
+        ))
+        .into());
+    }
+    let spec = edit.map(read_spec::<3>).transpose()?;
+    let params = DeformParams {
+        build: cells.params(),
+        ..Default::default()
+    };
+    let (complex, info, solution, warnings) = pipeline::file_cells(
+        input,
+        spec.as_ref(),
+        &params,
+        CHUNK,
+        &rigidcells::progress::Silent,
+    )?;
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    write_cells_ply(output, &complex, solution.as_ref())?;
+    let shown = solution.as_ref().map_or(&complex, |s| &s.complex);
+    println!(
+        "{} -> {}: {} cells ({} boundary, {} interior), finest cell {}",
+        input.display(),
+        output.display(),
+        shown.len(),
+        info.boundary_cells,
+        info.interior_cells,
+        shown.grid.finest_size()
+    );
+    Ok(())
+}
+
 fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     refuse_overwrite(&args.input, &args.output)?;
     let params = DeformParams {
-        build: BuildParams {
-            cell_size: args.cell_size,
-            max_level: args.max_level,
-            inside: match (args.shell, args.inside) {
-                (true, _) | (_, InsideArg::None) => Inside::None,
-                (_, InsideArg::Auto) => Inside::Auto,
-                (_, InsideArg::Winding) => Inside::Winding,
-                (_, InsideArg::Flood) => Inside::Flood,
-            },
-        },
+        build: args.cells.params(),
         solve: SolveParams {
             refine_strain: args.refine_strain,
             ..Default::default()

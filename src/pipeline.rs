@@ -132,35 +132,14 @@ pub fn deform_file(
         samples: source.len(),
         ..Default::default()
     };
-    let (lo, hi) = match source.bounds_hint() {
-        Some(b) => b,
-        None => scan_bounds(source.as_mut(), chunk)?,
-    };
-    let mut pass = first_pass(
+    let (complex, build_info, selections) = first_pass_cells(
         source.as_mut(),
         spec,
         &params.build,
-        (lo, hi),
         chunk,
+        &mut info.notes,
         observer,
     )?;
-    if pass.outside > 0 {
-        info.notes.push(format!(
-            "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
-            pass.outside
-        ));
-        let b = pass.bounds;
-        pass = first_pass(source.as_mut(), spec, &params.build, b, chunk, observer)?;
-    }
-    let FirstPass {
-        mut occupancy,
-        selections,
-        positions,
-        ..
-    } = pass;
-    occupancy.add_triangles(&positions, source.triangles())?;
-    drop(positions);
-    let (complex, build_info) = occupancy.finish();
     info.seconds_read = t0.elapsed().as_secs_f64();
     let constraints = solve::resolve_selected(&complex, spec, &selections)?;
     let warnings = build_warnings(&build_info, &complex, &constraints.warnings);
@@ -217,6 +196,72 @@ pub fn apply_file(
         seconds_write: t.elapsed().as_secs_f64(),
         ..Default::default()
     })
+}
+
+/// Pass 1 of [`deform_file`]: the cell complex of `source` (rerunning the pass with the
+/// samples' own bounds when they overflow the header's) and what the spec's regions select.
+fn first_pass_cells(
+    source: &mut dyn Source,
+    spec: &EditSpec<3>,
+    build: &BuildParams,
+    chunk: usize,
+    notes: &mut Vec<String>,
+    observer: &dyn Observer,
+) -> Result<(CellComplex<3>, BuildInfo, Selections<3>)> {
+    let (lo, hi) = match source.bounds_hint() {
+        Some(b) => b,
+        None => scan_bounds(source, chunk)?,
+    };
+    let mut pass = first_pass(source, spec, build, (lo, hi), chunk, observer)?;
+    if pass.outside > 0 {
+        notes.push(format!(
+            "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
+            pass.outside
+        ));
+        let b = pass.bounds;
+        pass = first_pass(source, spec, build, b, chunk, observer)?;
+    }
+    let FirstPass {
+        mut occupancy,
+        selections,
+        positions,
+        ..
+    } = pass;
+    occupancy.add_triangles(&positions, source.triangles())?;
+    drop(positions);
+    let (complex, build_info) = occupancy.finish();
+    Ok((complex, build_info, selections))
+}
+
+/// The cell complex of the file `input` (pass 1 of [`deform_file`]) and, with a `spec`, its
+/// solution: for inspecting the cells (`rigidcells cells`).
+pub fn file_cells(
+    input: &Path,
+    spec: Option<&EditSpec<3>>,
+    params: &DeformParams,
+    chunk: usize,
+    observer: &dyn Observer,
+) -> Result<(CellComplex<3>, BuildInfo, Option<Solution<3>>, Vec<String>)> {
+    let mut source = io::open(input)?;
+    let empty = EditSpec::default();
+    let mut notes = Vec::new();
+    let (complex, info, selections) = first_pass_cells(
+        source.as_mut(),
+        spec.unwrap_or(&empty),
+        &params.build,
+        chunk,
+        &mut notes,
+        observer,
+    )?;
+    let mut warnings = build_warnings(&info, &complex, &[]);
+    warnings.extend(notes);
+    let Some(spec) = spec else {
+        return Ok((complex, info, None, warnings));
+    };
+    let constraints = solve::resolve_selected(&complex, spec, &selections)?;
+    warnings.extend(constraints.warnings.iter().cloned());
+    let solution = solve::solve(complex.clone(), constraints, &params.solve, observer)?;
+    Ok((complex, info, Some(solution), warnings))
 }
 
 struct FirstPass {

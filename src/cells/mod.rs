@@ -17,10 +17,12 @@
 
 mod adjacency;
 mod build;
+mod export;
 mod tri_box;
 mod winding;
 
 pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, classify_inside};
+pub use export::write_cells_ply;
 pub use tri_box::triangle_box_overlap;
 pub use winding::Winding;
 

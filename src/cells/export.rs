@@ -1,0 +1,106 @@
+//! The cell complex as a PLY file of boxes, for inspection in any mesh viewer.
+//!
+//! Every cell is 8 vertices and 6 quads, in world coordinates (double). Faces carry the cell's
+//! properties: `level`, `kind` (0 boundary, 1 interior), `role` (0 free, 1 fixed, 2 handle,
+//! 3 pin, 4 rest), `strain` and a color: after a solve, the boxes are drawn in their solved pose
+//! (each cell moved by its own rigid motion, as in the paper's Fig. 5) and colored blue → red by
+//! strain relative to the largest; without one, boundary cells are orange and interior cells
+//! blue-gray.
+
+use std::io::Write;
+use std::path::Path;
+
+use super::{CellComplex, CellKind};
+use crate::error::Result;
+use crate::io::write_atomic;
+use crate::rigid::{Motion, Vect};
+use crate::solve::{Role, Solution, cell_strain};
+
+/// Writes `complex` (or, when given, the solution's complex in its solved pose) to `path` as a
+/// binary little-endian PLY.
+pub fn write_cells_ply(
+    path: &Path,
+    complex: &CellComplex<3>,
+    solution: Option<&Solution<3>>,
+) -> Result<()> {
+    let complex = solution.map_or(complex, |s| &s.complex);
+    let strain = solution.map(|s| cell_strain(&s.complex, &s.motions));
+    let top = strain
+        .as_ref()
+        .map_or(0.0, |s| s.iter().cloned().fold(0.0, f64::max));
+    let n = complex.len();
+    let mut out = Vec::with_capacity(n * (8 * 24 + 6 * 28) + 512);
+    let _ = write!(
+        out,
+        "ply\nformat binary_little_endian 1.0\ncomment rigidcells cell complex: {n} cells\n\
+         element vertex {}\nproperty double x\nproperty double y\nproperty double z\n\
+         element face {}\nproperty list uchar int vertex_indices\nproperty uchar level\n\
+         property uchar kind\nproperty uchar role\nproperty float strain\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+        8 * n,
+        6 * n
+    );
+    let origin = complex.grid.origin;
+    for (i, cell) in complex.cells.iter().enumerate() {
+        let motion = solution.map_or(Motion::rest(&cell.center), |s| s.motions[i]);
+        for corner in 0..8 {
+            let offset = Vect::<3>::from_fn(|a, _| {
+                if corner >> a & 1 == 1 {
+                    cell.half
+                } else {
+                    -cell.half
+                }
+            });
+            let p = motion.apply(&cell.center, &(cell.center + offset)) + origin;
+            for v in p.iter() {
+                out.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    // Quads of the box, outward, by corner bits (x = 1, y = 2, z = 4).
+    const QUADS: [[u32; 4]; 6] = [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ];
+    for (i, cell) in complex.cells.iter().enumerate() {
+        let role = solution.map_or(0u8, |s| match s.constraints.roles[i] {
+            Role::Free => 0,
+            Role::Fixed => 1,
+            Role::Handle(_) => 2,
+            Role::Pin(_) => 3,
+            Role::Rest => 4,
+        });
+        let s = strain.as_ref().map_or(0.0, |s| s[i]);
+        let color = match (&strain, cell.kind) {
+            (Some(_), _) => {
+                let t = if top > 0.0 {
+                    (s / top).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                [
+                    (255.0 * t) as u8,
+                    (80.0 * (1.0 - t)) as u8,
+                    (255.0 * (1.0 - t)) as u8,
+                ]
+            }
+            (None, CellKind::Boundary) => [240, 150, 40],
+            (None, CellKind::Interior) => [110, 130, 170],
+        };
+        let kind = u8::from(cell.kind == CellKind::Interior);
+        for quad in QUADS {
+            out.push(4);
+            for c in quad {
+                out.extend_from_slice(&(8 * i as u32 + c).to_le_bytes());
+            }
+            out.extend_from_slice(&[cell.key.level, kind, role]);
+            out.extend_from_slice(&(s as f32).to_le_bytes());
+            out.extend_from_slice(&color);
+        }
+    }
+    write_atomic(path, &out)
+}
