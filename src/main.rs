@@ -113,6 +113,9 @@ struct CellArgs {
     /// Edge length of the finest cells, in input units [default: longest extent / 32].
     #[arg(long)]
     cell_size: Option<f64>,
+    /// About this many cells: picks the finest cell size (overrides --cell-size).
+    #[arg(long)]
+    cells: Option<usize>,
     /// Octree levels above the finest cells [default: enough to span the input].
     #[arg(long)]
     max_level: Option<u8>,
@@ -129,6 +132,7 @@ impl CellArgs {
     fn params(&self) -> BuildParams {
         BuildParams {
             cell_size: self.cell_size,
+            target_cells: self.cells,
             max_level: self.max_level,
             inside: match (self.shell, self.inside) {
                 (true, _) | (_, InsideArg::None) => Inside::None,

@@ -212,6 +212,18 @@ fn first_pass_cells(
         Some(b) => b,
         None => scan_bounds(source, chunk)?,
     };
+    let sized;
+    let build = match build.target_cells {
+        Some(n) => {
+            sized = BuildParams {
+                cell_size: Some(proxy_cell_size(source, build, (lo, hi), n, chunk)?),
+                target_cells: None,
+                ..*build
+            };
+            &sized
+        }
+        None => build,
+    };
     let mut pass = first_pass(source, spec, build, (lo, hi), chunk, observer)?;
     if pass.outside > 0 {
         notes.push(format!(
@@ -231,6 +243,37 @@ fn first_pass_cells(
     drop(positions);
     let (complex, build_info) = occupancy.finish();
     Ok((complex, build_info, selections))
+}
+
+/// Voxels per longest extent of the decimated proxy that [`proxy_cell_size`] bisects on.
+const PROXY_RESOLUTION: f64 = 1024.0;
+
+/// The finest cell size giving about `target` cells for `source`, found on a proxy gathered in
+/// one extra pass: meshes keep their vertices (their triangles need them), point clouds are
+/// decimated to one sample per occupied voxel of 1/1024 of the longest extent.
+fn proxy_cell_size(
+    source: &mut dyn Source,
+    build: &BuildParams,
+    (lo, hi): Bounds,
+    target: usize,
+    chunk_len: usize,
+) -> Result<f64> {
+    source.rewind()?;
+    let voxel = (hi - lo).max().max(f64::MIN_POSITIVE) / PROXY_RESOLUTION;
+    let keep_all = !source.triangles().is_empty();
+    let mut proxy = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    let mut chunk = Chunk::default();
+    while source.read(chunk_len, &mut chunk)? > 0 {
+        check_finite(source.path(), &chunk)?;
+        for p in &chunk.positions {
+            let key = ((p - lo) / voxel).map(|v| v.floor() as i64);
+            if keep_all || seen.insert((key[0], key[1], key[2])) {
+                proxy.push(*p);
+            }
+        }
+    }
+    crate::cells::cell_size_for(&proxy, source.triangles(), build, target)
 }
 
 /// The cell complex of the file `input` (pass 1 of [`deform_file`]) and, with a `spec`, its

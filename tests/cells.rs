@@ -201,3 +201,35 @@ fn cells_export_writes_closed_boxes() {
         "rigid boxes keep their volume: {volumes:?}"
     );
 }
+
+/// `--cells N` picks the finest cell size that gives about N cells, for a mesh (bisection on its
+/// vertices and triangles) and for a scan (on a decimated proxy).
+#[test]
+fn cells_option_gives_about_the_asked_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.las");
+    data_gen::write_las_terrain(&scan, 200_000, false).unwrap();
+    for (input, n) in [
+        (shared("meshes/dragon_11k_binary.ply"), 1200usize),
+        (shared("meshes/dragon_11k_binary.ply"), 5500),
+        (scan, 3000),
+    ] {
+        let output = dir.path().join("cells.ply");
+        let want = n.to_string();
+        let r = common::run(&[
+            "cells",
+            input.to_str().unwrap(),
+            "-o",
+            output.to_str().unwrap(),
+            "--cells",
+            &want,
+        ]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let got = Document::read(&output).unwrap().positions().len() / 8;
+        assert!(
+            (got as f64 / n as f64 - 1.0).abs() < 0.1,
+            "{}: asked {n}, got {got}",
+            input.display()
+        );
+    }
+}

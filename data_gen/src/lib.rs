@@ -285,7 +285,8 @@ pub fn write_ply_terrain(path: &Path, n: u64) -> std::io::Result<()> {
         for v in [x + 500_000.0, y + 5_000_000.0, z] {
             out.write_all(&v.to_le_bytes())?;
         }
-        out.write_all(&[class * 40, (z * 3.0) as u8, 255 - class * 40, class])?;
+        let c = (class % 6) * 40;
+        out.write_all(&[c, (z * 3.0) as u8, 255 - c, class])?;
         out.write_all(&((z * 100.0) as f32).to_le_bytes())?;
     }
     out.flush()
@@ -336,7 +337,7 @@ pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), la
             bytes.push((k % 251) as u8); // user data
             bytes.extend_from_slice(&((k / 100_000) as u16).to_le_bytes()); // point source
             bytes.extend_from_slice(&(k as f64 * 1e-5).to_le_bytes()); // GPS time
-            let c = (class as u16) * 4000;
+            let c = (class as u16 % 16) * 4000;
             for v in [c, (z * 300.0) as u16, 65535 - c] {
                 bytes.extend_from_slice(&v.to_le_bytes());
             }

@@ -54,6 +54,9 @@ pub struct BuildParams {
     /// Inside classification of empty cells. Default: winding numbers for meshes, flood fill
     /// for point clouds.
     pub inside: Inside,
+    /// About this many cells: the finest cell size is found by bisection ([`cell_size_for`]),
+    /// overriding `cell_size`.
+    pub target_cells: Option<usize>,
 }
 
 impl Default for BuildParams {
@@ -62,6 +65,7 @@ impl Default for BuildParams {
             cell_size: None,
             max_level: None,
             inside: Inside::Auto,
+            target_cells: None,
         }
     }
 }
@@ -103,10 +107,51 @@ pub fn build<const D: usize>(
     params: &BuildParams,
 ) -> Result<(CellComplex<D>, BuildInfo)> {
     let (lo, hi) = bounds(points)?;
+    let sized;
+    let params = match params.target_cells {
+        Some(n) => {
+            sized = BuildParams {
+                cell_size: Some(cell_size_for(points, triangles, params, n)?),
+                target_cells: None,
+                ..*params
+            };
+            &sized
+        }
+        None => params,
+    };
     let mut occupancy = Occupancy::new(&lo, &hi, params)?;
     occupancy.add_points(points);
     occupancy.add_triangles(points, triangles)?;
     Ok(occupancy.finish())
+}
+
+/// The finest cell size for which the complex of `points` (and `triangles`) has about `target`
+/// cells: 20 steps of geometric bisection between 1/4096 and 1/2 of the longest extent (cell
+/// counts grow as the size shrinks). Streaming callers pass a decimated proxy of the samples.
+pub fn cell_size_for<const D: usize>(
+    points: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    params: &BuildParams,
+    target: usize,
+) -> Result<f64> {
+    let (lo, hi) = bounds(points)?;
+    let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
+    let (mut small, mut large) = (longest / 4096.0, longest / 2.0);
+    for _ in 0..20 {
+        let mid = (small * large).sqrt();
+        let at = BuildParams {
+            cell_size: Some(mid),
+            target_cells: None,
+            ..*params
+        };
+        let too_many = match build(points, triangles, &at) {
+            Ok((complex, _)) => complex.len() > target,
+            Err(Error::GridTooLarge { .. }) => true,
+            Err(e) => return Err(e),
+        };
+        if too_many { small = mid } else { large = mid }
+    }
+    Ok((small * large).sqrt())
 }
 
 /// The bounding box of `points`; an error for no points or a coordinate that is not finite.

@@ -21,7 +21,9 @@ mod export;
 mod tri_box;
 mod winding;
 
-pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, classify_inside};
+pub use build::{
+    BuildInfo, BuildParams, Inside, Occupancy, bounds, build, cell_size_for, classify_inside,
+};
 pub use export::write_cells_ply;
 pub use tri_box::triangle_box_overlap;
 pub use winding::Winding;

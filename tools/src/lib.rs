@@ -29,20 +29,9 @@ pub fn build_at(points: &[Vect<3>], tris: &[[u32; 3]], size: f64) -> Result<Cell
     Ok(build(points, tris, &params)?.0)
 }
 
-/// The finest cell size that gives about `target` cells (bisection on the size).
-pub fn cell_size_for(
-    points: &[Vect<3>],
-    tris: &[[u32; 3]],
-    extent: f64,
-    target: usize,
-) -> Result<f64, Error> {
-    let (mut a, mut b) = (extent / 400.0, extent / 4.0);
-    for _ in 0..18 {
-        let mid = (a * b).sqrt();
-        let c = build_at(points, tris, mid)?;
-        if c.len() > target { a = mid } else { b = mid }
-    }
-    Ok((a * b).sqrt())
+/// The finest cell size that gives about `target` cells (the library's bisection).
+pub fn cell_size_for(points: &[Vect<3>], tris: &[[u32; 3]], target: usize) -> Result<f64, Error> {
+    rigidcells::cells::cell_size_for(points, tris, &BuildParams::default(), target)
 }
 
 /// `n` random points on the triangles (uniform per triangle, triangles chosen uniformly).

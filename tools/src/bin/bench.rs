@@ -71,7 +71,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for target in [1200usize, 5500] {
-        let size = cell_size_for(points, tris, ext.max(), target)?;
+        let size = cell_size_for(points, tris, target)?;
         let t = Instant::now();
         let complex = build_at(points, tris, size)?;
         let t_build = t.elapsed().as_secs_f64();

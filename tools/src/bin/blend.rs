@@ -26,10 +26,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = model_arg();
     let doc = Document::read(&model)?;
     let (points, tris) = (doc.positions(), doc.triangles());
-    let extent = points
-        .iter()
-        .fold((points[0], points[0]), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
-    let extent = (extent.1 - extent.0).max();
     let samples = surface_samples(points, tris, SAMPLES, 5);
     println!(
         "model {} ({} vertices), {SAMPLES} surface samples, {} threads",
@@ -44,7 +40,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for target in [1200usize, 5500] {
-        let size = cell_size_for(points, tris, extent, target)?;
+        let size = cell_size_for(points, tris, target)?;
         let complex = build_at(points, tris, size)?;
         let field = random_field(&complex);
         let local: Vec<[f64; 3]> = samples.iter().map(|p| (p - field.origin).into()).collect();
