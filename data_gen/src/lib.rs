@@ -143,6 +143,111 @@ pub fn soup(size: [f64; 3], per_unit: f64) -> Mesh {
     mesh
 }
 
+/// `mesh` with every triangle split into 4 at its edge midpoints (shared edges share their
+/// midpoint, so a welded mesh stays welded).
+pub fn subdivide(mesh: &Mesh) -> Mesh {
+    let mut out = Mesh {
+        vertices: mesh.vertices.clone(),
+        triangles: Vec::with_capacity(4 * mesh.triangles.len()),
+    };
+    let mut midpoints = std::collections::HashMap::new();
+    let mut mid = |a: u32, b: u32, out: &mut Mesh| -> u32 {
+        *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+            let (p, q) = (out.vertices[a as usize], out.vertices[b as usize]);
+            out.vertices
+                .push(std::array::from_fn(|k| 0.5 * (p[k] + q[k])));
+            out.vertices.len() as u32 - 1
+        })
+    };
+    for &[a, b, c] in &mesh.triangles {
+        let (ab, bc, ca) = (
+            mid(a, b, &mut out),
+            mid(b, c, &mut out),
+            mid(c, a, &mut out),
+        );
+        out.triangles
+            .extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
+    }
+    out
+}
+
+/// `mesh` grown to exactly `vertices` vertices by splitting its first triangles into 3 at their
+/// centroids (one new vertex each); unchanged if it already has as many.
+pub fn split_to(mesh: &Mesh, vertices: usize) -> Mesh {
+    let mut out = mesh.clone();
+    let extra = vertices
+        .saturating_sub(mesh.vertices.len())
+        .min(mesh.triangles.len());
+    out.triangles.clear();
+    for (k, &[a, b, c]) in mesh.triangles.iter().enumerate() {
+        if k < extra {
+            let [p, q, r] = [a, b, c].map(|i| mesh.vertices[i as usize]);
+            out.vertices
+                .push(std::array::from_fn(|j| (p[j] + q[j] + r[j]) / 3.0));
+            let m = out.vertices.len() as u32 - 1;
+            out.triangles.extend([[a, b, m], [b, c, m], [c, a, m]]);
+        } else {
+            out.triangles.push([a, b, c]);
+        }
+    }
+    out
+}
+
+/// `mesh` decimated by vertex clustering to about `vertices` vertices: vertices in one cell of
+/// a regular grid merge into their mean, triangles that collapse are dropped. The grid is
+/// bisected to the count.
+pub fn decimate(mesh: &Mesh, vertices: usize) -> Mesh {
+    let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
+    for v in &mesh.vertices {
+        for k in 0..3 {
+            lo[k] = lo[k].min(v[k]);
+            hi[k] = hi[k].max(v[k]);
+        }
+    }
+    let longest = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    let cluster = |cell: f64| -> Mesh {
+        let mut index = std::collections::HashMap::new();
+        let mut sums: Vec<([f64; 3], f64)> = Vec::new();
+        let map: Vec<u32> = mesh
+            .vertices
+            .iter()
+            .map(|v| {
+                let key: [i64; 3] = std::array::from_fn(|k| ((v[k] - lo[k]) / cell) as i64);
+                let i = *index.entry(key).or_insert_with(|| {
+                    sums.push(([0.0; 3], 0.0));
+                    sums.len() as u32 - 1
+                });
+                let s = &mut sums[i as usize];
+                for (sum, x) in s.0.iter_mut().zip(v) {
+                    *sum += x;
+                }
+                s.1 += 1.0;
+                i
+            })
+            .collect();
+        let triangles = mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| map[i as usize]))
+            .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+            .collect();
+        Mesh {
+            vertices: sums.iter().map(|(s, n)| s.map(|v| v / n)).collect(),
+            triangles,
+        }
+    };
+    let (mut small, mut large) = (longest / 1e5, longest);
+    for _ in 0..30 {
+        let mid = (small * large).sqrt();
+        if cluster(mid).vertices.len() > vertices {
+            small = mid
+        } else {
+            large = mid
+        }
+    }
+    cluster(large)
+}
+
 /// A tree as in the paper's Fig. 9: a closed trunk (a welded bar of 0.4 × 0.4 × 4 along z,
 /// from the origin) and `leaves` disconnected triangles of edge about 0.15, every one with its
 /// own vertices, scattered in a ball of radius 1.5 around the trunk's top (reproducible).

@@ -417,7 +417,7 @@ fn triangle_cells<const D: usize>(
     }
     let cells: Vec<usize> = triangles
         .par_iter()
-        .flat_map_iter(|t| {
+        .fold(Vec::new, |mut out, t| {
             let tri: [[f64; 3]; 3] = t.map(|v| {
                 let p = points[v as usize] - grid.origin;
                 std::array::from_fn(|a| if a < D { p[a] } else { 0.0 })
@@ -428,10 +428,17 @@ fn triangle_cells<const D: usize>(
                 let (mn, mx) = tri
                     .iter()
                     .fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p[a]), h.max(p[a])));
-                lo[a] = (((mn - grid.lower[a]) / size).floor() as i64 - 1).max(0);
-                hi[a] = (((mx - grid.lower[a]) / size).floor() as i64 + 1).min(dims[a] - 1);
+                // Closed cells touching the triangle's box, i·s ≤ mx and (i + 1)·s ≥ mn, with
+                // a margin against rounding (the exact test below decides).
+                lo[a] = (((mn - grid.lower[a]) / size - 1e-9).ceil() as i64 - 1).max(0);
+                hi[a] = (((mx - grid.lower[a]) / size + 1e-9).floor() as i64).min(dims[a] - 1);
             }
-            let mut out = Vec::new();
+            if lo == hi {
+                // The triangle's box lies in this one cell (a small triangle).
+                let coord: [i64; D] = std::array::from_fn(|a| lo[a]);
+                out.push(linear(&coord, &dims));
+                return out;
+            }
             for x in lo[0]..=hi[0] {
                 for y in lo[1]..=hi[1] {
                     for z in lo[2]..=hi[2] {
@@ -450,7 +457,10 @@ fn triangle_cells<const D: usize>(
             }
             out
         })
-        .collect();
+        .reduce(Vec::new, |mut a, b| {
+            a.extend(b);
+            a
+        });
     Ok(cells)
 }
 

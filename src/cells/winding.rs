@@ -14,10 +14,13 @@
 //! sphere), far from the ½ threshold for points more than a cell away from the surface, which
 //! is where [`super::build`] asks.
 //!
-//! The BVH is our own (median split on the longest centroid axis, leaves of up to 8 triangles,
-//! f64): the tree-code needs its own per-node data and f64 keeps georeferenced local frames
+//! The BVH is our own (triangles sorted once along a Morton curve and split at the median
+//! index, leaves of up to 8 triangles, node data gathered bottom-up from the children, large
+//! subtrees built in parallel, f64): the tree-code needs its own per-node data and f64 keeps georeferenced local frames
 //! exact, which `obvhs` (f32) would not; triangle–cell overlap needs no BVH (each triangle visits
 //! the cells of its own bounding box).
+
+use rayon::prelude::*;
 
 use crate::rigid::Vect;
 
@@ -36,8 +39,8 @@ struct Node {
     center: V3,
     /// Radius of the ball around `center` holding the node's triangles.
     radius: f64,
-    /// Leaf: triangles `start..start + count`; inner: children `start` and `start + 1`
-    /// (`count == 0`).
+    /// Leaf: triangles `start..start + count`; inner (`count == 0`): the left child is the next
+    /// node, the right child is node `start`.
     start: u32,
     count: u32,
 }
@@ -53,21 +56,50 @@ pub struct Winding {
 impl Winding {
     /// Builds the tree over `triangles` (indices into `points`).
     pub fn new(points: &[V3], triangles: &[[u32; 3]]) -> Self {
-        let mut tris: Vec<[V3; 3]> = triangles
+        let tris: Vec<[V3; 3]> = triangles
             .iter()
             .map(|t| t.map(|i| points[i as usize]))
             .collect();
-        let mut nodes = vec![Node {
+        let items: Vec<Item> = tris
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let normal = (t[1] - t[0]).cross(&(t[2] - t[0])) * 0.5;
+                Item {
+                    centroid: (t[0] + t[1] + t[2]) / 3.0,
+                    normal,
+                    area: normal.norm(),
+                    index: i as u32,
+                }
+            })
+            .collect();
+        // Sorted once along a Morton curve of the centroids, so that every split is a median
+        // in index order and the tree needs no partitioning.
+        let (mut lo, mut hi) = (V3::repeat(f64::MAX), V3::repeat(f64::MIN));
+        for it in &items {
+            lo = lo.inf(&it.centroid);
+            hi = hi.sup(&it.centroid);
+        }
+        let scale = 1023.0 / (hi - lo).max().max(f64::MIN_POSITIVE);
+        let mut keyed: Vec<(u32, Item)> = items
+            .par_iter()
+            .map(|it| (morton(&((it.centroid - lo) * scale)), *it))
+            .collect();
+        keyed.par_sort_unstable_by_key(|k| k.0);
+        let items: Vec<Item> = keyed.into_iter().map(|k| k.1).collect();
+        let empty = Node {
             normal: V3::zeros(),
             center: V3::zeros(),
             radius: 0.0,
             start: 0,
             count: 0,
-        }];
-        if !tris.is_empty() {
-            let n = tris.len();
-            split(&mut tris, 0, n, 0, &mut nodes);
+        };
+        let mut nodes = vec![empty; node_count(items.len())];
+        if !items.is_empty() {
+            build_tree(&tris, &items, 0, &mut nodes);
+            link(&mut nodes, 0, items.len());
         }
+        let tris = items.iter().map(|it| tris[it.index as usize]).collect();
         Self { tris, nodes }
     }
 
@@ -96,8 +128,8 @@ impl Winding {
                     .map(|t| solid_angle(t, q))
                     .sum::<f64>();
             } else {
+                stack.push(i + 1);
                 stack.push(node.start);
-                stack.push(node.start + 1);
             }
         }
         sum / (4.0 * std::f64::consts::PI)
@@ -109,55 +141,113 @@ impl Winding {
     }
 }
 
-/// Builds the subtree over `tris[lo..hi]` into `nodes[at]`.
-fn split(tris: &mut [[V3; 3]], lo: usize, hi: usize, at: usize, nodes: &mut Vec<Node>) {
-    let part = &tris[lo..hi];
-    let (mut normal, mut weighted, mut area) = (V3::zeros(), V3::zeros(), 0.0);
-    for t in part {
-        let n = (t[1] - t[0]).cross(&(t[2] - t[0])) * 0.5;
-        let a = n.norm();
-        normal += n;
-        weighted += (t[0] + t[1] + t[2]) * (a / 3.0);
-        area += a;
-    }
-    let center = if area > 0.0 {
-        weighted / area
-    } else {
-        part.iter().map(|t| t[0]).sum::<V3>() / part.len() as f64
+/// A triangle while the tree is built.
+#[derive(Debug, Clone, Copy)]
+struct Item {
+    centroid: V3,
+    /// Area-weighted normal.
+    normal: V3,
+    area: f64,
+    index: u32,
+}
+
+/// The 30-bit Morton code of a point with coordinates in `0..1024`.
+fn morton(p: &V3) -> u32 {
+    let spread = |v: f64| {
+        let mut x = (v.clamp(0.0, 1023.0) as u32) & 0x3ff;
+        x = (x | (x << 16)) & 0x0300_00ff;
+        x = (x | (x << 8)) & 0x0300_f00f;
+        x = (x | (x << 4)) & 0x030c_30c3;
+        (x | (x << 2)) & 0x0924_9249
     };
-    let radius = part
-        .iter()
-        .flat_map(|t| t.iter())
-        .map(|p| (p - center).norm())
-        .fold(0.0, f64::max);
-    nodes[at] = Node {
-        normal,
+    spread(p.x) | (spread(p.y) << 1) | (spread(p.z) << 2)
+}
+
+/// Subtrees larger than this are built in parallel.
+const PARALLEL: usize = 4096;
+
+/// Nodes of the subtree over `n` triangles.
+fn node_count(n: usize) -> usize {
+    if n <= LEAF {
+        1
+    } else {
+        1 + node_count(n / 2) + node_count(n - n / 2)
+    }
+}
+
+/// Writes the subtree over `items` (whose first triangle has index `offset` in BVH order) into
+/// `nodes` (of [`node_count`] length), root first; returns the subtree's area. Splits are at the
+/// median index of the Morton-sorted items.
+fn build_tree(tris: &[[V3; 3]], items: &[Item], offset: usize, nodes: &mut [Node]) -> f64 {
+    let n = items.len();
+    if n <= LEAF {
+        let (mut normal, mut weighted, mut area) = (V3::zeros(), V3::zeros(), 0.0);
+        for it in items {
+            normal += it.normal;
+            weighted += it.centroid * it.area;
+            area += it.area;
+        }
+        let center = if area > 0.0 {
+            weighted / area
+        } else {
+            items.iter().map(|it| it.centroid).sum::<V3>() / n as f64
+        };
+        let radius = items
+            .iter()
+            .flat_map(|it| tris[it.index as usize].iter())
+            .map(|p| (p - center).norm())
+            .fold(0.0, f64::max);
+        nodes[0] = Node {
+            normal,
+            center,
+            radius,
+            start: offset as u32,
+            count: n as u32,
+        };
+        return area;
+    }
+    let mid = n / 2;
+    let (root, children) = nodes.split_first_mut().expect("a subtree has a root");
+    let (left, right) = children.split_at_mut(node_count(mid));
+    let (mut build_left, mut build_right) = (
+        || build_tree(tris, &items[..mid], offset, &mut *left),
+        || build_tree(tris, &items[mid..], offset + mid, &mut *right),
+    );
+    let (al, ar) = if n > PARALLEL {
+        rayon::join(build_left, build_right)
+    } else {
+        (build_left(), build_right())
+    };
+    // The parent from its children: normals add, the center is the area-weighted mean, the
+    // ball holds both children's balls.
+    let (nl, nr) = (&left[0], &right[0]);
+    let center = if al + ar > 0.0 {
+        (nl.center * al + nr.center * ar) / (al + ar)
+    } else {
+        (nl.center + nr.center) * 0.5
+    };
+    let radius =
+        ((nl.center - center).norm() + nl.radius).max((nr.center - center).norm() + nr.radius);
+    *root = Node {
+        normal: nl.normal + nr.normal,
         center,
         radius,
-        start: lo as u32,
-        count: (hi - lo) as u32,
+        start: 0,
+        count: 0,
     };
-    if hi - lo <= LEAF {
+    al + ar
+}
+
+/// Turns the right-child pointers of a tree written by [`build_tree`] into absolute indices:
+/// the right child of the inner node `i` over `n` triangles is `i + 1 + node_count(n / 2)`.
+fn link(nodes: &mut [Node], i: usize, n: usize) {
+    if n <= LEAF {
         return;
     }
-    let centroid = |t: &[V3; 3]| (t[0] + t[1] + t[2]) / 3.0;
-    let (mut cmin, mut cmax) = (V3::repeat(f64::MAX), V3::repeat(f64::MIN));
-    for t in part.iter() {
-        let c = centroid(t);
-        cmin = cmin.inf(&c);
-        cmax = cmax.sup(&c);
-    }
-    let axis = (cmax - cmin).imax();
-    let mid = (hi - lo) / 2;
-    tris[lo..hi]
-        .select_nth_unstable_by(mid, |a, b| centroid(a)[axis].total_cmp(&centroid(b)[axis]));
-    let first = nodes.len();
-    nodes.push(nodes[at].clone());
-    nodes.push(nodes[at].clone());
-    nodes[at].start = first as u32;
-    nodes[at].count = 0;
-    split(tris, lo, lo + mid, first, nodes);
-    split(tris, lo + mid, hi, first + 1, nodes);
+    let right = i + 1 + node_count(n / 2);
+    nodes[i].start = right as u32;
+    link(nodes, i + 1, n / 2);
+    link(nodes, right, n - n / 2);
 }
 
 /// The signed solid angle of triangle `t` seen from `q` (Van Oosterom–Strackee).
