@@ -233,3 +233,127 @@ fn cells_option_gives_about_the_asked_count() {
         );
     }
 }
+
+/// The dragon as a welded mesh, an unwelded soup and a point cloud sampled from its surface
+/// (its vertices plus 60k points uniform on its surface): interior cells agree (mesh and soup
+/// identically, points within one cell layer), and the same bend moves the vertices to within
+/// one cell size of each other (mesh and soup to rounding; the pivot is given, since its default,
+/// the centroid of the handle's samples, moves with the soup's duplicated vertices).
+#[test]
+fn mesh_soup_and_points_give_the_same_cells_and_bend() {
+    use rigidcells::pipeline::{DeformParams, deform};
+    use rigidcells::progress::Silent;
+    let (dragon, tris) = mesh("dragon_11k_binary.ply");
+    let (soup, soup_tris) = unweld(&dragon, &tris);
+    // Samples uniform by area (the dragon's flat base has few, large triangles).
+    let mut cloud = dragon.clone();
+    let mut rng = StdRng::seed_from_u64(7);
+    let mut cumulative = Vec::with_capacity(tris.len());
+    let mut total = 0.0;
+    for t in &tris {
+        let [a, b, c] = t.map(|i| dragon[i as usize]);
+        total += (b - a).cross(&(c - a)).norm();
+        cumulative.push(total);
+    }
+    for _ in 0..60_000 {
+        let pick = rng.random_range(0.0..total);
+        let k = cumulative
+            .partition_point(|&c| c < pick)
+            .min(tris.len() - 1);
+        let t = tris[k].map(|i| dragon[i as usize]);
+        let (mut u, mut v) = (rng.random::<f64>(), rng.random::<f64>());
+        if u + v > 1.0 {
+            (u, v) = (1.0 - u, 1.0 - v);
+        }
+        cloud.push(t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v);
+    }
+    let (lo, hi) = dragon
+        .iter()
+        .fold((dragon[0], dragon[0]), |(l, h), p| (l.inf(p), h.sup(p)));
+    let cell = (hi - lo).max() / 24.0;
+    let params = DeformParams {
+        build: BuildParams {
+            cell_size: Some(cell),
+            ..Default::default()
+        },
+        transfer: rigidcells::field::Transfer::Rbf,
+        ..Default::default()
+    };
+    let (m, _) = build(&dragon, &tris, &params.build).unwrap();
+    let (p, pi) = build(&cloud, &[], &params.build).unwrap();
+    assert_eq!(pi.inside, Inside::Flood);
+    // Every interior cell of one lies within one finest cell of the other's cells.
+    let covered = |a: &rigidcells::cells::CellComplex<3>, b: &rigidcells::cells::CellComplex<3>| {
+        let near = |x: Vect<3>| {
+            (0..27).any(|k| {
+                let d = Vect::<3>::new(
+                    (k % 3) as f64 - 1.0,
+                    (k / 3 % 3) as f64 - 1.0,
+                    (k / 9) as f64 - 1.0,
+                );
+                b.locate(&(x + d * cell)).is_some()
+            })
+        };
+        a.cells
+            .iter()
+            .filter(|c| c.kind == rigidcells::cells::CellKind::Interior)
+            .filter(|c| !near(c.center + a.grid.origin - b.grid.origin))
+            .count()
+    };
+    assert_eq!(
+        (covered(&m, &p), covered(&p, &m)),
+        (0, 0),
+        "interior cells not covered"
+    );
+    let volume =
+        |c: &rigidcells::cells::CellComplex<3>| c.cells.iter().map(|c| c.volume()).sum::<f64>();
+    let ratio = volume(&p) / volume(&m);
+    assert!(
+        (ratio - 1.0).abs() < 0.1,
+        "point cloud / mesh cell volume {ratio}"
+    );
+
+    let z = |f: f64| lo.z + f * (hi.z - lo.z);
+    let spec = rigidcells::spec::parse_spec::<3>(
+        &format!(
+            "[[fixed]]\nbox = {{ min = [-1e9, -1e9, -1e9], max = [1e9, 1e9, {}] }}\n\
+             [[handle]]\nbox = {{ min = [-1e9, -1e9, {}], max = [1e9, 1e9, 1e9] }}\n\
+             translate = [0, {}, 0]\nrotate = {{ axis = [1, 0, 0], degrees = 40 }}\n\
+             pivot = [{}, {}, {}]\n",
+            z(0.15),
+            z(0.85),
+            0.3 * (hi.z - lo.z),
+            0.5 * (lo.x + hi.x),
+            0.5 * (lo.y + hi.y),
+            z(0.9)
+        ),
+        std::path::Path::new("."),
+        std::path::Path::new("bend.toml"),
+    )
+    .unwrap();
+    let (a, _, _) = deform(&dragon, &tris, &spec, &params, &Silent).unwrap();
+    let (b, _, _) = deform(&soup, &soup_tris, &spec, &params, &Silent).unwrap();
+    let (c, _, _) = deform(&cloud, &[], &spec, &params, &Silent).unwrap();
+    let moved = a
+        .iter()
+        .zip(&dragon)
+        .map(|(q, p)| (q - p).norm())
+        .fold(0.0, f64::max);
+    assert!(moved > 2.0 * cell, "the bend moves the dragon ({moved})");
+    for (k, t) in tris.iter().enumerate() {
+        for (j, &i) in t.iter().enumerate() {
+            let d = (b[3 * k + j] - a[i as usize]).norm();
+            assert!(
+                d < 1e-9 * (hi - lo).max(),
+                "soup vertex {} off by {d}",
+                3 * k + j
+            );
+        }
+    }
+    let worst = a[..]
+        .iter()
+        .zip(&c[..dragon.len()])
+        .map(|(x, y)| (x - y).norm())
+        .fold(0.0, f64::max);
+    assert!(worst < cell, "points vs mesh: {worst} (cell {cell})");
+}
