@@ -20,6 +20,7 @@
 use std::time::Instant;
 
 use rayon::prelude::*;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 use super::winding::Winding;
 use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
@@ -243,7 +244,8 @@ impl<const D: usize> Occupancy<D> {
                     .iter()
                     .map(|p| Vect::<3>::from_fn(|a, _| p[a] - self.grid.origin[a]))
                     .collect();
-                self.winding = Some(Winding::new(&local, triangles));
+                let cluster = 0.25 * self.grid.finest_size();
+                self.winding = Some(Winding::decimated(&local, triangles, cluster));
             }
         }
         Ok(())
@@ -265,18 +267,22 @@ impl<const D: usize> Occupancy<D> {
             let (ra, rb) = (root(parent, a), root(parent, b));
             parent[ra.max(rb) as usize] = ra.min(rb);
         };
-        let mut first_at = std::collections::HashMap::new();
+        for t in triangles {
+            union(&mut parent, t[0], t[1]);
+            union(&mut parent, t[1], t[2]);
+        }
+        // A connected mesh (the common case) has nothing to glue.
+        if (0..points.len() as u32).all(|i| root(&mut parent, i) == 0) {
+            return 0;
+        }
+        let mut first_at = FxHashMap::default();
         for (i, p) in points.iter().enumerate() {
             let key: [u64; D] = std::array::from_fn(|a| p[a].to_bits());
             let j = *first_at.entry(key).or_insert(i as u32);
             union(&mut parent, i as u32, j);
         }
-        for t in triangles {
-            union(&mut parent, t[0], t[1]);
-            union(&mut parent, t[1], t[2]);
-        }
-        let mut part_of_cell = std::collections::HashMap::new();
-        let mut glued = std::collections::HashSet::new();
+        let mut part_of_cell = FxHashMap::default();
+        let mut glued = FxHashSet::default();
         for (i, p) in points.iter().enumerate() {
             let Some(cell) = self.finest_index(p) else {
                 continue;

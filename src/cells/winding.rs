@@ -21,6 +21,7 @@
 //! the cells of its own bounding box).
 
 use rayon::prelude::*;
+use rustc_hash::FxHashMap;
 
 use crate::rigid::Vect;
 
@@ -101,6 +102,35 @@ impl Winding {
         }
         let tris = items.iter().map(|it| tris[it.index as usize]).collect();
         Self { tris, nodes }
+    }
+
+    /// The tree over a proxy of the triangles decimated by vertex clustering: vertices in one
+    /// cell of a grid of edge `cluster` merge into the first of them, and triangles that
+    /// collapse are dropped. Each vertex moves by less than `cluster·√3`, so winding numbers at
+    /// points farther than that from the surface keep their side of ½ for a closed surface —
+    /// [`super::build`] asks at least half a finest cell away and clusters at a quarter of one.
+    pub fn decimated(points: &[V3], triangles: &[[u32; 3]], cluster: f64) -> Self {
+        let mut first: FxHashMap<[i64; 3], u32> = FxHashMap::default();
+        let map: Vec<u32> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                *first
+                    .entry(p.map(|v| (v / cluster).floor() as i64).into())
+                    .or_insert(i as u32)
+            })
+            .collect();
+        let kept: Vec<[u32; 3]> = triangles
+            .iter()
+            .map(|t| t.map(|i| map[i as usize]))
+            .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+            .collect();
+        Self::new(points, &kept)
+    }
+
+    /// Triangles in the tree.
+    pub fn len(&self) -> usize {
+        self.tris.len()
     }
 
     /// Whether there are no triangles.

@@ -18,7 +18,7 @@
 //!
 //! Everything here is in the local frame of the complex.
 
-use std::collections::HashSet;
+use rustc_hash::FxHashSet as HashSet;
 
 use crate::cells::{CellComplex, CellKey, Grid};
 use crate::error::{Error, Result};
@@ -151,7 +151,7 @@ impl<const D: usize> Selections<D> {
             regions: regions
                 .iter()
                 .map(|_| RegionSamples {
-                    cells: HashSet::new(),
+                    cells: HashSet::default(),
                     sum: Vect::<D>::zeros(),
                     count: 0,
                 })
