@@ -122,8 +122,8 @@ struct CellArgs {
     /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.
     #[arg(long)]
     shell: bool,
-    /// Inside classification of empty cells: winding numbers for meshes and soups, exterior
-    /// flood fill for point clouds (auto), or as named.
+    /// Inside classification of empty cells: winding numbers for meshes, soups and point
+    /// clouds with normals, exterior flood fill for point clouds without (auto), or as named.
     #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
     inside: InsideArg,
 }
@@ -146,9 +146,9 @@ impl CellArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum InsideArg {
-    /// Winding numbers when the input has triangles, flood fill otherwise.
+    /// Winding numbers when the input has triangles or normals, flood fill otherwise.
     Auto,
-    /// Generalized winding number of the triangles (meshes and soups only).
+    /// Generalized winding number of the triangles or oriented points.
     Winding,
     /// Exterior flood fill on the finest grid.
     Flood,

@@ -378,7 +378,11 @@ fn first_pass(
             bounds.0 = bounds.0.inf(p);
             bounds.1 = bounds.1.sup(p);
         }
-        outside += occupancy.add_points(&chunk.positions);
+        outside += if chunk.normals.is_empty() {
+            occupancy.add_points(&chunk.positions)
+        } else {
+            occupancy.add_oriented_points(&chunk.positions, &chunk.normals)
+        };
         let classes = (!chunk.classes.is_empty()).then_some(&chunk.classes[..]);
         selections.add(
             spec,

@@ -357,3 +357,57 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
         .fold(0.0, f64::max);
     assert!(worst < cell, "points vs mesh: {worst} (cell {cell})");
 }
+
+/// A point cloud with normals (the bunny's vertices) and a hole cut into it (its lowest 12%
+/// removed): the exterior flood fill leaks through the hole, the point variant of winding
+/// numbers (the default for oriented points) keeps the interior, close to the closed cloud's.
+#[test]
+fn oriented_points_with_a_hole_keep_their_interior() {
+    use rigidcells::pipeline::{CHUNK, DeformParams, file_cells};
+    use rigidcells::progress::Silent;
+    let dir = tempfile::tempdir().unwrap();
+    let doc = Document::read(&shared("meshes/bunny_vn.ply")).unwrap();
+    let (pts, normals) = (doc.positions(), doc.normals().unwrap());
+    let (lo, hi) = pts
+        .iter()
+        .fold((pts[0], pts[0]), |(l, h), p| (l.inf(p), h.sup(p)));
+    let cut = lo.y + 0.12 * (hi.y - lo.y);
+    let write = |name: &str, keep: &dyn Fn(&Vect<3>) -> bool| {
+        let kept: Vec<usize> = (0..pts.len()).filter(|&i| keep(&pts[i])).collect();
+        let mut text = format!(
+            "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\n\
+             property float z\nproperty float nx\nproperty float ny\nproperty float nz\nend_header\n",
+            kept.len()
+        );
+        for i in kept {
+            let (p, n) = (pts[i], normals[i]);
+            text += &format!("{} {} {} {} {} {}\n", p.x, p.y, p.z, n.x, n.y, n.z);
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let closed = write("closed.ply", &|_| true);
+    let holed = write("holed.ply", &|p| p.y > cut);
+    let interior = |path: &std::path::Path, inside| {
+        let params = DeformParams {
+            build: BuildParams {
+                cell_size: Some(0.075),
+                inside,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let (_, info, _, _) = file_cells(path, None, &params, CHUNK, &Silent).unwrap();
+        (info.inside, info.interior_cells)
+    };
+    let (mode, whole) = interior(&closed, Inside::Auto);
+    assert_eq!(mode, Inside::Winding);
+    let (_, flood) = interior(&holed, Inside::Flood);
+    let (_, winding) = interior(&holed, Inside::Auto);
+    assert!(flood * 20 < winding, "flood {flood}, winding {winding}");
+    assert!(
+        winding as f64 > 0.8 * whole as f64,
+        "holed {winding} vs closed {whole} interior cells"
+    );
+}

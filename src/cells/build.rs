@@ -7,8 +7,11 @@
 //!    overlaps (exact test, so large triangles crossing many cells leave no gaps).
 //! 3. Inside/outside of the empty finest cells: for meshes and soups by the generalized winding
 //!    number of the triangles ([`super::winding`]; one evaluation per coarsest all-empty cell),
-//!    which holes and unwelded or non-manifold surfaces do not fool; for point clouds by the
-//!    exterior flood fill of [`classify_inside`], which leaks through gaps wider than a cell.
+//!    which holes and unwelded or non-manifold surfaces do not fool; for point clouds with
+//!    normals by its point variant (a dipole per occupied finest cell: the mean position, the
+//!    mean normal times `c²/max|n_a|`, the area of a surface crossing one column of cells along
+//!    the normal's dominant axis); for point clouds without normals by the exterior flood fill
+//!    of [`classify_inside`], which leaks through gaps wider than a cell.
 //! 4. A pyramid of states from the finest level up; leaves are emitted top-down: a cell that is
 //!    all inside is an interior leaf at the coarsest level where that holds, a cell with occupied
 //!    descendants is split down to `max_level`, a cell all outside is dropped.
@@ -30,11 +33,14 @@ use crate::rigid::Vect;
 /// How empty cells are classified.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Inside {
-    /// [`Inside::Winding`] for meshes and soups, [`Inside::Flood`] for point clouds.
+    /// [`Inside::Winding`] for meshes, soups and point clouds with normals, [`Inside::Flood`]
+    /// for point clouds without.
     #[default]
     Auto,
-    /// Generalized winding number of the triangles, `|w| ≥ ½` (see [`super::winding`]): robust
-    /// to holes, soups, non-manifold edges and self-intersections. Needs triangles.
+    /// Generalized winding number, `|w| ≥ ½` (see [`super::winding`]): of the triangles, or of
+    /// the oriented samples (one dipole per occupied finest cell); robust to holes, soups,
+    /// non-manifold edges and self-intersections. Without triangles or normals it falls back
+    /// to the flood fill.
     Winding,
     /// Exterior flood fill on the finest grid: an empty cell is inside when no path of empty
     /// face-adjacent cells leads from it to the grid's border.
@@ -185,6 +191,9 @@ pub struct Occupancy<const D: usize> {
     inside: Inside,
     /// The triangles seen so far (local frame), for winding numbers.
     winding: Option<Winding>,
+    /// Oriented samples (point clouds with normals) gathered per voxel of a quarter finest
+    /// cell: summed local position, summed unit normal, count.
+    oriented: FxHashMap<[i64; D], (Vect<D>, Vect<D>, u32)>,
     glued: usize,
     start: Instant,
 }
@@ -200,6 +209,7 @@ impl<const D: usize> Occupancy<D> {
             state: vec![OUT; dims.iter().product::<i64>() as usize],
             inside: params.inside,
             winding: None,
+            oriented: FxHashMap::default(),
             glued: 0,
             start: Instant::now(),
         })
@@ -225,6 +235,29 @@ impl<const D: usize> Occupancy<D> {
             match self.finest_index(p) {
                 Some(i) => self.state[i] = OCCUPIED,
                 None => outside += 1,
+            }
+        }
+        outside
+    }
+
+    /// Marks the cells of world-coordinate samples with unit `normals` and, unless the
+    /// classification is flood fill or none, gathers them for the point variant of winding
+    /// numbers (used when there are no triangles): one dipole per voxel of a quarter finest
+    /// cell. Returns how many fell outside the grid.
+    pub fn add_oriented_points(&mut self, points: &[Vect<D>], normals: &[Vect<D>]) -> usize {
+        let outside = self.add_points(points);
+        if D == 3 && matches!(self.inside, Inside::Auto | Inside::Winding) {
+            let voxel = self.grid.finest_size();
+            for (p, n) in points.iter().zip(normals) {
+                let local = p - self.grid.origin;
+                let key: [i64; D] = std::array::from_fn(|a| (local[a] / voxel).floor() as i64);
+                let e =
+                    self.oriented
+                        .entry(key)
+                        .or_insert((Vect::<D>::zeros(), Vect::<D>::zeros(), 0));
+                e.0 += local;
+                e.1 += n;
+                e.2 += 1;
             }
         }
         outside
@@ -303,9 +336,25 @@ impl<const D: usize> Occupancy<D> {
             mut state,
             inside,
             winding,
+            oriented,
             glued,
             start,
         } = self;
+        let winding = winding.or_else(|| {
+            // The point variant: each voxel's mean position, its mean normal times the area of
+            // a surface crossing a voxel column along the normal's dominant axis, c²/max|n_a|.
+            let c = grid.finest_size();
+            let (points, normals): (Vec<Vect<3>>, Vec<Vect<3>>) = oriented
+                .values()
+                .filter_map(|(p, n, k)| {
+                    let p = Vect::<3>::from_fn(|a, _| if a < D { p[a] / *k as f64 } else { 0.0 });
+                    let n = Vect::<3>::from_fn(|a, _| if a < D { n[a] } else { 0.0 });
+                    let unit = n.try_normalize(1e-9)?;
+                    Some((p, unit * (c * c / unit.amax())))
+                })
+                .unzip();
+            (!points.is_empty()).then(|| Winding::from_dipoles(&points, &normals))
+        });
         let occupied = state.iter().filter(|&&s| s == OCCUPIED).count();
         let (inside, winding_queries) = match (inside, winding) {
             (Inside::Auto | Inside::Winding, Some(w)) => {

@@ -4,7 +4,9 @@
 //! `w(q) = (1/4π) Σ_t Ω_t(q)`, with `Ω_t` the signed solid angle of triangle `t` seen from `q`
 //! (Van Oosterom–Strackee). It is 1 inside and 0 outside a closed, outward-oriented surface and
 //! degrades gracefully with holes, duplicated faces, non-manifold edges, self-intersections and
-//! unwelded soups, so `|w| ≥ ½` is the inside test for every kind of mesh input.
+//! unwelded soups, so `|w| ≥ ½` is the inside test for every kind of mesh input. Oriented point
+//! clouds use the point variant ([`Winding::from_dipoles`]): each point is a dipole of its
+//! normal times the area it stands for.
 //!
 //! **Tree-code.** Every BVH node stores the area-weighted normal sum `N = Σ a_t n_t`, the
 //! area-weighted centroid `p̃` and the radius `r` of the ball around `p̃` holding its triangles.
@@ -51,6 +53,8 @@ struct Node {
 pub struct Winding {
     /// Triangle corners, in BVH order.
     tris: Vec<[V3; 3]>,
+    /// Or oriented points: position and area-weighted normal, in BVH order.
+    dipoles: Vec<[V3; 2]>,
     nodes: Vec<Node>,
 }
 
@@ -74,34 +78,42 @@ impl Winding {
                 }
             })
             .collect();
-        // Sorted once along a Morton curve of the centroids, so that every split is a median
-        // in index order and the tree needs no partitioning.
-        let (mut lo, mut hi) = (V3::repeat(f64::MAX), V3::repeat(f64::MIN));
-        for it in &items {
-            lo = lo.inf(&it.centroid);
-            hi = hi.sup(&it.centroid);
-        }
-        let scale = 1023.0 / (hi - lo).max().max(f64::MIN_POSITIVE);
-        let mut keyed: Vec<(u32, Item)> = items
-            .par_iter()
-            .map(|it| (morton(&((it.centroid - lo) * scale)), *it))
-            .collect();
-        keyed.par_sort_unstable_by_key(|k| k.0);
-        let items: Vec<Item> = keyed.into_iter().map(|k| k.1).collect();
-        let empty = Node {
-            normal: V3::zeros(),
-            center: V3::zeros(),
-            radius: 0.0,
-            start: 0,
-            count: 0,
-        };
-        let mut nodes = vec![empty; node_count(items.len())];
-        if !items.is_empty() {
-            build_tree(&tris, &items, 0, &mut nodes);
-            link(&mut nodes, 0, items.len());
-        }
+        let (items, nodes) = tree(items, &|it: &Item, c: &V3| {
+            tris[it.index as usize]
+                .iter()
+                .map(|p| (p - c).norm())
+                .fold(0.0, f64::max)
+        });
         let tris = items.iter().map(|it| tris[it.index as usize]).collect();
-        Self { tris, nodes }
+        Self {
+            tris,
+            dipoles: Vec::new(),
+            nodes,
+        }
+    }
+
+    /// The tree over oriented points (Barill et al.'s point variant): `normals[i]` is the unit
+    /// normal at `points[i]` times the area of surface it stands for; each point contributes
+    /// the dipole term at every distance.
+    pub fn from_dipoles(points: &[V3], normals: &[V3]) -> Self {
+        let items: Vec<Item> = points
+            .iter()
+            .zip(normals)
+            .enumerate()
+            .map(|(i, (p, n))| Item {
+                centroid: *p,
+                normal: *n,
+                area: n.norm(),
+                index: i as u32,
+            })
+            .collect();
+        let (items, nodes) = tree(items, &|it: &Item, c: &V3| (it.centroid - c).norm());
+        let dipoles = items.iter().map(|it| [it.centroid, it.normal]).collect();
+        Self {
+            tris: Vec::new(),
+            dipoles,
+            nodes,
+        }
     }
 
     /// The tree over a proxy of the triangles decimated by vertex clustering: vertices in one
@@ -128,19 +140,19 @@ impl Winding {
         Self::new(points, &kept)
     }
 
-    /// Triangles in the tree.
+    /// Triangles or points in the tree.
     pub fn len(&self) -> usize {
-        self.tris.len()
+        self.tris.len() + self.dipoles.len()
     }
 
-    /// Whether there are no triangles.
+    /// Whether there is nothing in the tree.
     pub fn is_empty(&self) -> bool {
-        self.tris.is_empty()
+        self.len() == 0
     }
 
     /// The winding number at `q` by the tree-code.
     pub fn at(&self, q: &V3) -> f64 {
-        if self.tris.is_empty() {
+        if self.is_empty() {
             return 0.0;
         }
         let mut sum = 0.0;
@@ -150,13 +162,20 @@ impl Winding {
             let d = node.center - q;
             let dist = d.norm();
             if dist > BETA * node.radius {
-                sum += node.normal.dot(&d) / (dist * dist * dist);
+                sum += dipole(&node.center, &node.normal, q);
             } else if node.count > 0 {
                 let range = node.start as usize..(node.start + node.count) as usize;
-                sum += self.tris[range]
-                    .iter()
-                    .map(|t| solid_angle(t, q))
-                    .sum::<f64>();
+                sum += if self.dipoles.is_empty() {
+                    self.tris[range]
+                        .iter()
+                        .map(|t| solid_angle(t, q))
+                        .sum::<f64>()
+                } else {
+                    self.dipoles[range]
+                        .iter()
+                        .map(|[p, n]| dipole(p, n, q))
+                        .sum::<f64>()
+                };
             } else {
                 stack.push(i + 1);
                 stack.push(node.start);
@@ -165,9 +184,15 @@ impl Winding {
         sum / (4.0 * std::f64::consts::PI)
     }
 
-    /// The winding number at `q` summed exactly over every triangle (the reference).
+    /// The winding number at `q` summed exactly over every triangle or point (the reference).
     pub fn exact(&self, q: &V3) -> f64 {
-        self.tris.iter().map(|t| solid_angle(t, q)).sum::<f64>() / (4.0 * std::f64::consts::PI)
+        let tris = self.tris.iter().map(|t| solid_angle(t, q)).sum::<f64>();
+        let points = self
+            .dipoles
+            .iter()
+            .map(|[p, n]| dipole(p, n, q))
+            .sum::<f64>();
+        (tris + points) / (4.0 * std::f64::consts::PI)
     }
 }
 
@@ -196,6 +221,52 @@ fn morton(p: &V3) -> u32 {
 /// Subtrees larger than this are built in parallel.
 const PARALLEL: usize = 4096;
 
+/// Items sorted along a Morton curve of their centroids (every split is then a median in index
+/// order and the tree needs no partitioning) and the tree over them; `reach(item, c)` is the
+/// largest distance from `c` to the item.
+fn tree(items: Vec<Item>, reach: &Reach<'_>) -> (Vec<Item>, Vec<Node>) {
+    let (mut lo, mut hi) = (V3::repeat(f64::MAX), V3::repeat(f64::MIN));
+    for it in &items {
+        lo = lo.inf(&it.centroid);
+        hi = hi.sup(&it.centroid);
+    }
+    let scale = 1023.0 / (hi - lo).max().max(f64::MIN_POSITIVE);
+    let mut keyed: Vec<(u32, Item)> = items
+        .par_iter()
+        .map(|it| (morton(&((it.centroid - lo) * scale)), *it))
+        .collect();
+    keyed.par_sort_unstable_by_key(|k| k.0);
+    let items: Vec<Item> = keyed.into_iter().map(|k| k.1).collect();
+    let empty = Node {
+        normal: V3::zeros(),
+        center: V3::zeros(),
+        radius: 0.0,
+        start: 0,
+        count: 0,
+    };
+    let mut nodes = vec![empty; node_count(items.len())];
+    if !items.is_empty() {
+        build_tree(reach, &items, 0, &mut nodes);
+        link(&mut nodes, 0, items.len());
+    }
+    (items, nodes)
+}
+
+/// The largest distance from a point to an item.
+type Reach<'a> = dyn Fn(&Item, &V3) -> f64 + Sync + 'a;
+
+/// The dipole term `n · (p − q) / |p − q|³` of an area-weighted normal `n` at `p`.
+#[inline]
+fn dipole(p: &V3, n: &V3, q: &V3) -> f64 {
+    let d = p - q;
+    let r = d.norm();
+    if r > 0.0 {
+        n.dot(&d) / (r * r * r)
+    } else {
+        0.0
+    }
+}
+
 /// Nodes of the subtree over `n` triangles.
 fn node_count(n: usize) -> usize {
     if n <= LEAF {
@@ -208,7 +279,7 @@ fn node_count(n: usize) -> usize {
 /// Writes the subtree over `items` (whose first triangle has index `offset` in BVH order) into
 /// `nodes` (of [`node_count`] length), root first; returns the subtree's area. Splits are at the
 /// median index of the Morton-sorted items.
-fn build_tree(tris: &[[V3; 3]], items: &[Item], offset: usize, nodes: &mut [Node]) -> f64 {
+fn build_tree(reach: &Reach<'_>, items: &[Item], offset: usize, nodes: &mut [Node]) -> f64 {
     let n = items.len();
     if n <= LEAF {
         let (mut normal, mut weighted, mut area) = (V3::zeros(), V3::zeros(), 0.0);
@@ -224,8 +295,7 @@ fn build_tree(tris: &[[V3; 3]], items: &[Item], offset: usize, nodes: &mut [Node
         };
         let radius = items
             .iter()
-            .flat_map(|it| tris[it.index as usize].iter())
-            .map(|p| (p - center).norm())
+            .map(|it| reach(it, &center))
             .fold(0.0, f64::max);
         nodes[0] = Node {
             normal,
@@ -240,8 +310,8 @@ fn build_tree(tris: &[[V3; 3]], items: &[Item], offset: usize, nodes: &mut [Node
     let (root, children) = nodes.split_first_mut().expect("a subtree has a root");
     let (left, right) = children.split_at_mut(node_count(mid));
     let (mut build_left, mut build_right) = (
-        || build_tree(tris, &items[..mid], offset, &mut *left),
-        || build_tree(tris, &items[mid..], offset + mid, &mut *right),
+        || build_tree(reach, &items[..mid], offset, &mut *left),
+        || build_tree(reach, &items[mid..], offset + mid, &mut *right),
     );
     let (al, ar) = if n > PARALLEL {
         rayon::join(build_left, build_right)
