@@ -277,7 +277,7 @@ impl<const D: usize> Occupancy<D> {
                     .iter()
                     .map(|p| Vect::<3>::from_fn(|a, _| p[a] - self.grid.origin[a]))
                     .collect();
-                let cluster = 0.25 * self.grid.finest_size();
+                let cluster = 0.5 * self.grid.finest_size();
                 self.winding = Some(Winding::decimated(&local, triangles, cluster));
             }
         }

@@ -118,9 +118,12 @@ impl Winding {
 
     /// The tree over a proxy of the triangles decimated by vertex clustering: vertices in one
     /// cell of a grid of edge `cluster` merge into the first of them, and triangles that
-    /// collapse are dropped. Each vertex moves by less than `cluster·√3`, so winding numbers at
-    /// points farther than that from the surface keep their side of ½ for a closed surface —
-    /// [`super::build`] asks at least half a finest cell away and clusters at a quarter of one.
+    /// collapse (zero solid angle) are dropped. Every point of the proxy surface lies within
+    /// `cluster·√3` of the original (same barycentric coordinates), so for a query farther than
+    /// that the straight homotopy between the two surfaces never crosses it, and a closed
+    /// surface keeps its exact integer winding number there. [`super::build`] clusters at half a
+    /// finest cell (0.87·½ of a cell) and asks only at centers of empty cells, at least half a
+    /// cell from the surface.
     pub fn decimated(points: &[V3], triangles: &[[u32; 3]], cluster: f64) -> Self {
         let mut first: FxHashMap<[i64; 3], u32> = FxHashMap::default();
         let map: Vec<u32> = points
