@@ -4,7 +4,10 @@
 //!    of size `S·2^max_level`); the grid is centered on the input's bounding box with at least one
 //!    empty finest cell of margin on every side, so the exterior is connected around the shape.
 //! 2. Occupancy at the finest level: the cell of every sample point, and every cell a triangle
-//!    overlaps (exact test, so large triangles crossing many cells leave no gaps).
+//!    overlaps (exact test, so large triangles crossing many cells leave no gaps). Each
+//!    triangle visits only the closed cells touching its bounding box, in parallel; a BVH over
+//!    the triangles (issue 4 suggested `obvhs`) would find the same candidate cells and adds
+//!    nothing here: one cell for a small triangle, and a large one must test its box anyway.
 //! 3. Inside/outside of the empty finest cells: for meshes and soups by the generalized winding
 //!    number of the triangles ([`super::winding`]; one evaluation per coarsest all-empty cell),
 //!    which holes and unwelded or non-manifold surfaces do not fool; for point clouds with
