@@ -117,19 +117,12 @@ fn tree_soup_with_thousands_of_leaves_bends_from_the_cli() {
     )
     .unwrap();
     let output = dir.path().join("bent.ply");
-    // Without -q, so that warnings are printed.
-    let r = common::run(&[
-        "deform",
-        input.to_str().unwrap(),
-        "-o",
-        output.to_str().unwrap(),
-        "--edit",
-        edit.to_str().unwrap(),
-        "--cell-size",
-        "0.2",
-        "--transfer",
-        "blend",
-    ]);
+    let r = common::deform_verbose(
+        &input,
+        &output,
+        &edit,
+        &["--cell-size", "0.2", "--transfer", "blend"],
+    );
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(
         r.stderr

@@ -29,6 +29,13 @@ pub fn run(args: &[&str]) -> Run {
 
 /// `rigidcells deform INPUT -o OUTPUT --edit EDIT -q` plus `extra` arguments.
 pub fn deform(input: &Path, output: &Path, edit: &Path, extra: &[&str]) -> Run {
+    let mut args = vec!["-q"];
+    args.extend_from_slice(extra);
+    deform_verbose(input, output, edit, &args)
+}
+
+/// `rigidcells deform INPUT -o OUTPUT --edit EDIT` plus `extra` arguments (warnings printed).
+pub fn deform_verbose(input: &Path, output: &Path, edit: &Path, extra: &[&str]) -> Run {
     let mut args = vec![
         "deform",
         input.to_str().unwrap(),
@@ -36,7 +43,6 @@ pub fn deform(input: &Path, output: &Path, edit: &Path, extra: &[&str]) -> Run {
         output.to_str().unwrap(),
         "--edit",
         edit.to_str().unwrap(),
-        "-q",
     ];
     args.extend_from_slice(extra);
     run(&args)
