@@ -17,7 +17,7 @@ mod xyz;
 pub use las::{LasHeader, LasSource, VlrInfo};
 pub use obj::ObjFile;
 pub use ply::PlyFile;
-pub use ply_stream::PlyStream;
+pub use ply_stream::{PlyStream, PlyTextStream};
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
 pub use xyz::{XyzFile, XyzStream};
 
@@ -25,15 +25,21 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ, binary
-/// PLY and XYZ stream from the file; ASCII PLY and OBJ are read whole and served in chunks.
+/// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ, PLY
+/// and XYZ stream from the file; OBJ (and binary PLY with list properties on its vertices) is
+/// read whole and served in chunks.
 pub fn open(path: &Path) -> Result<Box<dyn Source>> {
     match extension(path).as_deref() {
         Some("las") | Some("laz") => Ok(Box::new(LasSource::open(path)?)),
-        Some("ply") => match PlyStream::open(path)? {
-            Some(stream) => Ok(Box::new(stream)),
-            None => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
-        },
+        Some("ply") => {
+            if let Some(stream) = PlyStream::open(path)? {
+                return Ok(Box::new(stream));
+            }
+            if let Some(stream) = PlyTextStream::open(path)? {
+                return Ok(Box::new(stream));
+            }
+            Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?))
+        }
         Some("xyz") | Some("txt") => Ok(Box::new(XyzStream::open(path)?)),
         _ => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
     }

@@ -62,43 +62,36 @@ impl PlyFile {
         let mut triangles = Vec::new();
         for (name, element) in header.elements.iter() {
             if name != "vertex" {
-                walk_element(&mut walker, name, element, &mut triangles, |_| Ok(()))?;
+                let records = 0..element.count;
+                walk_element(&mut walker, name, element, records, &mut triangles, |_| {
+                    Ok(())
+                })?;
                 continue;
             }
             coords.reserve(element.count);
             positions.reserve(element.count);
-            let mut spans = [Span { start: 0, end: 0 }; 3];
-            let mut xyz = [0.0f64; 3];
-            let mut nspans = [Span { start: 0, end: 0 }; 3];
-            let mut nxyz = [0.0f64; 3];
-            walk_element(&mut walker, name, element, &mut triangles, |visit| {
-                let record = match visit {
-                    Visit::Scalar(pname, value, span) => {
-                        if let Some(k) = ["x", "y", "z"].iter().position(|n| *n == pname) {
-                            spans[k] = span;
-                            xyz[k] = value;
-                        } else if let Some(k) = ["nx", "ny", "nz"].iter().position(|n| *n == pname)
-                        {
-                            nspans[k] = span;
-                            nxyz[k] = value;
-                        }
+            let mut fields = VertexFields::default();
+            let records = 0..element.count;
+            walk_element(
+                &mut walker,
+                name,
+                element,
+                records,
+                &mut triangles,
+                |visit| {
+                    let Some(record) = fields.take(visit) else {
                         return Ok(());
+                    };
+                    let (spans, xyz, nspans, nxyz) = fields.checked(path, record)?;
+                    coords.push(spans);
+                    positions.push(xyz);
+                    if normal_doubles.is_some() {
+                        normal_spans.push(nspans);
+                        normals.push(nxyz);
                     }
-                    Visit::End(record) => record,
-                };
-                if !xyz.iter().all(|v| v.is_finite()) {
-                    return Err(err(format!(
-                        "vertex {record} has a coordinate that is not finite: {xyz:?}"
-                    )));
-                }
-                coords.push(spans);
-                positions.push(Vect::<3>::from(xyz));
-                if normal_doubles.is_some() {
-                    normal_spans.push(nspans);
-                    normals.push(Vect::<3>::from(nxyz));
-                }
-                Ok(())
-            })?;
+                    Ok(())
+                },
+            )?;
         }
         if header.encoding == Encoding::Ascii
             && bytes[walker.pos..].iter().any(|b| !b.is_ascii_whitespace())
@@ -283,13 +276,66 @@ pub(super) enum Visit<'a> {
     End(usize),
 }
 
-/// Walks the records of `element` (named `name`), collecting the triangles of faces and strips
+/// The `x y z` and `nx ny nz` of the vertex record being walked, gathered from [`Visit`]s.
+#[derive(Debug, Default)]
+pub(super) struct VertexFields {
+    spans: [Span; 3],
+    xyz: [f64; 3],
+    nspans: [Span; 3],
+    nxyz: [f64; 3],
+}
+
+impl VertexFields {
+    /// Takes one visit; at the end of a record returns its index.
+    pub(super) fn take(&mut self, visit: Visit) -> Option<usize> {
+        match visit {
+            Visit::Scalar(pname, value, span) => {
+                if let Some(k) = ["x", "y", "z"].iter().position(|n| *n == pname) {
+                    self.spans[k] = span;
+                    self.xyz[k] = value;
+                } else if let Some(k) = ["nx", "ny", "nz"].iter().position(|n| *n == pname) {
+                    self.nspans[k] = span;
+                    self.nxyz[k] = value;
+                }
+                None
+            }
+            Visit::End(record) => Some(record),
+        }
+    }
+
+    /// The record's coordinate spans and position, normal spans and normal; an error naming
+    /// vertex `record` when a coordinate is not finite.
+    pub(super) fn checked(
+        &self,
+        path: &Path,
+        record: usize,
+    ) -> Result<([Span; 3], Vect<3>, [Span; 3], Vect<3>)> {
+        if !self.xyz.iter().all(|v| v.is_finite()) {
+            return Err(Error::format(
+                path,
+                format!(
+                    "vertex {record} has a coordinate that is not finite: {:?}",
+                    self.xyz
+                ),
+            ));
+        }
+        Ok((
+            self.spans,
+            Vect::<3>::from(self.xyz),
+            self.nspans,
+            Vect::<3>::from(self.nxyz),
+        ))
+    }
+}
+
+/// Walks `records` of `element` (named `name`), collecting the triangles of faces and strips
 /// and showing `visit` every scalar and the end of every record. Errors name the element,
 /// record and property.
 pub(super) fn walk_element(
     walker: &mut Walker,
     name: &str,
     element: &ElementDef,
+    records: std::ops::Range<usize>,
     triangles: &mut Vec<[u32; 3]>,
     mut visit: impl FnMut(Visit) -> Result<()>,
 ) -> Result<()> {
@@ -300,7 +346,7 @@ pub(super) fn walk_element(
         .collect();
     let keep_lists = matches!(name, "face" | "tristrips");
     let mut list = Vec::new();
-    for record in 0..element.count {
+    for record in records {
         for &(pname, ptype) in &props {
             let at = |e: Error| match e {
                 Error::Format { path, message } => Error::Format {

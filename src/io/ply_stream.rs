@@ -9,7 +9,8 @@
 //! the body is held in memory but the chunk in flight (and, for meshes, the triangles).
 //!
 //! `tools/src/bin/ply.rs` measures this against reading the same file with `ply-rs-bw`.
-//! ASCII PLY and vertices with list properties go through [`super::PlyFile`] in memory.
+//! ASCII PLY streams through [`PlyTextStream`]; binary vertices with list properties go through
+//! [`super::PlyFile`] in memory.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -17,12 +18,15 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use memmap2::Mmap;
-use ply_rs_bw::ply::{Encoding, PropertyType};
+use ply_rs_bw::ply::{ElementDef, Encoding, PropertyType};
 
 use super::mapped::map;
-use super::ply::{Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element};
+use super::ply::{
+    VertexFields, Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element,
+};
 use super::require_extension;
 use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
+use super::text::{edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -149,7 +153,10 @@ impl PlyStream {
                 start = Some(walker.pos);
                 walker.pos = end;
             } else {
-                walk_element(&mut walker, name, element, &mut triangles, |_| Ok(()))?;
+                let records = 0..element.count;
+                walk_element(&mut walker, name, element, records, &mut triangles, |_| {
+                    Ok(())
+                })?;
             }
         }
         let count = vertex.count;
@@ -295,6 +302,221 @@ impl Sink for PlySink {
         }
         let map = self.map.clone();
         self.put(&map[l.span(0, l.count).end..])?;
+        let Self { file, out, .. } = *self;
+        file.commit_writer(out)?;
+        Ok(Vec::new())
+    }
+}
+
+/// An ASCII PLY file streamed from a memory map. `open` walks the whole body once to validate
+/// it (with the messages of [`super::PlyFile`]) and to collect faces; a chunk then walks its
+/// vertex records from where the previous one stopped and carries the bytes from there through
+/// its last record (from the file's start for the first chunk, to its end for the last), so the
+/// chunks' bytes partition the file and the sink splices the new numbers into them.
+pub struct PlyTextStream {
+    path: PathBuf,
+    map: Arc<Mmap>,
+    vertex: ElementDef,
+    /// Byte offset of the first vertex record.
+    start: usize,
+    /// Whether `x y z` (and `nx ny nz`) are written as single precision.
+    singles: [bool; 3],
+    normal_singles: Option<[bool; 3]>,
+    triangles: Vec<[u32; 3]>,
+    /// Where the next chunk's records begin, and its first vertex.
+    pos: usize,
+    next: usize,
+}
+
+impl PlyTextStream {
+    /// Opens `path` for streaming; `None` when it is not ASCII.
+    pub fn open(path: &Path) -> Result<Option<Self>> {
+        let map = map(path)?;
+        let err = |m: String| Error::format(path, m);
+        if !map.starts_with(b"ply") {
+            return Err(err("not a PLY file (no `ply` magic line)".into()));
+        }
+        let (header, body) = parse_header(&map).map_err(err)?;
+        if header.encoding != Encoding::Ascii {
+            return Ok(None);
+        }
+        let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
+        let mut walker = Walker {
+            bytes: &map,
+            pos: body,
+            encoding: header.encoding,
+            path,
+        };
+        let mut triangles = Vec::new();
+        let mut start = body;
+        for (name, element) in header.elements.iter() {
+            let records = 0..element.count;
+            if name != "vertex" {
+                walk_element(&mut walker, name, element, records, &mut triangles, |_| {
+                    Ok(())
+                })?;
+                continue;
+            }
+            start = walker.pos;
+            let mut fields = VertexFields::default();
+            walk_element(
+                &mut walker,
+                name,
+                element,
+                records,
+                &mut triangles,
+                |visit| match fields.take(visit) {
+                    Some(record) => fields.checked(path, record).map(|_| ()),
+                    None => Ok(()),
+                },
+            )?;
+        }
+        if map[walker.pos..].iter().any(|b| !b.is_ascii_whitespace()) {
+            return Err(err(
+                "data after the last element: the header's counts are smaller than the body".into(),
+            ));
+        }
+        let vertex = header.elements["vertex"].clone();
+        if vertex.count == 0 {
+            return Err(err("the file holds no vertices or points".into()));
+        }
+        check_triangles(path, &triangles, vertex.count)?;
+        Ok(Some(Self {
+            path: path.to_path_buf(),
+            map: Arc::new(map),
+            vertex,
+            start,
+            singles: doubles.map(|d| !d),
+            normal_singles: normal_doubles.map(|d| d.map(|d| !d)),
+            triangles,
+            pos: start,
+            next: 0,
+        }))
+    }
+}
+
+impl Source for PlyTextStream {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn len(&self) -> u64 {
+        self.vertex.count as u64
+    }
+
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        (self.pos, self.next) = (self.start, 0);
+        Ok(())
+    }
+
+    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        let n = max.min(self.vertex.count - self.next);
+        chunk.clear(self.next as u64);
+        let from = if self.next == 0 { 0 } else { self.pos };
+        let mut walker = Walker {
+            bytes: &self.map,
+            pos: self.pos,
+            encoding: Encoding::Ascii,
+            path: &self.path,
+        };
+        let mut fields = VertexFields::default();
+        let has_normals = self.normal_singles.is_some();
+        let records = self.next..self.next + n;
+        walk_element(
+            &mut walker,
+            "vertex",
+            &self.vertex,
+            records,
+            &mut Vec::new(),
+            |visit| {
+                if let Some(record) = fields.take(visit) {
+                    let (_, p, _, normal) = fields.checked(&self.path, record)?;
+                    chunk.positions.push(p);
+                    if has_normals {
+                        chunk.normals.push(normal);
+                    }
+                }
+                Ok(())
+            },
+        )?;
+        self.next += n;
+        let to = if self.next == self.vertex.count {
+            self.map.len()
+        } else {
+            walker.pos
+        };
+        self.pos = walker.pos;
+        chunk.raw.extend_from_slice(&self.map[from..to]);
+        Ok(n)
+    }
+
+    fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
+        require_extension(output, "ply")?;
+        let (file, out) = TempFile::create(output)?;
+        Ok(Box::new(PlyTextSink {
+            path: self.path.clone(),
+            vertex: self.vertex.clone(),
+            start: self.start,
+            singles: self.singles,
+            normal_singles: self.normal_singles,
+            file,
+            out,
+        }))
+    }
+}
+
+/// Writes the chunks of a [`PlyTextStream`] with their vertices' numbers replaced.
+struct PlyTextSink {
+    path: PathBuf,
+    vertex: ElementDef,
+    start: usize,
+    singles: [bool; 3],
+    normal_singles: Option<[bool; 3]>,
+    file: TempFile,
+    out: BufWriter<File>,
+}
+
+impl Sink for PlyTextSink {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
+        let first = chunk.first as usize;
+        let mut walker = Walker {
+            bytes: &chunk.raw,
+            pos: if first == 0 { self.start } else { 0 },
+            encoding: Encoding::Ascii,
+            path: &self.path,
+        };
+        let mut fields = VertexFields::default();
+        let mut edits = Vec::with_capacity(6 * moved.len());
+        let records = first..first + moved.len();
+        walk_element(
+            &mut walker,
+            "vertex",
+            &self.vertex,
+            records,
+            &mut Vec::new(),
+            |visit| {
+                if let Some(record) = fields.take(visit) {
+                    let (spans, _, nspans, _) = fields.checked(&self.path, record)?;
+                    edits.extend(edits3(&spans, &moved[record - first], self.singles));
+                    if let (Some(singles), Some(n)) =
+                        (self.normal_singles, normals.get(record - first))
+                    {
+                        edits.extend(edits3(&nspans, n, singles));
+                    }
+                }
+                Ok(())
+            },
+        )?;
+        self.out
+            .write_all(&splice(&chunk.raw, edits))
+            .map_err(|e| Error::io(self.file.path(), e))
+    }
+
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
         let Self { file, out, .. } = *self;
         file.commit_writer(out)?;
         Ok(Vec::new())
