@@ -31,15 +31,7 @@ use std::sync::Arc;
 pub fn open(path: &Path) -> Result<Box<dyn Source>> {
     match extension(path).as_deref() {
         Some("las") | Some("laz") => Ok(Box::new(LasSource::open(path)?)),
-        Some("ply") => {
-            if let Some(stream) = PlyStream::open(path)? {
-                return Ok(Box::new(stream));
-            }
-            if let Some(stream) = PlyTextStream::open(path)? {
-                return Ok(Box::new(stream));
-            }
-            Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?))
-        }
+        Some("ply") => ply_stream::open(path),
         Some("xyz") | Some("txt") => Ok(Box::new(XyzStream::open(path)?)),
         _ => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
     }

@@ -51,12 +51,7 @@ impl PlyFile {
         let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
         let mut normal_spans = Vec::new();
         let mut normals = Vec::new();
-        let mut walker = Walker {
-            bytes: &bytes,
-            pos: body,
-            encoding: header.encoding,
-            path,
-        };
+        let mut walker = Walker::new(&bytes, body, header.encoding, path);
         let mut coords = Vec::new();
         let mut positions = Vec::new();
         let mut triangles = Vec::new();
@@ -426,7 +421,17 @@ pub(super) struct Walker<'a> {
     pub(super) path: &'a Path,
 }
 
-impl Walker<'_> {
+impl<'a> Walker<'a> {
+    /// A walker over `bytes` from `pos`.
+    pub(super) fn new(bytes: &'a [u8], pos: usize, encoding: Encoding, path: &'a Path) -> Self {
+        Self {
+            bytes,
+            pos,
+            encoding,
+            path,
+        }
+    }
+
     pub(super) fn scalar(&mut self, t: &ScalarType) -> Result<(f64, Span)> {
         match self.encoding {
             Encoding::Ascii => self.ascii(t),

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use memmap2::Mmap;
-use ply_rs_bw::ply::{ElementDef, Encoding, PropertyType};
+use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyType};
 
 use super::mapped::map;
 use super::ply::{
@@ -87,6 +87,52 @@ impl Layout {
     }
 }
 
+/// A PLY file mapped, its header parsed, and the types of its vertex coordinates.
+struct Opened {
+    map: Mmap,
+    header: Header,
+    /// Offset of the body.
+    body: usize,
+    doubles: [bool; 3],
+    normal_doubles: Option<[bool; 3]>,
+}
+
+impl Opened {
+    fn new(path: &Path) -> Result<Self> {
+        let map = map(path)?;
+        let err = |m: String| Error::format(path, m);
+        if !map.starts_with(b"ply") {
+            return Err(err("not a PLY file (no `ply` magic line)".into()));
+        }
+        let (header, body) = parse_header(&map).map_err(err)?;
+        let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
+        Ok(Self {
+            map,
+            header,
+            body,
+            doubles,
+            normal_doubles,
+        })
+    }
+}
+
+/// Opens the PLY file `path` as a [`Source`]: binary files with fixed-size vertex records as a
+/// [`PlyStream`], ASCII files as a [`PlyTextStream`], others (vertices with list properties)
+/// read whole.
+pub(super) fn open(path: &Path) -> Result<Box<dyn Source>> {
+    let opened = Opened::new(path)?;
+    if opened.header.encoding == Encoding::Ascii {
+        return Ok(Box::new(PlyTextStream::from_opened(path, opened)?));
+    }
+    match PlyStream::from_opened(path, opened)? {
+        Some(stream) => Ok(Box::new(stream)),
+        None => Ok(Box::new(super::DocumentSource::new(
+            path,
+            super::Document::read(path)?,
+        )?)),
+    }
+}
+
 /// A binary PLY file with fixed-size vertex records, streamed from a memory map.
 pub struct PlyStream {
     path: PathBuf,
@@ -100,18 +146,23 @@ impl PlyStream {
     /// Opens `path` for streaming; `None` when it is ASCII or its vertices have list properties
     /// (then it is read whole by [`super::PlyFile`]).
     pub fn open(path: &Path) -> Result<Option<Self>> {
-        let map = map(path)?;
+        Self::from_opened(path, Opened::new(path)?)
+    }
+
+    fn from_opened(path: &Path, opened: Opened) -> Result<Option<Self>> {
+        let Opened {
+            map,
+            header,
+            body,
+            doubles,
+            normal_doubles,
+        } = opened;
         let err = |m: String| Error::format(path, m);
-        if !map.starts_with(b"ply") {
-            return Err(err("not a PLY file (no `ply` magic line)".into()));
-        }
-        let (header, body) = parse_header(&map).map_err(err)?;
         let big = match header.encoding {
             Encoding::Ascii => return Ok(None),
             Encoding::BinaryLittleEndian => false,
             Encoding::BinaryBigEndian => true,
         };
-        let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
         let vertex = &header.elements["vertex"];
         let mut offsets = std::collections::HashMap::new();
         let mut record = 0;
@@ -128,12 +179,7 @@ impl PlyStream {
                 double: doubles[k],
             })
         };
-        let mut walker = Walker {
-            bytes: &map,
-            pos: body,
-            encoding: header.encoding,
-            path,
-        };
+        let mut walker = Walker::new(&map, body, header.encoding, path);
         let mut triangles = Vec::new();
         let mut start = None;
         for (name, element) in header.elements.iter() {
@@ -331,22 +377,23 @@ pub struct PlyTextStream {
 impl PlyTextStream {
     /// Opens `path` for streaming; `None` when it is not ASCII.
     pub fn open(path: &Path) -> Result<Option<Self>> {
-        let map = map(path)?;
-        let err = |m: String| Error::format(path, m);
-        if !map.starts_with(b"ply") {
-            return Err(err("not a PLY file (no `ply` magic line)".into()));
-        }
-        let (header, body) = parse_header(&map).map_err(err)?;
-        if header.encoding != Encoding::Ascii {
+        let opened = Opened::new(path)?;
+        if opened.header.encoding != Encoding::Ascii {
             return Ok(None);
         }
-        let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
-        let mut walker = Walker {
-            bytes: &map,
-            pos: body,
-            encoding: header.encoding,
-            path,
-        };
+        Self::from_opened(path, opened).map(Some)
+    }
+
+    fn from_opened(path: &Path, opened: Opened) -> Result<Self> {
+        let Opened {
+            map,
+            header,
+            body,
+            doubles,
+            normal_doubles,
+        } = opened;
+        let err = |m: String| Error::format(path, m);
+        let mut walker = Walker::new(&map, body, header.encoding, path);
         let mut triangles = Vec::new();
         let mut start = body;
         for (name, element) in header.elements.iter() {
@@ -381,7 +428,7 @@ impl PlyTextStream {
             return Err(err("the file holds no vertices or points".into()));
         }
         check_triangles(path, &triangles, vertex.count)?;
-        Ok(Some(Self {
+        Ok(Self {
             path: path.to_path_buf(),
             map: Arc::new(map),
             vertex,
@@ -391,7 +438,7 @@ impl PlyTextStream {
             triangles,
             pos: start,
             next: 0,
-        }))
+        })
     }
 }
 
@@ -417,12 +464,7 @@ impl Source for PlyTextStream {
         let n = max.min(self.vertex.count - self.next);
         chunk.clear(self.next as u64);
         let from = if self.next == 0 { 0 } else { self.pos };
-        let mut walker = Walker {
-            bytes: &self.map,
-            pos: self.pos,
-            encoding: Encoding::Ascii,
-            path: &self.path,
-        };
+        let mut walker = Walker::new(&self.map, self.pos, Encoding::Ascii, &self.path);
         let mut fields = VertexFields::default();
         let has_normals = self.normal_singles.is_some();
         let records = self.next..self.next + n;
@@ -483,12 +525,12 @@ struct PlyTextSink {
 impl Sink for PlyTextSink {
     fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
         let first = chunk.first as usize;
-        let mut walker = Walker {
-            bytes: &chunk.raw,
-            pos: if first == 0 { self.start } else { 0 },
-            encoding: Encoding::Ascii,
-            path: &self.path,
-        };
+        let mut walker = Walker::new(
+            &chunk.raw,
+            if first == 0 { self.start } else { 0 },
+            Encoding::Ascii,
+            &self.path,
+        );
         let mut fields = VertexFields::default();
         let mut edits = Vec::with_capacity(6 * moved.len());
         let records = first..first + moved.len();
