@@ -26,7 +26,7 @@ use super::ply::{
 };
 use super::require_extension;
 use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
-use super::text::{edits3, splice};
+use super::text::TextSink;
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -357,8 +357,9 @@ impl Sink for PlySink {
 /// An ASCII PLY file streamed from a memory map. `open` walks the whole body once to validate
 /// it (with the messages of [`super::PlyFile`]) and to collect faces; a chunk then walks its
 /// vertex records from where the previous one stopped and carries the bytes from there through
-/// its last record (from the file's start for the first chunk, to its end for the last), so the
-/// chunks' bytes partition the file and the sink splices the new numbers into them.
+/// its last record (from the file's start for the first chunk, to its end for the last) with
+/// the spans of their numbers, so the chunks' bytes partition the file and the
+/// [`TextSink`](super::text::TextSink) splices the new numbers into them.
 pub struct PlyTextStream {
     path: PathBuf,
     map: Arc<Mmap>,
@@ -476,10 +477,12 @@ impl Source for PlyTextStream {
             &mut Vec::new(),
             |visit| {
                 if let Some(record) = fields.take(visit) {
-                    let (_, p, _, normal) = fields.checked(&self.path, record)?;
+                    let (spans, p, nspans, normal) = fields.checked(&self.path, record)?;
                     chunk.positions.push(p);
+                    chunk.spans.extend(spans.map(|s| s.before(from)));
                     if has_normals {
                         chunk.normals.push(normal);
+                        chunk.spans.extend(nspans.map(|s| s.before(from)));
                     }
                 }
                 Ok(())
@@ -497,70 +500,7 @@ impl Source for PlyTextStream {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        require_extension(output, "ply")?;
-        let (file, out) = TempFile::create(output)?;
-        Ok(Box::new(PlyTextSink {
-            path: self.path.clone(),
-            vertex: self.vertex.clone(),
-            start: self.start,
-            singles: self.singles,
-            normal_singles: self.normal_singles,
-            file,
-            out,
-        }))
-    }
-}
-
-/// Writes the chunks of a [`PlyTextStream`] with their vertices' numbers replaced.
-struct PlyTextSink {
-    path: PathBuf,
-    vertex: ElementDef,
-    start: usize,
-    singles: [bool; 3],
-    normal_singles: Option<[bool; 3]>,
-    file: TempFile,
-    out: BufWriter<File>,
-}
-
-impl Sink for PlyTextSink {
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
-        let first = chunk.first as usize;
-        let mut walker = Walker::new(
-            &chunk.raw,
-            if first == 0 { self.start } else { 0 },
-            Encoding::Ascii,
-            &self.path,
-        );
-        let mut fields = VertexFields::default();
-        let mut edits = Vec::with_capacity(6 * moved.len());
-        let records = first..first + moved.len();
-        walk_element(
-            &mut walker,
-            "vertex",
-            &self.vertex,
-            records,
-            &mut Vec::new(),
-            |visit| {
-                if let Some(record) = fields.take(visit) {
-                    let (spans, _, nspans, _) = fields.checked(&self.path, record)?;
-                    edits.extend(edits3(&spans, &moved[record - first], self.singles));
-                    if let (Some(singles), Some(n)) =
-                        (self.normal_singles, normals.get(record - first))
-                    {
-                        edits.extend(edits3(&nspans, n, singles));
-                    }
-                }
-                Ok(())
-            },
-        )?;
-        self.out
-            .write_all(&splice(&chunk.raw, edits))
-            .map_err(|e| Error::io(self.file.path(), e))
-    }
-
-    fn finish(self: Box<Self>) -> Result<Vec<String>> {
-        let Self { file, out, .. } = *self;
-        file.commit_writer(out)?;
-        Ok(Vec::new())
+        let sink = TextSink::create(&self.path, output, "ply", self.singles, self.normal_singles)?;
+        Ok(Box::new(sink))
     }
 }

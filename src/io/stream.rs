@@ -11,6 +11,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+use super::text::Span;
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -29,6 +30,9 @@ pub struct Chunk {
     pub raw: Vec<u8>,
     /// Length of one raw record.
     pub record_len: usize,
+    /// Text formats: where each sample's `x y z` (then `nx ny nz`, when the chunk has normals)
+    /// lie in `raw`, so that the sink splices new numbers without walking the text again.
+    pub(crate) spans: Vec<Span>,
 }
 
 impl Chunk {
@@ -48,6 +52,7 @@ impl Chunk {
         self.normals.clear();
         self.classes.clear();
         self.raw.clear();
+        self.spans.clear();
     }
 }
 

@@ -1,9 +1,12 @@
 //! Replacing numbers inside a file's bytes: the one writer of every text format (PLY ASCII,
 //! OBJ, XYZ), so that everything between the numbers is copied as it was.
 
-use std::io::Write;
-use std::path::Path;
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
 
+use super::require_extension;
+use super::stream::{Chunk, Sink, TempFile};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -12,6 +15,16 @@ use crate::rigid::Vect;
 pub(crate) struct Span {
     pub start: usize,
     pub end: usize,
+}
+
+impl Span {
+    /// The span `by` bytes earlier (relative to a slice starting at `by`).
+    pub(crate) fn before(self, by: usize) -> Self {
+        Self {
+            start: self.start - by,
+            end: self.end - by,
+        }
+    }
 }
 
 /// A number to write over a [`Span`]: as f64 (shortest text that reads back exactly) or, for
@@ -60,6 +73,63 @@ pub(crate) fn splice(bytes: &[u8], mut edits: Vec<Edit>) -> Vec<u8> {
     }
     out.extend_from_slice(&bytes[last..]);
     out
+}
+
+/// The sink of the streamed text formats (XYZ, ASCII PLY): each chunk's bytes written with the
+/// numbers at its [`Chunk::spans`] replaced; `singles` marks the components written as f32.
+pub(crate) struct TextSink {
+    input: PathBuf,
+    file: TempFile,
+    out: BufWriter<File>,
+    singles: [bool; 3],
+    normal_singles: Option<[bool; 3]>,
+}
+
+impl TextSink {
+    /// A sink for `output`, which must have the extension `ext`; `input` names errors.
+    pub(crate) fn create(
+        input: &Path,
+        output: &Path,
+        ext: &str,
+        singles: [bool; 3],
+        normal_singles: Option<[bool; 3]>,
+    ) -> Result<Self> {
+        require_extension(output, ext)?;
+        let (file, out) = TempFile::create(output)?;
+        Ok(Self {
+            input: input.to_path_buf(),
+            file,
+            out,
+            singles,
+            normal_singles,
+        })
+    }
+}
+
+impl Sink for TextSink {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
+        let with_normals = !chunk.normals.is_empty();
+        let stride = if with_normals { 6 } else { 3 };
+        check_count(&self.input, chunk.spans.len(), stride * moved.len())?;
+        let mut edits = Vec::with_capacity(chunk.spans.len());
+        for (i, (spans, p)) in chunk.spans.chunks_exact(stride).zip(moved).enumerate() {
+            let xyz: &[Span; 3] = spans[..3].try_into().expect("3 spans");
+            edits.extend(edits3(xyz, p, self.singles));
+            if let (Some(singles), Some(n)) = (self.normal_singles, normals.get(i)) {
+                let nxyz: &[Span; 3] = spans[3..].try_into().expect("3 normal spans");
+                edits.extend(edits3(nxyz, n, singles));
+            }
+        }
+        self.out
+            .write_all(&splice(&chunk.raw, edits))
+            .map_err(|e| Error::io(self.file.path(), e))
+    }
+
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+        let Self { file, out, .. } = *self;
+        file.commit_writer(out)?;
+        Ok(Vec::new())
+    }
 }
 
 #[cfg(test)]

@@ -4,21 +4,19 @@
 //!
 //! [`XyzStream`] streams a file of any size from a memory map: a chunk carries the bytes of its
 //! lines (from the end of the previous chunk through its last point's line, and to the end of
-//! the file for the last one), and the sink writes them back with the three numbers of each
-//! point line replaced, so the chunks' bytes partition the file. [`XyzFile`] holds a file in
+//! the file for the last one) and where its numbers lie in them, and the
+//! [`TextSink`](super::text::TextSink) writes them back with those numbers replaced, so the
+//! chunks' bytes partition the file. [`XyzFile`] holds a file in
 //! memory for the in-memory API. Both read lines through [`PointLines`].
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use memmap2::Mmap;
 
 use super::mapped::map;
-use super::require_extension;
-use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
-use super::text::{Span, check_count, edits3, splice};
+use super::stream::{Bounds, Chunk, Sink, Source};
+use super::text::{Span, TextSink, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -210,8 +208,9 @@ impl Source for XyzStream {
         let mut end = start;
         while chunk.positions.len() < max {
             let Some(point) = lines.next() else { break };
-            let (_, p, line_end) = point?;
+            let (spans, p, line_end) = point?;
             chunk.positions.push(Vect::<3>::from(p));
+            chunk.spans.extend(spans.map(|s| s.before(start)));
             end = line_end;
         }
         let n = chunk.positions.len();
@@ -227,39 +226,8 @@ impl Source for XyzStream {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        require_extension(output, "xyz")?;
-        let (file, out) = TempFile::create(output)?;
-        Ok(Box::new(XyzSink {
-            path: self.path.clone(),
-            file,
-            out,
-        }))
-    }
-}
-
-/// Writes the chunks of an [`XyzStream`] with their points replaced.
-struct XyzSink {
-    path: PathBuf,
-    file: TempFile,
-    out: BufWriter<File>,
-}
-
-impl Sink for XyzSink {
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
-        let mut edits = Vec::with_capacity(3 * moved.len());
-        for (point, p) in PointLines::new(&chunk.raw, 0, 0, &self.path, false).zip(moved) {
-            edits.extend(edits3(&point?.0, p, [false; 3]));
-        }
-        check_count(&self.path, moved.len(), edits.len() / 3)?;
-        self.out
-            .write_all(&splice(&chunk.raw, edits))
-            .map_err(|e| Error::io(self.file.path(), e))
-    }
-
-    fn finish(self: Box<Self>) -> Result<Vec<String>> {
-        let Self { file, out, .. } = *self;
-        file.commit_writer(out)?;
-        Ok(Vec::new())
+        let sink = TextSink::create(&self.path, output, "xyz", [false; 3], None)?;
+        Ok(Box::new(sink))
     }
 }
 
