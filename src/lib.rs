@@ -70,4 +70,3 @@ pub(crate) fn faer_sequential() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| faer::set_global_parallelism(faer::Par::Seq));
 }
-

@@ -264,7 +264,7 @@ fn proxy_cell_size(
     let mut proxy = Vec::new();
     let mut seen = std::collections::HashSet::new();
     let mut chunk = Chunk::default();
-    while source.read(chunk_len, &mut chunk)? > 0 {
+    while source.read_samples(chunk_len, &mut chunk)? > 0 {
         check_finite(source.path(), &chunk)?;
         for p in &chunk.positions {
             let key = ((p - lo) / voxel).map(|v| v.floor() as i64);
@@ -339,7 +339,7 @@ fn scan_bounds(source: &mut dyn Source, chunk_len: usize) -> Result<Bounds> {
     let mut chunk = Chunk::default();
     let mut lo = Vect::<3>::repeat(f64::INFINITY);
     let mut hi = Vect::<3>::repeat(f64::NEG_INFINITY);
-    while source.read(chunk_len, &mut chunk)? > 0 {
+    while source.read_samples(chunk_len, &mut chunk)? > 0 {
         check_finite(source.path(), &chunk)?;
         for p in &chunk.positions {
             lo = lo.inf(p);
@@ -372,7 +372,7 @@ fn first_pass(
     let mut outside = 0;
     let mut chunk = Chunk::default();
     observer.stage("reading", source.len());
-    while source.read(chunk_len, &mut chunk)? > 0 {
+    while source.read_samples(chunk_len, &mut chunk)? > 0 {
         check_finite(source.path(), &chunk)?;
         for p in &chunk.positions {
             bounds.0 = bounds.0.inf(p);

@@ -448,73 +448,11 @@ impl Source for LasSource {
     }
 
     fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
-        let h = &self.header;
-        let rl = h.record_len as usize;
-        let mut n = (h.count - self.next).min(max as u64) as usize;
-        chunk.clear(self.next);
-        chunk.record_len = rl;
-        if n == 0 {
-            return Ok(0);
-        }
-        match &mut self.body {
-            Body::Mapped(map) => {
-                let start = h.point_offset as usize + self.next as usize * rl;
-                chunk.raw.extend_from_slice(&map[start..start + n * rl]);
-            }
-            Body::Laz(reader, slab, used) => {
-                if *used * rl == slab.raw_bytes().len() {
-                    let want = (h.count - self.next).min(LAZ_BATCH as u64);
-                    let got = reader.fill_points(want, slab).map_err(|e| {
-                        Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
-                    })?;
-                    if got != want {
-                        return Err(Error::format(
-                            &self.path,
-                            format!(
-                                "truncated: the header says {} points but the data ends after {}",
-                                h.count,
-                                self.next + got
-                            ),
-                        ));
-                    }
-                    *used = 0;
-                }
-                let take = n.min(slab.raw_bytes().len() / rl - *used);
-                chunk
-                    .raw
-                    .extend_from_slice(&slab.raw_bytes()[*used * rl..(*used + take) * rl]);
-                *used += take;
-                n = take;
-            }
-            Body::PointWise(d) => {
-                chunk.raw.resize(n * rl, 0);
-                d.decompress_many(&mut chunk.raw).map_err(|e| {
-                    Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
-                })?;
-            }
-        }
-        let class_at = h.class_at();
-        let five_bits = h.format < 6;
-        for rec in chunk.raw.chunks_exact(rl) {
-            let c = |at: usize| i32::from_le_bytes(rec[at..at + 4].try_into().expect("4 bytes"));
-            chunk.positions.push(Vect::<3>::new(
-                c(0) as f64 * h.scale[0] + h.offset[0],
-                c(4) as f64 * h.scale[1] + h.offset[1],
-                c(8) as f64 * h.scale[2] + h.offset[2],
-            ));
-            let class = rec[class_at];
-            chunk
-                .classes
-                .push(if five_bits { class & 0x1f } else { class });
-            let ret = if five_bits {
-                rec[14] & 0x07
-            } else {
-                rec[14] & 0x0f
-            };
-            self.max_return = self.max_return.max(ret);
-        }
-        self.next += n as u64;
-        Ok(n)
+        self.read_records(max, chunk, true)
+    }
+
+    fn read_samples(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        self.read_records(max, chunk, false)
     }
 
     fn sink(&self, output: &Path, bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
@@ -549,6 +487,96 @@ impl Source for LasSource {
             )?)),
         }
     }
+}
+
+impl LasSource {
+    /// Reads up to `max` records into `chunk`: their samples, and with `keep_raw` their bytes.
+    /// Memory-mapped records are decoded in place without `keep_raw`.
+    fn read_records(&mut self, max: usize, chunk: &mut Chunk, keep_raw: bool) -> Result<usize> {
+        let h = &self.header;
+        let rl = h.record_len as usize;
+        let mut n = (h.count - self.next).min(max as u64) as usize;
+        chunk.clear(self.next);
+        chunk.record_len = rl;
+        if n == 0 {
+            return Ok(0);
+        }
+        match &mut self.body {
+            Body::Mapped(map) => {
+                let start = h.point_offset as usize + self.next as usize * rl;
+                let records = &map[start..start + n * rl];
+                if !keep_raw {
+                    self.max_return = self.max_return.max(decode(h, records, chunk));
+                    self.next += n as u64;
+                    return Ok(n);
+                }
+                chunk.raw.extend_from_slice(records);
+            }
+            Body::Laz(reader, slab, used) => {
+                if *used * rl == slab.raw_bytes().len() {
+                    let want = (h.count - self.next).min(LAZ_BATCH as u64);
+                    let got = reader.fill_points(want, slab).map_err(|e| {
+                        Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
+                    })?;
+                    if got != want {
+                        return Err(Error::format(
+                            &self.path,
+                            format!(
+                                "truncated: the header says {} points but the data ends after {}",
+                                h.count,
+                                self.next + got
+                            ),
+                        ));
+                    }
+                    *used = 0;
+                }
+                let take = n.min(slab.raw_bytes().len() / rl - *used);
+                chunk
+                    .raw
+                    .extend_from_slice(&slab.raw_bytes()[*used * rl..(*used + take) * rl]);
+                *used += take;
+                n = take;
+            }
+            Body::PointWise(d) => {
+                chunk.raw.resize(n * rl, 0);
+                d.decompress_many(&mut chunk.raw).map_err(|e| {
+                    Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
+                })?;
+            }
+        }
+        let raw = std::mem::take(&mut chunk.raw);
+        self.max_return = self.max_return.max(decode(h, &raw, chunk));
+        chunk.raw = raw;
+        self.next += n as u64;
+        Ok(n)
+    }
+}
+
+/// Appends the world coordinates and classes of `records` to `chunk`; returns the largest
+/// return number among them.
+fn decode(h: &LasHeader, records: &[u8], chunk: &mut Chunk) -> u8 {
+    let class_at = h.class_at();
+    let five_bits = h.format < 6;
+    let mut max_return = 0;
+    for rec in records.chunks_exact(h.record_len as usize) {
+        let c = |at: usize| i32::from_le_bytes(rec[at..at + 4].try_into().expect("4 bytes"));
+        chunk.positions.push(Vect::<3>::new(
+            c(0) as f64 * h.scale[0] + h.offset[0],
+            c(4) as f64 * h.scale[1] + h.offset[1],
+            c(8) as f64 * h.scale[2] + h.offset[2],
+        ));
+        let class = rec[class_at];
+        chunk
+            .classes
+            .push(if five_bits { class & 0x1f } else { class });
+        let ret = if five_bits {
+            rec[14] & 0x07
+        } else {
+            rec[14] & 0x0f
+        };
+        max_return = max_return.max(ret);
+    }
+    max_return
 }
 
 /// The output's scale and offset: the input's, unless `bounds` (of the moved samples, known

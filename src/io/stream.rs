@@ -91,6 +91,11 @@ pub trait Source {
     fn rewind(&mut self) -> Result<()>;
     /// Fills `chunk` with up to `max` next samples; returns how many (0 at the end).
     fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize>;
+    /// As [`Source::read`], but `chunk.raw` may be left empty: for passes that only look at
+    /// coordinates, normals and classes (pass 1), so that sources need not copy their records.
+    fn read_samples(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        self.read(max, chunk)
+    }
     /// A sink writing `output` in the format its extension names. `bounds`: the moved samples'
     /// bounds when known (after a first attempt overflowed the output's coordinate range).
     fn sink(&self, output: &Path, bounds: Option<Bounds>) -> Result<Box<dyn Sink>>;
