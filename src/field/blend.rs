@@ -22,7 +22,7 @@
 use super::nearest::{NEAR, Nearest};
 use super::{Field, Warp};
 use crate::error::Result;
-use crate::rigid::{Motion, Vect};
+use crate::rigid::{Affine, Vect};
 
 /// Neighbors blended per sample.
 pub const K: usize = 4;
@@ -40,8 +40,9 @@ pub enum Weights {
 /// The blend transfer of a field.
 pub struct Blend<const D: usize> {
     nearest: Nearest<D>,
-    centers: Vec<Vect<D>>,
-    motions: Vec<Motion<D>>,
+    /// Each cell's motion as the affine map `x ↦ R x + (p − R c)`: one read and no
+    /// subtraction per blended cell.
+    maps: Vec<Affine<D>>,
     weights: Weights,
     snap2: f64,
 }
@@ -52,8 +53,15 @@ impl<const D: usize> Blend<D> {
         let smallest = field.halves.iter().cloned().fold(f64::MAX, f64::min);
         Ok(Self {
             nearest: Nearest::new(&field.centers, &field.halves)?,
-            centers: field.centers.clone(),
-            motions: field.motions.clone(),
+            maps: field
+                .motions
+                .iter()
+                .zip(&field.centers)
+                .map(|(m, c)| Affine {
+                    linear: m.rot,
+                    translation: m.pos - m.rot * c,
+                })
+                .collect(),
             weights,
             snap2: (1e-12 * smallest).powi(2),
         })
@@ -88,8 +96,9 @@ impl<const D: usize> Blend<D> {
             total += w;
         }
         if total > 0.0 {
+            let inv = 1.0 / total;
             for slot in &mut out[..n] {
-                slot.1 /= total;
+                slot.1 *= inv;
             }
         } else {
             for slot in &mut out[..n] {
@@ -109,18 +118,21 @@ impl<const D: usize> Blend<D> {
             return (*x, n.copied().unwrap_or_else(Vect::<D>::zeros));
         }
         let mut moved = Vect::<D>::zeros();
+        for &(c, wk) in &w[..k] {
+            moved += self.maps[c].apply(x) * wk;
+        }
+        let Some(n) = n else {
+            return (moved, Vect::<D>::zeros());
+        };
         let mut turned = Vect::<D>::zeros();
         for &(c, wk) in &w[..k] {
-            moved += self.motions[c].apply(&self.centers[c], x) * wk;
-            if let Some(n) = n {
-                turned += self.motions[c].rot * n * wk;
-            }
+            turned += self.maps[c].linear * n * wk;
         }
         let len = turned.norm();
-        match n {
-            Some(_) if len > 0.0 && len.is_finite() => (moved, turned / len),
-            Some(n) => (moved, *n),
-            None => (moved, turned),
+        if len > 0.0 && len.is_finite() {
+            (moved, turned / len)
+        } else {
+            (moved, *n)
         }
     }
 }
