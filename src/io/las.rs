@@ -973,7 +973,7 @@ mod tests {
         for r in values {
             let reference = r.round();
             let expected = (reference >= i32::MIN as f64 && reference <= i32::MAX as f64)
-                .then(|| reference as i32);
+                .then_some(reference as i32);
             assert_eq!(round_to_i32(r), expected, "{r}");
         }
     }
