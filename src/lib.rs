@@ -59,14 +59,18 @@ pub mod spec;
 
 pub use error::{Error, Result};
 
-/// Makes faer run sequentially, once per process, before its first factorization.
+/// Runs `f`, which calls faer, on a rayon pool of faer's own.
 ///
 /// faer's parallel kernels go through `spindle`, which runs them inside rayon scopes; measured
-/// here, a rayon pool that has run one of them no longer hands work to its second worker, so
-/// every parallel loop after the first solve ran at one core's speed (pass 2 of a 20M-point LAS:
-/// 2.5 s of transfer on 1.0 core instead of 1.3 s on 2; `rayon::join` of two 90 ms tasks: 80 ms
-/// instead of 40). Our factorizations are small next to the transfers, so they run sequentially.
-pub(crate) fn faer_sequential() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| faer::set_global_parallelism(faer::Par::Seq));
+/// here, a rayon pool that has run one of them no longer hands work to its second worker, so on
+/// the global pool every parallel loop after the first solve ran at one core's speed (pass 2 of
+/// a 20M-point LAS took 2.95 s instead of 1.9; `rayon::join` of two 90 ms tasks took 80 ms
+/// instead of 40; a Gauss-Newton iteration at 1.2k cells 26 ms instead of 13). Every faer call
+/// runs on this pool instead, which nothing else uses.
+pub(crate) fn with_faer<T: Send>(f: impl FnOnce() -> T + Send) -> T {
+    static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
+    match POOL.get_or_init(|| rayon::ThreadPoolBuilder::new().build().ok()) {
+        Some(pool) => pool.install(f),
+        None => f(),
+    }
 }

@@ -73,8 +73,7 @@ impl<const D: usize> Rbf<D> {
                 0.0
             }
         });
-        crate::faer_sequential();
-        let x = a.partial_piv_lu().solve(&rhs);
+        let x = crate::with_faer(|| a.partial_piv_lu().solve(&rhs));
         if !(0..m).all(|r| (0..D).all(|k| x[(r, k)].is_finite())) {
             return Err(Error::Solver(
                 "the RBF system is singular (coincident cell centers?)".into(),

@@ -129,7 +129,6 @@ pub fn solve<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    crate::faer_sequential();
     let start = Instant::now();
     let steps = load_steps(&complex, &constraints, params);
     let mut info = SolverInfo {

@@ -133,7 +133,7 @@ impl Positions {
                 );
             }
         }
-        let x = factor.solve(&rhs);
+        let x = crate::with_faer(|| factor.solve(&rhs));
         if !x.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
             return;
         }
@@ -148,8 +148,10 @@ impl Positions {
 /// The sparse Cholesky factor of the `n × n` matrix given by lower-triangle `triplets`.
 fn factor(n: usize, triplets: &[Triplet<usize, usize, f64>]) -> Option<Llt<usize, f64>> {
     let m = SparseColMat::try_new_from_triplets(n, n, triplets).ok()?;
-    let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).ok()?;
-    Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower).ok()
+    crate::with_faer(|| {
+        let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).ok()?;
+        Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower).ok()
+    })
 }
 
 fn pair_weight<const D: usize>(

@@ -126,7 +126,7 @@ where
             let indices = system.pattern(complex);
             let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &indices)
                 .map_err(|e| Error::Solver(format!("sparsity pattern: {e:?}")))?;
-            let llt = SymbolicLlt::try_new(sym.as_ref(), Side::Lower)
+            let llt = crate::with_faer(|| SymbolicLlt::try_new(sym.as_ref(), Side::Lower))
                 .map_err(|e| Error::Solver(format!("symbolic Cholesky: {e:?}")))?;
             system.values = vec![0.0; indices.len()];
             system.symbolic = Some((sym, argsort, llt));
@@ -347,11 +347,12 @@ where
             let all = [&cell_vals[..], &pair_vals[..]].concat();
             let matrix = SparseColMat::new_from_argsort(sym.clone(), argsort, &all)
                 .map_err(|e| Error::Solver(format!("assembly: {e:?}")))?;
-            if let Ok(factor) =
+            let rhs = Mat::<f64>::from_fn(self.n, 1, |r, _| -grad[r]);
+            let solved = crate::with_faer(|| {
                 Llt::try_new_with_symbolic(llt.clone(), matrix.as_ref(), Side::Lower)
-            {
-                let rhs = Mat::<f64>::from_fn(self.n, 1, |r, _| -grad[r]);
-                let x = factor.solve(&rhs);
+                    .map(|factor| factor.solve(&rhs))
+            });
+            if let Ok(x) = solved {
                 let step: Vec<f64> = (0..self.n).map(|r| x[(r, 0)]).collect();
                 if step.iter().all(|v| v.is_finite()) {
                     return Ok(step);
