@@ -477,6 +477,7 @@ fn pipelined_pass(
         Vect::<3>::repeat(f64::NEG_INFINITY),
     );
     observer.stage("writing", source.len());
+    let raw = sink.needs_raw();
     let sink = std::thread::scope(|scope| -> Result<Option<Box<dyn Sink>>> {
         let (full, queued) = mpsc::sync_channel::<Job>(1);
         let (done, empty) = mpsc::channel::<Job>();
@@ -499,7 +500,12 @@ fn pipelined_pass(
         });
         // `recv` fails only when the writer stopped on an error, which `join` returns.
         while let Ok(mut job) = empty.recv() {
-            if source.read(chunk_len, &mut job.chunk)? == 0 {
+            let read = if raw {
+                source.read(chunk_len, &mut job.chunk)?
+            } else {
+                source.read_samples(chunk_len, &mut job.chunk)?
+            };
+            if read == 0 {
                 break;
             }
             let Job {

@@ -2,7 +2,7 @@
 //! displacements; blend weights sum to one over the true 4 nearest centers.
 
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use rigidcells::field::{Blend, Field, Nearest, Rbf, Warp, Weights};
+use rigidcells::field::{Anchor, Blend, Field, Nearest, Rbf, Warp, Weights};
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
 
 fn field(n: usize, seed: u64) -> Field<3> {
@@ -207,6 +207,51 @@ fn tiled_nearest_centers_equal_brute_force() {
         ties > 1000,
         "the lattice queries must exercise ties ({ties})"
     );
+}
+
+/// Along scan-like paths (small steps, some along lattice lines where centers tie, and jumps),
+/// reusing an anchor's neighbors gives exactly the brute-force neighbors, and the blend of a run
+/// of samples equals the blend of each sample alone, bit for bit.
+#[test]
+fn reused_neighbors_equal_brute_force_along_scans() {
+    let f = octree_field();
+    let nearest = Nearest::new(&f.centers, &f.halves).unwrap();
+    let mut rng = StdRng::seed_from_u64(9);
+    let mut path: Vec<[f64; 3]> = Vec::new();
+    let mut x = [5.0, 4.0, 3.0];
+    for i in 0..40_000 {
+        if i % 5_000 == 0 {
+            x = std::array::from_fn(|a| rng.random_range(0.0..[10.0, 8.0, 6.0][a]));
+        }
+        if i % 10_000 < 2_000 {
+            // Along a lattice line, where many centers are equidistant.
+            x = [x[0] + 0.003, 4.0, 3.0];
+        } else {
+            for a in 0..3 {
+                x[a] += rng.random_range(-0.01..0.01);
+            }
+        }
+        path.push(x);
+    }
+    let mut anchor = Anchor::default();
+    let mut reused = 0;
+    for q in &path {
+        reused += usize::from(anchor.covers(q));
+        let got = nearest.find_reusing(q, &mut anchor);
+        assert_eq!(got, nearest.brute_force(q), "at {q:?}");
+    }
+    assert!(
+        reused > path.len() / 4,
+        "the paths must exercise reuse ({reused} of {})",
+        path.len()
+    );
+    let blend = Blend::new(&f, Weights::Continuous).unwrap();
+    let points: Vec<Vect<3>> = path.iter().map(|q| Vect::<3>::from(*q)).collect();
+    let mut run = vec![Vect::<3>::zeros(); points.len()];
+    blend.warp_run(&f.origin, &points, &mut run);
+    for (p, r) in points.iter().zip(&run) {
+        assert_eq!(blend.warp(p), *r, "at {p:?}");
+    }
 }
 
 /// The continuous blend has no seam where the 4-nearest set changes: across such a boundary,

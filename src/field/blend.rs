@@ -19,7 +19,7 @@
 //! dividing by zero. With fewer than 5 cells, all cells are blended by inverse distance. The
 //! nearest centers come from the exact tiled search of [`super::nearest`].
 
-use super::nearest::{NEAR, Nearest};
+use super::nearest::{Anchor, NEAR, Nearest, Neighbors};
 use super::{Field, Warp};
 use crate::error::Result;
 use crate::rigid::{Affine, Vect};
@@ -75,7 +75,12 @@ impl<const D: usize> Blend<D> {
     /// The blended cells and their normalized weights (summing to one) at the local point `x`.
     #[inline]
     pub fn weights(&self, x: &Vect<D>) -> ([(usize, f64); K], usize) {
-        let nb = self.nearest.find(&(*x).into());
+        self.weights_of(&self.nearest.find(&(*x).into()))
+    }
+
+    /// The blended cells and their normalized weights for the nearest centers `nb`.
+    #[inline(always)]
+    fn weights_of(&self, nb: &Neighbors) -> ([(usize, f64); K], usize) {
         let mut out = [(0usize, 0.0f64); K];
         if nb.n == 0 {
             return (out, 0);
@@ -113,7 +118,13 @@ impl<const D: usize> Blend<D> {
     /// non-finite coordinate) stays where it is.
     #[inline]
     fn blend(&self, x: &Vect<D>, n: Option<&Vect<D>>) -> (Vect<D>, Vect<D>) {
-        let (w, k) = self.weights(x);
+        self.blend_with(x, n, &self.nearest.find(&(*x).into()))
+    }
+
+    /// [`Self::blend`] with the nearest centers `nb` of `x` already found.
+    #[inline(always)]
+    fn blend_with(&self, x: &Vect<D>, n: Option<&Vect<D>>, nb: &Neighbors) -> (Vect<D>, Vect<D>) {
+        let (w, k) = self.weights_of(nb);
         if k == 0 {
             return (*x, n.copied().unwrap_or_else(Vect::<D>::zeros));
         }
@@ -149,5 +160,16 @@ impl<const D: usize> Warp<D> for Blend<D> {
 
     fn warp_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
         self.blend(x, Some(n))
+    }
+
+    /// Consecutive samples of a scan mostly share their nearest centers: found once, they are
+    /// reused while provably still the nearest ([`Nearest::find_reusing`]), with the same bits.
+    fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
+        let mut anchor = Anchor::default();
+        for (o, p) in out.iter_mut().zip(points) {
+            let x = p - origin;
+            let nb = self.nearest.find_reusing(&x.into(), &mut anchor);
+            *o = self.blend_with(&x, None, &nb).0 + origin;
+        }
     }
 }

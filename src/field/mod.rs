@@ -19,7 +19,7 @@ mod rbf;
 
 pub use blend::{Blend, Weights};
 pub use file::SavedField;
-pub use nearest::{NEAR, Nearest, Neighbors};
+pub use nearest::{Anchor, NEAR, Nearest, Neighbors};
 pub use rbf::Rbf;
 
 use rayon::prelude::*;
@@ -79,6 +79,15 @@ pub trait Warp<const D: usize>: Sync {
     fn warp_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
         (self.warp(x), self.warp_normal(x, n))
     }
+
+    /// Moves the world-coordinate `points` into `out`, in order, through the local frame whose
+    /// origin is `origin`: `out[i] = warp(points[i] − origin) + origin`. Transfers may reuse work
+    /// between consecutive samples, but each result is [`Warp::warp`]'s, bit for bit.
+    fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
+        for (o, p) in out.iter_mut().zip(points) {
+            *o = self.warp(&(p - origin)) + origin;
+        }
+    }
 }
 
 /// A transfer built for a field, ready to warp samples.
@@ -126,6 +135,13 @@ impl<const D: usize> Warp<D> for Deformer<D> {
             Self::Rbf(r) => r.warp_with_normal(x, n),
         }
     }
+
+    fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
+        match self {
+            Self::Blend(b) => b.warp_run(origin, points, out),
+            Self::Rbf(r) => r.warp_run(origin, points, out),
+        }
+    }
 }
 
 /// Samples per parallel task.
@@ -148,11 +164,7 @@ pub fn apply_into<const D: usize>(
         moved
             .par_chunks_mut(CHUNK)
             .zip(points.par_chunks(CHUNK))
-            .for_each(|(out, inp)| {
-                for (o, p) in out.iter_mut().zip(inp) {
-                    *o = warp.warp(&(p - origin)) + origin;
-                }
-            });
+            .for_each(|(out, inp)| warp.warp_run(origin, inp, out));
         return;
     }
     moved_normals.resize(normals.len(), Vect::<D>::zeros());
@@ -172,8 +184,7 @@ pub fn apply_into<const D: usize>(
 /// `origin`. Parallel over chunks; the result of each sample depends on that sample alone.
 pub fn apply<const D: usize>(warp: &impl Warp<D>, origin: &Vect<D>, points: &mut [Vect<D>]) {
     points.par_chunks_mut(CHUNK).for_each(|chunk| {
-        for p in chunk {
-            *p = warp.warp(&(*p - origin)) + origin;
-        }
+        let inp = chunk.to_vec();
+        warp.warp_run(origin, &inp, chunk);
     });
 }

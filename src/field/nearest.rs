@@ -59,19 +59,61 @@ impl Neighbors {
     /// the order of `(d2, cell)`: whatever order centers are offered in, the result is the same.
     #[inline(always)]
     fn offer(&mut self, d2: f64, cell: u32) {
-        let before = |nb: &Self, j: usize| d2 < nb.d2[j] || (d2 == nb.d2[j] && cell < nb.cells[j]);
-        if self.n == NEAR && !before(self, NEAR - 1) {
-            return;
+        offer(&mut self.d2, &mut self.cells, &mut self.n, d2, cell);
+    }
+}
+
+/// Keeps `(d2, cell)` among the `N` smallest so far of the sorted `d2s`/`cells` (`n` of them
+/// filled), in the order of `(d2, cell)`.
+#[inline(always)]
+fn offer<const N: usize>(
+    d2s: &mut [f64; N],
+    cells: &mut [u32; N],
+    n: &mut usize,
+    d2: f64,
+    cell: u32,
+) {
+    let before = |d2s: &[f64; N], cells: &[u32; N], j: usize| {
+        d2 < d2s[j] || (d2 == d2s[j] && cell < cells[j])
+    };
+    if *n == N && !before(d2s, cells, N - 1) {
+        return;
+    }
+    let mut j = (*n).min(N - 1);
+    *n = (*n + 1).min(N);
+    while j > 0 && before(d2s, cells, j - 1) {
+        d2s[j] = d2s[j - 1];
+        cells[j] = cells[j - 1];
+        j -= 1;
+    }
+    d2s[j] = d2;
+    cells[j] = cell;
+}
+
+/// What [`Nearest::find_reusing`] keeps from one call to the next: the last point searched in
+/// full, its [`NEAR`] nearest centers, and the squared radius around it within which they stay
+/// provably the nearest.
+#[derive(Debug, Clone, Copy)]
+pub struct Anchor<const D: usize> {
+    at: [f64; D],
+    cells: [u32; NEAR],
+    reach2: f64,
+}
+
+impl<const D: usize> Anchor<D> {
+    /// Whether [`Nearest::find_reusing`] would answer at the local point `x` from this anchor.
+    pub fn covers(&self, x: &[f64; D]) -> bool {
+        dist2(x, &self.at) < self.reach2
+    }
+}
+
+impl<const D: usize> Default for Anchor<D> {
+    fn default() -> Self {
+        Self {
+            at: [0.0; D],
+            cells: [0; NEAR],
+            reach2: -1.0,
         }
-        let mut j = self.n.min(NEAR - 1);
-        self.n = (self.n + 1).min(NEAR);
-        while j > 0 && before(self, j - 1) {
-            self.d2[j] = self.d2[j - 1];
-            self.cells[j] = self.cells[j - 1];
-            j -= 1;
-        }
-        self.d2[j] = d2;
-        self.cells[j] = cell;
     }
 }
 
@@ -82,6 +124,13 @@ struct Candidate<const D: usize> {
     cell: u32,
 }
 
+/// The candidates of a tile and the bound they were chosen by: every center left out is
+/// farther than `bound` from every point of the tile.
+struct TileList<const D: usize> {
+    candidates: Box<[Candidate<D>]>,
+    bound: f64,
+}
+
 /// The nearest-center index over a field's rest centers.
 pub struct Nearest<const D: usize> {
     centers: Vec<[f64; D]>,
@@ -89,7 +138,7 @@ pub struct Nearest<const D: usize> {
     lower: [f64; D],
     size: f64,
     dims: [usize; D],
-    tiles: Vec<OnceLock<Box<[Candidate<D>]>>>,
+    tiles: Vec<OnceLock<TileList<D>>>,
 }
 
 #[inline(always)]
@@ -151,8 +200,57 @@ impl<const D: usize> Nearest<D> {
             return self.outside(x);
         };
         let mut nb = Neighbors::EMPTY;
-        for c in self.tiles[t].get_or_init(|| self.fill(t)).iter() {
+        for c in self.tiles[t].get_or_init(|| self.fill(t)).candidates.iter() {
             nb.offer(dist2(x, &c.at), c.cell);
+        }
+        nb
+    }
+
+    /// [`Self::find`] for points that come in a coherent order (scans): when `x` is within
+    /// `anchor`'s reach, its nearest centers are the anchor's, and only their distances are
+    /// computed; otherwise `x` is searched in full and becomes the anchor. The result is
+    /// [`Self::find`]'s, bit for bit.
+    ///
+    /// **Why.** Let `a` be the anchor, `d5` the distance of its 5th nearest center and `L` a
+    /// lower bound on its distance to every other center: the 6th nearest of its tile's list, or
+    /// the tile's bound for the centers left out of the list. For `x` with `δ = |x − a|`, every
+    /// kept center is within `d5 + δ` of `x` and every other beyond `L − δ`, so while
+    /// `δ < (L − d5) / 2` the kept centers are strictly the nearest (the reach is shortened by
+    /// `1e-9 L` against rounding), and sorting them by `(d2, cell)` gives what the full scan
+    /// gives.
+    #[inline]
+    pub fn find_reusing(&self, x: &[f64; D], anchor: &mut Anchor<D>) -> Neighbors {
+        if anchor.covers(x) {
+            let mut nb = Neighbors::EMPTY;
+            for &c in &anchor.cells {
+                nb.offer(dist2(x, &self.centers[c as usize]), c);
+            }
+            return nb;
+        }
+        anchor.reach2 = -1.0;
+        let Some(t) = self.tile_of(x) else {
+            return self.outside(x);
+        };
+        let list = self.tiles[t].get_or_init(|| self.fill(t));
+        let (mut d2s, mut cells, mut n) = ([f64::INFINITY; NEAR + 1], [0u32; NEAR + 1], 0);
+        for c in list.candidates.iter() {
+            offer(&mut d2s, &mut cells, &mut n, dist2(x, &c.at), c.cell);
+        }
+        let mut nb = Neighbors::EMPTY;
+        nb.n = n.min(NEAR);
+        nb.d2.copy_from_slice(&d2s[..NEAR]);
+        nb.cells.copy_from_slice(&cells[..NEAR]);
+        if n >= NEAR {
+            let d5 = d2s[NEAR - 1].sqrt();
+            let beyond = d2s[NEAR].sqrt().min(list.bound);
+            let reach = 0.5 * (beyond - d5) - 1e-9 * beyond;
+            if reach > 0.0 {
+                *anchor = Anchor {
+                    at: *x,
+                    cells: nb.cells,
+                    reach2: reach * reach,
+                };
+            }
         }
         nb
     }
@@ -178,7 +276,9 @@ impl<const D: usize> Nearest<D> {
             .tiles
             .iter()
             .filter_map(|t| t.get())
-            .fold((0usize, 0usize), |(s, n), l| (s + l.len(), n + 1));
+            .fold((0usize, 0usize), |(s, n), l| {
+                (s + l.candidates.len(), n + 1)
+            });
         sum as f64 / n.max(1) as f64
     }
 
@@ -210,7 +310,7 @@ impl<const D: usize> Nearest<D> {
     }
 
     /// The candidate list of tile `t` (see the module docs).
-    fn fill(&self, t: usize) -> Box<[Candidate<D>]> {
+    fn fill(&self, t: usize) -> TileList<D> {
         let (lo, hi) = self.tile_box(t);
         let mid: [f64; D] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
         let half_diagonal = 0.5 * self.size * (D as f64).sqrt();
@@ -259,14 +359,15 @@ impl<const D: usize> Nearest<D> {
             .map(|i| (dist2(&mid, &self.centers[i as usize]), i))
             .collect();
         cells.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        cells
+        let candidates = cells
             .into_iter()
             .map(|(_, cell)| cell)
             .map(|cell| Candidate {
                 at: self.centers[cell as usize],
                 cell,
             })
-            .collect()
+            .collect();
+        TileList { candidates, bound }
     }
 
     /// A point outside the tiles: the kd-tree's nearest, then every center as near as the

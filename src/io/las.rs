@@ -659,13 +659,9 @@ fn round_to_i32(r: f64) -> Option<i32> {
     }
     let t = r as i64;
     let frac = r - t as f64;
-    let v = if frac >= 0.5 {
-        t + 1
-    } else if frac <= -0.5 {
-        t - 1
-    } else {
-        t
-    };
+    // Branch-free: the fraction of a moved coordinate is random, and a branch on it missed
+    // half the time (a fifth of pass 2 before).
+    let v = t + i64::from(frac >= 0.5) - i64::from(frac <= -0.5);
     i32::try_from(v).ok()
 }
 
@@ -712,12 +708,15 @@ impl RawSink {
 
 impl Sink for RawSink {
     fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
+        let rl = self.header.record_len as usize;
+        let start = self.header.point_offset as usize + chunk.first as usize * rl;
         self.buf.clear();
-        self.buf.extend_from_slice(&chunk.raw);
+        self.buf
+            .extend_from_slice(&self.input[start..start + moved.len() * rl]);
         let target = self.tmp.target().to_path_buf();
         encode(
             &mut self.buf,
-            chunk.record_len,
+            rl,
             moved,
             &(self.scale, self.offset),
             (&mut self.lo, &mut self.hi),
@@ -726,6 +725,11 @@ impl Sink for RawSink {
         self.out
             .write_all(&self.buf)
             .map_err(|e| Error::io(&target, e))
+    }
+
+    /// The records come from the input's map: the source need not copy them.
+    fn needs_raw(&self) -> bool {
+        false
     }
 
     fn finish(self: Box<Self>) -> Result<Vec<String>> {

@@ -107,6 +107,12 @@ pub trait Sink: Send {
     /// none). Returns [`Error::CoordinateOverflow`] when a coordinate does not fit the output's
     /// encoding; the caller then makes a new sink with the moved bounds.
     fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()>;
+    /// Whether [`Sink::write`] needs the chunks' raw records; a sink that reads them from the
+    /// input itself (a memory-mapped LAS) lets the source skip copying them
+    /// ([`Source::read_samples`]).
+    fn needs_raw(&self) -> bool {
+        true
+    }
     /// The moved [`Source::loose_normals`], after every chunk.
     fn loose_normals(&mut self, _normals: Vec<Vect<3>>) {}
     /// Completes the file and renames it over the target; returns notes for the user.
