@@ -170,12 +170,17 @@ impl<const D: usize> Selections<D> {
         classes: Option<&[u8]>,
     ) {
         for (region, acc) in regions(spec).zip(&mut self.regions) {
+            // Consecutive samples of a scan mostly share a cell: one set insertion per run.
+            let mut last = None;
             for (i, p) in points.iter().enumerate() {
                 if region.selects(first + i as u64, p, classes.map(|c| c[i])) {
                     acc.sum += p;
                     acc.count += 1;
-                    if let Some(k) = grid.locate(&(p - grid.origin), grid.max_level) {
+                    if let Some(k) = grid.locate(&(p - grid.origin), grid.max_level)
+                        && last != Some(k.coord)
+                    {
                         acc.cells.insert(k.coord);
+                        last = Some(k.coord);
                     }
                 }
             }
