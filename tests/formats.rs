@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use common::{deform, run, shared};
 use rigidcells::io::{
-    Chunk, Document, LasHeader, LasSource, PlyStream, PlyTextStream, Source, XyzStream,
+    Chunk, Document, LasHeader, LasSource, PlyRecordStream, PlyStream, Source, XyzStream,
 };
 use rigidcells::rigid::Vect;
 
@@ -391,16 +391,30 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
 #[test]
 fn ply_streams_like_the_whole_file_reader() {
     let dir = tempfile::tempdir().unwrap();
-    let mut streamed = 0;
-    for input in files("meshes") {
+    let mut inputs: Vec<PathBuf> = files("meshes");
+    for big in [false, true] {
+        let path = dir.path().join(format!("vertex_lists_{big}.ply"));
+        std::fs::write(&path, binary_ply_with_vertex_lists(big)).unwrap();
+        inputs.push(path);
+    }
+    let (mut streamed, mut walked_binary) = (0, 0);
+    for input in inputs {
         if input.extension().is_none_or(|e| e != "ply") {
             continue;
         }
         let mut stream: Box<dyn Source> = match PlyStream::open(&input) {
             Ok(Some(binary)) => Box::new(binary),
-            Ok(None) => match PlyTextStream::open(&input) {
-                Ok(Some(text)) => Box::new(text),
-                _ => continue,
+            Ok(None) => match PlyRecordStream::open(&input) {
+                Ok(walked) => {
+                    walked_binary += usize::from(
+                        !std::fs::read(&input)
+                            .unwrap()
+                            .windows(12)
+                            .any(|w| w == b"format ascii"),
+                    );
+                    Box::new(walked)
+                }
+                Err(_) => continue,
             },
             Err(_) => continue,
         };
@@ -426,7 +440,69 @@ fn ply_streams_like_the_whole_file_reader() {
         assert!(std::fs::read(&out).unwrap() == want, "{name}: bytes differ");
         streamed += 1;
     }
-    assert!(streamed >= 20, "only {streamed} PLY files streamed");
+    assert!(streamed >= 22, "only {streamed} PLY files streamed");
+    assert_eq!(
+        walked_binary, 2,
+        "both binary files with vertex lists are walked"
+    );
+}
+
+/// A binary PLY whose vertices carry a list property between their coordinates (records of
+/// varying size), with doubles, floats, a face and a trailing element.
+fn binary_ply_with_vertex_lists(big: bool) -> Vec<u8> {
+    let format = if big { "big" } else { "little" };
+    let mut out = format!(
+        "ply\nformat binary_{format}_endian 1.0\ncomment walked records\nelement vertex 5\n\
+         property float x\nproperty list uchar int tags\nproperty double y\nproperty float z\n\
+         property uchar flag\nelement face 2\nproperty list uchar int vertex_indices\n\
+         element extra 1\nproperty short s\nend_header\n"
+    )
+    .into_bytes();
+    let f32b = |v: f32| {
+        if big {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        }
+    };
+    let f64b = |v: f64| {
+        if big {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        }
+    };
+    let i32b = |v: i32| {
+        if big {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        }
+    };
+    for k in 0..5 {
+        out.extend_from_slice(&f32b(k as f32 * 0.5));
+        out.push(k as u8 % 3);
+        for t in 0..(k % 3) {
+            out.extend_from_slice(&i32b(100 * k + t));
+        }
+        out.extend_from_slice(&f64b(1.0 + k as f64 / 3.0));
+        out.extend_from_slice(&f32b(-(k as f32)));
+        out.push(200 + k as u8);
+    }
+    for face in [[0, 1, 2], [2, 3, 4]] {
+        out.push(3);
+        for v in face {
+            out.extend_from_slice(&i32b(v));
+        }
+    }
+    out.extend_from_slice(
+        &(if big {
+            7i16.to_be_bytes()
+        } else {
+            7i16.to_le_bytes()
+        }),
+    );
+    out
 }
 
 /// An XYZ file with a header comment, `//` comments, blank lines, CRLF line ends, commas,

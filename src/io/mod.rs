@@ -17,7 +17,7 @@ mod xyz;
 pub use las::{LasHeader, LasSource, VlrInfo};
 pub use obj::ObjFile;
 pub use ply::PlyFile;
-pub use ply_stream::{PlyStream, PlyTextStream};
+pub use ply_stream::{PlyRecordStream, PlyStream};
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
 pub use xyz::{XyzFile, XyzStream};
 

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Header, PropertyType, ScalarType};
 
-use super::text::{Edit, Span, check_count, edits3, splice};
+use super::text::{Edit, Numbers, Span, check_count, edits3, rewrite};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -144,23 +144,16 @@ impl PlyFile {
                 add(spans, n, &doubles);
             }
         }
-        match self.encoding {
-            Encoding::Ascii => Ok(splice(&self.bytes, edits)),
-            Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
-                let mut out = self.bytes.clone();
-                let big = self.encoding == Encoding::BinaryBigEndian;
-                for e in edits {
-                    let (v, dst) = (e.value, &mut out[e.span.start..e.span.end]);
-                    match (e.single, big) {
-                        (false, false) => dst.copy_from_slice(&v.to_le_bytes()),
-                        (false, true) => dst.copy_from_slice(&v.to_be_bytes()),
-                        (true, false) => dst.copy_from_slice(&(v as f32).to_le_bytes()),
-                        (true, true) => dst.copy_from_slice(&(v as f32).to_be_bytes()),
-                    }
-                }
-                Ok(out)
-            }
-        }
+        Ok(rewrite(&self.bytes, edits, numbers(self.encoding)))
+    }
+}
+
+/// How numbers are written in a body of `encoding`.
+pub(super) fn numbers(encoding: Encoding) -> Numbers {
+    match encoding {
+        Encoding::Ascii => Numbers::Text,
+        Encoding::BinaryLittleEndian => Numbers::Binary { big: false },
+        Encoding::BinaryBigEndian => Numbers::Binary { big: true },
     }
 }
 

@@ -9,7 +9,7 @@
 //! the body is held in memory but the chunk in flight (and, for meshes, the triangles).
 //!
 //! `tools/src/bin/ply.rs` measures this against reading the same file with `ply-rs-bw`.
-//! ASCII PLY streams through [`PlyTextStream`]; binary vertices with list properties go through
+//! ASCII PLY streams through [`PlyRecordStream`]; binary vertices with list properties go through
 //! [`super::PlyFile`] in memory.
 
 use std::fs::File;
@@ -21,6 +21,7 @@ use memmap2::Mmap;
 use ply_rs_bw::ply::{ElementDef, Encoding, Header, PropertyType};
 
 use super::mapped::map;
+use super::ply::numbers;
 use super::ply::{
     VertexFields, Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element,
 };
@@ -117,20 +118,25 @@ impl Opened {
 }
 
 /// Opens the PLY file `path` as a [`Source`]: binary files with fixed-size vertex records as a
-/// [`PlyStream`], ASCII files as a [`PlyTextStream`], others (vertices with list properties)
+/// [`PlyStream`], ASCII files as a [`PlyRecordStream`], others (vertices with list properties)
 /// read whole.
 pub(super) fn open(path: &Path) -> Result<Box<dyn Source>> {
     let opened = Opened::new(path)?;
-    if opened.header.encoding == Encoding::Ascii {
-        return Ok(Box::new(PlyTextStream::from_opened(path, opened)?));
+    if mapped_vertices(&opened.header) {
+        Ok(Box::new(PlyStream::from_opened(path, opened)?))
+    } else {
+        Ok(Box::new(PlyRecordStream::from_opened(path, opened)?))
     }
-    match PlyStream::from_opened(path, opened)? {
-        Some(stream) => Ok(Box::new(stream)),
-        None => Ok(Box::new(super::DocumentSource::new(
-            path,
-            super::Document::read(path)?,
-        )?)),
-    }
+}
+
+/// Whether the vertex records can be patched in place in the map ([`PlyStream`]): a binary body
+/// whose vertex properties are all scalars, so that every vertex record has one size.
+fn mapped_vertices(header: &Header) -> bool {
+    header.encoding != Encoding::Ascii
+        && header.elements["vertex"]
+            .properties
+            .values()
+            .all(|p| matches!(p.data_type, PropertyType::Scalar(_)))
 }
 
 /// A binary PLY file with fixed-size vertex records, streamed from a memory map.
@@ -144,12 +150,17 @@ pub struct PlyStream {
 
 impl PlyStream {
     /// Opens `path` for streaming; `None` when it is ASCII or its vertices have list properties
-    /// (then it is read whole by [`super::PlyFile`]).
+    /// (then it streams through [`PlyRecordStream`]).
     pub fn open(path: &Path) -> Result<Option<Self>> {
-        Self::from_opened(path, Opened::new(path)?)
+        let opened = Opened::new(path)?;
+        if !mapped_vertices(&opened.header) {
+            return Ok(None);
+        }
+        Self::from_opened(path, opened).map(Some)
     }
 
-    fn from_opened(path: &Path, opened: Opened) -> Result<Option<Self>> {
+    /// A stream over `opened`, whose vertex records must be [`mapped_vertices`].
+    fn from_opened(path: &Path, opened: Opened) -> Result<Self> {
         let Opened {
             map,
             header,
@@ -158,20 +169,15 @@ impl PlyStream {
             normal_doubles,
         } = opened;
         let err = |m: String| Error::format(path, m);
-        let big = match header.encoding {
-            Encoding::Ascii => return Ok(None),
-            Encoding::BinaryLittleEndian => false,
-            Encoding::BinaryBigEndian => true,
-        };
+        let big = header.encoding == Encoding::BinaryBigEndian;
         let vertex = &header.elements["vertex"];
         let mut offsets = std::collections::HashMap::new();
         let mut record = 0;
         for (name, p) in vertex.properties.iter() {
-            let PropertyType::Scalar(t) = &p.data_type else {
-                return Ok(None);
-            };
-            offsets.insert(name.as_str(), record);
-            record += scalar_size(t);
+            if let PropertyType::Scalar(t) = &p.data_type {
+                offsets.insert(name.as_str(), record);
+                record += scalar_size(t);
+            }
         }
         let slots = |names: [&str; 3], doubles: [bool; 3]| -> [Slot; 3] {
             std::array::from_fn(|k| Slot {
@@ -218,13 +224,13 @@ impl PlyStream {
             xyz: slots(["x", "y", "z"], doubles),
             normals: normal_doubles.map(|d| slots(["nx", "ny", "nz"], d)),
         };
-        Ok(Some(Self {
+        Ok(Self {
             path: path.to_path_buf(),
             map: Arc::new(map),
             layout,
             triangles,
             next: 0,
-        }))
+        })
     }
 
     /// All vertex positions (for tools and tests; streaming callers use [`Source::read`]).
@@ -354,15 +360,18 @@ impl Sink for PlySink {
     }
 }
 
-/// An ASCII PLY file streamed from a memory map. `open` walks the whole body once to validate
-/// it (with the messages of [`super::PlyFile`]) and to collect faces; a chunk then walks its
-/// vertex records from where the previous one stopped and carries the bytes from there through
-/// its last record (from the file's start for the first chunk, to its end for the last) with
-/// the spans of their numbers, so the chunks' bytes partition the file and the
-/// [`TextSink`](super::text::TextSink) splices the new numbers into them.
-pub struct PlyTextStream {
+/// A PLY file whose vertex records are walked one by one, streamed from a memory map: ASCII, or
+/// binary with list properties on its vertices (records of varying size). `open` walks the
+/// whole body once to validate it (with the messages of [`super::PlyFile`]) and to collect
+/// faces; a chunk then walks its vertex records from where the previous one stopped and carries
+/// the bytes from there through its last record (from the file's start for the first chunk, to
+/// its end for the last) with the spans of their numbers, so the chunks' bytes partition the
+/// file and the [`TextSink`](super::text::TextSink) writes the new numbers over them (as text,
+/// or as floats in the file's byte order).
+pub struct PlyRecordStream {
     path: PathBuf,
     map: Arc<Mmap>,
+    encoding: Encoding,
     vertex: ElementDef,
     /// Byte offset of the first vertex record.
     start: usize,
@@ -375,14 +384,11 @@ pub struct PlyTextStream {
     next: usize,
 }
 
-impl PlyTextStream {
-    /// Opens `path` for streaming; `None` when it is not ASCII.
-    pub fn open(path: &Path) -> Result<Option<Self>> {
-        let opened = Opened::new(path)?;
-        if opened.header.encoding != Encoding::Ascii {
-            return Ok(None);
-        }
-        Self::from_opened(path, opened).map(Some)
+impl PlyRecordStream {
+    /// Opens `path` for streaming, whatever its encoding (binary files with fixed-size vertex
+    /// records stream faster through [`PlyStream`]).
+    pub fn open(path: &Path) -> Result<Self> {
+        Self::from_opened(path, Opened::new(path)?)
     }
 
     fn from_opened(path: &Path, opened: Opened) -> Result<Self> {
@@ -419,7 +425,9 @@ impl PlyTextStream {
                 },
             )?;
         }
-        if map[walker.pos..].iter().any(|b| !b.is_ascii_whitespace()) {
+        if header.encoding == Encoding::Ascii
+            && map[walker.pos..].iter().any(|b| !b.is_ascii_whitespace())
+        {
             return Err(err(
                 "data after the last element: the header's counts are smaller than the body".into(),
             ));
@@ -432,6 +440,7 @@ impl PlyTextStream {
         Ok(Self {
             path: path.to_path_buf(),
             map: Arc::new(map),
+            encoding: header.encoding,
             vertex,
             start,
             singles: doubles.map(|d| !d),
@@ -443,7 +452,7 @@ impl PlyTextStream {
     }
 }
 
-impl Source for PlyTextStream {
+impl Source for PlyRecordStream {
     fn path(&self) -> &Path {
         &self.path
     }
@@ -465,7 +474,7 @@ impl Source for PlyTextStream {
         let n = max.min(self.vertex.count - self.next);
         chunk.clear(self.next as u64);
         let from = if self.next == 0 { 0 } else { self.pos };
-        let mut walker = Walker::new(&self.map, self.pos, Encoding::Ascii, &self.path);
+        let mut walker = Walker::new(&self.map, self.pos, self.encoding, &self.path);
         let mut fields = VertexFields::default();
         let has_normals = self.normal_singles.is_some();
         let records = self.next..self.next + n;
@@ -500,7 +509,14 @@ impl Source for PlyTextStream {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        let sink = TextSink::create(&self.path, output, "ply", self.singles, self.normal_singles)?;
+        let sink = TextSink::create(
+            &self.path,
+            output,
+            "ply",
+            numbers(self.encoding),
+            self.singles,
+            self.normal_singles,
+        )?;
         Ok(Box::new(sink))
     }
 }

@@ -1,5 +1,6 @@
 //! Replacing numbers inside a file's bytes: the one writer of every text format (PLY ASCII,
-//! OBJ, XYZ), so that everything between the numbers is copied as it was.
+//! OBJ, XYZ) and of binary PLY whose vertex records are walked rather than mapped (list
+//! properties on vertices), so that everything between the numbers is copied as it was.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -56,6 +57,38 @@ pub(crate) fn edits3(spans: &[Span; 3], v: &Vect<3>, single: [bool; 3]) -> [Edit
     })
 }
 
+/// How the numbers of a file are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Numbers {
+    /// As text, in the span of the old token (which may change length).
+    Text,
+    /// As IEEE floats of the span's size, big- or little-endian.
+    Binary {
+        /// Big-endian.
+        big: bool,
+    },
+}
+
+/// `bytes` with each edit's number written over its span in the file's `numbers` format;
+/// spans must not overlap.
+pub(crate) fn rewrite(bytes: &[u8], edits: Vec<Edit>, numbers: Numbers) -> Vec<u8> {
+    let big = match numbers {
+        Numbers::Text => return splice(bytes, edits),
+        Numbers::Binary { big } => big,
+    };
+    let mut out = bytes.to_vec();
+    for e in edits {
+        let (v, dst) = (e.value, &mut out[e.span.start..e.span.end]);
+        match (e.single, big) {
+            (false, false) => dst.copy_from_slice(&v.to_le_bytes()),
+            (false, true) => dst.copy_from_slice(&v.to_be_bytes()),
+            (true, false) => dst.copy_from_slice(&(v as f32).to_le_bytes()),
+            (true, true) => dst.copy_from_slice(&(v as f32).to_be_bytes()),
+        }
+    }
+    out
+}
+
 /// `bytes` with each edit's span replaced by its number; spans must not overlap.
 pub(crate) fn splice(bytes: &[u8], mut edits: Vec<Edit>) -> Vec<u8> {
     edits.sort_unstable_by_key(|e| e.span.start);
@@ -75,12 +108,14 @@ pub(crate) fn splice(bytes: &[u8], mut edits: Vec<Edit>) -> Vec<u8> {
     out
 }
 
-/// The sink of the streamed text formats (XYZ, ASCII PLY): each chunk's bytes written with the
-/// numbers at its [`Chunk::spans`] replaced; `singles` marks the components written as f32.
+/// The sink of the streams that carry their records' bytes (XYZ, ASCII PLY, binary PLY with
+/// walked vertex records): each chunk's bytes written with the numbers at its [`Chunk::spans`]
+/// replaced; `singles` marks the components written as f32.
 pub(crate) struct TextSink {
     input: PathBuf,
     file: TempFile,
     out: BufWriter<File>,
+    numbers: Numbers,
     singles: [bool; 3],
     normal_singles: Option<[bool; 3]>,
 }
@@ -91,6 +126,7 @@ impl TextSink {
         input: &Path,
         output: &Path,
         ext: &str,
+        numbers: Numbers,
         singles: [bool; 3],
         normal_singles: Option<[bool; 3]>,
     ) -> Result<Self> {
@@ -100,6 +136,7 @@ impl TextSink {
             input: input.to_path_buf(),
             file,
             out,
+            numbers,
             singles,
             normal_singles,
         })
@@ -121,7 +158,7 @@ impl Sink for TextSink {
             }
         }
         self.out
-            .write_all(&splice(&chunk.raw, edits))
+            .write_all(&rewrite(&chunk.raw, edits, self.numbers))
             .map_err(|e| Error::io(self.file.path(), e))
     }
 

@@ -16,7 +16,7 @@ use memmap2::Mmap;
 
 use super::mapped::map;
 use super::stream::{Bounds, Chunk, Sink, Source};
-use super::text::{Span, TextSink, check_count, edits3, splice};
+use super::text::{Numbers, Span, TextSink, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -226,7 +226,7 @@ impl Source for XyzStream {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        let sink = TextSink::create(&self.path, output, "xyz", [false; 3], None)?;
+        let sink = TextSink::create(&self.path, output, "xyz", Numbers::Text, [false; 3], None)?;
         Ok(Box::new(sink))
     }
 }
