@@ -26,8 +26,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ, PLY
-/// and XYZ stream from the file; OBJ (and binary PLY with list properties on its vertices) is
-/// read whole and served in chunks.
+/// and XYZ stream from the file; OBJ is read whole and served in chunks.
 pub fn open(path: &Path) -> Result<Box<dyn Source>> {
     match extension(path).as_deref() {
         Some("las") | Some("laz") => Ok(Box::new(LasSource::open(path)?)),

@@ -9,8 +9,8 @@
 //! the body is held in memory but the chunk in flight (and, for meshes, the triangles).
 //!
 //! `tools/src/bin/ply.rs` measures this against reading the same file with `ply-rs-bw`.
-//! ASCII PLY streams through [`PlyRecordStream`]; binary vertices with list properties go through
-//! [`super::PlyFile`] in memory.
+//! ASCII PLY, and binary PLY whose vertices have list properties, stream through
+//! [`PlyRecordStream`], which walks the vertex records.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -118,8 +118,8 @@ impl Opened {
 }
 
 /// Opens the PLY file `path` as a [`Source`]: binary files with fixed-size vertex records as a
-/// [`PlyStream`], ASCII files as a [`PlyRecordStream`], others (vertices with list properties)
-/// read whole.
+/// [`PlyStream`], the others (ASCII, or vertices with list properties) as a
+/// [`PlyRecordStream`].
 pub(super) fn open(path: &Path) -> Result<Box<dyn Source>> {
     let opened = Opened::new(path)?;
     if mapped_vertices(&opened.header) {
