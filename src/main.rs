@@ -270,6 +270,8 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
             ..Default::default()
         },
         transfer: args.transfer.into(),
+        // Nothing of the CLI draws a preview yet.
+        proxy_samples: Some(0),
     };
     if let Some(f) = &args.save_field {
         refuse_overwrite(&args.input, f)?;

@@ -26,6 +26,43 @@ pub struct DeformParams {
     pub solve: SolveParams,
     /// The transfer to the samples.
     pub transfer: Transfer,
+    /// The most samples in the preview proxy of [`deform_file`] (`None`: [`PROXY_SAMPLES`];
+    /// `Some(0)`: no proxy).
+    pub proxy_samples: Option<usize>,
+}
+
+/// The default bound on the samples of a [`Proxy`].
+pub const PROXY_SAMPLES: usize = 1 << 20;
+
+/// A decimated copy of a file's samples for previews, gathered in pass 1: every `stride`-th
+/// sample (the stride is the smallest that keeps at most the bound), before and after the
+/// deformation. `after[i]` is what the output holds for sample `i · stride`, before the
+/// output's own rounding (LAS scale, text digits).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Proxy {
+    /// Samples from one to the next.
+    pub stride: u64,
+    /// Rest positions (world coordinates).
+    pub before: Vec<Vect<3>>,
+    /// Deformed positions.
+    pub after: Vec<Vect<3>>,
+}
+
+impl Proxy {
+    /// An empty proxy for `len` samples keeping at most `max` (`max > 0`).
+    fn new(len: u64, max: usize) -> Self {
+        Self {
+            stride: len.div_ceil(max as u64).max(1),
+            ..Default::default()
+        }
+    }
+
+    /// Keeps the chunk's samples whose index is a multiple of the stride.
+    fn gather(&mut self, chunk: &Chunk) {
+        let skip = (self.stride - chunk.first % self.stride) % self.stride;
+        let kept = chunk.positions.iter().skip(skip as usize);
+        self.before.extend(kept.step_by(self.stride as usize));
+    }
 }
 
 /// What [`deform`] did.
@@ -110,6 +147,8 @@ pub struct FileInfo {
     pub seconds_read: f64,
     /// Seconds of the second pass (transfer and writing).
     pub seconds_write: f64,
+    /// The preview proxy (empty for [`apply_file`], or when none was asked for).
+    pub proxy: Proxy,
 }
 
 /// Deforms the file `input` into `output` in two streaming passes (DESIGN §7): pass 1 builds
@@ -132,11 +171,13 @@ pub fn deform_file(
         samples: source.len(),
         ..Default::default()
     };
-    let (complex, build_info, selections) = first_pass_cells(
+    let proxy_max = params.proxy_samples.unwrap_or(PROXY_SAMPLES);
+    let (complex, build_info, selections, proxy) = first_pass_cells(
         source.as_mut(),
         spec,
         &params.build,
         chunk,
+        proxy_max,
         &mut info.notes,
         observer,
     )?;
@@ -157,6 +198,10 @@ pub fn deform_file(
     }
     let origin = saved.field.origin;
     let deformer = saved.deformer(params.transfer)?;
+    info.proxy = proxy;
+    let mut after = info.proxy.before.clone();
+    apply(&deformer, &origin, &mut after);
+    info.proxy.after = after;
     let t2 = Instant::now();
     info.notes.extend(transfer_pass(
         source.as_mut(),
@@ -205,9 +250,10 @@ fn first_pass_cells(
     spec: &EditSpec<3>,
     build: &BuildParams,
     chunk: usize,
+    proxy_max: usize,
     notes: &mut Vec<String>,
     observer: &dyn Observer,
-) -> Result<(CellComplex<3>, BuildInfo, Selections<3>)> {
+) -> Result<(CellComplex<3>, BuildInfo, Selections<3>, Proxy)> {
     let (lo, hi) = match source.bounds_hint() {
         Some(b) => b,
         None => scan_bounds(source, chunk)?,
@@ -224,25 +270,26 @@ fn first_pass_cells(
         }
         None => build,
     };
-    let mut pass = first_pass(source, spec, build, (lo, hi), chunk, observer)?;
+    let mut pass = first_pass(source, spec, build, (lo, hi), chunk, proxy_max, observer)?;
     if pass.outside > 0 {
         notes.push(format!(
             "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
             pass.outside
         ));
         let b = pass.bounds;
-        pass = first_pass(source, spec, build, b, chunk, observer)?;
+        pass = first_pass(source, spec, build, b, chunk, proxy_max, observer)?;
     }
     let FirstPass {
         mut occupancy,
         selections,
         positions,
+        proxy,
         ..
     } = pass;
     occupancy.add_triangles(&positions, source.triangles())?;
     drop(positions);
     let (complex, build_info) = occupancy.finish();
-    Ok((complex, build_info, selections))
+    Ok((complex, build_info, selections, proxy))
 }
 
 /// Voxels per longest extent of the decimated proxy that [`proxy_cell_size`] bisects on.
@@ -288,11 +335,12 @@ pub fn file_cells(
     let mut source = io::open(input)?;
     let empty = EditSpec::default();
     let mut notes = Vec::new();
-    let (complex, info, selections) = first_pass_cells(
+    let (complex, info, selections, _) = first_pass_cells(
         source.as_mut(),
         spec.unwrap_or(&empty),
         &params.build,
         chunk,
+        0,
         &mut notes,
         observer,
     )?;
@@ -312,6 +360,8 @@ struct FirstPass {
     selections: Selections<3>,
     /// All positions, kept only when the source has triangles.
     positions: Vec<Vect<3>>,
+    /// The decimated samples (none when its bound is 0).
+    proxy: Proxy,
     bounds: Bounds,
     outside: usize,
 }
@@ -358,6 +408,7 @@ fn first_pass(
     build: &BuildParams,
     (lo, hi): Bounds,
     chunk_len: usize,
+    proxy_max: usize,
     observer: &dyn Observer,
 ) -> Result<FirstPass> {
     source.rewind()?;
@@ -365,6 +416,7 @@ fn first_pass(
     let mut selections = Selections::new(spec, source.has_classes())?;
     let keep = !source.triangles().is_empty();
     let mut positions = Vec::new();
+    let mut proxy = (proxy_max > 0).then(|| Proxy::new(source.len(), proxy_max));
     let mut bounds = (
         Vect::<3>::repeat(f64::INFINITY),
         Vect::<3>::repeat(f64::NEG_INFINITY),
@@ -394,6 +446,9 @@ fn first_pass(
         if keep {
             positions.extend_from_slice(&chunk.positions);
         }
+        if let Some(proxy) = proxy.as_mut() {
+            proxy.gather(&chunk);
+        }
         observer.advance(chunk.len() as u64);
     }
     observer.finish();
@@ -401,6 +456,7 @@ fn first_pass(
         occupancy,
         selections,
         positions,
+        proxy: proxy.unwrap_or_default(),
         bounds,
         outside,
     })

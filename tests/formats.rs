@@ -566,3 +566,66 @@ fn xyz_streams_like_the_whole_file_reader() {
         assert!((q - p - shift).norm() < 1e-9, "{p:?} -> {q:?}");
     }
 }
+
+/// Pass 1's preview proxy is every `stride`-th sample, within its bound, and its deformed copy
+/// is what the output holds for those samples (to the LAS scale).
+#[test]
+fn the_preview_proxy_samples_the_input_and_the_output() {
+    use rigidcells::field::Transfer;
+    use rigidcells::pipeline::{DeformParams, deform_file};
+    use rigidcells::progress::Silent;
+    use rigidcells::spec::read_spec;
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.las");
+    let (header, _, rest, _) = records(&input);
+    let spec_path = dir.path().join("bend.toml");
+    let (lo, hi) = (header.min, header.max);
+    let w = hi[0] - lo[0];
+    std::fs::write(
+        &spec_path,
+        format!(
+            "[[fixed]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
+             [[handle]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
+             translate = [0, 0, {}]\n",
+            lo[0] - 1.0,
+            lo[1] - 1.0,
+            lo[2] - 1.0,
+            lo[0] + 0.2 * w,
+            hi[1] + 1.0,
+            hi[2] + 1.0,
+            hi[0] - 0.2 * w,
+            lo[1] - 1.0,
+            lo[2] - 1.0,
+            hi[0] + 1.0,
+            hi[1] + 1.0,
+            hi[2] + 1.0,
+            0.1 * w
+        ),
+    )
+    .unwrap();
+    let spec = read_spec::<3>(&spec_path).unwrap();
+    let output = dir.path().join("bent.las");
+    let max = 1000;
+    let params = DeformParams {
+        transfer: Transfer::Blend,
+        proxy_samples: Some(max),
+        ..Default::default()
+    };
+    let (_, info) = deform_file(&input, &output, &spec, &params, 4099, None, &Silent).unwrap();
+    let proxy = &info.proxy;
+    let n = rest.len() as u64;
+    assert_eq!(proxy.stride, n.div_ceil(max as u64));
+    assert!(proxy.stride > 1 && proxy.before.len() <= max);
+    assert_eq!(proxy.before.len() as u64, n.div_ceil(proxy.stride));
+    assert_eq!(proxy.after.len(), proxy.before.len());
+    let (out_header, _, moved, _) = records(&output);
+    let tolerance = 0.5 * out_header.scale.iter().cloned().fold(0.0, f64::max) + 1e-9;
+    let mut lifted = 0;
+    for (k, (b, a)) in proxy.before.iter().zip(&proxy.after).enumerate() {
+        let i = k * proxy.stride as usize;
+        assert_eq!(*b, rest[i], "sample {i} before");
+        assert!((a - moved[i]).amax() <= tolerance, "sample {i} after");
+        lifted += usize::from(a[2] - b[2] > 0.05 * w);
+    }
+    assert!(lifted > 0, "the proxy shows the edit");
+}

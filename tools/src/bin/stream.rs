@@ -84,6 +84,8 @@ fn main() {
     let out = dir.join(format!("rigidcells-stream-deform.{ext}"));
     let params = DeformParams {
         transfer: Transfer::Blend,
+        // As the CLI, which draws no preview.
+        proxy_samples: Some(0),
         ..Default::default()
     };
     // Alternating runs, medians reported: the copy writes as many bytes as the deform and its
