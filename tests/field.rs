@@ -294,3 +294,35 @@ fn continuous_blend_has_no_seams() {
         "the paper's blend should jump ({idw_jump:e})"
     );
 }
+
+/// Where every blended cell is at rest the blend leaves a sample exactly where it was, bit for
+/// bit (fixed regions keep their coordinates), and its normal too; where they share one rigid
+/// motion, the sample follows it.
+#[test]
+fn samples_among_cells_at_rest_keep_their_bits() {
+    let mut f = octree_field();
+    for (m, c) in f.motions.iter_mut().zip(&f.centers) {
+        *m = Motion::rest(c);
+    }
+    let blend = Blend::new(&f, Weights::Continuous).unwrap();
+    let mut rng = StdRng::seed_from_u64(12);
+    let n = Vect::<3>::new(0.36, 0.48, 0.8);
+    for _ in 0..10_000 {
+        let x = Vect::<3>::from_fn(|a, _| rng.random_range(0.0..[10.0, 8.0, 6.0][a]));
+        assert_eq!(blend.warp(&x), x);
+        assert_eq!(blend.warp_with_normal(&x, &n), (x, n));
+    }
+    let r = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::new(1.0, 2.0, 3.0), 0.7);
+    let t = Vect::<3>::new(5.0, -1.0, 2.0);
+    for (m, c) in f.motions.iter_mut().zip(&f.centers) {
+        *m = Motion {
+            rot: r,
+            pos: r * c + t,
+        };
+    }
+    let blend = Blend::new(&f, Weights::Continuous).unwrap();
+    for _ in 0..10_000 {
+        let x = Vect::<3>::from_fn(|a, _| rng.random_range(0.0..[10.0, 8.0, 6.0][a]));
+        assert!((blend.warp(&x) - (r * x + t)).amax() < 1e-12);
+    }
+}
