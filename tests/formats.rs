@@ -583,24 +583,7 @@ fn the_preview_proxy_samples_the_input_and_the_output() {
     let w = hi[0] - lo[0];
     std::fs::write(
         &spec_path,
-        format!(
-            "[[fixed]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
-             [[handle]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
-             translate = [0, 0, {}]\n",
-            lo[0] - 1.0,
-            lo[1] - 1.0,
-            lo[2] - 1.0,
-            lo[0] + 0.2 * w,
-            hi[1] + 1.0,
-            hi[2] + 1.0,
-            hi[0] - 0.2 * w,
-            lo[1] - 1.0,
-            lo[2] - 1.0,
-            hi[0] + 1.0,
-            hi[1] + 1.0,
-            hi[2] + 1.0,
-            0.1 * w
-        ),
+        data_gen::end_lift_spec(lo, hi, 0.2, 0.1 * w, 0.0),
     )
     .unwrap();
     let spec = read_spec::<3>(&spec_path).unwrap();

@@ -316,6 +316,30 @@ pub fn write_ply(path: &Path, mesh: &Mesh, binary: bool) -> std::io::Result<()> 
     out.flush()
 }
 
+/// An edit spec (TOML) over the box `lo..hi` that fixes the western `end` fraction along x and
+/// lifts the eastern `end` fraction by `lift`, turned by `degrees` about y: the bend of the
+/// streaming benchmarks and tests.
+pub fn end_lift_spec(lo: [f64; 3], hi: [f64; 3], end: f64, lift: f64, degrees: f64) -> String {
+    let w = hi[0] - lo[0];
+    format!(
+        "[[fixed]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
+         [[handle]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
+         translate = [0, 0, {lift}]\nrotate = {{ axis = [0, 1, 0], degrees = {degrees} }}\n",
+        lo[0] - 1.0,
+        lo[1] - 1.0,
+        lo[2] - 1.0,
+        lo[0] + end * w,
+        hi[1] + 1.0,
+        hi[2] + 1.0,
+        hi[0] - end * w,
+        lo[1] - 1.0,
+        lo[2] - 1.0,
+        hi[0] + 1.0,
+        hi[1] + 1.0,
+        hi[2] + 1.0,
+    )
+}
+
 /// Height of the synthetic terrain at `(x, y)` (metres; a 2 km square): rolling hills, a river
 /// valley along y = 1000, flat-roofed buildings on a grid, and a bridge deck across the valley.
 pub fn terrain_height(x: f64, y: f64) -> (f64, u8) {

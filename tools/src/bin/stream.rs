@@ -57,26 +57,8 @@ fn main() {
         Some(p) => read_spec::<3>(Path::new(p)).unwrap(),
         None => {
             let h = rigidcells::io::LasHeader::read(&input).unwrap();
-            let (lo, hi) = (h.min, h.max);
-            let w = hi[0] - lo[0];
-            let text = format!(
-                "[[fixed]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
-                 [[handle]]\nbox = {{ min = [{}, {}, {}], max = [{}, {}, {}] }}\n\
-                 translate = [0, 0, {}]\nrotate = {{ axis = [0, 1, 0], degrees = -10 }}\n",
-                lo[0] - 1.0,
-                lo[1] - 1.0,
-                lo[2] - 1.0,
-                lo[0] + 0.15 * w,
-                hi[1] + 1.0,
-                hi[2] + 1.0,
-                hi[0] - 0.15 * w,
-                lo[1] - 1.0,
-                lo[2] - 1.0,
-                hi[0] + 1.0,
-                hi[1] + 1.0,
-                hi[2] + 1.0,
-                0.025 * w
-            );
+            let w = h.max[0] - h.min[0];
+            let text = data_gen::end_lift_spec(h.min, h.max, 0.15, 0.025 * w, -10.0);
             parse_spec::<3>(&text, Path::new("."), Path::new("<default edit>")).unwrap()
         }
     };
