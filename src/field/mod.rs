@@ -16,6 +16,7 @@ mod blend;
 mod file;
 mod nearest;
 mod rbf;
+mod simd;
 
 pub use blend::{Blend, Weights};
 pub use file::SavedField;

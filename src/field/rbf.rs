@@ -14,7 +14,8 @@
 //! Coordinates are scaled to the unit box of the centers first, so the system's conditioning does
 //! not depend on the input's units. Evaluation sums over all centers per sample (O(m·n)) with
 //! the centers in structure-of-arrays layout and four independent accumulators per component, a
-//! loop the compiler vectorizes; samples are parallel in the driver.
+//! loop the compiler vectorizes, built for AVX2 too and chosen at run time with the same bits
+//! ([`super::simd`]); samples are parallel in the driver.
 
 use faer::Mat;
 use faer::prelude::*;
@@ -92,35 +93,10 @@ impl<const D: usize> Rbf<D> {
     /// The displacement `d(x)` at the local point `x`.
     pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
         let y: [f64; D] = ((x - self.shift) * self.inv_scale).into();
-        let n = self.centers[0].len();
-        let mut acc = [[0.0f64; 4]; D];
-        let mut i = 0;
-        while i + 4 <= n {
-            let mut r3 = [0.0f64; 4];
-            for (l, r) in r3.iter_mut().enumerate() {
-                let mut r2 = 0.0;
-                for a in 0..D {
-                    let d = y[a] - self.centers[a][i + l];
-                    r2 += d * d;
-                }
-                *r = r2 * r2.sqrt();
-            }
-            for k in 0..D {
-                for l in 0..4 {
-                    acc[k][l] += self.weights[k][i + l] * r3[l];
-                }
-            }
-            i += 4;
-        }
-        for j in i..n {
-            let r2: f64 = (0..D).map(|a| (y[a] - self.centers[a][j]).powi(2)).sum();
-            for k in 0..D {
-                acc[k][j - i] += self.weights[k][j] * r2 * r2.sqrt();
-            }
-        }
+        let sums = super::simd::sum(&y, &self.centers, &self.weights);
         Vect::<D>::from_fn(|k, _| {
             let lin: f64 = (0..D).map(|a| self.linear[k][a] * y[a]).sum();
-            (acc[k].iter().sum::<f64>() + self.constant[k] + lin) / self.inv_scale
+            (sums[k] + self.constant[k] + lin) / self.inv_scale
         })
     }
 }
