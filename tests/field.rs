@@ -51,7 +51,9 @@ fn rbf_reproduces_every_center_displacement() {
         .zip(&f.motions)
         .map(|(c, m)| (rbf.warp(c) - m.pos).norm() / extent)
         .fold(0.0, f64::max);
-    assert!(worst <= 1e-9, "worst relative error {worst:e}");
+    // Cholesky on the projected system with one refinement step: 5.8e-11 here (LU on the
+    // saddle-point system gave 1.2e-10).
+    assert!(worst <= 1e-10, "worst relative error {worst:e}");
 }
 
 #[test]
