@@ -1,12 +1,69 @@
-//! Shared pieces of the harnesses: the default model, cell complexes of a chosen size, and
-//! random samples on a model's surface.
+//! Shared pieces of the harnesses: the default model and its resamplings to the paper's sizes,
+//! the bend edit, cell complexes of a chosen size, and random samples on a model's surface.
 
 use std::path::PathBuf;
 
+use data_gen::{Mesh, decimate, split_to, subdivide};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, CellComplex, build};
 use rigidcells::rigid::Vect;
+use rigidcells::spec::{EditSpec, parse_spec};
+
+/// `scan` with about `vertices` vertices: decimated by vertex clustering, or subdivided and
+/// split (the paper's Table 1 sizes from one real scan).
+pub fn resampled(scan: &Mesh, vertices: usize) -> Mesh {
+    if vertices < scan.vertices.len() {
+        decimate(scan, vertices)
+    } else {
+        let mut m = scan.clone();
+        while 4 * m.vertices.len() < vertices {
+            m = subdivide(&m);
+        }
+        split_to(&m, vertices)
+    }
+}
+
+/// The bend of the harnesses: the lowest 15 % of `points` along their longest axis is fixed,
+/// the highest 15 % turns by 60° and lifts by a quarter of the length.
+pub fn bend_spec(points: &[Vect<3>]) -> Result<EditSpec<3>, Error> {
+    let (mut lo, mut hi) = (points[0], points[0]);
+    for p in points {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    let ext = hi - lo;
+    let axis = ext.imax();
+    let up = (axis + 1) % 3;
+    let side = 3 - axis - up;
+    let low = lo[axis] + 0.15 * ext[axis];
+    let high = hi[axis] - 0.15 * ext[axis];
+    let bounds = |a: f64, b: f64| {
+        let mut min = lo - ext * 0.1;
+        let mut max = hi + ext * 0.1;
+        min[axis] = a;
+        max[axis] = b;
+        format!(
+            "{{ min = {:?}, max = {:?} }}",
+            min.as_slice(),
+            max.as_slice()
+        )
+    };
+    let mut rot_axis = [0.0; 3];
+    rot_axis[side] = 1.0;
+    let mut lift = [0.0; 3];
+    lift[up] = 0.25 * ext[axis];
+    let text = format!(
+        "[[fixed]]\nbox = {}\n[[handle]]\nbox = {}\nrotate = {{ axis = {rot_axis:?}, degrees = 60.0 }}\ntranslate = {lift:?}\n",
+        bounds(lo[axis] - ext[axis], low),
+        bounds(high, hi[axis] + ext[axis])
+    );
+    parse_spec::<3>(
+        &text,
+        std::path::Path::new("."),
+        std::path::Path::new("bend.toml"),
+    )
+}
 
 /// The decimated Stanford dragon in `../shared/data/meshes`, or the model named by the first
 /// argument.

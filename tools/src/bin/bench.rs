@@ -12,49 +12,13 @@ use rigidcells::field::{Deformer, Field, Transfer, apply};
 use rigidcells::io::Document;
 use rigidcells::progress::Silent;
 use rigidcells::solve::{self, SolveParams};
-use rigidcells::spec::parse_spec;
-use rigidcells_tools::{build_at, cell_size_for, model_arg, surface_samples};
+use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let model = model_arg();
     let doc = Document::read(&model)?;
     let (points, tris) = (doc.positions(), doc.triangles());
-    let (mut lo, mut hi) = (points[0], points[0]);
-    for p in points {
-        lo = lo.inf(p);
-        hi = hi.sup(p);
-    }
-    let ext = hi - lo;
-    let axis = ext.imax();
-    let up = (axis + 1) % 3;
-    let side = 3 - axis - up;
-    let low = lo[axis] + 0.15 * ext[axis];
-    let high = hi[axis] - 0.15 * ext[axis];
-    let bounds = |a: f64, b: f64| {
-        let mut min = lo - ext * 0.1;
-        let mut max = hi + ext * 0.1;
-        min[axis] = a;
-        max[axis] = b;
-        format!(
-            "{{ min = {:?}, max = {:?} }}",
-            min.as_slice(),
-            max.as_slice()
-        )
-    };
-    let mut rot_axis = [0.0; 3];
-    rot_axis[side] = 1.0;
-    let mut lift = [0.0; 3];
-    lift[up] = 0.25 * ext[axis];
-    let spec_text = format!(
-        "[[fixed]]\nbox = {}\n[[handle]]\nbox = {}\nrotate = {{ axis = {rot_axis:?}, degrees = 60.0 }}\ntranslate = {lift:?}\n",
-        bounds(lo[axis] - ext[axis], low),
-        bounds(high, hi[axis] + ext[axis])
-    );
-    let spec = parse_spec::<3>(
-        &spec_text,
-        std::path::Path::new("."),
-        std::path::Path::new("bench.toml"),
-    )?;
+    let spec = bend_spec(points)?;
     println!(
         "model {} ({} vertices, {} triangles), {} threads",
         model.display(),

@@ -9,11 +9,11 @@
 
 use std::time::Instant;
 
-use data_gen::{Mesh, decimate, split_to, subdivide};
+use data_gen::Mesh;
 use rigidcells::cells::{BuildParams, build};
 use rigidcells::io::Document;
 use rigidcells::rigid::Vect;
-use rigidcells_tools::{cell_size_for, model_arg};
+use rigidcells_tools::{cell_size_for, model_arg, resampled};
 
 /// The paper's rows: vertices, cells, voxelization seconds.
 const PAPER: [(usize, usize, f64); 6] = [
@@ -43,15 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("|---|---|---|---|---|---|---|");
     for (vertices, cells, paper) in PAPER {
-        let mesh = if vertices < scan.vertices.len() {
-            decimate(&scan, vertices)
-        } else {
-            let mut m = scan.clone();
-            while 4 * m.vertices.len() < vertices {
-                m = subdivide(&m);
-            }
-            split_to(&m, vertices)
-        };
+        let mesh = resampled(&scan, vertices);
         let points: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
         let size = cell_size_for(&points, &mesh.triangles, cells)?;
         let params = BuildParams {
