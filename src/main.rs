@@ -261,6 +261,10 @@ fn run_cells(
     Ok(())
 }
 
+/// Samples of a file checked for fold-overs (a decimated proxy: the check costs a few warps per
+/// sample).
+const FOLDOVER_SAMPLES: usize = 100_000;
+
 fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     refuse_overwrite(&args.input, &args.output)?;
     let params = DeformParams {
@@ -270,8 +274,8 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
             ..Default::default()
         },
         transfer: args.transfer.into(),
-        // Nothing of the CLI draws a preview yet.
-        proxy_samples: Some(0),
+        // The proxy serves the fold-over check (nothing of the CLI draws a preview yet).
+        proxy_samples: Some(FOLDOVER_SAMPLES),
     };
     if let Some(f) = &args.save_field {
         refuse_overwrite(&args.input, f)?;
@@ -447,6 +451,10 @@ fn report(input: &Path, output: &Path, file: &FileInfo) {
         "  cells {:.2} s, transfer {:.2} s",
         info.build.seconds, info.seconds_transfer
     );
+    let (checked, folded) = info.foldovers;
+    if checked > 0 {
+        println!("  fold-overs: {folded} of {checked} samples checked");
+    }
 }
 
 fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {

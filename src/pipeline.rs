@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use crate::cells::{BuildInfo, BuildParams, CellComplex, Occupancy, build};
 use crate::error::{Error, Result};
-use crate::field::{Deformer, Field, Rbf, SavedField, Transfer, Warp, apply, apply_into};
+use crate::field::{
+    Deformer, Field, Rbf, SavedField, Transfer, Warp, apply, apply_into, count_foldovers,
+};
 use crate::io::{self, Bounds, Chunk, Sink, Source};
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
@@ -74,6 +76,9 @@ pub struct DeformInfo {
     pub solver: SolverInfo,
     /// Seconds spent in the transfer (building it and applying it).
     pub seconds_transfer: f64,
+    /// Samples checked for fold-overs and how many of them the map folds over (Jacobian
+    /// determinant not positive): every sample of [`deform`], the proxy of [`deform_file`].
+    pub foldovers: (usize, usize),
     /// Messages for the user.
     pub warnings: Vec<String>,
 }
@@ -99,13 +104,37 @@ where
     let deformer = Deformer::new(&field, params.transfer)?;
     let mut moved = points.to_vec();
     apply(&deformer, &field.origin, &mut moved);
+    let h = foldover_step(&solution.complex);
+    let foldovers = (
+        points.len(),
+        count_foldovers(&deformer, &field.origin, points, h),
+    );
+    let mut warnings = warnings;
+    warnings.extend(foldover_warning(foldovers));
     let info = DeformInfo {
         build: build_info,
         solver: solution.info.clone(),
         seconds_transfer: t.elapsed().as_secs_f64(),
+        foldovers,
         warnings,
     };
     Ok((moved, solution, info))
+}
+
+/// The step of the fold-over check's central differences: a thousandth of the finest cell.
+fn foldover_step<const D: usize>(complex: &CellComplex<D>) -> f64 {
+    1e-3 * complex.grid.finest_size()
+}
+
+/// The warning for `(checked, folded)` samples, if any are folded.
+fn foldover_warning((checked, folded): (usize, usize)) -> Option<String> {
+    (folded > 0).then(|| {
+        format!(
+            "the deformation folds space over at {folded} of {checked} samples checked (the \
+             Jacobian determinant is not positive there): the shape passes through itself; \
+             a smaller edit, more load steps or stiffer cells avoid it"
+        )
+    })
 }
 
 /// The warnings of the cell construction followed by those of the constraints.
@@ -202,6 +231,9 @@ pub fn deform_file(
     let mut after = info.proxy.before.clone();
     apply(&deformer, &origin, &mut after);
     info.proxy.after = after;
+    let h = foldover_step(&solution.complex);
+    let before = &info.proxy.before;
+    let foldovers = (before.len(), count_foldovers(&deformer, &origin, before, h));
     let t2 = Instant::now();
     info.notes.extend(transfer_pass(
         source.as_mut(),
@@ -212,10 +244,13 @@ pub fn deform_file(
         observer,
     )?);
     info.seconds_write = t2.elapsed().as_secs_f64();
+    let mut warnings = warnings;
+    warnings.extend(foldover_warning(foldovers));
     info.deform = DeformInfo {
         build: build_info,
         solver: solution.info.clone(),
         seconds_transfer: t1.elapsed().as_secs_f64(),
+        foldovers,
         warnings,
     };
     Ok((solution, info))

@@ -2,7 +2,9 @@
 //! displacements; blend weights sum to one over the true 4 nearest centers.
 
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use rigidcells::field::{Anchor, Blend, Field, Nearest, Rbf, Warp, Weights};
+use rigidcells::field::{
+    Anchor, Blend, Deformer, Field, Nearest, Rbf, Transfer, Warp, Weights, count_foldovers,
+};
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
 
 fn field(n: usize, seed: u64) -> Field<3> {
@@ -327,4 +329,45 @@ fn samples_among_cells_at_rest_keep_their_bits() {
         let x = Vect::<3>::from_fn(|a, _| rng.random_range(0.0..[10.0, 8.0, 6.0][a]));
         assert!((blend.warp(&x) - (r * x + t)).amax() < 1e-12);
     }
+}
+
+/// The fold-over check finds none where the cells are at rest or share one rotation, and finds
+/// every sample where the cells' order along x is reversed (the map turns space inside out),
+/// through both transfers.
+#[test]
+fn foldovers_are_counted_where_space_turns_inside_out() {
+    let mut f = octree_field();
+    let mut rng = StdRng::seed_from_u64(13);
+    let samples: Vec<Vect<3>> = (0..2_000)
+        .map(|_| Vect::<3>::from_fn(|a, _| rng.random_range(1.0..[9.0, 7.0, 5.0][a])))
+        .collect();
+    let count = |f: &Field<3>, transfer| {
+        let d = Deformer::new(f, transfer).unwrap();
+        count_foldovers(&d, &f.origin, &samples, 1e-4)
+    };
+    for (m, c) in f.motions.iter_mut().zip(&f.centers) {
+        *m = Motion::rest(c);
+    }
+    assert_eq!(count(&f, Transfer::Blend), 0);
+    assert_eq!(count(&f, Transfer::Rbf), 0);
+    let r = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::new(0.0, 0.0, 1.0), 0.5);
+    for (m, c) in f.motions.iter_mut().zip(&f.centers) {
+        *m = Motion { rot: r, pos: r * c };
+    }
+    assert_eq!(count(&f, Transfer::Blend), 0);
+    assert_eq!(count(&f, Transfer::Rbf), 0);
+    // Mirror the centers' x: each cell keeps its orientation but the cells' order is reversed.
+    for (m, c) in f.motions.iter_mut().zip(&f.centers) {
+        *m = Motion {
+            rot: nalgebra::Matrix3::identity(),
+            pos: Vect::<3>::new(10.0 - c.x, c.y, c.z),
+        };
+    }
+    assert_eq!(count(&f, Transfer::Rbf), samples.len());
+    let blended = count(&f, Transfer::Blend);
+    assert!(
+        blended > samples.len() / 2,
+        "{blended} of {}",
+        samples.len()
+    );
 }

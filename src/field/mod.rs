@@ -81,6 +81,19 @@ pub trait Warp<const D: usize>: Sync {
         (self.warp(x), self.warp_normal(x, n))
     }
 
+    /// The Jacobian of the map at the local point `x`, by central differences of step `h`
+    /// (transfers with a closed form override it).
+    fn jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
+        let mut j = nalgebra::SMatrix::<f64, D, D>::zeros();
+        for a in 0..D {
+            let mut e = Vect::<D>::zeros();
+            e[a] = h;
+            let column = (self.warp(&(x + e)) - self.warp(&(x - e))) / (2.0 * h);
+            j.set_column(a, &column);
+        }
+        j
+    }
+
     /// Moves the world-coordinate `points` into `out`, in order, through the local frame whose
     /// origin is `origin`: `out[i] = warp(points[i] − origin) + origin`. Transfers may reuse work
     /// between consecutive samples, but each result is [`Warp::warp`]'s, bit for bit.
@@ -143,6 +156,13 @@ impl<const D: usize> Warp<D> for Deformer<D> {
             Self::Rbf(r) => r.warp_run(origin, points, out),
         }
     }
+
+    fn jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
+        match self {
+            Self::Blend(b) => b.jacobian(x, h),
+            Self::Rbf(r) => Warp::jacobian(r, x, h),
+        }
+    }
 }
 
 /// Samples per parallel task.
@@ -179,6 +199,50 @@ pub fn apply_into<const D: usize>(
                 (*o, *on) = (x + origin, m);
             }
         });
+}
+
+/// How many of the world-coordinate `points` the map folds over: where the Jacobian
+/// determinant of `warp` (central differences of step `h`, or the closed form) is not positive,
+/// space is turned inside out. Parallel.
+pub fn count_foldovers<const D: usize>(
+    warp: &impl Warp<D>,
+    origin: &Vect<D>,
+    points: &[Vect<D>],
+    h: f64,
+) -> usize {
+    points
+        .par_iter()
+        .filter(|p| {
+            let det = determinant(&warp.jacobian(&(*p - origin), h));
+            det.is_nan() || det <= 0.0
+        })
+        .count()
+}
+
+/// The determinant of a small square matrix, by elimination with partial pivoting.
+fn determinant<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> f64 {
+    let mut a = *m;
+    let mut det = 1.0;
+    for k in 0..D {
+        let p = (k..D)
+            .max_by(|&i, &j| a[(i, k)].abs().total_cmp(&a[(j, k)].abs()))
+            .expect("k < D");
+        if a[(p, k)] == 0.0 {
+            return 0.0;
+        }
+        if p != k {
+            a.swap_rows(p, k);
+            det = -det;
+        }
+        det *= a[(k, k)];
+        for i in k + 1..D {
+            let f = a[(i, k)] / a[(k, k)];
+            for j in k..D {
+                a[(i, j)] -= f * a[(k, j)];
+            }
+        }
+    }
+    det
 }
 
 /// Moves world-coordinate `points` in place by `warp`, whose local frame has its origin at

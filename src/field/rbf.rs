@@ -261,9 +261,14 @@ impl<const D: usize> Warp<D> for Rbf<D> {
         x + self.displacement(x)
     }
 
+    /// The closed form ([`Rbf::jacobian`]); `h` is not used.
+    fn jacobian(&self, x: &Vect<D>, _h: f64) -> nalgebra::SMatrix<f64, D, D> {
+        Rbf::jacobian(self, x)
+    }
+
     /// The normal mapped by the inverse transpose of the field's Jacobian, renormalized.
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
-        let j = self.jacobian(x);
+        let j = Rbf::jacobian(self, x);
         let mapped = j.try_inverse().map(|inv| inv.transpose() * n).unwrap_or(*n);
         let len = mapped.norm();
         if len > 0.0 && len.is_finite() {

@@ -66,8 +66,8 @@ fn main() {
     let out = dir.join(format!("rigidcells-stream-deform.{ext}"));
     let params = DeformParams {
         transfer: Transfer::Blend,
-        // As the CLI, which draws no preview.
-        proxy_samples: Some(0),
+        // As the CLI: a proxy for the fold-over check.
+        proxy_samples: Some(100_000),
         ..Default::default()
     };
     // Alternating runs, medians reported: the copy writes as many bytes as the deform and its
