@@ -10,6 +10,24 @@ use rigidcells::cells::{BuildParams, CellComplex, build};
 use rigidcells::rigid::Vect;
 use rigidcells::spec::{EditSpec, parse_spec};
 
+/// The model of [`model_arg`] as a mesh, and its path; prints a line naming it with `what`
+/// (the harness's units and conventions) after the vertex and thread counts.
+pub fn load_scan(what: &str) -> Result<(PathBuf, Mesh), Box<dyn std::error::Error>> {
+    let model = model_arg();
+    let doc = rigidcells::io::Document::read(&model)?;
+    let scan = Mesh {
+        vertices: doc.positions().iter().map(|p| [p.x, p.y, p.z]).collect(),
+        triangles: doc.triangles().to_vec(),
+    };
+    println!(
+        "model {} ({} vertices), {} threads{what}",
+        model.display(),
+        scan.vertices.len(),
+        rayon::current_num_threads()
+    );
+    Ok((model, scan))
+}
+
 /// `scan` with about `vertices` vertices: decimated by vertex clustering, or subdivided and
 /// split (the paper's Table 1 sizes from one real scan).
 pub fn resampled(scan: &Mesh, vertices: usize) -> Mesh {

@@ -14,14 +14,12 @@
 
 use std::time::Instant;
 
-use data_gen::Mesh;
 use rigidcells::cells::{BuildParams, build};
 use rigidcells::field::{Deformer, Field, Transfer, apply};
-use rigidcells::io::Document;
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
 use rigidcells::solve::{self, SolveParams};
-use rigidcells_tools::{bend_spec, cell_size_for, model_arg, resampled};
+use rigidcells_tools::{bend_spec, cell_size_for, load_scan, resampled};
 
 /// The paper's dragon rows: vertices, cells, voxelization, solve (one Newton iteration),
 /// blend, RBF, in seconds.
@@ -35,18 +33,7 @@ const PAPER: [(usize, usize, f64, f64, f64, f64); 6] = [
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let model = model_arg();
-    let doc = Document::read(&model)?;
-    let scan = Mesh {
-        vertices: doc.positions().iter().map(|p| [p.x, p.y, p.z]).collect(),
-        triangles: doc.triangles().to_vec(),
-    };
-    println!(
-        "model {} ({} vertices), {} threads; seconds, paper's in parentheses, paper / ours after",
-        model.display(),
-        scan.vertices.len(),
-        rayon::current_num_threads()
-    );
+    let (_, scan) = load_scan("; seconds, paper's in parentheses, paper / ours after")?;
     println!(
         "| vertices | cells | voxel. | GN iteration | solve (iterations) | blend | RBF (factor + evaluate) |"
     );

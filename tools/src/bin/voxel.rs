@@ -9,11 +9,9 @@
 
 use std::time::Instant;
 
-use data_gen::Mesh;
 use rigidcells::cells::{BuildParams, build};
-use rigidcells::io::Document;
 use rigidcells::rigid::Vect;
-use rigidcells_tools::{cell_size_for, model_arg, resampled};
+use rigidcells_tools::{cell_size_for, load_scan, resampled};
 
 /// The paper's rows: vertices, cells, voxelization seconds.
 const PAPER: [(usize, usize, f64); 6] = [
@@ -26,18 +24,7 @@ const PAPER: [(usize, usize, f64); 6] = [
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let model = model_arg();
-    let doc = Document::read(&model)?;
-    let scan = Mesh {
-        vertices: doc.positions().iter().map(|p| [p.x, p.y, p.z]).collect(),
-        triangles: doc.triangles().to_vec(),
-    };
-    println!(
-        "model {} ({} vertices), {} threads",
-        model.display(),
-        scan.vertices.len(),
-        rayon::current_num_threads()
-    );
+    let (_, scan) = load_scan("")?;
     println!(
         "| vertices | triangles | cells | interior | voxelization s | paper s | paper / ours |"
     );
