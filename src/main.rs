@@ -261,10 +261,6 @@ fn run_cells(
     Ok(())
 }
 
-/// Samples of a file checked for fold-overs (a decimated proxy: the check costs a few warps per
-/// sample).
-const FOLDOVER_SAMPLES: usize = 100_000;
-
 fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     refuse_overwrite(&args.input, &args.output)?;
     let params = DeformParams {
@@ -275,7 +271,7 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         },
         transfer: args.transfer.into(),
         // The proxy serves the fold-over check (nothing of the CLI draws a preview yet).
-        proxy_samples: Some(FOLDOVER_SAMPLES),
+        proxy_samples: Some(pipeline::FOLDOVER_SAMPLES),
     };
     if let Some(f) = &args.save_field {
         refuse_overwrite(&args.input, f)?;

@@ -77,7 +77,8 @@ pub struct DeformInfo {
     /// Seconds spent in the transfer (building it and applying it).
     pub seconds_transfer: f64,
     /// Samples checked for fold-overs and how many of them the map folds over (Jacobian
-    /// determinant not positive): every sample of [`deform`], the proxy of [`deform_file`].
+    /// determinant not positive): at most [`FOLDOVER_SAMPLES`], evenly strided over the samples
+    /// of [`deform`] or the proxy of [`deform_file`].
     pub foldovers: (usize, usize),
     /// Messages for the user.
     pub warnings: Vec<String>,
@@ -104,13 +105,8 @@ where
     let deformer = Deformer::new(&field, params.transfer)?;
     let mut moved = points.to_vec();
     apply(&deformer, &field.origin, &mut moved);
-    let h = foldover_step(&solution.complex);
-    let foldovers = (
-        points.len(),
-        count_foldovers(&deformer, &field.origin, points, h),
-    );
     let mut warnings = warnings;
-    warnings.extend(foldover_warning(foldovers));
+    let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
     let info = DeformInfo {
         build: build_info,
         solver: solution.info.clone(),
@@ -121,20 +117,32 @@ where
     Ok((moved, solution, info))
 }
 
-/// The step of the fold-over check's central differences: a thousandth of the finest cell.
-fn foldover_step<const D: usize>(complex: &CellComplex<D>) -> f64 {
-    1e-3 * complex.grid.finest_size()
-}
+/// Samples checked for fold-overs at most: evenly strided, as the check costs a few warps (or
+/// one Jacobian) per sample.
+pub const FOLDOVER_SAMPLES: usize = 100_000;
 
-/// The warning for `(checked, folded)` samples, if any are folded.
-fn foldover_warning((checked, folded): (usize, usize)) -> Option<String> {
-    (folded > 0).then(|| {
-        format!(
-            "the deformation folds space over at {folded} of {checked} samples checked (the \
-             Jacobian determinant is not positive there): the shape passes through itself; \
-             a smaller edit, more load steps or stiffer cells avoid it"
-        )
-    })
+/// Counts the fold-overs of `warp` at up to [`FOLDOVER_SAMPLES`] of the world-coordinate
+/// `samples` (every k-th), with central differences of a thousandth of the finest cell, and
+/// warns when there are any. Returns `(checked, folded)`.
+fn check_foldovers<const D: usize>(
+    warp: &impl Warp<D>,
+    solution: &Solution<D>,
+    samples: &[Vect<D>],
+    warnings: &mut Vec<String>,
+) -> (usize, usize) {
+    let stride = samples.len().div_ceil(FOLDOVER_SAMPLES).max(1);
+    let checked: Vec<Vect<D>> = samples.iter().step_by(stride).copied().collect();
+    let h = 1e-3 * solution.complex.grid.finest_size();
+    let folded = count_foldovers(warp, &solution.complex.grid.origin, &checked, h);
+    if folded > 0 {
+        warnings.push(format!(
+            "the deformation folds space over at {folded} of {} samples checked (the Jacobian \
+             determinant is not positive there): the shape passes through itself; a smaller \
+             edit, more load steps or stiffer cells avoid it",
+            checked.len()
+        ));
+    }
+    (checked.len(), folded)
 }
 
 /// The warnings of the cell construction followed by those of the constraints.
@@ -227,13 +235,11 @@ pub fn deform_file(
     }
     let origin = saved.field.origin;
     let deformer = saved.deformer(params.transfer)?;
-    info.proxy = proxy;
-    let mut after = info.proxy.before.clone();
+    let mut after = proxy.before.clone();
     apply(&deformer, &origin, &mut after);
-    info.proxy.after = after;
-    let h = foldover_step(&solution.complex);
-    let before = &info.proxy.before;
-    let foldovers = (before.len(), count_foldovers(&deformer, &origin, before, h));
+    info.proxy = Proxy { after, ..proxy };
+    let mut warnings = warnings;
+    let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
     let t2 = Instant::now();
     info.notes.extend(transfer_pass(
         source.as_mut(),
@@ -244,8 +250,6 @@ pub fn deform_file(
         observer,
     )?);
     info.seconds_write = t2.elapsed().as_secs_f64();
-    let mut warnings = warnings;
-    warnings.extend(foldover_warning(foldovers));
     info.deform = DeformInfo {
         build: build_info,
         solver: solution.info.clone(),

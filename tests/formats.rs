@@ -612,3 +612,45 @@ fn the_preview_proxy_samples_the_input_and_the_output() {
     }
     assert!(lifted > 0, "the proxy shows the edit");
 }
+
+/// `deform` warns about an edit that folds space over (a strip of a terrain pushed 900 m into
+/// its fixed end) and not about one that only bends it.
+#[test]
+fn deform_warns_where_the_edit_folds_space_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("scan.las");
+    data_gen::write_las_terrain(&scan, 200_000, false).unwrap();
+    let spec = |name: &str, handle: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(
+            &path,
+            format!(
+                "[[fixed]]\nbox = {{ min = [499999, 4999999, 0], max = [500300, 5002001, 200] }}\n\
+                 [[handle]]\n{handle}\n"
+            ),
+        )
+        .unwrap();
+        path
+    };
+    let fold = spec(
+        "fold.toml",
+        "box = { min = [500900, 4999999, 0], max = [501100, 5002001, 200] }\n\
+         translate = [-900, 0, 0]",
+    );
+    let bend = spec(
+        "bend.toml",
+        "box = { min = [501700, 4999999, 0], max = [502001, 5002001, 200] }\n\
+         translate = [0, 0, 50]",
+    );
+    let output = dir.path().join("out.las");
+    let folded = common::deform_verbose(&scan, &output, &fold, &["--transfer", "blend"]);
+    assert_eq!(folded.code, 0, "{}", folded.stderr);
+    assert!(
+        folded.stderr.contains("folds space over"),
+        "{}",
+        folded.stderr
+    );
+    let bent = common::deform_verbose(&scan, &output, &bend, &["--transfer", "blend"]);
+    assert_eq!(bent.code, 0, "{}", bent.stderr);
+    assert!(!bent.stderr.contains("folds space over"), "{}", bent.stderr);
+}

@@ -67,7 +67,7 @@ fn main() {
     let params = DeformParams {
         transfer: Transfer::Blend,
         // As the CLI: a proxy for the fold-over check.
-        proxy_samples: Some(100_000),
+        proxy_samples: Some(rigidcells::pipeline::FOLDOVER_SAMPLES),
         ..Default::default()
     };
     // Alternating runs, medians reported: the copy writes as many bytes as the deform and its
