@@ -65,8 +65,8 @@ pub use error::{Error, Result};
 /// here, a rayon pool that has run one of them no longer hands work to its second worker, so on
 /// the global pool every parallel loop after the first solve ran at one core's speed (pass 2 of
 /// a 20M-point LAS took 2.95 s instead of 1.9; `rayon::join` of two 90 ms tasks took 80 ms
-/// instead of 40; a Gauss-Newton iteration at 1.2k cells 26 ms instead of 13). Every faer call
-/// runs on this pool instead, which nothing else uses.
+/// instead of 40; a Gauss-Newton iteration on that terrain's 1.4k cells 26 ms instead of 13).
+/// Every faer call runs on this pool instead, which nothing else uses.
 pub(crate) fn with_faer<T: Send>(f: impl FnOnce() -> T + Send) -> T {
     static POOL: std::sync::OnceLock<Option<rayon::ThreadPool>> = std::sync::OnceLock::new();
     match POOL.get_or_init(|| rayon::ThreadPoolBuilder::new().build().ok()) {

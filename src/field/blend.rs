@@ -16,7 +16,8 @@
 //!
 //! Where the blended cells all follow one motion (a fixed region, the inside of a handle), the
 //! sample follows that motion exactly, without weights: the samples of a fixed region keep
-//! their coordinates bit for bit, and a quarter to a third of a typical scan skips the weights.
+//! their coordinates bit for bit (on the terrain of `tools/stream`, whose ends are fixed and
+//! lifted, the blend went from 70 to 65 ns per sample).
 //!
 //! At `d_k → 0` the weight of that cell dominates and the limit is `T_k(x)`: a sample within
 //! `1e-12` cell sizes of a center takes that cell's motion alone, which is the limit and avoids
@@ -24,7 +25,7 @@
 //! nearest centers come from the exact tiled search of [`super::nearest`].
 
 use super::nearest::{Anchor, NEAR, Nearest, Neighbors};
-use super::{Field, Warp};
+use super::{Field, Warp, unit_or};
 use crate::error::Result;
 use crate::rigid::{Affine, Vect};
 
@@ -150,32 +151,14 @@ impl<const D: usize> Blend<D> {
         for &(c, wk) in &w[..k] {
             turned += self.maps[c].linear * n * wk;
         }
-        let len = turned.norm();
-        if len > 0.0 && len.is_finite() {
-            (moved, turned / len)
-        } else {
-            (moved, *n)
-        }
+        (moved, unit_or(turned, n))
     }
-}
 
-impl<const D: usize> Blend<D> {
     /// `x` and its normal under one cell's motion `map`, which every blended cell follows.
     #[inline(always)]
     fn rigid(&self, map: &Affine<D>, x: &Vect<D>, n: Option<&Vect<D>>) -> (Vect<D>, Vect<D>) {
-        let moved = map.apply(x);
-        match n {
-            None => (moved, Vect::<D>::zeros()),
-            Some(n) => {
-                let turned = map.linear * n;
-                let len = turned.norm();
-                if len > 0.0 && len.is_finite() {
-                    (moved, turned / len)
-                } else {
-                    (moved, *n)
-                }
-            }
-        }
+        let turned = n.map_or_else(Vect::<D>::zeros, |n| unit_or(map.linear * n, n));
+        (map.apply(x), turned)
     }
 }
 

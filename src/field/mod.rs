@@ -165,6 +165,18 @@ impl<const D: usize> Warp<D> for Deformer<D> {
     }
 }
 
+/// `v` normalized, or `fallback` where `v` has no direction (zero or not finite): a normal
+/// after a transfer.
+#[inline]
+pub(crate) fn unit_or<const D: usize>(v: Vect<D>, fallback: &Vect<D>) -> Vect<D> {
+    let len = v.norm();
+    if len > 0.0 && len.is_finite() {
+        v / len
+    } else {
+        *fallback
+    }
+}
+
 /// Samples per parallel task.
 const CHUNK: usize = 4096;
 

@@ -199,11 +199,29 @@ impl<const D: usize> Nearest<D> {
         let Some(t) = self.tile_of(x) else {
             return self.outside(x);
         };
-        let mut nb = Neighbors::EMPTY;
-        for c in self.tiles[t].get_or_init(|| self.fill(t)).candidates.iter() {
-            nb.offer(dist2(x, &c.at), c.cell);
+        let (d2, cells, n) = self.scan::<NEAR>(x, self.list(t));
+        Neighbors { cells, d2, n }
+    }
+
+    /// The filled candidate list of tile `t`.
+    #[inline(always)]
+    fn list(&self, t: usize) -> &TileList<D> {
+        self.tiles[t].get_or_init(|| self.fill(t))
+    }
+
+    /// The `N` candidates of `list` nearest to `x`, in the order of `(d2, cell)`, and how many
+    /// there are.
+    #[inline(always)]
+    fn scan<const N: usize>(
+        &self,
+        x: &[f64; D],
+        list: &TileList<D>,
+    ) -> ([f64; N], [u32; N], usize) {
+        let (mut d2s, mut cells, mut n) = ([f64::INFINITY; N], [0u32; N], 0);
+        for c in list.candidates.iter() {
+            offer(&mut d2s, &mut cells, &mut n, dist2(x, &c.at), c.cell);
         }
-        nb
+        (d2s, cells, n)
     }
 
     /// [`Self::find`] for points that come in a coherent order (scans): when `x` is within
@@ -231,11 +249,8 @@ impl<const D: usize> Nearest<D> {
         let Some(t) = self.tile_of(x) else {
             return self.outside(x);
         };
-        let list = self.tiles[t].get_or_init(|| self.fill(t));
-        let (mut d2s, mut cells, mut n) = ([f64::INFINITY; NEAR + 1], [0u32; NEAR + 1], 0);
-        for c in list.candidates.iter() {
-            offer(&mut d2s, &mut cells, &mut n, dist2(x, &c.at), c.cell);
-        }
+        let list = self.list(t);
+        let (d2s, cells, n) = self.scan::<{ NEAR + 1 }>(x, list);
         let mut nb = Neighbors::EMPTY;
         nb.n = n.min(NEAR);
         nb.d2.copy_from_slice(&d2s[..NEAR]);

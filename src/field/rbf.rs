@@ -272,12 +272,7 @@ impl<const D: usize> Warp<D> for Rbf<D> {
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
         let j = Rbf::jacobian(self, x);
         let mapped = j.try_inverse().map(|inv| inv.transpose() * n).unwrap_or(*n);
-        let len = mapped.norm();
-        if len > 0.0 && len.is_finite() {
-            mapped / len
-        } else {
-            *n
-        }
+        super::unit_or(mapped, n)
     }
 }
 
