@@ -490,8 +490,9 @@ impl Source for LasSource {
 }
 
 impl LasSource {
-    /// Reads up to `max` records into `chunk`: their samples, and with `keep_raw` their bytes.
-    /// Memory-mapped records are decoded in place without `keep_raw`.
+    /// Reads up to `max` records into `chunk`: their samples, and with `keep_raw` their bytes
+    /// (memory-mapped records are decoded from the map, so without `keep_raw` they are not
+    /// copied at all).
     fn read_records(&mut self, max: usize, chunk: &mut Chunk, keep_raw: bool) -> Result<usize> {
         let h = &self.header;
         let rl = h.record_len as usize;
@@ -501,16 +502,15 @@ impl LasSource {
         if n == 0 {
             return Ok(0);
         }
-        match &mut self.body {
+        // Mapped records are decoded straight from the map; the others from `chunk.raw`.
+        let ret = match &mut self.body {
             Body::Mapped(map) => {
                 let start = h.point_offset as usize + self.next as usize * rl;
                 let records = &map[start..start + n * rl];
-                if !keep_raw {
-                    self.max_return = self.max_return.max(decode(h, records, chunk));
-                    self.next += n as u64;
-                    return Ok(n);
+                if keep_raw {
+                    chunk.raw.extend_from_slice(records);
                 }
-                chunk.raw.extend_from_slice(records);
+                Some(decode(h, records, &mut chunk.positions, &mut chunk.classes))
             }
             Body::Laz(reader, slab, used) => {
                 if *used * rl == slab.raw_bytes().len() {
@@ -536,39 +536,44 @@ impl LasSource {
                     .extend_from_slice(&slab.raw_bytes()[*used * rl..(*used + take) * rl]);
                 *used += take;
                 n = take;
+                None
             }
             Body::PointWise(d) => {
                 chunk.raw.resize(n * rl, 0);
                 d.decompress_many(&mut chunk.raw).map_err(|e| {
                     Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
                 })?;
+                None
             }
-        }
-        let raw = std::mem::take(&mut chunk.raw);
-        self.max_return = self.max_return.max(decode(h, &raw, chunk));
-        chunk.raw = raw;
+        };
+        let ret =
+            ret.unwrap_or_else(|| decode(h, &chunk.raw, &mut chunk.positions, &mut chunk.classes));
+        self.max_return = self.max_return.max(ret);
         self.next += n as u64;
         Ok(n)
     }
 }
 
-/// Appends the world coordinates and classes of `records` to `chunk`; returns the largest
-/// return number among them.
-fn decode(h: &LasHeader, records: &[u8], chunk: &mut Chunk) -> u8 {
+/// Appends the world coordinates and classes of `records` to `positions` and `classes`;
+/// returns the largest return number among them.
+fn decode(
+    h: &LasHeader,
+    records: &[u8],
+    positions: &mut Vec<Vect<3>>,
+    classes: &mut Vec<u8>,
+) -> u8 {
     let class_at = h.class_at();
     let five_bits = h.format < 6;
     let mut max_return = 0;
     for rec in records.chunks_exact(h.record_len as usize) {
         let c = |at: usize| i32::from_le_bytes(rec[at..at + 4].try_into().expect("4 bytes"));
-        chunk.positions.push(Vect::<3>::new(
+        positions.push(Vect::<3>::new(
             c(0) as f64 * h.scale[0] + h.offset[0],
             c(4) as f64 * h.scale[1] + h.offset[1],
             c(8) as f64 * h.scale[2] + h.offset[2],
         ));
         let class = rec[class_at];
-        chunk
-            .classes
-            .push(if five_bits { class & 0x1f } else { class });
+        classes.push(if five_bits { class & 0x1f } else { class });
         let ret = if five_bits {
             rec[14] & 0x07
         } else {

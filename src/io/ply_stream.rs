@@ -27,7 +27,7 @@ use super::ply::{
 };
 use super::require_extension;
 use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
-use super::text::TextSink;
+use super::text::SpanSink;
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -366,7 +366,7 @@ impl Sink for PlySink {
 /// faces; a chunk then walks its vertex records from where the previous one stopped and carries
 /// the bytes from there through its last record (from the file's start for the first chunk, to
 /// its end for the last) with the spans of their numbers, so the chunks' bytes partition the
-/// file and the [`TextSink`](super::text::TextSink) writes the new numbers over them (as text,
+/// file and the [`SpanSink`](super::text::SpanSink) writes the new numbers over them (as text,
 /// or as floats in the file's byte order).
 pub struct PlyRecordStream {
     path: PathBuf,
@@ -509,7 +509,7 @@ impl Source for PlyRecordStream {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        let sink = TextSink::create(
+        let sink = SpanSink::create(
             &self.path,
             output,
             "ply",

@@ -111,7 +111,7 @@ pub(crate) fn splice(bytes: &[u8], mut edits: Vec<Edit>) -> Vec<u8> {
 /// The sink of the streams that carry their records' bytes (XYZ, ASCII PLY, binary PLY with
 /// walked vertex records): each chunk's bytes written with the numbers at its [`Chunk::spans`]
 /// replaced; `singles` marks the components written as f32.
-pub(crate) struct TextSink {
+pub(crate) struct SpanSink {
     input: PathBuf,
     file: TempFile,
     out: BufWriter<File>,
@@ -120,7 +120,7 @@ pub(crate) struct TextSink {
     normal_singles: Option<[bool; 3]>,
 }
 
-impl TextSink {
+impl SpanSink {
     /// A sink for `output`, which must have the extension `ext`; `input` names errors.
     pub(crate) fn create(
         input: &Path,
@@ -143,7 +143,7 @@ impl TextSink {
     }
 }
 
-impl Sink for TextSink {
+impl Sink for SpanSink {
     fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
         let with_normals = !chunk.normals.is_empty();
         let stride = if with_normals { 6 } else { 3 };

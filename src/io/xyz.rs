@@ -5,7 +5,7 @@
 //! [`XyzStream`] streams a file of any size from a memory map: a chunk carries the bytes of its
 //! lines (from the end of the previous chunk through its last point's line, and to the end of
 //! the file for the last one) and where its numbers lie in them, and the
-//! [`TextSink`](super::text::TextSink) writes them back with those numbers replaced, so the
+//! [`SpanSink`](super::text::SpanSink) writes them back with those numbers replaced, so the
 //! chunks' bytes partition the file. [`XyzFile`] holds a file in
 //! memory for the in-memory API. Both read lines through [`PointLines`].
 
@@ -16,7 +16,7 @@ use memmap2::Mmap;
 
 use super::mapped::map;
 use super::stream::{Bounds, Chunk, Sink, Source};
-use super::text::{Numbers, Span, TextSink, check_count, edits3, splice};
+use super::text::{Numbers, Span, SpanSink, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -226,7 +226,7 @@ impl Source for XyzStream {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        let sink = TextSink::create(&self.path, output, "xyz", Numbers::Text, [false; 3], None)?;
+        let sink = SpanSink::create(&self.path, output, "xyz", Numbers::Text, [false; 3], None)?;
         Ok(Box::new(sink))
     }
 }
