@@ -22,6 +22,7 @@
 use faer::Mat;
 use faer::prelude::*;
 
+use super::simd::slices;
 use super::{Field, Warp};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
@@ -88,7 +89,8 @@ impl<const D: usize> Rbf<D> {
     /// The displacement `d(x)` at the local point `x`.
     pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
         let y = self.scaled(x);
-        self.finish(&y, super::simd::sum(&y, &self.centers, &self.weights))
+        let sums = super::simd::sum(&y, &slices(&self.centers), &slices(&self.weights));
+        self.finish(&y, sums)
     }
 
     fn scaled(&self, x: &Vect<D>) -> [f64; D] {
@@ -180,7 +182,7 @@ fn projected<const D: usize>(c: &[Vect<D>], d: &Mat<f64>) -> Option<Mat<f64>> {
         });
         let rows: Vec<[f64; 4]> = (0..n)
             .into_par_iter()
-            .map(|r| super::simd::sum(&c[r].into(), &centers, &v))
+            .map(|r| super::simd::sum(&c[r].into(), &slices(&centers), &slices(&v)))
             .collect();
         (0..q)
             .map(|j| rows.iter().map(|row| row[j]).collect())
@@ -304,7 +306,7 @@ fn projected<const D: usize>(c: &[Vect<D>], d: &Mat<f64>) -> Option<Mat<f64>> {
             .into_par_iter()
             .map(|r| {
                 let y: [f64; D] = c[r].into();
-                let sums = super::simd::sum(&y, &centers, &weights);
+                let sums = super::simd::sum(&y, &slices(&centers), &slices(&weights));
                 std::array::from_fn(|k| {
                     let lin: f64 = (0..D).map(|a| c[r][a] * x[(n + 1 + a, k)]).sum();
                     d[(r, k)] - x[(n, k)] - lin - sums[k]
@@ -342,7 +344,7 @@ impl<const D: usize> Warp<D> for Rbf<D> {
         for (p, o) in (&mut chunks).zip(&mut outs) {
             let xs: [Vect<D>; S] = std::array::from_fn(|s| p[s] - origin);
             let ys: [[f64; D]; S] = std::array::from_fn(|s| self.scaled(&xs[s]));
-            let sums = super::simd::sums(&ys, &self.centers, &self.weights);
+            let sums = super::simd::sums(&ys, &slices(&self.centers), &slices(&self.weights));
             for s in 0..S {
                 o[s] = xs[s] + self.finish(&ys[s], sums[s]) + origin;
             }

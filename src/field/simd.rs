@@ -26,11 +26,16 @@
 /// `Σ_i w_k[i] |y − c_i|³` for each of the `K` weight vectors `w_k`, over centers stored axis by axis (`centers[a]`
 /// the `a`-th coordinates) and weights component by component, on the widest vector unit the
 /// CPU has.
+/// The slices of `N` vectors, as the kernels take them.
+pub(crate) fn slices<const N: usize>(v: &[Vec<f64>; N]) -> [&[f64]; N] {
+    v.each_ref().map(Vec::as_slice)
+}
+
 #[inline]
 pub(crate) fn sum<const D: usize, const K: usize>(
     y: &[f64; D],
-    centers: &[Vec<f64>; D],
-    weights: &[Vec<f64>; K],
+    centers: &[&[f64]; D],
+    weights: &[&[f64]; K],
 ) -> [f64; K] {
     #[cfg(target_arch = "x86_64")]
     {
@@ -59,8 +64,8 @@ pub(crate) fn sum<const D: usize, const K: usize>(
 #[inline]
 pub(crate) fn sums<const D: usize, const K: usize, const S: usize>(
     ys: &[[f64; D]; S],
-    centers: &[Vec<f64>; D],
-    weights: &[Vec<f64>; K],
+    centers: &[&[f64]; D],
+    weights: &[&[f64]; K],
 ) -> [[f64; K]; S] {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx512f") {
@@ -80,8 +85,8 @@ pub(crate) fn sums<const D: usize, const K: usize, const S: usize>(
 #[target_feature(enable = "avx512f")]
 fn sum_avx512<const D: usize, const K: usize, const S: usize>(
     ys: &[[f64; D]; S],
-    centers: &[Vec<f64>; D],
-    weights: &[Vec<f64>; K],
+    centers: &[&[f64]; D],
+    weights: &[&[f64]; K],
 ) -> [[f64; K]; S] {
     use std::arch::x86_64::*;
     let n = centers[0].len();
@@ -125,8 +130,8 @@ fn sum_avx512<const D: usize, const K: usize, const S: usize>(
 #[target_feature(enable = "avx2")]
 fn sum_avx2<const D: usize, const K: usize>(
     y: &[f64; D],
-    centers: &[Vec<f64>; D],
-    weights: &[Vec<f64>; K],
+    centers: &[&[f64]; D],
+    weights: &[&[f64]; K],
 ) -> [f64; K] {
     kernel(y, centers, weights)
 }
@@ -136,8 +141,8 @@ fn sum_avx2<const D: usize, const K: usize>(
 #[inline(always)]
 fn kernel<const D: usize, const K: usize>(
     y: &[f64; D],
-    centers: &[Vec<f64>; D],
-    weights: &[Vec<f64>; K],
+    centers: &[&[f64]; D],
+    weights: &[&[f64]; K],
 ) -> [f64; K] {
     let n = centers[0].len();
     let mut acc = [[0.0f64; 4]; K];
@@ -198,6 +203,8 @@ mod tests {
             let weights: [Vec<f64>; 3] = std::array::from_fn(|_| (0..n).map(|_| next()).collect());
             let magnitude: [Vec<f64>; 3] =
                 weights.clone().map(|w| w.iter().map(|v| v.abs()).collect());
+            let (centers, weights, magnitude) =
+                (slices(&centers), slices(&weights), slices(&magnitude));
             for t in 0..50 {
                 let y = match t {
                     0 => [centers[0][0], centers[1][0], centers[2][0]],

@@ -146,21 +146,15 @@ where
     let mut system = timed(&mut info.seconds_symbolic, || {
         System::new(&complex, &constraints)
     })?;
-    observer.stage("solving", steps as u64);
-    for s in 1..=steps {
-        let f = s as f64 / steps as f64;
-        let it = minimize_with(
-            &mut system,
-            &complex,
-            &constraints,
-            &mut motions,
-            f,
-            params,
-            &mut info,
-        )?;
-        info.iterations_per_step.push(it);
-        observer.advance(1);
-    }
+    load_stepped(
+        &mut system,
+        &complex,
+        &constraints,
+        &mut motions,
+        params,
+        &mut info,
+        observer,
+    )?;
     if let Some(tau) = params.refine_strain {
         let limit = complex.grid.max_level + params.refine_levels;
         for _ in 0..params.max_refinements {
@@ -216,6 +210,162 @@ where
         constraints,
         info,
     })
+}
+
+/// The load steps `1/steps, 2/steps, …, 1` of `info.load_steps`, each minimized from the last.
+fn load_stepped<const D: usize>(
+    system: &mut System<D>,
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &mut [Motion<D>],
+    params: &SolveParams,
+    info: &mut SolverInfo,
+    observer: &dyn Observer,
+) -> Result<()>
+where
+    Dim<D>: Rigid<D>,
+{
+    let steps = info.load_steps;
+    observer.stage("solving", steps as u64);
+    for s in 1..=steps {
+        let f = s as f64 / steps as f64;
+        let it = minimize_with(system, complex, constraints, motions, f, params, info)?;
+        info.iterations_per_step.push(it);
+        observer.advance(1);
+    }
+    Ok(())
+}
+
+/// An editing session on fixed cells: the paper's interactive case. The first solve runs from
+/// rest with load steps, as [`solve`] does (without refinement); each [`Session::update`] then
+/// starts Gauss-Newton from the current motions, without load steps, and reuses the sparse
+/// system's symbolic factorization when only the handles, pins and targets moved. A handle
+/// dragged a little converges in a few iterations instead of a solve from rest.
+pub struct Session<const D: usize> {
+    complex: CellComplex<D>,
+    constraints: Constraints<D>,
+    system: System<D>,
+    motions: Vec<Motion<D>>,
+    params: SolveParams,
+}
+
+impl<const D: usize> Session<D>
+where
+    Dim<D>: Rigid<D>,
+{
+    /// Solves `constraints` on `complex` from rest (`params.refine_strain` is not used: a
+    /// session's cells stay those of `complex`).
+    pub fn new(
+        complex: CellComplex<D>,
+        constraints: Constraints<D>,
+        params: &SolveParams,
+        observer: &dyn Observer,
+    ) -> Result<(Self, SolverInfo)> {
+        let start = Instant::now();
+        let mut info = SolverInfo {
+            cells_initial: complex.len(),
+            load_steps: load_steps(&complex, &constraints, params),
+            ..Default::default()
+        };
+        let mut motions: Vec<Motion<D>> = complex
+            .cells
+            .iter()
+            .map(|c| Motion::rest(&c.center))
+            .collect();
+        let mut system = timed(&mut info.seconds_symbolic, || {
+            System::new(&complex, &constraints)
+        })?;
+        load_stepped(
+            &mut system,
+            &complex,
+            &constraints,
+            &mut motions,
+            params,
+            &mut info,
+            observer,
+        )?;
+        observer.finish();
+        let session = Self {
+            complex,
+            constraints,
+            system,
+            motions,
+            params: *params,
+        };
+        let info = session.finished(info, start);
+        Ok((session, info))
+    }
+
+    /// Moves to `constraints` — the same edit with its handles, pins or targets moved, resolved
+    /// on this session's cells — starting from the current motions. The symbolic factorization
+    /// is kept unless the cells' roles, stiffness or targets' cells and weights changed.
+    pub fn update(&mut self, constraints: Constraints<D>) -> Result<SolverInfo> {
+        if constraints.roles.len() != self.complex.len() {
+            return Err(Error::Solver(format!(
+                "the constraints are for {} cells, the session has {}",
+                constraints.roles.len(),
+                self.complex.len()
+            )));
+        }
+        let start = Instant::now();
+        let mut info = SolverInfo {
+            cells_initial: self.complex.len(),
+            load_steps: 1,
+            ..Default::default()
+        };
+        let same_structure = constraints.roles == self.constraints.roles
+            && constraints.stiffness == self.constraints.stiffness
+            && constraints.targets.len() == self.constraints.targets.len()
+            && constraints
+                .targets
+                .iter()
+                .zip(&self.constraints.targets)
+                .all(|(a, b)| a.cell == b.cell && a.weight == b.weight);
+        if !same_structure {
+            self.system = timed(&mut info.seconds_symbolic, || {
+                System::new(&self.complex, &constraints)
+            })?;
+        }
+        self.constraints = constraints;
+        let it = minimize_with(
+            &mut self.system,
+            &self.complex,
+            &self.constraints,
+            &mut self.motions,
+            1.0,
+            &self.params,
+            &mut info,
+        )?;
+        info.iterations_per_step.push(it);
+        Ok(self.finished(info, start))
+    }
+
+    fn finished(&self, mut info: SolverInfo, start: Instant) -> SolverInfo {
+        info.cells_final = self.complex.len();
+        info.unknowns = self.system.unknowns();
+        info.seconds = start.elapsed().as_secs_f64();
+        info
+    }
+
+    /// The cells.
+    pub fn complex(&self) -> &CellComplex<D> {
+        &self.complex
+    }
+
+    /// The current motions, one per cell (local frame).
+    pub fn motions(&self) -> &[Motion<D>] {
+        &self.motions
+    }
+
+    /// The session's state as a [`Solution`] with `info`.
+    pub fn solution(&self, info: SolverInfo) -> Solution<D> {
+        Solution {
+            complex: self.complex.clone(),
+            motions: self.motions.clone(),
+            constraints: self.constraints.clone(),
+            info,
+        }
+    }
 }
 
 /// Runs Gauss-Newton at load fraction `f` from the given `motions` (prescribed cells are set to

@@ -61,9 +61,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent)?;
         let field = Field::from_solution(&sol);
         let timed = |transfer| -> Result<f64, rigidcells::Error> {
+            let mut moved = points.clone();
             let t = Instant::now();
             let deformer = Deformer::new(&field, transfer)?;
-            let mut moved = points.clone();
             apply(&deformer, &field.origin, &mut moved);
             Ok(t.elapsed().as_secs_f64())
         };
