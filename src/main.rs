@@ -13,6 +13,7 @@ use rigidcells::field::{SavedField, Transfer};
 use rigidcells::io::{LasHeader, Source, refuse_overwrite};
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
 use rigidcells::progress::Observer;
+use rigidcells::report::Report;
 use rigidcells::solve::SolveParams;
 use rigidcells::spec::read_spec;
 
@@ -99,6 +100,10 @@ struct DeformArgs {
     /// Also write the solved field to this file, for `rigidcells apply`.
     #[arg(long)]
     save_field: Option<PathBuf>,
+    /// Also write a JSON report: counts, cell levels, iterations, energies, residuals,
+    /// fold-overs, timings per stage, peak memory.
+    #[arg(long)]
+    report: Option<PathBuf>,
     /// Samples per streamed chunk.
     #[arg(long, default_value_t = CHUNK)]
     chunk: usize,
@@ -273,8 +278,8 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         // The proxy serves the fold-over check (nothing of the CLI draws a preview yet).
         proxy_samples: Some(pipeline::FOLDOVER_SAMPLES),
     };
-    if let Some(f) = &args.save_field {
-        refuse_overwrite(&args.input, f)?;
+    for extra in [&args.save_field, &args.report].into_iter().flatten() {
+        refuse_overwrite(&args.input, extra)?;
     }
     deform_file(
         &args.input,
@@ -283,6 +288,7 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         &params,
         args.chunk.max(1),
         args.save_field.as_deref(),
+        args.report.as_deref(),
         args.quiet,
     )
 }
@@ -297,6 +303,7 @@ impl From<TransferArg> for Transfer {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn deform_file(
     input: &Path,
     output: &Path,
@@ -304,11 +311,18 @@ fn deform_file(
     params: &DeformParams,
     chunk: usize,
     save_field: Option<&Path>,
+    report_to: Option<&Path>,
     quiet: bool,
 ) -> anyhow::Result<()> {
+    let start = std::time::Instant::now();
     let spec = read_spec::<3>(edit)?;
     let bar = Bar::new(quiet);
-    let (_, info) = pipeline::deform_file(input, output, &spec, params, chunk, save_field, &bar)?;
+    let (solution, info) =
+        pipeline::deform_file(input, output, &spec, params, chunk, save_field, &bar)?;
+    if let Some(path) = report_to {
+        let total = start.elapsed().as_secs_f64();
+        Report::new(input, output, &solution, &info, total).write(path)?;
+    }
     if !quiet {
         report(input, output, &info);
     }
@@ -480,7 +494,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             transfer,
             ..Default::default()
         };
-        deform_file(&input, &output, &edit, &params, CHUNK, None, quiet)?;
+        deform_file(&input, &output, &edit, &params, CHUNK, None, None, quiet)?;
     }
     if !quiet {
         println!(

@@ -218,3 +218,64 @@ fn demo_writes_inputs_and_results() {
     let b = Document::read(&dir.path().join("soup_bent.ply")).unwrap();
     assert_eq!(a.positions().len(), b.positions().len());
 }
+
+/// `--report`: the stable keys are there and agree with the file and the run.
+#[test]
+fn deform_writes_a_report_with_the_stable_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    let output = dir.path().join("out.ply");
+    let edit = dir.path().join("edit.toml");
+    let report = dir.path().join("report.json");
+    let mesh = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    data_gen::write_ply(&input, &mesh, true).unwrap();
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0.0, 0.0, 2.0]\n",
+    )
+    .unwrap();
+    let r = deform(
+        &input,
+        &output,
+        &edit,
+        &["--cell-size", "0.25", "--transfer", "blend", "--report", report.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(json["points"].as_u64(), Some(mesh.vertices.len() as u64));
+    let cells = json["cells"].as_u64().unwrap();
+    assert!(cells > 100, "{cells} cells");
+    assert_eq!(json["cells_initial"].as_u64(), Some(cells));
+    let levels: u64 = json["cell_levels"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_u64().unwrap())
+        .sum();
+    assert_eq!(levels, cells);
+    let iterations = json["iterations"].as_u64().unwrap() as usize;
+    let energy: Vec<f64> = json["energy"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(iterations > 0 && energy.len() > iterations);
+    assert!(energy.last().unwrap() < &energy[1]);
+    // Samples deep in a region follow it exactly; those in its boundary cells blend with free
+    // neighbors and miss by a fraction of a cell (0.03 here, cells of 0.25).
+    let residual = json["residual_max"].as_f64().unwrap();
+    assert!(json["residual_samples"].as_u64().unwrap() > 100);
+    assert!((0.0..0.125).contains(&residual), "residual {residual}");
+    assert_eq!(json["foldovers"].as_u64(), Some(0));
+    let t = &json["timings_s"];
+    let stage = |k: &str| t[k].as_f64().unwrap_or_else(|| panic!("timings_s.{k}"));
+    let parts: f64 = ["read", "voxelize", "solve", "transfer", "write"]
+        .iter()
+        .map(|k| stage(k))
+        .sum();
+    assert!(parts > 0.0 && stage("total") >= parts * 0.99, "{t}");
+}

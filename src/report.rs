@@ -1,0 +1,196 @@
+//! The machine-readable report of a deformation (`deform --report R.json`).
+//!
+//! Scripts rely on these top-level keys, which keep their names and meanings: `points`,
+//! `cells`, `cells_initial`, `iterations`, `energy`, `residual_max`, `foldovers` and
+//! `timings_s` with `read`, `voxelize`, `solve`, `transfer`, `write`, `total`. Keys may be
+//! added; none is renamed or removed.
+//!
+//! The residual is measured where the file's samples were sent: on the preview proxy (every
+//! k-th sample, [`crate::pipeline::Proxy`]), each sample inside a fixed cell should stay where
+//! it was and each inside a handle's cell should follow the handle's motion; `residual_max` is
+//! the largest distance of such a sample from there, in input units (zero when the proxy holds
+//! none). Soft targets are reported apart, as the distance of each target's point under its
+//! cell's motion from the target (`target_residual_max`): a soft target is not met exactly by
+//! design.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::error::{Error, Result};
+use crate::pipeline::FileInfo;
+use crate::rigid::Vect;
+use crate::solve::{Role, Solution};
+
+/// The report; see the module docs for the stable keys.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// The input file.
+    pub input: String,
+    /// The output file.
+    pub output: String,
+    /// Samples deformed.
+    pub points: u64,
+    /// Cells after refinement.
+    pub cells: usize,
+    /// Cells before refinement.
+    pub cells_initial: usize,
+    /// Cells per octree level (level 0 the finest), after refinement.
+    pub cell_levels: BTreeMap<u8, usize>,
+    /// Cells of each role: `free`, `fixed`, `handle`, `pin`, `rest`.
+    pub cell_roles: BTreeMap<&'static str, usize>,
+    /// Gauss-Newton iterations over all load steps and refinements.
+    pub iterations: usize,
+    /// Load steps.
+    pub load_steps: usize,
+    /// The energy before the first iteration of each load step and after every iteration.
+    pub energy: Vec<f64>,
+    /// Whether the last load step met the tolerance.
+    pub converged: bool,
+    /// The largest distance of a fixed or handle sample of the proxy from where it was sent.
+    pub residual_max: f64,
+    /// Proxy samples that `residual_max` measured.
+    pub residual_samples: usize,
+    /// The largest distance of a soft target's point, under its cell's motion, from its
+    /// target.
+    pub target_residual_max: f64,
+    /// Samples where the map folds space over (Jacobian determinant not positive).
+    pub foldovers: usize,
+    /// Samples checked for fold-overs.
+    pub foldovers_checked: usize,
+    /// Seconds per stage.
+    pub timings_s: Timings,
+    /// The process's peak resident memory in bytes (`VmHWM`; absent where unknown).
+    pub peak_memory_bytes: Option<u64>,
+    /// Warnings, as printed.
+    pub warnings: Vec<String>,
+}
+
+/// Seconds per stage of [`crate::pipeline::deform_file`].
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Timings {
+    /// Pass 1, less the cells' construction: reading the samples, bounds and selections.
+    pub read: f64,
+    /// Building the cell complex (occupancy, octree, inside classification).
+    pub voxelize: f64,
+    /// The Gauss-Newton solve, refinements included.
+    pub solve: f64,
+    /// Building the transfer (the RBF's factorization, the blend's index), the proxy's
+    /// deformation and the fold-over check.
+    pub transfer: f64,
+    /// Pass 2: every sample read, moved through the transfer and written.
+    pub write: f64,
+    /// From the start of the deformation to the output's rename.
+    pub total: f64,
+}
+
+impl Report {
+    /// The report of `deform_file`'s result; `total` is the wall time the caller measured.
+    pub fn new(
+        input: &Path,
+        output: &Path,
+        solution: &Solution<3>,
+        file: &FileInfo,
+        total: f64,
+    ) -> Self {
+        let d = &file.deform;
+        let s = &d.solver;
+        let complex = &solution.complex;
+        let mut cell_levels = BTreeMap::new();
+        for c in &complex.cells {
+            *cell_levels.entry(c.key.level).or_insert(0) += 1;
+        }
+        let mut cell_roles = BTreeMap::new();
+        for role in &solution.constraints.roles {
+            let name = match role {
+                Role::Free => "free",
+                Role::Fixed => "fixed",
+                Role::Handle(_) => "handle",
+                Role::Pin(_) => "pin",
+                Role::Rest => "rest",
+            };
+            *cell_roles.entry(name).or_insert(0) += 1;
+        }
+        let (residual_max, residual_samples) = proxy_residual(solution, file);
+        let target_residual_max = solution
+            .constraints
+            .targets
+            .iter()
+            .map(|t| {
+                let c = t.cell as usize;
+                (solution.motions[c].apply(&complex.cells[c].center, &t.from) - t.to).norm()
+            })
+            .fold(0.0, f64::max);
+        let transfer = (d.seconds_transfer - file.seconds_write).max(0.0);
+        Self {
+            input: input.display().to_string(),
+            output: output.display().to_string(),
+            points: file.samples,
+            cells: s.cells_final,
+            cells_initial: s.cells_initial,
+            cell_levels,
+            cell_roles,
+            iterations: s.iterations,
+            load_steps: s.load_steps,
+            energy: s.energies.clone(),
+            converged: s.converged,
+            residual_max,
+            residual_samples,
+            target_residual_max,
+            foldovers: d.foldovers.1,
+            foldovers_checked: d.foldovers.0,
+            timings_s: Timings {
+                read: (file.seconds_read - d.build.seconds).max(0.0),
+                voxelize: d.build.seconds,
+                solve: s.seconds,
+                transfer,
+                write: file.seconds_write,
+                total,
+            },
+            peak_memory_bytes: peak_memory(),
+            warnings: d.warnings.clone(),
+        }
+    }
+
+    /// Writes the report as pretty JSON to `path`, atomically.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| Error::Param(format!("{}: {e}", path.display())))?;
+        crate::io::write_atomic(path, format!("{text}\n").as_bytes())
+    }
+}
+
+/// The largest distance of a proxy sample in a fixed or handle cell from where its cell's
+/// constraint sends it, and how many samples were measured.
+fn proxy_residual(solution: &Solution<3>, file: &FileInfo) -> (f64, usize) {
+    let constraints = &solution.constraints;
+    let origin = constraints.origin;
+    let maps: Vec<_> = (0..constraints.handles.len())
+        .map(|k| constraints.handle_map(k, 1.0))
+        .collect();
+    let mut worst = 0.0f64;
+    let mut count = 0;
+    for (before, after) in file.proxy.before.iter().zip(&file.proxy.after) {
+        let local: Vect<3> = before - origin;
+        let Some(c) = solution.complex.locate(&local) else {
+            continue;
+        };
+        let sent = match constraints.roles[c] {
+            Role::Fixed => *before,
+            Role::Handle(k) => maps[k as usize].apply(&local) + origin,
+            _ => continue,
+        };
+        worst = worst.max((after - sent).norm());
+        count += 1;
+    }
+    (worst, count)
+}
+
+/// `VmHWM` of `/proc/self/status`, in bytes.
+fn peak_memory() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
