@@ -240,7 +240,14 @@ fn deform_writes_a_report_with_the_stable_keys() {
         &input,
         &output,
         &edit,
-        &["--cell-size", "0.25", "--transfer", "blend", "--report", report.to_str().unwrap()],
+        &[
+            "--cell-size",
+            "0.25",
+            "--transfer",
+            "blend",
+            "--report",
+            report.to_str().unwrap(),
+        ],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let json: serde_json::Value =
