@@ -53,6 +53,7 @@ pub mod field;
 pub mod io;
 pub mod pipeline;
 pub mod progress;
+pub mod render;
 pub mod report;
 pub mod rigid;
 pub mod solve;

@@ -13,8 +13,11 @@ use rigidcells::field::{SavedField, Transfer};
 use rigidcells::io::{LasHeader, Source, refuse_overwrite};
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
 use rigidcells::progress::Observer;
+use rigidcells::render::{self, View};
 use rigidcells::report::Report;
+use rigidcells::rigid::Vect;
 use rigidcells::solve::SolveParams;
+use rigidcells::solve::{Role, Solution};
 use rigidcells::spec::read_spec;
 
 #[derive(Parser)]
@@ -63,6 +66,17 @@ enum Command {
         #[command(flatten)]
         cells: CellArgs,
     },
+    /// Render a file to a PNG: meshes and soups as shaded triangles, point clouds as shaded
+    /// splats (LAS RGB, or intensity, when present).
+    Render {
+        /// Input file.
+        input: PathBuf,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        view: ViewArgs,
+    },
     /// Describe a file: format, version, counts, attributes, bounds, CRS.
     Info {
         /// Input file.
@@ -104,12 +118,60 @@ struct DeformArgs {
     /// fold-overs, timings per stage, peak memory.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Also write a PNG of the input and the output side by side (a decimated proxy of the
+    /// samples: fixed regions gray, handles yellow, the rest blue).
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    #[command(flatten)]
+    view: ViewArgs,
     /// Samples per streamed chunk.
     #[arg(long, default_value_t = CHUNK)]
     chunk: usize,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// Where pictures are seen from.
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// Degrees about the vertical (z) axis of the view direction.
+    #[arg(long, default_value_t = -60.0, allow_hyphen_values = true)]
+    azimuth: f64,
+    /// Degrees above the horizon of the view direction.
+    #[arg(long, default_value_t = 25.0, allow_hyphen_values = true)]
+    elevation: f64,
+    /// Picture size in pixels, WIDTHxHEIGHT (a preview has two of them side by side).
+    #[arg(long, default_value = "640x480")]
+    size: String,
+}
+
+impl ViewArgs {
+    fn view(&self) -> anyhow::Result<View> {
+        let bad = || {
+            Error::Param(format!(
+                "--size {}: expected WIDTHxHEIGHT, e.g. 640x480",
+                self.size
+            ))
+        };
+        let (w, h) = self.size.split_once('x').ok_or_else(bad)?;
+        let (width, height): (u32, u32) =
+            (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+        if !(16..=8192).contains(&width) || !(16..=8192).contains(&height) {
+            return Err(
+                Error::Param(format!("--size {}: 16 to 8192 pixels each way", self.size)).into(),
+            );
+        }
+        if !self.azimuth.is_finite() || !self.elevation.is_finite() {
+            return Err(Error::Param("--azimuth and --elevation must be finite".into()).into());
+        }
+        Ok(View {
+            azimuth: self.azimuth,
+            elevation: self.elevation,
+            width,
+            height,
+        })
+    }
 }
 
 /// How the cell complex is built.
@@ -183,6 +245,11 @@ fn main() -> ExitCode {
             quiet,
         } => run_apply(&field, &input, &output, transfer.into(), quiet),
         Command::Info { input } => run_info(&input),
+        Command::Render {
+            input,
+            output,
+            view,
+        } => view.view().and_then(|v| run_render(&input, &output, &v)),
         Command::Cells {
             input,
             output,
@@ -278,8 +345,15 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         // The proxy serves the fold-over check (nothing of the CLI draws a preview yet).
         proxy_samples: Some(pipeline::FOLDOVER_SAMPLES),
     };
-    for extra in [&args.save_field, &args.report].into_iter().flatten() {
+    for extra in [&args.save_field, &args.report, &args.preview]
+        .into_iter()
+        .flatten()
+    {
         refuse_overwrite(&args.input, extra)?;
+    }
+    let view = args.view.view()?;
+    if let Some(p) = &args.preview {
+        png_path(p)?;
     }
     deform_file(
         &args.input,
@@ -289,6 +363,7 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         args.chunk.max(1),
         args.save_field.as_deref(),
         args.report.as_deref(),
+        args.preview.as_deref().map(|p| (p, view)),
         args.quiet,
     )
 }
@@ -312,6 +387,7 @@ fn deform_file(
     chunk: usize,
     save_field: Option<&Path>,
     report_to: Option<&Path>,
+    preview: Option<(&Path, View)>,
     quiet: bool,
 ) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
@@ -323,10 +399,150 @@ fn deform_file(
         let total = start.elapsed().as_secs_f64();
         Report::new(input, output, &solution, &info, total).write(path)?;
     }
+    if let Some((path, view)) = preview {
+        preview_image(&solution, &info, &view).write_png(path)?;
+    }
     if !quiet {
         report(input, output, &info);
     }
     Ok(())
+}
+
+/// `path`, when it names a PNG.
+fn png_path(path: &Path) -> anyhow::Result<()> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        Ok(())
+    } else {
+        Err(Error::Param(format!("{}: pictures are written as .png", path.display())).into())
+    }
+}
+
+/// Fixed samples gray, handle samples yellow, the rest blue (paper Fig. 1).
+const FIXED: [u8; 3] = [150, 150, 150];
+const HANDLE: [u8; 3] = [240, 200, 30];
+const FREE: [u8; 3] = [90, 140, 220];
+
+/// The preview of a deformation: the proxy before and after, side by side in one view fitted
+/// to both, each sample colored by its cell's role.
+fn preview_image(solution: &Solution<3>, info: &FileInfo, view: &View) -> render::Image {
+    let proxy = &info.proxy;
+    let origin = solution.constraints.origin;
+    let colors: Vec<[u8; 3]> = proxy
+        .before
+        .iter()
+        .map(|p| {
+            match solution
+                .complex
+                .locate(&(p - origin))
+                .map(|c| solution.constraints.roles[c])
+            {
+                Some(Role::Fixed) => FIXED,
+                Some(Role::Handle(_)) => HANDLE,
+                _ => FREE,
+            }
+        })
+        .collect();
+    let both: Vec<Vect<3>> = proxy.before.iter().chain(&proxy.after).copied().collect();
+    let fit = render::bounds(&both);
+    let side = |points: &[Vect<3>]| render::render(points, &[], None, |i| colors[i], view, fit);
+    render::Image::beside(&[side(&proxy.before), side(&proxy.after)])
+}
+
+fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    png_path(output)?;
+    let image = match rigidcells::io::Document::read(input) {
+        Ok(doc) => {
+            let gray = |_| [200, 200, 200];
+            render::render(
+                doc.positions(),
+                doc.triangles(),
+                doc.normals(),
+                gray,
+                view,
+                None,
+            )
+        }
+        Err(Error::UnsupportedFormat { .. }) => {
+            let (points, colors) = read_colored_points(input, RENDER_POINTS)?;
+            render::render(&points, &[], None, |i| colors[i], view, None)
+        }
+        Err(e) => return Err(e.into()),
+    };
+    image.write_png(output)?;
+    println!(
+        "{} -> {}: {}x{}, {} pixels drawn",
+        input.display(),
+        output.display(),
+        image.width,
+        image.height,
+        image.foreground()
+    );
+    Ok(())
+}
+
+/// Points `render` draws of a streamed file at most (every k-th sample).
+const RENDER_POINTS: usize = 2_000_000;
+
+/// Every k-th sample of a streamed file (at most `max`) with its color: LAS RGB when the point
+/// format has it, else LAS intensity as gray, else a neutral gray.
+fn read_colored_points(input: &Path, max: usize) -> anyhow::Result<(Vec<Vect<3>>, Vec<[u8; 3]>)> {
+    let mut source = rigidcells::io::open(input)?;
+    let stride = (source.len() as usize).div_ceil(max).max(1);
+    let las = LasHeader::read(input).ok();
+    let mut chunk = rigidcells::io::Chunk::default();
+    let (mut points, mut raw_colors) = (Vec::new(), Vec::new());
+    let mut index = 0usize;
+    loop {
+        let n = source.read(CHUNK, &mut chunk)?;
+        if n == 0 {
+            break;
+        }
+        for i in 0..n {
+            if (index + i).is_multiple_of(stride) {
+                points.push(chunk.positions[i]);
+                let rec = (chunk.record_len > 0)
+                    .then(|| &chunk.raw[i * chunk.record_len..(i + 1) * chunk.record_len]);
+                raw_colors.push(las.as_ref().zip(rec).map(|(h, r)| las_color(h.format, r)));
+            }
+        }
+        index += n;
+    }
+    // Intensities and 16-bit RGB are scaled by the file's own range.
+    let top = raw_colors
+        .iter()
+        .flatten()
+        .flat_map(|c| c.1)
+        .fold(1u16, u16::max);
+    let colors = raw_colors
+        .into_iter()
+        .map(|c| match c {
+            Some((_, rgb)) => rgb.map(|v| (v as u32 * 255 / top as u32) as u8),
+            None => [200, 200, 200],
+        })
+        .collect();
+    Ok((points, colors))
+}
+
+/// A LAS record's color: `(has RGB, [r, g, b])`, the intensity thrice without RGB.
+fn las_color(format: u8, rec: &[u8]) -> (bool, [u16; 3]) {
+    let u16_at = |at: usize| u16::from_le_bytes([rec[at], rec[at + 1]]);
+    let rgb_at = match format {
+        2 => Some(20),
+        3 | 5 => Some(28),
+        7 | 8 | 10 => Some(30),
+        _ => None,
+    };
+    match rgb_at {
+        Some(at) if rec.len() >= at + 6 => (true, [u16_at(at), u16_at(at + 2), u16_at(at + 4)]),
+        _ => {
+            let i = u16_at(12);
+            (false, [i, i, i])
+        }
+    }
 }
 
 fn run_apply(
@@ -494,7 +710,9 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             transfer,
             ..Default::default()
         };
-        deform_file(&input, &output, &edit, &params, CHUNK, None, None, quiet)?;
+        deform_file(
+            &input, &output, &edit, &params, CHUNK, None, None, None, quiet,
+        )?;
     }
     if !quiet {
         println!(

@@ -286,3 +286,127 @@ fn deform_writes_a_report_with_the_stable_keys() {
         .sum();
     assert!(parts > 0.0 && stage("total") >= parts * 0.99, "{t}");
 }
+
+/// `render` on the real dragon: a PNG with the model in its middle and the corners empty; a
+/// LAS with RGB renders in its colors. `deform --preview` draws before and after side by side,
+/// and the handle's yellow moves with the edit.
+#[test]
+fn render_and_preview_draw_what_was_there() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("dragon.png");
+    let dragon = common::shared("meshes/dragon_11k_binary.ply");
+    let r = run(&[
+        "render",
+        dragon.to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--size",
+        "320x240",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let image = read_png(&png);
+    assert_eq!((image.width, image.height), (320, 240));
+    let fg = |x: u32, y: u32| image.pixel(x, y) != rigidcells::render::BACKGROUND;
+    assert!(
+        fg(160, 120) || fg(150, 120) || fg(170, 120),
+        "the model's middle"
+    );
+    assert!(!fg(0, 0) && !fg(319, 239));
+    assert!(
+        image.foreground() > 320 * 240 / 20,
+        "{} pixels",
+        image.foreground()
+    );
+
+    let las = common::shared("las/autzen_trim.las");
+    let las_png = dir.path().join("autzen.png");
+    let r = run(&[
+        "render",
+        las.to_str().unwrap(),
+        "-o",
+        las_png.to_str().unwrap(),
+        "--elevation",
+        "90",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let colored = read_png(&las_png)
+        .rgb
+        .chunks_exact(3)
+        .filter(|p| p[0] != p[1] || p[1] != p[2])
+        .count();
+    assert!(colored > 1000, "{colored} colored pixels");
+
+    // A bad size is refused, and nothing is written.
+    let bad = dir.path().join("bad.png");
+    let r = run(&[
+        "render",
+        dragon.to_str().unwrap(),
+        "-o",
+        bad.to_str().unwrap(),
+        "--size",
+        "big",
+    ]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(!bad.exists());
+
+    let input = dir.path().join("bar.ply");
+    let output = dir.path().join("out.ply");
+    let edit = dir.path().join("edit.toml");
+    let preview = dir.path().join("preview.png");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0.0, 0.0, 4.0]\n",
+    )
+    .unwrap();
+    let r = deform(
+        &input,
+        &output,
+        &edit,
+        &[
+            "--cell-size",
+            "0.25",
+            "--preview",
+            preview.to_str().unwrap(),
+            "--size",
+            "300x200",
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let image = read_png(&preview);
+    assert_eq!((image.width, image.height), (602, 200));
+    // The yellow handle's mean row, left (before) and right (after): lifted means higher up.
+    let yellow_row = |x0: u32, x1: u32| {
+        let (mut sum, mut n) = (0.0, 0);
+        for y in 0..image.height {
+            for x in x0..x1 {
+                let [r, g, b] = image.pixel(x, y);
+                // The handle's yellow [240, 200, 30], shaded by depth; gray and blue have b ≥ 67.
+                if b < 60 && r > 100 && g > 80 {
+                    sum += y as f64;
+                    n += 1;
+                }
+            }
+        }
+        assert!(n > 20, "{n} yellow pixels");
+        sum / n as f64
+    };
+    let (before, after) = (yellow_row(0, 300), yellow_row(302, 602));
+    assert!(after < before - 20.0, "handle rows {before} → {after}");
+}
+
+fn read_png(path: &std::path::Path) -> rigidcells::render::Image {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    buf.truncate(info.buffer_size());
+    rigidcells::render::Image {
+        width: info.width,
+        height: info.height,
+        rgb: buf,
+    }
+}

@@ -1,0 +1,424 @@
+//! A small software renderer for looking at inputs and results: no GPU, no window.
+//!
+//! Orthographic view from an azimuth and elevation, fitted to given bounds so that several
+//! pictures (before and after) share one scale. Triangles are rasterized with a z-buffer and
+//! flat-shaded by a headlight (two-sided: soups have no consistent orientation); points are
+//! square splats, shaded by their normals when they have them and by depth when not, so that a
+//! cloud reads as a surface. Images are RGB PNGs written atomically.
+
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+/// Where the camera looks from and the picture's size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    /// Degrees about the vertical (z) axis, from the +x side towards +y.
+    pub azimuth: f64,
+    /// Degrees above the horizon.
+    pub elevation: f64,
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+}
+
+impl Default for View {
+    fn default() -> Self {
+        Self {
+            azimuth: -60.0,
+            elevation: 25.0,
+            width: 640,
+            height: 480,
+        }
+    }
+}
+
+/// An RGB image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+    /// Row by row from the top, three bytes per pixel.
+    pub rgb: Vec<u8>,
+}
+
+/// The background of every picture.
+pub const BACKGROUND: [u8; 3] = [255, 255, 255];
+
+impl Image {
+    /// A `width × height` image of the background color.
+    pub fn blank(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            rgb: BACKGROUND.repeat(width as usize * height as usize),
+        }
+    }
+
+    /// The pixel at column `x`, row `y`.
+    pub fn pixel(&self, x: u32, y: u32) -> [u8; 3] {
+        let i = 3 * (y as usize * self.width as usize + x as usize);
+        [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
+    }
+
+    fn set(&mut self, x: usize, y: usize, c: [u8; 3]) {
+        let i = 3 * (y * self.width as usize + x);
+        self.rgb[i..i + 3].copy_from_slice(&c);
+    }
+
+    /// Pixels that are not the background.
+    pub fn foreground(&self) -> usize {
+        self.rgb
+            .chunks_exact(3)
+            .filter(|p| *p != BACKGROUND)
+            .count()
+    }
+
+    /// `images` side by side, left to right, separated by a gray line.
+    pub fn beside(images: &[Image]) -> Image {
+        let gap = 2;
+        let height = images.iter().map(|i| i.height).max().unwrap_or(0);
+        let width = images.iter().map(|i| i.width).sum::<u32>()
+            + gap * images.len().saturating_sub(1) as u32;
+        let mut out = Image::blank(width, height);
+        let mut left = 0;
+        for (k, img) in images.iter().enumerate() {
+            if k > 0 {
+                for y in 0..height {
+                    for g in 0..gap {
+                        out.set((left + g) as usize, y as usize, [160, 160, 160]);
+                    }
+                }
+                left += gap;
+            }
+            for y in 0..img.height {
+                let row =
+                    &img.rgb[3 * (y * img.width) as usize..3 * ((y + 1) * img.width) as usize];
+                let at = 3 * (y * width + left) as usize;
+                out.rgb[at..at + row.len()].copy_from_slice(row);
+            }
+            left += img.width;
+        }
+        out
+    }
+
+    /// Writes the image as a PNG, atomically.
+    pub fn write_png(&self, path: &Path) -> Result<()> {
+        let mut bytes = Vec::new();
+        let fail = |e: png::EncodingError| Error::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::other(e),
+        };
+        {
+            let mut enc = png::Encoder::new(&mut bytes, self.width, self.height);
+            enc.set_color(png::ColorType::Rgb);
+            enc.set_depth(png::BitDepth::Eight);
+            enc.set_compression(png::Compression::High);
+            let mut w = enc.write_header().map_err(fail)?;
+            w.write_image_data(&self.rgb).map_err(fail)?;
+        }
+        crate::io::write_atomic(path, &bytes)
+    }
+}
+
+/// An orthographic camera fitted to a box.
+#[derive(Debug, Clone, Copy)]
+pub struct Camera {
+    /// Rows: the view's right, up and towards-the-viewer axes in world coordinates.
+    axes: [Vect<3>; 3],
+    center: Vect<3>,
+    scale: f64,
+    view: View,
+}
+
+impl Camera {
+    /// The camera of `view` that shows the box `lo..hi` whole, with a margin.
+    pub fn fit(lo: &Vect<3>, hi: &Vect<3>, view: &View) -> Self {
+        let (az, el) = (view.azimuth.to_radians(), view.elevation.to_radians());
+        let toward = Vect::<3>::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+        let right = Vect::<3>::new(-az.sin(), az.cos(), 0.0);
+        let up = toward.cross(&right);
+        let axes = [right, up, toward];
+        let center = (lo + hi) * 0.5;
+        let (mut ex, mut ey) = (0.0f64, 0.0f64);
+        for k in 0..8 {
+            let corner = Vect::<3>::from_fn(|a, _| if k >> a & 1 == 1 { hi[a] } else { lo[a] });
+            let d = corner - center;
+            ex = ex.max(d.dot(&right).abs());
+            ey = ey.max(d.dot(&up).abs());
+        }
+        let margin = 0.92;
+        let scale = (margin * 0.5 * view.width as f64 / ex.max(1e-300))
+            .min(margin * 0.5 * view.height as f64 / ey.max(1e-300));
+        Self {
+            axes,
+            center,
+            scale,
+            view: *view,
+        }
+    }
+
+    /// Pixel column, row and depth (larger is nearer the viewer) of `p`.
+    pub fn project(&self, p: &Vect<3>) -> (f64, f64, f64) {
+        let d = p - self.center;
+        (
+            0.5 * self.view.width as f64 + self.scale * d.dot(&self.axes[0]),
+            0.5 * self.view.height as f64 - self.scale * d.dot(&self.axes[1]),
+            d.dot(&self.axes[2]),
+        )
+    }
+
+    /// The direction towards the viewer.
+    pub fn toward(&self) -> Vect<3> {
+        self.axes[2]
+    }
+}
+
+/// A picture being drawn: the image and its depth buffer.
+pub struct Canvas {
+    /// The image so far.
+    pub image: Image,
+    depth: Vec<f64>,
+    camera: Camera,
+}
+
+impl Canvas {
+    /// A blank canvas for `camera`.
+    pub fn new(camera: Camera) -> Self {
+        let (w, h) = (camera.view.width, camera.view.height);
+        Self {
+            image: Image::blank(w, h),
+            depth: vec![f64::NEG_INFINITY; w as usize * h as usize],
+            camera,
+        }
+    }
+
+    fn plot(&mut self, x: i64, y: i64, z: f64, c: [u8; 3]) {
+        let (w, h) = (self.image.width as i64, self.image.height as i64);
+        if x < 0 || y < 0 || x >= w || y >= h {
+            return;
+        }
+        let i = (y * w + x) as usize;
+        if z > self.depth[i] {
+            self.depth[i] = z;
+            self.image.set(x as usize, y as usize, c);
+        }
+    }
+
+    /// Draws the triangles over `points`, flat-shaded, `color(t)` for triangle `t`.
+    pub fn triangles(
+        &mut self,
+        points: &[Vect<3>],
+        triangles: &[[u32; 3]],
+        color: impl Fn(usize) -> [u8; 3],
+    ) {
+        let toward = self.camera.toward();
+        for (t, tri) in triangles.iter().enumerate() {
+            let [a, b, c] = tri.map(|i| points[i as usize]);
+            let n = (b - a).cross(&(c - a));
+            let len = n.norm();
+            if len.is_nan() || len <= 0.0 {
+                continue;
+            }
+            let light = 0.3 + 0.7 * (n.dot(&toward) / len).abs();
+            let shade = color(t).map(|v| (v as f64 * light).round() as u8);
+            let p = [a, b, c].map(|v| self.camera.project(&v));
+            let area =
+                (p[1].0 - p[0].0) * (p[2].1 - p[0].1) - (p[2].0 - p[0].0) * (p[1].1 - p[0].1);
+            if area == 0.0 || !area.is_finite() {
+                continue;
+            }
+            let (x0, x1) = (
+                p.iter()
+                    .map(|q| q.0)
+                    .fold(f64::MAX, f64::min)
+                    .floor()
+                    .max(0.0) as i64,
+                p.iter().map(|q| q.0).fold(f64::MIN, f64::max).ceil() as i64,
+            );
+            let (y0, y1) = (
+                p.iter()
+                    .map(|q| q.1)
+                    .fold(f64::MAX, f64::min)
+                    .floor()
+                    .max(0.0) as i64,
+                p.iter().map(|q| q.1).fold(f64::MIN, f64::max).ceil() as i64,
+            );
+            let (x1, y1) = (
+                x1.min(self.image.width as i64 - 1),
+                y1.min(self.image.height as i64 - 1),
+            );
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
+                    let edge = |i: usize, j: usize| {
+                        (p[j].0 - p[i].0) * (py - p[i].1) - (px - p[i].0) * (p[j].1 - p[i].1)
+                    };
+                    let (w0, w1, w2) = (edge(1, 2) / area, edge(2, 0) / area, edge(0, 1) / area);
+                    if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+                        continue;
+                    }
+                    let z = w0 * p[0].2 + w1 * p[1].2 + w2 * p[2].2;
+                    self.plot(x, y, z, shade);
+                }
+            }
+        }
+    }
+
+    /// Draws `points` as square splats of `radius` pixels, `color(i)` for point `i`, shaded by
+    /// `normals` (one per point) or, without them, by depth within `depth_range`.
+    pub fn points(
+        &mut self,
+        points: &[Vect<3>],
+        normals: Option<&[Vect<3>]>,
+        radius: i64,
+        depth_range: (f64, f64),
+        color: impl Fn(usize) -> [u8; 3],
+    ) {
+        let toward = self.camera.toward();
+        let (near, far) = depth_range;
+        let span = (near - far).max(1e-300);
+        for (i, p) in points.iter().enumerate() {
+            let (x, y, z) = self.camera.project(p);
+            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+                continue;
+            }
+            let light = match normals {
+                Some(n) if n[i].norm() > 0.0 => 0.3 + 0.7 * (n[i].dot(&toward) / n[i].norm()).abs(),
+                _ => 0.45 + 0.55 * ((z - far) / span).clamp(0.0, 1.0),
+            };
+            let shade = color(i).map(|v| (v as f64 * light).round() as u8);
+            let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+            for dy in -radius..=radius {
+                for dx in -radius..=radius {
+                    self.plot(cx + dx, cy + dy, z, shade);
+                }
+            }
+        }
+    }
+
+    /// The depth range of `points` in this camera: (nearest, farthest).
+    pub fn depth_range(&self, points: &[Vect<3>]) -> (f64, f64) {
+        points.iter().fold((f64::MIN, f64::MAX), |(n, f), p| {
+            let z = self.camera.project(p).2;
+            (n.max(z), f.min(z))
+        })
+    }
+}
+
+/// A splat radius in pixels for `n` points filling about a third of a `view`.
+pub fn splat_radius(n: usize, view: &View) -> i64 {
+    let area = view.width as f64 * view.height as f64 / 3.0;
+    ((area / n.max(1) as f64).sqrt() * 0.5)
+        .round()
+        .clamp(0.0, 4.0) as i64
+}
+
+/// The bounds of `points` (finite ones), or `None` for none.
+pub fn bounds(points: &[Vect<3>]) -> Option<(Vect<3>, Vect<3>)> {
+    points
+        .iter()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .fold(None, |acc, p| match acc {
+            None => Some((*p, *p)),
+            Some((lo, hi)) => Some((lo.inf(p), hi.sup(p))),
+        })
+}
+
+/// Renders a mesh (with `triangles`) or a point cloud (without), colored `color`, in `view`
+/// fitted to `fit` (the points' own bounds when `None`).
+pub fn render(
+    points: &[Vect<3>],
+    triangles: &[[u32; 3]],
+    normals: Option<&[Vect<3>]>,
+    color: impl Fn(usize) -> [u8; 3],
+    view: &View,
+    fit: Option<(Vect<3>, Vect<3>)>,
+) -> Image {
+    let Some((lo, hi)) = fit.or_else(|| bounds(points)) else {
+        return Image::blank(view.width, view.height);
+    };
+    let mut canvas = Canvas::new(Camera::fit(&lo, &hi, view));
+    if triangles.is_empty() {
+        let range = canvas.depth_range(points);
+        canvas.points(
+            points,
+            normals,
+            splat_radius(points.len(), view),
+            range,
+            color,
+        );
+    } else {
+        canvas.triangles(points, triangles, color);
+    }
+    canvas.image
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cube(at: Vect<3>) -> (Vec<Vect<3>>, Vec<[u32; 3]>) {
+        let p: Vec<Vect<3>> = (0..8)
+            .map(|k| at + Vect::<3>::new((k & 1) as f64, (k >> 1 & 1) as f64, (k >> 2 & 1) as f64))
+            .collect();
+        let quads = [
+            [0, 1, 3, 2],
+            [4, 6, 7, 5],
+            [0, 4, 5, 1],
+            [2, 3, 7, 6],
+            [0, 2, 6, 4],
+            [1, 5, 7, 3],
+        ];
+        let tris = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        (p, tris)
+    }
+
+    /// A unit cube seen from the front fills the middle of the picture and not its corners; its
+    /// copy moved right (in a view fitted to both) lights pixels further right.
+    #[test]
+    fn a_cube_lands_where_the_camera_puts_it_and_moves_with_it() {
+        let view = View {
+            azimuth: -90.0,
+            elevation: 0.0,
+            width: 200,
+            height: 100,
+        };
+        let (p, t) = cube(Vect::<3>::zeros());
+        let fit = Some((Vect::<3>::zeros(), Vect::<3>::new(3.0, 1.0, 1.0)));
+        let image = render(&p, &t, None, |_| [200, 200, 200], &view, fit);
+        // Looking along +y from −y: x runs left to right over the fitted 0..3.
+        let column = |img: &Image| {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for y in 0..img.height {
+                for x in 0..img.width {
+                    if img.pixel(x, y) != BACKGROUND {
+                        sum += x as f64;
+                        n += 1;
+                    }
+                }
+            }
+            sum / n as f64
+        };
+        assert_ne!(image.pixel(100 - 56, 50), BACKGROUND, "the cube's middle");
+        assert_eq!(image.pixel(2, 2), BACKGROUND);
+        assert_eq!(image.pixel(197, 50), BACKGROUND);
+        let width = 0.92 * 200.0 / 3.0;
+        assert!((image.foreground() as f64 - width * width).abs() < 0.05 * width * width);
+        let (moved, _) = cube(Vect::<3>::new(2.0, 0.0, 0.0));
+        let shifted = render(&moved, &t, None, |_| [200, 200, 200], &view, fit);
+        assert_ne!(shifted, image);
+        let shift = column(&shifted) - column(&image);
+        assert!((shift - 2.0 * width).abs() < 2.0, "moved {shift} px");
+        // As points, the cube's corners light splats at its corners.
+        let cloud = render(&p, &[], None, |_| [0, 0, 200], &view, fit);
+        assert!(cloud.foreground() > 8);
+    }
+}
