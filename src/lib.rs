@@ -50,6 +50,7 @@
 pub mod cells;
 pub mod error;
 pub mod field;
+pub mod image;
 pub mod io;
 pub mod pipeline;
 pub mod progress;

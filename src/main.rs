@@ -77,6 +77,29 @@ enum Command {
         #[command(flatten)]
         view: ViewArgs,
     },
+    /// Deform the foreground of a PNG (alpha > 0, or not the --background color) under an edit
+    /// spec in pixel coordinates (x right, y down), on a quadtree of 2D rigid cells.
+    Image {
+        /// Input PNG.
+        input: PathBuf,
+        /// Edit spec (TOML) in pixel coordinates.
+        #[arg(long)]
+        edit: PathBuf,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The background color of an opaque picture, R,G,B (0–255 each).
+        #[arg(long)]
+        background: Option<String>,
+        /// Transfer of the cells' motions to the pixels (the blend keeps fixed pixels exact).
+        #[arg(long, value_enum, default_value_t = TransferArg::Blend)]
+        transfer: TransferArg,
+        #[command(flatten)]
+        cells: CellArgs,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Describe a file: format, version, counts, attributes, bounds, CRS.
     Info {
         /// Input file.
@@ -245,6 +268,23 @@ fn main() -> ExitCode {
             quiet,
         } => run_apply(&field, &input, &output, transfer.into(), quiet),
         Command::Info { input } => run_info(&input),
+        Command::Image {
+            input,
+            edit,
+            output,
+            background,
+            transfer,
+            cells,
+            quiet,
+        } => run_image(
+            &input,
+            &edit,
+            &output,
+            background.as_deref(),
+            transfer.into(),
+            &cells,
+            quiet,
+        ),
         Command::Render {
             input,
             output,
@@ -449,6 +489,70 @@ fn preview_image(solution: &Solution<3>, info: &FileInfo, view: &View) -> render
     let fit = render::bounds(&both);
     let side = |points: &[Vect<3>]| render::render(points, &[], None, |i| colors[i], view, fit);
     render::Image::beside(&[side(&proxy.before), side(&proxy.after)])
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_image(
+    input: &Path,
+    edit: &Path,
+    output: &Path,
+    background: Option<&str>,
+    transfer: Transfer,
+    cells: &CellArgs,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    png_path(output)?;
+    let background = background.map(parse_color).transpose()?;
+    let spec = read_spec::<2>(edit)?;
+    let raster = rigidcells::image::Raster::read_png(input)?;
+    let params = DeformParams {
+        build: cells.params(),
+        transfer,
+        ..Default::default()
+    };
+    let (out, info) = rigidcells::image::deform_image(&raster, &spec, &params, background)
+        .with_context(|| format!("deforming {}", input.display()))?;
+    out.write_png(output)?;
+    if !quiet {
+        for w in &info.warnings {
+            eprintln!("warning: {w}");
+        }
+        if info.folded > 0 {
+            eprintln!(
+                "warning: the edit folds the picture over itself at {} pixel triangles",
+                info.folded
+            );
+        }
+        if info.clipped > 0 {
+            eprintln!(
+                "warning: {} pixel corners moved outside the {}x{} picture and were clipped",
+                info.clipped, out.width, out.height
+            );
+        }
+        println!(
+            "{} -> {}: {} foreground pixels ({} after), {} cells, {} Gauss-Newton iterations",
+            input.display(),
+            output.display(),
+            info.pixels.0,
+            info.pixels.1,
+            info.cells,
+            info.iterations
+        );
+    }
+    Ok(())
+}
+
+/// `R,G,B` with each in 0–255.
+fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
+    let parts: Vec<Option<u8>> = text.split(',').map(|v| v.trim().parse().ok()).collect();
+    match parts.as_slice() {
+        [Some(r), Some(g), Some(b)] => Ok([*r, *g, *b]),
+        _ => Err(Error::Param(format!(
+            "--background {text}: expected R,G,B with each 0–255"
+        ))
+        .into()),
+    }
 }
 
 fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
@@ -714,9 +818,39 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             &input, &output, &edit, &params, CHUNK, None, None, None, quiet,
         )?;
     }
+    // The 2D picture of paper Fig. 7: a gingerbread figure with its arms moved.
+    let (width, height, rgba) = data_gen::gingerbread();
+    let figure = rigidcells::image::Raster {
+        width,
+        height,
+        rgba,
+    };
+    let (png_in, png_out, png_edit) = (
+        out.join("gingerbread.png"),
+        out.join("gingerbread_bent.png"),
+        out.join("gingerbread.toml"),
+    );
+    figure.write_png(&png_in)?;
+    rigidcells::io::write_atomic(&png_edit, data_gen::GINGERBREAD_SPEC.as_bytes())?;
+    run_image(
+        &png_in,
+        &png_edit,
+        &png_out,
+        None,
+        rigidcells::image::IMAGE_TRANSFER,
+        &CellArgs {
+            cell_size: None,
+            cells: None,
+            max_level: None,
+            shell: false,
+            inside: InsideArg::Auto,
+        },
+        quiet,
+    )?;
     if !quiet {
         println!(
-            "demo: wrote bar.ply, soup.ply (inputs), bar_bent.ply (RBF), soup_bent.ply (blend) and bend.toml in {}",
+            "demo: wrote bar.ply, soup.ply (inputs), bar_bent.ply (RBF), soup_bent.ply (blend), bend.toml, \
+             gingerbread.png, gingerbread.toml and gingerbread_bent.png in {}",
             out.display()
         );
     }

@@ -481,6 +481,61 @@ pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), la
     w.close()
 }
 
+/// A gingerbread figure for the 2D image deformation (paper Fig. 7): a `240 × 240` RGBA picture,
+/// transparent around a head, a body, two arms held out sideways and two legs, textured with a
+/// fine pattern (so that moved pixels can be recognized). Returns `(width, height, rgba)`.
+pub fn gingerbread() -> (u32, u32, Vec<u8>) {
+    let (w, h) = (240u32, 240u32);
+    let inside = |x: f64, y: f64| {
+        let disc = |cx: f64, cy: f64, r: f64| (x - cx).powi(2) + (y - cy).powi(2) <= r * r;
+        let rect = |x0: f64, y0: f64, x1: f64, y1: f64| x >= x0 && x <= x1 && y >= y0 && y <= y1;
+        disc(120.0, 45.0, 27.0)
+            || rect(92.0, 60.0, 148.0, 160.0)
+            || rect(20.0, 85.0, 220.0, 125.0)
+            || disc(20.0, 105.0, 20.0)
+            || disc(220.0, 105.0, 20.0)
+            || rect(94.0, 150.0, 116.0, 228.0)
+            || rect(124.0, 150.0, 146.0, 228.0)
+    };
+    let mut rgba = Vec::with_capacity((4 * w * h) as usize);
+    for y in 0..h {
+        for x in 0..w {
+            if inside(x as f64 + 0.5, y as f64 + 0.5) {
+                let icing = (x / 6 + y / 6) % 5 == 0;
+                rgba.extend_from_slice(&if icing {
+                    [250, 245, 235, 255]
+                } else {
+                    [
+                        (140 + (x * 7 + y * 3) % 50) as u8,
+                        (80 + (x * 3 + y * 11) % 40) as u8,
+                        (40 + (x + y * 5) % 25) as u8,
+                        255,
+                    ]
+                });
+            } else {
+                rgba.extend_from_slice(&[0, 0, 0, 0]);
+            }
+        }
+    }
+    (w, h, rgba)
+}
+
+/// An edit of [`gingerbread`] in pixel coordinates: the legs fixed, the left hand raised by
+/// 30 pixels and the right hand lowered by 25.
+pub const GINGERBREAD_SPEC: &str = "\
+# The gingerbread figure: legs fixed, left hand up, right hand down (pixel coordinates, y down).
+[[fixed]]
+box = { min = [90.0, 185.0], max = [150.0, 240.0] }
+
+[[handle]]
+box = { min = [0.0, 80.0], max = [40.0, 130.0] }
+translate = [0.0, -30.0]
+
+[[handle]]
+box = { min = [200.0, 80.0], max = [240.0, 130.0] }
+translate = [0.0, 25.0]
+";
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,0 +1,153 @@
+//! 2D image deformation from the CLI (paper Fig. 7): a gingerbread figure with its legs fixed
+//! and its hands moved.
+
+mod common;
+
+use common::run;
+use rigidcells::image::Raster;
+
+/// The fixed legs keep their pixels, the hands' pixels move as sent, the foreground's area
+/// stays within 5 %, and the output has no holes.
+#[test]
+fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, output, edit) = (
+        dir.path().join("figure.png"),
+        dir.path().join("bent.png"),
+        dir.path().join("edit.toml"),
+    );
+    let (width, height, rgba) = data_gen::gingerbread();
+    let figure = Raster {
+        width,
+        height,
+        rgba,
+    };
+    figure.write_png(&input).unwrap();
+    std::fs::write(&edit, data_gen::GINGERBREAD_SPEC).unwrap();
+    let r = run(&[
+        "image",
+        input.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let out = Raster::read_png(&output).unwrap();
+    assert_eq!((out.width, out.height), (width, height));
+
+    // The fixed box (legs below y = 185), away from its border with the free cells.
+    let mut checked = 0;
+    for y in 195..240 {
+        for x in 90..150 {
+            assert_eq!(
+                out.pixel(x, y),
+                figure.pixel(x, y),
+                "fixed pixel ({x}, {y})"
+            );
+            checked += figure.pixel(x, y)[3].min(1) as usize;
+        }
+    }
+    assert!(checked > 1400, "{checked} fixed foreground pixels");
+
+    // The hands, well inside their handle boxes: the left one raised by 30, the right one
+    // lowered by 25.
+    let mut moved = 0;
+    for (xs, dy) in [(2..28, -30i64), (212..238, 25)] {
+        for y in 92..118u32 {
+            for x in xs.clone() {
+                let want = figure.pixel(x, y);
+                if want[3] == 0 {
+                    continue;
+                }
+                let got = out.pixel(x, (y as i64 + dy) as u32);
+                let diff = (0..4).map(|c| want[c].abs_diff(got[c])).max().unwrap();
+                assert!(diff <= 2, "hand pixel ({x}, {y}): {want:?} → {got:?}");
+                moved += 1;
+            }
+        }
+    }
+    assert!(moved > 800, "{moved} hand pixels");
+
+    // Area.
+    let area = |r: &Raster| r.rgba.chunks_exact(4).filter(|p| p[3] > 0).count() as f64;
+    let (before, after) = (area(&figure), area(&out));
+    assert!(
+        (after / before - 1.0).abs() <= 0.05,
+        "area {before} → {after}"
+    );
+
+    // No holes: every transparent pixel is reached from the border through transparent ones.
+    let (w, h) = (width as usize, height as usize);
+    let clear = |i: usize| out.rgba[4 * i + 3] == 0;
+    let mut seen = vec![false; w * h];
+    let mut stack: Vec<usize> = (0..w * h)
+        .filter(|&i| (i % w == 0 || i % w == w - 1 || i / w == 0 || i / w == h - 1) && clear(i))
+        .collect();
+    for &i in &stack {
+        seen[i] = true;
+    }
+    while let Some(i) = stack.pop() {
+        let (x, y) = (i % w, i / w);
+        let near = [
+            (x > 0).then(|| i - 1),
+            (x + 1 < w).then(|| i + 1),
+            (y > 0).then(|| i - w),
+            (y + 1 < h).then(|| i + w),
+        ];
+        for j in near.into_iter().flatten() {
+            if clear(j) && !seen[j] {
+                seen[j] = true;
+                stack.push(j);
+            }
+        }
+    }
+    let holes = (0..w * h).filter(|&i| clear(i) && !seen[i]).count();
+    assert_eq!(
+        holes, 0,
+        "{holes} transparent pixels enclosed by the figure"
+    );
+}
+
+/// An opaque picture needs its background named; a wrong file is refused with its name.
+#[test]
+fn image_refuses_what_it_cannot_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, output, edit) = (
+        dir.path().join("opaque.png"),
+        dir.path().join("out.png"),
+        dir.path().join("edit.toml"),
+    );
+    let opaque = Raster {
+        width: 32,
+        height: 32,
+        rgba: [255, 255, 255, 255].repeat(32 * 32),
+    };
+    opaque.write_png(&input).unwrap();
+    std::fs::write(&edit, data_gen::GINGERBREAD_SPEC).unwrap();
+    let args = |extra: &[&str]| {
+        let mut a = vec![
+            "image",
+            input.to_str().unwrap(),
+            "--edit",
+            edit.to_str().unwrap(),
+            "-o",
+            output.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        a.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let r = run(&args(&[]).iter().map(String::as_str).collect::<Vec<_>>());
+    assert_ne!(r.code, 0);
+    assert!(r.stderr.contains("--background"), "{}", r.stderr);
+    assert!(!output.exists());
+    std::fs::write(&input, b"not a png").unwrap();
+    let r = run(&args(&["--background", "255,255,255"])
+        .iter()
+        .map(String::as_str)
+        .collect::<Vec<_>>());
+    assert_eq!(r.code, 3, "{}", r.stderr);
+    assert!(r.stderr.contains("opaque.png"), "{}", r.stderr);
+    assert!(!output.exists());
+}
