@@ -375,6 +375,9 @@ fn run_cells(
 
 fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     refuse_overwrite(&args.input, &args.output)?;
+    if is_xy(&args.input) {
+        return run_deform_xy(args);
+    }
     let params = DeformParams {
         build: args.cells.params(),
         solve: SolveParams {
@@ -489,6 +492,59 @@ fn preview_image(solution: &Solution<3>, info: &FileInfo, view: &View) -> render
     let fit = render::bounds(&both);
     let side = |points: &[Vect<3>]| render::render(points, &[], None, |i| colors[i], view, fit);
     render::Image::beside(&[side(&proxy.before), side(&proxy.after)])
+}
+
+fn is_xy(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xy"))
+}
+
+/// `deform` of a 2D point set (`.xy`) under a 2D edit spec: the whole set in memory.
+fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
+    if !is_xy(&args.output) {
+        return Err(Error::Param(format!(
+            "{}: a .xy point set is written as .xy",
+            args.output.display()
+        ))
+        .into());
+    }
+    for (flag, set) in [
+        ("--save-field", args.save_field.is_some()),
+        ("--report", args.report.is_some()),
+        ("--preview", args.preview.is_some()),
+    ] {
+        if set {
+            return Err(Error::Param(format!("{flag} is for 3D inputs, not .xy point sets")).into());
+        }
+    }
+    let file = rigidcells::io::XyFile::read(&args.input)?;
+    let spec = read_spec::<2>(&args.edit)?;
+    let params = DeformParams {
+        build: args.cells.params(),
+        solve: SolveParams {
+            refine_strain: args.refine_strain,
+            ..Default::default()
+        },
+        transfer: args.transfer.into(),
+        proxy_samples: None,
+    };
+    let bar = Bar::new(args.quiet);
+    let (moved, solution, info) = pipeline::deform(file.points(), &[], &spec, &params, &bar)?;
+    file.write(&args.output, &moved)?;
+    if !args.quiet {
+        for w in &info.warnings {
+            eprintln!("warning: {w}");
+        }
+        println!(
+            "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {:.3e}",
+            args.input.display(),
+            args.output.display(),
+            moved.len(),
+            solution.complex.len(),
+            solution.info.iterations,
+            solution.info.energies.last().copied().unwrap_or(0.0)
+        );
+    }
+    Ok(())
 }
 
 #[allow(clippy::too_many_arguments)]

@@ -178,12 +178,21 @@ impl<const D: usize> Warp<D> for Blend<D> {
 
     /// Consecutive samples of a scan mostly share their nearest centers: found once, they are
     /// reused while provably still the nearest ([`Nearest::find_reusing`]), with the same bits.
+    ///
+    /// A sample whose blended cells are all at rest is returned as it came: the round trip
+    /// through the local frame, `(p − origin) + origin`, could change its last bit.
     fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
         let mut anchor = Anchor::default();
+        let rest = Affine::<D>::identity();
         for (o, p) in out.iter_mut().zip(points) {
             let x = p - origin;
             let nb = self.nearest.find_reusing(&x.into(), &mut anchor);
-            *o = self.blend_with(&x, None, &nb).0 + origin;
+            let blended = &nb.cells[..nb.n.min(K)];
+            *o = if !blended.is_empty() && blended.iter().all(|&c| self.maps[c as usize] == rest) {
+                *p
+            } else {
+                self.blend_with(&x, None, &nb).0 + origin
+            };
         }
     }
 }

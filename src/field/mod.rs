@@ -96,7 +96,9 @@ pub trait Warp<const D: usize>: Sync {
 
     /// Moves the world-coordinate `points` into `out`, in order, through the local frame whose
     /// origin is `origin`: `out[i] = warp(points[i] − origin) + origin`. Transfers may reuse work
-    /// between consecutive samples, but each result is [`Warp::warp`]'s, bit for bit.
+    /// between consecutive samples, but each result is [`Warp::warp`]'s, bit for bit, except
+    /// that a sample the transfer leaves at rest may come back as it was (skipping the round
+    /// trip through the local frame, which can change a last bit).
     fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
         for (o, p) in out.iter_mut().zip(points) {
             *o = self.warp(&(p - origin)) + origin;

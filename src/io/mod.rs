@@ -12,10 +12,12 @@ mod ply;
 mod ply_stream;
 mod stream;
 mod text;
+mod xy;
 mod xyz;
 
 pub use las::{LasHeader, LasSource, VlrInfo};
 pub use obj::ObjFile;
+pub use xy::XyFile;
 pub use ply::PlyFile;
 pub use ply_stream::{PlyRecordStream, PlyStream};
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
