@@ -145,6 +145,10 @@ struct DeformArgs {
     /// samples: fixed regions gray, handles yellow, the rest blue).
     #[arg(long)]
     preview: Option<PathBuf>,
+    /// Add a third panel to the preview: the deformed cells colored by strain, blue (none) to
+    /// red (the most).
+    #[arg(long, requires = "preview")]
+    strain: bool,
     #[command(flatten)]
     view: ViewArgs,
     /// Samples per streamed chunk.
@@ -406,7 +410,7 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         args.chunk.max(1),
         args.save_field.as_deref(),
         args.report.as_deref(),
-        args.preview.as_deref().map(|p| (p, view)),
+        args.preview.as_deref().map(|p| (p, view, args.strain)),
         args.quiet,
     )
 }
@@ -430,7 +434,7 @@ fn deform_file(
     chunk: usize,
     save_field: Option<&Path>,
     report_to: Option<&Path>,
-    preview: Option<(&Path, View)>,
+    preview: Option<(&Path, View, bool)>,
     quiet: bool,
 ) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
@@ -442,8 +446,8 @@ fn deform_file(
         let total = start.elapsed().as_secs_f64();
         Report::new(input, output, &solution, &info, total).write(path)?;
     }
-    if let Some((path, view)) = preview {
-        preview_image(&solution, &info, &view).write_png(path)?;
+    if let Some((path, view, strain)) = preview {
+        preview_image(&solution, &info, &view, strain).write_png(path)?;
     }
     if !quiet {
         report(input, output, &info);
@@ -469,8 +473,14 @@ const HANDLE: [u8; 3] = [240, 200, 30];
 const FREE: [u8; 3] = [90, 140, 220];
 
 /// The preview of a deformation: the proxy before and after, side by side in one view fitted
-/// to both, each sample colored by its cell's role.
-fn preview_image(solution: &Solution<3>, info: &FileInfo, view: &View) -> render::Image {
+/// to both, each sample colored by its cell's role; with `strain`, the deformed cells colored
+/// by their strain beside them.
+fn preview_image(
+    solution: &Solution<3>,
+    info: &FileInfo,
+    view: &View,
+    strain: bool,
+) -> render::Image {
     let proxy = &info.proxy;
     let origin = solution.constraints.origin;
     let colors: Vec<[u8; 3]> = proxy
@@ -491,11 +501,28 @@ fn preview_image(solution: &Solution<3>, info: &FileInfo, view: &View) -> render
     let both: Vec<Vect<3>> = proxy.before.iter().chain(&proxy.after).copied().collect();
     let fit = render::bounds(&both);
     let side = |points: &[Vect<3>]| render::render(points, &[], None, |i| colors[i], view, fit);
-    render::Image::beside(&[side(&proxy.before), side(&proxy.after)])
+    let mut panels = vec![side(&proxy.before), side(&proxy.after)];
+    if let (true, Some((lo, hi))) = (strain, fit) {
+        let complex = &solution.complex;
+        let values = rigidcells::solve::cell_strain(complex, &solution.motions);
+        let top = values
+            .iter()
+            .cloned()
+            .fold(0.0, f64::max)
+            .max(f64::MIN_POSITIVE);
+        let centers: Vec<Vect<3>> = solution.motions.iter().map(|m| m.pos + origin).collect();
+        let halves: Vec<f64> = complex.cells.iter().map(|c| c.half).collect();
+        let mut canvas = render::Canvas::new(render::Camera::fit(&lo, &hi, view));
+        let range = canvas.depth_range(&centers);
+        canvas.squares(&centers, &halves, range, |i| render::heat(values[i] / top));
+        panels.push(canvas.image);
+    }
+    render::Image::beside(&panels)
 }
 
 fn is_xy(path: &Path) -> bool {
-    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xy"))
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("xy"))
 }
 
 /// `deform` of a 2D point set (`.xy`) under a 2D edit spec: the whole set in memory.
@@ -513,7 +540,9 @@ fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
         ("--preview", args.preview.is_some()),
     ] {
         if set {
-            return Err(Error::Param(format!("{flag} is for 3D inputs, not .xy point sets")).into());
+            return Err(
+                Error::Param(format!("{flag} is for 3D inputs, not .xy point sets")).into(),
+            );
         }
     }
     let file = rigidcells::io::XyFile::read(&args.input)?;

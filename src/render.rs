@@ -301,6 +301,31 @@ impl Canvas {
         }
     }
 
+    /// Draws a square of half edge `halves[i]` (world units) about each of `centers`, facing the
+    /// viewer, in `color(i)`, shaded by depth within `depth_range`: cells seen from outside.
+    pub fn squares(
+        &mut self,
+        centers: &[Vect<3>],
+        halves: &[f64],
+        depth_range: (f64, f64),
+        color: impl Fn(usize) -> [u8; 3],
+    ) {
+        let (near, far) = depth_range;
+        let span = (near - far).max(1e-300);
+        for (i, (c, h)) in centers.iter().zip(halves).enumerate() {
+            let (x, y, z) = self.camera.project(c);
+            let r = (h * self.camera.scale).round().max(0.0) as i64;
+            let light = 0.45 + 0.55 * ((z - far) / span).clamp(0.0, 1.0);
+            let shade = color(i).map(|v| (v as f64 * light).round() as u8);
+            let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    self.plot(cx + dx, cy + dy, z, shade);
+                }
+            }
+        }
+    }
+
     /// The depth range of `points` in this camera: (nearest, farthest).
     pub fn depth_range(&self, points: &[Vect<3>]) -> (f64, f64) {
         points.iter().fold((f64::MIN, f64::MAX), |(n, f), p| {
@@ -310,10 +335,20 @@ impl Canvas {
     }
 }
 
-/// A splat radius in pixels for `n` points filling about a third of a `view`.
-pub fn splat_radius(n: usize, view: &View) -> i64 {
-    let area = view.width as f64 * view.height as f64 / 3.0;
-    ((area / n.max(1) as f64).sqrt() * 0.5)
+/// Blue (0) through purple to red (1): the paper's strain colors.
+pub fn heat(t: f64) -> [u8; 3] {
+    let t = if t.is_finite() {
+        t.clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    [(40.0 + 215.0 * t) as u8, 40, (255.0 - 215.0 * t) as u8]
+}
+
+/// A splat radius in pixels for `n` points spread over `area` square pixels: splats about as
+/// wide as the points' spacing, so that a surface reads closed, from 1 to 9 pixels across.
+pub fn splat_radius(n: usize, area: f64) -> i64 {
+    (0.75 * (area / n.max(1) as f64).sqrt())
         .round()
         .clamp(0.0, 4.0) as i64
 }
@@ -345,10 +380,16 @@ pub fn render(
     let mut canvas = Canvas::new(Camera::fit(&lo, &hi, view));
     if triangles.is_empty() {
         let range = canvas.depth_range(points);
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in points {
+            let (x, y, _) = canvas.camera.project(p);
+            (lo, hi) = ([lo[0].min(x), lo[1].min(y)], [hi[0].max(x), hi[1].max(y)]);
+        }
+        let area = ((hi[0] - lo[0]) * (hi[1] - lo[1])).max(1.0);
         canvas.points(
             points,
             normals,
-            splat_radius(points.len(), view),
+            splat_radius(points.len(), area),
             range,
             color,
         );

@@ -372,11 +372,22 @@ fn render_and_preview_draw_what_was_there() {
             preview.to_str().unwrap(),
             "--size",
             "300x200",
+            "--strain",
         ],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let image = read_png(&preview);
-    assert_eq!((image.width, image.height), (602, 200));
+    assert_eq!((image.width, image.height), (904, 200));
+    // The strain panel: the bent middle red, the rigid ends blue.
+    let (mut red, mut blue) = (0, 0);
+    for y in 0..200 {
+        for x in 604..904 {
+            let [r, _, b] = image.pixel(x, y);
+            red += (r > b + 60) as usize;
+            blue += (b > r + 60) as usize;
+        }
+    }
+    assert!(red > 200 && blue > 50, "{red} red, {blue} blue pixels");
     // The yellow handle's mean row, left (before) and right (after): lifted means higher up.
     let yellow_row = |x0: u32, x1: u32| {
         let (mut sum, mut n) = (0.0, 0);

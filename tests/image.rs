@@ -175,7 +175,12 @@ fn deform_moves_a_2d_point_set() {
          [[handle]]\nbox = { min = [9.5, -0.1], max = [10.1, 1.1] }\ntranslate = [0.0, 3.0]\n",
     )
     .unwrap();
-    let r = common::deform(&input, &output, &edit, &["--cell-size", "0.25", "--transfer", "blend"]);
+    let r = common::deform(
+        &input,
+        &output,
+        &edit,
+        &["--cell-size", "0.25", "--transfer", "blend"],
+    );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let out = std::fs::read_to_string(&output).unwrap();
     let lines: Vec<&str> = out.lines().collect();
@@ -191,16 +196,26 @@ fn deform_moves_a_2d_point_set() {
             assert_eq!((x1, y1), (x, y), "fixed point {before}");
         }
         if x >= 9.75 {
-            assert!((x1 - x).abs() < 1e-9 && (y1 - y - 3.0).abs() < 1e-9, "{before} → {after}");
+            assert!(
+                (x1 - x).abs() < 1e-9 && (y1 - y - 3.0).abs() < 1e-9,
+                "{before} → {after}"
+            );
         }
         if (4.9..5.1).contains(&x) {
-            assert!(y1 - y > 0.5 && y1 - y < 2.5, "the middle follows: {before} → {after}");
+            assert!(
+                y1 - y > 0.5 && y1 - y < 2.5,
+                "the middle follows: {before} → {after}"
+            );
         }
     }
     std::fs::write(&input, "0 0\n1 one\n").unwrap();
     let bad = dir.path().join("bad.xy");
     let r = common::deform(&input, &bad, &edit, &[]);
     assert_eq!(r.code, 3, "{}", r.stderr);
-    assert!(r.stderr.contains("bar.xy") && r.stderr.contains("line 2"), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("bar.xy") && r.stderr.contains("line 2"),
+        "{}",
+        r.stderr
+    );
     assert!(!bad.exists());
 }

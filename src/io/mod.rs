@@ -17,10 +17,10 @@ mod xyz;
 
 pub use las::{LasHeader, LasSource, VlrInfo};
 pub use obj::ObjFile;
-pub use xy::XyFile;
 pub use ply::PlyFile;
 pub use ply_stream::{PlyRecordStream, PlyStream};
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
+pub use xy::XyFile;
 pub use xyz::{XyzFile, XyzStream};
 
 use std::io::Write;

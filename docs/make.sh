@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Regenerates the pictures of the README (run from the repository root).
+set -euo pipefail
+cargo build --release -q
+bin=target/release/rigidcells
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+$bin demo --out "$work" -q
+$bin deform "$work/bar.ply" -o "$work/bar_out.ply" --edit "$work/bend.toml" --cell-size 0.25 \
+    --preview docs/bar_preview.png --strain --size 300x220 -q
+cp "$work/gingerbread.png" docs/gingerbread.png
+cp "$work/gingerbread_bent.png" docs/gingerbread_bent.png
+$bin render ../shared/data/meshes/dragon_11k_binary.ply -o docs/dragon.png --size 360x300
+$bin render ../shared/data/las/autzen_trim.las -o docs/autzen.png --azimuth -90 --elevation 90 --size 360x300
+ls -l docs/*.png
