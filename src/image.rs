@@ -88,19 +88,13 @@ impl Raster {
 
     /// Writes the picture as an RGBA PNG, atomically.
     pub fn write_png(&self, path: &Path) -> Result<()> {
-        let mut bytes = Vec::new();
-        let fail = |e: png::EncodingError| Error::Io {
-            path: path.to_path_buf(),
-            source: std::io::Error::other(e),
-        };
-        {
-            let mut enc = png::Encoder::new(&mut bytes, self.width, self.height);
-            enc.set_color(png::ColorType::Rgba);
-            enc.set_depth(png::BitDepth::Eight);
-            let mut w = enc.write_header().map_err(fail)?;
-            w.write_image_data(&self.rgba).map_err(fail)?;
-        }
-        crate::io::write_atomic(path, &bytes)
+        crate::render::write_png(
+            path,
+            self.width,
+            self.height,
+            png::ColorType::Rgba,
+            &self.rgba,
+        )
     }
 }
 

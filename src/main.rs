@@ -159,6 +159,21 @@ struct DeformArgs {
     quiet: bool,
 }
 
+impl DeformArgs {
+    /// The library's parameters for these arguments, keeping a proxy of `proxy_samples`.
+    fn params(&self, proxy_samples: Option<usize>) -> DeformParams {
+        DeformParams {
+            build: self.cells.params(),
+            solve: SolveParams {
+                refine_strain: self.refine_strain,
+                ..Default::default()
+            },
+            transfer: self.transfer.into(),
+            proxy_samples,
+        }
+    }
+}
+
 /// Where pictures are seen from.
 #[derive(clap::Args)]
 struct ViewArgs {
@@ -382,16 +397,8 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
-    let params = DeformParams {
-        build: args.cells.params(),
-        solve: SolveParams {
-            refine_strain: args.refine_strain,
-            ..Default::default()
-        },
-        transfer: args.transfer.into(),
-        // The proxy serves the fold-over check (nothing of the CLI draws a preview yet).
-        proxy_samples: Some(pipeline::FOLDOVER_SAMPLES),
-    };
+    // The proxy serves the fold-over check, the report's residual and the preview.
+    let params = args.params(Some(pipeline::FOLDOVER_SAMPLES));
     for extra in [&args.save_field, &args.report, &args.preview]
         .into_iter()
         .flatten()
@@ -547,15 +554,7 @@ fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
     }
     let file = rigidcells::io::XyFile::read(&args.input)?;
     let spec = read_spec::<2>(&args.edit)?;
-    let params = DeformParams {
-        build: args.cells.params(),
-        solve: SolveParams {
-            refine_strain: args.refine_strain,
-            ..Default::default()
-        },
-        transfer: args.transfer.into(),
-        proxy_samples: None,
-    };
+    let params = args.params(None);
     let bar = Bar::new(args.quiet);
     let (moved, solution, info) = pipeline::deform(file.points(), &[], &spec, &params, &bar)?;
     file.write(&args.output, &moved)?;

@@ -108,21 +108,38 @@ impl Image {
 
     /// Writes the image as a PNG, atomically.
     pub fn write_png(&self, path: &Path) -> Result<()> {
-        let mut bytes = Vec::new();
-        let fail = |e: png::EncodingError| Error::Io {
-            path: path.to_path_buf(),
-            source: std::io::Error::other(e),
-        };
-        {
-            let mut enc = png::Encoder::new(&mut bytes, self.width, self.height);
-            enc.set_color(png::ColorType::Rgb);
-            enc.set_depth(png::BitDepth::Eight);
-            enc.set_compression(png::Compression::High);
-            let mut w = enc.write_header().map_err(fail)?;
-            w.write_image_data(&self.rgb).map_err(fail)?;
-        }
-        crate::io::write_atomic(path, &bytes)
+        write_png(
+            path,
+            self.width,
+            self.height,
+            png::ColorType::Rgb,
+            &self.rgb,
+        )
     }
+}
+
+/// Writes 8-bit pixels of `color` type as a PNG at `path`, atomically.
+pub(crate) fn write_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    color: png::ColorType,
+    data: &[u8],
+) -> Result<()> {
+    let mut bytes = Vec::new();
+    let fail = |e: png::EncodingError| Error::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e),
+    };
+    {
+        let mut enc = png::Encoder::new(&mut bytes, width, height);
+        enc.set_color(color);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::High);
+        let mut w = enc.write_header().map_err(fail)?;
+        w.write_image_data(data).map_err(fail)?;
+    }
+    crate::io::write_atomic(path, &bytes)
 }
 
 /// An orthographic camera fitted to a box.

@@ -223,19 +223,9 @@ fn demo_writes_inputs_and_results() {
 #[test]
 fn deform_writes_a_report_with_the_stable_keys() {
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("bar.ply");
-    let output = dir.path().join("out.ply");
-    let edit = dir.path().join("edit.toml");
+    let (input, output, edit) = lifted_bar(dir.path(), 2.0);
     let report = dir.path().join("report.json");
     let mesh = data_gen::bar([10.0, 1.0, 1.0], 8.0);
-    data_gen::write_ply(&input, &mesh, true).unwrap();
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-         translate = [0.0, 0.0, 2.0]\n",
-    )
-    .unwrap();
     let r = deform(
         &input,
         &output,
@@ -349,18 +339,8 @@ fn render_and_preview_draw_what_was_there() {
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(!bad.exists());
 
-    let input = dir.path().join("bar.ply");
-    let output = dir.path().join("out.ply");
-    let edit = dir.path().join("edit.toml");
+    let (input, output, edit) = lifted_bar(dir.path(), 4.0);
     let preview = dir.path().join("preview.png");
-    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-         translate = [0.0, 0.0, 4.0]\n",
-    )
-    .unwrap();
     let r = deform(
         &input,
         &output,
@@ -382,7 +362,7 @@ fn render_and_preview_draw_what_was_there() {
     let (mut red, mut blue) = (0, 0);
     for y in 0..200 {
         for x in 604..904 {
-            let [r, _, b] = image.pixel(x, y);
+            let [r, _, b] = image.pixel(x, y).map(i32::from);
             red += (r > b + 60) as usize;
             blue += (b > r + 60) as usize;
         }
@@ -420,4 +400,28 @@ fn read_png(path: &std::path::Path) -> rigidcells::render::Image {
         height: info.height,
         rgb: buf,
     }
+}
+
+/// The 10×1×1 bar written to `dir` with an edit that fixes its left end and lifts its right end
+/// by `lift`: `(input, output, edit)` paths.
+fn lifted_bar(
+    dir: &std::path::Path,
+    lift: f64,
+) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    let (input, output, edit) = (
+        dir.join("bar.ply"),
+        dir.join("out.ply"),
+        dir.join("edit.toml"),
+    );
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    std::fs::write(
+        &edit,
+        format!(
+            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }}\n\
+             [[handle]]\nbox = {{ min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
+             translate = [0.0, 0.0, {lift}]\n"
+        ),
+    )
+    .unwrap();
+    (input, output, edit)
 }

@@ -130,31 +130,9 @@ where
     Dim<D>: Rigid<D>,
 {
     let start = Instant::now();
-    let steps = load_steps(&complex, &constraints, params);
-    let mut info = SolverInfo {
-        cells_initial: complex.len(),
-        load_steps: steps,
-        ..Default::default()
-    };
-    let mut motions: Vec<Motion<D>> = complex
-        .cells
-        .iter()
-        .map(|c| Motion::rest(&c.center))
-        .collect();
+    let (mut system, mut motions, mut info) = from_rest(&complex, &constraints, params, observer)?;
     let mut complex = complex;
     let mut constraints = constraints;
-    let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(&complex, &constraints)
-    })?;
-    load_stepped(
-        &mut system,
-        &complex,
-        &constraints,
-        &mut motions,
-        params,
-        &mut info,
-        observer,
-    )?;
     if let Some(tau) = params.refine_strain {
         let limit = complex.grid.max_level + params.refine_levels;
         for _ in 0..params.max_refinements {
@@ -212,6 +190,43 @@ where
     })
 }
 
+/// The solve from rest through its load steps: the sparse system, the motions and what was
+/// done so far.
+#[allow(clippy::type_complexity)]
+fn from_rest<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    params: &SolveParams,
+    observer: &dyn Observer,
+) -> Result<(System<D>, Vec<Motion<D>>, SolverInfo)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut info = SolverInfo {
+        cells_initial: complex.len(),
+        load_steps: load_steps(complex, constraints, params),
+        ..Default::default()
+    };
+    let mut motions: Vec<Motion<D>> = complex
+        .cells
+        .iter()
+        .map(|c| Motion::rest(&c.center))
+        .collect();
+    let mut system = timed(&mut info.seconds_symbolic, || {
+        System::new(complex, constraints)
+    })?;
+    load_stepped(
+        &mut system,
+        complex,
+        constraints,
+        &mut motions,
+        params,
+        &mut info,
+        observer,
+    )?;
+    Ok((system, motions, info))
+}
+
 /// The load steps `1/steps, 2/steps, …, 1` of `info.load_steps`, each minimized from the last.
 fn load_stepped<const D: usize>(
     system: &mut System<D>,
@@ -262,28 +277,7 @@ where
         observer: &dyn Observer,
     ) -> Result<(Self, SolverInfo)> {
         let start = Instant::now();
-        let mut info = SolverInfo {
-            cells_initial: complex.len(),
-            load_steps: load_steps(&complex, &constraints, params),
-            ..Default::default()
-        };
-        let mut motions: Vec<Motion<D>> = complex
-            .cells
-            .iter()
-            .map(|c| Motion::rest(&c.center))
-            .collect();
-        let mut system = timed(&mut info.seconds_symbolic, || {
-            System::new(&complex, &constraints)
-        })?;
-        load_stepped(
-            &mut system,
-            &complex,
-            &constraints,
-            &mut motions,
-            params,
-            &mut info,
-            observer,
-        )?;
+        let (system, motions, info) = from_rest(&complex, &constraints, params, observer)?;
         observer.finish();
         let session = Self {
             complex,
