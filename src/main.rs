@@ -449,15 +449,31 @@ fn deform_file(
     let bar = Bar::new(quiet);
     let (solution, info) =
         pipeline::deform_file(input, output, &spec, params, chunk, save_field, &bar)?;
+    let summary = Report::new(
+        input,
+        output,
+        &solution,
+        &info,
+        start.elapsed().as_secs_f64(),
+    );
     if let Some(path) = report_to {
-        let total = start.elapsed().as_secs_f64();
-        Report::new(input, output, &solution, &info, total).write(path)?;
+        summary.write(path)?;
     }
     if let Some((path, view, strain)) = preview {
         preview_image(&solution, &info, &view, strain).write_png(path)?;
     }
     if !quiet {
         report(input, output, &info);
+        println!(
+            "  constraints: fixed and handle samples within {:.3e} of where they were sent ({} \
+             checked); total {:.2} s{}",
+            summary.residual_max,
+            summary.residual_samples,
+            summary.timings_s.total,
+            summary
+                .peak_memory_bytes
+                .map_or(String::new(), |b| format!(", peak memory {} MB", b >> 20))
+        );
     }
     Ok(())
 }
