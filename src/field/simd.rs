@@ -37,12 +37,33 @@ pub(crate) fn sum<const D: usize, const K: usize>(
     centers: &[&[f64]; D],
     weights: &[&[f64]; K],
 ) -> [f64; K] {
+    radial::<D, K, false>(y, centers, weights)
+}
+
+/// `Σ_i w_k[i] |y − c_i|` for each of the `K` weight vectors: the sums of the RBF's gradient
+/// (`∇ |y − c|³ = 3 |y − c| (y − c)`), on the same vector units as [`sum`].
+#[inline]
+pub(crate) fn sum_linear<const D: usize, const K: usize>(
+    y: &[f64; D],
+    centers: &[&[f64]; D],
+    weights: &[&[f64]; K],
+) -> [f64; K] {
+    radial::<D, K, true>(y, centers, weights)
+}
+
+/// [`sum`] (`φ(r) = r³`) or, with `LINEAR`, [`sum_linear`] (`φ(r) = r`).
+#[inline]
+fn radial<const D: usize, const K: usize, const LINEAR: bool>(
+    y: &[f64; D],
+    centers: &[&[f64]; D],
+    weights: &[&[f64]; K],
+) -> [f64; K] {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f") {
             // SAFETY: the CPU supports AVX-512F, checked just above (the module's contract).
             let [one] = unsafe {
-                sum_avx512(
+                sum_avx512::<D, K, 1, LINEAR>(
                     std::slice::from_ref(y).try_into().expect("one point"),
                     centers,
                     weights,
@@ -52,10 +73,10 @@ pub(crate) fn sum<const D: usize, const K: usize>(
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2, checked just above (the module's contract).
-            return unsafe { sum_avx2(y, centers, weights) };
+            return unsafe { sum_avx2::<D, K, LINEAR>(y, centers, weights) };
         }
     }
-    kernel(y, centers, weights)
+    kernel::<D, K, LINEAR>(y, centers, weights)
 }
 
 /// [`sum`] for `S` points at once: on AVX-512F each step's centers and weights are loaded once
@@ -70,7 +91,7 @@ pub(crate) fn sums<const D: usize, const K: usize, const S: usize>(
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx512f") {
         // SAFETY: the CPU supports AVX-512F, checked just above (the module's contract).
-        return unsafe { sum_avx512(ys, centers, weights) };
+        return unsafe { sum_avx512::<D, K, S, false>(ys, centers, weights) };
     }
     std::array::from_fn(|s| sum(&ys[s], centers, weights))
 }
@@ -83,7 +104,7 @@ pub(crate) fn sums<const D: usize, const K: usize, const S: usize>(
 /// term and by FMA accumulation; `tests::every_build_agrees` bounds the difference.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-fn sum_avx512<const D: usize, const K: usize, const S: usize>(
+fn sum_avx512<const D: usize, const K: usize, const S: usize, const LINEAR: bool>(
     ys: &[[f64; D]; S],
     centers: &[&[f64]; D],
     weights: &[&[f64]; K],
@@ -115,7 +136,8 @@ fn sum_avx512<const D: usize, const K: usize, const S: usize>(
                 let d = _mm512_sub_pd(yv[s][a], c[a]);
                 r2 = _mm512_fmadd_pd(d, d, r2);
             }
-            let r3 = _mm512_mul_pd(r2, _mm512_sqrt_pd(r2));
+            let r = _mm512_sqrt_pd(r2);
+            let r3 = if LINEAR { r } else { _mm512_mul_pd(r2, r) };
             for k in 0..K {
                 acc[s][k] = _mm512_fmadd_pd(w[k], r3, acc[s][k]);
             }
@@ -128,18 +150,18 @@ fn sum_avx512<const D: usize, const K: usize, const S: usize>(
 /// [`kernel`] compiled with AVX2 enabled.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn sum_avx2<const D: usize, const K: usize>(
+fn sum_avx2<const D: usize, const K: usize, const LINEAR: bool>(
     y: &[f64; D],
     centers: &[&[f64]; D],
     weights: &[&[f64]; K],
 ) -> [f64; K] {
-    kernel(y, centers, weights)
+    kernel::<D, K, LINEAR>(y, centers, weights)
 }
 
 /// The sum itself, inlined into each build: blocks of four centers with one accumulator per
 /// lane, then the remainder, then the lanes added in order.
 #[inline(always)]
-fn kernel<const D: usize, const K: usize>(
+fn kernel<const D: usize, const K: usize, const LINEAR: bool>(
     y: &[f64; D],
     centers: &[&[f64]; D],
     weights: &[&[f64]; K],
@@ -159,7 +181,11 @@ fn kernel<const D: usize, const K: usize>(
         }
         let mut r3 = [0.0f64; 4];
         for l in 0..4 {
-            r3[l] = r2[l] * r2[l].sqrt();
+            r3[l] = if LINEAR {
+                r2[l].sqrt()
+            } else {
+                r2[l] * r2[l].sqrt()
+            };
         }
         for k in 0..K {
             let w: &[f64; 4] = weights[k][i..i + 4].try_into().expect("4 weights");
@@ -172,7 +198,8 @@ fn kernel<const D: usize, const K: usize>(
     for j in i..n {
         let r2: f64 = (0..D).map(|a| (y[a] - centers[a][j]).powi(2)).sum();
         for k in 0..K {
-            acc[k][j - i] += weights[k][j] * r2 * r2.sqrt();
+            let phi = if LINEAR { r2.sqrt() } else { r2 * r2.sqrt() };
+            acc[k][j - i] += weights[k][j] * phi;
         }
     }
     std::array::from_fn(|k| acc[k].iter().sum::<f64>())
@@ -210,14 +237,22 @@ mod tests {
                     0 => [centers[0][0], centers[1][0], centers[2][0]],
                     _ => [next(), next(), next()],
                 };
-                let base = kernel(&y, &centers, &weights);
+                let base = kernel::<3, 3, false>(&y, &centers, &weights);
                 #[cfg(target_arch = "x86_64")]
                 if std::arch::is_x86_feature_detected!("avx2") {
                     // SAFETY: checked just above.
-                    let fast = unsafe { sum_avx2(&y, &centers, &weights) };
+                    let fast = unsafe { sum_avx2::<3, 3, false>(&y, &centers, &weights) };
                     assert_eq!(fast.map(f64::to_bits), base.map(f64::to_bits), "n = {n}");
                 }
-                let bound = kernel(&y, &centers, &magnitude);
+                let bound = kernel::<3, 3, false>(&y, &centers, &magnitude);
+                let linear = sum_linear(&y, &centers, &weights);
+                let linear_base = kernel::<3, 3, true>(&y, &centers, &weights);
+                let linear_bound = kernel::<3, 3, true>(&y, &centers, &magnitude);
+                for k in 0..3 {
+                    assert!(
+                        (linear[k] - linear_base[k]).abs() <= 8.0 * f64::EPSILON * linear_bound[k]
+                    );
+                }
                 let got = sum(&y, &centers, &weights);
                 for k in 0..3 {
                     assert!(
