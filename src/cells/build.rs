@@ -40,7 +40,7 @@ pub enum Inside {
     /// for point clouds without.
     #[default]
     Auto,
-    /// Generalized winding number, `|w| ≥ ½` (see [`super::winding`]): of the triangles, or of
+    /// Generalized winding number, `|w| ≥ ½` (see `cells::winding`): of the triangles, or of
     /// the oriented samples (one dipole per occupied finest cell); robust to holes, soups,
     /// non-manifold edges and self-intersections. Without triangles or normals it falls back
     /// to the flood fill.

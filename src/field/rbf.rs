@@ -404,7 +404,7 @@ impl<const D: usize> Rbf<D> {
     /// The Jacobian `I + ∂d/∂x` at the local point `x`: `∇_y |y − c|³ = 3 |y − c| (y − c)` in
     /// scaled coordinates, whose scale cancels with the displacement's. The sum over centers is
     /// `3 (y_a Σ w_k r − Σ (w_k c_a) r)`: one vectorized pass of `D + D²` sums of `r`
-    /// ([`super::simd`]), with the products `w_k c_a` kept since construction.
+    /// (`field::simd`), with the products `w_k c_a` kept since construction.
     pub fn jacobian(&self, x: &Vect<D>) -> nalgebra::SMatrix<f64, D, D> {
         // One pass for all `D + D²` sums (12 in 3D; in 2D the unused slots repeat a weight
         // vector and their sums are not read).
