@@ -368,7 +368,7 @@ impl<const D: usize> Warp<D> for Rbf<D> {
         x + self.displacement(x)
     }
 
-    /// Four samples per pass over the centers ([`super::simd::sums`]), the same bits as
+    /// Four samples per pass over the centers (`field::simd::sums`), the same bits as
     /// [`Warp::warp`].
     fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
         const S: usize = 4;

@@ -366,7 +366,7 @@ impl Sink for PlySink {
 /// faces; a chunk then walks its vertex records from where the previous one stopped and carries
 /// the bytes from there through its last record (from the file's start for the first chunk, to
 /// its end for the last) with the spans of their numbers, so the chunks' bytes partition the
-/// file and the [`SpanSink`](super::text::SpanSink) writes the new numbers over them (as text,
+/// file and the `SpanSink` writes the new numbers over them (as text,
 /// or as floats in the file's byte order).
 pub struct PlyRecordStream {
     path: PathBuf,

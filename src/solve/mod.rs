@@ -10,7 +10,7 @@
 //! Every Gauss-Newton step is followed by a line search along the step (halving from the full
 //! step, or doubling up to 8× while a full step keeps lowering the energy), and every trial has
 //! its free positions replaced by their optimum for its rotations (variable projection, see
-//! [`positions`]). The energy never increases across accepted iterations; a step that cannot
+//! `positions`). The energy never increases across accepted iterations; a step that cannot
 //! decrease the energy ends the load step. With `refine_strain`, cells whose strain exceeds the threshold are split after the last
 //! load step (children inherit motion and constraint) and the solve continues.
 
