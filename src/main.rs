@@ -33,8 +33,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Deform a LAS/LAZ scan, a PLY or OBJ mesh or point cloud, or an XYZ point cloud under an
-    /// edit spec.
+    /// Deform a LAS/LAZ scan, a PLY or OBJ mesh or point cloud, an XYZ point cloud, or a 2D
+    /// point set (.xy, with a 2D spec) under an edit spec.
     Deform(DeformArgs),
     /// Apply a field saved by `deform --save-field` to a file (the same, a denser one, a tile).
     Apply {
@@ -105,7 +105,8 @@ enum Command {
         /// Input file.
         input: PathBuf,
     },
-    /// Generate a bar and a non-manifold soup, bend them, and write inputs and results.
+    /// Generate a bar, a non-manifold soup and a 2D picture, deform them, and write inputs and
+    /// results.
     Demo {
         /// Folder for the files (created if missing).
         #[arg(long, default_value = "rigidcells-demo")]
@@ -118,7 +119,7 @@ enum Command {
 
 #[derive(clap::Args)]
 struct DeformArgs {
-    /// Input file (.las, .laz, .ply, .obj, .xyz).
+    /// Input file (.las, .laz, .ply, .obj, .xyz; .xy for 2D points).
     input: PathBuf,
     /// Output file (the input's format; .las and .laz convert into each other).
     #[arg(short, long)]
