@@ -129,13 +129,25 @@ impl<const D: usize> Blend<D> {
     /// [`Self::blend`] with the nearest centers `nb` of `x` already found.
     #[inline(always)]
     fn blend_with(&self, x: &Vect<D>, n: Option<&Vect<D>>, nb: &Neighbors) -> (Vect<D>, Vect<D>) {
-        let blended = &nb.cells[..nb.n.min(K)];
-        if let Some((&first, rest)) = blended.split_first() {
-            let map = &self.maps[first as usize];
-            if rest.iter().all(|&c| self.maps[c as usize] == *map) {
-                return self.rigid(map, x, n);
-            }
+        match self.shared(nb) {
+            Some(map) => self.rigid(map, x, n),
+            None => self.weighted(x, n, nb),
         }
+    }
+
+    /// The one motion every blended cell of `nb` follows, if they do.
+    #[inline(always)]
+    fn shared(&self, nb: &Neighbors) -> Option<&Affine<D>> {
+        let (&first, rest) = nb.cells[..nb.n.min(K)].split_first()?;
+        let map = &self.maps[first as usize];
+        rest.iter()
+            .all(|&c| self.maps[c as usize] == *map)
+            .then_some(map)
+    }
+
+    /// [`Self::blend_with`] where the blended cells move differently: the weighted sum.
+    #[inline(always)]
+    fn weighted(&self, x: &Vect<D>, n: Option<&Vect<D>>, nb: &Neighbors) -> (Vect<D>, Vect<D>) {
         let (w, k) = self.weights_of(nb);
         if k == 0 {
             return (*x, n.copied().unwrap_or_else(Vect::<D>::zeros));
@@ -187,11 +199,10 @@ impl<const D: usize> Warp<D> for Blend<D> {
         for (o, p) in out.iter_mut().zip(points) {
             let x = p - origin;
             let nb = self.nearest.find_reusing(&x.into(), &mut anchor);
-            let blended = &nb.cells[..nb.n.min(K)];
-            *o = if !blended.is_empty() && blended.iter().all(|&c| self.maps[c as usize] == rest) {
-                *p
-            } else {
-                self.blend_with(&x, None, &nb).0 + origin
+            *o = match self.shared(&nb) {
+                Some(map) if *map == rest => *p,
+                Some(map) => map.apply(&x) + origin,
+                None => self.weighted(&x, None, &nb).0 + origin,
             };
         }
     }
