@@ -60,12 +60,30 @@ pub(crate) struct System<const D: usize> {
         Argsort<usize>,
         SymbolicCholesky<usize>,
     )>,
-    values: Vec<f64>,
-    /// The numeric factor's values and faer's scratch, kept between iterations (45 MB at 29k
-    /// unknowns: allocating them anew took a tenth of the iteration in page faults).
-    factor: std::sync::Mutex<(Vec<f64>, MemBuffer)>,
+    /// What each iteration writes, kept between iterations.
+    buffers: Buffers,
     /// The position-only system, for variable projection.
     positions: Positions,
+}
+
+/// The storage of an iteration: the assembled values (one slot per block entry), the numeric
+/// factor and faer's scratch. Kept with the system: allocating the factor (45 MB at 29k
+/// unknowns) and its scratch anew each iteration faulted its pages in every time, and the step
+/// took 119 ms instead of 87–94.
+struct Buffers {
+    values: Vec<f64>,
+    factor: Vec<f64>,
+    scratch: MemBuffer,
+}
+
+impl Default for Buffers {
+    fn default() -> Self {
+        Self {
+            values: Vec::new(),
+            factor: Vec::new(),
+            scratch: MemBuffer::new(faer::dyn_stack::StackReq::EMPTY),
+        }
+    }
 }
 
 /// Entries of a diagonal block's lower triangle, and of a full block, for `DOF` unknowns.
@@ -128,11 +146,7 @@ where
             target_range,
             n,
             symbolic: None,
-            values: Vec::new(),
-            factor: std::sync::Mutex::new((
-                Vec::new(),
-                MemBuffer::new(faer::dyn_stack::StackReq::EMPTY),
-            )),
+            buffers: Buffers::default(),
             positions: Positions::new(complex, constraints),
         };
         if n > 0 {
@@ -148,13 +162,15 @@ where
                 )
             })
             .map_err(|e| Error::Solver(format!("symbolic Cholesky: {e:?}")))?;
-            system.values = vec![0.0; indices.len()];
             let par = faer::get_global_parallelism();
             let scratch = llt
                 .factorize_numeric_llt_scratch::<f64>(par, Default::default())
                 .or(llt.solve_in_place_scratch::<f64>(1, par));
-            system.factor =
-                std::sync::Mutex::new((vec![0.0; llt.len_val()], MemBuffer::new(scratch)));
+            system.buffers = Buffers {
+                values: vec![0.0; indices.len()],
+                factor: vec![0.0; llt.len_val()],
+                scratch: MemBuffer::new(scratch),
+            };
             system.symbolic = Some((sym, argsort, llt));
         }
         Ok(system)
@@ -268,9 +284,9 @@ where
         damping: f64,
     ) -> Result<Vec<f64>> {
         let cell_part = self.free_cells.len() * Self::CELL_SLOT;
-        let mut values = std::mem::take(&mut self.values);
+        let mut buffers = std::mem::take(&mut self.buffers);
         let result = self.step_into(
-            &mut values,
+            &mut buffers,
             cell_part,
             complex,
             constraints,
@@ -278,14 +294,14 @@ where
             targets_to,
             damping,
         );
-        self.values = values;
+        self.buffers = buffers;
         result
     }
 
     #[allow(clippy::too_many_arguments)]
     fn step_into(
         &self,
-        values: &mut [f64],
+        buffers: &mut Buffers,
         cell_part: usize,
         complex: &CellComplex<D>,
         constraints: &Constraints<D>,
@@ -294,6 +310,11 @@ where
         damping: f64,
     ) -> Result<Vec<f64>> {
         let dof = Self::DOF;
+        let Buffers {
+            values,
+            factor,
+            scratch,
+        } = buffers;
         let (cell_vals, pair_vals) = values.split_at_mut(cell_part);
         let mut pair_grad = vec![0.0f64; self.pairs.len() * 2 * dof];
         let this = self;
@@ -375,9 +396,7 @@ where
             let rhs = Mat::<f64>::from_fn(self.n, 1, |r, _| -grad[r]);
             let solved = crate::with_faer(|| {
                 let par = faer::get_global_parallelism();
-                let mut guard = self.factor.lock().unwrap_or_else(|e| e.into_inner());
-                let (factor, mem) = &mut *guard;
-                let stack = MemStack::new(mem);
+                let stack = MemStack::new(scratch);
                 let l = llt.factorize_numeric_llt(
                     factor,
                     matrix.as_ref(),
