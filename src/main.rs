@@ -510,16 +510,10 @@ fn preview_image(
     let colors: Vec<[u8; 3]> = proxy
         .before
         .iter()
-        .map(|p| {
-            match solution
-                .complex
-                .locate(&(p - origin))
-                .map(|c| solution.constraints.roles[c])
-            {
-                Some(Role::Fixed) => FIXED,
-                Some(Role::Handle(_)) => HANDLE,
-                _ => FREE,
-            }
+        .map(|p| match solution.role_at(p) {
+            Some(Role::Fixed) => FIXED,
+            Some(Role::Handle(_)) => HANDLE,
+            _ => FREE,
         })
         .collect();
     let both: Vec<Vect<3>> = proxy.before.iter().chain(&proxy.after).copied().collect();
@@ -711,7 +705,7 @@ fn read_colored_points(input: &Path, max: usize) -> anyhow::Result<(Vec<Vect<3>>
                 points.push(chunk.positions[i]);
                 let rec = (chunk.record_len > 0)
                     .then(|| &chunk.raw[i * chunk.record_len..(i + 1) * chunk.record_len]);
-                raw_colors.push(las.as_ref().zip(rec).map(|(h, r)| las_color(h.format, r)));
+                raw_colors.push(las.as_ref().zip(rec).map(|(h, r)| h.color(r)));
             }
         }
         index += n;
@@ -720,34 +714,16 @@ fn read_colored_points(input: &Path, max: usize) -> anyhow::Result<(Vec<Vect<3>>
     let top = raw_colors
         .iter()
         .flatten()
-        .flat_map(|c| c.1)
-        .fold(1u16, u16::max);
+        .flatten()
+        .fold(1u16, |a, &b| a.max(b));
     let colors = raw_colors
         .into_iter()
         .map(|c| match c {
-            Some((_, rgb)) => rgb.map(|v| (v as u32 * 255 / top as u32) as u8),
+            Some(rgb) => rgb.map(|v| (v as u32 * 255 / top as u32) as u8),
             None => [200, 200, 200],
         })
         .collect();
     Ok((points, colors))
-}
-
-/// A LAS record's color: `(has RGB, [r, g, b])`, the intensity thrice without RGB.
-fn las_color(format: u8, rec: &[u8]) -> (bool, [u16; 3]) {
-    let u16_at = |at: usize| u16::from_le_bytes([rec[at], rec[at + 1]]);
-    let rgb_at = match format {
-        2 => Some(20),
-        3 | 5 => Some(28),
-        7 | 8 | 10 => Some(30),
-        _ => None,
-    };
-    match rgb_at {
-        Some(at) if rec.len() >= at + 6 => (true, [u16_at(at), u16_at(at + 2), u16_at(at + 4)]),
-        _ => {
-            let i = u16_at(12);
-            (false, [i, i, i])
-        }
-    }
 }
 
 fn run_apply(

@@ -20,7 +20,6 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::pipeline::FileInfo;
-use crate::rigid::Vect;
 use crate::solve::{Role, Solution};
 
 /// The report; see the module docs for the stable keys.
@@ -172,13 +171,9 @@ fn proxy_residual(solution: &Solution<3>, file: &FileInfo) -> (f64, usize) {
     let mut worst = 0.0f64;
     let mut count = 0;
     for (before, after) in file.proxy.before.iter().zip(&file.proxy.after) {
-        let local: Vect<3> = before - origin;
-        let Some(c) = solution.complex.locate(&local) else {
-            continue;
-        };
-        let sent = match constraints.roles[c] {
-            Role::Fixed => *before,
-            Role::Handle(k) => maps[k as usize].apply(&local) + origin,
+        let sent = match solution.role_at(before) {
+            Some(Role::Fixed) => *before,
+            Some(Role::Handle(k)) => maps[k as usize].apply(&(before - origin)) + origin,
             _ => continue,
         };
         worst = worst.max((after - sent).norm());

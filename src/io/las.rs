@@ -302,6 +302,22 @@ impl LasHeader {
     fn class_at(&self) -> usize {
         if self.format >= 6 { 16 } else { 15 }
     }
+
+    /// A record's color for pictures: its 16-bit RGB when the point format has one, else its
+    /// intensity three times.
+    pub fn color(&self, record: &[u8]) -> [u16; 3] {
+        let u16_at = |at: usize| u16::from_le_bytes([record[at], record[at + 1]]);
+        let rgb_at = match self.format {
+            2 => Some(20),
+            3 | 5 => Some(28),
+            7 | 8 | 10 => Some(30),
+            _ => None,
+        };
+        match rgb_at {
+            Some(at) if record.len() >= at + 6 => [u16_at(at), u16_at(at + 2), u16_at(at + 4)],
+            _ => [u16_at(12); 3],
+        }
+    }
 }
 
 enum Body {

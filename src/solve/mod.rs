@@ -118,6 +118,14 @@ pub struct Solution<const D: usize> {
     pub info: SolverInfo,
 }
 
+impl<const D: usize> Solution<D> {
+    /// The role of the cell holding the world point `p`, if a cell holds it.
+    pub fn role_at(&self, p: &Vect<D>) -> Option<Role> {
+        let c = self.complex.locate(&(p - self.constraints.origin))?;
+        Some(self.constraints.roles[c])
+    }
+}
+
 /// Solves for the rigid motions of `complex` under `constraints`, with load steps and optional
 /// refinement.
 pub fn solve<const D: usize>(
