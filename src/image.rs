@@ -287,38 +287,12 @@ impl Lookup<'_> {
 /// Draws the warped triangle `p` of `out`, each covered pixel looked up at the matching point
 /// of the rest triangle `s`.
 fn draw(out: &mut Raster, lookup: &Lookup, p: [Vect<2>; 3], s: [Vect<2>; 3]) {
-    let area = (p[1] - p[0]).perp(&(p[2] - p[0]));
-    if area == 0.0 || !area.is_finite() {
-        return;
-    }
-    let (w, h) = (out.width as i64, out.height as i64);
-    let lo = p[0].inf(&p[1]).inf(&p[2]);
-    let hi = p[0].sup(&p[1]).sup(&p[2]);
-    let (x0, x1) = (
-        (lo.x - 0.5).ceil().max(0.0) as i64,
-        ((hi.x - 0.5).floor() as i64).min(w - 1),
-    );
-    let (y0, y1) = (
-        (lo.y - 0.5).ceil().max(0.0) as i64,
-        ((hi.y - 0.5).floor() as i64).min(h - 1),
-    );
-    // Inclusive edges, with a tolerance of rounding: shared edges are drawn by both sides.
-    let eps = -1e-9;
-    for y in y0..=y1 {
-        for x in x0..=x1 {
-            let c = Vect::<2>::new(x as f64 + 0.5, y as f64 + 0.5);
-            let l0 = (p[1] - c).perp(&(p[2] - c)) / area;
-            let l1 = (p[2] - c).perp(&(p[0] - c)) / area;
-            let l2 = 1.0 - l0 - l1;
-            if l0 < eps || l1 < eps || l2 < eps {
-                continue;
-            }
-            let src = s[0] * l0 + s[1] * l1 + s[2] * l2;
-            let color = lookup.at(&src);
-            let i = 4 * (y * w + x) as usize;
-            out.rgba[i..i + 4].copy_from_slice(&color);
-        }
-    }
+    let w = out.width as usize;
+    crate::render::raster(p, out.width, out.height, |x, y, [l0, l1, l2]| {
+        let color = lookup.at(&(s[0] * l0 + s[1] * l1 + s[2] * l2));
+        let i = 4 * (y * w + x);
+        out.rgba[i..i + 4].copy_from_slice(&color);
+    });
 }
 
 /// The default transfer of [`deform_image`]: the blend keeps a fixed region's pixels exact.

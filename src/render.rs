@@ -244,45 +244,12 @@ impl Canvas {
             let light = 0.3 + 0.7 * (n.dot(&toward) / len).abs();
             let shade = color(t).map(|v| (v as f64 * light).round() as u8);
             let p = [a, b, c].map(|v| self.camera.project(&v));
-            let area =
-                (p[1].0 - p[0].0) * (p[2].1 - p[0].1) - (p[2].0 - p[0].0) * (p[1].1 - p[0].1);
-            if area == 0.0 || !area.is_finite() {
-                continue;
-            }
-            let (x0, x1) = (
-                p.iter()
-                    .map(|q| q.0)
-                    .fold(f64::MAX, f64::min)
-                    .floor()
-                    .max(0.0) as i64,
-                p.iter().map(|q| q.0).fold(f64::MIN, f64::max).ceil() as i64,
-            );
-            let (y0, y1) = (
-                p.iter()
-                    .map(|q| q.1)
-                    .fold(f64::MAX, f64::min)
-                    .floor()
-                    .max(0.0) as i64,
-                p.iter().map(|q| q.1).fold(f64::MIN, f64::max).ceil() as i64,
-            );
-            let (x1, y1) = (
-                x1.min(self.image.width as i64 - 1),
-                y1.min(self.image.height as i64 - 1),
-            );
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
-                    let edge = |i: usize, j: usize| {
-                        (p[j].0 - p[i].0) * (py - p[i].1) - (px - p[i].0) * (p[j].1 - p[i].1)
-                    };
-                    let (w0, w1, w2) = (edge(1, 2) / area, edge(2, 0) / area, edge(0, 1) / area);
-                    if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
-                        continue;
-                    }
-                    let z = w0 * p[0].2 + w1 * p[1].2 + w2 * p[2].2;
-                    self.plot(x, y, z, shade);
-                }
-            }
+            let corners = p.map(|q| Vect::<2>::new(q.0, q.1));
+            let (w, h) = (self.image.width, self.image.height);
+            raster(corners, w, h, |x, y, l| {
+                let z = l[0] * p[0].2 + l[1] * p[1].2 + l[2] * p[2].2;
+                self.plot(x as i64, y as i64, z, shade);
+            });
         }
     }
 
@@ -296,25 +263,9 @@ impl Canvas {
         depth_range: (f64, f64),
         color: impl Fn(usize) -> [u8; 3],
     ) {
-        let toward = self.camera.toward();
-        let (near, far) = depth_range;
-        let span = (near - far).max(1e-300);
         for (i, p) in points.iter().enumerate() {
-            let (x, y, z) = self.camera.project(p);
-            if !(x.is_finite() && y.is_finite() && z.is_finite()) {
-                continue;
-            }
-            let light = match normals {
-                Some(n) if n[i].norm() > 0.0 => 0.3 + 0.7 * (n[i].dot(&toward) / n[i].norm()).abs(),
-                _ => 0.45 + 0.55 * ((z - far) / span).clamp(0.0, 1.0),
-            };
-            let shade = color(i).map(|v| (v as f64 * light).round() as u8);
-            let (cx, cy) = (x.floor() as i64, y.floor() as i64);
-            for dy in -radius..=radius {
-                for dx in -radius..=radius {
-                    self.plot(cx + dx, cy + dy, z, shade);
-                }
-            }
+            let normal = normals.map(|n| &n[i]);
+            self.splat(p, radius, normal, depth_range, color(i));
         }
     }
 
@@ -327,18 +278,37 @@ impl Canvas {
         depth_range: (f64, f64),
         color: impl Fn(usize) -> [u8; 3],
     ) {
-        let (near, far) = depth_range;
-        let span = (near - far).max(1e-300);
         for (i, (c, h)) in centers.iter().zip(halves).enumerate() {
-            let (x, y, z) = self.camera.project(c);
-            let r = (h * self.camera.scale).round().max(0.0) as i64;
-            let light = 0.45 + 0.55 * ((z - far) / span).clamp(0.0, 1.0);
-            let shade = color(i).map(|v| (v as f64 * light).round() as u8);
-            let (cx, cy) = (x.floor() as i64, y.floor() as i64);
-            for dy in -r..=r {
-                for dx in -r..=r {
-                    self.plot(cx + dx, cy + dy, z, shade);
-                }
+            let radius = (h * self.camera.scale).round().max(0.0) as i64;
+            self.splat(c, radius, None, depth_range, color(i));
+        }
+    }
+
+    /// One square splat of `radius` pixels about `p`, shaded by its `normal` when it has one and
+    /// by depth within `(near, far)` when not.
+    fn splat(
+        &mut self,
+        p: &Vect<3>,
+        radius: i64,
+        normal: Option<&Vect<3>>,
+        (near, far): (f64, f64),
+        color: [u8; 3],
+    ) {
+        let (x, y, z) = self.camera.project(p);
+        if !(x.is_finite() && y.is_finite() && z.is_finite()) {
+            return;
+        }
+        let light = match normal {
+            Some(n) if n.norm() > 0.0 => {
+                0.3 + 0.7 * (n.dot(&self.camera.toward()) / n.norm()).abs()
+            }
+            _ => 0.45 + 0.55 * ((z - far) / (near - far).max(1e-300)).clamp(0.0, 1.0),
+        };
+        let shade = color.map(|v| (v as f64 * light).round() as u8);
+        let (cx, cy) = (x.floor() as i64, y.floor() as i64);
+        for dy in -radius..=radius {
+            for dx in -radius..=radius {
+                self.plot(cx + dx, cy + dy, z, shade);
             }
         }
     }
@@ -349,6 +319,44 @@ impl Canvas {
             let z = self.camera.project(p).2;
             (n.max(z), f.min(z))
         })
+    }
+}
+
+/// Calls `f(x, y, [l0, l1, l2])` for every pixel of a `width × height` picture whose center
+/// lies in the triangle `p` (pixel coordinates), with the center's barycentric coordinates.
+/// Edges are inclusive to a tolerance of rounding, so triangles that share an edge leave no
+/// crack between them (the pixels on it are drawn by both); degenerate triangles draw nothing.
+/// The one rasterizer of the renderer and of the 2D picture warp.
+pub(crate) fn raster(
+    p: [Vect<2>; 3],
+    width: u32,
+    height: u32,
+    mut f: impl FnMut(usize, usize, [f64; 3]),
+) {
+    let area = (p[1] - p[0]).perp(&(p[2] - p[0]));
+    if area == 0.0 || !area.is_finite() {
+        return;
+    }
+    let lo = p[0].inf(&p[1]).inf(&p[2]);
+    let hi = p[0].sup(&p[1]).sup(&p[2]);
+    let span = |lo: f64, hi: f64, n: u32| {
+        (
+            (lo - 0.5).ceil().max(0.0) as i64,
+            ((hi - 0.5).floor() as i64).min(n as i64 - 1),
+        )
+    };
+    let ((x0, x1), (y0, y1)) = (span(lo.x, hi.x, width), span(lo.y, hi.y, height));
+    let eps = -1e-9;
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let c = Vect::<2>::new(x as f64 + 0.5, y as f64 + 0.5);
+            let l0 = (p[1] - c).perp(&(p[2] - c)) / area;
+            let l1 = (p[2] - c).perp(&(p[0] - c)) / area;
+            let l2 = 1.0 - l0 - l1;
+            if l0 >= eps && l1 >= eps && l2 >= eps {
+                f(x as usize, y as usize, [l0, l1, l2]);
+            }
+        }
     }
 }
 
