@@ -388,17 +388,21 @@ fn render_and_preview_draw_what_was_there() {
     assert!(after < before - 20.0, "handle rows {before} → {after}");
 }
 
+/// A PNG as the renderer's RGB image (read by the library's reader).
 fn read_png(path: &std::path::Path) -> rigidcells::render::Image {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    assert_eq!(info.color_type, png::ColorType::Rgb);
-    buf.truncate(info.buffer_size());
+    let raster = rigidcells::image::Raster::read_png(path).unwrap();
+    assert!(
+        raster.rgba.chunks_exact(4).all(|p| p[3] == 255),
+        "renders are opaque"
+    );
     rigidcells::render::Image {
-        width: info.width,
-        height: info.height,
-        rgb: buf,
+        width: raster.width,
+        height: raster.height,
+        rgb: raster
+            .rgba
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect(),
     }
 }
 

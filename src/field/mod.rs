@@ -179,6 +179,19 @@ pub(crate) fn unit_or<const D: usize>(v: Vect<D>, fallback: &Vect<D>) -> Vect<D>
     }
 }
 
+/// A deterministic stream of numbers in `[-1, 1)` (xorshift) for the unit tests of the
+/// transfers.
+#[cfg(test)]
+pub(crate) fn test_numbers(seed: u64) -> impl FnMut() -> f64 {
+    let mut x = seed;
+    move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
 /// Samples per parallel task.
 const CHUNK: usize = 4096;
 

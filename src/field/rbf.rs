@@ -471,13 +471,7 @@ mod tests {
     /// central differences of the displacement.
     #[test]
     fn the_jacobian_matches_its_definition() {
-        let mut seed = 7u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut next = super::super::test_numbers(7);
         let n = 300;
         let centers: Vec<Vect<3>> = (0..n)
             .map(|_| Vect::<3>::new(next(), next(), next()) * 4.0)

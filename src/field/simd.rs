@@ -208,22 +208,12 @@ fn kernel<const D: usize, const K: usize, const LINEAR: bool>(
 mod tests {
     use super::*;
 
-    fn random() -> impl FnMut() -> f64 {
-        let mut x = 0x9e37_79b9_7f4a_7c15u64;
-        move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        }
-    }
-
     /// The AVX2 build gives the baseline's bits; the AVX-512 build agrees with it to a few ulps
     /// of the sum of the terms' magnitudes, at the centers too (`r = 0`); and the sum of several
     /// points at once gives each point's bits.
     #[test]
     fn every_build_agrees() {
-        let mut next = random();
+        let mut next = super::super::test_numbers(0x9e37_79b9_7f4a_7c15);
         for n in [1, 3, 4, 7, 8, 9, 64, 1001] {
             let centers: [Vec<f64>; 3] = std::array::from_fn(|_| (0..n).map(|_| next()).collect());
             let weights: [Vec<f64>; 3] = std::array::from_fn(|_| (0..n).map(|_| next()).collect());

@@ -244,14 +244,11 @@ impl<const D: usize> Node<D> {
 mod tests {
     use super::*;
 
+    /// Numbers in `[-1, 1)`, seeded.
     fn random() -> impl FnMut() -> f64 {
-        let mut x = 0x2545_f491_4f6c_dd1du64;
-        move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        }
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(0x2545_f491_4f6c_dd1d);
+        move || rng.random_range(-1.0..1.0)
     }
 
     /// One cluster seen from ever farther: the expansion's error falls like `1/r` (the

@@ -133,7 +133,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
          max stated bound / extent |"
     );
     println!("|---|---|---|---|---|---|");
-    let (shift, inv_scale, constant, linear, weights) = rbf.parts();
+    let (shift, inv_scale, _, _, weights) = rbf.parts();
     let scaled: Vec<Vect<3>> = field
         .centers
         .iter()
@@ -149,10 +149,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let x = p - field.origin;
             let y = (x - shift) * inv_scale;
             let (sums, bound) = tree.sum(&y.into());
-            let d = Vect::<3>::from_fn(|k, _| {
-                let lin: f64 = (0..3).map(|a| linear[k][a] * y[a]).sum();
-                (sums[k] + constant[k] + lin) / inv_scale
-            });
+            let d = displacement(&rbf, &y, sums);
             (
                 x + d + field.origin,
                 bound.iter().cloned().fold(0.0, f64::max) / inv_scale,
@@ -205,7 +202,7 @@ fn reference_blend(field: &Field<3>, x: &Vect<3>) -> Vect<3> {
 /// arithmetic (about 106 bits) on the same f64 inputs: the evaluation's exact value, to which
 /// any f64 evaluation's rounding is compared.
 fn reference_rbf(rbf: &Rbf<3>, field: &Field<3>, x: &Vect<3>) -> Vect<3> {
-    let (shift, inv_scale, constant, linear, weights) = rbf.parts();
+    let (shift, inv_scale, _, _, weights) = rbf.parts();
     let y = (x - shift) * inv_scale;
     let mut sums = [Dd::default(); 3];
     for (i, c) in field.centers.iter().enumerate() {
@@ -220,11 +217,7 @@ fn reference_rbf(rbf: &Rbf<3>, field: &Field<3>, x: &Vect<3>) -> Vect<3> {
             sums[k] = sums[k].add(r3.scale(weights[k][i]));
         }
     }
-    let d = Vect::<3>::from_fn(|k, _| {
-        let lin: f64 = (0..3).map(|a| linear[k][a] * y[a]).sum();
-        (sums[k].hi + sums[k].lo + constant[k] + lin) / inv_scale
-    });
-    x + d
+    x + displacement(rbf, &y, sums.map(|s| s.hi + s.lo))
 }
 
 /// `Σ_i |a_i| |y − c_i|³` per component, in world units: the size of the terms the RBF's sum
@@ -244,7 +237,7 @@ fn rbf_magnitude(rbf: &Rbf<3>, field: &Field<3>, x: &Vect<3>) -> Vect<3> {
 
 /// The RBF's displacement summed term by term in f64, in order: the naive evaluation.
 fn naive_rbf(rbf: &Rbf<3>, field: &Field<3>, x: &Vect<3>) -> Vect<3> {
-    let (shift, inv_scale, constant, linear, weights) = rbf.parts();
+    let (shift, inv_scale, _, _, weights) = rbf.parts();
     let y = (x - shift) * inv_scale;
     let mut sums = [0.0; 3];
     for (i, c) in field.centers.iter().enumerate() {
@@ -253,11 +246,17 @@ fn naive_rbf(rbf: &Rbf<3>, field: &Field<3>, x: &Vect<3>) -> Vect<3> {
             sums[k] += weights[k][i] * (r * r * r);
         }
     }
-    let d = Vect::<3>::from_fn(|k, _| {
+    x + displacement(rbf, &y, sums)
+}
+
+/// The displacement at the scaled point `y` from the kernel `sums`: the polynomial part added
+/// and the scale undone, as `Rbf::displacement` does.
+fn displacement(rbf: &Rbf<3>, y: &Vect<3>, sums: [f64; 3]) -> Vect<3> {
+    let (_, inv_scale, constant, linear, _) = rbf.parts();
+    Vect::<3>::from_fn(|k, _| {
         let lin: f64 = (0..3).map(|a| linear[k][a] * y[a]).sum();
         (sums[k] + constant[k] + lin) / inv_scale
-    });
-    x + d
+    })
 }
 
 /// A double-double number `hi + lo`, `|lo| ≤ ulp(hi) / 2`.
