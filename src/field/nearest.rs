@@ -362,6 +362,7 @@ impl<const D: usize> Nearest<D> {
             .tree
             .query(&mid)
             .within::<SquaredEuclidean<f64>>(reach * reach)
+            .unsorted()
             .execute()
             .iter()
             .map(|r| r.item)
