@@ -157,7 +157,8 @@ pub fn deform_image(
     info.cells = solution.complex.len();
     info.iterations = solution.info.iterations;
     let field = Field::from_solution(&solution);
-    let deformer = Deformer::new(&field, params.transfer)?;
+    let deformer =
+        Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
 
     // The corners of the foreground pixels, numbered on first use, and where they go.
     let mut corner = vec![u32::MAX; (w + 1) * (h + 1)];

@@ -48,6 +48,8 @@ enum Command {
         /// Transfer of the cells' motions to the samples.
         #[arg(long, value_enum, default_value_t = TransferArg::Rbf)]
         transfer: TransferArg,
+        #[command(flatten)]
+        tolerance: ToleranceArg,
         /// Print nothing but errors.
         #[arg(short, long)]
         quiet: bool,
@@ -132,6 +134,8 @@ struct DeformArgs {
     /// Transfer of the cells' motions to the samples.
     #[arg(long, value_enum, default_value_t = TransferArg::Rbf)]
     transfer: TransferArg,
+    #[command(flatten)]
+    tolerance: ToleranceArg,
     /// Split cells whose strain exceeds this threshold, and solve again.
     #[arg(long)]
     refine_strain: Option<f64>,
@@ -170,7 +174,34 @@ impl DeformArgs {
                 ..Default::default()
             },
             transfer: self.transfer.into(),
+            rbf_tolerance: self.tolerance.rbf_tolerance,
             proxy_samples,
+        }
+    }
+}
+
+/// The RBF's far-field evaluation.
+#[derive(clap::Args)]
+struct ToleranceArg {
+    /// With the RBF transfer: sum far cells through a Barnes–Hut expansion, each output
+    /// coordinate within this length (model units) of the exact RBF's. Without it every cell
+    /// is summed exactly (measured as fast or faster at the cell counts of BENCHMARKS.md).
+    #[arg(long, value_name = "LENGTH")]
+    rbf_tolerance: Option<f64>,
+}
+
+impl ToleranceArg {
+    /// Refuses a tolerance given with a transfer other than the RBF, or not a length.
+    fn check(&self, transfer: TransferArg) -> anyhow::Result<()> {
+        match self.rbf_tolerance {
+            Some(_) if !matches!(transfer, TransferArg::Rbf) => {
+                Err(Error::Param("--rbf-tolerance applies to --transfer rbf only".into()).into())
+            }
+            Some(t) if !(t >= 0.0 && t.is_finite()) => Err(Error::Param(format!(
+                "--rbf-tolerance must be a length of at least 0, not {t}"
+            ))
+            .into()),
+            _ => Ok(()),
         }
     }
 }
@@ -285,8 +316,18 @@ fn main() -> ExitCode {
             input,
             output,
             transfer,
+            tolerance,
             quiet,
-        } => run_apply(&field, &input, &output, transfer.into(), quiet),
+        } => tolerance.check(transfer).and_then(|()| {
+            run_apply(
+                &field,
+                &input,
+                &output,
+                transfer.into(),
+                tolerance.rbf_tolerance,
+                quiet,
+            )
+        }),
         Command::Info { input } => run_info(&input),
         Command::Image {
             input,
@@ -395,6 +436,7 @@ fn run_cells(
 
 fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     refuse_overwrite(&args.input, &args.output)?;
+    args.tolerance.check(args.transfer)?;
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
@@ -731,12 +773,13 @@ fn run_apply(
     input: &Path,
     output: &Path,
     transfer: Transfer,
+    rbf_tolerance: Option<f64>,
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
     let saved = SavedField::<3>::load(field)?;
     let bar = Bar::new(quiet);
-    let info = pipeline::apply_file(saved, input, output, transfer, CHUNK, &bar)?;
+    let info = pipeline::apply_file(saved, input, output, transfer, rbf_tolerance, CHUNK, &bar)?;
     if !quiet {
         for n in &info.notes {
             println!("note: {n}");

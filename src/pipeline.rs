@@ -28,6 +28,9 @@ pub struct DeformParams {
     pub solve: SolveParams,
     /// The transfer to the samples.
     pub transfer: Transfer,
+    /// With the RBF transfer: evaluate positions through its far field, each coordinate
+    /// within this length of the exact sum's ([`crate::field::Rbf::with_tolerance`]).
+    pub rbf_tolerance: Option<f64>,
     /// The most samples in the preview proxy of [`deform_file`] (`None`: [`PROXY_SAMPLES`];
     /// `Some(0)`: no proxy).
     pub proxy_samples: Option<usize>,
@@ -102,7 +105,8 @@ where
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
     let t = Instant::now();
     let field = Field::from_solution(&solution);
-    let deformer = Deformer::new(&field, params.transfer)?;
+    let deformer =
+        Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
     let mut moved = points.to_vec();
     apply(&deformer, &field.origin, &mut moved);
     let mut warnings = warnings;
@@ -241,7 +245,7 @@ pub fn deform_file(
         saved.save(path)?;
     }
     let origin = saved.field.origin;
-    let deformer = saved.deformer(params.transfer)?;
+    let deformer = saved.deformer(params.transfer, params.rbf_tolerance)?;
     let mut after = proxy.before.clone();
     apply(&deformer, &origin, &mut after);
     info.proxy = Proxy { after, ..proxy };
@@ -273,13 +277,14 @@ pub fn apply_file(
     input: &Path,
     output: &Path,
     transfer: Transfer,
+    rbf_tolerance: Option<f64>,
     chunk: usize,
     observer: &dyn Observer,
 ) -> Result<FileInfo> {
     let t = Instant::now();
     let mut source = io::open(input)?;
     let origin = field.field.origin;
-    let deformer = field.deformer(transfer)?;
+    let deformer = field.deformer(transfer, rbf_tolerance)?;
     let notes = transfer_pass(source.as_mut(), output, &deformer, &origin, chunk, observer)?;
     Ok(FileInfo {
         samples: source.len(),

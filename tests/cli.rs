@@ -429,3 +429,40 @@ fn lifted_bar(
     .unwrap();
     (input, output, edit)
 }
+
+/// `--rbf-tolerance`: the output stays within the tolerance of the exact RBF's (on the bar the
+/// far field never applies, so it is the same), and the option is refused with a blend or a
+/// tolerance that is not a length, leaving no output.
+#[test]
+fn rbf_tolerance_is_checked_and_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, output, edit) = lifted_bar(dir.path(), 2.0);
+    let r = deform(&input, &output, &edit, &["--cell-size", "0.25"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let far = dir.path().join("far.ply");
+    let r = deform(
+        &input,
+        &far,
+        &edit,
+        &["--cell-size", "0.25", "--rbf-tolerance", "1e-3"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (a, b) = (
+        Document::read(&output).unwrap(),
+        Document::read(&far).unwrap(),
+    );
+    for (p, q) in a.positions().iter().zip(b.positions()) {
+        assert!((p - q).amax() <= 1e-3, "{p} vs {q}");
+    }
+    let refused = dir.path().join("refused.ply");
+    for extra in [
+        &["--transfer", "blend", "--rbf-tolerance", "1e-3"][..],
+        &["--rbf-tolerance=-1"][..],
+        &["--rbf-tolerance", "nan"][..],
+    ] {
+        let r = deform(&input, &refused, &edit, extra);
+        assert_ne!(r.code, 0, "{extra:?}");
+        assert!(r.stderr.contains("--rbf-tolerance"), "{}", r.stderr);
+        assert!(!refused.exists());
+    }
+}

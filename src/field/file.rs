@@ -37,13 +37,14 @@ impl<const D: usize> SavedField<D> {
         Self { field, rbf }
     }
 
-    /// The transfer for `transfer`: the saved RBF coefficients, or a new blend.
-    pub fn deformer(self, transfer: Transfer) -> Result<Deformer<D>> {
-        Ok(match (transfer, self.rbf) {
+    /// The transfer for `transfer`: the saved RBF coefficients (evaluated through the far
+    /// field within `rbf_tolerance`, when given), or a new blend.
+    pub fn deformer(self, transfer: Transfer, rbf_tolerance: Option<f64>) -> Result<Deformer<D>> {
+        match (transfer, self.rbf) {
             (Transfer::Rbf, Some(r)) => Deformer::Rbf(r),
-            (Transfer::Rbf, None) => Deformer::Rbf(Rbf::new(&self.field)?),
             (t, _) => Deformer::new(&self.field, t)?,
-        })
+        }
+        .with_rbf_tolerance(rbf_tolerance)
     }
 
     /// Writes the field to `path` atomically.

@@ -13,6 +13,7 @@
 //! identical results.
 
 mod blend;
+pub mod far;
 mod file;
 mod nearest;
 mod rbf;
@@ -123,6 +124,15 @@ impl<const D: usize> Deformer<D> {
                 Self::Blend(Box::new(Blend::new(field, Weights::InverseDistance)?))
             }
             Transfer::Rbf => Self::Rbf(Rbf::new(field)?),
+        })
+    }
+
+    /// The RBF evaluated through its far field within `tolerance` ([`Rbf::with_tolerance`]);
+    /// a blend, or no tolerance, is returned as it is.
+    pub fn with_rbf_tolerance(self, tolerance: Option<f64>) -> Result<Self> {
+        Ok(match (self, tolerance) {
+            (Self::Rbf(r), Some(t)) => Self::Rbf(r.with_tolerance(t)?),
+            (d, _) => d,
         })
     }
 }

@@ -22,12 +22,14 @@
 use faer::Mat;
 use faer::prelude::*;
 
+use super::far::FarField;
 use super::simd::slices;
 use super::{Field, Warp};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
 /// The RBF transfer of a field.
+#[derive(Clone)]
 pub struct Rbf<const D: usize> {
     /// Center coordinates, axis by axis, scaled.
     centers: [Vec<f64>; D],
@@ -44,6 +46,9 @@ pub struct Rbf<const D: usize> {
     /// `w_k[i] c_a[i]`, axis by axis then component by component: the second sums of the
     /// Jacobian ([`Rbf::jacobian`]).
     weighted_centers: [[Vec<f64>; D]; D],
+    /// The far-field evaluation and its tolerance (world units), when one was asked for
+    /// ([`Rbf::with_tolerance`]).
+    far: Option<(FarField<D>, f64)>,
 }
 
 impl<const D: usize> Rbf<D> {
@@ -116,13 +121,46 @@ impl<const D: usize> Rbf<D> {
             shift,
             inv_scale,
             weighted_centers,
+            far: None,
         }
+    }
+
+    /// Evaluates positions through the far field of [`super::far`]: each coordinate of the
+    /// displacement within `tolerance` (world units) of the exact sum's. A tolerance of zero
+    /// is the exact sum; normals and Jacobians stay exact.
+    pub fn with_tolerance(mut self, tolerance: f64) -> Result<Self> {
+        if !(tolerance >= 0.0 && tolerance.is_finite()) {
+            return Err(Error::Solver(format!(
+                "the RBF tolerance must be a length of at least 0, not {tolerance}"
+            )));
+        }
+        self.far = (tolerance > 0.0).then(|| {
+            let tree = FarField::new(&self.centers, &self.weights, tolerance * self.inv_scale);
+            (tree, tolerance)
+        });
+        Ok(self)
+    }
+
+    /// The distance (world units) from the centers' centroid within which the far field sums
+    /// every center exactly ([`FarField::expands_at`]), if positions are evaluated through one.
+    pub fn far_field_reach(&self) -> Option<f64> {
+        self.far
+            .as_ref()
+            .map(|(far, _)| far.reach() / self.inv_scale)
+    }
+
+    /// The far field's tolerance (world units), if positions are evaluated through one.
+    pub fn tolerance(&self) -> Option<f64> {
+        self.far.as_ref().map(|(_, t)| *t)
     }
 
     /// The displacement `d(x)` at the local point `x`.
     pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
         let y = self.scaled(x);
-        let sums = super::simd::sum(&y, &slices(&self.centers), &slices(&self.weights));
+        let sums = match &self.far {
+            Some((far, _)) if far.expands_at(&y) => far.sum(&y),
+            _ => super::simd::sum(&y, &slices(&self.centers), &slices(&self.weights)),
+        };
         self.finish(&y, sums)
     }
 
@@ -377,6 +415,14 @@ impl<const D: usize> Warp<D> for Rbf<D> {
         for (p, o) in (&mut chunks).zip(&mut outs) {
             let xs: [Vect<D>; S] = std::array::from_fn(|s| p[s] - origin);
             let ys: [[f64; D]; S] = std::array::from_fn(|s| self.scaled(&xs[s]));
+            if let Some((far, _)) = &self.far
+                && ys.iter().any(|y| far.expands_at(y))
+            {
+                for s in 0..S {
+                    o[s] = self.warp(&xs[s]) + origin;
+                }
+                continue;
+            }
             let sums = super::simd::sums(&ys, &slices(&self.centers), &slices(&self.weights));
             for s in 0..S {
                 o[s] = xs[s] + self.finish(&ys[s], sums[s]) + origin;
@@ -520,5 +566,71 @@ mod tests {
                 assert!((column - j.column(a)).amax() < 1e-5, "column {a}");
             }
         }
+    }
+
+    /// Through the far field: points inside the model are summed exactly (the same bits), and
+    /// points far enough for expansions to be used stay within the tolerance of the exact sum
+    /// (to the exact sum's own rounding).
+    #[test]
+    fn the_far_field_keeps_its_tolerance() {
+        let mut next = super::super::test_numbers(3);
+        let n = 400;
+        let centers: Vec<Vect<3>> = (0..n)
+            .map(|_| Vect::<3>::new(next(), next(), next()) * 4.0)
+            .collect();
+        let field = Field {
+            origin: Vect::<3>::zeros(),
+            halves: vec![0.1; n],
+            motions: centers
+                .iter()
+                .map(|c| Motion {
+                    rot: nalgebra::SMatrix::<f64, 3, 3>::identity(),
+                    pos: c + Vect::<3>::new(0.2 * c.y.sin(), 0.1 * c.x, 0.05 * next()),
+                })
+                .collect(),
+            centers,
+        };
+        let exact = Rbf::new(&field).unwrap();
+        let tolerance = 0.5;
+        let far = exact.clone().with_tolerance(tolerance).unwrap();
+        assert!(exact.clone().with_tolerance(-1.0).is_err());
+        let reach = far.far_field_reach().unwrap();
+        assert!(reach > 8.0, "{reach}");
+        let mut expanded = 0;
+        for i in 0..200 {
+            let s = if i % 2 == 0 {
+                3.0
+            } else {
+                (1.05 + 0.01 * i as f64) * reach
+            };
+            let x = Vect::<3>::new(next(), next(), next()).normalize() * s;
+            let (got, want) = (far.displacement(&x), exact.displacement(&x));
+            let y = far.scaled(&x);
+            if far.far.as_ref().unwrap().0.expands_at(&y) {
+                expanded += 1;
+                let magnitude: f64 = (0..n)
+                    .map(|j| {
+                        let r2: f64 = (0..3).map(|a| (y[a] - far.centers[a][j]).powi(2)).sum();
+                        (0..3).map(|k| far.weights[k][j].abs()).fold(0.0, f64::max) * r2 * r2.sqrt()
+                    })
+                    .sum::<f64>()
+                    / far.inv_scale;
+                assert!(
+                    (got - want).amax() <= tolerance + 1e-14 * magnitude,
+                    "{} at {s}",
+                    (got - want).amax()
+                );
+            } else {
+                assert_eq!(got, want);
+            }
+        }
+        assert!(expanded > 50, "{expanded}");
+        let points: Vec<Vect<3>> = (0..9)
+            .map(|_| Vect::<3>::new(next(), next(), 0.0))
+            .collect();
+        let (mut a, mut b) = (points.clone(), points.clone());
+        far.warp_run(&Vect::<3>::zeros(), &points, &mut a);
+        exact.warp_run(&Vect::<3>::zeros(), &points, &mut b);
+        assert_eq!(a, b);
     }
 }

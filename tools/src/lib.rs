@@ -1,8 +1,6 @@
 //! Shared pieces of the harnesses: the default model and its resamplings to the paper's sizes,
 //! the bend edit, cell complexes of a chosen size, and random samples on a model's surface.
 
-pub mod far;
-
 use std::path::PathBuf;
 
 use data_gen::{Mesh, decimate, split_to, subdivide};
