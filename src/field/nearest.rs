@@ -7,12 +7,23 @@
 //! list of the only centers that can be among the [`NEAR`] nearest of any point inside it. A
 //! query is then a scan of that list, in cache, with no allocation.
 //!
-//! **Why the list is exact.** For a tile box `B` let `D = max_j dmax(c_j, B)` over the `NEAR`
-//! centers nearest to the tile's middle, with `dmax(c, B)` the distance from `c` to the farthest
-//! corner of `B`. Every point `x ∈ B` has those `NEAR` centers within `D`, so a center among its
-//! `NEAR` nearest is within `D` of `x`, hence `dmin(c, B) ≤ D` and `|c − mid| ≤ D + r` (`r` the
-//! half diagonal). The list holds exactly the centers found by that radius query that pass the
-//! `dmin` test (with a relative slack of `1e-9` against rounding).
+//! **Filling a tile** takes no kd-tree query where the field is small enough for a
+//! [`LeafMap`]: a grid of voxels of the smallest cells' size, each holding the cell that covers
+//! it. The cells of the voxels around the tile give the bound below, and the cells of the
+//! voxels within the bound of the tile the list. Filling the 16.6k tiles that the 480k-vertex
+//! dragon meets at 5.5k cells took about 2.6 µs of CPU per tile with two kd-tree queries (a
+//! third of the blend's time) and about half of that from the map; the blend went from 0.058 to
+//! 0.052 s (first pass, best of 10). Where the map would exceed [`MAX_VOXELS`], or a tile's
+//! region [`MAX_VISITED`] voxels, the kd-tree fills the tile.
+//!
+//! **Why the list is exact.** For a tile box `B` let `D = max_j dmax(c_j, B)` over any `NEAR`
+//! centers (the kd-tree's `NEAR` nearest to the tile's middle, or the `NEAR` of smallest `dmax`
+//! among the map's cells around the tile), with `dmax(c, B)` the distance from `c` to the
+//! farthest corner of `B`. Every point `x ∈ B` has those `NEAR` centers within `D`, so a center
+//! among its `NEAR` nearest is within `D` of `x`, hence `dmin(c, B) ≤ D`: it lies within `D + r`
+//! of the middle (`r` the half diagonal; the kd-tree's radius query) and in a voxel of `B` grown
+//! by `D` (the map's). The list holds exactly the centers found that pass the `dmin` test (with
+//! a relative slack of `1e-9` against rounding).
 //!
 //! **Order.** Neighbors are ordered by squared distance, ties by the lower cell index, whatever
 //! order candidates are offered in; lists are sorted by distance from the tile's middle, so the
@@ -139,6 +150,97 @@ pub struct Nearest<const D: usize> {
     size: f64,
     dims: [usize; D],
     tiles: Vec<OnceLock<TileList<D>>>,
+    /// The cells over a grid of the smallest cells, when it is small enough.
+    leaves: Option<LeafMap<D>>,
+}
+
+/// Upper bound on the voxels of a [`LeafMap`] (4 bytes each).
+const MAX_VOXELS: usize = 1 << 22;
+
+/// Upper bound on the voxels a tile's fill visits before it asks the kd-tree instead.
+const MAX_VISITED: usize = 4096;
+
+/// The cell covering each voxel of a grid of the smallest cells' size over the cells' boxes
+/// (`u32::MAX`: none). The cells are the leaves of an octree, aligned with this grid, so every
+/// center within a box of space lies in a voxel of its cell inside that box.
+struct LeafMap<const D: usize> {
+    edge: f64,
+    dims: [usize; D],
+    cells: Vec<u32>,
+    /// Whether a cell covers more than one voxel (and may be met more than once).
+    coarse: Vec<bool>,
+}
+
+impl<const D: usize> LeafMap<D> {
+    /// The map of the cells (`centers`, `halves`) over the box from `lower` to `upper`, or
+    /// `None` when it would have more than [`MAX_VOXELS`] voxels or the cells are not aligned
+    /// with it.
+    fn new(centers: &[[f64; D]], halves: &[f64], lower: [f64; D], upper: [f64; D]) -> Option<Self> {
+        let edge = 2.0 * halves.iter().cloned().fold(f64::MAX, f64::min);
+        let dims: [usize; D] =
+            std::array::from_fn(|a| (((upper[a] - lower[a]) / edge).round() as usize).max(1));
+        if dims.iter().map(|&n| n as f64).product::<f64>() > MAX_VOXELS as f64 {
+            return None;
+        }
+        let mut cells = vec![u32::MAX; dims.iter().product()];
+        let coarse = halves.iter().map(|&h| 2.0 * h > 1.5 * edge).collect();
+        for (i, (c, h)) in centers.iter().zip(halves).enumerate() {
+            let mut from = [0usize; D];
+            let mut to = [0usize; D];
+            for a in 0..D {
+                let f = (c[a] - h - lower[a]) / edge;
+                let t = (c[a] + h - lower[a]) / edge;
+                if (f - f.round()).abs() > 1e-6 || (t - t.round()).abs() > 1e-6 {
+                    return None;
+                }
+                from[a] = f.round() as usize;
+                to[a] = (t.round() as usize).min(dims[a]);
+            }
+            for_each_voxel(&dims, from, to, |v| cells[v] = i as u32);
+        }
+        Some(Self {
+            edge,
+            dims,
+            cells,
+            coarse,
+        })
+    }
+}
+
+/// Calls `f` with the index of every voxel from `from` to `to` (exclusive) of a grid of `dims`,
+/// the first axis fastest.
+#[inline]
+fn for_each_voxel<const D: usize>(
+    dims: &[usize; D],
+    from: [usize; D],
+    to: [usize; D],
+    mut f: impl FnMut(usize),
+) {
+    if (0..D).any(|a| from[a] >= to[a]) {
+        return;
+    }
+    let mut at = from;
+    loop {
+        let mut index = 0;
+        for a in (1..D).rev() {
+            index = (index + at[a]) * dims[a - 1];
+        }
+        for i in from[0]..to[0] {
+            f(index + i);
+        }
+        let mut a = 1;
+        loop {
+            if a == D {
+                return;
+            }
+            at[a] += 1;
+            if at[a] < to[a] {
+                break;
+            }
+            at[a] = from[a];
+            a += 1;
+        }
+    }
 }
 
 #[inline(always)]
@@ -182,6 +284,7 @@ impl<const D: usize> Nearest<D> {
         let tiles = (0..dims.iter().product())
             .map(|_| OnceLock::new())
             .collect();
+        let leaves = LeafMap::new(&centers, halves, lower, upper);
         Ok(Self {
             centers,
             tree,
@@ -189,6 +292,7 @@ impl<const D: usize> Nearest<D> {
             size,
             dims,
             tiles,
+            leaves,
         })
     }
 
@@ -205,8 +309,17 @@ impl<const D: usize> Nearest<D> {
 
     /// The filled candidate list of tile `t`.
     #[inline(always)]
+    ///
+    /// A thread that finds the tile empty fills it itself rather than wait for another thread
+    /// that is filling it: the lists are the same, the first stored is kept, and no thread
+    /// sleeps (waiting measured as a tenth of the first pass's time).
     fn list(&self, t: usize) -> &TileList<D> {
-        self.tiles[t].get_or_init(|| self.fill(t))
+        let tile = &self.tiles[t];
+        if let Some(list) = tile.get() {
+            return list;
+        }
+        let _ = tile.set(self.fill(t));
+        tile.get().expect("just set")
     }
 
     /// The `N` candidates of `list` nearest to `x`, in the order of `(d2, cell)`, and how many
@@ -347,27 +460,14 @@ impl<const D: usize> Nearest<D> {
                 .sum::<f64>()
                 .sqrt()
         };
-        let k = NonZero::new(NEAR.min(self.centers.len())).expect("centers are not empty");
-        let bound = self
-            .tree
-            .query(&mid)
-            .nearest_n::<SquaredEuclidean<f64>>(k)
-            .execute()
-            .iter()
-            .map(|r| far(&self.centers[r.item as usize]))
-            .fold(0.0, f64::max)
-            * (1.0 + 1e-9);
-        let reach = (bound + half_diagonal) * (1.0 + 1e-9);
-        let cells: Vec<u32> = self
-            .tree
-            .query(&mid)
-            .within::<SquaredEuclidean<f64>>(reach * reach)
-            .unsorted()
-            .execute()
-            .iter()
-            .map(|r| r.item)
-            .filter(|&i| near(&self.centers[i as usize]) <= bound)
-            .collect();
+        let from_leaves = self
+            .leaves
+            .as_ref()
+            .and_then(|map| self.gather_by_leaves(map, &lo, &hi));
+        let (bound, cells) = match from_leaves {
+            Some(found) => found,
+            None => self.gather_by_tree(&mid, half_diagonal, &far, &near),
+        };
         // Nearest to the middle first: the first few offered are then mostly the kept ones, and
         // later candidates are rejected by one predictable comparison.
         let mut cells: Vec<(f64, u32)> = cells
@@ -384,6 +484,139 @@ impl<const D: usize> Nearest<D> {
             })
             .collect();
         TileList { candidates, bound }
+    }
+
+    /// A tile's bound and candidates (see the module docs) from the kd-tree: its [`NEAR`]
+    /// centers nearest to the middle give the bound, and a radius query the candidates.
+    fn gather_by_tree(
+        &self,
+        mid: &[f64; D],
+        half_diagonal: f64,
+        far: &impl Fn(&[f64; D]) -> f64,
+        near: &impl Fn(&[f64; D]) -> f64,
+    ) -> (f64, Vec<u32>) {
+        let k = NonZero::new(NEAR.min(self.centers.len())).expect("centers are not empty");
+        let bound = self
+            .tree
+            .query(mid)
+            .nearest_n::<SquaredEuclidean<f64>>(k)
+            .execute()
+            .iter()
+            .map(|r| far(&self.centers[r.item as usize]))
+            .fold(0.0, f64::max)
+            * (1.0 + 1e-9);
+        let reach = (bound + half_diagonal) * (1.0 + 1e-9);
+        let cells = self
+            .tree
+            .query(mid)
+            .within::<SquaredEuclidean<f64>>(reach * reach)
+            .unsorted()
+            .execute()
+            .iter()
+            .map(|r| r.item)
+            .filter(|&i| near(&self.centers[i as usize]) <= bound)
+            .collect();
+        (bound, cells)
+    }
+
+    /// A tile's bound and candidates from the leaf map, or `None` where that
+    /// would visit more than [`MAX_VISITED`] voxels. The cells of the voxels around the tile,
+    /// grown a voxel at a time until they hold [`NEAR`] centers, give the bound (any `NEAR`
+    /// centers bound every point's `NEAR`-th distance by their farthest corner distances);
+    /// every center within the bound of the tile lies in a voxel of the tile's box grown by the
+    /// bound (and a millionth of a voxel against rounding), so the cells of those voxels are the
+    /// candidates.
+    fn gather_by_leaves(
+        &self,
+        map: &LeafMap<D>,
+        lo: &[f64; D],
+        hi: &[f64; D],
+    ) -> Option<(f64, Vec<u32>)> {
+        let range = |grow: f64| -> Option<([usize; D], [usize; D])> {
+            let mut from = [0usize; D];
+            let mut to = [0usize; D];
+            let mut count = 1.0;
+            for a in 0..D {
+                let f = ((lo[a] - grow - self.lower[a]) / map.edge - 1e-6).floor();
+                let t = ((hi[a] + grow - self.lower[a]) / map.edge + 1e-6).floor() + 1.0;
+                from[a] = f.clamp(0.0, map.dims[a] as f64) as usize;
+                to[a] = t.clamp(0.0, map.dims[a] as f64) as usize;
+                count *= (to[a] - from[a]) as f64;
+            }
+            (count <= MAX_VISITED as f64).then_some((from, to))
+        };
+        let mut found = Vec::with_capacity(512);
+        // The cells of the voxels from `from` to `to`, each once: a cell of one voxel is met
+        // once; the few coarser ones are checked against those already found.
+        let mut seen_coarse: Vec<u32> = Vec::with_capacity(64);
+        let mut gather = |from, to, found: &mut Vec<u32>| {
+            found.clear();
+            seen_coarse.clear();
+            let mut last = u32::MAX;
+            for_each_voxel(&map.dims, from, to, |v| {
+                let cell = map.cells[v];
+                if cell == last || cell == u32::MAX {
+                    return;
+                }
+                last = cell;
+                if map.coarse[cell as usize] {
+                    if seen_coarse.contains(&cell) {
+                        return;
+                    }
+                    seen_coarse.push(cell);
+                }
+                found.push(cell);
+            });
+        };
+        // Squared farthest-corner and nearest distances from the tile's box.
+        let far2 = |c: &[f64; D]| -> f64 {
+            (0..D)
+                .map(|a| {
+                    let d = (c[a] - lo[a]).abs().max((c[a] - hi[a]).abs());
+                    d * d
+                })
+                .sum::<f64>()
+        };
+        let near2 = |c: &[f64; D]| -> f64 {
+            (0..D)
+                .map(|a| {
+                    let d = (lo[a] - c[a]).max(c[a] - hi[a]).max(0.0);
+                    d * d
+                })
+                .sum::<f64>()
+        };
+        // The tile's voxels, grown a voxel at a time until they hold NEAR cells.
+        let mut grow = 0.0;
+        let bound = loop {
+            let (from, to) = range(grow)?;
+            gather(from, to, &mut found);
+            if found.len() >= NEAR {
+                // The NEAR smallest farthest-corner distances.
+                let mut smallest = [f64::INFINITY; NEAR];
+                for &i in &found {
+                    let d = far2(&self.centers[i as usize]);
+                    if d < smallest[NEAR - 1] {
+                        let mut j = NEAR - 1;
+                        while j > 0 && d < smallest[j - 1] {
+                            smallest[j] = smallest[j - 1];
+                            j -= 1;
+                        }
+                        smallest[j] = d;
+                    }
+                }
+                break smallest[NEAR - 1].sqrt() * (1.0 + 1e-9);
+            }
+            if (0..D).all(|a| from[a] == 0 && to[a] == map.dims[a]) {
+                // The whole field holds fewer than NEAR cells: every one is a candidate.
+                return Some((f64::INFINITY, found));
+            }
+            grow += map.edge;
+        };
+        let (from, to) = range(bound)?;
+        gather(from, to, &mut found);
+        let bound2 = bound * bound;
+        found.retain(|&i| near2(&self.centers[i as usize]) <= bound2);
+        Some((bound, found))
     }
 
     /// A point outside the tiles: the kd-tree's nearest, then every center as near as the
