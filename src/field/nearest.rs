@@ -648,3 +648,39 @@ impl<const D: usize> Nearest<D> {
         nb
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The kd-tree's fill, used where the leaf map is not (cells not on one grid, or too many
+    /// voxels), finds the brute-force neighbors too; and the leaf map is built where the cells
+    /// are aligned.
+    #[test]
+    fn tiles_filled_by_the_kd_tree_equal_brute_force() {
+        let mut next = super::super::test_numbers(17);
+        // A lattice of unit cells (aligned: the map is built) and the same lattice jittered.
+        let lattice: Vec<Vect<3>> = (0..6 * 5 * 4)
+            .map(|i| Vect::<3>::new((i % 6) as f64, (i / 6 % 5) as f64, (i / 30) as f64))
+            .collect();
+        let jittered: Vec<Vect<3>> = lattice
+            .iter()
+            .map(|c| c + Vect::<3>::new(next(), next(), next()) * 0.2)
+            .collect();
+        let halves = vec![0.5; lattice.len()];
+        let aligned = Nearest::new(&lattice, &halves).unwrap();
+        assert!(aligned.leaves.is_some());
+        let mut forced = Nearest::new(&lattice, &halves).unwrap();
+        forced.leaves = None;
+        let unaligned = Nearest::new(&jittered, &halves).unwrap();
+        assert!(unaligned.leaves.is_none());
+        for nearest in [&aligned, &forced, &unaligned] {
+            for _ in 0..5000 {
+                let x = [3.0 + 3.5 * next(), 2.5 + 3.0 * next(), 2.0 + 2.5 * next()];
+                assert_eq!(nearest.find(&x), nearest.brute_force(&x), "at {x:?}");
+            }
+            let (_, filled) = nearest.tile_counts();
+            assert!(filled > 100, "{filled}");
+        }
+    }
+}
