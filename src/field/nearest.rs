@@ -207,6 +207,28 @@ impl<const D: usize> LeafMap<D> {
     }
 }
 
+/// The squared distance from `c` to the farthest corner of the box from `lo` to `hi`.
+#[inline]
+fn far2<const D: usize>(c: &[f64; D], lo: &[f64; D], hi: &[f64; D]) -> f64 {
+    (0..D)
+        .map(|a| {
+            let d = (c[a] - lo[a]).abs().max((c[a] - hi[a]).abs());
+            d * d
+        })
+        .sum()
+}
+
+/// The squared distance from `c` to the box from `lo` to `hi` (zero inside).
+#[inline]
+fn near2<const D: usize>(c: &[f64; D], lo: &[f64; D], hi: &[f64; D]) -> f64 {
+    (0..D)
+        .map(|a| {
+            let d = (lo[a] - c[a]).max(c[a] - hi[a]).max(0.0);
+            d * d
+        })
+        .sum()
+}
+
 /// Calls `f` with the index of every voxel from `from` to `to` (exclusive) of a grid of `dims`,
 /// the first axis fastest.
 #[inline]
@@ -442,24 +464,8 @@ impl<const D: usize> Nearest<D> {
         let (lo, hi) = self.tile_box(t);
         let mid: [f64; D] = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
         let half_diagonal = 0.5 * self.size * (D as f64).sqrt();
-        let far = |c: &[f64; D]| -> f64 {
-            (0..D)
-                .map(|a| {
-                    let d = (c[a] - lo[a]).abs().max((c[a] - hi[a]).abs());
-                    d * d
-                })
-                .sum::<f64>()
-                .sqrt()
-        };
-        let near = |c: &[f64; D]| -> f64 {
-            (0..D)
-                .map(|a| {
-                    let d = (lo[a] - c[a]).max(c[a] - hi[a]).max(0.0);
-                    d * d
-                })
-                .sum::<f64>()
-                .sqrt()
-        };
+        let far = |c: &[f64; D]| -> f64 { far2(c, &lo, &hi).sqrt() };
+        let near = |c: &[f64; D]| -> f64 { near2(c, &lo, &hi).sqrt() };
         let from_leaves = self
             .leaves
             .as_ref()
@@ -568,23 +574,6 @@ impl<const D: usize> Nearest<D> {
                 found.push(cell);
             });
         };
-        // Squared farthest-corner and nearest distances from the tile's box.
-        let far2 = |c: &[f64; D]| -> f64 {
-            (0..D)
-                .map(|a| {
-                    let d = (c[a] - lo[a]).abs().max((c[a] - hi[a]).abs());
-                    d * d
-                })
-                .sum::<f64>()
-        };
-        let near2 = |c: &[f64; D]| -> f64 {
-            (0..D)
-                .map(|a| {
-                    let d = (lo[a] - c[a]).max(c[a] - hi[a]).max(0.0);
-                    d * d
-                })
-                .sum::<f64>()
-        };
         // The tile's voxels, grown a voxel at a time until they hold NEAR cells.
         let mut grow = 0.0;
         let bound = loop {
@@ -594,7 +583,7 @@ impl<const D: usize> Nearest<D> {
                 // The NEAR smallest farthest-corner distances.
                 let mut smallest = [f64::INFINITY; NEAR];
                 for &i in &found {
-                    let d = far2(&self.centers[i as usize]);
+                    let d = far2(&self.centers[i as usize], lo, hi);
                     if d < smallest[NEAR - 1] {
                         let mut j = NEAR - 1;
                         while j > 0 && d < smallest[j - 1] {
@@ -615,7 +604,7 @@ impl<const D: usize> Nearest<D> {
         let (from, to) = range(bound)?;
         gather(from, to, &mut found);
         let bound2 = bound * bound;
-        found.retain(|&i| near2(&self.centers[i as usize]) <= bound2);
+        found.retain(|&i| near2(&self.centers[i as usize], lo, hi) <= bound2);
         Some((bound, found))
     }
 

@@ -513,16 +513,13 @@ mod tests {
     use super::*;
     use crate::rigid::Motion;
 
-    /// The vectorized Jacobian against the term-by-term sum of `3 r w (y − c)`, and against
-    /// central differences of the displacement.
-    #[test]
-    fn the_jacobian_matches_its_definition() {
-        let mut next = super::super::test_numbers(7);
-        let n = 300;
+    /// `n` centers in a box of edge 8, displaced smoothly and by a little noise, at rest
+    /// rotation.
+    fn random_field(n: usize, next: &mut impl FnMut() -> f64) -> Field<3> {
         let centers: Vec<Vect<3>> = (0..n)
             .map(|_| Vect::<3>::new(next(), next(), next()) * 4.0)
             .collect();
-        let field = Field {
+        Field {
             origin: Vect::<3>::zeros(),
             halves: vec![0.1; n],
             motions: centers
@@ -533,7 +530,16 @@ mod tests {
                 })
                 .collect(),
             centers,
-        };
+        }
+    }
+
+    /// The vectorized Jacobian against the term-by-term sum of `3 r w (y − c)`, and against
+    /// central differences of the displacement.
+    #[test]
+    fn the_jacobian_matches_its_definition() {
+        let mut next = super::super::test_numbers(7);
+        let n = 300;
+        let field = random_field(n, &mut next);
         let rbf = Rbf::new(&field).unwrap();
         for _ in 0..20 {
             let x = Vect::<3>::new(next(), next(), next()) * 3.0;
@@ -575,21 +581,7 @@ mod tests {
     fn the_far_field_keeps_its_tolerance() {
         let mut next = super::super::test_numbers(3);
         let n = 400;
-        let centers: Vec<Vect<3>> = (0..n)
-            .map(|_| Vect::<3>::new(next(), next(), next()) * 4.0)
-            .collect();
-        let field = Field {
-            origin: Vect::<3>::zeros(),
-            halves: vec![0.1; n],
-            motions: centers
-                .iter()
-                .map(|c| Motion {
-                    rot: nalgebra::SMatrix::<f64, 3, 3>::identity(),
-                    pos: c + Vect::<3>::new(0.2 * c.y.sin(), 0.1 * c.x, 0.05 * next()),
-                })
-                .collect(),
-            centers,
-        };
+        let field = random_field(n, &mut next);
         let exact = Rbf::new(&field).unwrap();
         let tolerance = 0.5;
         let far = exact.clone().with_tolerance(tolerance).unwrap();
