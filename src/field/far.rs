@@ -124,7 +124,7 @@ impl<const D: usize> FarField<D> {
     pub fn expands_at(&self, y: &[f64; D]) -> bool {
         let root = &self.nodes[0].z;
         let r2: f64 = (0..D).map(|a| (y[a] - root[a]).powi(2)).sum();
-        r2 >= self.near * self.near
+        self.near <= 0.0 || r2 >= self.near * self.near
     }
 
     /// The distance from the root's centroid within which no expansion is used.
@@ -354,6 +354,9 @@ mod tests {
                 [s * next(), s * next(), s * next()]
             })
             .collect();
+        // A tolerance beyond every node's bound: expansions are used even at the centroid.
+        let loose = FarField::new(&centers, &weights, 1e12);
+        assert!(loose.reach() < 0.0 && loose.expands_at(&loose.nodes[0].z));
         for tolerance in [10.0, 1.0, 0.1, 0.0] {
             let tree = FarField::new(&centers, &weights, tolerance);
             let mut used = 0.0f64;
@@ -372,6 +375,7 @@ mod tests {
                     used = used.max(bound[k]);
                 }
             }
+            assert!(!tree.expands_at(&tree.nodes[0].z) || tolerance > 0.0);
             if tolerance == 0.0 {
                 assert_eq!(used, 0.0);
             } else {
