@@ -25,7 +25,9 @@
 //! / n)` (per node, one precomputed radius). The nodes used at a point hold disjoint sets of
 //! centers, so their bounds add up to at most `τ`, and the rest is summed exactly (leaves, by
 //! the vector kernel of [`super::simd`]). Nodes of fewer than [`MIN_EXPANDED`] centers are
-//! never expanded: evaluating an expansion costs about as much as summing 100 centers exactly.
+//! never expanded: an expansion takes some 150 scalar operations per component, about what the
+//! vector kernel spends on 100 centers (an estimate from the kernel's measured rate, not a
+//! measurement of the expansion).
 //!
 //! **What it buys, measured** (`tools/exact`, the 480k-vertex dragon bent at 5.5k cells; see
 //! `BENCHMARKS.md`): nothing there. The triharmonic weights cancel terms some 10⁴ times larger
