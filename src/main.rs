@@ -183,9 +183,11 @@ impl DeformArgs {
 /// The RBF's far-field evaluation.
 #[derive(clap::Args)]
 struct ToleranceArg {
-    /// With the RBF transfer: sum far cells through a Barnes–Hut expansion, each output
-    /// coordinate within this length (model units) of the exact RBF's. Without it every cell
-    /// is summed exactly (measured as fast or faster at the cell counts of BENCHMARKS.md).
+    /// With the RBF transfer: sum far groups of cells through a Barnes–Hut expansion wherever
+    /// its error bound keeps each output coordinate within this length (model units) of the
+    /// exact RBF's. On real models that is only far outside the model (90 extents away at 1 %
+    /// of the extent on the dragon, BENCHMARKS.md); elsewhere every cell is summed exactly, at
+    /// the same speed.
     #[arg(long, value_name = "LENGTH")]
     rbf_tolerance: Option<f64>,
 }
