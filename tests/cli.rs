@@ -31,9 +31,7 @@ fn bar_edit(
     handle: impl Fn(&Vect<3>) -> Vect<3>,
 ) -> (Vec<Vect<3>>, Vec<Vect<3>>) {
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("bar.ply");
-    let output = dir.path().join("out.ply");
-    let edit = dir.path().join("edit.toml");
+    let (input, output, edit) = common::files(dir.path(), "bar.ply", "out.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
     std::fs::write(
         &edit,
@@ -285,14 +283,7 @@ fn render_and_preview_draw_what_was_there() {
     let dir = tempfile::tempdir().unwrap();
     let png = dir.path().join("dragon.png");
     let dragon = common::shared("meshes/dragon_11k_binary.ply");
-    let r = run(&[
-        "render",
-        dragon.to_str().unwrap(),
-        "-o",
-        png.to_str().unwrap(),
-        "--size",
-        "320x240",
-    ]);
+    let r = render(&dragon, &png, &["--size", "320x240"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let image = read_png(&png);
     assert_eq!((image.width, image.height), (320, 240));
@@ -310,14 +301,7 @@ fn render_and_preview_draw_what_was_there() {
 
     let las = common::shared("las/autzen_trim.las");
     let las_png = dir.path().join("autzen.png");
-    let r = run(&[
-        "render",
-        las.to_str().unwrap(),
-        "-o",
-        las_png.to_str().unwrap(),
-        "--elevation",
-        "90",
-    ]);
+    let r = render(&las, &las_png, &["--elevation", "90"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let colored = read_png(&las_png)
         .rgb
@@ -328,14 +312,7 @@ fn render_and_preview_draw_what_was_there() {
 
     // A bad size is refused, and nothing is written.
     let bad = dir.path().join("bad.png");
-    let r = run(&[
-        "render",
-        dragon.to_str().unwrap(),
-        "-o",
-        bad.to_str().unwrap(),
-        "--size",
-        "big",
-    ]);
+    let r = render(&dragon, &bad, &["--size", "big"]);
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(!bad.exists());
 
@@ -389,6 +366,18 @@ fn render_and_preview_draw_what_was_there() {
 }
 
 /// A PNG as the renderer's RGB image (read by the library's reader).
+/// `rigidcells render INPUT -o OUTPUT` plus `extra` arguments.
+fn render(input: &std::path::Path, output: &std::path::Path, extra: &[&str]) -> common::Run {
+    let mut args = vec![
+        "render",
+        input.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 fn read_png(path: &std::path::Path) -> rigidcells::render::Image {
     let raster = rigidcells::image::Raster::read_png(path).unwrap();
     assert!(
@@ -412,11 +401,7 @@ fn lifted_bar(
     dir: &std::path::Path,
     lift: f64,
 ) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
-    let (input, output, edit) = (
-        dir.join("bar.ply"),
-        dir.join("out.ply"),
-        dir.join("edit.toml"),
-    );
+    let (input, output, edit) = common::files(dir, "bar.ply", "out.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
     std::fs::write(
         &edit,

@@ -3,19 +3,31 @@
 
 mod common;
 
+use std::path::Path;
+
 use common::run;
 use rigidcells::image::Raster;
+
+/// `rigidcells image INPUT --edit EDIT -o OUTPUT` plus `extra` arguments.
+fn image(input: &Path, edit: &Path, output: &Path, extra: &[&str]) -> common::Run {
+    let mut args = vec![
+        "image",
+        input.to_str().unwrap(),
+        "--edit",
+        edit.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    run(&args)
+}
 
 /// The fixed legs keep their pixels, the hands' pixels move as sent, the foreground's area
 /// stays within 5 %, and the output has no holes.
 #[test]
 fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
     let dir = tempfile::tempdir().unwrap();
-    let (input, output, edit) = (
-        dir.path().join("figure.png"),
-        dir.path().join("bent.png"),
-        dir.path().join("edit.toml"),
-    );
+    let (input, output, edit) = common::files(dir.path(), "figure.png", "bent.png");
     let (width, height, rgba) = data_gen::gingerbread();
     let figure = Raster {
         width,
@@ -24,15 +36,7 @@ fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
     };
     figure.write_png(&input).unwrap();
     std::fs::write(&edit, data_gen::GINGERBREAD_SPEC).unwrap();
-    let r = run(&[
-        "image",
-        input.to_str().unwrap(),
-        "--edit",
-        edit.to_str().unwrap(),
-        "-o",
-        output.to_str().unwrap(),
-        "-q",
-    ]);
+    let r = image(&input, &edit, &output, &["-q"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let out = Raster::read_png(&output).unwrap();
     assert_eq!((out.width, out.height), (width, height));
@@ -114,11 +118,7 @@ fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
 #[test]
 fn image_refuses_what_it_cannot_read() {
     let dir = tempfile::tempdir().unwrap();
-    let (input, output, edit) = (
-        dir.path().join("opaque.png"),
-        dir.path().join("out.png"),
-        dir.path().join("edit.toml"),
-    );
+    let (input, output, edit) = common::files(dir.path(), "opaque.png", "out.png");
     let opaque = Raster {
         width: 32,
         height: 32,
@@ -126,27 +126,12 @@ fn image_refuses_what_it_cannot_read() {
     };
     opaque.write_png(&input).unwrap();
     std::fs::write(&edit, data_gen::GINGERBREAD_SPEC).unwrap();
-    let args = |extra: &[&str]| {
-        let mut a = vec![
-            "image",
-            input.to_str().unwrap(),
-            "--edit",
-            edit.to_str().unwrap(),
-            "-o",
-            output.to_str().unwrap(),
-        ];
-        a.extend_from_slice(extra);
-        a.into_iter().map(String::from).collect::<Vec<_>>()
-    };
-    let r = run(&args(&[]).iter().map(String::as_str).collect::<Vec<_>>());
+    let r = image(&input, &edit, &output, &[]);
     assert_ne!(r.code, 0);
     assert!(r.stderr.contains("--background"), "{}", r.stderr);
     assert!(!output.exists());
     std::fs::write(&input, b"not a png").unwrap();
-    let r = run(&args(&["--background", "255,255,255"])
-        .iter()
-        .map(String::as_str)
-        .collect::<Vec<_>>());
+    let r = image(&input, &edit, &output, &["--background", "255,255,255"]);
     assert_eq!(r.code, 3, "{}", r.stderr);
     assert!(r.stderr.contains("opaque.png"), "{}", r.stderr);
     assert!(!output.exists());
@@ -157,11 +142,7 @@ fn image_refuses_what_it_cannot_read() {
 #[test]
 fn deform_moves_a_2d_point_set() {
     let dir = tempfile::tempdir().unwrap();
-    let (input, output, edit) = (
-        dir.path().join("bar.xy"),
-        dir.path().join("out.xy"),
-        dir.path().join("edit.toml"),
-    );
+    let (input, output, edit) = common::files(dir.path(), "bar.xy", "out.xy");
     let mut text = String::from("# a 10 x 1 strip of points, with a label column\n");
     for i in 0..=100 {
         for j in 0..=10 {

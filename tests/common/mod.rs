@@ -14,6 +14,11 @@ pub fn shared(rel: &str) -> PathBuf {
         .join(rel)
 }
 
+/// The paths of a test's input and output files in `dir`, and of its `edit.toml`.
+pub fn files(dir: &Path, input: &str, output: &str) -> (PathBuf, PathBuf, PathBuf) {
+    (dir.join(input), dir.join(output), dir.join("edit.toml"))
+}
+
 pub struct Run {
     pub code: i32,
     pub stderr: String,
