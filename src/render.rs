@@ -432,15 +432,7 @@ mod tests {
         let p: Vec<Vect<3>> = (0..8)
             .map(|k| at + Vect::<3>::new((k & 1) as f64, (k >> 1 & 1) as f64, (k >> 2 & 1) as f64))
             .collect();
-        let quads = [
-            [0, 1, 3, 2],
-            [4, 6, 7, 5],
-            [0, 4, 5, 1],
-            [2, 3, 7, 6],
-            [0, 2, 6, 4],
-            [1, 5, 7, 3],
-        ];
-        let tris = quads
+        let tris = crate::cells::BOX_QUADS
             .iter()
             .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
             .collect();

@@ -16,6 +16,17 @@ use crate::io::write_atomic;
 use crate::rigid::{Motion, Vect};
 use crate::solve::{Role, Solution, cell_strain};
 
+/// The faces of a box as quads of its corners, outward, corners numbered by bits (x = 1,
+/// y = 2, z = 4).
+pub(crate) const BOX_QUADS: [[u32; 4]; 6] = [
+    [0, 4, 6, 2],
+    [1, 3, 7, 5],
+    [0, 1, 5, 4],
+    [2, 6, 7, 3],
+    [0, 2, 3, 1],
+    [4, 5, 7, 6],
+];
+
 /// Writes `complex` (or, when given, the solution's complex in its solved pose) to `path` as a
 /// binary little-endian PLY.
 pub fn write_cells_ply(
@@ -57,15 +68,6 @@ pub fn write_cells_ply(
             }
         }
     }
-    // Quads of the box, outward, by corner bits (x = 1, y = 2, z = 4).
-    const QUADS: [[u32; 4]; 6] = [
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-    ];
     for (i, cell) in complex.cells.iter().enumerate() {
         let role = solution.map_or(0u8, |s| match s.constraints.roles[i] {
             Role::Free => 0,
@@ -92,7 +94,7 @@ pub fn write_cells_ply(
             (None, CellKind::Interior) => [110, 130, 170],
         };
         let kind = u8::from(cell.kind == CellKind::Interior);
-        for quad in QUADS {
+        for quad in BOX_QUADS {
             out.push(4);
             for c in quad {
                 out.extend_from_slice(&(8 * i as u32 + c).to_le_bytes());

@@ -18,6 +18,8 @@
 mod adjacency;
 mod build;
 mod export;
+#[cfg(test)]
+pub(crate) use export::BOX_QUADS;
 mod tri_box;
 mod winding;
 
