@@ -199,11 +199,8 @@ impl ToleranceArg {
             Some(_) if !matches!(transfer, TransferArg::Rbf) => {
                 Err(Error::Param("--rbf-tolerance applies to --transfer rbf only".into()).into())
             }
-            Some(t) if !(t >= 0.0 && t.is_finite()) => Err(Error::Param(format!(
-                "--rbf-tolerance must be a length of at least 0, not {t}"
-            ))
-            .into()),
-            _ => Ok(()),
+            Some(t) => Ok(rigidcells::field::Rbf::<3>::check_tolerance(t)?),
+            None => Ok(()),
         }
     }
 }

@@ -129,11 +129,7 @@ impl<const D: usize> Rbf<D> {
     /// displacement within `tolerance` (world units) of the exact sum's. A tolerance of zero
     /// is the exact sum; normals and Jacobians stay exact.
     pub fn with_tolerance(mut self, tolerance: f64) -> Result<Self> {
-        if !(tolerance >= 0.0 && tolerance.is_finite()) {
-            return Err(Error::Solver(format!(
-                "the RBF tolerance must be a length of at least 0, not {tolerance}"
-            )));
-        }
+        Self::check_tolerance(tolerance)?;
         self.far = (tolerance > 0.0).then(|| {
             let tree = FarField::new(&self.centers, &self.weights, tolerance * self.inv_scale);
             (tree, tolerance)
@@ -147,6 +143,18 @@ impl<const D: usize> Rbf<D> {
         self.far
             .as_ref()
             .map(|(far, _)| far.reach() / self.inv_scale)
+    }
+
+    /// Refuses a far-field tolerance that is not a finite length of at least 0 (what
+    /// [`Rbf::with_tolerance`] takes; the CLI checks it before solving).
+    pub fn check_tolerance(tolerance: f64) -> Result<()> {
+        if tolerance >= 0.0 && tolerance.is_finite() {
+            Ok(())
+        } else {
+            Err(Error::Param(format!(
+                "the RBF tolerance (--rbf-tolerance) must be a length of at least 0, not {tolerance}"
+            )))
+        }
     }
 
     /// The far field's tolerance (world units), if positions are evaluated through one.

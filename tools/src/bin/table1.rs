@@ -46,50 +46,37 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             cell_size: Some(cell_size_for(&points, &mesh.triangles, cells)?),
             ..Default::default()
         };
-        let mut times = Vec::new();
-        let mut complex = None;
-        for _ in 0..3 {
-            let t = Instant::now();
-            complex = Some(build(&points, &mesh.triangles, &params)?.0);
-            times.push(t.elapsed().as_secs_f64());
-        }
-        times.sort_by(f64::total_cmp);
-        let voxel = times[1];
-        let complex = complex.expect("three builds");
-        let got_cells = complex.len();
         // Medians of three runs: this machine's timings vary by ±20 % from run to run.
-        let mut solves = Vec::new();
-        for _ in 0..3 {
+        let (complex, voxel) = median_of_3(|| {
+            let t = Instant::now();
+            let complex = build(&points, &mesh.triangles, &params)?.0;
+            Ok::<_, rigidcells::Error>((complex, t.elapsed().as_secs_f64()))
+        })?;
+        let got_cells = complex.len();
+        let (sol, iteration) = median_of_3(|| {
             let constraints = solve::resolve(&complex, &spec, &points, None)?;
-            solves.push(solve::solve(
+            let sol = solve::solve(
                 complex.clone(),
                 constraints,
                 &SolveParams::default(),
                 &Silent,
-            )?);
-        }
-        solves.sort_by(|a, b| {
-            a.info
-                .seconds_per_iteration()
-                .total_cmp(&b.info.seconds_per_iteration())
-        });
-        let sol = &solves[1];
-        let field = Field::from_solution(sol);
+            )?;
+            let iteration = sol.info.seconds_per_iteration();
+            Ok::<_, rigidcells::Error>((sol, iteration))
+        })?;
+        let field = Field::from_solution(&sol);
         let timed = |transfer| -> Result<f64, rigidcells::Error> {
-            let mut times = Vec::new();
-            for _ in 0..3 {
+            let ((), seconds) = median_of_3(|| {
                 let mut moved = points.clone();
                 let t = Instant::now();
                 let deformer = Deformer::new(&field, transfer)?;
                 apply(&deformer, &field.origin, &mut moved);
-                times.push(t.elapsed().as_secs_f64());
-            }
-            times.sort_by(f64::total_cmp);
-            Ok(times[1])
+                Ok::<_, rigidcells::Error>(((), t.elapsed().as_secs_f64()))
+            })?;
+            Ok(seconds)
         };
         let blend = timed(Transfer::Blend)?;
         let rbf = timed(Transfer::Rbf)?;
-        let iteration = sol.info.seconds_per_iteration();
         let ratio = |paper: f64, ours: f64| match paper / ours {
             r if r < 10.0 => format!("{r:.1}×"),
             r => format!("{r:.0}×"),
@@ -106,4 +93,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
+}
+
+/// Runs `run` three times and keeps the run whose measure (the second of its pair) is the
+/// median.
+fn median_of_3<T, E>(mut run: impl FnMut() -> Result<(T, f64), E>) -> Result<(T, f64), E> {
+    let mut runs = vec![run()?, run()?, run()?];
+    runs.sort_by(|a, b| a.1.total_cmp(&b.1));
+    Ok(runs.swap_remove(1))
 }
