@@ -140,8 +140,7 @@ impl<const D: usize> FarField<D> {
         self.sum_with_bound(y).0
     }
 
-    /// [`Self::sum`] and the bound on the error of each component (at most the tolerance),
-    /// with the number of nodes expanded.
+    /// [`Self::sum`] and the bound on the error of each component (at most the tolerance).
     pub fn sum_with_bound(&self, y: &[f64; D]) -> ([f64; D], [f64; D]) {
         let mut sums = [0.0; D];
         let mut bound = [0.0; D];

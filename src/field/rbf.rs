@@ -46,9 +46,8 @@ pub struct Rbf<const D: usize> {
     /// `w_k[i] c_a[i]`, axis by axis then component by component: the second sums of the
     /// Jacobian ([`Rbf::jacobian`]).
     weighted_centers: [[Vec<f64>; D]; D],
-    /// The far-field evaluation and its tolerance (world units), when one was asked for
-    /// ([`Rbf::with_tolerance`]).
-    far: Option<(FarField<D>, f64)>,
+    /// The far-field evaluation, when one was asked for ([`Rbf::with_tolerance`]).
+    far: Option<FarField<D>>,
 }
 
 impl<const D: usize> Rbf<D> {
@@ -130,19 +129,15 @@ impl<const D: usize> Rbf<D> {
     /// is the exact sum; normals and Jacobians stay exact.
     pub fn with_tolerance(mut self, tolerance: f64) -> Result<Self> {
         Self::check_tolerance(tolerance)?;
-        self.far = (tolerance > 0.0).then(|| {
-            let tree = FarField::new(&self.centers, &self.weights, tolerance * self.inv_scale);
-            (tree, tolerance)
-        });
+        self.far = (tolerance > 0.0)
+            .then(|| FarField::new(&self.centers, &self.weights, tolerance * self.inv_scale));
         Ok(self)
     }
 
     /// The distance (world units) from the centers' centroid within which the far field sums
     /// every center exactly ([`FarField::expands_at`]), if positions are evaluated through one.
     pub fn far_field_reach(&self) -> Option<f64> {
-        self.far
-            .as_ref()
-            .map(|(far, _)| far.reach() / self.inv_scale)
+        self.far.as_ref().map(|far| far.reach() / self.inv_scale)
     }
 
     /// Refuses a far-field tolerance that is not a finite length of at least 0 (what
@@ -157,16 +152,11 @@ impl<const D: usize> Rbf<D> {
         }
     }
 
-    /// The far field's tolerance (world units), if positions are evaluated through one.
-    pub fn tolerance(&self) -> Option<f64> {
-        self.far.as_ref().map(|(_, t)| *t)
-    }
-
     /// The displacement `d(x)` at the local point `x`.
     pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
         let y = self.scaled(x);
         let sums = match &self.far {
-            Some((far, _)) if far.expands_at(&y) => far.sum(&y),
+            Some(far) if far.expands_at(&y) => far.sum(&y),
             _ => super::simd::sum(&y, &slices(&self.centers), &slices(&self.weights)),
         };
         self.finish(&y, sums)
@@ -423,7 +413,7 @@ impl<const D: usize> Warp<D> for Rbf<D> {
         for (p, o) in (&mut chunks).zip(&mut outs) {
             let xs: [Vect<D>; S] = std::array::from_fn(|s| p[s] - origin);
             let ys: [[f64; D]; S] = std::array::from_fn(|s| self.scaled(&xs[s]));
-            if let Some((far, _)) = &self.far
+            if let Some(far) = &self.far
                 && ys.iter().any(|y| far.expands_at(y))
             {
                 for s in 0..S {
@@ -606,7 +596,7 @@ mod tests {
             let x = Vect::<3>::new(next(), next(), next()).normalize() * s;
             let (got, want) = (far.displacement(&x), exact.displacement(&x));
             let y = far.scaled(&x);
-            if far.far.as_ref().unwrap().0.expands_at(&y) {
+            if far.far.as_ref().unwrap().expands_at(&y) {
                 expanded += 1;
                 let magnitude: f64 = (0..n)
                     .map(|j| {
