@@ -82,6 +82,25 @@ pub enum Error {
     /// that must change with what the points hold).
     #[error("{0}: the output must be written again")]
     Retry(PathBuf),
+    /// Samples lie beyond the margin of the field's cells, where the field is not defined.
+    #[error(
+        "{path}: {count} samples lie farther than {margin} outside the field's cells (the \
+         farthest, at {at:?}, lies {farthest} from the cells' bounding box); nothing was \
+         written. Solve a field over these samples, or pass --outside keep (they keep their \
+         coordinates) or --outside extend (the transfer is extrapolated)"
+    )]
+    Outside {
+        /// The input file.
+        path: PathBuf,
+        /// How many samples.
+        count: u64,
+        /// The margin.
+        margin: f64,
+        /// The largest distance of one from the cells' bounding box.
+        farthest: f64,
+        /// That sample (input coordinates).
+        at: Vec<f64>,
+    },
     /// A numerical failure that damping could not repair.
     #[error("solver failure: {0}")]
     Solver(String),

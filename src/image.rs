@@ -23,7 +23,7 @@ use std::path::Path;
 
 use crate::cells::build;
 use crate::error::{Error, Result};
-use crate::field::{Deformer, Field, Transfer, apply};
+use crate::field::{Constrained, Deformer, Field, Outside, Transfer, apply};
 use crate::pipeline::DeformParams;
 use crate::progress::Silent;
 use crate::rigid::Vect;
@@ -157,8 +157,8 @@ pub fn deform_image(
     info.cells = solution.complex.len();
     info.iterations = solution.info.iterations;
     let field = Field::from_solution(&solution);
-    let deformer =
-        Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
+    let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
+    let deformer = Constrained::new(&field, inner, Outside::Extend)?;
 
     // The corners of the foreground pixels, numbered on first use, and where they go.
     let mut corner = vec![u32::MAX; (w + 1) * (h + 1)];

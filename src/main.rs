@@ -9,7 +9,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, Inside, write_cells_ply};
-use rigidcells::field::{SavedField, Transfer};
+use rigidcells::field::{Outside, SavedField, Transfer};
 use rigidcells::io::{LasHeader, Source, refuse_overwrite};
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
 use rigidcells::progress::Observer;
@@ -45,11 +45,18 @@ enum Command {
         /// Output file.
         #[arg(short, long)]
         output: PathBuf,
-        /// Transfer of the cells' motions to the samples.
-        #[arg(long, value_enum, default_value_t = TransferArg::Rbf)]
-        transfer: TransferArg,
+        /// Transfer of the cells' motions to the samples [default: the one the field was
+        /// saved with by `deform --transfer`].
+        #[arg(long, value_enum)]
+        transfer: Option<TransferArg>,
         #[command(flatten)]
         tolerance: ToleranceArg,
+        /// Samples farther outside the field's cells than its margin (the size of the cells on
+        /// its boundary): refuse (exit 4, nothing written), keep (they keep their coordinates;
+        /// the shape tears at the margin), or extend (the transfer is extrapolated: the RBF's
+        /// linear part grows with the distance, the blend follows the nearest cells).
+        #[arg(long, value_enum, default_value_t = OutsideArg::Refuse)]
+        outside: OutsideArg,
         /// Print nothing but errors.
         #[arg(short, long)]
         quiet: bool,
@@ -297,6 +304,16 @@ enum InsideArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+enum OutsideArg {
+    /// Fail with exit code 4, naming how many samples and how far; write nothing.
+    Refuse,
+    /// Samples beyond the margin keep their coordinates bit for bit.
+    Keep,
+    /// The transfer is evaluated beyond the margin as anywhere.
+    Extend,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 enum TransferArg {
     /// Continuous blend of the 4 nearest cells (fast preview).
     Blend,
@@ -316,17 +333,22 @@ fn main() -> ExitCode {
             output,
             transfer,
             tolerance,
+            outside,
             quiet,
-        } => tolerance.check(transfer).and_then(|()| {
-            run_apply(
-                &field,
-                &input,
-                &output,
-                transfer.into(),
-                tolerance.rbf_tolerance,
-                quiet,
-            )
-        }),
+        } => tolerance
+            .check(transfer.unwrap_or(TransferArg::Rbf))
+            .and_then(|()| {
+                let params = pipeline::ApplyParams {
+                    transfer: transfer.map(Into::into),
+                    rbf_tolerance: tolerance.rbf_tolerance,
+                    outside: match outside {
+                        OutsideArg::Refuse => Outside::Refuse,
+                        OutsideArg::Keep => Outside::Keep,
+                        OutsideArg::Extend => Outside::Extend,
+                    },
+                };
+                run_apply(&field, &input, &output, &params, quiet)
+            }),
         Command::Info { input } => run_info(&input),
         Command::Image {
             input,
@@ -381,7 +403,8 @@ fn exit_code(e: &anyhow::Error) -> u8 {
             | Error::Param(_)
             | Error::NoConstraints
             | Error::ConstraintConflict { .. }
-            | Error::GridTooLarge { .. },
+            | Error::GridTooLarge { .. }
+            | Error::Outside { .. },
         ) => 4,
         _ => 1,
     }
@@ -507,9 +530,10 @@ fn deform_file(
     if !quiet {
         report(input, output, &info);
         println!(
-            "  constraints: fixed and handle samples within {:.3e} of where they were sent ({} \
-             checked); total {:.2} s{}",
-            summary.residual_max,
+            "  constraints: fixed samples within {:.3e} of their rest positions, handle samples \
+             within {:.3e} of where they were sent ({} checked); total {:.2} s{}",
+            summary.residual_fixed_max,
+            summary.residual_handle_max,
             summary.residual_samples,
             summary.timings_s.total,
             summary
@@ -771,14 +795,22 @@ fn run_apply(
     field: &Path,
     input: &Path,
     output: &Path,
-    transfer: Transfer,
-    rbf_tolerance: Option<f64>,
+    params: &pipeline::ApplyParams,
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
     let saved = SavedField::<3>::load(field)?;
+    if params.rbf_tolerance.is_some() && params.transfer.unwrap_or(saved.transfer) != Transfer::Rbf
+    {
+        return Err(Error::Param(format!(
+            "--rbf-tolerance applies to the RBF transfer only, and {} was saved for another; \
+             add --transfer rbf",
+            field.display()
+        ))
+        .into());
+    }
     let bar = Bar::new(quiet);
-    let info = pipeline::apply_file(saved, input, output, transfer, rbf_tolerance, CHUNK, &bar)?;
+    let info = pipeline::apply_file(saved, input, output, params, CHUNK, &bar)?;
     if !quiet {
         for n in &info.notes {
             println!("note: {n}");
@@ -976,29 +1008,35 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A progress bar on a terminal; silent otherwise.
+/// A progress bar on a terminal (a spinner for stages of unknown length); silent otherwise.
 struct Bar(Option<ProgressBar>);
 
 impl Bar {
     fn new(quiet: bool) -> Self {
-        Self((!quiet && std::io::stderr().is_terminal()).then(|| {
-            let b = ProgressBar::hidden();
-            b.set_style(
-                ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {elapsed}")
-                    .expect("valid template"),
-            );
-            b
-        }))
+        Self((!quiet && std::io::stderr().is_terminal()).then(ProgressBar::hidden))
     }
 }
 
 impl Observer for Bar {
     fn stage(&self, name: &str, len: u64) {
         if let Some(b) = &self.0 {
+            let template = if len == 0 {
+                "{prefix:>11} {spinner} {msg} {elapsed}"
+            } else {
+                "{prefix:>11} [{bar:30}] {pos}/{len} {msg} {elapsed}"
+            };
+            b.set_style(ProgressStyle::with_template(template).expect("valid template"));
             b.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-            b.set_message(name.to_string());
+            b.set_prefix(name.to_string());
+            b.set_message("");
             b.set_length(len);
             b.set_position(0);
+            b.reset_elapsed();
+            if len == 0 {
+                b.enable_steady_tick(std::time::Duration::from_millis(120));
+            } else {
+                b.disable_steady_tick();
+            }
         }
     }
     fn advance(&self, n: u64) {
@@ -1006,8 +1044,14 @@ impl Observer for Bar {
             b.inc(n);
         }
     }
+    fn message(&self, text: &str) {
+        if let Some(b) = &self.0 {
+            b.set_message(text.to_string());
+        }
+    }
     fn finish(&self) {
         if let Some(b) = &self.0 {
+            b.disable_steady_tick();
             b.finish_and_clear();
         }
     }

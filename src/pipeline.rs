@@ -10,7 +10,8 @@ use std::time::Instant;
 use crate::cells::{BuildInfo, BuildParams, CellComplex, Occupancy, build};
 use crate::error::{Error, Result};
 use crate::field::{
-    Deformer, Field, Rbf, SavedField, Transfer, Warp, apply, apply_into, count_foldovers,
+    Constrained, Deformer, Field, Outside, Rbf, SavedField, Transfer, Warp, apply, apply_into,
+    count_foldovers,
 };
 use crate::io::{self, Bounds, Chunk, Sink, Source};
 use crate::progress::Observer;
@@ -105,8 +106,8 @@ where
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
     let t = Instant::now();
     let field = Field::from_solution(&solution);
-    let deformer =
-        Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
+    let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
+    let deformer = Constrained::new(&field, inner, Outside::Extend)?;
     let mut moved = points.to_vec();
     apply(&deformer, &field.origin, &mut moved);
     let mut warnings = warnings;
@@ -197,13 +198,27 @@ pub struct FileInfo {
     pub seconds_write: f64,
     /// The preview proxy (empty for [`apply_file`], or when none was asked for).
     pub proxy: Proxy,
+    /// Samples beyond the field's margin (kept or extended as [`ApplyParams::outside`] says).
+    pub outside: u64,
+}
+
+/// Parameters of [`apply_file`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ApplyParams {
+    /// The transfer (`None`: the one the field was saved with).
+    pub transfer: Option<Transfer>,
+    /// With the RBF transfer: the far field's tolerance ([`DeformParams::rbf_tolerance`]).
+    pub rbf_tolerance: Option<f64>,
+    /// What happens to samples beyond the field's margin (default: refused).
+    pub outside: Outside,
 }
 
 /// Deforms the file `input` into `output` in two streaming passes (DESIGN §7): pass 1 builds
 /// the cells from occupancy and gathers what the spec's regions select, never holding all
 /// samples (meshes excepted: their triangles need the vertices); the solve runs on the cells;
 /// pass 2 streams chunks of `chunk` samples through the field, in file order, into the output.
-/// With `save_field`, the solved field (with RBF coefficients) is written there too.
+/// With `save_field`, the solved field (with its transfer, and the RBF's coefficients when that
+/// is the transfer) is written there too; [`apply_file`] with it writes the same bytes.
 pub fn deform_file(
     input: &Path,
     output: &Path,
@@ -236,21 +251,25 @@ pub fn deform_file(
 
     let t1 = Instant::now();
     let field = Field::from_solution(&solution);
-    let rbf = match (params.transfer, save_field) {
-        (Transfer::Rbf, _) | (_, Some(_)) => Some(Rbf::new(&field)?),
+    observer.stage("factoring", 0);
+    let rbf = match params.transfer {
+        Transfer::Rbf => Some(Rbf::new(&field)?),
         _ => None,
     };
-    let saved = SavedField::new(field, rbf);
+    let saved = SavedField::new(field, params.transfer, rbf);
     if let Some(path) = save_field {
         saved.save(path)?;
     }
     let origin = saved.field.origin;
-    let deformer = saved.deformer(params.transfer, params.rbf_tolerance)?;
+    // Every sample made the cells, so none lies beyond the margin.
+    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    observer.stage("checking", 0);
     let mut after = proxy.before.clone();
     apply(&deformer, &origin, &mut after);
     info.proxy = Proxy { after, ..proxy };
     let mut warnings = warnings;
     let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
+    observer.finish();
     let t2 = Instant::now();
     info.notes.extend(transfer_pass(
         source.as_mut(),
@@ -271,25 +290,42 @@ pub fn deform_file(
     Ok((solution, info))
 }
 
-/// Applies a saved field to the file `input`, writing `output` (one streaming pass).
+/// Applies a saved field to the file `input`, writing `output` (one streaming pass). Samples
+/// beyond the field's margin are refused by default ([`Error::Outside`], and nothing is
+/// written), or kept or extended as `params.outside` says.
 pub fn apply_file(
     field: SavedField<3>,
     input: &Path,
     output: &Path,
-    transfer: Transfer,
-    rbf_tolerance: Option<f64>,
+    params: &ApplyParams,
     chunk: usize,
     observer: &dyn Observer,
 ) -> Result<FileInfo> {
     let t = Instant::now();
     let mut source = io::open(input)?;
     let origin = field.field.origin;
-    let deformer = field.deformer(transfer, rbf_tolerance)?;
-    let notes = transfer_pass(source.as_mut(), output, &deformer, &origin, chunk, observer)?;
+    observer.stage("transfer", 0);
+    let deformer = field.deformer(params.transfer, params.rbf_tolerance, params.outside)?;
+    observer.finish();
+    let mut notes = transfer_pass(source.as_mut(), output, &deformer, &origin, chunk, observer)?;
+    let outside = deformer.outside().count;
+    match params.outside {
+        Outside::Keep if outside > 0 => notes.push(format!(
+            "{outside} samples beyond the field's margin ({}) kept their coordinates",
+            deformer.margin()
+        )),
+        Outside::Extend if outside > 0 => notes.push(format!(
+            "{outside} samples beyond the field's margin ({}) were moved by the transfer \
+             extended there",
+            deformer.margin()
+        )),
+        _ => {}
+    }
     Ok(FileInfo {
         samples: source.len(),
         notes,
         seconds_write: t.elapsed().as_secs_f64(),
+        outside,
         ..Default::default()
     })
 }
@@ -312,8 +348,12 @@ fn first_pass_cells(
     let sized;
     let build = match build.target_cells {
         Some(n) => {
+            observer.stage("sizing", 0);
+            let size = proxy_cell_size(source, build, (lo, hi), n, chunk)?;
+            observer.finish();
+            notes.push(format!("--cells {n}: finest cell size {size}"));
             sized = BuildParams {
-                cell_size: Some(proxy_cell_size(source, build, (lo, hi), n, chunk)?),
+                cell_size: Some(size),
                 target_cells: None,
                 ..*build
             };
@@ -337,9 +377,11 @@ fn first_pass_cells(
         proxy,
         ..
     } = pass;
+    observer.stage("voxelizing", 0);
     occupancy.add_triangles(&positions, source.triangles())?;
     drop(positions);
     let (complex, build_info) = occupancy.finish();
+    observer.finish();
     Ok((complex, build_info, selections, proxy))
 }
 
@@ -526,11 +568,12 @@ const IN_FLIGHT: usize = 3;
 
 /// Pass 2: streams the source through `warp` into `output`. When a moved coordinate overflows
 /// the output's encoding, the pass finishes computing the moved bounds and runs again with a
-/// sink chosen for them.
+/// sink chosen for them. Samples beyond the field's margin, when `warp` refuses them, fail the
+/// pass before the output is renamed into place.
 fn transfer_pass(
     source: &mut dyn Source,
     output: &Path,
-    warp: &impl Warp<3>,
+    warp: &Constrained<3>,
     origin: &Vect<3>,
     chunk_len: usize,
     observer: &dyn Observer,
@@ -539,6 +582,7 @@ fn transfer_pass(
     let mut retried = false;
     loop {
         source.rewind()?;
+        warp.reset_outside();
         let sink = source.sink(output, bounds)?;
         let (sink, moved_bounds) = pipelined_pass(
             source,
@@ -551,6 +595,7 @@ fn transfer_pass(
         )?;
         match sink {
             Some(mut s) => {
+                refuse_outside(source.path(), warp)?;
                 let loose: Vec<Vect<3>> = source
                     .loose_normals()
                     .iter()
@@ -565,6 +610,21 @@ fn transfer_pass(
             None => bounds = Some(moved_bounds),
         }
     }
+}
+
+/// [`Error::Outside`] when `warp` refuses samples beyond its margin and met some.
+fn refuse_outside(input: &Path, warp: &Constrained<3>) -> Result<()> {
+    let tally = warp.outside();
+    if warp.outside_policy() != Outside::Refuse || tally.count == 0 {
+        return Ok(());
+    }
+    Err(Error::Outside {
+        path: input.to_path_buf(),
+        count: tally.count,
+        margin: warp.margin(),
+        farthest: tally.farthest,
+        at: (tally.at + warp.origin()).iter().copied().collect(),
+    })
 }
 
 /// Reads and warps chunks on this thread while a second thread writes the previous ones, so

@@ -9,7 +9,9 @@
 //! k-th sample, [`crate::pipeline::Proxy`]), each sample inside a fixed cell should stay where
 //! it was and each inside a handle's cell should follow the handle's motion; `residual_max` is
 //! the largest distance of such a sample from there, in input units (zero when the proxy holds
-//! none). Soft targets are reported apart, as the distance of each target's point under its
+//! none). `residual_fixed_max` and `residual_handle_max` split it by role. Every transfer makes
+//! fixed and handle samples exact ([`crate::field::Constrained`]), so these are zero up to the
+//! rounding of the handle's transform. Soft targets are reported apart, as the distance of each target's point under its
 //! cell's motion from the target (`target_residual_max`): a soft target is not met exactly by
 //! design.
 
@@ -49,6 +51,10 @@ pub struct Report {
     pub converged: bool,
     /// The largest distance of a fixed or handle sample of the proxy from where it was sent.
     pub residual_max: f64,
+    /// The largest distance of a fixed sample of the proxy from its rest position.
+    pub residual_fixed_max: f64,
+    /// The largest distance of a handle sample of the proxy from where its handle sends it.
+    pub residual_handle_max: f64,
     /// Proxy samples that `residual_max` measured.
     pub residual_samples: usize,
     /// The largest distance of a soft target's point, under its cell's motion, from its
@@ -111,7 +117,8 @@ impl Report {
             };
             *cell_roles.entry(name).or_insert(0) += 1;
         }
-        let (residual_max, residual_samples) = proxy_residual(solution, file);
+        let (residual_fixed_max, residual_handle_max, residual_samples) =
+            proxy_residual(solution, file);
         let target_residual_max = solution
             .constraints
             .targets
@@ -134,7 +141,9 @@ impl Report {
             load_steps: s.load_steps,
             energy: s.energies.clone(),
             converged: s.converged,
-            residual_max,
+            residual_max: residual_fixed_max.max(residual_handle_max),
+            residual_fixed_max,
+            residual_handle_max,
             residual_samples,
             target_residual_max,
             foldovers: d.foldovers.1,
@@ -160,26 +169,28 @@ impl Report {
     }
 }
 
-/// The largest distance of a proxy sample in a fixed or handle cell from where its cell's
-/// constraint sends it, and how many samples were measured.
-fn proxy_residual(solution: &Solution<3>, file: &FileInfo) -> (f64, usize) {
+/// The largest distances of a proxy sample in a fixed cell and in a handle cell from where its
+/// cell's constraint sends it, and how many samples were measured.
+fn proxy_residual(solution: &Solution<3>, file: &FileInfo) -> (f64, f64, usize) {
     let constraints = &solution.constraints;
     let origin = constraints.origin;
     let maps: Vec<_> = (0..constraints.handles.len())
         .map(|k| constraints.handle_map(k, 1.0))
         .collect();
-    let mut worst = 0.0f64;
+    let (mut fixed, mut handle) = (0.0f64, 0.0f64);
     let mut count = 0;
     for (before, after) in file.proxy.before.iter().zip(&file.proxy.after) {
-        let sent = match solution.role_at(before) {
-            Some(Role::Fixed) => *before,
-            Some(Role::Handle(k)) => maps[k as usize].apply(&(before - origin)) + origin,
+        match solution.role_at(before) {
+            Some(Role::Fixed) => fixed = fixed.max((after - before).norm()),
+            Some(Role::Handle(k)) => {
+                let sent = maps[k as usize].apply(&(before - origin)) + origin;
+                handle = handle.max((after - sent).norm());
+            }
             _ => continue,
-        };
-        worst = worst.max((after - sent).norm());
+        }
         count += 1;
     }
-    (worst, count)
+    (fixed, handle, count)
 }
 
 /// `VmHWM` of `/proc/self/status`, in bytes.

@@ -112,6 +112,11 @@ pub struct HandleMotion<const D: usize> {
     pub pivot: Option<Vect<D>>,
     /// The rotation `R`.
     pub rotation: Mat<D>,
+    /// The rotation as written: its axis (unused in 2D) and signed angle in radians, of any
+    /// size (720° is two whole turns). Load steps interpolate this angle, so a whole turn is
+    /// not the identity. For a `matrix` it is the angle of `R` in `[0, π]`: a matrix cannot
+    /// say how many turns it makes.
+    pub turn: (Vect<D>, f64),
     /// The stretch `P`.
     pub stretch: Mat<D>,
     /// The translation.
@@ -141,8 +146,12 @@ impl<const D: usize> HandleMotion<D> {
         } else {
             self.translate
         };
-        let (axis, angle) = <Dim<D> as Rigid<D>>::axis_angle_of(&self.rotation);
-        let rot = <Dim<D> as Rigid<D>>::axis_angle(&axis, f * angle);
+        let (axis, angle) = self.turn;
+        let rot = if f == 1.0 {
+            self.rotation
+        } else {
+            <Dim<D> as Rigid<D>>::axis_angle(&axis, f * angle)
+        };
         let stretch = Mat::<D>::identity() + (self.stretch - Mat::<D>::identity()) * f;
         let linear = rot * stretch;
         crate::rigid::Affine {
@@ -519,7 +528,7 @@ impl Ctx<'_> {
         if !(scale.is_finite() && scale > 0.0) {
             return Err(self.error(Some(line), format!("scale {scale} must be positive")));
         }
-        let rotation = match t.get("rotate") {
+        let (rotation, turn) = match t.get("rotate") {
             Some(_) => {
                 let r: RawRotate = self.field(t, "rotate", line)?;
                 let axis = match (&r.axis, D) {
@@ -532,13 +541,21 @@ impl Ctx<'_> {
                 if D == 3 && axis.norm() == 0.0 {
                     return Err(self.error(Some(line), "rotate.axis is zero".into()));
                 }
-                <Dim<D> as Rigid<D>>::axis_angle(&axis, r.degrees.to_radians())
+                if !r.degrees.is_finite() {
+                    return Err(self.error(Some(line), "rotate.degrees must be finite".into()));
+                }
+                let radians = r.degrees.to_radians();
+                (
+                    <Dim<D> as Rigid<D>>::axis_angle(&axis, radians),
+                    (axis, radians),
+                )
             }
-            None => Mat::<D>::identity(),
+            None => (Mat::<D>::identity(), (Vect::<D>::zeros(), 0.0)),
         };
         Ok(HandleMotion {
             pivot,
             rotation,
+            turn,
             stretch: Mat::<D>::identity() * scale,
             translate,
             from_matrix: false,
@@ -581,6 +598,7 @@ impl Ctx<'_> {
         Ok(HandleMotion {
             pivot: None,
             rotation,
+            turn: <Dim<D> as Rigid<D>>::axis_angle_of(&rotation),
             stretch: rotation.transpose() * linear,
             translate: Vect::<D>::from_fn(|r, _| m[r][D]),
             from_matrix: true,

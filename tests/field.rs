@@ -39,6 +39,7 @@ fn field(n: usize, seed: u64) -> Field<3> {
         halves: vec![0.0625; n],
         centers,
         motions,
+        prescribed: Default::default(),
     }
 }
 
@@ -180,6 +181,7 @@ fn octree_field() -> Field<3> {
         centers,
         halves,
         motions,
+        prescribed: Default::default(),
     }
 }
 

@@ -4,47 +4,71 @@
 //! output bit for bit:
 //!
 //! ```text
-//! "RCFIELD\0"  u32 version (1)  u32 D
+//! "RCFIELD\0"  u32 version (2)  u32 D
+//! u8 transfer                                    0 blend, 1 blend-idw, 2 rbf (version 2)
 //! f64[D] origin                                  world position of the local frame
 //! u64 n, then n × (f64[D] center, f64 half, f64[D·D] rotation (row-major), f64[D] position)
+//! u64 r, then r × (f64[D·D] linear (row-major), f64[D] translation)   prescribed maps (v2)
+//!        and if r > 0: u32[n] the map of each cell (u32::MAX: none)
 //! u8 has_rbf, then if 1: f64[D] shift, f64 inv_scale, f64[D] constant, f64[D·D] linear,
 //!                        f64[D·n] weights (component by component)
 //! ```
 //!
 //! The RBF coefficients are stored rather than recomputed, because a parallel dense
 //! factorization need not give the same last bits on another machine or thread count.
+//!
+//! Version 2 added the transfer `deform` used (what `apply` uses unless told otherwise) and the
+//! maps that fixed and handle cells follow exactly ([`super::Constrained`]). Version 1 files
+//! still load: their transfer is the RBF (the one they were saved for) and they prescribe no
+//! cell, so their constraints are as exact as the transfer makes them.
 
 use std::io::Read;
 use std::path::Path;
 
-use super::{Deformer, Field, Rbf, Transfer};
+use super::{Constrained, Deformer, FREE, Field, Outside, Rbf, Transfer};
 use crate::error::{Error, Result};
-use crate::rigid::{Mat, Motion, Vect};
+use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
 
 const MAGIC: &[u8; 8] = b"RCFIELD\0";
-const VERSION: u32 = 1;
+const VERSION: u32 = 2;
 
-/// A field with the RBF coefficients it was saved with, if any.
+/// A field with its transfer and the RBF coefficients it was saved with, if any.
 pub struct SavedField<const D: usize> {
     /// The cells and motions.
     pub field: Field<D>,
+    /// The transfer the field was made for.
+    pub transfer: Transfer,
     rbf: Option<Rbf<D>>,
 }
 
-impl<const D: usize> SavedField<D> {
-    /// Wraps a field and, optionally, its RBF transfer.
-    pub fn new(field: Field<D>, rbf: Option<Rbf<D>>) -> Self {
-        Self { field, rbf }
+impl<const D: usize> SavedField<D>
+where
+    Dim<D>: Rigid<D>,
+{
+    /// Wraps a field, the transfer it is for and, optionally, its RBF transfer.
+    pub fn new(field: Field<D>, transfer: Transfer, rbf: Option<Rbf<D>>) -> Self {
+        Self {
+            field,
+            transfer,
+            rbf,
+        }
     }
 
-    /// The transfer for `transfer`: the saved RBF coefficients (evaluated through the far
-    /// field within `rbf_tolerance`, when given), or a new blend.
-    pub fn deformer(self, transfer: Transfer, rbf_tolerance: Option<f64>) -> Result<Deformer<D>> {
-        match (transfer, self.rbf) {
+    /// The map of space for `transfer` (`None`: the field's own): the saved RBF coefficients
+    /// (evaluated through the far field within `rbf_tolerance`, when given) or a new blend or
+    /// RBF, with the prescribed cells exact and samples beyond the margin handled by `outside`.
+    pub fn deformer(
+        self,
+        transfer: Option<Transfer>,
+        rbf_tolerance: Option<f64>,
+        outside: Outside,
+    ) -> Result<Constrained<D>> {
+        let inner = match (transfer.unwrap_or(self.transfer), self.rbf) {
             (Transfer::Rbf, Some(r)) => Deformer::Rbf(r),
             (t, _) => Deformer::new(&self.field, t)?,
         }
-        .with_rbf_tolerance(rbf_tolerance)
+        .with_rbf_tolerance(rbf_tolerance)?;
+        Constrained::new(&self.field, inner, outside)
     }
 
     /// Writes the field to `path` atomically.
@@ -54,6 +78,11 @@ impl<const D: usize> SavedField<D> {
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&VERSION.to_le_bytes());
         out.extend_from_slice(&(D as u32).to_le_bytes());
+        out.push(match self.transfer {
+            Transfer::Blend => 0,
+            Transfer::BlendIdw => 1,
+            Transfer::Rbf => 2,
+        });
         let put = |out: &mut Vec<u8>, v: f64| out.extend_from_slice(&v.to_le_bytes());
         f.origin.iter().for_each(|&v| put(&mut out, v));
         out.extend_from_slice(&(f.centers.len() as u64).to_le_bytes());
@@ -67,6 +96,22 @@ impl<const D: usize> SavedField<D> {
                 }
             }
             m.pos.iter().for_each(|&v| put(&mut out, v));
+        }
+        let prescribed = &f.prescribed;
+        out.extend_from_slice(&(prescribed.maps.len() as u64).to_le_bytes());
+        for m in &prescribed.maps {
+            for r in 0..D {
+                for k in 0..D {
+                    put(&mut out, m.linear[(r, k)]);
+                }
+            }
+            m.translation.iter().for_each(|&v| put(&mut out, v));
+        }
+        if !prescribed.maps.is_empty() {
+            for c in 0..f.centers.len() {
+                let m = prescribed.cells.get(c).copied().unwrap_or(FREE);
+                out.extend_from_slice(&m.to_le_bytes());
+            }
         }
         match &self.rbf {
             None => out.push(0),
@@ -98,10 +143,10 @@ impl<const D: usize> SavedField<D> {
             return Err(Error::format(path, "not a rigidcells field (bad magic)"));
         }
         let version = r.u32()?;
-        if version != VERSION {
+        if !(1..=VERSION).contains(&version) {
             return Err(Error::format(
                 path,
-                format!("field format version {version}; this rigidcells reads {VERSION}"),
+                format!("field format version {version}; this rigidcells reads 1 to {VERSION}"),
             ));
         }
         let dim = r.u32()?;
@@ -111,6 +156,15 @@ impl<const D: usize> SavedField<D> {
                 format!("a {dim}D field cannot deform {D}D samples"),
             ));
         }
+        let transfer = match version {
+            1 => Transfer::Rbf,
+            _ => match r.take(1)?[0] {
+                0 => Transfer::Blend,
+                1 => Transfer::BlendIdw,
+                2 => Transfer::Rbf,
+                t => return Err(Error::format(path, format!("unknown transfer {t}"))),
+            },
+        };
         let origin = r.vect::<D>()?;
         let n = r.u64()? as usize;
         if n == 0 || n > bytes.len() {
@@ -131,12 +185,41 @@ impl<const D: usize> SavedField<D> {
                 pos: r.vect::<D>()?,
             });
         }
-        let field = Field {
+        let mut field = Field {
             origin,
             centers,
             halves,
             motions,
+            prescribed: Default::default(),
         };
+        if version >= 2 {
+            let count = r.u64()? as usize;
+            if count > n {
+                return Err(Error::format(path, format!("map count {count} is wrong")));
+            }
+            for _ in 0..count {
+                let mut linear = Mat::<D>::zeros();
+                for row in 0..D {
+                    for k in 0..D {
+                        linear[(row, k)] = r.f64()?;
+                    }
+                }
+                let translation = r.vect::<D>()?;
+                field.prescribed.maps.push(Affine {
+                    linear,
+                    translation,
+                });
+            }
+            if count > 0 {
+                for _ in 0..n {
+                    let m = r.u32()?;
+                    if m != FREE && m as usize >= count {
+                        return Err(Error::format(path, format!("map index {m} is wrong")));
+                    }
+                    field.prescribed.cells.push(m);
+                }
+            }
+        }
         let rbf = match r.take(1)?[0] {
             0 => None,
             _ => {
@@ -163,7 +246,14 @@ impl<const D: usize> SavedField<D> {
         if r.at != bytes.len() {
             return Err(Error::format(path, "trailing bytes after the field"));
         }
-        Ok(Self { field, rbf })
+        // Every field that `deform` saves has the leaves of an octree for cells: a damaged file
+        // is a format error here, not a failure later.
+        super::exact::check_cells(&field).map_err(|e| Error::format(path, e))?;
+        Ok(Self {
+            field,
+            transfer,
+            rbf,
+        })
     }
 }
 

@@ -13,6 +13,7 @@
 //! identical results.
 
 mod blend;
+mod exact;
 pub mod far;
 mod file;
 mod nearest;
@@ -20,6 +21,7 @@ mod rbf;
 mod simd;
 
 pub use blend::{Blend, Weights};
+pub use exact::{Constrained, FREE, Outside, OutsideTally, Prescribed};
 pub use file::SavedField;
 pub use nearest::{Anchor, NEAR, Nearest, Neighbors};
 pub use rbf::Rbf;
@@ -27,8 +29,8 @@ pub use rbf::Rbf;
 use rayon::prelude::*;
 
 use crate::error::Result;
-use crate::rigid::{Motion, Vect};
-use crate::solve::Solution;
+use crate::rigid::{Affine, Dim, Motion, Rigid, Vect};
+use crate::solve::{Role, Solution};
 
 /// The solved deformation: cells and their rigid motions, in the local frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,16 +43,36 @@ pub struct Field<const D: usize> {
     pub halves: Vec<f64>,
     /// Rigid motion of each cell (local).
     pub motions: Vec<Motion<D>>,
+    /// The maps that the fixed and handle cells follow exactly ([`Constrained`]).
+    pub prescribed: Prescribed<D>,
 }
 
 impl<const D: usize> Field<D> {
-    /// The field of a solution.
-    pub fn from_solution(solution: &Solution<D>) -> Self {
+    /// The field of a solution: its fixed cells and the cells it kept at rest follow the
+    /// identity exactly, and each handle's cells its transform.
+    pub fn from_solution(solution: &Solution<D>) -> Self
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let constraints = &solution.constraints;
+        let n = solution.complex.len();
+        let maps: Vec<Affine<D>> = (0..constraints.handles.len())
+            .map(|k| constraints.handle_map(k, 1.0))
+            .collect();
+        let mut prescribed = Prescribed::default();
+        for (c, role) in constraints.roles.iter().enumerate() {
+            match role {
+                Role::Fixed | Role::Rest => prescribed.set(c, n, Affine::identity()),
+                Role::Handle(k) => prescribed.set(c, n, maps[*k as usize]),
+                Role::Free | Role::Pin(_) => {}
+            }
+        }
         Self {
             origin: solution.complex.grid.origin,
             centers: solution.complex.cells.iter().map(|c| c.center).collect(),
             halves: solution.complex.cells.iter().map(|c| c.half).collect(),
             motions: solution.motions.clone(),
+            prescribed,
         }
     }
 }
@@ -85,14 +107,7 @@ pub trait Warp<const D: usize>: Sync {
     /// The Jacobian of the map at the local point `x`, by central differences of step `h`
     /// (transfers with a closed form override it).
     fn jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
-        let mut j = nalgebra::SMatrix::<f64, D, D>::zeros();
-        for a in 0..D {
-            let mut e = Vect::<D>::zeros();
-            e[a] = h;
-            let column = (self.warp(&(x + e)) - self.warp(&(x - e))) / (2.0 * h);
-            j.set_column(a, &column);
-        }
-        j
+        central_jacobian(self, x, h)
     }
 
     /// Moves the world-coordinate `points` into `out`, in order, through the local frame whose
@@ -105,6 +120,22 @@ pub trait Warp<const D: usize>: Sync {
             *o = self.warp(&(p - origin)) + origin;
         }
     }
+}
+
+/// The Jacobian of `warp` at the local point `x` by central differences of step `h`.
+pub(crate) fn central_jacobian<const D: usize>(
+    warp: &(impl Warp<D> + ?Sized),
+    x: &Vect<D>,
+    h: f64,
+) -> nalgebra::SMatrix<f64, D, D> {
+    let mut j = nalgebra::SMatrix::<f64, D, D>::zeros();
+    for a in 0..D {
+        let mut e = Vect::<D>::zeros();
+        e[a] = h;
+        let column = (warp.warp(&(x + e)) - warp.warp(&(x - e))) / (2.0 * h);
+        j.set_column(a, &column);
+    }
+    j
 }
 
 /// A transfer built for a field, ready to warp samples.

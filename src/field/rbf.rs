@@ -528,6 +528,7 @@ mod tests {
                 })
                 .collect(),
             centers,
+            prescribed: Default::default(),
         }
     }
 

@@ -143,7 +143,9 @@ where
     let mut constraints = constraints;
     if let Some(tau) = params.refine_strain {
         let limit = complex.grid.max_level + params.refine_levels;
+        observer.stage("refining", params.max_refinements as u64);
         for _ in 0..params.max_refinements {
+            observer.advance(1);
             let strain = cell_strain(&complex, &motions);
             let split: Vec<bool> = complex
                 .cells
@@ -182,6 +184,7 @@ where
                 1.0,
                 params,
                 &mut info,
+                observer,
             )?;
             info.iterations_per_step.push(it);
         }
@@ -252,7 +255,16 @@ where
     observer.stage("solving", steps as u64);
     for s in 1..=steps {
         let f = s as f64 / steps as f64;
-        let it = minimize_with(system, complex, constraints, motions, f, params, info)?;
+        let it = minimize_with(
+            system,
+            complex,
+            constraints,
+            motions,
+            f,
+            params,
+            info,
+            observer,
+        )?;
         info.iterations_per_step.push(it);
         observer.advance(1);
     }
@@ -337,6 +349,7 @@ where
             1.0,
             &self.params,
             &mut info,
+            &crate::progress::Silent,
         )?;
         info.iterations_per_step.push(it);
         Ok(self.finished(info, start))
@@ -387,7 +400,16 @@ where
     let mut system = timed(&mut info.seconds_symbolic, || {
         System::new(complex, constraints)
     })?;
-    minimize_with(&mut system, complex, constraints, motions, f, params, info)
+    minimize_with(
+        &mut system,
+        complex,
+        constraints,
+        motions,
+        f,
+        params,
+        info,
+        &crate::progress::Silent,
+    )
 }
 
 /// The total energy: glue plus soft targets.
@@ -410,6 +432,7 @@ pub fn total_energy<const D: usize>(
     glue + soft
 }
 
+#[allow(clippy::too_many_arguments)]
 fn minimize_with<const D: usize>(
     system: &mut System<D>,
     complex: &CellComplex<D>,
@@ -418,6 +441,7 @@ fn minimize_with<const D: usize>(
     f: f64,
     params: &SolveParams,
     info: &mut SolverInfo,
+    observer: &dyn Observer,
 ) -> Result<usize>
 where
     Dim<D>: Rigid<D>,
@@ -505,6 +529,7 @@ where
         iterations += 1;
         info.iterations += 1;
         info.energies.push(energy);
+        observer.message(&format!("iteration {iterations}, energy {energy:.3e}"));
         if decrease <= params.tolerance * (energy + decrease) {
             info.converged = true;
             break;
@@ -555,7 +580,7 @@ where
     let mut turn = 0.0f64;
     let mut travel = 0.0f64;
     for (k, h) in constraints.handles.iter().enumerate() {
-        turn = turn.max(<Dim<D> as Rigid<D>>::angle(&h.motion.rotation).to_degrees());
+        turn = turn.max(h.motion.turn.1.abs().to_degrees());
         let map = constraints.handle_map(k, 1.0);
         for (c, role) in constraints.roles.iter().enumerate() {
             if *role == Role::Handle(k as u32) {

@@ -1,0 +1,432 @@
+//! Right answers (issue 14): fixed samples keep their bytes and handle samples follow their
+//! handle with every transfer, whole turns turn, a field refuses samples it does not reach, and
+//! a saved field remembers its transfer.
+
+mod common;
+
+use std::path::Path;
+
+use common::{deform, run, shared};
+use rigidcells::field::{Constrained, Deformer, Field, Outside, Transfer, Warp};
+use rigidcells::io::{Chunk, Document, LasHeader, LasSource, Source};
+use rigidcells::pipeline::{self, DeformParams};
+use rigidcells::progress::Silent;
+use rigidcells::rigid::{Dim, Rigid, Vect};
+use rigidcells::spec::parse_spec;
+
+/// All records of a LAS file: raw bytes, decoded coordinates, record length.
+fn records(path: &Path) -> (Vec<u8>, Vec<Vect<3>>, usize) {
+    let mut src = LasSource::open(path).unwrap();
+    let mut chunk = Chunk::default();
+    let (mut raw, mut pos) = (Vec::new(), Vec::new());
+    while src.read(100_000, &mut chunk).unwrap() > 0 {
+        raw.extend_from_slice(&chunk.raw);
+        pos.extend_from_slice(&chunk.positions);
+    }
+    (raw, pos, chunk.record_len)
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The 1.2 km autzen scan at 25 m cells: the west third fixed, the east third lifted 30 m and
+/// turned 2° about the north axis. Every fixed record keeps its bytes and every handle sample
+/// lands where the handle sends it (to the file's 0.01 m precision), with each transfer; the
+/// report says so.
+#[test]
+fn fixed_and_handle_samples_are_exact_with_every_transfer() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.las");
+    let edit = dir.path().join("edit.toml");
+    let pivot = Vect::<3>::new(636983.0, 849216.0, 450.0);
+    std::fs::write(
+        &edit,
+        format!(
+            "[[fixed]]\nbox = {{ min = [636000, 848900, 300], max = [636394, 849500, 600] }}\n\
+             [[handle]]\nbox = {{ min = [636786, 848900, 300], max = [637180, 849500, 600] }}\n\
+             translate = [0, 0, 30]\nrotate = {{ axis = [0, 1, 0], degrees = 2 }}\n\
+             pivot = [{}, {}, {}]\n",
+            pivot.x, pivot.y, pivot.z
+        ),
+    )
+    .unwrap();
+    let turn = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::y(), 2f64.to_radians());
+    let sent = |p: &Vect<3>| turn * (p - pivot) + pivot + Vect::<3>::new(0.0, 0.0, 30.0);
+    let (raw, pos, rl) = records(&input);
+    let scale = LasHeader::read(&input).unwrap().scale;
+    for transfer in ["rbf", "blend", "blend-idw"] {
+        let out = dir.path().join(format!("{transfer}.las"));
+        let report = dir.path().join(format!("{transfer}.json"));
+        let r = deform(
+            &input,
+            &out,
+            &edit,
+            &[
+                "--cell-size",
+                "25",
+                "--transfer",
+                transfer,
+                "--report",
+                s(&report),
+            ],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let (moved_raw, moved, _) = records(&out);
+        let (mut fixed, mut handle, mut worst) = (0, 0, 0.0f64);
+        for (k, p) in pos.iter().enumerate() {
+            if p.x <= 636394.0 {
+                assert_eq!(
+                    raw[k * rl..(k + 1) * rl],
+                    moved_raw[k * rl..(k + 1) * rl],
+                    "{transfer}: fixed record {k} changed"
+                );
+                fixed += 1;
+            } else if p.x >= 636786.0 {
+                let miss = sent(p) - moved[k];
+                for a in 0..3 {
+                    worst = worst.max(miss[a].abs() / scale[a]);
+                }
+                handle += 1;
+            }
+        }
+        assert!(fixed > 30_000 && handle > 20_000, "{fixed} {handle}");
+        assert!(
+            worst <= 0.5 + 1e-6,
+            "{transfer}: a handle sample is {worst} steps off"
+        );
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(json["residual_fixed_max"].as_f64(), Some(0.0), "{transfer}");
+        let h = json["residual_handle_max"].as_f64().unwrap();
+        assert!(h < 1e-9, "{transfer}: handle residual {h}");
+        // Between the regions the ground still rises smoothly from 0 to 30 m.
+        let rise: Vec<(f64, f64)> = pos
+            .iter()
+            .zip(&moved)
+            .filter(|(p, _)| p.x > 636394.0 && p.x < 636786.0)
+            .map(|(p, q)| (p.x, q.z - p.z))
+            .collect();
+        let (lo, hi) = rise.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &(_, d)| {
+            (lo.min(d), hi.max(d))
+        });
+        assert!(lo > -8.0 && hi < 45.0, "{transfer}: rise from {lo} to {hi}");
+    }
+}
+
+/// The map is continuous across a fixed region's border and a handle's: along lines through
+/// both, no small step moves the image much more than the step (the RBF is smooth; the blend
+/// has steps of its own at the corners of its cells, which the exact regions do not add to).
+#[test]
+fn exact_regions_blend_smoothly_into_the_field() {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let points: Vec<Vect<3>> = bar
+        .vertices
+        .iter()
+        .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
+        .collect();
+    let spec = parse_spec::<3>(
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [2.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [7.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0.0, 0.0, 3.0]\nrotate = { axis = [0.0, 1.0, 0.0], degrees = -20.0 }\n",
+        Path::new("."),
+        Path::new("edit.toml"),
+    )
+    .unwrap();
+    let params = DeformParams {
+        build: rigidcells::cells::BuildParams {
+            cell_size: Some(0.25),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let (_, solution, _) =
+        pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
+    let field = Field::from_solution(&solution);
+    for transfer in [Transfer::Rbf, Transfer::Blend] {
+        let map = Constrained::new(
+            &field,
+            Deformer::new(&field, transfer).unwrap(),
+            Outside::Extend,
+        )
+        .unwrap();
+        let step = 2.5e-4;
+        for (y, z) in [(0.0, 0.0), (0.5, 0.5), (1.0, 0.3)] {
+            let slope = |warp: &dyn Fn(&Vect<3>) -> Vect<3>| {
+                let at = |x: f64| warp(&(Vect::<3>::new(x, y, z) - field.origin));
+                let mut prev = at(1.0);
+                let mut worst = 0.0f64;
+                let mut x = 1.0;
+                while x < 9.0 {
+                    x += step;
+                    let next = at(x);
+                    worst = worst.max((next - prev).norm() / step);
+                    prev = next;
+                }
+                worst
+            };
+            let worst = slope(&|p| map.warp(p));
+            let inner = slope(&|p| map.inner().warp(p));
+            assert!(
+                worst < 20.0f64.max(1.01 * inner),
+                "{transfer:?} at y {y}, z {z}: slope {worst} (the transfer alone: {inner})"
+            );
+            // Inside the fixed region: the identity, exactly.
+            let p = Vect::<3>::new(2.4, y, z) - field.origin;
+            assert_eq!(map.warp(&p), p);
+        }
+    }
+}
+
+/// The turn of each cross-section of the bar about its axis, from the fixed end to the handle,
+/// unwrapped from section to section.
+fn section_turns(before: &[Vect<3>], after: &[Vect<3>]) -> Vec<f64> {
+    let mut turns = Vec::new();
+    let mut total = 0.0f64;
+    let mut prev = 0.0f64;
+    for k in 0..=20 {
+        let x = 0.5 * k as f64;
+        let ring: Vec<(&Vect<3>, &Vect<3>)> = before
+            .iter()
+            .zip(after)
+            .filter(|(p, _)| {
+                (p.x - x).abs() < 0.07 && ((p.y - 0.5).abs() > 0.3 || (p.z - 0.5).abs() > 0.3)
+            })
+            .collect();
+        assert!(!ring.is_empty(), "no ring at x = {x}");
+        let n = ring.len() as f64;
+        let (cy, cz) = ring
+            .iter()
+            .fold((0.0, 0.0), |(y, z), (_, q)| (y + q.y / n, z + q.z / n));
+        let (mut sin, mut cos) = (0.0, 0.0);
+        for (p, q) in &ring {
+            let d = (q.z - cz).atan2(q.y - cy) - (p.z - 0.5).atan2(p.y - 0.5);
+            sin += d.sin();
+            cos += d.cos();
+        }
+        let angle = sin.atan2(cos).to_degrees();
+        total += (angle - prev + 540.0).rem_euclid(360.0) - 180.0;
+        prev = angle;
+        turns.push(total);
+    }
+    turns
+}
+
+/// A whole turn is not the identity: 360° and 720° twists of the bar wind its sections by the
+/// angle as written, in load steps of 30°.
+#[test]
+fn whole_turns_twist_the_bar_by_the_angle_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    let before = Document::read(&input).unwrap().positions().to_vec();
+    for degrees in [360.0, 720.0] {
+        let edit = dir.path().join("twist.toml");
+        std::fs::write(
+            &edit,
+            format!(
+                "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }}\n\
+                 [[handle]]\nbox = {{ min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
+                 rotate = {{ axis = [1.0, 0.0, 0.0], degrees = {degrees} }}\n\
+                 pivot = [9.75, 0.5, 0.5]\n"
+            ),
+        )
+        .unwrap();
+        let out = dir.path().join("twisted.ply");
+        let report = dir.path().join("twist.json");
+        let r = deform(
+            &input,
+            &out,
+            &edit,
+            &[
+                "--cell-size",
+                "0.25",
+                "--transfer",
+                "blend",
+                "--report",
+                s(&report),
+            ],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(json["load_steps"].as_u64(), Some((degrees / 30.0) as u64));
+        assert!(json["iterations"].as_u64().unwrap() > 0);
+        let after = Document::read(&out).unwrap().positions().to_vec();
+        let turns = section_turns(&before, &after);
+        let end = *turns.last().unwrap();
+        assert!(
+            (end - degrees).abs() < 1.0,
+            "{degrees}°: sections add up to {end}°"
+        );
+        // The twist spreads along the bar: the middle has turned by about half.
+        let middle = turns[10];
+        assert!(
+            (middle - degrees / 2.0).abs() < 0.15 * degrees,
+            "{degrees}°: the middle turned {middle}°"
+        );
+    }
+}
+
+/// Writes `input` (LAS 1.2) with its header's x offset moved by `dx`: the same scan `dx` away.
+fn shifted_tile(input: &Path, dx: f64, out: &Path) {
+    let mut bytes = std::fs::read(input).unwrap();
+    let offset = f64::from_le_bytes(bytes[155..163].try_into().unwrap()) + dx;
+    bytes[155..163].copy_from_slice(&offset.to_le_bytes());
+    for at in [179, 187] {
+        let v = f64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) + dx;
+        bytes[at..at + 8].copy_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(out, bytes).unwrap();
+}
+
+/// A field refuses a tile 100 km away (exit 4, how many and how far, no output), keeps it
+/// unchanged or extrapolates onto it only when asked; the scan it was solved on passes.
+#[test]
+fn apply_refuses_samples_beyond_the_fields_margin() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.las");
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [636000, 848900, 300], max = [636394, 849500, 600] }\n\
+         [[handle]]\nbox = { min = [636786, 848900, 300], max = [637180, 849500, 600] }\n\
+         translate = [0, 0, 30]\n",
+    )
+    .unwrap();
+    let field = dir.path().join("lift.field");
+    let whole = dir.path().join("whole.las");
+    let r = deform(
+        &input,
+        &whole,
+        &edit,
+        &["--cell-size", "25", "--save-field", s(&field)],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let far = dir.path().join("far.las");
+    shifted_tile(&input, 100_000.0, &far);
+    let out = dir.path().join("far_out.las");
+    let a = run(&["apply", s(&field), s(&far), "-o", s(&out), "-q"]);
+    assert_eq!(a.code, 4, "{}", a.stderr);
+    assert!(
+        a.stderr.contains("110000 samples lie farther than 25"),
+        "{}",
+        a.stderr
+    );
+    assert!(a.stderr.contains("far.las"), "{}", a.stderr);
+    assert!(!out.exists(), "nothing is written");
+    assert!(
+        std::fs::read_dir(dir.path()).unwrap().all(|e| !e
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .ends_with(".tmp")),
+        "no temporary file is left"
+    );
+
+    // --outside keep: every record as it was.
+    let a = run(&[
+        "apply",
+        s(&field),
+        s(&far),
+        "-o",
+        s(&out),
+        "-q",
+        "--outside",
+        "keep",
+    ]);
+    assert_eq!(a.code, 0, "{}", a.stderr);
+    let ((raw_in, _, _), (raw_out, _, _)) = (records(&far), records(&out));
+    assert_eq!(raw_in, raw_out);
+    // --outside extend: the transfer runs there (the old behaviour) and moves them.
+    let a = run(&[
+        "apply",
+        s(&field),
+        s(&far),
+        "-o",
+        s(&out),
+        "-q",
+        "--outside",
+        "extend",
+    ]);
+    assert_eq!(a.code, 0, "{}", a.stderr);
+    let (_, moved, _) = records(&out);
+    let (_, rest, _) = records(&far);
+    assert!(moved.iter().zip(&rest).any(|(a, b)| a != b));
+
+    // A tile of the scan itself is inside, and the whole scan gives deform's bytes.
+    let again = dir.path().join("again.las");
+    let a = run(&["apply", s(&field), s(&input), "-o", s(&again), "-q"]);
+    assert_eq!(a.code, 0, "{}", a.stderr);
+    assert_eq!(
+        std::fs::read(&again).unwrap(),
+        std::fs::read(&whole).unwrap()
+    );
+    // A tile a little beside the scan (within the margin) passes too.
+    let near = dir.path().join("near.las");
+    shifted_tile(&input, 10.0, &near);
+    let a = run(&["apply", s(&field), s(&near), "-o", s(&again), "-q"]);
+    assert_eq!(a.code, 0, "{}", a.stderr);
+}
+
+/// `deform --transfer T --save-field F` then `apply F` (no --transfer) writes deform's bytes,
+/// for each transfer; `apply --transfer` still chooses another.
+#[test]
+fn a_saved_field_remembers_its_transfer() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("meshes/dragon_11k_binary.ply");
+    let edit = dir.path().join("edit.toml");
+    // The dragon spans y ∈ [−749, −594]: hold one end, lift and turn the other.
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nplane = { point = [0, -720, 0], normal = [0, 1, 0] }\n\
+         [[handle]]\nplane = { point = [0, -620, 0], normal = [0, -1, 0] }\n\
+         translate = [0, 0, 15]\nrotate = { axis = [1, 0, 0], degrees = 25 }\n",
+    )
+    .unwrap();
+    let mut outputs = Vec::new();
+    for transfer in ["blend", "blend-idw", "rbf"] {
+        let field = dir.path().join(format!("{transfer}.field"));
+        let out = dir.path().join(format!("{transfer}.ply"));
+        let r = deform(
+            &input,
+            &out,
+            &edit,
+            &[
+                "--cells",
+                "600",
+                "--transfer",
+                transfer,
+                "--save-field",
+                s(&field),
+            ],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let again = dir.path().join(format!("{transfer}_again.ply"));
+        let a = run(&["apply", s(&field), s(&input), "-o", s(&again), "-q"]);
+        assert_eq!(a.code, 0, "{}", a.stderr);
+        assert_eq!(
+            std::fs::read(&again).unwrap(),
+            std::fs::read(&out).unwrap(),
+            "{transfer}: apply differs from deform"
+        );
+        outputs.push((field, out));
+    }
+    // The blend's field applied with --transfer rbf is the RBF's map, not the blend's.
+    let other = dir.path().join("other.ply");
+    let a = run(&[
+        "apply",
+        s(&outputs[0].0),
+        s(&input),
+        "-o",
+        s(&other),
+        "-q",
+        "--transfer",
+        "rbf",
+    ]);
+    assert_eq!(a.code, 0, "{}", a.stderr);
+    assert_ne!(
+        std::fs::read(&other).unwrap(),
+        std::fs::read(&outputs[0].1).unwrap()
+    );
+}
