@@ -85,7 +85,7 @@ pub enum Error {
     /// Samples lie beyond the margin of the field's cells, where the field is not defined.
     #[error(
         "{path}: {count} samples lie farther than {margin} outside the field's cells (the \
-         farthest, at {at:?}, lies {farthest} from the cells' bounding box); nothing was \
+         farthest, at {at}, lies {farthest:.3} from the cells' bounding box); nothing was \
          written. Solve a field over these samples, or pass --outside keep (they keep their \
          coordinates) or --outside extend (the transfer is extrapolated)"
     )]
@@ -98,8 +98,8 @@ pub enum Error {
         margin: f64,
         /// The largest distance of one from the cells' bounding box.
         farthest: f64,
-        /// That sample (input coordinates).
-        at: Vec<f64>,
+        /// That sample (input coordinates), as text.
+        at: String,
     },
     /// A numerical failure that damping could not repair.
     #[error("solver failure: {0}")]

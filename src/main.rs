@@ -1008,50 +1008,56 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A progress bar on a terminal (a spinner for stages of unknown length); silent otherwise.
-struct Bar(Option<ProgressBar>);
+/// A progress bar on a terminal (a spinner for stages of unknown length), a new one for each
+/// stage (a finished bar draws no more); silent otherwise.
+struct Bar {
+    shown: bool,
+    bar: std::sync::Mutex<Option<ProgressBar>>,
+}
 
 impl Bar {
     fn new(quiet: bool) -> Self {
-        Self((!quiet && std::io::stderr().is_terminal()).then(ProgressBar::hidden))
+        Self {
+            shown: !quiet && std::io::stderr().is_terminal(),
+            bar: std::sync::Mutex::new(None),
+        }
+    }
+
+    fn with(&self, f: impl FnOnce(&ProgressBar)) {
+        if let Some(b) = self.bar.lock().expect("not poisoned").as_ref() {
+            f(b);
+        }
     }
 }
 
 impl Observer for Bar {
     fn stage(&self, name: &str, len: u64) {
-        if let Some(b) = &self.0 {
-            let template = if len == 0 {
-                "{prefix:>11} {spinner} {msg} {elapsed}"
-            } else {
-                "{prefix:>11} [{bar:30}] {pos}/{len} {msg} {elapsed}"
-            };
-            b.set_style(ProgressStyle::with_template(template).expect("valid template"));
-            b.set_draw_target(indicatif::ProgressDrawTarget::stderr());
-            b.set_prefix(name.to_string());
-            b.set_message("");
-            b.set_length(len);
-            b.set_position(0);
-            b.reset_elapsed();
-            if len == 0 {
-                b.enable_steady_tick(std::time::Duration::from_millis(120));
-            } else {
-                b.disable_steady_tick();
-            }
+        if !self.shown {
+            return;
+        }
+        let template = if len == 0 {
+            "{prefix:>11} {spinner} {elapsed} {msg}"
+        } else {
+            "{prefix:>11} [{bar:20}] {pos}/{len} {elapsed} {msg}"
+        };
+        let b = ProgressBar::with_draw_target(Some(len), indicatif::ProgressDrawTarget::stderr())
+            .with_style(ProgressStyle::with_template(template).expect("valid template"))
+            .with_prefix(name.to_string());
+        if len == 0 {
+            b.enable_steady_tick(std::time::Duration::from_millis(120));
+        }
+        if let Some(old) = self.bar.lock().expect("not poisoned").replace(b) {
+            old.finish_and_clear();
         }
     }
     fn advance(&self, n: u64) {
-        if let Some(b) = &self.0 {
-            b.inc(n);
-        }
+        self.with(|b| b.inc(n));
     }
     fn message(&self, text: &str) {
-        if let Some(b) = &self.0 {
-            b.set_message(text.to_string());
-        }
+        self.with(|b| b.set_message(text.to_string()));
     }
     fn finish(&self) {
-        if let Some(b) = &self.0 {
-            b.disable_steady_tick();
+        if let Some(b) = self.bar.lock().expect("not poisoned").take() {
             b.finish_and_clear();
         }
     }

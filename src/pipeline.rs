@@ -623,7 +623,14 @@ fn refuse_outside(input: &Path, warp: &Constrained<3>) -> Result<()> {
         count: tally.count,
         margin: warp.margin(),
         farthest: tally.farthest,
-        at: (tally.at + warp.origin()).iter().copied().collect(),
+        at: format!(
+            "({})",
+            (tally.at + warp.origin())
+                .iter()
+                .map(|v| format!("{v:.3}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     })
 }
 

@@ -289,3 +289,74 @@ impl Cursor<'_> {
         Ok(v)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Eight unit cells around the origin, each moved a little, the first fixed.
+    fn field() -> Field<3> {
+        let centers: Vec<Vect<3>> = (0..8)
+            .map(|k| Vect::<3>::from_fn(|a, _| if k >> a & 1 == 1 { 0.5 } else { -0.5 }))
+            .collect();
+        let motions = centers
+            .iter()
+            .map(|c| Motion {
+                rot: Mat::<3>::identity(),
+                pos: c + Vect::<3>::new(0.0, 0.0, 0.1 * c.x),
+            })
+            .collect();
+        let mut prescribed = super::super::Prescribed::default();
+        prescribed.set(0, 8, Affine::identity());
+        Field {
+            origin: Vect::<3>::new(1e6, 2e6, 0.0),
+            halves: vec![0.5; 8],
+            centers,
+            motions,
+            prescribed,
+        }
+    }
+
+    #[test]
+    fn saves_and_loads_the_transfer_and_the_prescribed_maps() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.field");
+        let f = field();
+        SavedField::new(f.clone(), Transfer::BlendIdw, None)
+            .save(&path)
+            .unwrap();
+        let back = SavedField::<3>::load(&path).unwrap();
+        assert_eq!(back.transfer, Transfer::BlendIdw);
+        assert_eq!(back.field, f);
+        assert!(back.rbf.is_none());
+    }
+
+    /// A version-1 file (no transfer, no maps) still loads, as a field for the RBF.
+    #[test]
+    fn loads_version_1_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v2.field");
+        let mut f = field();
+        f.prescribed = Default::default();
+        let rbf = Rbf::new(&f).unwrap();
+        SavedField::new(f.clone(), Transfer::Rbf, Some(rbf))
+            .save(&path)
+            .unwrap();
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[8..12].copy_from_slice(&1u32.to_le_bytes());
+        let cells = 16 + 1 + 3 * 8 + 8 + 8 * (3 + 1 + 9 + 3) * 8;
+        assert_eq!(bytes[cells..cells + 8], 0u64.to_le_bytes(), "no maps");
+        bytes.drain(cells..cells + 8);
+        bytes.remove(16);
+        let v1 = dir.path().join("v1.field");
+        std::fs::write(&v1, &bytes).unwrap();
+        let back = SavedField::<3>::load(&v1).unwrap();
+        assert_eq!(back.transfer, Transfer::Rbf);
+        assert_eq!(back.field, f);
+        assert!(back.rbf.is_some());
+        bytes[8..12].copy_from_slice(&3u32.to_le_bytes());
+        std::fs::write(&v1, &bytes).unwrap();
+        let e = SavedField::<3>::load(&v1).err().unwrap().to_string();
+        assert!(e.contains("version 3"), "{e}");
+    }
+}
