@@ -23,9 +23,14 @@ fn image(input: &Path, edit: &Path, output: &Path, extra: &[&str]) -> common::Ru
 }
 
 /// The fixed legs keep their pixels, the hands' pixels move as sent, the foreground's area
-/// stays within 5 %, and the output has no holes.
+/// stays within 5 %, and the output has no holes: with the blend and with the RBF.
 #[test]
 fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
+    moves_the_hands("blend");
+    moves_the_hands("rbf");
+}
+
+fn moves_the_hands(transfer: &str) {
     let dir = tempfile::tempdir().unwrap();
     let (input, output, edit) = common::files(dir.path(), "figure.png", "bent.png");
     let (width, height, rgba) = data_gen::gingerbread();
@@ -36,7 +41,7 @@ fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
     };
     figure.write_png(&input).unwrap();
     std::fs::write(&edit, data_gen::GINGERBREAD_SPEC).unwrap();
-    let r = image(&input, &edit, &output, &["-q"]);
+    let r = image(&input, &edit, &output, &["-q", "--transfer", transfer]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let out = Raster::read_png(&output).unwrap();
     assert_eq!((out.width, out.height), (width, height));
@@ -48,7 +53,7 @@ fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
             assert_eq!(
                 out.pixel(x, y),
                 figure.pixel(x, y),
-                "fixed pixel ({x}, {y})"
+                "{transfer}: fixed pixel ({x}, {y})"
             );
             checked += figure.pixel(x, y)[3].min(1) as usize;
         }
@@ -67,7 +72,10 @@ fn image_moves_the_hands_keeps_the_legs_and_leaves_no_holes() {
                 }
                 let got = out.pixel(x, (y as i64 + dy) as u32);
                 let diff = (0..4).map(|c| want[c].abs_diff(got[c])).max().unwrap();
-                assert!(diff <= 2, "hand pixel ({x}, {y}): {want:?} → {got:?}");
+                assert!(
+                    diff <= 2,
+                    "{transfer}: hand pixel ({x}, {y}): {want:?} → {got:?}"
+                );
                 moved += 1;
             }
         }
