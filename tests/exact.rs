@@ -480,3 +480,73 @@ fn a_saved_field_remembers_its_transfer() {
         std::fs::read(&outputs[0].1).unwrap()
     );
 }
+
+/// Text files keep the text of their fixed samples, not only the values: every line of the
+/// output that differs from the input's belongs to a sample outside the fixed half-space
+/// (ASCII PLY with normals, OBJ, XYZ), with the RBF.
+#[test]
+fn text_files_keep_the_lines_of_their_fixed_samples() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("points.xyz");
+    let mut text = String::new();
+    let mut next = 0x2545f4914f6cdd1du64;
+    let mut number = || {
+        next ^= next << 13;
+        next ^= next >> 7;
+        next ^= next << 17;
+        (next >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for i in 0..3000 {
+        text += &format!(
+            "{:.6} {:.6} {:.6} {i}\n",
+            10.0 * number(),
+            number(),
+            number()
+        );
+    }
+    std::fs::write(&xyz, text).unwrap();
+    for input in [
+        shared("meshes/Wuson.ply"),
+        shared("meshes/bunny_vn.ply"),
+        shared("meshes/spot.obj"),
+        xyz,
+    ] {
+        let name = input.file_name().unwrap().to_str().unwrap().to_string();
+        let doc = Document::read(&input).unwrap();
+        let mut xs: Vec<f64> = doc.positions().iter().map(|p| p.x).collect();
+        xs.sort_by(f64::total_cmp);
+        let (lo, hi) = (xs[xs.len() / 3], xs[2 * xs.len() / 3]);
+        let edit = dir.path().join("edit.toml");
+        std::fs::write(
+            &edit,
+            format!(
+                "[[fixed]]\nplane = {{ point = [{lo}, 0, 0], normal = [1, 0, 0] }}\n\
+                 [[handle]]\nplane = {{ point = [{hi}, 0, 0], normal = [-1, 0, 0] }}\n\
+                 translate = [0, {}, 0]\n",
+                0.3 * (hi - lo)
+            ),
+        )
+        .unwrap();
+        let out = dir.path().join(format!("out_{name}"));
+        let r = deform(&input, &out, &edit, &[]);
+        assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+        let (a, b) = (
+            std::fs::read_to_string(&input).unwrap(),
+            std::fs::read_to_string(&out).unwrap(),
+        );
+        let (a, b): (Vec<&str>, Vec<&str>) = (a.lines().collect(), b.lines().collect());
+        assert_eq!(a.len(), b.len(), "{name}");
+        let mut kept = 0;
+        for (x, y) in a.iter().zip(&b) {
+            let first = x.split_whitespace().find_map(|t| t.parse::<f64>().ok());
+            let fixed =
+                first.is_some_and(|v| v < lo) && !x.starts_with("vn") && !x.starts_with("vt");
+            if fixed {
+                assert_eq!(x, y, "{name}: a fixed sample's line changed");
+                kept += 1;
+            }
+        }
+        assert!(kept > 100, "{name}: {kept} fixed lines");
+        assert_ne!(a, b, "{name}: the handle moved");
+    }
+}

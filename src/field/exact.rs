@@ -501,11 +501,19 @@ where
         (sums, n)
     }
 
+    /// The one map that has the whole weight at `x`, if one has.
+    fn whole(&self, w: &[(u32, f64)]) -> Option<u32> {
+        match w {
+            [(m, 1.0)] => Some(*m),
+            _ => None,
+        }
+    }
+
     /// `F(x) + Σ w_r (A_r(x) − F(x))` for the band weights at `x`, given `F(x)`.
     fn banded(&self, x: &Vect<D>, start: u32, len: u32, f: Vect<D>) -> Vect<D> {
         let (w, n) = self.weights(x, start, len);
-        if n == 1 && w[0].1 == 1.0 {
-            return self.prescribed.maps[w[0].0 as usize].apply(x);
+        if let Some(m) = self.whole(&w[..n]) {
+            return self.prescribed.maps[m as usize].apply(x);
         }
         let mut out = f;
         for &(m, wr) in &w[..n] {
@@ -514,14 +522,21 @@ where
         out
     }
 
-    /// The normal under map `m`.
+    /// The normal under map `m` (the identity returns it as it came).
     fn exact_normal(&self, m: u32, n: &Vect<D>) -> Vect<D> {
-        unit_or(self.normal_maps[m as usize] * n, n)
+        if self.identity[m as usize] {
+            *n
+        } else {
+            unit_or(self.normal_maps[m as usize] * n, n)
+        }
     }
 
     /// The normal in a band: the transfer's and the maps' blended by the weights.
     fn banded_normal(&self, x: &Vect<D>, start: u32, len: u32, f: Vect<D>, n: &Vect<D>) -> Vect<D> {
         let (w, k) = self.weights(x, start, len);
+        if let Some(m) = self.whole(&w[..k]) {
+            return self.exact_normal(m, n);
+        }
         let mut out = f;
         for &(m, wr) in &w[..k] {
             out += (self.exact_normal(m, n) - f) * wr;
@@ -594,6 +609,39 @@ where
         }
     }
 
+    /// Samples of cells that the identity holds keep their position and normal bits.
+    fn warp_run_with_normals(
+        &self,
+        origin: &Vect<D>,
+        points: &[Vect<D>],
+        normals: &[Vect<D>],
+        out: &mut [Vect<D>],
+        out_normals: &mut [Vect<D>],
+    ) {
+        for (((o, on), p), n) in out.iter_mut().zip(out_normals).zip(points).zip(normals) {
+            let x = p - origin;
+            let still = match self.class_of(&x) {
+                Class::Exact(m) => self.identity[m as usize],
+                Class::Band(s, l) => {
+                    let (w, k) = self.weights(&x, s, l);
+                    self.whole(&w[..k])
+                        .is_some_and(|m| self.identity[m as usize])
+                }
+                Class::Outside => self.outside != Outside::Extend,
+                Class::Free => false,
+            };
+            if still {
+                if self.class_of(&x) == Class::Outside {
+                    self.count_outside(&x);
+                }
+                (*o, *on) = (*p, *n);
+            } else {
+                let (y, m) = self.warp_with_normal(&x, n);
+                (*o, *on) = (y + origin, m);
+            }
+        }
+    }
+
     /// Runs of samples the transfer moves alone go to its own `warp_run`; samples of prescribed
     /// cells take their map (the identity returns the sample as it came, bit for bit).
     fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
@@ -632,7 +680,14 @@ where
             out[i] = match class {
                 Class::Exact(m) if self.identity[m as usize] => *p,
                 Class::Exact(m) => self.prescribed.maps[m as usize].apply(&x) + origin,
-                Class::Band(s, l) => self.banded(&x, s, l, self.inner.warp(&x)) + origin,
+                Class::Band(s, l) => {
+                    let (w, n) = self.weights(&x, s, l);
+                    match self.whole(&w[..n]) {
+                        // A sample the identity has whole keeps its bits.
+                        Some(m) if self.identity[m as usize] => *p,
+                        _ => self.banded(&x, s, l, self.inner.warp(&x)) + origin,
+                    }
+                }
                 _ => {
                     tally.add(&x, self.distance(&x));
                     *p

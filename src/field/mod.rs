@@ -120,6 +120,23 @@ pub trait Warp<const D: usize>: Sync {
             *o = self.warp(&(p - origin)) + origin;
         }
     }
+
+    /// [`Warp::warp_run`] with normals: `out[i], out_normals[i]` from
+    /// [`Warp::warp_with_normal`] at `points[i] − origin`, with the same allowance for samples
+    /// left at rest.
+    fn warp_run_with_normals(
+        &self,
+        origin: &Vect<D>,
+        points: &[Vect<D>],
+        normals: &[Vect<D>],
+        out: &mut [Vect<D>],
+        out_normals: &mut [Vect<D>],
+    ) {
+        for (((o, on), p), n) in out.iter_mut().zip(out_normals).zip(points).zip(normals) {
+            let (x, m) = self.warp_with_normal(&(p - origin), n);
+            (*o, *on) = (x + origin, m);
+        }
+    }
 }
 
 /// The Jacobian of `warp` at the local point `x` by central differences of step `h`.
@@ -262,10 +279,7 @@ pub fn apply_into<const D: usize>(
         .zip(moved_normals.par_chunks_mut(CHUNK))
         .zip(points.par_chunks(CHUNK).zip(normals.par_chunks(CHUNK)))
         .for_each(|((out, out_n), (ps, ns))| {
-            for (((o, on), p), n) in out.iter_mut().zip(out_n).zip(ps).zip(ns) {
-                let (x, m) = warp.warp_with_normal(&(p - origin), n);
-                (*o, *on) = (x + origin, m);
-            }
+            warp.warp_run_with_normals(origin, ps, ns, out, out_n)
         });
 }
 

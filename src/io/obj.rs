@@ -169,18 +169,19 @@ impl ObjFile {
     /// [`ObjFile::loose_normals`]) replaced.
     pub fn encode(&self, positions: &[Vect<3>], normals: &[Vect<3>]) -> Result<Vec<u8>> {
         check_count(&self.path, positions.len(), self.positions.len())?;
-        let at = |spans: &[Span; 3], v: &Vect<3>| edits3(spans, v, [false; 3]);
+        let at = |spans: &[Span; 3], v: &Vect<3>, old: &Vect<3>| edits3(spans, v, old, [false; 3]);
         let mut edits: Vec<Edit> = Vec::with_capacity(3 * positions.len());
-        for (spans, p) in self.coords.iter().zip(positions) {
-            edits.extend(at(spans, p));
+        for ((spans, p), old) in self.coords.iter().zip(positions).zip(&self.positions) {
+            edits.extend(at(spans, p, old));
         }
         let referenced = self
             .normal_spans
             .iter()
+            .zip(&self.normals)
             .zip(&self.normal_vertex)
             .filter(|(_, v)| v.is_some());
-        for ((spans, _), n) in referenced.zip(normals) {
-            edits.extend(at(spans, n));
+        for (((spans, old), _), n) in referenced.zip(normals) {
+            edits.extend(at(spans, n, old));
         }
         Ok(splice(&self.bytes, edits))
     }

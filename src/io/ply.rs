@@ -133,15 +133,15 @@ impl PlyFile {
             check_count(&self.path, n.len(), self.coords.len())?;
         }
         let mut edits: Vec<Edit> = Vec::with_capacity(6 * positions.len());
-        let mut add = |spans: &[Span; 3], v: &Vect<3>, doubles: &[bool; 3]| {
-            edits.extend(edits3(spans, v, doubles.map(|d| !d)))
+        let mut add = |spans: &[Span; 3], v: &Vect<3>, old: &Vect<3>, doubles: &[bool; 3]| {
+            edits.extend(edits3(spans, v, old, doubles.map(|d| !d)))
         };
-        for (spans, p) in self.coords.iter().zip(positions) {
-            add(spans, p, &self.doubles);
+        for ((spans, p), old) in self.coords.iter().zip(positions).zip(&self.positions) {
+            add(spans, p, old, &self.doubles);
         }
         if let (Some(normals), Some(doubles)) = (normals, self.normal_doubles) {
-            for (spans, n) in self.normal_spans.iter().zip(normals) {
-                add(spans, n, &doubles);
+            for ((spans, n), old) in self.normal_spans.iter().zip(normals).zip(&self.normals) {
+                add(spans, n, old, &doubles);
             }
         }
         Ok(rewrite(&self.bytes, edits, numbers(self.encoding)))

@@ -48,13 +48,24 @@ pub(crate) fn check_count(path: &Path, given: usize, expected: usize) -> Result<
     )))
 }
 
-/// The edits writing the three components of `v` over `spans` (`single`: as f32).
-pub(crate) fn edits3(spans: &[Span; 3], v: &Vect<3>, single: [bool; 3]) -> [Edit; 3] {
-    std::array::from_fn(|k| Edit {
-        span: spans[k],
-        value: v[k],
-        single: single[k],
-    })
+/// The edits writing the components of `v` that differ from the file's `old` ones over
+/// `spans` (`single`: as f32).
+pub(crate) fn edits3(
+    spans: &[Span; 3],
+    v: &Vect<3>,
+    old: &Vect<3>,
+    single: [bool; 3],
+) -> impl Iterator<Item = Edit> + use<> {
+    // A number that did not change keeps its text (a fixed sample keeps its bytes, not only
+    // its value).
+    let (spans, v, old) = (*spans, *v, *old);
+    (0..3)
+        .filter(move |&k| v[k].to_bits() != old[k].to_bits())
+        .map(move |k| Edit {
+            span: spans[k],
+            value: v[k],
+            single: single[k],
+        })
 }
 
 /// How the numbers of a file are written.
@@ -149,12 +160,15 @@ impl Sink for SpanSink {
         let stride = if with_normals { 6 } else { 3 };
         check_count(&self.input, chunk.spans.len(), stride * moved.len())?;
         let mut edits = Vec::with_capacity(chunk.spans.len());
+        let unknown = Vect::<3>::repeat(f64::NAN);
         for (i, (spans, p)) in chunk.spans.chunks_exact(stride).zip(moved).enumerate() {
             let xyz: &[Span; 3] = spans[..3].try_into().expect("3 spans");
-            edits.extend(edits3(xyz, p, self.singles));
+            let old = chunk.positions.get(i).unwrap_or(&unknown);
+            edits.extend(edits3(xyz, p, old, self.singles));
             if let (Some(singles), Some(n)) = (self.normal_singles, normals.get(i)) {
                 let nxyz: &[Span; 3] = spans[3..].try_into().expect("3 normal spans");
-                edits.extend(edits3(nxyz, n, singles));
+                let old = chunk.normals.get(i).unwrap_or(&unknown);
+                edits.extend(edits3(nxyz, n, old, singles));
             }
         }
         self.out

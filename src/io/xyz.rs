@@ -147,7 +147,8 @@ impl XyzFile {
             .spans
             .iter()
             .zip(positions)
-            .flat_map(|(s, p)| edits3(s, p, [false; 3]))
+            .zip(&self.positions)
+            .flat_map(|((s, p), old)| edits3(s, p, old, [false; 3]))
             .collect();
         Ok(splice(&self.text, edits))
     }
