@@ -52,6 +52,20 @@ pub enum Error {
         /// The number of finest cells the grid would need.
         cells: u128,
     },
+    /// A buffer would exceed the memory budget ([`crate::memory`]).
+    #[error(
+        "{what} would need about {needed}, over the memory limit of {limit} (--memory-limit): {advice}"
+    )]
+    Memory {
+        /// What would be allocated.
+        what: String,
+        /// The estimate.
+        needed: String,
+        /// The budget.
+        limit: String,
+        /// Which parameters shrink it.
+        advice: String,
+    },
     /// The edit spec constrains nothing.
     #[error(
         "the edit spec has no constraint that selects any cell: add a [[fixed]], [[handle]], [[pin]] or [[target]] entry that touches the shape"

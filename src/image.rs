@@ -153,6 +153,7 @@ pub fn deform_image(
         warnings: constraints.warnings.clone(),
         ..Default::default()
     };
+    crate::pipeline::check_rbf_memory::<2>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, &Silent)?;
     info.cells = solution.complex.len();
     info.iterations = solution.info.iterations;

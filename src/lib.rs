@@ -52,6 +52,7 @@ pub mod error;
 pub mod field;
 pub mod image;
 pub mod io;
+pub mod memory;
 pub mod pipeline;
 pub mod progress;
 pub mod render;

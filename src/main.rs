@@ -57,6 +57,8 @@ enum Command {
         /// linear part grows with the distance, the blend follows the nearest cells).
         #[arg(long, value_enum, default_value_t = OutsideArg::Refuse)]
         outside: OutsideArg,
+        #[command(flatten)]
+        memory: MemoryArg,
         /// Print nothing but errors.
         #[arg(short, long)]
         quiet: bool,
@@ -178,6 +180,7 @@ impl DeformArgs {
             build: self.cells.params(),
             solve: SolveParams {
                 refine_strain: self.refine_strain,
+                memory_limit: self.cells.memory.memory_limit,
                 ..Default::default()
             },
             transfer: self.transfer.into(),
@@ -273,13 +276,38 @@ struct CellArgs {
     /// clouds with normals, exterior flood fill for point clouds without (auto), or as named.
     #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
     inside: InsideArg,
+    #[command(flatten)]
+    memory: MemoryArg,
+}
+
+/// The memory budget.
+#[derive(clap::Args, Clone, Copy)]
+struct MemoryArg {
+    /// Stop with an error, before allocating, when the cell grid, the solver or the RBF would
+    /// need more memory than this (e.g. 8G, 512M) [default: three quarters of the machine's
+    /// memory].
+    #[arg(long, value_name = "SIZE", value_parser = parse_memory)]
+    memory_limit: Option<u64>,
+}
+
+fn parse_memory(text: &str) -> Result<u64, String> {
+    rigidcells::memory::parse_size(text)
 }
 
 impl CellArgs {
+    /// The solver's parameters: the defaults, with the memory budget.
+    fn solve_params(&self) -> SolveParams {
+        SolveParams {
+            memory_limit: self.memory.memory_limit,
+            ..Default::default()
+        }
+    }
+
     fn params(&self) -> BuildParams {
         BuildParams {
             cell_size: self.cell_size,
             target_cells: self.cells,
+            memory_limit: self.memory.memory_limit,
             max_level: self.max_level,
             inside: match (self.shell, self.inside) {
                 (true, _) | (_, InsideArg::None) => Inside::None,
@@ -334,6 +362,7 @@ fn main() -> ExitCode {
             transfer,
             tolerance,
             outside,
+            memory,
             quiet,
         } => tolerance
             .check(transfer.unwrap_or(TransferArg::Rbf))
@@ -346,6 +375,7 @@ fn main() -> ExitCode {
                         OutsideArg::Keep => Outside::Keep,
                         OutsideArg::Extend => Outside::Extend,
                     },
+                    memory_limit: memory.memory_limit,
                 };
                 run_apply(&field, &input, &output, &params, quiet)
             }),
@@ -404,6 +434,7 @@ fn exit_code(e: &anyhow::Error) -> u8 {
             | Error::NoConstraints
             | Error::ConstraintConflict { .. }
             | Error::GridTooLarge { .. }
+            | Error::Memory { .. }
             | Error::Outside { .. },
         ) => 4,
         _ => 1,
@@ -430,6 +461,7 @@ fn run_cells(
     let spec = edit.map(read_spec::<3>).transpose()?;
     let params = DeformParams {
         build: cells.params(),
+        solve: cells.solve_params(),
         ..Default::default()
     };
     let (complex, info, solution, warnings) = pipeline::file_cells(
@@ -668,6 +700,7 @@ fn run_image(
     let raster = rigidcells::image::Raster::read_png(input)?;
     let params = DeformParams {
         build: cells.params(),
+        solve: cells.solve_params(),
         transfer,
         ..Default::default()
     };
@@ -995,6 +1028,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             max_level: None,
             shell: false,
             inside: InsideArg::Auto,
+            memory: MemoryArg { memory_limit: None },
         },
         quiet,
     )?;

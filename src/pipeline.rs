@@ -103,8 +103,10 @@ where
     let (complex, build_info) = build(points, triangles, &params.build)?;
     let constraints = solve::resolve(&complex, spec, points, None)?;
     let warnings = build_warnings(&build_info, &complex, &constraints.warnings);
+    check_rbf_memory::<D>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
     let t = Instant::now();
+    check_rbf_memory::<D>(solution.complex.len(), params)?;
     let field = Field::from_solution(&solution);
     let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
     let deformer = Constrained::new(&field, inner, Outside::Extend)?;
@@ -120,6 +122,20 @@ where
         warnings,
     };
     Ok((moved, solution, info))
+}
+
+/// [`crate::memory::check`] of the dense RBF of `cells` cells, when that is the transfer:
+/// checked before the solve, and again after refinement, so that neither ends in an abort.
+pub(crate) fn check_rbf_memory<const D: usize>(cells: usize, params: &DeformParams) -> Result<()> {
+    if params.transfer != Transfer::Rbf {
+        return Ok(());
+    }
+    crate::memory::check(
+        &format!("the RBF transfer of {cells} cells"),
+        crate::memory::rbf_bytes(cells, D),
+        crate::memory::limit(params.build.memory_limit),
+        "use --transfer blend, or a larger --cell-size (or fewer --cells)",
+    )
 }
 
 /// Samples checked for fold-overs at most: evenly strided, as the check costs a few warps (or
@@ -211,6 +227,8 @@ pub struct ApplyParams {
     pub rbf_tolerance: Option<f64>,
     /// What happens to samples beyond the field's margin (default: refused).
     pub outside: Outside,
+    /// The memory budget in bytes ([`crate::memory`]), for an RBF that must be factored.
+    pub memory_limit: Option<u64>,
 }
 
 /// Deforms the file `input` into `output` in two streaming passes (DESIGN §7): pass 1 builds
@@ -247,7 +265,9 @@ pub fn deform_file(
     info.seconds_read = t0.elapsed().as_secs_f64();
     let constraints = solve::resolve_selected(&complex, spec, &selections)?;
     let warnings = build_warnings(&build_info, &complex, &constraints.warnings);
+    check_rbf_memory::<3>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+    check_rbf_memory::<3>(solution.complex.len(), params)?;
 
     let t1 = Instant::now();
     let field = Field::from_solution(&solution);
@@ -304,6 +324,14 @@ pub fn apply_file(
     let t = Instant::now();
     let mut source = io::open(input)?;
     let origin = field.field.origin;
+    if params.transfer == Some(Transfer::Rbf) && !field.has_rbf() {
+        crate::memory::check(
+            &format!("the RBF transfer of {} cells", field.field.centers.len()),
+            crate::memory::rbf_bytes(field.field.centers.len(), 3),
+            crate::memory::limit(params.memory_limit),
+            "apply the field with the transfer it was saved with (no --transfer rbf)",
+        )?;
+    }
     observer.stage("transfer", 0);
     let deformer = field.deformer(params.transfer, params.rbf_tolerance, params.outside)?;
     observer.finish();

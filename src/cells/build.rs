@@ -67,6 +67,9 @@ pub struct BuildParams {
     /// About this many cells: the finest cell size is found by bisection ([`cell_size_for`]),
     /// overriding `cell_size`.
     pub target_cells: Option<usize>,
+    /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
+    /// machine's memory).
+    pub memory_limit: Option<u64>,
 }
 
 impl Default for BuildParams {
@@ -76,6 +79,7 @@ impl Default for BuildParams {
             max_level: None,
             inside: Inside::Auto,
             target_cells: None,
+            memory_limit: None,
         }
     }
 }
@@ -156,7 +160,7 @@ pub fn cell_size_for<const D: usize>(
         };
         let too_many = match build(points, triangles, &at) {
             Ok((complex, _)) => complex.len() > target,
-            Err(Error::GridTooLarge { .. }) => true,
+            Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => true,
             Err(e) => return Err(e),
         };
         if too_many { small = mid } else { large = mid }
@@ -443,6 +447,12 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
             cells: finest,
         });
     }
+    crate::memory::check(
+        &format!("the finest grid of {finest} cells of size {size}"),
+        crate::memory::grid_bytes(finest as f64, params.inside != Inside::None),
+        crate::memory::limit(params.memory_limit),
+        "use a larger --cell-size (or fewer --cells)",
+    )?;
     let size0 = size * block;
     let origin = (lo + hi) * 0.5;
     let lower = Vect::<D>::from_fn(|a, _| -0.5 * dims0[a] as f64 * size0);
@@ -536,28 +546,29 @@ pub fn classify_inside<const D: usize>(dims: &[i64; D], state: &mut [u8], mode: 
             *s = IN;
         }
     }
-    let mut stack = Vec::new();
+    // The stack holds linear indices (the grid has at most 2³¹ cells): 4 bytes a cell at worst.
+    let strides: [usize; D] = std::array::from_fn(|a| dims[..a].iter().product::<i64>() as usize);
+    let mut stack: Vec<u32> = Vec::new();
     for_each_coord(dims, |c| {
         if (0..D).any(|a| c[a] == 0 || c[a] == dims[a] - 1) {
             let i = linear(&c, dims);
             if state[i] == IN {
                 state[i] = OUT;
-                stack.push(c);
+                stack.push(i as u32);
             }
         }
     });
-    while let Some(c) = stack.pop() {
+    while let Some(i) = stack.pop() {
+        let i = i as usize;
         for a in 0..D {
-            for d in [-1, 1] {
-                let mut n = c;
-                n[a] += d;
-                if n[a] < 0 || n[a] >= dims[a] {
-                    continue;
-                }
-                let i = linear(&n, dims);
-                if state[i] == IN {
-                    state[i] = OUT;
-                    stack.push(n);
+            let c = (i / strides[a]) as i64 % dims[a];
+            for (ok, n) in [
+                (c > 0, i.wrapping_sub(strides[a])),
+                (c + 1 < dims[a], i + strides[a]),
+            ] {
+                if ok && state[n] == IN {
+                    state[n] = OUT;
+                    stack.push(n as u32);
                 }
             }
         }

@@ -54,6 +54,11 @@ where
         }
     }
 
+    /// Whether the file holds the RBF's coefficients.
+    pub fn has_rbf(&self) -> bool {
+        self.rbf.is_some()
+    }
+
     /// The map of space for `transfer` (`None`: the field's own): the saved RBF coefficients
     /// (evaluated through the far field within `rbf_tolerance`, when given) or a new blend or
     /// RBF, with the prescribed cells exact and samples beyond the margin handled by `outside`.

@@ -49,6 +49,9 @@ pub struct SolveParams {
     pub refine_levels: u8,
     /// Rounds of refinement at most. Default 4.
     pub max_refinements: usize,
+    /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
+    /// machine's memory).
+    pub memory_limit: Option<u64>,
 }
 
 impl Default for SolveParams {
@@ -61,6 +64,7 @@ impl Default for SolveParams {
             refine_strain: None,
             refine_levels: 2,
             max_refinements: 4,
+            memory_limit: None,
         }
     }
 }
@@ -156,6 +160,12 @@ where
             if !split.iter().any(|&s| s) {
                 break;
             }
+            let more = split.iter().filter(|&&s| s).count() * ((1 << D) - 1);
+            check_solver_memory(
+                complex.len() + more,
+                params,
+                "use a larger --refine-strain threshold",
+            )?;
             let (fine, parent) = complex.split(&split);
             motions = fine
                 .cells
@@ -218,6 +228,11 @@ where
         load_steps: load_steps(complex, constraints, params),
         ..Default::default()
     };
+    check_solver_memory(
+        complex.len(),
+        params,
+        "use a larger --cell-size (or fewer --cells)",
+    )?;
     let mut motions: Vec<Motion<D>> = complex
         .cells
         .iter()
@@ -598,6 +613,16 @@ where
     let by_turn = (turn / params.max_step_degrees.max(1e-3)).ceil();
     let by_travel = (travel / (params.max_step_fraction.max(1e-6) * extent)).ceil();
     by_turn.max(by_travel).clamp(1.0, 1000.0) as usize
+}
+
+/// [`crate::memory::check`] of the solver's estimate for `cells` cells.
+fn check_solver_memory(cells: usize, params: &SolveParams, advice: &str) -> Result<()> {
+    crate::memory::check(
+        &format!("solving {cells} cells"),
+        cells as f64 * crate::memory::SOLVER_BYTES_PER_CELL as f64,
+        crate::memory::limit(params.memory_limit),
+        advice,
+    )
 }
 
 fn timed<T>(acc: &mut f64, f: impl FnOnce() -> T) -> T {

@@ -1,0 +1,143 @@
+//! The memory budget: everything that grows with the cells, the extent or the samples is
+//! estimated before it is allocated, and a run whose estimate exceeds the budget stops with
+//! [`Error::Memory`], naming the parameter to change, instead of ending in an allocation abort
+//! (issue 15).
+//!
+//! The budget is `--memory-limit` (library: the `memory_limit` of the parameters), by default
+//! three quarters of the machine's physical memory, or of the control group's limit where that
+//! is lower. The estimates are of the large buffers only:
+//!
+//! - the dense finest grid of the cell construction: one byte per finest cell for its state,
+//!   as much again for the pyramid of coarser levels and the winding classification's copy,
+//!   and 4 bytes per cell for the exterior flood fill's stack at worst ([`grid_bytes`]);
+//! - the solver: about [`SOLVER_BYTES_PER_CELL`] per cell (blocks, the sparse factorization's
+//!   fill, the motions and the energies), measured as 19–25 KB per cell at 30k–80k cells;
+//! - the dense RBF: its `n × n` factor and the kernel sums ([`rbf_bytes`]).
+
+use crate::error::{Error, Result};
+
+/// The solver's memory per cell (see the module docs).
+pub const SOLVER_BYTES_PER_CELL: u64 = 24 << 10;
+
+/// The memory budget when none is given: three quarters of the physical memory (or of the
+/// control group's limit, if lower); 8 GiB where neither can be read.
+pub fn default_limit() -> u64 {
+    let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+        let line = s.lines().find(|l| l.starts_with("MemTotal:"))?;
+        let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+        Some(kb * 1024)
+    });
+    let cgroup = std::fs::read_to_string("/sys/fs/cgroup/memory.max")
+        .ok()
+        .and_then(|s| s.trim().parse::<u64>().ok());
+    let physical = match (total, cgroup) {
+        (Some(t), Some(c)) => t.min(c),
+        (Some(t), None) => t,
+        (None, Some(c)) => c,
+        (None, None) => 32 << 30,
+    };
+    physical / 4 * 3
+}
+
+/// The limit of `given`, or [`default_limit`].
+pub fn limit(given: Option<u64>) -> u64 {
+    given.unwrap_or_else(default_limit)
+}
+
+/// [`Error::Memory`] when `bytes` exceed `limit`; `what` names the allocation, `advice` the
+/// parameters that shrink it.
+pub fn check(what: &str, bytes: f64, limit: u64, advice: &str) -> Result<()> {
+    if bytes <= limit as f64 {
+        Ok(())
+    } else {
+        Err(Error::Memory {
+            what: what.to_string(),
+            needed: format_bytes(bytes),
+            limit: format_bytes(limit as f64),
+            advice: advice.to_string(),
+        })
+    }
+}
+
+/// The estimated bytes of a dense finest grid of `cells` cells, with or without the exterior
+/// flood fill.
+pub fn grid_bytes(cells: f64, flood: bool) -> f64 {
+    cells * if flood { 7.0 } else { 3.0 }
+}
+
+/// The estimated bytes of the dense RBF of `n` cells in `D` dimensions.
+pub fn rbf_bytes(n: usize, dim: usize) -> f64 {
+    let n = n as f64;
+    8.0 * n * n + 8.0 * n * (4.0 * dim as f64 + 8.0)
+}
+
+/// `1.5 GiB`, `300 MiB`, `512 bytes`.
+pub fn format_bytes(bytes: f64) -> String {
+    const UNITS: [(&str, f64); 4] = [
+        ("TiB", 1099511627776.0),
+        ("GiB", 1073741824.0),
+        ("MiB", 1048576.0),
+        ("KiB", 1024.0),
+    ];
+    for (name, size) in UNITS {
+        if bytes >= size {
+            return format!("{:.1} {name}", bytes / size);
+        }
+    }
+    format!("{bytes:.0} bytes")
+}
+
+/// Parses a size: a number of bytes, or a number with `K`, `M`, `G` or `T` (powers of 1024;
+/// `KB`, `KiB`, `MB`, `MiB`, … are the same), e.g. `8G`, `512MiB`, `2.5g`.
+pub fn parse_size(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let value: f64 = number
+        .parse()
+        .map_err(|_| format!("`{text}` is not a size (e.g. 8G, 512M, 1000000)"))?;
+    let scale = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1.0,
+        "k" | "kb" | "kib" => 1024.0,
+        "m" | "mb" | "mib" => 1048576.0,
+        "g" | "gb" | "gib" => 1073741824.0,
+        "t" | "tb" | "tib" => 1099511627776.0,
+        _ => {
+            return Err(format!(
+                "`{text}`: unknown unit `{unit}` (use K, M, G or T)"
+            ));
+        }
+    };
+    let bytes = value * scale;
+    if !(1.0..1.8e19).contains(&bytes) {
+        return Err(format!("`{text}` is not a usable size"));
+    }
+    Ok(bytes as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes_parse_and_print() {
+        assert_eq!(parse_size("8G"), Ok(8 << 30));
+        assert_eq!(parse_size("512MiB"), Ok(512 << 20));
+        assert_eq!(parse_size("1000"), Ok(1000));
+        assert_eq!(parse_size("2.5g"), Ok((2.5 * 1073741824.0) as u64));
+        assert!(parse_size("lots").is_err());
+        assert!(parse_size("8Q").is_err());
+        assert!(parse_size("0").is_err());
+        assert_eq!(format_bytes(1.5 * 1073741824.0), "1.5 GiB");
+        assert!(default_limit() > 1 << 20);
+        let e = check("the RBF", 2e9, 1 << 30, "use --transfer blend")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("1.9 GiB") && e.contains("1.0 GiB") && e.contains("--memory-limit"),
+            "{e}"
+        );
+    }
+}

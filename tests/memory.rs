@@ -1,0 +1,144 @@
+//! The memory budget (issue 15): what would not fit is refused before it is allocated, with an
+//! error naming the parameter to change, never an allocation abort.
+
+mod common;
+
+use common::{deform, run};
+
+/// A line of 257 points 443 units long (a long thin input).
+fn line(dir: &std::path::Path) -> std::path::PathBuf {
+    let path = dir.join("line.xyz");
+    let text: String = (0..257)
+        .map(|i| {
+            let t = i as f64;
+            format!("{t} {t} {t}\n")
+        })
+        .collect();
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn edit(dir: &std::path::Path, text: &str) -> std::path::PathBuf {
+    let path = dir.join("edit.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn a_tiny_cell_size_on_a_long_thin_input_is_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = line(dir.path());
+    let spec = edit(
+        dir.path(),
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [10, 10, 10] }\n",
+    );
+    let out = dir.path().join("out.xyz");
+    let start = std::time::Instant::now();
+    // Past the grid's hard bound.
+    let r = deform(&input, &out, &spec, &["--cell-size", "0.01"]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("--cell-size"), "{}", r.stderr);
+    // Within it, but past the budget.
+    let r = deform(
+        &input,
+        &out,
+        &spec,
+        &["--cell-size", "0.5", "--memory-limit", "64M"],
+    );
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("finest grid") && r.stderr.contains("--memory-limit"),
+        "{}",
+        r.stderr
+    );
+    assert!(r.stderr.contains("--cell-size"), "{}", r.stderr);
+    assert!(!out.exists());
+    // Both answers come at once (generous for a debug build on a busy machine).
+    assert!(
+        start.elapsed().as_secs_f64() < 10.0,
+        "{:?}",
+        start.elapsed()
+    );
+}
+
+#[test]
+fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    let spec = edit(
+        dir.path(),
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0, 0, 2]\n",
+    );
+    let out = dir.path().join("out.ply");
+    // 1,512 cells: the dense RBF needs about 18 MiB, the solver about 35 MiB.
+    let r = deform(
+        &input,
+        &out,
+        &spec,
+        &["--cell-size", "0.25", "--memory-limit", "10M"],
+    );
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("RBF") && r.stderr.contains("--transfer blend"),
+        "{}",
+        r.stderr
+    );
+    assert!(!out.exists());
+    let r = deform(
+        &input,
+        &out,
+        &spec,
+        &[
+            "--cell-size",
+            "0.25",
+            "--memory-limit",
+            "20M",
+            "--transfer",
+            "blend",
+        ],
+    );
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("solving 1512 cells"), "{}", r.stderr);
+    // Refinement that would outgrow the budget names its threshold.
+    let r = deform(
+        &input,
+        &out,
+        &spec,
+        &[
+            "--cell-size",
+            "0.25",
+            "--memory-limit",
+            "60M",
+            "--transfer",
+            "blend",
+            "--refine-strain",
+            "1e-9",
+        ],
+    );
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("--refine-strain"), "{}", r.stderr);
+    // With room, the same run works.
+    let r = deform(
+        &input,
+        &out,
+        &spec,
+        &["--cell-size", "0.25", "--memory-limit", "1G"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    // A size that is not one is a command-line error.
+    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let r = run(&[
+        "deform",
+        &p(&input),
+        "-o",
+        &p(&out),
+        "--edit",
+        &p(&spec),
+        "--memory-limit",
+        "lots",
+    ]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+}
