@@ -141,7 +141,7 @@ struct DeformArgs {
     #[command(flatten)]
     cells: CellArgs,
     /// Transfer of the cells' motions to the samples.
-    #[arg(long, value_enum, default_value_t = TransferArg::Rbf)]
+    #[arg(long, value_enum, default_value_t = TransferArg::Pu)]
     transfer: TransferArg,
     #[command(flatten)]
     tolerance: ToleranceArg,
@@ -349,6 +349,9 @@ enum TransferArg {
     BlendIdw,
     /// Triharmonic RBF interpolation (smooth, final).
     Rbf,
+    /// Partition-of-unity RBF: triharmonic fits on overlapping patches blended smoothly (C²),
+    /// for any number of cells.
+    Pu,
 }
 
 fn main() -> ExitCode {
@@ -525,6 +528,7 @@ impl From<TransferArg> for Transfer {
             TransferArg::Blend => Transfer::Blend,
             TransferArg::BlendIdw => Transfer::BlendIdw,
             TransferArg::Rbf => Transfer::Rbf,
+            TransferArg::Pu => Transfer::Pu,
         }
     }
 }
@@ -975,7 +979,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let size = [10.0, 1.0, 1.0];
     let shapes = [
-        ("bar", data_gen::bar(size, 8.0), Transfer::Rbf),
+        ("bar", data_gen::bar(size, 8.0), Transfer::Pu),
         ("soup", data_gen::soup(size, 8.0), Transfer::Blend),
     ];
     let edit = out.join("bend.toml");
@@ -1034,7 +1038,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
     )?;
     if !quiet {
         println!(
-            "demo: wrote bar.ply, soup.ply (inputs), bar_bent.ply (RBF), soup_bent.ply (blend), bend.toml, \
+            "demo: wrote bar.ply, soup.ply (inputs), bar_bent.ply (partition-of-unity RBF), soup_bent.ply (blend), bend.toml, \
              gingerbread.png, gingerbread.toml and gingerbread_bent.png in {}",
             out.display()
         );

@@ -134,7 +134,7 @@ pub(crate) fn check_rbf_memory<const D: usize>(cells: usize, params: &DeformPara
         &format!("the RBF transfer of {cells} cells"),
         crate::memory::rbf_bytes(cells, D),
         crate::memory::limit(params.build.memory_limit),
-        "use --transfer blend, or a larger --cell-size (or fewer --cells)",
+        "use --transfer pu (the default) or blend, or a larger --cell-size (or fewer --cells)",
     )
 }
 

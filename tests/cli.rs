@@ -422,14 +422,15 @@ fn lifted_bar(
 fn rbf_tolerance_is_checked_and_kept() {
     let dir = tempfile::tempdir().unwrap();
     let (input, output, edit) = lifted_bar(dir.path(), 2.0);
-    let r = deform(&input, &output, &edit, &["--cell-size", "0.25"]);
+    let rbf = ["--cell-size", "0.25", "--transfer", "rbf"];
+    let r = deform(&input, &output, &edit, &rbf);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let far = dir.path().join("far.ply");
     let r = deform(
         &input,
         &far,
         &edit,
-        &["--cell-size", "0.25", "--rbf-tolerance", "1e-3"],
+        &[&rbf[..], &["--rbf-tolerance", "1e-3"]].concat(),
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let (a, b) = (
@@ -442,8 +443,9 @@ fn rbf_tolerance_is_checked_and_kept() {
     let refused = dir.path().join("refused.ply");
     for extra in [
         &["--transfer", "blend", "--rbf-tolerance", "1e-3"][..],
-        &["--rbf-tolerance=-1"][..],
-        &["--rbf-tolerance", "nan"][..],
+        &["--transfer", "pu", "--rbf-tolerance", "1e-3"][..],
+        &["--transfer", "rbf", "--rbf-tolerance=-1"][..],
+        &["--transfer", "rbf", "--rbf-tolerance", "nan"][..],
     ] {
         let r = deform(&input, &refused, &edit, extra);
         assert_ne!(r.code, 0, "{extra:?}");

@@ -125,7 +125,7 @@ fn fixed_and_handle_samples_are_exact_with_every_transfer() {
         &edit,
         (636394.0, 636786.0),
         sent,
-        &["blend", "blend-idw", "rbf"],
+        &["blend", "blend-idw", "rbf", "pu"],
         "25",
     );
     // Between the regions the ground rises smoothly from 0 to the handle's 30 m (and the 7 m
@@ -193,7 +193,7 @@ fn exact_regions_blend_smoothly_into_the_field() {
     let (_, solution, _) =
         pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
     let field = Field::from_solution(&solution);
-    for transfer in [Transfer::Rbf, Transfer::Blend] {
+    for transfer in [Transfer::Rbf, Transfer::Pu, Transfer::Blend] {
         let map = Constrained::new(
             &field,
             Deformer::new(&field, transfer).unwrap(),
@@ -435,7 +435,7 @@ fn a_saved_field_remembers_its_transfer() {
     )
     .unwrap();
     let mut outputs = Vec::new();
-    for transfer in ["blend", "blend-idw", "rbf"] {
+    for transfer in ["blend", "blend-idw", "rbf", "pu"] {
         let field = dir.path().join(format!("{transfer}.field"));
         let out = dir.path().join(format!("{transfer}.ply"));
         let r = deform(

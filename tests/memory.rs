@@ -78,7 +78,14 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
         &input,
         &out,
         &spec,
-        &["--cell-size", "0.25", "--memory-limit", "10M"],
+        &[
+            "--cell-size",
+            "0.25",
+            "--memory-limit",
+            "10M",
+            "--transfer",
+            "rbf",
+        ],
     );
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(

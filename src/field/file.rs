@@ -5,7 +5,7 @@
 //!
 //! ```text
 //! "RCFIELD\0"  u32 version (2)  u32 D
-//! u8 transfer                                    0 blend, 1 blend-idw, 2 rbf (version 2)
+//! u8 transfer                        0 blend, 1 blend-idw, 2 rbf, 3 pu (version 2)
 //! f64[D] origin                                  world position of the local frame
 //! u64 n, then n × (f64[D] center, f64 half, f64[D·D] rotation (row-major), f64[D] position)
 //! u64 r, then r × (f64[D·D] linear (row-major), f64[D] translation)   prescribed maps (v2)
@@ -87,6 +87,7 @@ where
             Transfer::Blend => 0,
             Transfer::BlendIdw => 1,
             Transfer::Rbf => 2,
+            Transfer::Pu => 3,
         });
         let put = |out: &mut Vec<u8>, v: f64| out.extend_from_slice(&v.to_le_bytes());
         f.origin.iter().for_each(|&v| put(&mut out, v));
@@ -167,6 +168,7 @@ where
                 0 => Transfer::Blend,
                 1 => Transfer::BlendIdw,
                 2 => Transfer::Rbf,
+                3 => Transfer::Pu,
                 t => return Err(Error::format(path, format!("unknown transfer {t}"))),
             },
         };

@@ -17,6 +17,7 @@ mod exact;
 pub mod far;
 mod file;
 mod nearest;
+mod pu;
 mod rbf;
 mod simd;
 
@@ -24,6 +25,7 @@ pub use blend::{Blend, Weights};
 pub use exact::{Constrained, FREE, Outside, OutsideTally, Prescribed};
 pub use file::SavedField;
 pub use nearest::{Anchor, NEAR, Nearest, Neighbors};
+pub use pu::PuRbf;
 pub use rbf::Rbf;
 
 use rayon::prelude::*;
@@ -88,6 +90,9 @@ pub enum Transfer {
     BlendIdw,
     /// Triharmonic RBF interpolation of the cell-center displacements (smooth, final).
     Rbf,
+    /// The partition-of-unity RBF: triharmonic fits on overlapping patches blended by C²
+    /// weights ([`PuRbf`]; smooth, for any number of cells).
+    Pu,
 }
 
 /// A map of space in the local frame: the per-sample kernel of every driver.
@@ -161,6 +166,8 @@ pub enum Deformer<const D: usize> {
     Blend(Box<Blend<D>>),
     /// See [`Rbf`].
     Rbf(Rbf<D>),
+    /// See [`PuRbf`].
+    Pu(PuRbf<D>),
 }
 
 impl<const D: usize> Deformer<D> {
@@ -172,6 +179,7 @@ impl<const D: usize> Deformer<D> {
                 Self::Blend(Box::new(Blend::new(field, Weights::InverseDistance)?))
             }
             Transfer::Rbf => Self::Rbf(Rbf::new(field)?),
+            Transfer::Pu => Self::Pu(PuRbf::new(field)?),
         })
     }
 
@@ -191,6 +199,7 @@ impl<const D: usize> Warp<D> for Deformer<D> {
         match self {
             Self::Blend(b) => b.warp(x),
             Self::Rbf(r) => r.warp(x),
+            Self::Pu(p) => p.warp(x),
         }
     }
 
@@ -199,6 +208,7 @@ impl<const D: usize> Warp<D> for Deformer<D> {
         match self {
             Self::Blend(b) => b.warp_normal(x, n),
             Self::Rbf(r) => r.warp_normal(x, n),
+            Self::Pu(p) => p.warp_normal(x, n),
         }
     }
 
@@ -207,6 +217,7 @@ impl<const D: usize> Warp<D> for Deformer<D> {
         match self {
             Self::Blend(b) => b.warp_with_normal(x, n),
             Self::Rbf(r) => r.warp_with_normal(x, n),
+            Self::Pu(p) => p.warp_with_normal(x, n),
         }
     }
 
@@ -214,6 +225,7 @@ impl<const D: usize> Warp<D> for Deformer<D> {
         match self {
             Self::Blend(b) => b.warp_run(origin, points, out),
             Self::Rbf(r) => r.warp_run(origin, points, out),
+            Self::Pu(p) => p.warp_run(origin, points, out),
         }
     }
 
@@ -221,6 +233,7 @@ impl<const D: usize> Warp<D> for Deformer<D> {
         match self {
             Self::Blend(b) => b.jacobian(x, h),
             Self::Rbf(r) => Warp::jacobian(r, x, h),
+            Self::Pu(p) => p.jacobian(x, h),
         }
     }
 }

@@ -93,6 +93,62 @@ impl<const D: usize> Rbf<D> {
         ))
     }
 
+    /// [`Rbf::new`] for a few hundred cells at most, on the calling thread alone: LU of the
+    /// whole saddle-point system (nalgebra) and one step of iterative refinement. For the
+    /// patches of [`super::PuRbf`], which are fitted in parallel, many small fits each asking
+    /// for threads of their own overflowed the worker threads' stacks.
+    pub(crate) fn new_serial(field: &Field<D>) -> Result<Self> {
+        let n = field.centers.len();
+        if n == 0 {
+            return Err(Error::Solver("the field has no cells".into()));
+        }
+        let (mut lo, mut hi) = (field.centers[0], field.centers[0]);
+        for c in &field.centers {
+            lo = lo.inf(c);
+            hi = hi.sup(c);
+        }
+        let shift = (lo + hi) * 0.5;
+        let scale = (0.5 * (hi - lo).max()).max(f64::MIN_POSITIVE);
+        let inv_scale = 1.0 / scale;
+        let c: Vec<Vect<D>> = field
+            .centers
+            .iter()
+            .map(|x| (x - shift) * inv_scale)
+            .collect();
+        let m = n + D + 1;
+        let a = nalgebra::DMatrix::<f64>::from_fn(m, m, |r, k| match (r < n, k < n) {
+            (true, true) => (c[r] - c[k]).norm().powi(3),
+            (true, false) => poly(&c[r], k - n),
+            (false, true) => poly(&c[k], r - n),
+            (false, false) => 0.0,
+        });
+        let rhs = nalgebra::DMatrix::<f64>::from_fn(m, D, |r, k| {
+            if r < n {
+                (field.motions[r].pos[k] - field.centers[r][k]) * inv_scale
+            } else {
+                0.0
+            }
+        });
+        let lu = a.clone().lu();
+        let singular =
+            || Error::Solver("the RBF system is singular (coincident cell centers?)".into());
+        let mut x = lu.solve(&rhs).ok_or_else(singular)?;
+        if let Some(correction) = lu.solve(&(&rhs - &a * &x)) {
+            x += correction;
+        }
+        if !x.iter().all(|v| v.is_finite()) {
+            return Err(singular());
+        }
+        Ok(Self::assemble(
+            &c,
+            std::array::from_fn(|k| (0..n).map(|r| x[(r, k)]).collect()),
+            Vect::<D>::from_fn(|k, _| x[(n, k)]),
+            std::array::from_fn(|k| std::array::from_fn(|a| x[(n + 1 + a, k)])),
+            shift,
+            inv_scale,
+        ))
+    }
+
     /// The transfer from its scaled centers `c` and coefficients.
     fn assemble(
         c: &[Vect<D>],

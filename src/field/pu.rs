@@ -1,0 +1,326 @@
+//! The partition-of-unity RBF (issue 15): the triharmonic RBF of [`super::Rbf`] fitted on small
+//! overlapping patches and blended by C² weights, so that its fit is O(n) and its evaluation
+//! O(patch size) per sample, whatever the number of cells.
+//!
+//! - **Patches.** Space is cut into a regular grid of boxes of edge `s`, a power of two of the
+//!   smallest cell's edge, the smallest for which the boxes that hold a cell center hold at
+//!   least [`PATCH_CENTERS`] on average; every box that meets a cell is a patch. A patch's
+//!   weight is the tensor product of Wendland's C² function `ψ(t) = (1 − t)⁴ (4t + 1)` over
+//!   `t = |x_a − m_a| / r` with `m` the box's middle and `r = (½ + OVERLAP) s`, so neighboring
+//!   patches overlap by `OVERLAP · s` on each side and every point of the cells lies inside
+//!   some patch's support.
+//! - **Fits.** Each patch fits the triharmonic RBF with its linear part to the displacements of
+//!   the centers in its support (grown, for a patch with fewer than [`MIN_FIT`] centers there,
+//!   until it has that many): `f_p`.
+//! - **Blend.** `d(x) = Σ_p ψ_p(x) f_p(x) / Σ_p ψ_p(x)`. It is C² wherever the weights' sum is
+//!   positive (the weights are C², the fits C²); it interpolates the centers, because every
+//!   patch whose weight is positive at a center fits that center; and where all the centers of
+//!   the patches around a point move by one rigid motion, every fit reproduces that motion (it
+//!   is linear in `x`), and so does the blend.
+//! - **Outside every support** (only beyond the field's margin, with `--outside extend`) the
+//!   nearest patch's fit is used alone.
+//!
+//! A sample meets at most `2^D` patches, `(1 + 2·OVERLAP)^D` on average (3.4 in 3D), each a sum
+//! over its few dozen centers, so the cost per sample does not grow with the cells.
+
+use rayon::prelude::*;
+use rustc_hash::FxHashMap;
+
+use super::{Field, Rbf, Warp, unit_or};
+use crate::error::{Error, Result};
+use crate::rigid::{Motion, Vect};
+
+/// The centers a patch box holds on average at least (it sets the patches' size).
+pub const PATCH_CENTERS: f64 = 24.0;
+
+/// How far a patch's support reaches past its box on each side, in box edges.
+pub const OVERLAP: f64 = 0.25;
+
+/// The fewest centers a patch fits.
+pub const MIN_FIT: usize = 12;
+
+/// The partition-of-unity RBF transfer of a field.
+pub struct PuRbf<const D: usize> {
+    /// Lower corner of box 0 (local frame).
+    lower: Vect<D>,
+    /// The boxes' edge.
+    edge: f64,
+    /// Box coordinates → patch.
+    index: FxHashMap<[i64; D], u32>,
+    /// Each patch's box middle and fit.
+    patches: Vec<(Vect<D>, Rbf<D>)>,
+    /// The patches' middles, for the nearest patch outside every support.
+    middles: kiddo::ImmutableKdTree<f64, D>,
+}
+
+/// Wendland's C² function on `[0, 1]`: `(1 − t)⁴ (4t + 1)`, zero beyond.
+#[inline]
+fn wendland(t: f64) -> f64 {
+    if t >= 1.0 {
+        0.0
+    } else {
+        let u = 1.0 - t;
+        let u2 = u * u;
+        u2 * u2 * (4.0 * t + 1.0)
+    }
+}
+
+impl<const D: usize> PuRbf<D> {
+    /// Cuts the field into patches and fits each.
+    pub fn new(field: &Field<D>) -> Result<Self> {
+        let n = field.centers.len();
+        if n == 0 {
+            return Err(Error::Solver("the field has no cells".into()));
+        }
+        let smallest = 2.0 * field.halves.iter().cloned().fold(f64::INFINITY, f64::min);
+        let mut lo = Vect::<D>::repeat(f64::INFINITY);
+        for (c, h) in field.centers.iter().zip(&field.halves) {
+            lo = lo.inf(&c.add_scalar(-h));
+        }
+        let lower = lo;
+        let box_of = |x: &Vect<D>, edge: f64| -> [i64; D] {
+            std::array::from_fn(|a| ((x[a] - lower[a]) / edge).floor() as i64)
+        };
+        // The smallest power-of-two box edge whose occupied boxes hold enough centers.
+        let mut edge = smallest;
+        for _ in 0..40 {
+            let mut count: FxHashMap<[i64; D], usize> = FxHashMap::default();
+            for c in &field.centers {
+                *count.entry(box_of(c, edge)).or_default() += 1;
+            }
+            if n as f64 / count.len() as f64 >= PATCH_CENTERS || count.len() == 1 {
+                break;
+            }
+            edge *= std::f64::consts::SQRT_2;
+        }
+        // Every box that meets a cell is a patch.
+        let mut keys: Vec<[i64; D]> = Vec::new();
+        {
+            let mut seen = rustc_hash::FxHashSet::default();
+            for (c, &h) in field.centers.iter().zip(&field.halves) {
+                let from = box_of(&c.add_scalar(-h), edge);
+                let to = box_of(&c.add_scalar(h * (1.0 - 1e-12)), edge);
+                let mut k = from;
+                loop {
+                    if seen.insert(k) {
+                        keys.push(k);
+                    }
+                    let Some(a) = (0..D).find(|&a| k[a] < to[a]) else {
+                        break;
+                    };
+                    k[a] += 1;
+                    k[..a].copy_from_slice(&from[..a]);
+                }
+            }
+        }
+        keys.sort_unstable();
+        // The centers by box, for gathering each patch's fit.
+        let mut by_box: FxHashMap<[i64; D], Vec<u32>> = FxHashMap::default();
+        for (i, c) in field.centers.iter().enumerate() {
+            by_box.entry(box_of(c, edge)).or_default().push(i as u32);
+        }
+        let reach = (0.5 + OVERLAP) * edge;
+        let middle =
+            |k: &[i64; D]| Vect::<D>::from_fn(|a, _| lower[a] + (k[a] as f64 + 0.5) * edge);
+        let patches: Vec<(Vect<D>, Rbf<D>)> = keys
+            .par_iter()
+            .map(|k| {
+                let m = middle(k);
+                let members = gather(field, &by_box, k, &m, reach, edge);
+                Ok((m, Rbf::new_serial(&patch_field(field, &members))?))
+            })
+            .collect::<Result<_>>()?;
+        let index = keys
+            .iter()
+            .enumerate()
+            .map(|(p, k)| (*k, p as u32))
+            .collect();
+        let points: Vec<[f64; D]> = patches.iter().map(|(m, _)| (*m).into()).collect();
+        Ok(Self {
+            lower,
+            edge,
+            index,
+            middles: kiddo::ImmutableKdTree::new_from_slice(&points)
+                .map_err(|e| Error::Solver(format!("kd-tree over patches: {e:?}")))?,
+            patches,
+        })
+    }
+
+    /// Patches in all.
+    pub fn patch_count(&self) -> usize {
+        self.patches.len()
+    }
+
+    /// The patches' box edge.
+    pub fn patch_edge(&self) -> f64 {
+        self.edge
+    }
+
+    /// The displacement at the local point `x`.
+    pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
+        let reach = (0.5 + OVERLAP) * self.edge;
+        // The box of `x` and, along each axis, its neighbor on the near side when `x` is within
+        // the overlap of it.
+        let t: [f64; D] = std::array::from_fn(|a| (x[a] - self.lower[a]) / self.edge);
+        let home: [i64; D] = t.map(|v| v.floor() as i64);
+        let side: [i64; D] = std::array::from_fn(|a| {
+            let f = t[a] - home[a] as f64;
+            if f < OVERLAP {
+                -1
+            } else if f > 1.0 - OVERLAP {
+                1
+            } else {
+                0
+            }
+        });
+        let mut total = 0.0;
+        let mut sum = Vect::<D>::zeros();
+        for bits in 0..1usize << D {
+            if (0..D).any(|a| bits >> a & 1 == 1 && side[a] == 0) {
+                continue;
+            }
+            let k: [i64; D] = std::array::from_fn(|a| home[a] + (bits >> a & 1) as i64 * side[a]);
+            let Some(&p) = self.index.get(&k) else {
+                continue;
+            };
+            let (m, fit) = &self.patches[p as usize];
+            let mut w = 1.0;
+            for a in 0..D {
+                w *= wendland((x[a] - m[a]).abs() / reach);
+            }
+            if w > 0.0 {
+                total += w;
+                sum += fit.displacement(x) * w;
+            }
+        }
+        if total > 0.0 {
+            return sum / total;
+        }
+        let p: [f64; D] = (*x).into();
+        let one = std::num::NonZero::new(1).expect("1 > 0");
+        let nearest = self
+            .middles
+            .query(&p)
+            .nearest_n::<kiddo::SquaredEuclidean<f64>>(one)
+            .execute()
+            .first()
+            .map_or(0, |r| r.item);
+        self.patches[nearest as usize].1.displacement(x)
+    }
+}
+
+/// The sub-field of a patch's `members`. Where their centers lie in a plane (a terrain one
+/// cell thick) or on a line, the fit's linear part would be undetermined: each center then gets
+/// two companions half a cell off that plane on either side, displaced by the cell's own rigid
+/// motion, so the fit learns the cells' rotations there instead of failing.
+fn patch_field<const D: usize>(field: &Field<D>, members: &[u32]) -> Field<D> {
+    let mut sub = Field {
+        origin: Vect::<D>::zeros(),
+        centers: members.iter().map(|&i| field.centers[i as usize]).collect(),
+        halves: members.iter().map(|&i| field.halves[i as usize]).collect(),
+        motions: members.iter().map(|&i| field.motions[i as usize]).collect(),
+        prescribed: Default::default(),
+    };
+    let k = members.len() as f64;
+    let mean = sub.centers.iter().fold(Vect::<D>::zeros(), |s, c| s + c) / k;
+    let mut cov = nalgebra::SMatrix::<f64, D, D>::zeros();
+    for c in &sub.centers {
+        let d = c - mean;
+        cov += d * d.transpose();
+    }
+    let eigen = nalgebra::DMatrix::from_fn(D, D, |r, c| cov[(r, c)] / k).symmetric_eigen();
+    let largest = eigen.eigenvalues.iter().cloned().fold(0.0, f64::max);
+    let flat: Vec<Vect<D>> = (0..D)
+        .filter(|&a| eigen.eigenvalues[a] <= 1e-6 * largest.max(f64::MIN_POSITIVE))
+        .map(|a| Vect::<D>::from_fn(|r, _| eigen.eigenvectors[(r, a)]))
+        .collect();
+    if flat.is_empty() {
+        return sub;
+    }
+    for &i in members {
+        let (c, h, m) = (
+            field.centers[i as usize],
+            field.halves[i as usize],
+            field.motions[i as usize],
+        );
+        for axis in &flat {
+            for side in [-1.0, 1.0] {
+                let at = c + axis * (side * h);
+                sub.centers.push(at);
+                sub.halves.push(h);
+                sub.motions.push(Motion {
+                    rot: m.rot,
+                    pos: m.apply(&c, &at),
+                });
+            }
+        }
+    }
+    sub
+}
+
+/// The centers in the support of the patch of box `k` (middle `m`, half-width `reach`), or the
+/// [`MIN_FIT`] nearest found by growing it.
+fn gather<const D: usize>(
+    field: &Field<D>,
+    by_box: &FxHashMap<[i64; D], Vec<u32>>,
+    k: &[i64; D],
+    m: &Vect<D>,
+    reach: f64,
+    edge: f64,
+) -> Vec<u32> {
+    let mut r = reach;
+    let mut ring = 1i64;
+    loop {
+        let mut members = Vec::new();
+        let mut v = k.map(|c| c - ring);
+        loop {
+            if let Some(list) = by_box.get(&v) {
+                members.extend(list.iter().copied().filter(|&i| {
+                    let c = &field.centers[i as usize];
+                    (0..D).all(|a| (c[a] - m[a]).abs() <= r)
+                }));
+            }
+            let Some(a) = (0..D).find(|&a| v[a] < k[a] + ring) else {
+                break;
+            };
+            v[a] += 1;
+            for b in 0..a {
+                v[b] = k[b] - ring;
+            }
+        }
+        if members.len() >= MIN_FIT.min(field.centers.len()) {
+            members.sort_unstable();
+            return members;
+        }
+        if ring >= 4 {
+            // Sparse cells far apart: the nearest MIN_FIT centers by a scan.
+            let mut all: Vec<(f64, u32)> = field
+                .centers
+                .iter()
+                .enumerate()
+                .map(|(i, c)| ((c - m).norm_squared(), i as u32))
+                .collect();
+            all.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            let mut members: Vec<u32> = all.iter().take(MIN_FIT).map(|x| x.1).collect();
+            members.sort_unstable();
+            return members;
+        }
+        r += edge;
+        ring += 1;
+    }
+}
+
+impl<const D: usize> Warp<D> for PuRbf<D> {
+    #[inline]
+    fn warp(&self, x: &Vect<D>) -> Vect<D> {
+        x + self.displacement(x)
+    }
+
+    /// The normal mapped by the inverse transpose of the Jacobian (central differences of a
+    /// thousandth of a patch), renormalized.
+    fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
+        let j = super::central_jacobian(self, x, 1e-3 * self.edge);
+        let mapped = j.try_inverse().map(|inv| inv.transpose() * n).unwrap_or(*n);
+        unit_or(mapped, n)
+    }
+}

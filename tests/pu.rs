@@ -1,0 +1,128 @@
+//! The partition-of-unity RBF (issue 15): it interpolates the centers, reproduces one rigid
+//! motion exactly, agrees with the dense RBF where that is feasible, and is smooth across the
+//! borders of its patches.
+
+use std::path::Path;
+
+use rigidcells::cells::BuildParams;
+use rigidcells::field::{Field, PuRbf, Rbf, Warp};
+use rigidcells::pipeline::{self, DeformParams};
+use rigidcells::progress::Silent;
+use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
+use rigidcells::spec::parse_spec;
+
+/// The 10×1×1 bar bent by 90° (fixed left end, turned right end) at `cell` cells: a solved
+/// field with cells of several sizes.
+fn bent_bar(cell: f64) -> Field<3> {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let points: Vec<Vect<3>> = bar.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    let spec = parse_spec::<3>(
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-3.4, 0.0, 5.9]\n",
+        Path::new("."),
+        Path::new("edit.toml"),
+    )
+    .unwrap();
+    let params = DeformParams {
+        build: BuildParams {
+            cell_size: Some(cell),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let (_, solution, _) =
+        pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
+    Field::from_solution(&solution)
+}
+
+#[test]
+fn interpolates_the_centers() {
+    let f = bent_bar(0.25);
+    let pu = PuRbf::new(&f).unwrap();
+    assert!(pu.patch_count() > 4, "{} patches", pu.patch_count());
+    let worst = f
+        .centers
+        .iter()
+        .zip(&f.motions)
+        .map(|(c, m)| (pu.warp(c) - m.pos).norm())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9, "a center is {worst} off");
+}
+
+#[test]
+fn reproduces_one_rigid_motion_exactly() {
+    let mut f = bent_bar(0.25);
+    let rot = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::new(1.0, -2.0, 0.5), 0.7);
+    let t = Vect::<3>::new(3.0, -1.0, 2.0);
+    for (c, m) in f.centers.iter().zip(&mut f.motions) {
+        *m = Motion {
+            rot,
+            pos: rot * c + t,
+        };
+    }
+    let pu = PuRbf::new(&f).unwrap();
+    let mut worst = 0.0f64;
+    for i in 0..2000 {
+        let s = i as f64;
+        let x = Vect::<3>::new(
+            (s * 0.6180339887).fract() * 10.0 - 5.0,
+            (s * 0.7548776662).fract() - 0.5,
+            (s * 0.5698402910).fract() - 0.5,
+        );
+        worst = worst.max((pu.warp(&x) - (rot * x + t)).norm());
+    }
+    assert!(worst < 1e-9, "off the rigid motion by {worst}");
+}
+
+#[test]
+fn agrees_with_the_dense_rbf() {
+    let f = bent_bar(0.25);
+    let (dense, pu) = (Rbf::new(&f).unwrap(), PuRbf::new(&f).unwrap());
+    let (mut gap, mut largest) = (0.0f64, 0.0f64);
+    for i in 0..5000 {
+        let s = i as f64;
+        let x = Vect::<3>::new(
+            (s * 0.6180339887).fract() * 10.0 - 5.0,
+            (s * 0.7548776662).fract() - 0.5,
+            (s * 0.5698402910).fract() - 0.5,
+        );
+        let d = dense.warp(&x);
+        largest = largest.max((d - x).norm());
+        gap = gap.max((pu.warp(&x) - d).norm());
+    }
+    assert!(
+        gap <= 0.01 * largest,
+        "{gap} against a largest displacement of {largest}"
+    );
+}
+
+/// Second differences along lines through many patch borders shrink about 4× when the step
+/// halves, as for a C² map (a kink would give 2, a seam 1).
+#[test]
+fn is_smooth_across_patch_borders() {
+    let f = bent_bar(0.125);
+    let pu = PuRbf::new(&f).unwrap();
+    let edge = pu.patch_edge();
+    assert!(edge < 2.0, "patches of {edge} are too few to cross");
+    let second = |h: f64| {
+        let mut worst = 0.0f64;
+        let mut x = -4.5;
+        while x < 4.5 {
+            for (y, z) in [(0.0, 0.0), (0.31, -0.2), (-0.45, 0.45)] {
+                let p = Vect::<3>::new(x, y, z);
+                let e = Vect::<3>::new(h, 0.37 * h, 0.21 * h);
+                let d2 = pu.warp(&(p + e)) - 2.0 * pu.warp(&p) + pu.warp(&(p - e));
+                worst = worst.max(d2.norm());
+            }
+            x += 0.0137;
+        }
+        worst
+    };
+    let (a, b) = (second(2e-3), second(1e-3));
+    let ratio = a / b;
+    assert!(
+        ratio > 3.5 && ratio < 4.5,
+        "second differences {a:e} → {b:e}: ratio {ratio}"
+    );
+}
