@@ -89,7 +89,7 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
     );
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(
-        r.stderr.contains("RBF") && r.stderr.contains("--transfer blend"),
+        r.stderr.contains("RBF") && r.stderr.contains("--transfer pu"),
         "{}",
         r.stderr
     );
