@@ -126,3 +126,22 @@ fn is_smooth_across_patch_borders() {
         "second differences {a:e} → {b:e}: ratio {ratio}"
     );
 }
+
+/// Runs of samples (four at a time through each patch) give the bits of one sample at a time.
+#[test]
+fn runs_give_the_bits_of_single_samples() {
+    let f = bent_bar(0.25);
+    let pu = PuRbf::new(&f).unwrap();
+    let origin = Vect::<3>::new(1e5, -3e5, 20.0);
+    let points: Vec<Vect<3>> = (0..3001)
+        .map(|i| {
+            let s = i as f64;
+            origin + Vect::<3>::new(s * 3.3e-3 - 5.0, (s * 0.01).sin() * 0.5, 0.3)
+        })
+        .collect();
+    let mut out = vec![Vect::<3>::zeros(); points.len()];
+    pu.warp_run(&origin, &points, &mut out);
+    for (p, o) in points.iter().zip(&out) {
+        assert_eq!(*o, pu.warp(&(p - origin)) + origin);
+    }
+}

@@ -156,8 +156,10 @@ impl<const D: usize> PuRbf<D> {
         self.edge
     }
 
-    /// The displacement at the local point `x`.
-    pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
+    /// The patches whose support holds the local point `x`, with their weights, in a fixed
+    /// order (the box of `x`, then its neighbors on the near sides, by the bits of the axes).
+    #[inline]
+    fn around(&self, x: &Vect<D>) -> ([(u32, f64); 8], usize) {
         let reach = (0.5 + OVERLAP) * self.edge;
         // The box of `x` and, along each axis, its neighbor on the near side when `x` is within
         // the overlap of it.
@@ -173,8 +175,8 @@ impl<const D: usize> PuRbf<D> {
                 0
             }
         });
-        let mut total = 0.0;
-        let mut sum = Vect::<D>::zeros();
+        let mut out = [(0u32, 0.0f64); 8];
+        let mut n = 0;
         for bits in 0..1usize << D {
             if (0..D).any(|a| bits >> a & 1 == 1 && side[a] == 0) {
                 continue;
@@ -183,19 +185,36 @@ impl<const D: usize> PuRbf<D> {
             let Some(&p) = self.index.get(&k) else {
                 continue;
             };
-            let (m, fit) = &self.patches[p as usize];
+            let m = &self.patches[p as usize].0;
             let mut w = 1.0;
             for a in 0..D {
                 w *= wendland((x[a] - m[a]).abs() / reach);
             }
-            if w > 0.0 {
-                total += w;
-                sum += fit.displacement(x) * w;
+            if w > 0.0 && n < out.len() {
+                out[n] = (p, w);
+                n += 1;
             }
         }
-        if total > 0.0 {
-            return sum / total;
+        (out, n)
+    }
+
+    /// The displacement at the local point `x`.
+    pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
+        let (around, n) = self.around(x);
+        if n == 0 {
+            return self.nearest(x).displacement(x);
         }
+        let mut total = 0.0;
+        let mut sum = Vect::<D>::zeros();
+        for &(p, w) in &around[..n] {
+            total += w;
+            sum += self.patches[p as usize].1.displacement(x) * w;
+        }
+        sum / total
+    }
+
+    /// The fit of the patch nearest to `x` (outside every support).
+    fn nearest(&self, x: &Vect<D>) -> &Rbf<D> {
         let p: [f64; D] = (*x).into();
         let one = std::num::NonZero::new(1).expect("1 > 0");
         let nearest = self
@@ -205,7 +224,7 @@ impl<const D: usize> PuRbf<D> {
             .execute()
             .first()
             .map_or(0, |r| r.item);
-        self.patches[nearest as usize].1.displacement(x)
+        &self.patches[nearest as usize].1
     }
 }
 
@@ -314,6 +333,54 @@ impl<const D: usize> Warp<D> for PuRbf<D> {
     #[inline]
     fn warp(&self, x: &Vect<D>) -> Vect<D> {
         x + self.displacement(x)
+    }
+
+    /// Four consecutive samples among the same patches (the common case in a scan) share each
+    /// patch's pass over its centers; the same bits as [`Warp::warp`].
+    fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
+        let xs: Vec<Vect<D>> = points.iter().map(|p| p - origin).collect();
+        let sets: Vec<([(u32, f64); 8], usize)> = xs.iter().map(|x| self.around(x)).collect();
+        let same = |a: &([(u32, f64); 8], usize), b: &([(u32, f64); 8], usize)| {
+            a.1 == b.1 && (0..a.1).all(|k| a.0[k].0 == b.0[k].0)
+        };
+        let mut i = 0;
+        while i < xs.len() {
+            let n = sets[i].1;
+            if n > 0 && i + 4 <= xs.len() && (1..4).all(|s| same(&sets[i], &sets[i + s])) {
+                let four: [Vect<D>; 4] = std::array::from_fn(|s| xs[i + s]);
+                let mut total = [0.0f64; 4];
+                let mut sum = [Vect::<D>::zeros(); 4];
+                for k in 0..n {
+                    let d = self.patches[sets[i].0[k].0 as usize]
+                        .1
+                        .displacements4(&four);
+                    for s in 0..4 {
+                        let w = sets[i + s].0[k].1;
+                        total[s] += w;
+                        sum[s] += d[s] * w;
+                    }
+                }
+                for s in 0..4 {
+                    out[i + s] = four[s] + sum[s] / total[s] + origin;
+                }
+                i += 4;
+                continue;
+            }
+            let x = &xs[i];
+            let d = if n == 0 {
+                self.nearest(x).displacement(x)
+            } else {
+                let mut total = 0.0;
+                let mut sum = Vect::<D>::zeros();
+                for &(p, w) in &sets[i].0[..n] {
+                    total += w;
+                    sum += self.patches[p as usize].1.displacement(x) * w;
+                }
+                sum / total
+            };
+            out[i] = x + d + origin;
+            i += 1;
+        }
     }
 
     /// The normal mapped by the inverse transpose of the Jacobian (central differences of a

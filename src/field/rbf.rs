@@ -218,6 +218,14 @@ impl<const D: usize> Rbf<D> {
         self.finish(&y, sums)
     }
 
+    /// [`Rbf::displacement`] at four local points in one pass over the centers, with the same
+    /// bits (no far field).
+    pub(crate) fn displacements4(&self, xs: &[Vect<D>; 4]) -> [Vect<D>; 4] {
+        let ys: [[f64; D]; 4] = std::array::from_fn(|s| self.scaled(&xs[s]));
+        let sums = super::simd::sums(&ys, &slices(&self.centers), &slices(&self.weights));
+        std::array::from_fn(|s| self.finish(&ys[s], sums[s]))
+    }
+
     fn scaled(&self, x: &Vect<D>) -> [f64; D] {
         ((x - self.shift) * self.inv_scale).into()
     }

@@ -2,13 +2,17 @@
 //! times, and how far apart the two maps are (as a fraction of the largest displacement).
 //!
 //! `cargo run --release -p rigidcells-tools --bin pu [MODEL.ply]`: the dragon bent by
-//! `bend_spec` at about 1.2k and 5.5k cells, 480k samples on its surface, 2 threads.
+//! `bend_spec` at about 1.2k and 5.5k cells, 480k samples on its surface, 2 threads; then the
+//! PU alone on synthetic terrain fields of 10k to 1M cells (two layers of unit cells under a
+//! rolling surface, moved by a smooth bend), fit time and evaluation of 1M points in the order
+//! of a scan.
 
 use std::time::Instant;
 
 use rigidcells::field::{Deformer, Field, PuRbf, Rbf, Warp, apply};
 use rigidcells::io::Document;
 use rigidcells::progress::Silent;
+use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
 use rigidcells::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
@@ -73,6 +77,85 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             samples.len() as f64 / pu_eval / 1e6,
             gap / largest,
             at_centers / largest,
+        );
+    }
+    terrain_scale()?;
+    Ok(())
+}
+
+/// A terrain field of about `n` unit cells: a `w × w` sheet two cells thick following a rolling
+/// surface, bent smoothly (each cell turned about y by an angle growing along x and lifted).
+fn terrain(n: usize) -> Field<3> {
+    let w = ((n / 2) as f64).sqrt().round() as i64;
+    let mut centers = Vec::new();
+    for i in 0..w {
+        for j in 0..w {
+            let ground = (0.05 * i as f64).sin() * 3.0 + (0.07 * j as f64).cos() * 2.0;
+            for k in 0..2 {
+                centers.push(Vect::<3>::new(
+                    i as f64 + 0.5,
+                    j as f64 + 0.5,
+                    ground.floor() + k as f64 + 0.5,
+                ));
+            }
+        }
+    }
+    let motions = centers
+        .iter()
+        .map(|c| {
+            let t = c.x / w as f64;
+            let rot = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::y(), -0.3 * t);
+            Motion {
+                rot,
+                pos: c + Vect::<3>::new(0.0, 0.0, 20.0 * t * t),
+            }
+        })
+        .collect();
+    Field {
+        origin: Vect::<3>::zeros(),
+        halves: vec![0.5; centers.len()],
+        centers,
+        motions,
+        prescribed: Default::default(),
+    }
+}
+
+fn terrain_scale() -> Result<(), Box<dyn std::error::Error>> {
+    println!();
+    println!("| terrain cells | patches | PU fit s | eval 1M points s | M points/s |");
+    println!("|---|---|---|---|---|");
+    for n in [10_000usize, 100_000, 1_000_000] {
+        let field = terrain(n);
+        let t = Instant::now();
+        let pu = PuRbf::new(&field)?;
+        let fit = t.elapsed().as_secs_f64();
+        let patches = pu.patch_count();
+        let w = ((n / 2) as f64).sqrt();
+        let mut points: Vec<Vect<3>> = (0..1_000_000u64)
+            .map(|i| {
+                let s = i as f64;
+                let (x, y) = (
+                    (s * 0.6180339887).fract() * w,
+                    (s * 0.7548776662).fract() * w,
+                );
+                let ground = (0.05 * x).sin() * 3.0 + (0.07 * y).cos() * 2.0;
+                Vect::<3>::new(x, y, ground.floor() + 1.0)
+            })
+            .collect();
+        // In the order of a scan: strips 4 cells wide, each along x (the golden-ratio order
+        // above jumps across the whole field from one point to the next).
+        points.sort_by(|a, b| {
+            ((a.y / 4.0) as i64, a.x)
+                .partial_cmp(&((b.y / 4.0) as i64, b.x))
+                .expect("finite")
+        });
+        let t = Instant::now();
+        apply(&Deformer::Pu(pu), &field.origin, &mut points);
+        let eval = t.elapsed().as_secs_f64();
+        println!(
+            "| {} | {patches} | {fit:.2} | {eval:.3} | {:.1} |",
+            field.centers.len(),
+            1.0 / eval
         );
     }
     Ok(())
