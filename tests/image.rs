@@ -154,7 +154,11 @@ fn deform_moves_a_2d_point_set() {
     let mut text = String::from("# a 10 x 1 strip of points, with a label column\n");
     for i in 0..=100 {
         for j in 0..=10 {
-            text.push_str(&format!("{} {} p{i}_{j}\n", i as f64 * 0.1, j as f64 * 0.1));
+            text.push_str(&format!(
+                "{:.2} {:.2} p{i}_{j}\n",
+                i as f64 * 0.1,
+                j as f64 * 0.1
+            ));
         }
     }
     std::fs::write(&input, &text).unwrap();
@@ -164,37 +168,39 @@ fn deform_moves_a_2d_point_set() {
          [[handle]]\nbox = { min = [9.5, -0.1], max = [10.1, 1.1] }\ntranslate = [0.0, 3.0]\n",
     )
     .unwrap();
-    let r = common::deform(
-        &input,
-        &output,
-        &edit,
-        &["--cell-size", "0.25", "--transfer", "blend"],
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let out = std::fs::read_to_string(&output).unwrap();
-    let lines: Vec<&str> = out.lines().collect();
-    assert_eq!(lines[0], "# a 10 x 1 strip of points, with a label column");
-    assert_eq!(lines.len(), 1 + 101 * 11);
-    for (before, after) in text.lines().zip(&lines).skip(1) {
-        let b: Vec<&str> = before.split(' ').collect();
-        let a: Vec<&str> = after.split(' ').collect();
-        assert_eq!(a[2], b[2], "the label column");
-        let (x, y): (f64, f64) = (b[0].parse().unwrap(), b[1].parse().unwrap());
-        let (x1, y1): (f64, f64) = (a[0].parse().unwrap(), a[1].parse().unwrap());
-        if x <= 0.25 {
-            assert_eq!((x1, y1), (x, y), "fixed point {before}");
-        }
-        if x >= 9.75 {
-            assert!(
-                (x1 - x).abs() < 1e-9 && (y1 - y - 3.0).abs() < 1e-9,
-                "{before} → {after}"
-            );
-        }
-        if (4.9..5.1).contains(&x) {
-            assert!(
-                y1 - y > 0.5 && y1 - y < 2.5,
-                "the middle follows: {before} → {after}"
-            );
+    for transfer in ["blend", "pu"] {
+        let r = common::deform(
+            &input,
+            &output,
+            &edit,
+            &["--cell-size", "0.25", "--transfer", transfer],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let out = std::fs::read_to_string(&output).unwrap();
+        let lines: Vec<&str> = out.lines().collect();
+        assert_eq!(lines[0], "# a 10 x 1 strip of points, with a label column");
+        assert_eq!(lines.len(), 1 + 101 * 11);
+        for (before, after) in text.lines().zip(&lines).skip(1) {
+            let b: Vec<&str> = before.split(' ').collect();
+            let a: Vec<&str> = after.split(' ').collect();
+            assert_eq!(a[2], b[2], "the label column");
+            let (x, y): (f64, f64) = (b[0].parse().unwrap(), b[1].parse().unwrap());
+            let (x1, y1): (f64, f64) = (a[0].parse().unwrap(), a[1].parse().unwrap());
+            if x <= 0.5 {
+                assert_eq!(after, &before, "{transfer}: a fixed point's line");
+            }
+            if x >= 9.75 {
+                assert!(
+                    (x1 - x).abs() < 1e-9 && (y1 - y - 3.0).abs() < 1e-9,
+                    "{before} → {after}"
+                );
+            }
+            if (4.9..5.1).contains(&x) {
+                assert!(
+                    y1 - y > 0.5 && y1 - y < 2.5,
+                    "the middle follows: {before} → {after}"
+                );
+            }
         }
     }
     std::fs::write(&input, "0 0\n1 one\n").unwrap();

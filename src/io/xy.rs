@@ -65,11 +65,13 @@ impl XyFile {
     }
 
     /// Writes the file with the points replaced by `moved` (shortest round-trip numbers),
-    /// every other byte as read, atomically.
+    /// every other byte as read, atomically. A point that did not move keeps its line.
     pub fn write(&self, path: &Path, moved: &[Vect<2>]) -> Result<()> {
         let mut lines = self.lines.clone();
-        for (&(n, rest), p) in self.at.iter().zip(moved) {
-            lines[n] = format!("{} {}{}", p.x, p.y, &self.lines[n][rest..]);
+        for ((&(n, rest), p), old) in self.at.iter().zip(moved).zip(&self.points) {
+            if p.map(f64::to_bits) != old.map(f64::to_bits) {
+                lines[n] = format!("{} {}{}", p.x, p.y, &self.lines[n][rest..]);
+            }
         }
         let mut text = lines.join("\n");
         text.push('\n');
