@@ -266,7 +266,8 @@ struct CellArgs {
     /// About this many cells: picks the finest cell size (overrides --cell-size).
     #[arg(long)]
     cells: Option<usize>,
-    /// Octree levels above the finest cells [default: enough to span the input].
+    /// Octree levels above the finest cells [default: enough for the largest cell that fits the
+    /// input's shortest extent].
     #[arg(long)]
     max_level: Option<u8>,
     /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.

@@ -58,8 +58,8 @@ pub struct BuildParams {
     /// Edge length of the finest cells, in input units. Default (`None`): the longest extent of
     /// the input's bounding box / 32.
     pub cell_size: Option<f64>,
-    /// Levels of the tree above the finest cells. Default (`None`): enough for one level-0 cell
-    /// to span the longest extent.
+    /// Levels of the tree above the finest cells. Default (`None`): enough for a level-0 cell
+    /// to span the shortest extent (no interior cell can be larger), at least one.
     pub max_level: Option<u8>,
     /// Inside classification of empty cells. Default: winding numbers for meshes, flood fill
     /// for point clouds.
@@ -466,6 +466,7 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     let (lo, hi) = (*lo, *hi);
     let extent = hi - lo;
     let longest = extent.max();
+    let shortest = extent.min();
     let size = match params.cell_size {
         Some(s) if s.is_finite() && s > 0.0 => s,
         Some(s) => return Err(Error::Param(format!("cell size {s} must be positive"))),
@@ -475,7 +476,15 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     let levels = match params.max_level {
         Some(l) if l <= 20 => l,
         Some(l) => return Err(Error::Param(format!("max level {l} is above 20"))),
-        None => (longest / size).max(1.0).log2().ceil().min(20.0) as u8,
+        // An interior cell lies inside the shape, so no leaf is larger than the box's shortest
+        // extent: coarser levels would only make the finest grid a cube over the longest
+        // extent (a 2 km terrain 110 m high at 2.5 m cells: 1024³ finest cells instead of
+        // 832 × 832 × 64).
+        // At least one level, so the finest grid has an even number of cells along each axis
+        // and the box's center lies on cell faces, as it did with the cubic grid: a scan
+        // thinner than a cell then keeps two layers of cells rather than one plane of centers,
+        // on which the dense RBF's linear part is undetermined.
+        None => (shortest / size).max(2.0).log2().ceil().min(20.0) as u8,
     };
     let block = (1i64 << levels) as f64;
     let mut dims0 = [0i64; D];
