@@ -620,7 +620,8 @@ where
     ) {
         for (((o, on), p), n) in out.iter_mut().zip(out_normals).zip(points).zip(normals) {
             let x = p - origin;
-            let still = match self.class_of(&x) {
+            let class = self.class_of(&x);
+            let still = match class {
                 Class::Exact(m) => self.identity[m as usize],
                 Class::Band(s, l) => {
                     let (w, k) = self.weights(&x, s, l);
@@ -631,7 +632,7 @@ where
                 Class::Free => false,
             };
             if still {
-                if self.class_of(&x) == Class::Outside {
+                if class == Class::Outside {
                     self.count_outside(&x);
                 }
                 (*o, *on) = (*p, *n);
