@@ -255,7 +255,7 @@ where
         }
         // Every field that `deform` saves has the leaves of an octree for cells: a damaged file
         // is a format error here, not a failure later.
-        super::exact::check_cells(&field).map_err(|e| Error::format(path, e))?;
+        super::leaves::check_cells(&field).map_err(|e| Error::format(path, e))?;
         Ok(Self {
             field,
             transfer,

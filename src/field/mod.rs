@@ -16,6 +16,7 @@ mod blend;
 mod exact;
 pub mod far;
 mod file;
+mod leaves;
 mod nearest;
 mod pu;
 mod rbf;
