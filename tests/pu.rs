@@ -145,3 +145,40 @@ fn runs_give_the_bits_of_single_samples() {
         assert_eq!(*o, pu.warp(&(p - origin)) + origin);
     }
 }
+
+/// Cells far apart (each patch holds one center in its support) still give patches of the
+/// nearest centers, fitted without a search over all cells per patch, interpolating each center.
+#[test]
+fn sparse_cells_far_apart_are_fitted() {
+    let centers: Vec<Vect<3>> = (0..3000)
+        .map(|i| {
+            Vect::<3>::new(
+                (i % 30) as f64 * 40.0,
+                (i / 30 % 10) as f64 * 40.0,
+                (i / 300) as f64 * 40.0,
+            )
+        })
+        .collect();
+    let motions = centers
+        .iter()
+        .map(|c| Motion {
+            rot: <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::z(), 1e-3 * c.x),
+            pos: c + Vect::<3>::new(0.0, 0.01 * c.x, 0.002 * c.y),
+        })
+        .collect();
+    let f = Field {
+        origin: Vect::<3>::zeros(),
+        halves: vec![0.5; centers.len()],
+        centers,
+        motions,
+        prescribed: Default::default(),
+    };
+    let pu = PuRbf::new(&f).unwrap();
+    let worst = f
+        .centers
+        .iter()
+        .zip(&f.motions)
+        .map(|(c, m)| (pu.warp(c) - m.pos).norm())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-8, "a center is {worst} off");
+}

@@ -10,8 +10,8 @@
 //!   patches overlap by `OVERLAP · s` on each side and every point of the cells lies inside
 //!   some patch's support.
 //! - **Fits.** Each patch fits the triharmonic RBF with its linear part to the displacements of
-//!   the centers in its support (grown, for a patch with fewer than [`MIN_FIT`] centers there,
-//!   until it has that many): `f_p`.
+//!   the centers in its support (and, for a patch with fewer than [`MIN_FIT`] centers there,
+//!   the [`MIN_FIT`] nearest to its middle): `f_p`.
 //! - **Blend.** `d(x) = Σ_p ψ_p(x) f_p(x) / Σ_p ψ_p(x)`. It is C² wherever the weights' sum is
 //!   positive (the weights are C², the fits C²); it interpolates the centers, because every
 //!   patch whose weight is positive at a center fits that center; and where all the centers of
@@ -120,13 +120,16 @@ impl<const D: usize> PuRbf<D> {
             by_box.entry(box_of(c, edge)).or_default().push(i as u32);
         }
         let reach = (0.5 + OVERLAP) * edge;
+        let at: Vec<[f64; D]> = field.centers.iter().map(|c| (*c).into()).collect();
+        let near = kiddo::ImmutableKdTree::new_from_slice(&at)
+            .map_err(|e| Error::Solver(format!("kd-tree over cell centers: {e:?}")))?;
         let middle =
             |k: &[i64; D]| Vect::<D>::from_fn(|a, _| lower[a] + (k[a] as f64 + 0.5) * edge);
         let patches: Vec<(Vect<D>, Rbf<D>)> = keys
             .par_iter()
             .map(|k| {
                 let m = middle(k);
-                let members = gather(field, &by_box, k, &m, reach, edge);
+                let members = gather(field, &by_box, &near, k, &m, reach);
                 Ok((m, Rbf::new_serial(&patch_field(field, &members))?))
             })
             .collect::<Result<_>>()?;
@@ -277,56 +280,48 @@ fn patch_field<const D: usize>(field: &Field<D>, members: &[u32]) -> Field<D> {
     sub
 }
 
-/// The centers in the support of the patch of box `k` (middle `m`, half-width `reach`), or the
-/// [`MIN_FIT`] nearest found by growing it.
+/// The centers in the support of the patch of box `k` (middle `m`, half-width `reach`, so they
+/// lie in the boxes around `k`) and, where those are fewer than [`MIN_FIT`], also the
+/// [`MIN_FIT`] centers nearest to `m` (sparse cells far apart), from the kd-tree `near`.
 fn gather<const D: usize>(
     field: &Field<D>,
     by_box: &FxHashMap<[i64; D], Vec<u32>>,
+    near: &kiddo::ImmutableKdTree<f64, D>,
     k: &[i64; D],
     m: &Vect<D>,
     reach: f64,
-    edge: f64,
 ) -> Vec<u32> {
-    let mut r = reach;
-    let mut ring = 1i64;
+    let mut members = Vec::new();
+    let mut v = k.map(|c| c - 1);
     loop {
-        let mut members = Vec::new();
-        let mut v = k.map(|c| c - ring);
-        loop {
-            if let Some(list) = by_box.get(&v) {
-                members.extend(list.iter().copied().filter(|&i| {
-                    let c = &field.centers[i as usize];
-                    (0..D).all(|a| (c[a] - m[a]).abs() <= r)
-                }));
-            }
-            let Some(a) = (0..D).find(|&a| v[a] < k[a] + ring) else {
-                break;
-            };
-            v[a] += 1;
-            for b in 0..a {
-                v[b] = k[b] - ring;
-            }
+        if let Some(list) = by_box.get(&v) {
+            members.extend(list.iter().copied().filter(|&i| {
+                let c = &field.centers[i as usize];
+                (0..D).all(|a| (c[a] - m[a]).abs() <= reach)
+            }));
         }
-        if members.len() >= MIN_FIT.min(field.centers.len()) {
-            members.sort_unstable();
-            return members;
+        let Some(a) = (0..D).find(|&a| v[a] < k[a] + 1) else {
+            break;
+        };
+        v[a] += 1;
+        for b in 0..a {
+            v[b] = k[b] - 1;
         }
-        if ring >= 4 {
-            // Sparse cells far apart: the nearest MIN_FIT centers by a scan.
-            let mut all: Vec<(f64, u32)> = field
-                .centers
-                .iter()
-                .enumerate()
-                .map(|(i, c)| ((c - m).norm_squared(), i as u32))
-                .collect();
-            all.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let mut members: Vec<u32> = all.iter().take(MIN_FIT).map(|x| x.1).collect();
-            members.sort_unstable();
-            return members;
-        }
-        r += edge;
-        ring += 1;
     }
+    if members.len() < MIN_FIT {
+        let at: [f64; D] = (*m).into();
+        let count = std::num::NonZero::new(MIN_FIT).expect("MIN_FIT > 0");
+        members.extend(
+            near.query(&at)
+                .nearest_n::<kiddo::SquaredEuclidean<f64>>(count)
+                .execute()
+                .iter()
+                .map(|r| r.item as u32),
+        );
+    }
+    members.sort_unstable();
+    members.dedup();
+    members
 }
 
 impl<const D: usize> Warp<D> for PuRbf<D> {
