@@ -316,7 +316,7 @@ fn gather<const D: usize>(
                 .nearest_n::<kiddo::SquaredEuclidean<f64>>(count)
                 .execute()
                 .iter()
-                .map(|r| r.item as u32),
+                .map(|r| r.item),
         );
     }
     members.sort_unstable();
