@@ -53,23 +53,8 @@ pub struct Rbf<const D: usize> {
 impl<const D: usize> Rbf<D> {
     /// Factors the interpolation system of `field` and solves for the coefficients.
     pub fn new(field: &Field<D>) -> Result<Self> {
-        let n = field.centers.len();
-        if n == 0 {
-            return Err(Error::Solver("the field has no cells".into()));
-        }
-        let (mut lo, mut hi) = (field.centers[0], field.centers[0]);
-        for c in &field.centers {
-            lo = lo.inf(c);
-            hi = hi.sup(c);
-        }
-        let shift = (lo + hi) * 0.5;
-        let scale = (0.5 * (hi - lo).max()).max(f64::MIN_POSITIVE);
-        let inv_scale = 1.0 / scale;
-        let c: Vec<Vect<D>> = field
-            .centers
-            .iter()
-            .map(|x| (x - shift) * inv_scale)
-            .collect();
+        let (c, shift, inv_scale) = scaled_centers(field)?;
+        let n = c.len();
         let m = n + D + 1;
         let d = Mat::<f64>::from_fn(n, D, |r, k| {
             (field.motions[r].pos[k] - field.centers[r][k]) * inv_scale
@@ -98,23 +83,8 @@ impl<const D: usize> Rbf<D> {
     /// patches of [`super::PuRbf`], which are fitted in parallel, many small fits each asking
     /// for threads of their own overflowed the worker threads' stacks.
     pub(crate) fn new_serial(field: &Field<D>) -> Result<Self> {
-        let n = field.centers.len();
-        if n == 0 {
-            return Err(Error::Solver("the field has no cells".into()));
-        }
-        let (mut lo, mut hi) = (field.centers[0], field.centers[0]);
-        for c in &field.centers {
-            lo = lo.inf(c);
-            hi = hi.sup(c);
-        }
-        let shift = (lo + hi) * 0.5;
-        let scale = (0.5 * (hi - lo).max()).max(f64::MIN_POSITIVE);
-        let inv_scale = 1.0 / scale;
-        let c: Vec<Vect<D>> = field
-            .centers
-            .iter()
-            .map(|x| (x - shift) * inv_scale)
-            .collect();
+        let (c, shift, inv_scale) = scaled_centers(field)?;
+        let n = c.len();
         let m = n + D + 1;
         let a = nalgebra::DMatrix::<f64>::from_fn(m, m, |r, k| match (r < n, k < n) {
             (true, true) => (c[r] - c[k]).norm().powi(3),
@@ -238,6 +208,27 @@ impl<const D: usize> Rbf<D> {
             (sums[k] + self.constant[k] + lin) / self.inv_scale
         })
     }
+}
+
+/// The centers of `field` scaled to the unit box around their middle, with the shift and the
+/// inverse scale (so the system's conditioning does not depend on the input's units).
+fn scaled_centers<const D: usize>(field: &Field<D>) -> Result<(Vec<Vect<D>>, Vect<D>, f64)> {
+    if field.centers.is_empty() {
+        return Err(Error::Solver("the field has no cells".into()));
+    }
+    let (mut lo, mut hi) = (field.centers[0], field.centers[0]);
+    for c in &field.centers {
+        lo = lo.inf(c);
+        hi = hi.sup(c);
+    }
+    let shift = (lo + hi) * 0.5;
+    let inv_scale = 1.0 / (0.5 * (hi - lo).max()).max(f64::MIN_POSITIVE);
+    let c = field
+        .centers
+        .iter()
+        .map(|x| (x - shift) * inv_scale)
+        .collect();
+    Ok((c, shift, inv_scale))
 }
 
 /// The coefficients (`a`, then `b_0`, then `B` by rows of axes) by LU with partial pivoting of
