@@ -6,29 +6,13 @@ mod common;
 
 use std::path::Path;
 
-use common::{deform, run, shared};
+use common::{arg as s, deform, records, run, shared};
 use rigidcells::field::{Constrained, Deformer, Field, Outside, Transfer, Warp};
-use rigidcells::io::{Chunk, Document, LasHeader, LasSource, Source};
+use rigidcells::io::{Document, LasHeader};
 use rigidcells::pipeline::{self, DeformParams};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::{Dim, Rigid, Vect};
 use rigidcells::spec::parse_spec;
-
-/// All records of a LAS file: raw bytes, decoded coordinates, record length.
-fn records(path: &Path) -> (Vec<u8>, Vec<Vect<3>>, usize) {
-    let mut src = LasSource::open(path).unwrap();
-    let mut chunk = Chunk::default();
-    let (mut raw, mut pos) = (Vec::new(), Vec::new());
-    while src.read(100_000, &mut chunk).unwrap() > 0 {
-        raw.extend_from_slice(&chunk.raw);
-        pos.extend_from_slice(&chunk.positions);
-    }
-    (raw, pos, chunk.record_len)
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// Deforms the LAS/LAZ `input` under `edit` with each of `transfers` and checks that every
 /// sample west of `fixed_x` keeps its record's bytes and every sample east of `handle_x` lands
@@ -43,7 +27,7 @@ fn exact_regions(
     cell_size: &str,
 ) -> (Vec<Vect<3>>, Vec<Vect<3>>) {
     let dir = tempfile::tempdir().unwrap();
-    let (raw, pos, rl) = records(input);
+    let (_, raw, pos, rl) = records(input);
     let scale = LasHeader::read(input).unwrap().scale;
     let ext = input.extension().unwrap().to_str().unwrap();
     let mut moved = Vec::new();
@@ -64,7 +48,7 @@ fn exact_regions(
             ],
         );
         assert_eq!(r.code, 0, "{}", r.stderr);
-        let (moved_raw, out_pos, _) = records(&out);
+        let (_, moved_raw, out_pos, _) = records(&out);
         let (mut fixed, mut handle, mut worst) = (0, 0, 0.0f64);
         for (k, p) in pos.iter().enumerate() {
             if p.x <= fixed_x {
@@ -97,6 +81,22 @@ fn exact_regions(
     (pos, moved)
 }
 
+/// Writes `edit.toml` in `dir` for the 1.2 km autzen scan: its west third (x ≤ 636394) fixed,
+/// its east third (x ≥ 636786) lifted 30 m, with `more` lines for the handle.
+fn autzen_lift(dir: &Path, more: &str) -> std::path::PathBuf {
+    let edit = dir.join("edit.toml");
+    std::fs::write(
+        &edit,
+        format!(
+            "[[fixed]]\nbox = {{ min = [636000, 848900, 300], max = [636394, 849500, 600] }}\n\
+             [[handle]]\nbox = {{ min = [636786, 848900, 300], max = [637180, 849500, 600] }}\n\
+             translate = [0, 0, 30]\n{more}"
+        ),
+    )
+    .unwrap();
+    edit
+}
+
 /// The 1.2 km autzen scan at 25 m cells: the west third fixed, the east third lifted 30 m and
 /// turned 2° about the north axis. Every fixed record keeps its bytes and every handle sample
 /// lands where the handle sends it (to the file's 0.01 m precision), with each transfer; the
@@ -105,19 +105,14 @@ fn exact_regions(
 fn fixed_and_handle_samples_are_exact_with_every_transfer() {
     let dir = tempfile::tempdir().unwrap();
     let input = shared("las/autzen_trim.las");
-    let edit = dir.path().join("edit.toml");
     let pivot = Vect::<3>::new(636983.0, 849216.0, 450.0);
-    std::fs::write(
-        &edit,
-        format!(
-            "[[fixed]]\nbox = {{ min = [636000, 848900, 300], max = [636394, 849500, 600] }}\n\
-             [[handle]]\nbox = {{ min = [636786, 848900, 300], max = [637180, 849500, 600] }}\n\
-             translate = [0, 0, 30]\nrotate = {{ axis = [0, 1, 0], degrees = 2 }}\n\
-             pivot = [{}, {}, {}]\n",
+    let edit = autzen_lift(
+        dir.path(),
+        &format!(
+            "rotate = {{ axis = [0, 1, 0], degrees = 2 }}\npivot = [{}, {}, {}]\n",
             pivot.x, pivot.y, pivot.z
         ),
-    )
-    .unwrap();
+    );
     let turn = <Dim<3> as Rigid<3>>::axis_angle(&Vect::<3>::y(), 2f64.to_radians());
     let sent = |p: &Vect<3>| turn * (p - pivot) + pivot + Vect::<3>::new(0.0, 0.0, 30.0);
     let (pos, moved) = exact_regions(
@@ -336,14 +331,7 @@ fn shifted_tile(input: &Path, dx: f64, out: &Path) {
 fn apply_refuses_samples_beyond_the_fields_margin() {
     let dir = tempfile::tempdir().unwrap();
     let input = shared("las/autzen_trim.las");
-    let edit = dir.path().join("edit.toml");
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [636000, 848900, 300], max = [636394, 849500, 600] }\n\
-         [[handle]]\nbox = { min = [636786, 848900, 300], max = [637180, 849500, 600] }\n\
-         translate = [0, 0, 30]\n",
-    )
-    .unwrap();
+    let edit = autzen_lift(dir.path(), "");
     let field = dir.path().join("lift.field");
     let whole = dir.path().join("whole.las");
     let r = deform(
@@ -386,7 +374,7 @@ fn apply_refuses_samples_beyond_the_fields_margin() {
         "keep",
     ]);
     assert_eq!(a.code, 0, "{}", a.stderr);
-    let ((raw_in, _, _), (raw_out, _, _)) = (records(&far), records(&out));
+    let ((_, raw_in, _, _), (_, raw_out, _, _)) = (records(&far), records(&out));
     assert_eq!(raw_in, raw_out);
     // --outside extend: the transfer runs there (the old behaviour) and moves them.
     let a = run(&[
@@ -400,8 +388,8 @@ fn apply_refuses_samples_beyond_the_fields_margin() {
         "extend",
     ]);
     assert_eq!(a.code, 0, "{}", a.stderr);
-    let (_, moved, _) = records(&out);
-    let (_, rest, _) = records(&far);
+    let (_, _, moved, _) = records(&out);
+    let (_, _, rest, _) = records(&far);
     assert!(moved.iter().zip(&rest).any(|(a, b)| a != b));
 
     // A tile of the scan itself is inside, and the whole scan gives deform's bytes.

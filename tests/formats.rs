@@ -5,10 +5,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{deform, run, shared};
-use rigidcells::io::{
-    Chunk, Document, LasHeader, LasSource, PlyRecordStream, PlyStream, Source, XyzStream,
-};
+use common::{deform, records, run, shared};
+use rigidcells::io::{Chunk, Document, LasHeader, PlyRecordStream, PlyStream, Source, XyzStream};
 use rigidcells::rigid::Vect;
 
 const T: [f64; 3] = [1.5, -2.25, 0.75];
@@ -55,18 +53,6 @@ fn files(dir: &str) -> Vec<PathBuf> {
         .collect();
     v.sort();
     v
-}
-
-/// All records of a LAS/LAZ file: raw bytes and decoded coordinates.
-fn records(path: &Path) -> (LasHeader, Vec<u8>, Vec<Vect<3>>, usize) {
-    let mut src = LasSource::open(path).unwrap();
-    let mut chunk = Chunk::default();
-    let (mut raw, mut pos) = (Vec::new(), Vec::new());
-    while src.read(100_000, &mut chunk).unwrap() > 0 {
-        raw.extend_from_slice(&chunk.raw);
-        pos.extend_from_slice(&chunk.positions);
-    }
-    (src.header().clone(), raw, pos, chunk.record_len)
 }
 
 /// Refused LAS inputs, each with its message.

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{deform, run};
+use common::{arg, deform, run};
 
 /// A line of 257 points 443 units long (a long thin input).
 fn line(dir: &std::path::Path) -> std::path::PathBuf {
@@ -73,60 +73,26 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
          translate = [0, 0, 2]\n",
     );
     let out = dir.path().join("out.ply");
+    // `--cell-size 0.25 --memory-limit LIMIT` and `extra` are refused (exit 4, no output) with
+    // a message holding each of `needles`.
+    let refused = |limit: &str, extra: &[&str], needles: &[&str]| {
+        let args = [&["--cell-size", "0.25", "--memory-limit", limit][..], extra].concat();
+        let r = deform(&input, &out, &spec, &args);
+        assert_eq!(r.code, 4, "{extra:?}: {}", r.stderr);
+        for needle in needles {
+            assert!(r.stderr.contains(needle), "{extra:?}: {}", r.stderr);
+        }
+        assert!(!out.exists());
+    };
     // 1,512 cells: the dense RBF needs about 18 MiB, the solver about 35 MiB.
-    let r = deform(
-        &input,
-        &out,
-        &spec,
-        &[
-            "--cell-size",
-            "0.25",
-            "--memory-limit",
-            "10M",
-            "--transfer",
-            "rbf",
-        ],
-    );
-    assert_eq!(r.code, 4, "{}", r.stderr);
-    assert!(
-        r.stderr.contains("RBF") && r.stderr.contains("--transfer pu"),
-        "{}",
-        r.stderr
-    );
-    assert!(!out.exists());
-    let r = deform(
-        &input,
-        &out,
-        &spec,
-        &[
-            "--cell-size",
-            "0.25",
-            "--memory-limit",
-            "20M",
-            "--transfer",
-            "blend",
-        ],
-    );
-    assert_eq!(r.code, 4, "{}", r.stderr);
-    assert!(r.stderr.contains("solving 1512 cells"), "{}", r.stderr);
+    refused("10M", &["--transfer", "rbf"], &["RBF", "--transfer pu"]);
+    refused("20M", &["--transfer", "blend"], &["solving 1512 cells"]);
     // Refinement that would outgrow the budget names its threshold.
-    let r = deform(
-        &input,
-        &out,
-        &spec,
-        &[
-            "--cell-size",
-            "0.25",
-            "--memory-limit",
-            "60M",
-            "--transfer",
-            "blend",
-            "--refine-strain",
-            "1e-9",
-        ],
+    refused(
+        "60M",
+        &["--transfer", "blend", "--refine-strain", "1e-9"],
+        &["--refine-strain"],
     );
-    assert_eq!(r.code, 4, "{}", r.stderr);
-    assert!(r.stderr.contains("--refine-strain"), "{}", r.stderr);
     // With room, the same run works.
     let r = deform(
         &input,
@@ -136,14 +102,13 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     // A size that is not one is a command-line error.
-    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
     let r = run(&[
         "deform",
-        &p(&input),
+        arg(&input),
         "-o",
-        &p(&out),
+        arg(&out),
         "--edit",
-        &p(&spec),
+        arg(&spec),
         "--memory-limit",
         "lots",
     ]);

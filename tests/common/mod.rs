@@ -4,6 +4,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use rigidcells::io::{Chunk, LasHeader, LasSource, Source};
+use rigidcells::rigid::Vect;
+
 pub fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_rigidcells"))
 }
@@ -51,4 +54,22 @@ pub fn deform_verbose(input: &Path, output: &Path, edit: &Path, extra: &[&str]) 
     ];
     args.extend_from_slice(extra);
     run(&args)
+}
+
+/// A path as a command-line argument.
+pub fn arg(path: &Path) -> &str {
+    path.to_str().expect("a UTF-8 path")
+}
+
+/// All records of a LAS/LAZ file: its header, the raw record bytes, the decoded coordinates and
+/// the record length.
+pub fn records(path: &Path) -> (LasHeader, Vec<u8>, Vec<Vect<3>>, usize) {
+    let mut src = LasSource::open(path).unwrap();
+    let mut chunk = Chunk::default();
+    let (mut raw, mut pos) = (Vec::new(), Vec::new());
+    while src.read(100_000, &mut chunk).unwrap() > 0 {
+        raw.extend_from_slice(&chunk.raw);
+        pos.extend_from_slice(&chunk.positions);
+    }
+    (src.header().clone(), raw, pos, chunk.record_len)
 }
