@@ -36,17 +36,21 @@ fn bent_bar(cell: f64) -> Field<3> {
     Field::from_solution(&solution)
 }
 
+/// The largest distance of a rest center's image from where its cell's motion sends it.
+fn center_error(pu: &PuRbf<3>, f: &Field<3>) -> f64 {
+    f.centers
+        .iter()
+        .zip(&f.motions)
+        .map(|(c, m)| (pu.warp(c) - m.pos).norm())
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn interpolates_the_centers() {
     let f = bent_bar(0.25);
     let pu = PuRbf::new(&f).unwrap();
     assert!(pu.patch_count() > 4, "{} patches", pu.patch_count());
-    let worst = f
-        .centers
-        .iter()
-        .zip(&f.motions)
-        .map(|(c, m)| (pu.warp(c) - m.pos).norm())
-        .fold(0.0, f64::max);
+    let worst = center_error(&pu, &f);
     assert!(worst < 1e-9, "a center is {worst} off");
 }
 
@@ -174,11 +178,6 @@ fn sparse_cells_far_apart_are_fitted() {
         prescribed: Default::default(),
     };
     let pu = PuRbf::new(&f).unwrap();
-    let worst = f
-        .centers
-        .iter()
-        .zip(&f.motions)
-        .map(|(c, m)| (pu.warp(c) - m.pos).norm())
-        .fold(0.0, f64::max);
+    let worst = center_error(&pu, &f);
     assert!(worst < 1e-8, "a center is {worst} off");
 }

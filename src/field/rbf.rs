@@ -68,14 +68,7 @@ impl<const D: usize> Rbf<D> {
                 "the RBF system is singular (coincident cell centers?)".into(),
             ));
         }
-        Ok(Self::assemble(
-            &c,
-            std::array::from_fn(|k| (0..n).map(|r| x[(r, k)]).collect()),
-            Vect::<D>::from_fn(|k, _| x[(n, k)]),
-            std::array::from_fn(|k| std::array::from_fn(|a| x[(n + 1 + a, k)])),
-            shift,
-            inv_scale,
-        ))
+        Ok(Self::from_solution(&c, |r, k| x[(r, k)], shift, inv_scale))
     }
 
     /// [`Rbf::new`] for a few hundred cells at most, on the calling thread alone: LU of the
@@ -109,14 +102,26 @@ impl<const D: usize> Rbf<D> {
         if !x.iter().all(|v| v.is_finite()) {
             return Err(singular());
         }
-        Ok(Self::assemble(
-            &c,
-            std::array::from_fn(|k| (0..n).map(|r| x[(r, k)]).collect()),
-            Vect::<D>::from_fn(|k, _| x[(n, k)]),
-            std::array::from_fn(|k| std::array::from_fn(|a| x[(n + 1 + a, k)])),
+        Ok(Self::from_solution(&c, |r, k| x[(r, k)], shift, inv_scale))
+    }
+
+    /// The transfer from its scaled centers `c` and the solution `x(row, component)` of its
+    /// system: `a` in rows `0..n`, then `b_0`, then `B` by rows of axes.
+    fn from_solution(
+        c: &[Vect<D>],
+        x: impl Fn(usize, usize) -> f64,
+        shift: Vect<D>,
+        inv_scale: f64,
+    ) -> Self {
+        let n = c.len();
+        Self::assemble(
+            c,
+            std::array::from_fn(|k| (0..n).map(|r| x(r, k)).collect()),
+            Vect::<D>::from_fn(|k, _| x(n, k)),
+            std::array::from_fn(|k| std::array::from_fn(|a| x(n + 1 + a, k))),
             shift,
             inv_scale,
-        ))
+        )
     }
 
     /// The transfer from its scaled centers `c` and coefficients.
