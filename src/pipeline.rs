@@ -214,7 +214,8 @@ pub struct FileInfo {
     pub seconds_write: f64,
     /// The preview proxy (empty for [`apply_file`], or when none was asked for).
     pub proxy: Proxy,
-    /// Samples beyond the field's margin (kept or extended as [`ApplyParams::outside`] says).
+    /// Samples beyond the field's margin (kept or extended as [`ApplyParams::outside`] says;
+    /// for [`deform_file`], extended, and said in a note).
     pub outside: u64,
 }
 
@@ -299,6 +300,16 @@ pub fn deform_file(
         chunk,
         observer,
     )?);
+    // Every sample made the cells; one beyond their margin would be extrapolated, so say so.
+    let outside = deformer.outside().count;
+    if outside > 0 {
+        info.notes.push(format!(
+            "{outside} samples lay beyond the cells' margin ({}) and were moved by the transfer \
+             extended there",
+            deformer.margin()
+        ));
+    }
+    info.outside = outside;
     info.seconds_write = t2.elapsed().as_secs_f64();
     info.deform = DeformInfo {
         build: build_info,
