@@ -87,7 +87,7 @@ impl<const D: usize> Leaves<D> {
     /// The voxel of the local point `x` (non-finite coordinates give an arbitrary voxel).
     #[inline]
     pub(super) fn voxel(&self, x: &Vect<D>) -> [i64; D] {
-        std::array::from_fn(|a| ((x[a] - self.lower[a]) / self.edge).floor() as i64)
+        std::array::from_fn(|a| floor((x[a] - self.lower[a]) / self.edge))
     }
 
     /// The leaf holding voxel `v`.
@@ -106,6 +106,14 @@ impl<const D: usize> Leaves<D> {
             .filter(|&&s| s >= shift)
             .any(|&s| self.map.contains_key(&(s, coord.map(|c| c >> (s - shift)))))
     }
+}
+
+/// `t` rounded down, as an integer (saturating): `f64::floor` is a libm call on baseline x86-64,
+/// and this runs per sample.
+#[inline]
+pub(super) fn floor(t: f64) -> i64 {
+    let i = t as i64;
+    if (i as f64) > t { i - 1 } else { i }
 }
 
 /// Whether the cells of `field` are the leaves of an octree, as [`super::Constrained`] needs.
@@ -148,6 +156,13 @@ pub(super) fn for_each_shell<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_rounds_down() {
+        for t in [-2.5, -2.0, -0.0, 0.0, 0.3, 1.0, 7.9, -1e-300, 3e18] {
+            assert_eq!(floor(t), t.floor() as i64, "{t}");
+        }
+    }
 
     #[test]
     fn shell_skips_the_inner_box() {

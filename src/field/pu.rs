@@ -26,6 +26,7 @@
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
+use super::leaves::floor;
 use super::{Field, Rbf, Warp, unit_or};
 use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
@@ -79,7 +80,7 @@ impl<const D: usize> PuRbf<D> {
         }
         let lower = lo;
         let box_of = |x: &Vect<D>, edge: f64| -> [i64; D] {
-            std::array::from_fn(|a| ((x[a] - lower[a]) / edge).floor() as i64)
+            std::array::from_fn(|a| floor((x[a] - lower[a]) / edge))
         };
         // The smallest power-of-two box edge whose occupied boxes hold enough centers.
         let mut edge = smallest;
@@ -167,7 +168,7 @@ impl<const D: usize> PuRbf<D> {
         // The box of `x` and, along each axis, its neighbor on the near side when `x` is within
         // the overlap of it.
         let t: [f64; D] = std::array::from_fn(|a| (x[a] - self.lower[a]) / self.edge);
-        let home: [i64; D] = t.map(|v| v.floor() as i64);
+        let home: [i64; D] = t.map(floor);
         let side: [i64; D] = std::array::from_fn(|a| {
             let f = t[a] - home[a] as f64;
             if f < OVERLAP {
