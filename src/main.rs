@@ -16,7 +16,7 @@ use rigidcells::progress::Observer;
 use rigidcells::render::{self, View};
 use rigidcells::report::Report;
 use rigidcells::rigid::Vect;
-use rigidcells::solve::SolveParams;
+use rigidcells::solve::{Method, SolveParams};
 use rigidcells::solve::{Role, Solution};
 use rigidcells::spec::read_spec;
 
@@ -180,8 +180,7 @@ impl DeformArgs {
             build: self.cells.params(),
             solve: SolveParams {
                 refine_strain: self.refine_strain,
-                memory_limit: self.cells.memory.memory_limit,
-                ..Default::default()
+                ..self.cells.solve_params()
             },
             transfer: self.transfer.into(),
             rbf_tolerance: self.tolerance.rbf_tolerance,
@@ -277,8 +276,21 @@ struct CellArgs {
     /// clouds with normals, exterior flood fill for point clouds without (auto), or as named.
     #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
     inside: InsideArg,
+    /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
+    /// conjugate gradients with a two-level rigid-motion multigrid (reaches the same minimum;
+    /// slower than the factorization up to at least 342k cells, BENCHMARKS.md).
+    #[arg(long, value_enum, default_value_t = SolverArg::Direct)]
+    solver: SolverArg,
     #[command(flatten)]
     memory: MemoryArg,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SolverArg {
+    /// Sparse Cholesky factorization (fill-in: memory grows faster than the cells).
+    Direct,
+    /// Conjugate gradients with a rigid-motion multigrid (memory linear in the cells).
+    Multilevel,
 }
 
 /// The memory budget.
@@ -300,6 +312,10 @@ impl CellArgs {
     fn solve_params(&self) -> SolveParams {
         SolveParams {
             memory_limit: self.memory.memory_limit,
+            method: match self.solver {
+                SolverArg::Direct => Method::Direct,
+                SolverArg::Multilevel => Method::Multilevel,
+            },
             ..Default::default()
         }
     }
@@ -1033,6 +1049,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             max_level: None,
             shell: false,
             inside: InsideArg::Auto,
+            solver: SolverArg::Direct,
             memory: MemoryArg { memory_limit: None },
         },
         quiet,

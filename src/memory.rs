@@ -12,12 +12,18 @@
 //!   and 4 bytes per cell for the exterior flood fill's stack at worst ([`grid_bytes`]);
 //! - the solver: about [`SOLVER_BYTES_PER_CELL`] per cell (blocks, the sparse factorization's
 //!   fill, the motions and the energies), measured as 19–25 KB per cell at 30k–80k cells;
+//! - the multilevel solver ([`crate::solve::Method::Multilevel`]): about
+//!   [`MULTILEVEL_BYTES_PER_CELL`] (the normal equations' blocks, the smoothed prolongation,
+//!   the coarse level's factor; 10.4 KB per cell of process peak measured at 342k cells);
 //! - the dense RBF: its `n × n` factor and the kernel sums ([`rbf_bytes`]).
 
 use crate::error::{Error, Result};
 
 /// The solver's memory per cell (see the module docs).
 pub const SOLVER_BYTES_PER_CELL: u64 = 24 << 10;
+
+/// The multilevel solver's memory per cell (see the module docs).
+pub const MULTILEVEL_BYTES_PER_CELL: u64 = 12 << 10;
 
 /// The memory budget when none is given: three quarters of the physical memory (or of the
 /// control group's limit, if lower); 8 GiB where neither can be read.

@@ -45,6 +45,12 @@ pub struct Report {
     pub iterations: usize,
     /// Load steps.
     pub load_steps: usize,
+    /// How the linear systems were solved: `direct` or `multilevel`.
+    pub linear_solver: &'static str,
+    /// Conjugate-gradient iterations over all Gauss-Newton steps (multilevel; 0 when direct).
+    pub linear_iterations: usize,
+    /// Levels of the multilevel hierarchy (0 when direct).
+    pub levels: usize,
     /// The energy before the first iteration of each load step and after every iteration.
     pub energy: Vec<f64>,
     /// Whether the last load step met the tolerance.
@@ -139,6 +145,9 @@ impl Report {
             cell_roles,
             iterations: s.iterations,
             load_steps: s.load_steps,
+            linear_solver: if s.levels > 0 { "multilevel" } else { "direct" },
+            linear_iterations: s.linear_iterations,
+            levels: s.levels,
             energy: s.energies.clone(),
             converged: s.converged,
             residual_max: residual_fixed_max.max(residual_handle_max),

@@ -330,3 +330,90 @@ translate = [0.0, 0.0, {lift}]
         .fold(0.0, f64::max);
     assert!(worst < 0.01, "cells differ by {worst}");
 }
+
+/// Issue 15: the multilevel path (conjugate gradients with the rigid-motion multigrid) reaches
+/// the direct factorization's minimum, on a bent bar with a pin (3D, several levels) and on a
+/// 2D disk with a turned handle.
+#[test]
+fn multilevel_solve_reaches_the_direct_minimum() {
+    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
+    let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    let spec = parse_spec::<3>(
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [7.5, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
+         rotate = { axis = [0.0, 1.0, 0.0], degrees = -70.0 }\ntranslate = [-1.5, 0.0, 3.0]\n\
+         [[pin]]\npoint = [4.0, 0.5, 1.0]\nto = [4.0, 0.5, 2.2]\n",
+        std::path::Path::new("."),
+        std::path::Path::new("t.toml"),
+    )
+    .unwrap();
+    let (complex, _) = build(
+        &pts,
+        &mesh.triangles,
+        &BuildParams {
+            cell_size: Some(0.125),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(complex.len() > 2 * 2000, "{} cells", complex.len());
+    let constraints = solve::resolve(&complex, &spec, &pts, None).unwrap();
+    let energies = |method| {
+        let params = SolveParams {
+            method,
+            ..Default::default()
+        };
+        let s = solve::solve(complex.clone(), constraints.clone(), &params, &Silent).unwrap();
+        monotone(&s.info);
+        (*s.info.energies.last().unwrap(), s.info)
+    };
+    let (direct, _) = energies(solve::Method::Direct);
+    let (multi, info) = energies(solve::Method::Multilevel);
+    assert!(info.levels >= 2 && info.linear_iterations > 0, "{info:?}");
+    assert!(
+        (multi - direct).abs() <= 1e-4 * direct,
+        "multilevel {multi} vs direct {direct}"
+    );
+
+    let disk: Vec<Vect<2>> = blob([4.0, 2.0], 20_000);
+    let spec = parse_spec::<2>(
+        "[[fixed]]\nbox = { min = [-5, -3], max = [-3.0, 3] }\n\
+         [[handle]]\nbox = { min = [3.0, -3], max = [5, 3] }\n\
+         rotate = { degrees = 90.0 }\ntranslate = [0.0, 2.0]\n",
+        std::path::Path::new("."),
+        std::path::Path::new("t.toml"),
+    )
+    .unwrap();
+    let (complex, _) = build(
+        &disk,
+        &[],
+        &BuildParams {
+            cell_size: Some(0.012),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(complex.len() > 2000, "{} cells", complex.len());
+    let constraints = solve::resolve(&complex, &spec, &disk, None).unwrap();
+    let (direct, _) = energies2(&complex, &constraints, solve::Method::Direct);
+    let (multi, levels) = energies2(&complex, &constraints, solve::Method::Multilevel);
+    assert!(levels >= 2);
+    assert!(
+        (multi - direct).abs() <= 1e-4 * direct,
+        "2D: multilevel {multi} vs direct {direct}"
+    );
+}
+
+fn energies2(
+    complex: &CellComplex<2>,
+    constraints: &solve::Constraints<2>,
+    method: solve::Method,
+) -> (f64, usize) {
+    let params = SolveParams {
+        method,
+        ..Default::default()
+    };
+    let s = solve::solve(complex.clone(), constraints.clone(), &params, &Silent).unwrap();
+    monotone(&s.info);
+    (*s.info.energies.last().unwrap(), s.info.levels)
+}

@@ -16,6 +16,7 @@
 
 pub mod constraints;
 pub mod energy;
+mod multilevel;
 mod positions;
 mod system;
 
@@ -52,6 +53,19 @@ pub struct SolveParams {
     /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
     /// machine's memory).
     pub memory_limit: Option<u64>,
+    /// How each Gauss-Newton system is solved. Default [`Method::Direct`].
+    pub method: Method,
+}
+
+/// How the Gauss-Newton normal equations are solved.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Method {
+    /// faer's supernodal sparse Cholesky (memory grows faster than the cells: its fill).
+    #[default]
+    Direct,
+    /// Conjugate gradients preconditioned by a rigid-motion aggregation multigrid
+    /// (`multilevel` module; memory and work per iteration linear in the cells).
+    Multilevel,
 }
 
 impl Default for SolveParams {
@@ -65,6 +79,7 @@ impl Default for SolveParams {
             refine_levels: 2,
             max_refinements: 4,
             memory_limit: None,
+            method: Method::Direct,
         }
     }
 }
@@ -100,6 +115,11 @@ pub struct SolverInfo {
     pub seconds: f64,
     /// Whether the last load step stopped on the tolerance (not on the iteration limit).
     pub converged: bool,
+    /// Conjugate-gradient iterations over all Gauss-Newton steps (multilevel path; 0 when every
+    /// system was factored directly).
+    pub linear_iterations: usize,
+    /// Levels of the last multilevel hierarchy (0: the direct path).
+    pub levels: usize,
 }
 
 impl SolverInfo {
@@ -184,7 +204,7 @@ where
             complex = fine;
             info.refinements.push(complex.len());
             system = timed(&mut info.seconds_symbolic, || {
-                System::new(&complex, &constraints)
+                System::new(&complex, &constraints, params.method)
             })?;
             let it = minimize_with(
                 &mut system,
@@ -239,7 +259,7 @@ where
         .map(|c| Motion::rest(&c.center))
         .collect();
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints)
+        System::new(complex, constraints, params.method)
     })?;
     load_stepped(
         &mut system,
@@ -312,7 +332,7 @@ where
         observer: &dyn Observer,
     ) -> Result<(Self, SolverInfo)> {
         let start = Instant::now();
-        let (system, motions, info) = from_rest(&complex, &constraints, params, observer)?;
+            let (system, motions, info) = from_rest(&complex, &constraints, params, observer)?;
         observer.finish();
         let session = Self {
             complex,
@@ -352,7 +372,7 @@ where
                 .all(|(a, b)| a.cell == b.cell && a.weight == b.weight);
         if !same_structure {
             self.system = timed(&mut info.seconds_symbolic, || {
-                System::new(&self.complex, &constraints)
+                System::new(&self.complex, &constraints, self.params.method)
             })?;
         }
         self.constraints = constraints;
@@ -413,7 +433,7 @@ where
     Dim<D>: Rigid<D>,
 {
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints)
+        System::new(complex, constraints, params.method)
     })?;
     minimize_with(
         &mut system,
@@ -499,6 +519,10 @@ where
         let t0 = Instant::now();
         let delta = system.step(complex, constraints, motions, &targets_to, 0.0)?;
         info.seconds_factor += t0.elapsed().as_secs_f64();
+        if let Some((linear, levels)) = system.multilevel_stats() {
+            info.linear_iterations += linear;
+            info.levels = levels;
+        }
         // One trial: the step scaled by `t`, positions projected, and its energy.
         let trial = |t: f64| {
             let mut m = system.advance(complex, constraints, motions, &pins_to, &delta, t);
@@ -617,9 +641,13 @@ where
 
 /// [`crate::memory::check`] of the solver's estimate for `cells` cells.
 fn check_solver_memory(cells: usize, params: &SolveParams, advice: &str) -> Result<()> {
+    let per_cell = match params.method {
+        Method::Multilevel => crate::memory::MULTILEVEL_BYTES_PER_CELL,
+        _ => crate::memory::SOLVER_BYTES_PER_CELL,
+    };
     crate::memory::check(
         &format!("solving {cells} cells"),
-        cells as f64 * crate::memory::SOLVER_BYTES_PER_CELL as f64,
+        cells as f64 * per_cell as f64,
         crate::memory::limit(params.memory_limit),
         advice,
     )

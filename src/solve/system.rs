@@ -35,7 +35,10 @@ use rayon::prelude::*;
 
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
+use super::multilevel::{BlockMatrix, Hierarchy, Nodes};
 use super::positions::Positions;
+use super::Method;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
@@ -65,8 +68,23 @@ pub(crate) struct System<const D: usize> {
     )>,
     /// What each iteration writes, kept between iterations.
     buffers: Buffers,
+    /// Solve by the multilevel iteration instead of the sparse factorization.
+    multilevel: Option<Multilevel>,
     /// The position-only system, for variable projection.
     positions: Positions,
+}
+
+/// The multilevel path's view of the unknowns: node `k` is the free cell `free_cells[k]`; the
+/// pairs of each node (`2 · pair slot + side`, over `pair_start`), and the pairs joining two
+/// nodes, with their nodes.
+struct Multilevel {
+    pair_start: Vec<u32>,
+    pair_incident: Vec<u32>,
+    edges: Vec<[u32; 2]>,
+    edge_pairs: Vec<u32>,
+    /// Conjugate-gradient iterations of the last solve and levels of its hierarchy.
+    iterations: AtomicUsize,
+    levels: AtomicUsize,
 }
 
 /// The storage of an iteration: the assembled values (one slot per block entry), the numeric
@@ -103,7 +121,11 @@ where
     const PAIR_SLOT: usize = 2 * tri(Self::DOF) + Self::DOF * Self::DOF;
 
     /// The layout and symbolic factorization for `complex` under `constraints`.
-    pub fn new(complex: &CellComplex<D>, constraints: &Constraints<D>) -> Result<Self> {
+    pub fn new(
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        method: Method,
+    ) -> Result<Self> {
         let mut n = 0;
         let slots: Vec<Slot> = constraints
             .roles
@@ -150,9 +172,17 @@ where
             n,
             symbolic: None,
             buffers: Buffers::default(),
+            multilevel: None,
             positions: Positions::new(complex, constraints),
         };
-        if n > 0 {
+        if n > 0 && method == Method::Multilevel {
+            system.multilevel = Some(system.multilevel_layout(complex));
+            system.buffers.values = vec![
+                0.0;
+                system.free_cells.len() * Self::CELL_SLOT
+                    + system.pairs.len() * Self::PAIR_SLOT
+            ];
+        } else if n > 0 {
             let indices = system.pattern(complex);
             let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &indices)
                 .map_err(|e| Error::Solver(format!("sparsity pattern: {e:?}")))?;
@@ -194,6 +224,166 @@ where
     /// Number of unknowns.
     pub fn unknowns(&self) -> usize {
         self.n
+    }
+
+    /// The multilevel path's last conjugate-gradient iterations and levels, if it is taken.
+    pub fn multilevel_stats(&self) -> Option<(usize, usize)> {
+        self.multilevel.as_ref().map(|m| {
+            (
+                m.iterations.load(Ordering::Relaxed),
+                m.levels.load(Ordering::Relaxed),
+            )
+        })
+    }
+
+    /// The multilevel path's incidence of pairs and nodes.
+    fn multilevel_layout(&self, complex: &CellComplex<D>) -> Multilevel {
+        let mut node = vec![u32::MAX; self.slots.len()];
+        for (k, &c) in self.free_cells.iter().enumerate() {
+            node[c as usize] = k as u32;
+        }
+        let n = self.free_cells.len();
+        let mut pair_start = vec![0u32; n + 1];
+        let mut edges = Vec::new();
+        let mut edge_pairs = Vec::new();
+        for (k, &p) in self.pairs.iter().enumerate() {
+            let pr = &complex.pairs[p as usize];
+            let (a, b) = (node[pr.i as usize], node[pr.j as usize]);
+            for x in [a, b] {
+                if x != u32::MAX {
+                    pair_start[x as usize + 1] += 1;
+                }
+            }
+            if a != u32::MAX && b != u32::MAX {
+                edges.push([a, b]);
+                edge_pairs.push(k as u32);
+            }
+        }
+        for a in 0..n {
+            pair_start[a + 1] += pair_start[a];
+        }
+        let mut fill = pair_start.clone();
+        let mut pair_incident = vec![0u32; pair_start[n] as usize];
+        for (k, &p) in self.pairs.iter().enumerate() {
+            let pr = &complex.pairs[p as usize];
+            for (side, c) in [pr.i, pr.j].into_iter().enumerate() {
+                let x = node[c as usize];
+                if x != u32::MAX {
+                    pair_incident[fill[x as usize] as usize] = 2 * k as u32 + side as u32;
+                    fill[x as usize] += 1;
+                }
+            }
+        }
+        Multilevel {
+            pair_start,
+            pair_incident,
+            edges,
+            edge_pairs,
+            iterations: AtomicUsize::new(0),
+            levels: AtomicUsize::new(0),
+        }
+    }
+
+    /// The damped normal equations as blocks, and their multilevel solve (`None`: not positive
+    /// definite at this damping).
+    #[allow(clippy::too_many_arguments)]
+    fn multilevel_step(
+        &self,
+        ml: &Multilevel,
+        values: &[f64],
+        grad: &[f64],
+        diag: &[f64],
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        motions: &[Motion<D>],
+        mu: f64,
+        floor: f64,
+    ) -> Option<Vec<f64>> {
+        let dof = Self::DOF;
+        let bb = dof * dof;
+        let (cell_vals, pair_vals) = values.split_at(self.free_cells.len() * Self::CELL_SLOT);
+        let unpack = |out: &mut [f64], tri_vals: &[f64]| {
+            let mut k = 0;
+            for x in 0..dof {
+                for y in 0..=x {
+                    out[x * dof + y] += tri_vals[k];
+                    if x != y {
+                        out[y * dof + x] += tri_vals[k];
+                    }
+                    k += 1;
+                }
+            }
+        };
+        let mut blocks = vec![0.0; self.free_cells.len() * bb];
+        blocks
+            .par_chunks_mut(bb)
+            .enumerate()
+            .for_each(|(k, out)| {
+                unpack(out, &cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT]);
+                let (lo, hi) = (ml.pair_start[k] as usize, ml.pair_start[k + 1] as usize);
+                for &e in &ml.pair_incident[lo..hi] {
+                    let (p, side) = ((e >> 1) as usize, (e & 1) as usize);
+                    let at = p * Self::PAIR_SLOT + side * Self::CELL_SLOT;
+                    unpack(out, &pair_vals[at..at + Self::CELL_SLOT]);
+                }
+                let s = self.slots[self.free_cells[k] as usize];
+                for a in 0..dof {
+                    out[a * dof + a] += if a < s.len {
+                        mu * diag[s.offset + a] + floor
+                    } else {
+                        1.0
+                    };
+                }
+            });
+        let mut edge_blocks = vec![0.0; ml.edges.len() * bb];
+        edge_blocks
+            .par_chunks_mut(bb)
+            .zip(&ml.edge_pairs)
+            .for_each(|(out, &p)| {
+                let at = p as usize * Self::PAIR_SLOT + 2 * Self::CELL_SLOT;
+                out.copy_from_slice(&pair_vals[at..at + bb]);
+            });
+        let matrix = BlockMatrix::new(
+            dof,
+            self.free_cells.len(),
+            blocks,
+            ml.edges.clone(),
+            edge_blocks,
+        );
+        let nodes = Nodes {
+            rest: self
+                .free_cells
+                .iter()
+                .map(|&c| complex.cells[c as usize].center)
+                .collect(),
+            deformed: self
+                .free_cells
+                .iter()
+                .map(|&c| motions[c as usize].pos)
+                .collect(),
+            pinned: self
+                .free_cells
+                .iter()
+                .map(|&c| matches!(constraints.roles[c as usize], Role::Pin(_)))
+                .collect(),
+        };
+        let hierarchy = Hierarchy::new::<D>(matrix, nodes, complex.grid.finest_size());
+        let mut rhs = vec![0.0; self.free_cells.len() * dof];
+        for (k, &c) in self.free_cells.iter().enumerate() {
+            let s = self.slots[c as usize];
+            for a in 0..s.len {
+                rhs[k * dof + a] = -grad[s.offset + a];
+            }
+        }
+        let (x, iterations) = hierarchy.solve(&rhs)?;
+        ml.iterations.store(iterations, Ordering::Relaxed);
+        ml.levels.store(hierarchy.depth(), Ordering::Relaxed);
+        let mut step = vec![0.0; self.n];
+        for (k, &c) in self.free_cells.iter().enumerate() {
+            let s = self.slots[c as usize];
+            step[s.offset..s.offset + s.len].copy_from_slice(&x[k * dof..k * dof + s.len]);
+        }
+        Some(step)
     }
 
     /// The (row, column) of every value slot, lower triangle; unused slots point at (0, 0) and
@@ -389,6 +579,29 @@ where
             .iter()
             .fold(0.0f64, |m, &d| m.max(d))
             .max(f64::MIN_POSITIVE);
+        let scale_floor = 1e-12 * scale;
+        if let Some(ml) = &self.multilevel {
+            let mut mu = damping;
+            for _ in 0..12 {
+                if let Some(step) = self.multilevel_step(
+                    ml,
+                    values,
+                    &grad,
+                    &diag,
+                    complex,
+                    constraints,
+                    motions,
+                    mu,
+                    scale_floor,
+                ) {
+                    return Ok(step);
+                }
+                mu = (mu * 100.0).max(1e-6);
+            }
+            return Err(Error::Solver(
+                "the Gauss-Newton system stayed indefinite under damping".into(),
+            ));
+        }
         let (sym, argsort, llt) = self.symbolic.as_ref().expect("a system with unknowns");
         let mut mu = damping;
         for _ in 0..12 {

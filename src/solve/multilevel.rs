@@ -1,0 +1,759 @@
+//! The multilevel solve of the Gauss-Newton normal equations (issue 15; `--solver multilevel`).
+//!
+//! The normal equations `H δ = −g` of [`super::system`] are block-sparse: one `DOF × DOF` block
+//! per cell with freedom and one per pair of such face neighbors. This module solves them by
+//! conjugate gradients preconditioned with a two-level smoothed-aggregation multigrid whose
+//! coarse space is the rigid motions themselves:
+//!
+//! - **Groups.** Cells are grouped by the blocks of a regular grid of twice the finest cell
+//!   size (rest centers); where that merges too little (large interior cells) the step doubles.
+//! - **Coarse space.** A group moves rigidly: a velocity `(V, Ω)` about its deformed centroid `Z`
+//!   gives each member `ω_i = Ω`, `v_i = V + Ω × (y_i − Z)` (`y_i` the member's deformed center;
+//!   a pinned cell takes only `Ω`). This tentative prolongation `P₀` is smoothed once,
+//!   `P = (I − 4/(3λ) D⁻¹H) P₀`, and the coarse matrix is the Galerkin product `Pᵀ H P`,
+//!   factored by faer's sparse Cholesky.
+//! - **Smoothing.** A Chebyshev polynomial of degree [`SMOOTH_DEGREE`] in the block-Jacobi
+//!   preconditioned matrix over `[λ/RATIO, λ]`, `λ` its largest eigenvalue by power iteration,
+//!   the same before and after the coarse correction (a symmetric positive preconditioner).
+//!
+//! Conjugate gradients stop at [`TOLERANCE`] of the right-hand side: Gauss-Newton needs a
+//! descent direction, and its line search and energy test are unchanged, so it reaches the
+//! direct solve's minimum (tested in `tests/solver.rs`).
+//!
+//! **Where it stands** (BENCHMARKS.md, the 2M-point terrain): 25–49 iterations per solve in
+//! all, and the same minimum, but 1.8–2.7× slower than the direct factorization at 37k–342k
+//! cells and no smaller (3.55 against 3.65 GB at 342k): the coarse level holds a quarter of the
+//! cells with a wider stencil, and its factorization is most of the cost. Tried and not kept:
+//! plain (unsmoothed) rigid aggregation with a V-cycle down to 2,000 groups — its memory was a
+//! third of the direct solve's, but a one-cell-thick terrain took 100–140 iterations per
+//! Gauss-Newton step (30–50 even with an exact coarse solve: piecewise-rigid groups represent
+//! a bending plate badly), 3.5× slower; a K-cycle (Notay) over the same levels, and smoothed
+//! aggregation over more than two levels or with groups four cells wide, which stagnated on
+//! the 120k-cell terrain. A solver that beats the factorization needs a hierarchy whose coarse
+//! levels stay sparse and whose iterations stay bounded on thin shells.
+
+use faer::prelude::*;
+use faer::sparse::Triplet;
+use faer::sparse::linalg::solvers::Llt;
+use rayon::prelude::*;
+use rustc_hash::FxHashMap;
+
+use crate::rigid::{Dim, Rigid, Vect};
+
+/// Groups at most on the coarsest level, which is factored directly.
+pub(crate) const COARSEST: usize = 2000;
+/// The Chebyshev smoother's degree.
+const SMOOTH_DEGREE: usize = 2;
+/// The smoother targets the upper `1/RATIO` of the spectrum of `D⁻¹H`.
+const RATIO: f64 = 12.0;
+/// Relative residual at which conjugate gradients stop.
+pub(crate) const TOLERANCE: f64 = 1e-4;
+/// Conjugate-gradient iterations at most.
+const MAX_ITERATIONS: usize = 300;
+
+/// A symmetric matrix of `dof × dof` blocks: a block per node on the diagonal and a block per
+/// edge `[a, b]` (rows of `a`, columns of `b`; its transpose is the `[b, a]` block).
+pub(crate) struct BlockMatrix {
+    dof: usize,
+    n: usize,
+    diag: Vec<f64>,
+    edges: Vec<[u32; 2]>,
+    blocks: Vec<f64>,
+    /// The edges of each node: `incident[start[a]..start[a + 1]]`, each `2 · edge + side`
+    /// (side 1: the node is the edge's second).
+    start: Vec<u32>,
+    incident: Vec<u32>,
+}
+
+impl BlockMatrix {
+    /// The matrix with `diag` (`n` full blocks, row-major) and `edges` with their `blocks`.
+    pub fn new(dof: usize, n: usize, diag: Vec<f64>, edges: Vec<[u32; 2]>, blocks: Vec<f64>) -> Self {
+        let mut start = vec![0u32; n + 1];
+        for e in &edges {
+            start[e[0] as usize + 1] += 1;
+            start[e[1] as usize + 1] += 1;
+        }
+        for a in 0..n {
+            start[a + 1] += start[a];
+        }
+        let mut fill = start.clone();
+        let mut incident = vec![0u32; 2 * edges.len()];
+        for (k, e) in edges.iter().enumerate() {
+            for side in 0..2 {
+                let a = e[side] as usize;
+                incident[fill[a] as usize] = 2 * k as u32 + side as u32;
+                fill[a] += 1;
+            }
+        }
+        Self {
+            dof,
+            n,
+            diag,
+            edges,
+            blocks,
+            start,
+            incident,
+        }
+    }
+
+    /// Unknowns.
+    pub fn len(&self) -> usize {
+        self.n * self.dof
+    }
+
+    /// `y = H x`.
+    pub fn mul(&self, x: &[f64], y: &mut [f64]) {
+        let d = self.dof;
+        let bb = d * d;
+        y.par_chunks_mut(d).enumerate().for_each(|(a, ya)| {
+            let xa = &x[a * d..(a + 1) * d];
+            let da = &self.diag[a * bb..(a + 1) * bb];
+            for r in 0..d {
+                ya[r] = dot(&da[r * d..(r + 1) * d], xa);
+            }
+            for &e in &self.incident[self.start[a] as usize..self.start[a + 1] as usize] {
+                let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
+                let other = self.edges[k][1 - side] as usize;
+                let xo = &x[other * d..(other + 1) * d];
+                let b = &self.blocks[k * bb..(k + 1) * bb];
+                if side == 0 {
+                    for r in 0..d {
+                        ya[r] += dot(&b[r * d..(r + 1) * d], xo);
+                    }
+                } else {
+                    for c in 0..d {
+                        let xc = xo[c];
+                        for r in 0..d {
+                            ya[r] += b[c * d + r] * xc;
+                        }
+                    }
+                }
+            }
+        });
+    }
+
+    /// The inverses of the diagonal blocks (a tiny multiple of the largest diagonal entry added
+    /// to a block that is not positive definite).
+    fn block_inverses(&self) -> Vec<f64> {
+        let d = self.dof;
+        let bb = d * d;
+        let scale = (0..self.len())
+            .map(|i| self.diag[(i / d) * bb + (i % d) * (d + 1)])
+            .fold(0.0f64, f64::max)
+            .max(f64::MIN_POSITIVE);
+        let mut inv = vec![0.0; self.n * bb];
+        inv.par_chunks_mut(bb).enumerate().for_each(|(a, out)| {
+            let block = &self.diag[a * bb..(a + 1) * bb];
+            let mut eps = 0.0;
+            while !invert_spd(block, d, eps, out) {
+                eps = if eps == 0.0 { 1e-12 * scale } else { eps * 100.0 };
+            }
+        });
+        inv
+    }
+}
+
+/// One level of the hierarchy and the way to the next coarser one.
+struct Level {
+    matrix: BlockMatrix,
+    inverse: Vec<f64>,
+    /// Largest eigenvalue of `D⁻¹H` (estimated, with a margin).
+    lambda: f64,
+    /// The prolongation to this level from the next coarser one.
+    prolongation: Prolongation,
+}
+
+/// A block-sparse prolongation: the coarse nodes `to[start[i]..start[i + 1]]` of fine node `i`
+/// and their blocks.
+struct Prolongation {
+    start: Vec<u32>,
+    to: Vec<u32>,
+    blocks: Vec<f64>,
+    coarse: usize,
+}
+
+/// The multigrid hierarchy of one Gauss-Newton system.
+pub(crate) struct Hierarchy {
+    levels: Vec<Level>,
+    coarsest: Option<Llt<usize, f64>>,
+}
+
+/// What a node of a level is, for grouping and the rigid prolongation.
+pub(crate) struct Nodes<const D: usize> {
+    /// Rest position (grouping).
+    pub rest: Vec<Vect<D>>,
+    /// Deformed position (the lever arm of the coarse rotation).
+    pub deformed: Vec<Vect<D>>,
+    /// Whether the node has only rotational unknowns (a pinned cell, its unknowns first).
+    pub pinned: Vec<bool>,
+}
+
+impl Hierarchy {
+    /// The hierarchy of `matrix`, whose nodes are `nodes`; `size` is the finest cell size.
+    pub fn new<const D: usize>(matrix: BlockMatrix, nodes: Nodes<D>, size: f64) -> Self
+    where
+        Dim<D>: Rigid<D>,
+    {
+        if matrix.n <= COARSEST {
+            return Self {
+                coarsest: factor_coarsest(&matrix),
+                levels: Vec::new(),
+            };
+        }
+        // One coarsening (see the module docs for why not more); where a grid step merges too
+        // little (large interior cells), the step doubles.
+        let mut step = 2.0 * size;
+        let (group, count) = loop {
+            let (group, count) = group_by_grid(&nodes.rest, step);
+            if (count as f64) < 0.7 * matrix.n as f64 || step > 1e300 {
+                break (group, count);
+            }
+            step *= 2.0;
+        };
+        let coarse = coarse_nodes(&nodes, &group, count);
+        let tentative = prolongation::<D>(&nodes, &coarse.deformed, &group);
+        let inverse = matrix.block_inverses();
+        let lambda = largest_eigenvalue(&matrix, &inverse);
+        let prolongation = smoothed(&matrix, &inverse, lambda, &group, &tentative, count);
+        drop(tentative);
+        let next = galerkin(&matrix, &prolongation);
+        Self {
+            coarsest: factor_coarsest(&next),
+            levels: vec![Level {
+                matrix,
+                inverse,
+                lambda,
+                prolongation,
+            }],
+        }
+    }
+
+    /// Levels including the coarsest.
+    pub fn depth(&self) -> usize {
+        self.levels.len() + 1
+    }
+
+    /// Solves `H x = b` by preconditioned conjugate gradients on the finest level; returns the
+    /// solution and the iterations, or `None` when the iteration broke down (a matrix that is not
+    /// positive definite).
+    pub fn solve(&self, b: &[f64]) -> Option<(Vec<f64>, usize)> {
+        let Some(fine) = self.levels.first() else {
+            let x = self.coarse_solve(b);
+            return x.iter().all(|v| v.is_finite()).then_some((x, 0));
+        };
+        let n = b.len();
+        let norm_b = norm(b);
+        let mut x = vec![0.0; n];
+        if norm_b == 0.0 {
+            return Some((x, 0));
+        }
+        let mut r = b.to_vec();
+        let mut z = self.cycle(0, &r);
+        let mut p = z.clone();
+        let mut rz = par_dot(&r, &z);
+        let mut q = vec![0.0; n];
+        for it in 1..=MAX_ITERATIONS {
+            fine.matrix.mul(&p, &mut q);
+            let pq = par_dot(&p, &q);
+            if !(pq > 0.0 && rz.is_finite()) {
+                return None;
+            }
+            let alpha = rz / pq;
+            x.par_iter_mut().zip(&p).for_each(|(x, p)| *x += alpha * p);
+            r.par_iter_mut().zip(&q).for_each(|(r, q)| *r -= alpha * q);
+            if norm(&r) <= TOLERANCE * norm_b || it == MAX_ITERATIONS {
+                return x.iter().all(|v| v.is_finite()).then_some((x, it));
+            }
+            z = self.cycle(0, &r);
+            let rz_new = par_dot(&r, &z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            p.par_iter_mut().zip(&z).for_each(|(p, z)| *p = z + beta * *p);
+        }
+        None
+    }
+
+    /// One V-cycle from level `l` for the right-hand side `b`, from a zero guess: smoothing,
+    /// the coarse correction, smoothing.
+    fn cycle(&self, l: usize, b: &[f64]) -> Vec<f64> {
+        let Some(level) = self.levels.get(l) else {
+            return self.coarse_solve(b);
+        };
+        let a = &level.matrix;
+        let d = a.dof;
+        let mut x = vec![0.0; b.len()];
+        chebyshev(level, b, &mut x);
+        let mut r = vec![0.0; b.len()];
+        a.mul(&x, &mut r);
+        r.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+        let rc = level.prolongation.restrict(&r, d);
+        let xc = self.cycle(l + 1, &rc);
+        level.prolongation.prolong(&xc, &mut x, d);
+        chebyshev(level, b, &mut x);
+        x
+    }
+
+    fn coarse_solve(&self, b: &[f64]) -> Vec<f64> {
+        match &self.coarsest {
+            Some(llt) => {
+                let rhs = Mat::<f64>::from_fn(b.len(), 1, |r, _| b[r]);
+                let x = crate::with_faer(|| llt.solve(&rhs));
+                (0..b.len()).map(|r| x[(r, 0)]).collect()
+            }
+            None => vec![0.0; b.len()],
+        }
+    }
+}
+
+/// Chebyshev smoothing of `H x = b` from `x` (Saad, Algorithm 12.1, with the block-Jacobi
+/// preconditioner).
+fn chebyshev(level: &Level, b: &[f64], x: &mut [f64]) {
+    let a = &level.matrix;
+    let (hi, lo) = (level.lambda, level.lambda / RATIO);
+    let theta = 0.5 * (hi + lo);
+    let delta = 0.5 * (hi - lo);
+    let sigma = theta / delta;
+    let mut rho = 1.0 / sigma;
+    let mut r = vec![0.0; b.len()];
+    a.mul(x, &mut r);
+    r.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+    let mut d = precondition(a, &level.inverse, &r);
+    d.par_iter_mut().for_each(|v| *v /= theta);
+    let mut ad = vec![0.0; b.len()];
+    for k in 0..SMOOTH_DEGREE {
+        x.par_iter_mut().zip(&d).for_each(|(x, d)| *x += d);
+        if k + 1 == SMOOTH_DEGREE {
+            break;
+        }
+        a.mul(&d, &mut ad);
+        r.par_iter_mut().zip(&ad).for_each(|(r, ad)| *r -= ad);
+        let z = precondition(a, &level.inverse, &r);
+        let rho_next = 1.0 / (2.0 * sigma - rho);
+        let (c1, c2) = (rho_next * rho, 2.0 * rho_next / delta);
+        d.par_iter_mut()
+            .zip(&z)
+            .for_each(|(d, z)| *d = c1 * *d + c2 * z);
+        rho = rho_next;
+    }
+}
+
+/// `D⁻¹ r` with the diagonal blocks' inverses.
+fn precondition(a: &BlockMatrix, inverse: &[f64], r: &[f64]) -> Vec<f64> {
+    let d = a.dof;
+    let bb = d * d;
+    let mut z = vec![0.0; r.len()];
+    z.par_chunks_mut(d).enumerate().for_each(|(i, zi)| {
+        let m = &inverse[i * bb..(i + 1) * bb];
+        let ri = &r[i * d..(i + 1) * d];
+        for row in 0..d {
+            zi[row] = dot(&m[row * d..(row + 1) * d], ri);
+        }
+    });
+    z
+}
+
+/// The largest eigenvalue of `D⁻¹H` by power iteration, with a 10 % margin.
+fn largest_eigenvalue(a: &BlockMatrix, inverse: &[f64]) -> f64 {
+    let n = a.len();
+    // A fixed, non-smooth start vector (reproducible runs).
+    let mut v: Vec<f64> = (0..n)
+        .map(|i| ((i as u64).wrapping_mul(2654435761) % 1000) as f64 / 1000.0 - 0.5)
+        .collect();
+    let mut hv = vec![0.0; n];
+    let mut lambda = 1.0;
+    for _ in 0..12 {
+        let nv = norm(&v);
+        if nv == 0.0 || !nv.is_finite() {
+            break;
+        }
+        v.iter_mut().for_each(|x| *x /= nv);
+        a.mul(&v, &mut hv);
+        let w = precondition(a, inverse, &hv);
+        lambda = norm(&w);
+        v = w;
+    }
+    if lambda.is_finite() && lambda > 0.0 {
+        1.1 * lambda
+    } else {
+        2.0
+    }
+}
+
+/// Groups the points by the cells of a grid of step `step`: the group of every point and the
+/// number of groups, numbered in the order they are first met.
+fn group_by_grid<const D: usize>(points: &[Vect<D>], step: f64) -> (Vec<u32>, usize) {
+    let mut ids: FxHashMap<[i64; D], u32> = FxHashMap::default();
+    let group = points
+        .iter()
+        .map(|p| {
+            let key = std::array::from_fn(|a| (p[a] / step).floor() as i64);
+            let next = ids.len() as u32;
+            *ids.entry(key).or_insert(next)
+        })
+        .collect();
+    (group, ids.len())
+}
+
+/// The groups as nodes: mean rest and deformed positions, never pinned.
+fn coarse_nodes<const D: usize>(nodes: &Nodes<D>, group: &[u32], count: usize) -> Nodes<D> {
+    let mut rest = vec![Vect::<D>::zeros(); count];
+    let mut deformed = vec![Vect::<D>::zeros(); count];
+    let mut members = vec![0u32; count];
+    for (i, &g) in group.iter().enumerate() {
+        rest[g as usize] += nodes.rest[i];
+        deformed[g as usize] += nodes.deformed[i];
+        members[g as usize] += 1;
+    }
+    for g in 0..count {
+        let m = members[g].max(1) as f64;
+        rest[g] /= m;
+        deformed[g] /= m;
+    }
+    Nodes {
+        rest,
+        deformed,
+        pinned: vec![false; count],
+    }
+}
+
+/// The prolongation block of every node: its velocity when its group moves rigidly about the
+/// group's deformed centroid.
+fn prolongation<const D: usize>(nodes: &Nodes<D>, centers: &[Vect<D>], group: &[u32]) -> Vec<f64>
+where
+    Dim<D>: Rigid<D>,
+{
+    let d = <Dim<D> as Rigid<D>>::DOF;
+    let rot = <Dim<D> as Rigid<D>>::ROT;
+    let mut p = vec![0.0; group.len() * d * d];
+    p.par_chunks_mut(d * d).enumerate().for_each(|(i, block)| {
+        if nodes.pinned[i] {
+            for r in 0..rot {
+                block[r * d + D + r] = 1.0;
+            }
+            return;
+        }
+        let lever = nodes.deformed[i] - centers[group[i] as usize];
+        let cols = <Dim<D> as Rigid<D>>::cross_jacobian(&lever);
+        for a in 0..D {
+            block[a * d + a] = 1.0;
+            for r in 0..rot {
+                block[a * d + D + r] = cols[r][a];
+            }
+        }
+        for r in 0..rot {
+            block[(D + r) * d + D + r] = 1.0;
+        }
+    });
+    p
+}
+
+impl Prolongation {
+    /// `Pᵀ r`.
+    fn restrict(&self, r: &[f64], d: usize) -> Vec<f64> {
+        let bb = d * d;
+        let mut rc = vec![0.0; self.coarse * d];
+        for i in 0..self.start.len() - 1 {
+            let ri = &r[i * d..(i + 1) * d];
+            for e in self.start[i] as usize..self.start[i + 1] as usize {
+                let p = &self.blocks[e * bb..(e + 1) * bb];
+                let g = self.to[e] as usize;
+                let out = &mut rc[g * d..(g + 1) * d];
+                for row in 0..d {
+                    let v = ri[row];
+                    if v != 0.0 {
+                        for c in 0..d {
+                            out[c] += p[row * d + c] * v;
+                        }
+                    }
+                }
+            }
+        }
+        rc
+    }
+
+    /// `x += P xc`.
+    fn prolong(&self, xc: &[f64], x: &mut [f64], d: usize) {
+        let bb = d * d;
+        x.par_chunks_mut(d).enumerate().for_each(|(i, xi)| {
+            for e in self.start[i] as usize..self.start[i + 1] as usize {
+                let p = &self.blocks[e * bb..(e + 1) * bb];
+                let g = self.to[e] as usize;
+                let xg = &xc[g * d..(g + 1) * d];
+                for row in 0..d {
+                    xi[row] += dot(&p[row * d..(row + 1) * d], xg);
+                }
+            }
+        });
+    }
+}
+
+/// The smoothed-aggregation prolongation `(I − ω D⁻¹H) P₀` of the tentative (rigid) one `P₀`,
+/// `ω = 4 / (3λ)`: a coarse motion is no longer rigid up to its group's border and jumps there,
+/// but blends into its neighbors', so smooth low-energy modes (a thin plate bending) have
+/// low-energy coarse representatives. (With the rigid `P₀` alone, a one-cell-thick terrain took
+/// 30–50 conjugate-gradient iterations per Gauss-Newton step even with an exact coarse solve.)
+fn smoothed(
+    a: &BlockMatrix,
+    inverse: &[f64],
+    lambda: f64,
+    group: &[u32],
+    tentative: &[f64],
+    coarse: usize,
+) -> Prolongation {
+    let d = a.dof;
+    let bb = d * d;
+    let omega = 4.0 / (3.0 * lambda);
+    let rows: Vec<Vec<(u32, Vec<f64>)>> = (0..a.n)
+        .into_par_iter()
+        .map(|i| {
+            let mut row: Vec<(u32, Vec<f64>)> = Vec::with_capacity(4);
+            let mut add_to = |g: u32, m: Vec<f64>| match row.iter_mut().find(|(h, _)| *h == g) {
+                Some((_, b)) => add(b, &m),
+                None => row.push((g, m)),
+            };
+            let t = |j: usize| &tentative[j * bb..(j + 1) * bb];
+            let dinv = &inverse[i * bb..(i + 1) * bb];
+            // H_ii: D⁻¹ D P₀ = P₀, so the own group gets (1 − ω) P₀ᵢ.
+            add_to(group[i], t(i).iter().map(|v| (1.0 - omega) * v).collect());
+            for &e in &a.incident[a.start[i] as usize..a.start[i + 1] as usize] {
+                let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
+                let j = a.edges[k][1 - side] as usize;
+                let b = &a.blocks[k * bb..(k + 1) * bb];
+                let hij = if side == 0 { b.to_vec() } else { transpose(b, d) };
+                let m = matmul(dinv, &matmul(&hij, t(j), d), d);
+                add_to(group[j], m.into_iter().map(|v| -omega * v).collect());
+            }
+            row
+        })
+        .collect();
+    let mut start = Vec::with_capacity(a.n + 1);
+    start.push(0u32);
+    let mut to = Vec::new();
+    let mut blocks = Vec::new();
+    for row in rows {
+        for (g, m) in row {
+            to.push(g);
+            blocks.extend(m);
+        }
+        start.push(to.len() as u32);
+    }
+    Prolongation {
+        start,
+        to,
+        blocks,
+        coarse,
+    }
+}
+
+/// The Galerkin product `Pᵀ H P`.
+fn galerkin(a: &BlockMatrix, p: &Prolongation) -> BlockMatrix {
+    let d = a.dof;
+    let bb = d * d;
+    let count = p.coarse;
+    let pblocks = |i: usize| {
+        (p.start[i] as usize..p.start[i + 1] as usize)
+            .map(move |e| (p.to[e], &p.blocks[e * bb..(e + 1) * bb]))
+    };
+    // Each chunk of fine nodes sums its `P_iGᵀ (HP)_iH` into its own map of (G, H ≥ G).
+    let chunk = 4096;
+    let parts: Vec<(FxHashMap<u64, u32>, Vec<f64>)> = (0..a.n.div_ceil(chunk))
+        .into_par_iter()
+        .map(|c| {
+            let mut map: FxHashMap<u64, u32> = FxHashMap::default();
+            let mut blocks: Vec<f64> = Vec::new();
+            let mut hp: Vec<(u32, Vec<f64>)> = Vec::new();
+            for i in c * chunk..((c + 1) * chunk).min(a.n) {
+                hp.clear();
+                let mut add_to = |g: u32, m: Vec<f64>| match hp.iter_mut().find(|(h, _)| *h == g) {
+                    Some((_, b)) => add(b, &m),
+                    None => hp.push((g, m)),
+                };
+                for (g, pb) in pblocks(i) {
+                    add_to(g, matmul(&a.diag[i * bb..(i + 1) * bb], pb, d));
+                }
+                for &e in &a.incident[a.start[i] as usize..a.start[i + 1] as usize] {
+                    let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
+                    let j = a.edges[k][1 - side] as usize;
+                    let b = &a.blocks[k * bb..(k + 1) * bb];
+                    let hij = if side == 0 { b.to_vec() } else { transpose(b, d) };
+                    for (g, pb) in pblocks(j) {
+                        add_to(g, matmul(&hij, pb, d));
+                    }
+                }
+                for (g, pb) in pblocks(i) {
+                    for (h, m) in &hp {
+                        if *h < g {
+                            continue;
+                        }
+                        let key = ((g as u64) << 32) | *h as u64;
+                        let at = *map.entry(key).or_insert_with(|| {
+                            blocks.extend(std::iter::repeat_n(0.0, bb));
+                            (blocks.len() / bb - 1) as u32
+                        }) as usize;
+                        let out = &mut blocks[at * bb..(at + 1) * bb];
+                        // out += pbᵀ m
+                        for k in 0..d {
+                            for r in 0..d {
+                                let v = pb[k * d + r];
+                                if v != 0.0 {
+                                    for c in 0..d {
+                                        out[r * d + c] += v * m[k * d + c];
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            (map, blocks)
+        })
+        .collect();
+    let mut diag = vec![0.0; count * bb];
+    let mut index: FxHashMap<u64, u32> = FxHashMap::default();
+    let mut edges: Vec<[u32; 2]> = Vec::new();
+    let mut blocks: Vec<f64> = Vec::new();
+    for (map, part) in parts {
+        for (key, at) in map {
+            let m = &part[at as usize * bb..(at as usize + 1) * bb];
+            let (g, h) = ((key >> 32) as u32, key as u32);
+            if g == h {
+                add(&mut diag[g as usize * bb..(g as usize + 1) * bb], m);
+            } else {
+                let e = *index.entry(key).or_insert_with(|| {
+                    edges.push([g, h]);
+                    blocks.extend(std::iter::repeat_n(0.0, bb));
+                    (edges.len() - 1) as u32
+                }) as usize;
+                add(&mut blocks[e * bb..(e + 1) * bb], m);
+            }
+        }
+    }
+    // Symmetrize the diagonal blocks (sums of products round differently on each side).
+    for g in 0..count {
+        let m = &mut diag[g * bb..(g + 1) * bb];
+        for r in 0..d {
+            for c in 0..r {
+                let v = 0.5 * (m[r * d + c] + m[c * d + r]);
+                m[r * d + c] = v;
+                m[c * d + r] = v;
+            }
+        }
+    }
+    // A group of pinned cells alone has no translational stiffness: keep those unknowns at 0.
+    let scale = (0..count * d)
+        .map(|u| diag[(u / d) * bb + (u % d) * (d + 1)])
+        .fold(0.0f64, f64::max);
+    for u in 0..count * d {
+        let at = (u / d) * bb + (u % d) * (d + 1);
+        if diag[at] <= 1e-14 * scale {
+            diag[at] = scale.max(1.0);
+        }
+    }
+    BlockMatrix::new(d, count, diag, edges, blocks)
+}
+
+fn matmul(x: &[f64], y: &[f64], d: usize) -> Vec<f64> {
+    let mut out = vec![0.0; d * d];
+    for r in 0..d {
+        for k in 0..d {
+            let v = x[r * d + k];
+            if v != 0.0 {
+                for c in 0..d {
+                    out[r * d + c] += v * y[k * d + c];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The sparse Cholesky factor of the coarsest level.
+fn factor_coarsest(a: &BlockMatrix) -> Option<Llt<usize, f64>> {
+    let d = a.dof;
+    let bb = d * d;
+    let mut triplets = Vec::new();
+    for g in 0..a.n {
+        for r in 0..d {
+            for c in 0..=r {
+                triplets.push(Triplet::new(g * d + r, g * d + c, a.diag[g * bb + r * d + c]));
+            }
+        }
+    }
+    for (k, e) in a.edges.iter().enumerate() {
+        // Rows of the higher node: the transpose of the block when the first is lower.
+        let (i, j) = (e[0] as usize, e[1] as usize);
+        for r in 0..d {
+            for c in 0..d {
+                let v = a.blocks[k * bb + r * d + c];
+                let (row, col) = (i * d + r, j * d + c);
+                triplets.push(Triplet::new(row.max(col), row.min(col), v));
+            }
+        }
+    }
+    super::positions::factor(a.len(), &triplets)
+}
+
+fn transpose(m: &[f64], d: usize) -> Vec<f64> {
+    (0..d * d).map(|k| m[(k % d) * d + k / d]).collect()
+}
+
+fn add(out: &mut [f64], m: &[f64]) {
+    out.iter_mut().zip(m).for_each(|(o, m)| *o += m);
+}
+
+/// The inverse of the symmetric `d × d` block `m + eps I` by Cholesky, or `false` when it is not
+/// positive definite.
+fn invert_spd(m: &[f64], d: usize, eps: f64, out: &mut [f64]) -> bool {
+    let mut l = [0.0f64; 36];
+    for r in 0..d {
+        for c in 0..=r {
+            let mut s = m[r * d + c] + if r == c { eps } else { 0.0 };
+            for k in 0..c {
+                s -= l[r * 6 + k] * l[c * 6 + k];
+            }
+            if r == c {
+                if !(s > 0.0 && s.is_finite()) {
+                    return false;
+                }
+                l[r * 6 + r] = s.sqrt();
+            } else {
+                l[r * 6 + c] = s / l[c * 6 + c];
+            }
+        }
+    }
+    for col in 0..d {
+        // Solve L Lᵀ x = e_col.
+        let mut y = [0.0f64; 6];
+        for r in 0..d {
+            let mut s = if r == col { 1.0 } else { 0.0 };
+            for k in 0..r {
+                s -= l[r * 6 + k] * y[k];
+            }
+            y[r] = s / l[r * 6 + r];
+        }
+        for r in (0..d).rev() {
+            let mut s = y[r];
+            for k in r + 1..d {
+                s -= l[k * 6 + r] * y[k];
+            }
+            y[r] = s / l[r * 6 + r];
+        }
+        for r in 0..d {
+            out[r * d + col] = y[r];
+        }
+    }
+    true
+}
+
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a * b).sum()
+}
+
+fn par_dot(a: &[f64], b: &[f64]) -> f64 {
+    a.par_iter().zip(b).map(|(a, b)| a * b).sum()
+}
+
+fn norm(a: &[f64]) -> f64 {
+    par_dot(a, a).sqrt()
+}
