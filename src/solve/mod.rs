@@ -332,7 +332,7 @@ where
         observer: &dyn Observer,
     ) -> Result<(Self, SolverInfo)> {
         let start = Instant::now();
-            let (system, motions, info) = from_rest(&complex, &constraints, params, observer)?;
+        let (system, motions, info) = from_rest(&complex, &constraints, params, observer)?;
         observer.finish();
         let session = Self {
             complex,

@@ -67,7 +67,13 @@ pub(crate) struct BlockMatrix {
 
 impl BlockMatrix {
     /// The matrix with `diag` (`n` full blocks, row-major) and `edges` with their `blocks`.
-    pub fn new(dof: usize, n: usize, diag: Vec<f64>, edges: Vec<[u32; 2]>, blocks: Vec<f64>) -> Self {
+    pub fn new(
+        dof: usize,
+        n: usize,
+        diag: Vec<f64>,
+        edges: Vec<[u32; 2]>,
+        blocks: Vec<f64>,
+    ) -> Self {
         let mut start = vec![0u32; n + 1];
         for e in &edges {
             start[e[0] as usize + 1] += 1;
@@ -146,7 +152,11 @@ impl BlockMatrix {
             let block = &self.diag[a * bb..(a + 1) * bb];
             let mut eps = 0.0;
             while !invert_spd(block, d, eps, out) {
-                eps = if eps == 0.0 { 1e-12 * scale } else { eps * 100.0 };
+                eps = if eps == 0.0 {
+                    1e-12 * scale
+                } else {
+                    eps * 100.0
+                };
             }
         });
         inv
@@ -268,7 +278,9 @@ impl Hierarchy {
             let rz_new = par_dot(&r, &z);
             let beta = rz_new / rz;
             rz = rz_new;
-            p.par_iter_mut().zip(&z).for_each(|(p, z)| *p = z + beta * *p);
+            p.par_iter_mut()
+                .zip(&z)
+                .for_each(|(p, z)| *p = z + beta * *p);
         }
         None
     }
@@ -519,7 +531,11 @@ fn smoothed(
                 let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
                 let j = a.edges[k][1 - side] as usize;
                 let b = &a.blocks[k * bb..(k + 1) * bb];
-                let hij = if side == 0 { b.to_vec() } else { transpose(b, d) };
+                let hij = if side == 0 {
+                    b.to_vec()
+                } else {
+                    transpose(b, d)
+                };
                 let m = matmul(dinv, &matmul(&hij, t(j), d), d);
                 add_to(group[j], m.into_iter().map(|v| -omega * v).collect());
             }
@@ -575,7 +591,11 @@ fn galerkin(a: &BlockMatrix, p: &Prolongation) -> BlockMatrix {
                     let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
                     let j = a.edges[k][1 - side] as usize;
                     let b = &a.blocks[k * bb..(k + 1) * bb];
-                    let hij = if side == 0 { b.to_vec() } else { transpose(b, d) };
+                    let hij = if side == 0 {
+                        b.to_vec()
+                    } else {
+                        transpose(b, d)
+                    };
                     for (g, pb) in pblocks(j) {
                         add_to(g, matmul(&hij, pb, d));
                     }
@@ -675,7 +695,11 @@ fn factor_coarsest(a: &BlockMatrix) -> Option<Llt<usize, f64>> {
     for g in 0..a.n {
         for r in 0..d {
             for c in 0..=r {
-                triplets.push(Triplet::new(g * d + r, g * d + c, a.diag[g * bb + r * d + c]));
+                triplets.push(Triplet::new(
+                    g * d + r,
+                    g * d + c,
+                    a.diag[g * bb + r * d + c],
+                ));
             }
         }
     }

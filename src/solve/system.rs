@@ -33,15 +33,15 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
+use super::Method;
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
 use super::multilevel::{BlockMatrix, Hierarchy, Nodes};
 use super::positions::Positions;
-use super::Method;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Degrees of freedom of a cell and where they start in the global vector.
 #[derive(Debug, Clone, Copy)]
@@ -315,26 +315,26 @@ where
             }
         };
         let mut blocks = vec![0.0; self.free_cells.len() * bb];
-        blocks
-            .par_chunks_mut(bb)
-            .enumerate()
-            .for_each(|(k, out)| {
-                unpack(out, &cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT]);
-                let (lo, hi) = (ml.pair_start[k] as usize, ml.pair_start[k + 1] as usize);
-                for &e in &ml.pair_incident[lo..hi] {
-                    let (p, side) = ((e >> 1) as usize, (e & 1) as usize);
-                    let at = p * Self::PAIR_SLOT + side * Self::CELL_SLOT;
-                    unpack(out, &pair_vals[at..at + Self::CELL_SLOT]);
-                }
-                let s = self.slots[self.free_cells[k] as usize];
-                for a in 0..dof {
-                    out[a * dof + a] += if a < s.len {
-                        mu * diag[s.offset + a] + floor
-                    } else {
-                        1.0
-                    };
-                }
-            });
+        blocks.par_chunks_mut(bb).enumerate().for_each(|(k, out)| {
+            unpack(
+                out,
+                &cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT],
+            );
+            let (lo, hi) = (ml.pair_start[k] as usize, ml.pair_start[k + 1] as usize);
+            for &e in &ml.pair_incident[lo..hi] {
+                let (p, side) = ((e >> 1) as usize, (e & 1) as usize);
+                let at = p * Self::PAIR_SLOT + side * Self::CELL_SLOT;
+                unpack(out, &pair_vals[at..at + Self::CELL_SLOT]);
+            }
+            let s = self.slots[self.free_cells[k] as usize];
+            for a in 0..dof {
+                out[a * dof + a] += if a < s.len {
+                    mu * diag[s.offset + a] + floor
+                } else {
+                    1.0
+                };
+            }
+        });
         let mut edge_blocks = vec![0.0; ml.edges.len() * bb];
         edge_blocks
             .par_chunks_mut(bb)
