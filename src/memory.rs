@@ -10,8 +10,12 @@
 //! - the dense finest grid of the cell construction: one byte per finest cell for its state,
 //!   as much again for the pyramid of coarser levels and the winding classification's copy,
 //!   and 4 bytes per cell for the exterior flood fill's stack at worst ([`grid_bytes`]);
-//! - the solver: about [`SOLVER_BYTES_PER_CELL`] per cell (blocks, the sparse factorization's
-//!   fill, the motions and the energies), measured as 19–25 KB per cell at 30k–80k cells;
+//! - the solver: [`SOLVER_BYTES_PER_CELL`] per cell before anything is built (the motions, the
+//!   energies, the position system), then, for the direct path, the assembled system's entries
+//!   before they are allocated, and the sparse Cholesky factor exactly, from its symbolic
+//!   analysis, before its values are (the factor's fill depends on the shape: 12–13 KB per
+//!   cell on a terrain, up to 25 KB on a solid; a flat per-cell estimate refused a 1.1M-cell
+//!   terrain that ran in 14.4 GB);
 //! - the multilevel solver ([`crate::solve::Method::Multilevel`]): about
 //!   [`MULTILEVEL_BYTES_PER_CELL`] (the normal equations' blocks, the smoothed prolongation,
 //!   the coarse level's factor; 10.4 KB per cell of process peak measured at 342k cells);
@@ -19,8 +23,8 @@
 
 use crate::error::{Error, Result};
 
-/// The solver's memory per cell (see the module docs).
-pub const SOLVER_BYTES_PER_CELL: u64 = 24 << 10;
+/// The solver's memory per cell before its sparse factor (see the module docs).
+pub const SOLVER_BYTES_PER_CELL: u64 = 4 << 10;
 
 /// The multilevel solver's memory per cell (see the module docs).
 pub const MULTILEVEL_BYTES_PER_CELL: u64 = 12 << 10;

@@ -181,11 +181,7 @@ where
                 break;
             }
             let more = split.iter().filter(|&&s| s).count() * ((1 << D) - 1);
-            check_solver_memory(
-                complex.len() + more,
-                params,
-                "use a larger --refine-strain threshold",
-            )?;
+            check_solver_memory(complex.len() + more, params, REFINE_ADVICE)?;
             let (fine, parent) = complex.split(&split);
             motions = fine
                 .cells
@@ -204,7 +200,7 @@ where
             complex = fine;
             info.refinements.push(complex.len());
             system = timed(&mut info.seconds_symbolic, || {
-                System::new(&complex, &constraints, params.method)
+                System::new(&complex, &constraints, params, REFINE_ADVICE)
             })?;
             let it = minimize_with(
                 &mut system,
@@ -248,18 +244,14 @@ where
         load_steps: load_steps(complex, constraints, params),
         ..Default::default()
     };
-    check_solver_memory(
-        complex.len(),
-        params,
-        "use a larger --cell-size (or fewer --cells)",
-    )?;
+    check_solver_memory(complex.len(), params, CELLS_ADVICE)?;
     let mut motions: Vec<Motion<D>> = complex
         .cells
         .iter()
         .map(|c| Motion::rest(&c.center))
         .collect();
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params.method)
+        System::new(complex, constraints, params, CELLS_ADVICE)
     })?;
     load_stepped(
         &mut system,
@@ -372,7 +364,7 @@ where
                 .all(|(a, b)| a.cell == b.cell && a.weight == b.weight);
         if !same_structure {
             self.system = timed(&mut info.seconds_symbolic, || {
-                System::new(&self.complex, &constraints, self.params.method)
+                System::new(&self.complex, &constraints, &self.params, CELLS_ADVICE)
             })?;
         }
         self.constraints = constraints;
@@ -433,7 +425,7 @@ where
     Dim<D>: Rigid<D>,
 {
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params.method)
+        System::new(complex, constraints, params, CELLS_ADVICE)
     })?;
     minimize_with(
         &mut system,
@@ -638,6 +630,11 @@ where
     let by_travel = (travel / (params.max_step_fraction.max(1e-6) * extent)).ceil();
     by_turn.max(by_travel).clamp(1.0, 1000.0) as usize
 }
+
+/// What to change when the cells do not fit the memory budget.
+const CELLS_ADVICE: &str = "use a larger --cell-size (or fewer --cells)";
+/// What to change when refined cells would not fit it.
+const REFINE_ADVICE: &str = "use a larger --refine-strain threshold";
 
 /// [`crate::memory::check`] of the solver's estimate for `cells` cells.
 fn check_solver_memory(cells: usize, params: &SolveParams, advice: &str) -> Result<()> {

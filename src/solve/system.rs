@@ -33,11 +33,11 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
-use super::Method;
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
 use super::multilevel::{BlockMatrix, Hierarchy, Nodes};
 use super::positions::Positions;
+use super::{Method, SolveParams};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
@@ -124,7 +124,8 @@ where
     pub fn new(
         complex: &CellComplex<D>,
         constraints: &Constraints<D>,
-        method: Method,
+        params: &SolveParams,
+        advice: &str,
     ) -> Result<Self> {
         let mut n = 0;
         let slots: Vec<Slot> = constraints
@@ -175,7 +176,7 @@ where
             multilevel: None,
             positions: Positions::new(complex, constraints),
         };
-        if n > 0 && method == Method::Multilevel {
+        if n > 0 && params.method == Method::Multilevel {
             system.multilevel = Some(system.multilevel_layout(complex));
             system.buffers.values = vec![
                 0.0;
@@ -183,6 +184,16 @@ where
                     + system.pairs.len() * Self::PAIR_SLOT
             ];
         } else if n > 0 {
+            let limit = crate::memory::limit(params.memory_limit);
+            let entries =
+                system.free_cells.len() * Self::CELL_SLOT + system.pairs.len() * Self::PAIR_SLOT;
+            // The pattern's (row, column) pairs, faer's sorted copy and argsort, the values.
+            crate::memory::check(
+                &format!("assembling the solver's system of {} cells", complex.len()),
+                entries as f64 * 40.0,
+                limit,
+                advice,
+            )?;
             let indices = system.pattern(complex);
             let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &indices)
                 .map_err(|e| Error::Solver(format!("sparsity pattern: {e:?}")))?;
@@ -199,6 +210,14 @@ where
             let scratch = llt
                 .factorize_numeric_llt_scratch::<f64>(par, Default::default())
                 .or(llt.solve_in_place_scratch::<f64>(1, par));
+            // The symbolic analysis knows the factor's size exactly: check it before the
+            // numeric factor and its scratch are allocated.
+            crate::memory::check(
+                &format!("factoring the solver's system of {} cells", complex.len()),
+                (llt.len_val() * 8 + scratch.size_bytes() + indices.len() * 32) as f64,
+                limit,
+                advice,
+            )?;
             system.buffers = Buffers {
                 values: vec![0.0; indices.len()],
                 factor: vec![0.0; llt.len_val()],
