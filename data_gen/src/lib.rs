@@ -340,6 +340,49 @@ pub fn end_lift_spec(lo: [f64; 3], hi: [f64; 3], end: f64, lift: f64, degrees: f
     )
 }
 
+/// A closed thick-walled tube along x: length `length`, outer radius `outer`, inner radius
+/// `inner`, `around` vertices per ring and `along` segments, outward oriented (the issue 15
+/// benchmark's 480k-vertex tube is `tube(10.0, 1.0, 0.8, 400, 599)`).
+pub fn tube(length: f64, outer: f64, inner: f64, around: usize, along: usize) -> Mesh {
+    let (n, m) = (around.max(3), along.max(1));
+    let mut mesh = Mesh::default();
+    for radius in [outer, inner] {
+        for i in 0..=m {
+            let x = length * i as f64 / m as f64;
+            for j in 0..n {
+                let t = std::f64::consts::TAU * j as f64 / n as f64;
+                mesh.vertices.push([x, radius * t.cos(), radius * t.sin()]);
+            }
+        }
+    }
+    let at = |surface: usize, i: usize, j: usize| ((surface * (m + 1) + i) * n + j % n) as u32;
+    for i in 0..m {
+        for j in 0..n {
+            let q = |s| {
+                [
+                    at(s, i, j),
+                    at(s, i, j + 1),
+                    at(s, i + 1, j + 1),
+                    at(s, i + 1, j),
+                ]
+            };
+            // Around, then along, is outward on the outer wall; the inner wall faces the axis.
+            let [a, b, c, d] = q(0);
+            mesh.triangles.extend([[a, b, c], [a, c, d]]);
+            let [a, b, c, d] = q(1);
+            mesh.triangles.extend([[a, c, b], [a, d, c]]);
+        }
+    }
+    for j in 0..n {
+        // The annular ends: −x at x = 0, +x at x = length.
+        let (o0, o1, i0, i1) = (at(0, 0, j), at(0, 0, j + 1), at(1, 0, j), at(1, 0, j + 1));
+        mesh.triangles.extend([[o0, i0, o1], [o1, i0, i1]]);
+        let (o0, o1, i0, i1) = (at(0, m, j), at(0, m, j + 1), at(1, m, j), at(1, m, j + 1));
+        mesh.triangles.extend([[o0, o1, i0], [o1, i1, i0]]);
+    }
+    mesh
+}
+
 /// Height of the synthetic terrain at `(x, y)` (metres; a 2 km square): rolling hills, a river
 /// valley along y = 1000, flat-roofed buildings on a grid, and a bridge deck across the valley.
 pub fn terrain_height(x: f64, y: f64) -> (f64, u8) {
@@ -538,6 +581,23 @@ translate = [0.0, 25.0]
 
 #[cfg(test)]
 mod tests {
+
+    /// The tube is closed and outward oriented: its signed volume is the polygonal annulus's
+    /// area times its length.
+    #[test]
+    fn tube_encloses_its_wall() {
+        let (n, length, r_out, r_in) = (64usize, 3.0, 1.0, 0.7);
+        let mesh = tube(length, r_out, r_in, n, 10);
+        let polygon = |r: f64| 0.5 * n as f64 * r * r * (std::f64::consts::TAU / n as f64).sin();
+        let expected = (polygon(r_out) - polygon(r_in)) * length;
+        assert!(
+            (mesh.volume() - expected).abs() < 1e-9 * expected,
+            "{}",
+            mesh.volume()
+        );
+        assert_eq!(mesh.vertices.len(), 2 * 11 * n);
+    }
+
     use super::*;
 
     #[test]

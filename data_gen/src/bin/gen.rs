@@ -1,5 +1,7 @@
 //! `cargo run --release -p data_gen --bin gen -- terrain N OUT.las|OUT.laz|OUT.ply`: a synthetic
 //! scan of N points (terrain, buildings, a bridge) for benchmarks and memory checks.
+//! `gen tube OUT.ply`: the closed 480k-vertex tube of issue 15's `--cells 5500` benchmark
+//! (10 × 2 × 2, wall 0.2; binary PLY).
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -22,8 +24,14 @@ fn main() {
                 t.elapsed().as_secs_f64()
             );
         }
+        Some("tube") if args.len() == 3 => {
+            let out = std::path::Path::new(&args[2]);
+            let mesh = data_gen::tube(10.0, 1.0, 0.8, 400, 599);
+            data_gen::write_ply(out, &mesh, true).expect("writing the tube");
+            println!("{} vertices -> {}", mesh.vertices.len(), out.display());
+        }
         _ => {
-            eprintln!("usage: gen terrain N OUT.las|OUT.laz|OUT.ply");
+            eprintln!("usage: gen terrain N OUT.las|OUT.laz|OUT.ply | gen tube OUT.ply");
             std::process::exit(2);
         }
     }
