@@ -24,12 +24,34 @@ fn blob<const D: usize>(radii: [f64; D], n: usize) -> Vec<Vect<D>> {
 }
 
 fn complex<const D: usize>(radii: [f64; D], cell: f64) -> CellComplex<D> {
-    let pts = blob(radii, 40_000);
+    cells(&blob(radii, 40_000), &[], cell)
+}
+
+/// The cells of `pts` (and `triangles`) at finest size `cell`.
+fn cells<const D: usize>(pts: &[Vect<D>], triangles: &[[u32; 3]], cell: f64) -> CellComplex<D> {
     let params = BuildParams {
         cell_size: Some(cell),
         ..Default::default()
     };
-    build(&pts, &[], &params).unwrap().0
+    build(pts, triangles, &params).unwrap().0
+}
+
+/// The edit spec `text` resolved on `complex` with the samples `pts`.
+fn resolved<const D: usize>(
+    complex: &CellComplex<D>,
+    pts: &[Vect<D>],
+    text: &str,
+) -> solve::Constraints<D>
+where
+    Dim<D>: Rigid<D>,
+{
+    let spec = parse_spec::<D>(
+        text,
+        std::path::Path::new("."),
+        std::path::Path::new("t.toml"),
+    )
+    .unwrap();
+    solve::resolve(complex, &spec, pts, None).unwrap()
 }
 
 /// Paper Fig. 4: every cell collapsed to one point with a random rotation, one cell fixed.
@@ -139,22 +161,8 @@ fn rigid_edit<const D: usize>(
     Dim<D>: Rigid<D>,
 {
     let pts = blob(radii, 20_000);
-    let (complex, _) = build(
-        &pts,
-        &[],
-        &BuildParams {
-            cell_size: Some(0.2),
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let spec = parse_spec::<D>(
-        spec,
-        std::path::Path::new("."),
-        std::path::Path::new("t.toml"),
-    )
-    .unwrap();
-    let constraints = solve::resolve(&complex, &spec, &pts, None).unwrap();
+    let complex = cells(&pts, &[], 0.2);
+    let constraints = resolved(&complex, &pts, spec);
     let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent).unwrap();
     monotone(&sol.info);
     let origin = sol.complex.grid.origin;
@@ -214,24 +222,14 @@ translate = [-1.0, 0.5]
 fn refinement_splits_strained_cells_and_continues() {
     let mesh = data_gen::bar([6.0, 1.0, 1.0], 8.0);
     let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
-    let spec = parse_spec::<3>(
+    let complex = cells(&pts, &mesh.triangles, 0.5);
+    let constraints = resolved(
+        &complex,
+        &pts,
         "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
          [[handle]]\nbox = { min = [5.5, -0.1, -0.1], max = [6.1, 1.1, 1.1] }\n\
          rotate = { axis = [0.0, 1.0, 0.0], degrees = -60.0 }\ntranslate = [-1.0, 0.0, 2.5]\n",
-        std::path::Path::new("."),
-        std::path::Path::new("t.toml"),
-    )
-    .unwrap();
-    let (complex, _) = build(
-        &pts,
-        &mesh.triangles,
-        &BuildParams {
-            cell_size: Some(0.5),
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    let constraints = solve::resolve(&complex, &spec, &pts, None).unwrap();
+    );
     let plain = solve::solve(
         complex.clone(),
         constraints.clone(),
@@ -272,11 +270,7 @@ fn refinement_splits_strained_cells_and_continues() {
 #[test]
 fn a_session_follows_a_dragged_handle_from_its_last_solution() {
     let pts = blob([2.0, 1.0, 1.0], 20_000);
-    let params = BuildParams {
-        cell_size: Some(0.2),
-        ..Default::default()
-    };
-    let complex = build(&pts, &[], &params).unwrap().0;
+    let complex = cells(&pts, &[], 0.2);
     let spec = |lift: f64| {
         let text = format!(
             r#"
@@ -289,13 +283,7 @@ pivot = [1.5, 0.0, 0.0]
 translate = [0.0, 0.0, {lift}]
 "#
         );
-        let spec = parse_spec::<3>(
-            &text,
-            std::path::Path::new("."),
-            std::path::Path::new("t.toml"),
-        )
-        .unwrap();
-        solve::resolve(&complex, &spec, &pts, None).unwrap()
+        resolved(&complex, &pts, &text)
     };
     let solve_params = SolveParams::default();
     let (mut session, first) =
@@ -332,33 +320,41 @@ translate = [0.0, 0.0, {lift}]
 }
 
 /// Issue 15: the multilevel path (conjugate gradients with the rigid-motion multigrid) reaches
-/// the direct factorization's minimum, on a bent bar with a pin (3D, several levels) and on a
-/// 2D disk with a turned handle.
+/// the direct factorization's minimum, on a bent bar with a pin (3D) and on a 2D disk with a
+/// turned handle, both large enough for a coarse level.
 #[test]
 fn multilevel_solve_reaches_the_direct_minimum() {
     let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
     let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
-    let spec = parse_spec::<3>(
+    same_minimum(
+        &pts,
+        &mesh.triangles,
+        0.125,
         "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
          [[handle]]\nbox = { min = [7.5, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
          rotate = { axis = [0.0, 1.0, 0.0], degrees = -70.0 }\ntranslate = [-1.5, 0.0, 3.0]\n\
          [[pin]]\npoint = [4.0, 0.5, 1.0]\nto = [4.0, 0.5, 2.2]\n",
-        std::path::Path::new("."),
-        std::path::Path::new("t.toml"),
-    )
-    .unwrap();
-    let (complex, _) = build(
-        &pts,
-        &mesh.triangles,
-        &BuildParams {
-            cell_size: Some(0.125),
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    assert!(complex.len() > 2 * 2000, "{} cells", complex.len());
-    let constraints = solve::resolve(&complex, &spec, &pts, None).unwrap();
-    let energies = |method| {
+    );
+    same_minimum(
+        &blob([4.0, 2.0], 20_000),
+        &[],
+        0.012,
+        "[[fixed]]\nbox = { min = [-5, -3], max = [-3.0, 3] }\n\
+         [[handle]]\nbox = { min = [3.0, -3], max = [5, 3] }\n\
+         rotate = { degrees = 90.0 }\ntranslate = [0.0, 2.0]\n",
+    );
+}
+
+/// Solves `spec` on the cells of `pts` directly and by the multilevel path, and checks that both
+/// reach the same energy and that the multilevel path really ran on two levels.
+fn same_minimum<const D: usize>(pts: &[Vect<D>], triangles: &[[u32; 3]], cell: f64, spec: &str)
+where
+    Dim<D>: Rigid<D>,
+{
+    let complex = cells(pts, triangles, cell);
+    assert!(complex.len() > 2000, "{D}D: {} cells", complex.len());
+    let constraints = resolved(&complex, pts, spec);
+    let solved = |method| {
         let params = SolveParams {
             method,
             ..Default::default()
@@ -367,53 +363,14 @@ fn multilevel_solve_reaches_the_direct_minimum() {
         monotone(&s.info);
         (*s.info.energies.last().unwrap(), s.info)
     };
-    let (direct, _) = energies(solve::Method::Direct);
-    let (multi, info) = energies(solve::Method::Multilevel);
-    assert!(info.levels >= 2 && info.linear_iterations > 0, "{info:?}");
+    let (direct, _) = solved(solve::Method::Direct);
+    let (multi, info) = solved(solve::Method::Multilevel);
+    assert!(
+        info.levels >= 2 && info.linear_iterations > 0,
+        "{D}D: {info:?}"
+    );
     assert!(
         (multi - direct).abs() <= 1e-4 * direct,
-        "multilevel {multi} vs direct {direct}"
+        "{D}D: multilevel {multi} vs direct {direct}"
     );
-
-    let disk: Vec<Vect<2>> = blob([4.0, 2.0], 20_000);
-    let spec = parse_spec::<2>(
-        "[[fixed]]\nbox = { min = [-5, -3], max = [-3.0, 3] }\n\
-         [[handle]]\nbox = { min = [3.0, -3], max = [5, 3] }\n\
-         rotate = { degrees = 90.0 }\ntranslate = [0.0, 2.0]\n",
-        std::path::Path::new("."),
-        std::path::Path::new("t.toml"),
-    )
-    .unwrap();
-    let (complex, _) = build(
-        &disk,
-        &[],
-        &BuildParams {
-            cell_size: Some(0.012),
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    assert!(complex.len() > 2000, "{} cells", complex.len());
-    let constraints = solve::resolve(&complex, &spec, &disk, None).unwrap();
-    let (direct, _) = energies2(&complex, &constraints, solve::Method::Direct);
-    let (multi, levels) = energies2(&complex, &constraints, solve::Method::Multilevel);
-    assert!(levels >= 2);
-    assert!(
-        (multi - direct).abs() <= 1e-4 * direct,
-        "2D: multilevel {multi} vs direct {direct}"
-    );
-}
-
-fn energies2(
-    complex: &CellComplex<2>,
-    constraints: &solve::Constraints<2>,
-    method: solve::Method,
-) -> (f64, usize) {
-    let params = SolveParams {
-        method,
-        ..Default::default()
-    };
-    let s = solve::solve(complex.clone(), constraints.clone(), &params, &Silent).unwrap();
-    monotone(&s.info);
-    (*s.info.energies.last().unwrap(), s.info.levels)
 }

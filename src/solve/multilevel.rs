@@ -38,7 +38,7 @@ use faer::sparse::linalg::solvers::Llt;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
-use crate::rigid::{Dim, Rigid, Vect};
+use crate::rigid::{Dim, MAX_DOF, Rigid, Vect};
 
 /// Groups at most on the coarsest level, which is factored directly.
 pub(crate) const COARSEST: usize = 2000;
@@ -102,6 +102,26 @@ impl BlockMatrix {
         }
     }
 
+    /// The off-diagonal blocks of row `i`: each neighbor `j` with `H_ij` (the stored block, or
+    /// its transpose where `i` is the edge's second node).
+    fn row(&self, i: usize) -> impl Iterator<Item = (usize, Block)> + '_ {
+        let bb = self.dof * self.dof;
+        self.incident[self.start[i] as usize..self.start[i + 1] as usize]
+            .iter()
+            .map(move |&e| {
+                let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
+                let b = &self.blocks[k * bb..(k + 1) * bb];
+                let block = if side == 0 {
+                    let mut out = [0.0; MAX_DOF * MAX_DOF];
+                    out[..bb].copy_from_slice(b);
+                    out
+                } else {
+                    transpose(b, self.dof)
+                };
+                (self.edges[k][1 - side] as usize, block)
+            })
+    }
+
     /// Unknowns.
     pub fn len(&self) -> usize {
         self.n * self.dof
@@ -139,7 +159,9 @@ impl BlockMatrix {
     }
 
     /// The inverses of the diagonal blocks (a tiny multiple of the largest diagonal entry added
-    /// to a block that is not positive definite).
+    /// to a block that is not positive definite, growing a hundredfold up to eight times; a
+    /// block still not invertible, such as one holding a NaN, smooths by `1/scale`, where a
+    /// loop without a bound would hang).
     fn block_inverses(&self) -> Vec<f64> {
         let d = self.dof;
         let bb = d * d;
@@ -150,13 +172,15 @@ impl BlockMatrix {
         let mut inv = vec![0.0; self.n * bb];
         inv.par_chunks_mut(bb).enumerate().for_each(|(a, out)| {
             let block = &self.diag[a * bb..(a + 1) * bb];
-            let mut eps = 0.0;
-            while !invert_spd(block, d, eps, out) {
-                eps = if eps == 0.0 {
-                    1e-12 * scale
-                } else {
-                    eps * 100.0
-                };
+            let inverted = std::iter::once(0.0)
+                .chain((0..8).map(|k| 1e-12 * scale * 100f64.powi(k)))
+                .any(|eps| invert_spd(block, d, eps, out));
+            if !inverted {
+                out.fill(0.0);
+                let fallback = if scale.is_finite() { 1.0 / scale } else { 0.0 };
+                for r in 0..d {
+                    out[r * d + r] = fallback;
+                }
             }
         });
         inv
@@ -515,29 +539,23 @@ fn smoothed(
     let d = a.dof;
     let bb = d * d;
     let omega = 4.0 / (3.0 * lambda);
-    let rows: Vec<Vec<(u32, Vec<f64>)>> = (0..a.n)
+    let rows: Vec<Vec<(u32, Block)>> = (0..a.n)
         .into_par_iter()
         .map(|i| {
-            let mut row: Vec<(u32, Vec<f64>)> = Vec::with_capacity(4);
-            let mut add_to = |g: u32, m: Vec<f64>| match row.iter_mut().find(|(h, _)| *h == g) {
-                Some((_, b)) => add(b, &m),
-                None => row.push((g, m)),
-            };
+            let mut row: Vec<(u32, Block)> = Vec::with_capacity(4);
             let t = |j: usize| &tentative[j * bb..(j + 1) * bb];
             let dinv = &inverse[i * bb..(i + 1) * bb];
             // H_ii: D⁻¹ D P₀ = P₀, so the own group gets (1 − ω) P₀ᵢ.
-            add_to(group[i], t(i).iter().map(|v| (1.0 - omega) * v).collect());
-            for &e in &a.incident[a.start[i] as usize..a.start[i + 1] as usize] {
-                let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
-                let j = a.edges[k][1 - side] as usize;
-                let b = &a.blocks[k * bb..(k + 1) * bb];
-                let hij = if side == 0 {
-                    b.to_vec()
-                } else {
-                    transpose(b, d)
-                };
-                let m = matmul(dinv, &matmul(&hij, t(j), d), d);
-                add_to(group[j], m.into_iter().map(|v| -omega * v).collect());
+            let mut own = [0.0; MAX_DOF * MAX_DOF];
+            own[..bb]
+                .iter_mut()
+                .zip(t(i))
+                .for_each(|(o, v)| *o = (1.0 - omega) * v);
+            accumulate(&mut row, group[i], &own);
+            for (j, hij) in a.row(i) {
+                let mut m = matmul(dinv, &matmul(&hij, t(j), d), d);
+                m.iter_mut().for_each(|v| *v *= -omega);
+                accumulate(&mut row, group[j], &m);
             }
             row
         })
@@ -549,7 +567,7 @@ fn smoothed(
     for row in rows {
         for (g, m) in row {
             to.push(g);
-            blocks.extend(m);
+            blocks.extend_from_slice(&m[..bb]);
         }
         start.push(to.len() as u32);
     }
@@ -577,27 +595,15 @@ fn galerkin(a: &BlockMatrix, p: &Prolongation) -> BlockMatrix {
         .map(|c| {
             let mut map: FxHashMap<u64, u32> = FxHashMap::default();
             let mut blocks: Vec<f64> = Vec::new();
-            let mut hp: Vec<(u32, Vec<f64>)> = Vec::new();
+            let mut hp: Vec<(u32, Block)> = Vec::new();
             for i in c * chunk..((c + 1) * chunk).min(a.n) {
                 hp.clear();
-                let mut add_to = |g: u32, m: Vec<f64>| match hp.iter_mut().find(|(h, _)| *h == g) {
-                    Some((_, b)) => add(b, &m),
-                    None => hp.push((g, m)),
-                };
                 for (g, pb) in pblocks(i) {
-                    add_to(g, matmul(&a.diag[i * bb..(i + 1) * bb], pb, d));
+                    accumulate(&mut hp, g, &matmul(&a.diag[i * bb..(i + 1) * bb], pb, d));
                 }
-                for &e in &a.incident[a.start[i] as usize..a.start[i + 1] as usize] {
-                    let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
-                    let j = a.edges[k][1 - side] as usize;
-                    let b = &a.blocks[k * bb..(k + 1) * bb];
-                    let hij = if side == 0 {
-                        b.to_vec()
-                    } else {
-                        transpose(b, d)
-                    };
+                for (j, hij) in a.row(i) {
                     for (g, pb) in pblocks(j) {
-                        add_to(g, matmul(&hij, pb, d));
+                        accumulate(&mut hp, g, &matmul(&hij, pb, d));
                     }
                 }
                 for (g, pb) in pblocks(i) {
@@ -672,8 +678,20 @@ fn galerkin(a: &BlockMatrix, p: &Prolongation) -> BlockMatrix {
     BlockMatrix::new(d, count, diag, edges, blocks)
 }
 
-fn matmul(x: &[f64], y: &[f64], d: usize) -> Vec<f64> {
-    let mut out = vec![0.0; d * d];
+/// A `d × d` block, row-major, in the first `d²` entries (`d ≤ MAX_DOF`): products of blocks
+/// live on the stack, not in an allocation each.
+type Block = [f64; MAX_DOF * MAX_DOF];
+
+/// Adds `m` into the block of `g` in a short sparse row of blocks.
+fn accumulate(row: &mut Vec<(u32, Block)>, g: u32, m: &Block) {
+    match row.iter_mut().find(|(h, _)| *h == g) {
+        Some((_, b)) => add(b, m),
+        None => row.push((g, *m)),
+    }
+}
+
+fn matmul(x: &[f64], y: &[f64], d: usize) -> Block {
+    let mut out = [0.0; MAX_DOF * MAX_DOF];
     for r in 0..d {
         for k in 0..d {
             let v = x[r * d + k];
@@ -717,8 +735,12 @@ fn factor_coarsest(a: &BlockMatrix) -> Option<Llt<usize, f64>> {
     super::positions::factor(a.len(), &triplets)
 }
 
-fn transpose(m: &[f64], d: usize) -> Vec<f64> {
-    (0..d * d).map(|k| m[(k % d) * d + k / d]).collect()
+fn transpose(m: &[f64], d: usize) -> Block {
+    let mut out = [0.0; MAX_DOF * MAX_DOF];
+    for k in 0..d * d {
+        out[k] = m[(k % d) * d + k / d];
+    }
+    out
 }
 
 fn add(out: &mut [f64], m: &[f64]) {
