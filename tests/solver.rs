@@ -374,3 +374,46 @@ where
         "{D}D: multilevel {multi} vs direct {direct}"
     );
 }
+
+/// Issue 15: Newton's curvature term (the default) reaches Gauss-Newton's minimum, or a lower
+/// one, in fewer iterations on a bar bent by 90°, where the residuals at the minimum are large
+/// and Gauss-Newton converges only linearly.
+#[test]
+fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
+    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
+    let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    let complex = cells(&pts, &mesh.triangles, 0.25);
+    let constraints = resolved(
+        &complex,
+        &pts,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [7.0, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
+         rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]\n",
+    );
+    let solved = |newton| {
+        let params = SolveParams {
+            newton,
+            ..Default::default()
+        };
+        let s = solve::solve(complex.clone(), constraints.clone(), &params, &Silent).unwrap();
+        monotone(&s.info);
+        assert!(s.info.converged, "newton {newton}: {:?}", s.info);
+        s.info
+    };
+    let (newton, gauss) = (solved(true), solved(false));
+    let (en, eg) = (
+        *newton.energies.last().unwrap(),
+        *gauss.energies.last().unwrap(),
+    );
+    assert!(en <= eg * (1.0 + 1e-6), "Newton {en} vs Gauss-Newton {eg}");
+    assert!(
+        (en - eg).abs() <= 1e-4 * eg,
+        "Newton {en} vs Gauss-Newton {eg}"
+    );
+    let last = |i: &SolverInfo| *i.iterations_per_step.last().unwrap();
+    // 4 against 6 iterations in the last load step here (4 against 7 at cells of 0.125).
+    assert!(
+        last(&newton) < last(&gauss) && newton.iterations < gauss.iterations,
+        "Newton {newton:?} vs Gauss-Newton {gauss:?}"
+    );
+}

@@ -402,22 +402,59 @@ pub fn terrain_height(x: f64, y: f64) -> (f64, u8) {
     (ground, 2)
 }
 
-/// The synthetic terrain's samples: `n` points on a jittered grid over 2 km × 2 km at
-/// georeferenced coordinates (x from 500 000, y from 5 000 000), z from [`terrain_height`]
-/// with 2 cm of noise. Reproducible (xorshift64*).
+/// A road corridor 1 km × 200 m at `(x, y)`: a road 12 m wide along the middle (y = 100) at a
+/// grade rolling ±15 m; banks rising from it at 15 % with hummocks; stands of trees up to 18 m
+/// on the banks (a sample there lies at a height `u` ∈ [0, 1) of the canopy: returns through
+/// it); and a row of 20 m buildings 8 m high every 100 m on the north side, with their walls
+/// sampled. z spans about 50 m. Returns the height and the LAS class.
+pub fn corridor_height(x: f64, y: f64, u: f64) -> (f64, u8) {
+    let grade = 100.0 + 15.0 * (x / 200.0).sin();
+    let off = (y - 100.0).abs();
+    if off < 6.0 {
+        return (grade, 11);
+    }
+    let bank = grade + 0.15 * (off - 6.0) + 5.0 * (x / 53.0 + y / 71.0).sin() * (off / 100.0);
+    let (bx, by) = (x.rem_euclid(100.0), y - 160.0);
+    if (0.0..20.0).contains(&bx) && (0.0..20.0).contains(&by) {
+        let wall = bx.min(20.0 - bx).min(by).min(20.0 - by) < 1.0;
+        return (bank + if wall { 8.0 * u } else { 8.0 }, 6);
+    }
+    if off > 15.0 && (x / 37.0).sin() * (y / 23.0).cos() > 0.3 {
+        return (bank + 18.0 * u, 5);
+    }
+    (bank, 2)
+}
+
+/// A synthetic scan's samples: points on a jittered grid over a rectangle at georeferenced
+/// coordinates (x from 500 000, y from 5 000 000), z from a height function with 2 cm of
+/// noise. Reproducible (xorshift64*).
 pub struct Terrain {
-    side: u64,
-    step: f64,
+    columns: u64,
+    step: [f64; 2],
+    height: fn(f64, f64, f64) -> (f64, u8),
     state: u64,
 }
 
 impl Terrain {
-    /// The terrain of `n` samples.
+    /// The 2 km × 2 km terrain of [`terrain_height`], `n` samples.
     pub fn new(n: u64) -> Self {
-        let side = (n as f64).sqrt().ceil().max(1.0) as u64;
+        Self::over(n, [2000.0, 2000.0], |x, y, _| terrain_height(x, y))
+    }
+
+    /// The 1 km × 200 m road corridor of [`corridor_height`], `n` samples (issue 15's scan).
+    pub fn corridor(n: u64) -> Self {
+        Self::over(n, [1000.0, 200.0], corridor_height)
+    }
+
+    fn over(n: u64, extent: [f64; 2], height: fn(f64, f64, f64) -> (f64, u8)) -> Self {
+        // Square cells of the jittered grid: columns / rows = width / depth.
+        let aspect = extent[0] / extent[1];
+        let columns = ((n as f64) * aspect).sqrt().ceil().max(1.0) as u64;
+        let rows = ((n as f64) / aspect).sqrt().ceil().max(1.0) as u64;
         Self {
-            side,
-            step: 2000.0 / side as f64,
+            columns,
+            step: [extent[0] / columns as f64, extent[1] / rows as f64],
+            height,
             state: 0x9E37_79B9_7F4A_7C15,
         }
     }
@@ -431,9 +468,12 @@ impl Terrain {
 
     /// Sample `k` (call in order): local x, y, z and its LAS class.
     pub fn sample(&mut self, k: u64) -> (f64, f64, f64, u8) {
-        let x = (k % self.side) as f64 * self.step + self.rand() * self.step;
-        let y = (k / self.side) as f64 * self.step + self.rand() * self.step;
-        let (z, class) = terrain_height(x, y);
+        let x = (k % self.columns) as f64 * self.step[0] + self.rand() * self.step[0];
+        let y = (k / self.columns) as f64 * self.step[1] + self.rand() * self.step[1];
+        // The height within a column (a canopy's, a wall's): golden-ratio steps over k, so the
+        // jitter's stream stays that of the plain terrain.
+        let u = (k as f64 * 0.618_033_988_749_894_9).fract();
+        let (z, class) = (self.height)(x, y, u);
         (x, y, z + 0.02 * (self.rand() - 0.5), class)
     }
 }
@@ -467,6 +507,16 @@ pub fn write_ply_terrain(path: &Path, n: u64) -> std::io::Result<()> {
 /// Writes a LAS 1.2 (or LAZ) scan of `n` points of [`terrain_height`] (point format 3: GPS time
 /// and RGB; UTM-like offsets around 500 000 / 5 000 000, scale 1 mm), streaming in chunks.
 pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), las::Error> {
+    write_las(path, Terrain::new(n), n, compressed)
+}
+
+/// Writes `n` samples of `terrain` as [`write_las_terrain`] does.
+pub fn write_las(
+    path: &Path,
+    mut terrain: Terrain,
+    n: u64,
+    compressed: bool,
+) -> Result<(), las::Error> {
     use las::{Builder, LazParallelism, PointDataBuilder, Transform, Vector, WriterOptions};
     let mut b = Builder::from((1, 2));
     b.point_format = las::point::Format::new(3)?;
@@ -490,7 +540,6 @@ pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), la
         header,
         WriterOptions::default().with_laz_parallelism(LazParallelism::Yes),
     )?;
-    let mut terrain = Terrain::new(n);
     let chunk = 1u64 << 20;
     let mut i = 0u64;
     while i < n {

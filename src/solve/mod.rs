@@ -7,6 +7,26 @@
 //! where the middle never turns; the paper's interactive setting avoids this because handles move
 //! a little per frame, and load steps do the same for a batch tool.
 //!
+//! **Newton's curvature.** The glue energy is not a small-residual problem once a shape is
+//! bent: the pairs' residuals stay large at the minimum, and Gauss-Newton, which leaves out
+//! their second-order term, converges only linearly (the 480k-vertex tube bent by 90°: 9, 17
+//! and 16 iterations for its three load steps, the last ones each lowering the energy by 1e-5
+//! of it). From a load step's second iteration on, each free cell's rotation block therefore
+//! also gets `Σ a · ∂²(r · R(ω) y)/∂ω²` over its quadrature points (`r` the residual, `y` the
+//! rotated arm; `System::step`), which makes the iteration Newton's on the rotations and
+//! quadratically convergent. Where that matrix is indefinite (far from the minimum) its
+//! factorization fails and the step falls back to the term's positive part per cell, which
+//! keeps the matrix positive definite. The first iteration of each load step, which starts
+//! where the handles jumped, uses the positive part too. A load step before the last only
+//! has to bring the motions near the path's minimum (so that the next starts on the right
+//! side of a saddle): it stops at [`INTERMEDIATE_TOLERANCE`] or after
+//! [`INTERMEDIATE_ITERATIONS`]. On the tube: 42 iterations and 5.6 s became 11 iterations and
+//! 1.8 s, to a slightly lower energy (BENCHMARKS.md). Tried and not kept: keeping an earlier
+//! step's Cholesky factor as the preconditioner of conjugate gradients on the next steps'
+//! matrices — 5–12 iterations, each a pair of triangular solves costing a tenth of a
+//! factorization (the factor is memory-bound to read), so no faster on the tube or the
+//! corridor.
+//!
 //! Every Gauss-Newton step is followed by a line search along the step (halving from the full
 //! step, or doubling up to 8× while a full step keeps lowering the energy), and every trial has
 //! its free positions replaced by their optimum for its rotations (variable projection, see
@@ -55,6 +75,9 @@ pub struct SolveParams {
     pub memory_limit: Option<u64>,
     /// How each Gauss-Newton system is solved. Default [`Method::Direct`].
     pub method: Method,
+    /// After a load step's first iteration, add the rotations' second-order term to the
+    /// Gauss-Newton matrix (Newton's method; see the module docs). Default `true`.
+    pub newton: bool,
 }
 
 /// How the Gauss-Newton normal equations are solved.
@@ -80,6 +103,7 @@ impl Default for SolveParams {
             max_refinements: 4,
             memory_limit: None,
             method: Method::Direct,
+            newton: true,
         }
     }
 }
@@ -282,13 +306,30 @@ where
     observer.stage("solving", steps as u64);
     for s in 1..=steps {
         let f = s as f64 / steps as f64;
+        // A step before the last only has to bring the motions near the path's minimum, so
+        // that the next step starts on the right side of any saddle: it stops at a looser
+        // tolerance (on the 480k-vertex tube bend, the three steps took 9, 17 and 16
+        // iterations at 1e-6, the last ones each lowering the energy by 1e-5 of it).
+        let at = SolveParams {
+            tolerance: if s < steps {
+                params.tolerance.max(INTERMEDIATE_TOLERANCE)
+            } else {
+                params.tolerance
+            },
+            max_iterations: if s < steps {
+                params.max_iterations.min(INTERMEDIATE_ITERATIONS)
+            } else {
+                params.max_iterations
+            },
+            ..*params
+        };
         let it = minimize_with(
             system,
             complex,
             constraints,
             motions,
             f,
-            params,
+            &at,
             info,
             observer,
         )?;
@@ -297,6 +338,11 @@ where
     }
     Ok(())
 }
+
+/// The tolerance of the load steps before the last.
+const INTERMEDIATE_TOLERANCE: f64 = 1e-3;
+/// Iterations at most of a load step before the last.
+const INTERMEDIATE_ITERATIONS: usize = 3;
 
 /// An editing session on fixed cells: the paper's interactive case. The first solve runs from
 /// rest with load steps, as [`solve`] does (without refinement); each [`Session::update`] then
@@ -509,7 +555,9 @@ where
             break;
         }
         let t0 = Instant::now();
-        let delta = system.step(complex, constraints, motions, &targets_to, 0.0)?;
+        // Newton's curvature once Gauss-Newton has brought the load step near its minimum.
+        let newton = params.newton && iterations > 0;
+        let delta = system.step(complex, constraints, motions, &targets_to, newton)?;
         info.seconds_factor += t0.elapsed().as_secs_f64();
         if let Some((linear, levels)) = system.multilevel_stats() {
             info.linear_iterations += linear;

@@ -494,6 +494,41 @@ where
         (cols, value)
     }
 
+    /// The lever `R_i (q − z_i)` of the rotation of cell `c` at `q` (`z_i` its rotation center),
+    /// if the cell turns freely.
+    fn arm(
+        &self,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        motions: &[Motion<D>],
+        c: usize,
+        q: &Vect<D>,
+    ) -> Option<Vect<D>> {
+        let center = match constraints.roles[c] {
+            Role::Free => complex.cells[c].center,
+            Role::Pin(k) => constraints.pins[k as usize].point,
+            _ => return None,
+        };
+        Some(motions[c].rot * (q - center))
+    }
+
+    /// Adds `sign ·` each free cell's rotational curvature block (lower triangle, one per free
+    /// cell) to the cell's own rotation block.
+    fn add_curvature(&self, cell_vals: &mut [f64], blocks: &[[f64; 6]], sign: f64) {
+        let rot = <Dim<D> as Rigid<D>>::ROT;
+        for (k, &c) in self.free_cells.iter().enumerate() {
+            let s = self.slots[c as usize];
+            let first = s.len - rot;
+            let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
+            let m = &blocks[k];
+            for x in 0..rot {
+                for y in 0..=x {
+                    vals[tri(first + x) + first + y] += sign * m[tri(x) + y];
+                }
+            }
+        }
+    }
+
     /// Assembles and solves the damped normal equations at `motions`; returns the step `δ`
     /// (one entry per unknown), or an error when even strong damping cannot make the system
     /// positive definite.
@@ -503,7 +538,7 @@ where
         constraints: &Constraints<D>,
         motions: &[Motion<D>],
         targets_to: &[Vect<D>],
-        damping: f64,
+        newton: bool,
     ) -> Result<Vec<f64>> {
         let cell_part = self.free_cells.len() * Self::CELL_SLOT;
         let mut buffers = std::mem::take(&mut self.buffers);
@@ -514,7 +549,7 @@ where
             constraints,
             motions,
             targets_to,
-            damping,
+            newton,
         );
         self.buffers = buffers;
         result
@@ -529,7 +564,7 @@ where
         constraints: &Constraints<D>,
         motions: &[Motion<D>],
         targets_to: &[Vect<D>],
-        damping: f64,
+        newton: bool,
     ) -> Result<Vec<f64>> {
         let dof = Self::DOF;
         let Buffers {
@@ -540,14 +575,17 @@ where
         } = buffers;
         let (cell_vals, pair_vals) = values.split_at_mut(cell_part);
         let mut pair_grad = vec![0.0f64; self.pairs.len() * 2 * dof];
+        let mut pair_curv = vec![[0.0f64; 6]; self.pairs.len() * 2];
         let this = self;
         pair_vals
             .par_chunks_exact_mut(Self::PAIR_SLOT)
             .zip(pair_grad.par_chunks_exact_mut(2 * dof))
+            .zip(pair_curv.par_chunks_exact_mut(2))
             .zip(this.pairs.par_iter())
-            .for_each(|((vals, grad), &p)| {
+            .for_each(|(((vals, grad), curv), &p)| {
                 vals.fill(0.0);
                 grad.fill(0.0);
+                curv.fill([0.0; 6]);
                 let pr = &complex.pairs[p as usize];
                 let (i, j) = (pr.i as usize, pr.j as usize);
                 let (ni, nj) = (this.slots[i].len, this.slots[j].len);
@@ -560,6 +598,12 @@ where
                     let (ji, ti) = this.jacobian(complex, constraints, motions, i, &q);
                     let (jj, tj) = this.jacobian(complex, constraints, motions, j, &q);
                     let r = ti - tj;
+                    if let Some(arm) = this.arm(complex, constraints, motions, i, &q) {
+                        accumulate_curvature(&mut curv[0], &r, &arm, a);
+                    }
+                    if let Some(arm) = this.arm(complex, constraints, motions, j, &q) {
+                        accumulate_curvature(&mut curv[1], &r, &arm, -a);
+                    }
                     accumulate_diag(hii, &ji, ni, a);
                     accumulate_diag(hjj, &jj, nj, a);
                     for x in 0..ni {
@@ -576,11 +620,18 @@ where
 
         let mut grad = vec![0.0f64; self.n];
         let mut diag = vec![0.0f64; self.n];
+        let mut curvature = vec![[0.0f64; 6]; self.slots.len()];
         for (k, &p) in self.pairs.iter().enumerate() {
             let pr = &complex.pairs[p as usize];
             let vals = &pair_vals[k * Self::PAIR_SLOT..(k + 1) * Self::PAIR_SLOT];
             for (side, cell, base) in [(0, pr.i, 0), (1, pr.j, Self::CELL_SLOT)] {
                 let s = self.slots[cell as usize];
+                if s.len > 0 {
+                    let c = &mut curvature[cell as usize];
+                    c.iter_mut()
+                        .zip(&pair_curv[2 * k + side])
+                        .for_each(|(c, v)| *c += v);
+                }
                 for a in 0..s.len {
                     grad[s.offset + a] += pair_grad[k * 2 * dof + side * dof + a];
                     diag[s.offset + a] += vals[base + tri(a + 1) - 1];
@@ -599,19 +650,41 @@ where
                     self.jacobian(complex, constraints, motions, c as usize, &target.from);
                 let r = value - targets_to[t as usize];
                 accumulate_diag(vals, &jc, s.len, target.weight);
+                if let Some(arm) = self.arm(complex, constraints, motions, c as usize, &target.from)
+                {
+                    accumulate_curvature(&mut curvature[c as usize], &r, &arm, target.weight);
+                }
                 for a in 0..s.len {
                     grad[s.offset + a] += target.weight * jc[a].dot(&r);
                     diag[s.offset + a] += target.weight * jc[a].norm_squared();
                 }
             }
         }
+        let rot = <Dim<D> as Rigid<D>>::ROT;
+        let positive: Vec<[f64; 6]> = self
+            .free_cells
+            .iter()
+            .map(|&c| positive_part(&curvature[c as usize], rot))
+            .collect();
+        let exact: Vec<[f64; 6]> = self
+            .free_cells
+            .iter()
+            .map(|&c| curvature[c as usize])
+            .collect();
+        // The multilevel path's conjugate gradients need a positive definite matrix.
+        let mut newton = newton && self.multilevel.is_none();
+        self.add_curvature(
+            &mut values[..cell_part],
+            if newton { &exact } else { &positive },
+            1.0,
+        );
         let scale = diag
             .iter()
             .fold(0.0f64, |m, &d| m.max(d))
             .max(f64::MIN_POSITIVE);
         let scale_floor = 1e-12 * scale;
         if let Some(ml) = &self.multilevel {
-            let mut mu = damping;
+            let mut mu = 0.0;
             for _ in 0..12 {
                 if let Some(step) = self.multilevel_step(
                     ml,
@@ -633,8 +706,8 @@ where
             ));
         }
         let (argsort, llt) = self.symbolic.as_ref().expect("a system with unknowns");
-        let mut mu = damping;
-        for _ in 0..12 {
+        let mut mu = 0.0;
+        for _ in 0..13 {
             // Levenberg–Marquardt on the diagonal, plus a floor for singular directions.
             self.damp(&mut values[..cell_part], &diag, mu, 1e-12 * scale);
             let sym = pattern.take().ok_or_else(|| {
@@ -666,8 +739,15 @@ where
                     return Ok(step);
                 }
             }
-            // Undo this round's damping before trying a stronger one.
+            // Undo this round's damping before trying a stronger one; an indefinite Newton
+            // system first falls back to the curvature's positive part, undamped.
             self.damp(&mut values[..cell_part], &diag, -mu, -1e-12 * scale);
+            if newton {
+                self.add_curvature(&mut values[..cell_part], &exact, -1.0);
+                self.add_curvature(&mut values[..cell_part], &positive, 1.0);
+                newton = false;
+                continue;
+            }
             mu = (mu * 100.0).max(1e-6);
         }
         Err(Error::Solver(
@@ -740,4 +820,43 @@ fn accumulate_diag<const D: usize>(h: &mut [f64], j: &[Vect<D>; MAX_DOF], n: usi
             k += 1;
         }
     }
+}
+
+/// `K += a · ∂²(r · R(ω) y)/∂ω²` at `ω = 0` for the rotated arm `y` (lower triangle of the
+/// `ROT × ROT` block): the second-order term of the residual `r` that Gauss-Newton leaves out,
+/// `½ r · (e_x × (e_y × y) + e_y × (e_x × y))`.
+fn accumulate_curvature<const D: usize>(k: &mut [f64; 6], r: &Vect<D>, y: &Vect<D>, a: f64)
+where
+    Dim<D>: Rigid<D>,
+{
+    let rot = <Dim<D> as Rigid<D>>::ROT;
+    let once = <Dim<D> as Rigid<D>>::cross_jacobian(y);
+    let twice: [[Vect<D>; 3]; 3] =
+        std::array::from_fn(|s| <Dim<D> as Rigid<D>>::cross_jacobian(&once[s]));
+    for x in 0..rot {
+        for z in 0..=x {
+            k[tri(x) + z] += a * 0.5 * r.dot(&(twice[z][x] + twice[x][z]));
+        }
+    }
+}
+
+/// The positive semidefinite part of a symmetric `n × n` matrix (`n` 1 or 3) stored as its lower
+/// triangle: negative eigenvalues set to zero.
+fn positive_part(k: &[f64; 6], n: usize) -> [f64; 6] {
+    if n == 1 {
+        return [k[0].max(0.0), 0.0, 0.0, 0.0, 0.0, 0.0];
+    }
+    let m = nalgebra::Matrix3::new(k[0], k[1], k[3], k[1], k[2], k[4], k[3], k[4], k[5]);
+    let eig = m.symmetric_eigen();
+    let lambda = eig.eigenvalues.map(|v| v.max(0.0));
+    let p =
+        eig.eigenvectors * nalgebra::Matrix3::from_diagonal(&lambda) * eig.eigenvectors.transpose();
+    [
+        p[(0, 0)],
+        p[(1, 0)],
+        p[(1, 1)],
+        p[(2, 0)],
+        p[(2, 1)],
+        p[(2, 2)],
+    ]
 }

@@ -1,12 +1,14 @@
 //! `cargo run --release -p data_gen --bin gen -- terrain N OUT.las|OUT.laz|OUT.ply`: a synthetic
 //! scan of N points (terrain, buildings, a bridge) for benchmarks and memory checks.
+//! `gen corridor N OUT.las|OUT.laz`: N points of a 1 km × 200 m road corridor, z over ~50 m
+//! (issue 15's large-extent scan).
 //! `gen tube OUT.ply`: the closed 480k-vertex tube of issue 15's `--cells 5500` benchmark
 //! (10 × 2 × 2, wall 0.2; binary PLY).
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
-        Some("terrain") if args.len() == 4 => {
+        Some(scene @ ("terrain" | "corridor")) if args.len() == 4 => {
             let n: u64 = args[2].parse().expect("N is a point count");
             let out = std::path::Path::new(&args[3]);
             let ext = out
@@ -14,9 +16,18 @@ fn main() {
                 .map(|e| e.to_string_lossy().to_ascii_lowercase());
             let t = std::time::Instant::now();
             match ext.as_deref() {
-                Some("ply") => data_gen::write_ply_terrain(out, n).expect("writing the scan"),
-                Some("laz") => data_gen::write_las_terrain(out, n, true).expect("writing the scan"),
-                _ => data_gen::write_las_terrain(out, n, false).expect("writing the scan"),
+                Some("ply") if scene == "terrain" => {
+                    data_gen::write_ply_terrain(out, n).expect("writing the scan")
+                }
+                Some("ply") => panic!("the corridor is written as LAS or LAZ"),
+                ext => {
+                    let terrain = match scene {
+                        "corridor" => data_gen::Terrain::corridor(n),
+                        _ => data_gen::Terrain::new(n),
+                    };
+                    data_gen::write_las(out, terrain, n, ext == Some("laz"))
+                        .expect("writing the scan")
+                }
             }
             println!(
                 "{n} points -> {} in {:.1} s",
@@ -31,7 +42,10 @@ fn main() {
             println!("{} vertices -> {}", mesh.vertices.len(), out.display());
         }
         _ => {
-            eprintln!("usage: gen terrain N OUT.las|OUT.laz|OUT.ply | gen tube OUT.ply");
+            eprintln!(
+                "usage: gen terrain N OUT.las|OUT.laz|OUT.ply | gen corridor N OUT.las|OUT.laz | \
+                 gen tube OUT.ply"
+            );
             std::process::exit(2);
         }
     }
