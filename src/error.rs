@@ -42,15 +42,18 @@ pub enum Error {
     /// The input holds no samples, or samples that are not finite.
     #[error("invalid input: {0}")]
     Input(String),
-    /// The finest grid would be too large for memory.
+    /// The cell size divides the input's extent into more finest cells along an axis than cell
+    /// coordinates can hold.
     #[error(
-        "the cell size {cell_size} gives a finest grid of {cells} cells over the input's extent; use a larger --cell-size"
+        "the cell size {cell_size} gives {cells} finest cells along the input's extent, more than the {max} a cell's coordinates can hold; use a larger --cell-size"
     )]
     GridTooLarge {
         /// The finest cell size.
         cell_size: f64,
-        /// The number of finest cells the grid would need.
+        /// Finest cells along the longest axis that overflows.
         cells: u128,
+        /// Finest cells along an axis at most.
+        max: u128,
     },
     /// A buffer would exceed the memory budget ([`crate::memory`]).
     #[error(

@@ -279,7 +279,7 @@ struct CellArgs {
     /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
     /// conjugate gradients with a two-level rigid-motion multigrid (reaches the same minimum;
     /// slower than the factorization up to at least 342k cells, BENCHMARKS.md).
-    #[arg(long, value_enum, default_value_t = SolverArg::Direct)]
+    #[arg(long, value_enum, default_value_t = SolverArg::Auto)]
     solver: SolverArg,
     #[command(flatten)]
     memory: MemoryArg,
@@ -287,6 +287,8 @@ struct CellArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum SolverArg {
+    /// The factorization where it fits the memory budget, else the multilevel solver.
+    Auto,
     /// Sparse Cholesky factorization (fill-in: memory grows faster than the cells).
     Direct,
     /// Conjugate gradients with a rigid-motion multigrid (memory linear in the cells).
@@ -313,6 +315,7 @@ impl CellArgs {
         SolveParams {
             memory_limit: self.memory.memory_limit,
             method: match self.solver {
+                SolverArg::Auto => Method::Auto,
                 SolverArg::Direct => Method::Direct,
                 SolverArg::Multilevel => Method::Multilevel,
             },
@@ -1049,7 +1052,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             max_level: None,
             shell: false,
             inside: InsideArg::Auto,
-            solver: SolverArg::Direct,
+            solver: SolverArg::Auto,
             memory: MemoryArg { memory_limit: None },
         },
         quiet,

@@ -7,9 +7,13 @@
 //! three quarters of the machine's physical memory, or of the control group's limit where that
 //! is lower. The estimates are of the large buffers only:
 //!
-//! - the dense finest grid of the cell construction: one byte per finest cell for its state,
-//!   as much again for the pyramid of coarser levels and the winding classification's copy,
-//!   and 4 bytes per cell for the exterior flood fill's stack at worst ([`grid_bytes`]);
+//! - the cell construction (`cells::build`): 160 bytes per occupied finest cell (its code,
+//!   the coarser levels, the empty blocks and the flood fill's maps, the leaves), checked as
+//!   the occupied cells grow; 24 bytes per cell of the coarsest level, which is enumerated
+//!   whole; 8 bytes per candidate cell of the triangles' boxes, counted before they are
+//!   rasterized. Nothing is sized by the bounding box's volume;
+//! - with `--solver auto` (the default) the direct path where its factor fits, else the
+//!   multilevel one;
 //! - the solver: [`SOLVER_BYTES_PER_CELL`] per cell before anything is built (the motions, the
 //!   energies, the position system), then, for the direct path, the assembled system's entries
 //!   before they are allocated, and the sparse Cholesky factor exactly, from its symbolic
@@ -67,12 +71,6 @@ pub fn check(what: &str, bytes: f64, limit: u64, advice: &str) -> Result<()> {
             advice: advice.to_string(),
         })
     }
-}
-
-/// The estimated bytes of a dense finest grid of `cells` cells, with or without the exterior
-/// flood fill.
-pub fn grid_bytes(cells: f64, flood: bool) -> f64 {
-    cells * if flood { 7.0 } else { 3.0 }
 }
 
 /// The estimated bytes of the dense RBF of `n` cells in `D` dimensions.

@@ -419,7 +419,7 @@ fn first_pass_cells(
     observer.stage("voxelizing", 0);
     occupancy.add_triangles(&positions, source.triangles())?;
     drop(positions);
-    let (complex, build_info) = occupancy.finish();
+    let (complex, build_info) = occupancy.finish()?;
     observer.finish();
     Ok((complex, build_info, selections, proxy))
 }
@@ -563,9 +563,9 @@ fn first_pass(
             bounds.1 = bounds.1.sup(p);
         }
         outside += if chunk.normals.is_empty() {
-            occupancy.add_points(&chunk.positions)
+            occupancy.add_points(&chunk.positions)?
         } else {
-            occupancy.add_oriented_points(&chunk.positions, &chunk.normals)
+            occupancy.add_oriented_points(&chunk.positions, &chunk.normals)?
         };
         let classes = (!chunk.classes.is_empty()).then_some(&chunk.classes[..]);
         selections.add(

@@ -34,31 +34,57 @@ fn a_tiny_cell_size_on_a_long_thin_input_is_refused_at_once() {
     );
     let out = dir.path().join("out.xyz");
     let start = std::time::Instant::now();
-    // Past the grid's hard bound.
-    let r = deform(&input, &out, &spec, &["--cell-size", "0.01"]);
+    // Past what a cell's coordinates can hold.
+    let r = deform(&input, &out, &spec, &["--cell-size", "0.00001"]);
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(r.stderr.contains("--cell-size"), "{}", r.stderr);
-    // Within it, but past the budget.
-    let r = deform(
-        &input,
-        &out,
-        &spec,
-        &["--cell-size", "0.5", "--memory-limit", "64M"],
-    );
+    assert!(!out.exists());
+    // A triangle 1 km across at 1 cm cells: its candidate cells are counted before they are
+    // enumerated, and refused.
+    let soup = dir.path().join("big.obj");
+    std::fs::write(&soup, "v 0 0 0\nv 1000 0 0\nv 0 1000 1\nf 1 2 3\n").unwrap();
+    let out_obj = dir.path().join("out.obj");
+    let r = deform(&soup, &out_obj, &spec, &["--cell-size", "0.01"]);
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(
-        r.stderr.contains("finest grid") && r.stderr.contains("--memory-limit"),
+        r.stderr.contains("rasterizing") && r.stderr.contains("--cell-size"),
         "{}",
         r.stderr
     );
-    assert!(r.stderr.contains("--cell-size"), "{}", r.stderr);
-    assert!(!out.exists());
+    assert!(!out_obj.exists());
     // Both answers come at once (generous for a debug build on a busy machine).
     assert!(
         start.elapsed().as_secs_f64() < 10.0,
         "{:?}",
         start.elapsed()
     );
+}
+
+/// Issue 15: the cells' memory goes with the occupied cells, not with the bounding box: the
+/// line at 0.5 (a dense grid of 134M finest cells before) and at 0.01 runs in a 64 MB budget.
+#[test]
+fn a_long_thin_input_costs_memory_by_its_cells() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = line(dir.path());
+    let spec = edit(
+        dir.path(),
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [10, 10, 10] }\n",
+    );
+    for size in ["0.5", "0.01"] {
+        let out = dir.path().join(format!("out{size}.xyz"));
+        let r = deform(
+            &input,
+            &out,
+            &spec,
+            &["--cell-size", size, "--memory-limit", "64M"],
+        );
+        assert_eq!(r.code, 0, "{size}: {}", r.stderr);
+        assert_eq!(
+            std::fs::read_to_string(&out).unwrap().lines().count(),
+            257,
+            "{size}"
+        );
+    }
 }
 
 #[test]
@@ -90,9 +116,36 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
     refused("5M", &["--transfer", "blend"], &["solving 1512 cells"]);
     refused(
         "16M",
-        &["--transfer", "blend"],
+        &["--transfer", "blend", "--solver", "direct"],
         &["factoring the solver's system of 1512 cells", "--cell-size"],
     );
+    // The default solver falls back to the multilevel one (12 KB a cell, 17.7 MiB) where the
+    // factor does not fit, and says so in the report; below that, both are refused.
+    refused(
+        "16M",
+        &["--transfer", "blend"],
+        &["solving 1512 cells by the multilevel solver", "--cell-size"],
+    );
+    let report = dir.path().join("r.json");
+    let r = deform(
+        &input,
+        &out,
+        &spec,
+        &[
+            "--cell-size",
+            "0.25",
+            "--memory-limit",
+            "19M",
+            "--transfer",
+            "blend",
+            "--report",
+            arg(&report),
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let text = std::fs::read_to_string(&report).unwrap();
+    assert!(text.contains(r#""linear_solver": "multilevel""#), "{text}");
+    std::fs::remove_file(&out).unwrap();
     // Refinement that would outgrow the budget names its threshold.
     refused(
         "60M",

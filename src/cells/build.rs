@@ -8,20 +8,27 @@
 //!    triangle visits only the closed cells touching its bounding box, in parallel; a BVH over
 //!    the triangles (issue 4 suggested `obvhs`) would find the same candidate cells and adds
 //!    nothing here: one cell for a small triangle, and a large one must test its box anyway.
-//! 3. Inside/outside of the empty finest cells: for meshes and soups by the generalized winding
-//!    number of the triangles ([`super::winding`]; one evaluation per coarsest all-empty cell),
-//!    which holes and unwelded or non-manifold surfaces do not fool; for point clouds with
-//!    normals by its point variant (a dipole per occupied finest cell: the mean position, the
-//!    mean normal times `c²/max|n_a|`, the area of a surface crossing one column of cells along
-//!    the normal's dominant axis); for point clouds without normals by the exterior flood fill
-//!    of [`classify_inside`], which leaks through gaps wider than a cell.
-//! 4. A pyramid of states from the finest level up; leaves are emitted top-down: a cell that is
-//!    all inside is an interior leaf at the coarsest level where that holds, a cell with occupied
-//!    descendants is split down to `max_level`, a cell all outside is dropped.
+//! 3. Inside/outside of the empty space, tiled by the maximal empty cells of the tree ("blocks":
+//!    every unoccupied cell of level 0, and every unoccupied child of an occupied cell): the
+//!    surface lies in occupied cells, so each block is wholly inside or outside. For meshes and
+//!    soups by the generalized winding number of the triangles ([`super::winding`]; one
+//!    evaluation per block), which holes and unwelded or non-manifold surfaces do not fool; for
+//!    point clouds with normals by its point variant (a dipole per occupied finest cell: the
+//!    mean position, the mean normal times `c²/max|n_a|`, the area of a surface crossing one
+//!    column of cells along the normal's dominant axis); for point clouds without normals by an
+//!    exterior flood fill over the blocks (`classify_flood`, a union-find of face-adjacent
+//!    blocks), which leaks through gaps wider than a cell.
+//! 4. Leaves: every occupied finest cell is a boundary leaf, every inside block an interior
+//!    leaf at its own level (the coarsest where it is all inside); outside blocks are dropped.
 //!
-//! The finest level is held as a dense byte grid; that bounds the extent/cell-size ratio (about
-//! 2·10⁹ finest cells), which [`build`] checks up front. Streaming occupancy for inputs larger
-//! than memory is a later stage's job; this one takes the samples in memory.
+//! Nothing is sized by the bounding box's volume (issue 15): occupied finest cells are sorted
+//! Morton codes, the coarser levels their shifted codes, the blocks at most `2^D − 1` per
+//! occupied cell plus the coarsest level, which is enumerated whole (and bounded by the
+//! shortest extent's choice of levels). Memory is checked against the budget as the codes
+//! grow ([`BYTES_PER_OCCUPIED`]), the coarsest level and the triangles' candidate cells before
+//! they are enumerated. A dense byte grid held the finest level before: a 257-point diagonal
+//! line 256 units long at 0.5 cells needed 134M of them for 257 occupied ones. The 64-bit codes bound the finest cells along an
+//! axis to 2²¹ in 3D (2³¹ in 2D), which [`build`] checks up front ([`Error::GridTooLarge`]).
 
 use std::time::Instant;
 
@@ -31,6 +38,7 @@ use rustc_hash::{FxHashMap, FxHashSet};
 use super::winding::Winding;
 use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
 use crate::error::{Error, Result};
+use crate::field::floor;
 use crate::rigid::Vect;
 
 /// How empty cells are classified.
@@ -107,11 +115,17 @@ pub struct BuildInfo {
     pub seconds: f64,
 }
 
-const OUT: u8 = 0;
-const IN: u8 = 1;
-const OCCUPIED: u8 = 2;
-/// Largest finest grid [`build`] allocates (one byte per cell).
-const MAX_FINEST_CELLS: u128 = 1 << 31;
+/// Finest cells along an axis at most: the coordinates' bits of a 64-bit Morton code (21 in 3D,
+/// 31 in 2D).
+const fn max_axis(d: usize) -> i64 {
+    if d == 3 { 1 << 21 } else { 1 << 31 }
+}
+/// Bytes per occupied finest cell while the complex is built: the code, its share of the
+/// coarser levels, of the empty blocks (up to `2^D − 1` per occupied parent, with the flood
+/// fill's maps) and of the leaves.
+pub(crate) const BYTES_PER_OCCUPIED: u64 = 160;
+/// Bytes per cell of the coarsest level, which is enumerated whole.
+const BYTES_PER_COARSEST: u64 = 24;
 
 /// Builds the cell complex of a shape given by `points` (world coordinates) and, in 3D,
 /// `triangles` (indices into `points`; pass `&[]` for a point cloud).
@@ -134,9 +148,9 @@ pub fn build<const D: usize>(
         None => params,
     };
     let mut occupancy = Occupancy::new(&lo, &hi, params)?;
-    occupancy.add_points(points);
+    occupancy.add_points(points)?;
     occupancy.add_triangles(points, triangles)?;
-    Ok(occupancy.finish())
+    occupancy.finish()
 }
 
 /// The finest cell size for which the complex of `points` (and `triangles`) has about `target`
@@ -234,11 +248,18 @@ pub fn bounds<const D: usize>(points: &[Vect<D>]) -> Result<(Vect<D>, Vect<D>)> 
 /// The finest-level occupancy of a shape, filled a batch of samples at a time: the first pass
 /// of the streaming pipeline, which never holds all samples. [`Occupancy::finish`] classifies
 /// the empty cells and emits the adaptive complex.
+///
+/// Occupied finest cells are held as sorted Morton codes (a parent's code is its child's
+/// shifted right by `D` bits), appended per batch and sorted and deduplicated whenever they
+/// have doubled: memory goes with the occupied cells, not with the bounding box's volume.
 #[derive(Debug, Clone)]
 pub struct Occupancy<const D: usize> {
     grid: Grid<D>,
     dims: [i64; D],
-    state: Vec<u8>,
+    /// Morton codes of occupied finest cells: sorted and unique up to `sorted`.
+    occupied: Vec<u64>,
+    sorted: usize,
+    limit: u64,
     inside: Inside,
     /// The triangles seen so far (local frame), for winding numbers.
     winding: Option<Winding>,
@@ -257,7 +278,9 @@ impl<const D: usize> Occupancy<D> {
         Ok(Self {
             grid,
             dims,
-            state: vec![OUT; dims.iter().product::<i64>() as usize],
+            occupied: Vec::new(),
+            sorted: 0,
+            limit: crate::memory::limit(params.memory_limit),
             inside: params.inside,
             winding: None,
             oriented: FxHashMap::default(),
@@ -271,32 +294,63 @@ impl<const D: usize> Occupancy<D> {
         &self.grid
     }
 
-    /// The linear index of the finest cell holding the world point `p`, if inside the grid.
+    /// The Morton code of the finest cell holding the world point `p`, if inside the grid.
     #[inline]
-    pub fn finest_index(&self, p: &Vect<D>) -> Option<usize> {
+    pub fn finest_index(&self, p: &Vect<D>) -> Option<u64> {
         self.grid
             .locate(&(p - self.grid.origin), self.grid.max_level)
-            .map(|k| linear(&k.coord, &self.dims))
+            .map(|k| morton(&k.coord))
     }
 
-    /// Marks the cells of world-coordinate samples. Returns how many fell outside the grid.
-    pub fn add_points(&mut self, points: &[Vect<D>]) -> usize {
+    /// Marks the cells of world-coordinate samples. Returns how many fell outside the grid, or
+    /// the budget's error when the occupied cells outgrow it.
+    pub fn add_points(&mut self, points: &[Vect<D>]) -> Result<usize> {
         let mut outside = 0;
         for p in points {
             match self.finest_index(p) {
-                Some(i) => self.state[i] = OCCUPIED,
+                Some(code) => {
+                    // Runs of samples in one cell (scan order) are stored once.
+                    if self.occupied.last() != Some(&code) {
+                        self.occupied.push(code)
+                    }
+                }
                 None => outside += 1,
             }
         }
-        outside
+        if self.occupied.len() > 2 * self.sorted + (1 << 20) {
+            self.compact()?;
+        }
+        Ok(outside)
+    }
+
+    /// Sorts and deduplicates the occupied codes, and checks what the build will need for them
+    /// against the budget.
+    fn compact(&mut self) -> Result<()> {
+        self.occupied.par_sort_unstable();
+        self.occupied.dedup();
+        self.sorted = self.occupied.len();
+        crate::memory::check(
+            &format!(
+                "the cells of {} occupied finest cells of size {}",
+                self.sorted,
+                self.grid.finest_size()
+            ),
+            self.sorted as f64 * BYTES_PER_OCCUPIED as f64,
+            self.limit,
+            "use a larger --cell-size (or fewer --cells)",
+        )
     }
 
     /// Marks the cells of world-coordinate samples with unit `normals` and, unless the
     /// classification is flood fill or none, gathers them for the point variant of winding
     /// numbers (used when there are no triangles): one dipole per voxel of a quarter finest
     /// cell. Returns how many fell outside the grid.
-    pub fn add_oriented_points(&mut self, points: &[Vect<D>], normals: &[Vect<D>]) -> usize {
-        let outside = self.add_points(points);
+    pub fn add_oriented_points(
+        &mut self,
+        points: &[Vect<D>],
+        normals: &[Vect<D>],
+    ) -> Result<usize> {
+        let outside = self.add_points(points)?;
         if D == 3 && matches!(self.inside, Inside::Auto | Inside::Winding) {
             let voxel = self.grid.finest_size();
             for (p, n) in points.iter().zip(normals) {
@@ -311,7 +365,7 @@ impl<const D: usize> Occupancy<D> {
                 e.2 += 1;
             }
         }
-        outside
+        Ok(outside)
     }
 
     /// Marks every finest cell a triangle over `points` overlaps (3D; ignored in 2D), and keeps
@@ -319,9 +373,9 @@ impl<const D: usize> Occupancy<D> {
     /// it once, with all triangles.
     pub fn add_triangles(&mut self, points: &[Vect<D>], triangles: &[[u32; 3]]) -> Result<()> {
         if D == 3 && !triangles.is_empty() {
-            for idx in triangle_cells(&self.grid, points, triangles)? {
-                self.state[idx] = OCCUPIED;
-            }
+            let cells = triangle_cells(&self.grid, points, triangles, self.limit)?;
+            self.occupied.extend(cells);
+            self.compact()?;
             self.glued = self.glued_cells(points, triangles);
             if matches!(self.inside, Inside::Auto | Inside::Winding) {
                 let local: Vec<Vect<3>> = points
@@ -380,16 +434,18 @@ impl<const D: usize> Occupancy<D> {
     }
 
     /// Classifies the empty cells and emits the leaves of the adaptive complex.
-    pub fn finish(self) -> (CellComplex<D>, BuildInfo) {
+    pub fn finish(mut self) -> Result<(CellComplex<D>, BuildInfo)> {
+        self.compact()?;
         let Self {
             grid,
             dims,
-            mut state,
+            occupied,
             inside,
             winding,
             oriented,
             glued,
             start,
+            ..
         } = self;
         let winding = winding.or_else(|| {
             // The point variant: each voxel's mean position, its mean normal times the area of
@@ -406,43 +462,52 @@ impl<const D: usize> Occupancy<D> {
                 .unzip();
             (!points.is_empty()).then(|| Winding::from_dipoles(&points, &normals))
         });
-        let occupied = state.iter().filter(|&&s| s == OCCUPIED).count();
-        let (inside, winding_queries) = match (inside, winding) {
+        let occupied_count = occupied.len();
+        let levels = pyramid::<D>(&grid, occupied);
+        let blocks = empty_blocks(&grid, &levels);
+        let (inside, winding_queries, is_inside) = match (inside, winding) {
             (Inside::Auto | Inside::Winding, Some(w)) => {
-                (Inside::Winding, classify_winding(&grid, &mut state, &w))
+                let is_inside = classify_winding(&grid, &blocks, &w);
+                (Inside::Winding, blocks.len(), is_inside)
             }
-            (Inside::Auto | Inside::Winding, None) => {
-                classify_inside(&dims, &mut state, Inside::Flood);
-                (Inside::Flood, 0)
-            }
-            (mode, _) => {
-                classify_inside(&dims, &mut state, mode);
-                (mode, 0)
+            (Inside::None, _) => (Inside::None, 0, vec![false; blocks.len()]),
+            (Inside::Flood, _) | (Inside::Auto | Inside::Winding, None) => {
+                (Inside::Flood, 0, classify_flood(&grid, &levels, &blocks))
             }
         };
-        let pyramid = pyramid(&grid, state);
-        let mut leaves = Vec::new();
-        let mut stack: Vec<CellKey<D>> = Vec::new();
-        for_each_coord(&grid.dims0, |coord| stack.push(CellKey { level: 0, coord }));
-        while let Some(key) = stack.pop() {
-            let s = pyramid[key.level as usize][linear(&key.coord, &grid.dims(key.level))];
-            match s {
-                IN => leaves.push((key, CellKind::Interior)),
-                OCCUPIED if key.level == grid.max_level => leaves.push((key, CellKind::Boundary)),
-                OCCUPIED => stack.extend(key.children()),
-                _ => {}
-            }
-        }
-        leaves.sort_unstable_by_key(|(k, _)| *k);
-        let boundary_cells = leaves
+        let finest = grid.max_level;
+        let mut leaves: Vec<(CellKey<D>, CellKind)> = levels[finest as usize]
             .iter()
-            .filter(|(_, k)| *k == CellKind::Boundary)
-            .count();
+            .map(|&code| {
+                let key = CellKey {
+                    level: finest,
+                    coord: coords(code),
+                };
+                (key, CellKind::Boundary)
+            })
+            .collect();
+        let boundary_cells = leaves.len();
+        leaves.extend(
+            blocks
+                .iter()
+                .zip(&is_inside)
+                .filter(|(_, inside)| **inside)
+                .map(|(&(level, code), _)| {
+                    let key = CellKey {
+                        level,
+                        coord: coords(code),
+                    };
+                    (key, CellKind::Interior)
+                }),
+        );
+        drop(levels);
+        drop(blocks);
+        leaves.par_sort_unstable_by_key(|(k, _)| *k);
         let interior_cells = leaves.len() - boundary_cells;
         let complex = CellComplex::from_keys(grid, leaves);
         let info = BuildInfo {
             finest_dims: dims.to_vec(),
-            occupied,
+            occupied: occupied_count,
             boundary_cells,
             interior_cells,
             inside,
@@ -450,7 +515,7 @@ impl<const D: usize> Occupancy<D> {
             glued_cells: glued,
             seconds: start.elapsed().as_secs_f64(),
         };
-        (complex, info)
+        Ok((complex, info))
     }
 }
 
@@ -488,21 +553,28 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     };
     let block = (1i64 << levels) as f64;
     let mut dims0 = [0i64; D];
-    let mut finest = 1u128;
+    let mut coarsest = 1u128;
     for a in 0..D {
         let needed = (extent[a] / size).ceil() + 2.0;
-        dims0[a] = (needed / block).ceil().max(1.0) as i64;
-        finest = finest.saturating_mul((dims0[a] as u128) << levels);
+        let along = (needed / block).ceil().max(1.0);
+        // Finest coordinates must fit the Morton codes' bits.
+        if along * block > max_axis(D) as f64 {
+            return Err(Error::GridTooLarge {
+                cell_size: size,
+                cells: (along * block).min(u128::MAX as f64) as u128,
+                max: max_axis(D) as u128,
+            });
+        }
+        dims0[a] = along as i64;
+        coarsest = coarsest.saturating_mul(dims0[a] as u128);
     }
-    if finest > MAX_FINEST_CELLS {
-        return Err(Error::GridTooLarge {
-            cell_size: size,
-            cells: finest,
-        });
-    }
+    // The coarsest level is enumerated whole (its empty cells are blocks of their own).
     crate::memory::check(
-        &format!("the finest grid of {finest} cells of size {size}"),
-        crate::memory::grid_bytes(finest as f64, params.inside != Inside::None),
+        &format!(
+            "the coarsest level of {coarsest} cells of size {}",
+            size * block
+        ),
+        coarsest as f64 * BYTES_PER_COARSEST as f64,
         crate::memory::limit(params.memory_limit),
         "use a larger --cell-size (or fewer --cells)",
     )?;
@@ -518,12 +590,14 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     })
 }
 
-/// Indices of the finest cells overlapped by `triangles`.
+/// Morton codes of the finest cells overlapped by `triangles`. The cells of the triangles'
+/// boxes are counted first and checked against the budget `limit`.
 fn triangle_cells<const D: usize>(
     grid: &Grid<D>,
     points: &[Vect<D>],
     triangles: &[[u32; 3]],
-) -> Result<Vec<usize>> {
+    limit: u64,
+) -> Result<Vec<u64>> {
     let dims = grid.dims(grid.max_level);
     let size = grid.finest_size();
     let n = points.len();
@@ -536,28 +610,54 @@ fn triangle_cells<const D: usize>(
             t.iter().max().unwrap_or(&0)
         )));
     }
-    let cells: Vec<usize> = triangles
+    let local = |t: &[u32; 3]| -> [[f64; 3]; 3] {
+        t.map(|v| {
+            let p = points[v as usize] - grid.origin;
+            std::array::from_fn(|a| if a < D { p[a] } else { 0.0 })
+        })
+    };
+    // The closed cells touching a triangle's box, i·s ≤ max and (i + 1)·s ≥ min, with a margin
+    // against rounding (the exact test decides).
+    let range = |tri: &[[f64; 3]; 3]| -> ([i64; 3], [i64; 3]) {
+        let mut lo = [0i64; 3];
+        let mut hi = [0i64; 3];
+        for a in 0..D {
+            let (mn, mx) = tri
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p[a]), h.max(p[a])));
+            // ⌈t⌉ − 1 = −⌊−t⌋ − 1 (libm's floor and ceil are calls on baseline x86-64).
+            lo[a] = (-floor(-((mn - grid.lower[a]) / size - 1e-9)) - 1).max(0);
+            hi[a] = floor((mx - grid.lower[a]) / size + 1e-9).min(dims[a] - 1);
+        }
+        (lo, hi)
+    };
+    let candidates: f64 = triangles
+        .par_iter()
+        .map(|t| {
+            let (lo, hi) = range(&local(t));
+            (0..3)
+                .map(|a| (hi[a] - lo[a] + 1).max(1) as f64)
+                .product::<f64>()
+        })
+        .sum();
+    crate::memory::check(
+        &format!(
+            "rasterizing {} triangles into cells of size {size}",
+            triangles.len()
+        ),
+        candidates * 8.0,
+        limit,
+        "use a larger --cell-size (or fewer --cells)",
+    )?;
+    let cells: Vec<u64> = triangles
         .par_iter()
         .fold(Vec::new, |mut out, t| {
-            let tri: [[f64; 3]; 3] = t.map(|v| {
-                let p = points[v as usize] - grid.origin;
-                std::array::from_fn(|a| if a < D { p[a] } else { 0.0 })
-            });
-            let mut lo = [0i64; 3];
-            let mut hi = [0i64; 3];
-            for a in 0..D {
-                let (mn, mx) = tri
-                    .iter()
-                    .fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p[a]), h.max(p[a])));
-                // Closed cells touching the triangle's box, i·s ≤ mx and (i + 1)·s ≥ mn, with
-                // a margin against rounding (the exact test below decides).
-                lo[a] = (((mn - grid.lower[a]) / size - 1e-9).ceil() as i64 - 1).max(0);
-                hi[a] = (((mx - grid.lower[a]) / size + 1e-9).floor() as i64).min(dims[a] - 1);
-            }
+            let tri = local(t);
+            let (lo, hi) = range(&tri);
             if lo == hi {
                 // The triangle's box lies in this one cell (a small triangle).
                 let coord: [i64; D] = std::array::from_fn(|a| lo[a]);
-                out.push(linear(&coord, &dims));
+                out.push(morton(&coord));
                 return out;
             }
             for x in lo[0]..=hi[0] {
@@ -571,7 +671,7 @@ fn triangle_cells<const D: usize>(
                         });
                         let c: [f64; 3] = std::array::from_fn(|a| center[a]);
                         if triangle_box_overlap(&tri, c, 0.5 * size) {
-                            out.push(linear(&coord, &dims));
+                            out.push(morton(&coord));
                         }
                     }
                 }
@@ -585,120 +685,224 @@ fn triangle_cells<const D: usize>(
     Ok(cells)
 }
 
-/// Classifies the empty cells of a dense finest grid in place: `state` holds `2` for occupied
-/// cells and `0` elsewhere on entry; on return every empty cell is `0` (outside) or `1`
-/// (inside). This is the one place where inside/outside is decided; other classifiers (winding
-/// numbers for meshes) replace it here.
-pub fn classify_inside<const D: usize>(dims: &[i64; D], state: &mut [u8], mode: Inside) {
-    if mode == Inside::None || mode == Inside::Winding {
-        return;
-    }
-    // Everything empty starts inside; the flood from the border marks the outside.
-    for s in state.iter_mut() {
-        if *s == OUT {
-            *s = IN;
-        }
-    }
-    // The stack holds linear indices (the grid has at most 2³¹ cells): 4 bytes a cell at worst.
-    let strides: [usize; D] = std::array::from_fn(|a| dims[..a].iter().product::<i64>() as usize);
-    let mut stack: Vec<u32> = Vec::new();
-    for_each_coord(dims, |c| {
-        if (0..D).any(|a| c[a] == 0 || c[a] == dims[a] - 1) {
-            let i = linear(&c, dims);
-            if state[i] == IN {
-                state[i] = OUT;
-                stack.push(i as u32);
-            }
-        }
-    });
-    while let Some(i) = stack.pop() {
-        let i = i as usize;
-        for a in 0..D {
-            let c = (i / strides[a]) as i64 % dims[a];
-            for (ok, n) in [
-                (c > 0, i.wrapping_sub(strides[a])),
-                (c + 1 < dims[a], i + strides[a]),
-            ] {
-                if ok && state[n] == IN {
-                    state[n] = OUT;
-                    stack.push(n as u32);
-                }
-            }
-        }
-    }
-}
-
-/// Classifies the empty finest cells by the winding number of `winding`: the surface lies in
-/// occupied cells only, so the winding number cannot cross ½ inside a cell with no occupied
-/// descendant, and one evaluation at the center of the coarsest such cell classifies all its
-/// finest cells. Returns the number of evaluations.
-fn classify_winding<const D: usize>(grid: &Grid<D>, state: &mut [u8], winding: &Winding) -> usize {
-    let levels = pyramid(grid, state.to_vec());
-    let mut empty = Vec::new();
-    let mut stack = Vec::new();
-    for_each_coord(&grid.dims0, |coord| stack.push(CellKey { level: 0, coord }));
-    while let Some(key) = stack.pop() {
-        match levels[key.level as usize][linear(&key.coord, &grid.dims(key.level))] {
-            OUT => empty.push(key),
-            _ if key.level < grid.max_level => stack.extend(key.children()),
-            _ => {}
-        }
-    }
-    let inside: Vec<bool> = empty
-        .par_iter()
-        .map(|key| {
-            let c = grid.center(key);
-            winding
-                .at(&Vect::<3>::from_fn(|a, _| if a < D { c[a] } else { 0.0 }))
-                .abs()
-                >= 0.5
-        })
-        .collect();
-    let dims = grid.dims(grid.max_level);
-    for (key, _) in empty.iter().zip(&inside).filter(|(_, i)| **i) {
-        let shift = grid.max_level - key.level;
-        let span: [i64; D] = [1i64 << shift; D];
-        for_each_coord(&span, |d| {
-            let fine: [i64; D] = std::array::from_fn(|a| (key.coord[a] << shift) + d[a]);
-            state[linear(&fine, &dims)] = IN;
-        });
-    }
-    empty.len()
-}
-
-/// States of all levels, coarsest first: a cell is `IN`/`OUT` when all its finest descendants
-/// are, `OCCUPIED` otherwise (it must be split).
-fn pyramid<const D: usize>(grid: &Grid<D>, finest: Vec<u8>) -> Vec<Vec<u8>> {
+/// The occupied cells of every level, coarsest first, as sorted Morton codes: a cell is
+/// occupied when one of its finest descendants is.
+fn pyramid<const D: usize>(grid: &Grid<D>, finest: Vec<u64>) -> Vec<Vec<u64>> {
     let mut levels = vec![finest];
-    for level in (0..grid.max_level).rev() {
-        let dims = grid.dims(level);
-        let fine_dims = grid.dims(level + 1);
+    for _ in 0..grid.max_level {
         let fine = levels.last().expect("finest level present");
-        let mut coarse = vec![OUT; dims.iter().product::<i64>() as usize];
-        for_each_coord(&dims, |coord| {
-            let key = CellKey { level, coord };
-            let mut all = None;
-            let mut mixed = false;
-            for child in key.children() {
-                let s = fine[linear(&child.coord, &fine_dims)];
-                mixed |= s == OCCUPIED || all.is_some_and(|a| a != s);
-                all = Some(s);
-            }
-            coarse[linear(&coord, &dims)] = if mixed { OCCUPIED } else { all.unwrap_or(OUT) };
-        });
+        // A parent's code is its child's shifted right: the order is kept.
+        let mut coarse: Vec<u64> = fine.iter().map(|c| c >> D).collect();
+        coarse.dedup();
         levels.push(coarse);
     }
     levels.reverse();
     levels
 }
 
-#[inline]
-fn linear<const D: usize>(c: &[i64; D], dims: &[i64; D]) -> usize {
-    let mut i = 0i64;
-    for a in (0..D).rev() {
-        i = i * dims[a] + c[a];
+/// The maximal empty cells: every cell of level 0 that is not occupied, and every child that
+/// is not occupied of an occupied cell above the finest level. They tile the grid's empty
+/// space, and each is wholly inside or wholly outside the shape (the surface lies in
+/// occupied cells). Returned as `(level, code)`.
+fn empty_blocks<const D: usize>(grid: &Grid<D>, levels: &[Vec<u64>]) -> Vec<(u8, u64)> {
+    let mut blocks = Vec::new();
+    for_each_coord(&grid.dims0, |c| {
+        let code = morton(&c);
+        if levels[0].binary_search(&code).is_err() {
+            blocks.push((0, code));
+        }
+    });
+    for level in 1..levels.len() {
+        let (parents, children) = (&levels[level - 1], &levels[level]);
+        // Both are sorted and the children of a parent are the codes `p << D ..`: one merge.
+        let mut j = 0;
+        for &p in parents {
+            for child in p << D..(p + 1) << D {
+                while j < children.len() && children[j] < child {
+                    j += 1;
+                }
+                if children.get(j) != Some(&child) {
+                    blocks.push((level as u8, child));
+                }
+            }
+        }
     }
-    i as usize
+    blocks
+}
+
+/// Classifies the empty blocks by the winding number of `winding`: the surface lies in
+/// occupied cells only, so the winding number cannot cross ½ inside a block, and one
+/// evaluation at its center classifies it.
+fn classify_winding<const D: usize>(
+    grid: &Grid<D>,
+    blocks: &[(u8, u64)],
+    winding: &Winding,
+) -> Vec<bool> {
+    blocks
+        .par_iter()
+        .map(|&(level, code)| {
+            let c = grid.center(&CellKey {
+                level,
+                coord: coords(code),
+            });
+            winding
+                .at(&Vect::<3>::from_fn(|a, _| if a < D { c[a] } else { 0.0 }))
+                .abs()
+                >= 0.5
+        })
+        .collect()
+}
+
+/// Classifies the empty blocks by the exterior flood fill: a block is outside when a path of
+/// empty face-adjacent cells leads from it to the grid's border. The blocks are joined by a
+/// union-find: each block looks across each face at the cell of its own level there; an empty
+/// block there, or the coarser empty block that holds that cell, is joined to it, and an
+/// occupied one is left to its own finer empty blocks, which find this block from their side.
+/// So every pair of blocks sharing a face is joined once, as the finest cells of a dense grid
+/// would be, and the work goes with the blocks.
+fn classify_flood<const D: usize>(
+    grid: &Grid<D>,
+    levels: &[Vec<u64>],
+    blocks: &[(u8, u64)],
+) -> Vec<bool> {
+    let mut index: Vec<FxHashMap<u64, u32>> = vec![FxHashMap::default(); levels.len()];
+    for (k, &(level, code)) in blocks.iter().enumerate() {
+        index[level as usize].insert(code, k as u32);
+    }
+    let outside = blocks.len() as u32;
+    let mut parent: Vec<u32> = (0..=outside).collect();
+    fn root(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            parent[i as usize] = parent[parent[i as usize] as usize];
+            i = parent[i as usize];
+        }
+        i
+    }
+    // The joins are found in parallel and applied in order.
+    let joins: Vec<(u32, u32)> = blocks
+        .par_iter()
+        .enumerate()
+        .fold(Vec::new, |mut out, (k, &(level, code))| {
+            let dims = grid.dims(level);
+            let c = coords::<D>(code);
+            for a in 0..D {
+                for step in [-1i64, 1] {
+                    let mut n = c;
+                    n[a] += step;
+                    if n[a] < 0 || n[a] >= dims[a] {
+                        out.push((k as u32, outside));
+                        continue;
+                    }
+                    let (mut l, mut m) = (level as usize, morton(&n));
+                    loop {
+                        if let Some(&other) = index[l].get(&m) {
+                            out.push((k as u32, other));
+                            break;
+                        }
+                        if levels[l].binary_search(&m).is_ok() || l == 0 {
+                            break;
+                        }
+                        l -= 1;
+                        m >>= D;
+                    }
+                }
+            }
+            out
+        })
+        .reduce(Vec::new, |mut a, b| {
+            a.extend(b);
+            a
+        });
+    drop(index);
+    for (a, b) in joins {
+        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+        // The outside node stays a root, so a block is outside when its root is.
+        if ra != rb {
+            if ra == outside {
+                parent[rb as usize] = ra;
+            } else {
+                parent[ra as usize] = rb;
+            }
+        }
+    }
+    (0..outside)
+        .map(|k| root(&mut parent, k) != outside)
+        .collect()
+}
+
+/// The Morton code of a cell's coordinates: their bits interleaved (axis 0 lowest), so that a
+/// parent's code is its child's shifted right by `D` bits.
+#[inline]
+fn morton<const D: usize>(c: &[i64; D]) -> u64 {
+    let mut code = 0;
+    for (a, &v) in c.iter().enumerate() {
+        code |= if D == 3 {
+            spread3(v as u64)
+        } else {
+            spread2(v as u64)
+        } << a;
+    }
+    code
+}
+
+/// The coordinates of a Morton code ([`morton`]).
+#[inline]
+fn coords<const D: usize>(code: u64) -> [i64; D] {
+    std::array::from_fn(|a| {
+        (if D == 3 {
+            compact3(code >> a)
+        } else {
+            compact2(code >> a)
+        }) as i64
+    })
+}
+
+/// The low 21 bits of `x` spread to every third bit.
+#[inline]
+fn spread3(x: u64) -> u64 {
+    let mut x = x & 0x1f_ffff;
+    x = (x | x << 32) & 0x001f_0000_0000_ffff;
+    x = (x | x << 16) & 0x001f_0000_ff00_00ff;
+    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
+    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x << 2) & 0x1249_2492_4924_9249;
+    x
+}
+
+/// The inverse of [`spread3`].
+#[inline]
+fn compact3(x: u64) -> u64 {
+    let mut x = x & 0x1249_2492_4924_9249;
+    x = (x | x >> 2) & 0x10c3_0c30_c30c_30c3;
+    x = (x | x >> 4) & 0x100f_00f0_0f00_f00f;
+    x = (x | x >> 8) & 0x001f_0000_ff00_00ff;
+    x = (x | x >> 16) & 0x001f_0000_0000_ffff;
+    x = (x | x >> 32) & 0x1f_ffff;
+    x
+}
+
+/// The low 32 bits of `x` spread to every other bit.
+#[inline]
+fn spread2(x: u64) -> u64 {
+    let mut x = x & 0xffff_ffff;
+    x = (x | x << 16) & 0x0000_ffff_0000_ffff;
+    x = (x | x << 8) & 0x00ff_00ff_00ff_00ff;
+    x = (x | x << 4) & 0x0f0f_0f0f_0f0f_0f0f;
+    x = (x | x << 2) & 0x3333_3333_3333_3333;
+    x = (x | x << 1) & 0x5555_5555_5555_5555;
+    x
+}
+
+/// The inverse of [`spread2`].
+#[inline]
+fn compact2(x: u64) -> u64 {
+    let mut x = x & 0x5555_5555_5555_5555;
+    x = (x | x >> 1) & 0x3333_3333_3333_3333;
+    x = (x | x >> 2) & 0x0f0f_0f0f_0f0f_0f0f;
+    x = (x | x >> 4) & 0x00ff_00ff_00ff_00ff;
+    x = (x | x >> 8) & 0x0000_ffff_0000_ffff;
+    x = (x | x >> 16) & 0xffff_ffff;
+    x
 }
 
 fn for_each_coord<const D: usize>(dims: &[i64; D], mut f: impl FnMut([i64; D])) {
@@ -726,6 +930,146 @@ fn for_each_coord<const D: usize>(dims: &[i64; D], mut f: impl FnMut([i64; D])) 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn morton_codes_round_trip_and_nest() {
+        for c in [
+            [0i64, 0, 0],
+            [1, 2, 3],
+            [(1 << 21) - 1, 5, (1 << 20) + 7],
+            [9, 0, 1 << 20],
+        ] {
+            let code = morton(&c);
+            assert_eq!(coords::<3>(code), c);
+            let parent = c.map(|v| v >> 1);
+            assert_eq!(code >> 3, morton(&parent));
+        }
+        for c in [[0i64, 0], [(1 << 31) - 1, 12345], [7, (1 << 30) + 3]] {
+            let code = morton(&c);
+            assert_eq!(coords::<2>(code), c);
+            assert_eq!(code >> 2, morton(&c.map(|v| v >> 1)));
+        }
+    }
+
+    /// The flood fill over maximal empty blocks classifies every finest cell as a flood over a
+    /// dense grid would: random walls with holes and enclosed pockets, in 2D and 3D.
+    #[test]
+    fn block_flood_matches_a_dense_flood() {
+        fn check<const D: usize>(seed: u64, side: i64) {
+            let mut state = seed;
+            let mut rand = move || {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                state
+            };
+            // Hollow boxes (some with a hole) and scattered cells, on a grid of unit cells.
+            let mut occupied = std::collections::BTreeSet::new();
+            for _ in 0..4 {
+                let lo: [i64; D] = std::array::from_fn(|_| 1 + (rand() % (side as u64 - 8)) as i64);
+                let len: [i64; D] = std::array::from_fn(|_| 3 + (rand() % 5) as i64);
+                let hole = rand() % 2 == 0;
+                let n: i64 = len.iter().product();
+                for k in 0..n {
+                    let mut r = k;
+                    let c: [i64; D] = std::array::from_fn(|a| {
+                        let v = r % len[a];
+                        r /= len[a];
+                        v
+                    });
+                    let wall = (0..D).any(|a| c[a] == 0 || c[a] == len[a] - 1);
+                    let at_hole = hole && c[0] == 0 && (1..D).all(|a| c[a] == len[a] / 2);
+                    if wall && !at_hole {
+                        occupied.insert(std::array::from_fn::<i64, D, _>(|a| lo[a] + c[a]));
+                    }
+                }
+            }
+            for _ in 0..20 {
+                occupied.insert(std::array::from_fn::<i64, D, _>(|_| {
+                    (rand() % side as u64) as i64
+                }));
+            }
+            let points: Vec<Vect<D>> = occupied
+                .iter()
+                .map(|c| Vect::<D>::from_fn(|a, _| c[a] as f64 + 0.5))
+                .chain([Vect::<D>::zeros(), Vect::<D>::repeat(side as f64)])
+                .collect();
+            let params = BuildParams {
+                cell_size: Some(1.0),
+                inside: Inside::Flood,
+                ..Default::default()
+            };
+            let (complex, info) = build(&points, &[], &params).unwrap();
+            complex.validate().unwrap();
+            // The dense reference on the same finest grid.
+            let g = complex.grid;
+            let dims = g.dims(g.max_level);
+            let total: i64 = dims.iter().product();
+            let index = |c: &[i64; D]| (0..D).rev().fold(0i64, |i, a| i * dims[a] + c[a]) as usize;
+            let coord = |mut i: i64| -> [i64; D] {
+                std::array::from_fn(|a| {
+                    let v = i % dims[a];
+                    i /= dims[a];
+                    v
+                })
+            };
+            let mut busy = vec![false; total as usize];
+            for p in &points {
+                let k = g.locate(&(p - g.origin), g.max_level).unwrap();
+                busy[index(&k.coord)] = true;
+            }
+            let mut outside = vec![false; total as usize];
+            let mut stack: Vec<i64> = (0..total)
+                .filter(|&i| {
+                    let c = coord(i);
+                    !busy[i as usize] && (0..D).any(|a| c[a] == 0 || c[a] == dims[a] - 1)
+                })
+                .collect();
+            for &i in &stack {
+                outside[i as usize] = true;
+            }
+            while let Some(i) = stack.pop() {
+                let c = coord(i);
+                for a in 0..D {
+                    for step in [-1, 1] {
+                        let mut n = c;
+                        n[a] += step;
+                        if n[a] < 0 || n[a] >= dims[a] {
+                            continue;
+                        }
+                        let j = index(&n);
+                        if !busy[j] && !outside[j] {
+                            outside[j] = true;
+                            stack.push(j as i64);
+                        }
+                    }
+                }
+            }
+            let mut inside = 0;
+            for i in 0..total {
+                let c = coord(i);
+                let center = g.center(&CellKey {
+                    level: g.max_level,
+                    coord: c,
+                });
+                let got = complex.locate(&center).map(|k| complex.cells[k].kind);
+                let want = if busy[i as usize] {
+                    Some(CellKind::Boundary)
+                } else if outside[i as usize] {
+                    None
+                } else {
+                    inside += 1;
+                    Some(CellKind::Interior)
+                };
+                assert_eq!(got, want, "{D}D seed {seed}: finest cell {c:?}");
+            }
+            assert!(inside > 0 && info.interior_cells > 0, "{D}D seed {seed}");
+        }
+        for seed in 1..6 {
+            check::<3>(seed * 7919, 24);
+            check::<2>(seed * 104_729, 40);
+        }
+    }
 
     fn box_surface_points(n: usize, size: [f64; 3]) -> Vec<Vect<3>> {
         // Dense samples on the six faces of an axis-aligned box at the origin.

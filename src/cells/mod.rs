@@ -5,9 +5,10 @@
 //!   regular grid of cells of size `cell_size · 2^max_level`; level `max_level` cells have the
 //!   finest size `cell_size` chosen by the user. Refinement during the solve may go deeper.
 //! - Cells holding samples of the shape (points, or triangles overlapping the box) are refined to
-//!   `max_level` ([`build`]); empty cells are classified inside/outside by [`classify_inside`]
-//!   (exterior flood fill at the finest level); interior cells stay as coarse as the tree allows,
-//!   exterior cells are dropped.
+//!   `max_level` ([`build`]); the empty space is tiled by maximal empty cells of the tree, each
+//!   classified inside/outside (winding numbers, or an exterior flood fill over them); interior
+//!   cells stay as coarse as the tree allows, exterior cells are dropped. Nothing is sized by
+//!   the bounding box's volume ([`Occupancy`]).
 //! - Two leaves are neighbors when their boxes share a (partial) face; the shared area is
 //!   `min(2h_i, 2h_j)^(D−1)` because octree faces nest (T-junctions need no special handling).
 //!
@@ -23,9 +24,7 @@ pub(crate) use export::BOX_QUADS;
 mod tri_box;
 mod winding;
 
-pub use build::{
-    BuildInfo, BuildParams, Inside, Occupancy, bounds, build, cell_size_for, classify_inside,
-};
+pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, cell_size_for};
 pub use export::write_cells_ply;
 pub use tri_box::triangle_box_overlap;
 pub use winding::Winding;

@@ -111,7 +111,7 @@ impl<const D: usize> Leaves<D> {
 /// `t` rounded down, as an integer (saturating): `f64::floor` is a libm call on baseline x86-64,
 /// and this runs per sample.
 #[inline]
-pub(super) fn floor(t: f64) -> i64 {
+pub(crate) fn floor(t: f64) -> i64 {
     let i = t as i64;
     if (i as f64) > t { i - 1 } else { i }
 }

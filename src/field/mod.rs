@@ -17,6 +17,7 @@ mod exact;
 pub mod far;
 mod file;
 mod leaves;
+pub(crate) use leaves::floor;
 mod nearest;
 mod pu;
 mod rbf;

@@ -73,7 +73,7 @@ pub struct SolveParams {
     /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
     /// machine's memory).
     pub memory_limit: Option<u64>,
-    /// How each Gauss-Newton system is solved. Default [`Method::Direct`].
+    /// How each Gauss-Newton system is solved. Default [`Method::Auto`].
     pub method: Method,
     /// After a load step's first iteration, add the rotations' second-order term to the
     /// Gauss-Newton matrix (Newton's method; see the module docs). Default `true`.
@@ -83,8 +83,11 @@ pub struct SolveParams {
 /// How the Gauss-Newton normal equations are solved.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum Method {
-    /// faer's supernodal sparse Cholesky (memory grows faster than the cells: its fill).
+    /// [`Method::Direct`] where its factor fits the memory budget and its 32-bit indices (it
+    /// is the faster where it fits: BENCHMARKS.md), else [`Method::Multilevel`].
     #[default]
+    Auto,
+    /// faer's supernodal sparse Cholesky (memory grows faster than the cells: its fill).
     Direct,
     /// Conjugate gradients preconditioned by a rigid-motion aggregation multigrid
     /// (`multilevel` module; memory and work per iteration linear in the cells).
@@ -102,7 +105,7 @@ impl Default for SolveParams {
             refine_levels: 2,
             max_refinements: 4,
             memory_limit: None,
-            method: Method::Direct,
+            method: Method::Auto,
             newton: true,
         }
     }
