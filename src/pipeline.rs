@@ -344,9 +344,21 @@ pub fn apply_file(
         )?;
     }
     observer.stage("transfer", 0);
-    let deformer = field.deformer(params.transfer, params.rbf_tolerance, params.outside)?;
+    let deformer = field.tile_deformer(params.transfer, params.rbf_tolerance, params.outside)?;
     observer.finish();
     let mut notes = transfer_pass(source.as_mut(), output, &deformer, &origin, chunk, observer)?;
+    if let Deformer::Pu(pu) = deformer.inner() {
+        let (made, all, failed) = pu.fits();
+        notes.push(format!(
+            "the PU transfer fitted {made} of its {all} patches (those the samples reached)"
+        ));
+        if failed > 0 {
+            notes.push(format!(
+                "{failed} of the PU's patch fits failed; the samples there were blended from \
+                 the patches around them"
+            ));
+        }
+    }
     let outside = deformer.outside().count;
     match params.outside {
         Outside::Keep if outside > 0 => notes.push(format!(

@@ -181,3 +181,30 @@ fn sparse_cells_far_apart_are_fitted() {
     let worst = center_error(&pu, &f);
     assert!(worst < 1e-8, "a center is {worst} off");
 }
+
+/// Issue 15: fitted on demand, the PU fits only the patches that samples reach (a tile of the
+/// field), with the bits of the PU fitted whole.
+#[test]
+fn fits_on_demand_only_the_patches_a_tile_reaches() {
+    let f = bent_bar(0.25);
+    let (whole, tile) = (PuRbf::new(&f).unwrap(), PuRbf::lazy(&f).unwrap());
+    assert_eq!(tile.fits().0, 0);
+    // Samples near the fixed end only: x within [0, 2] of the bar's 10.
+    let origin = Vect::<3>::new(1e5, -3e5, 20.0);
+    let points: Vec<Vect<3>> = (0..2000)
+        .map(|i| {
+            let s = i as f64;
+            origin + Vect::<3>::new(s * 1e-3 - 4.9, (s * 0.01).sin() * 0.5, 0.3)
+        })
+        .collect();
+    let (mut a, mut b) = (
+        vec![Vect::<3>::zeros(); 2000],
+        vec![Vect::<3>::zeros(); 2000],
+    );
+    whole.warp_run(&origin, &points, &mut a);
+    tile.warp_run(&origin, &points, &mut b);
+    assert_eq!(a, b);
+    let (made, all, failed) = tile.fits();
+    assert_eq!((whole.fits().0, failed), (all, 0));
+    assert!(made > 0 && 4 * made < all, "fitted {made} of {all}");
+}

@@ -68,9 +68,31 @@ where
         rbf_tolerance: Option<f64>,
         outside: Outside,
     ) -> Result<Constrained<D>> {
+        self.deformer_with(transfer, rbf_tolerance, outside, Deformer::new)
+    }
+
+    /// As [`SavedField::deformer`], but the PU transfer fits its patches only where samples
+    /// reach ([`Deformer::on_demand`]): applying a large field to one tile fits the patches
+    /// around the tile, with the same bits.
+    pub fn tile_deformer(
+        self,
+        transfer: Option<Transfer>,
+        rbf_tolerance: Option<f64>,
+        outside: Outside,
+    ) -> Result<Constrained<D>> {
+        self.deformer_with(transfer, rbf_tolerance, outside, Deformer::on_demand)
+    }
+
+    fn deformer_with(
+        self,
+        transfer: Option<Transfer>,
+        rbf_tolerance: Option<f64>,
+        outside: Outside,
+        make: fn(&Field<D>, Transfer) -> Result<Deformer<D>>,
+    ) -> Result<Constrained<D>> {
         let inner = match (transfer.unwrap_or(self.transfer), self.rbf) {
             (Transfer::Rbf, Some(r)) => Deformer::Rbf(r),
-            (t, _) => Deformer::new(&self.field, t)?,
+            (t, _) => make(&self.field, t)?,
         }
         .with_rbf_tolerance(rbf_tolerance)?;
         Constrained::new(&self.field, inner, outside)

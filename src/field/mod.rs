@@ -169,7 +169,7 @@ pub enum Deformer<const D: usize> {
     /// See [`Rbf`].
     Rbf(Rbf<D>),
     /// See [`PuRbf`].
-    Pu(PuRbf<D>),
+    Pu(Box<PuRbf<D>>),
 }
 
 impl<const D: usize> Deformer<D> {
@@ -181,8 +181,17 @@ impl<const D: usize> Deformer<D> {
                 Self::Blend(Box::new(Blend::new(field, Weights::InverseDistance)?))
             }
             Transfer::Rbf => Self::Rbf(Rbf::new(field)?),
-            Transfer::Pu => Self::Pu(PuRbf::new(field)?),
+            Transfer::Pu => Self::Pu(Box::new(PuRbf::new(field)?)),
         })
+    }
+
+    /// As [`Deformer::new`], but the PU fits each patch only when a sample first needs it
+    /// ([`PuRbf::lazy`]): for applying a field to a tile of what it covers.
+    pub fn on_demand(field: &Field<D>, transfer: Transfer) -> Result<Self> {
+        match transfer {
+            Transfer::Pu => Ok(Self::Pu(Box::new(PuRbf::lazy(field)?))),
+            t => Self::new(field, t),
+        }
     }
 
     /// The RBF evaluated through its far field within `tolerance` ([`Rbf::with_tolerance`]);

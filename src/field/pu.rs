@@ -23,6 +23,9 @@
 //! A sample meets at most `2^D` patches, `(1 + 2·OVERLAP)^D` on average (3.4 in 3D), each a sum
 //! over its few dozen centers, so the cost per sample does not grow with the cells.
 
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
@@ -48,10 +51,21 @@ pub struct PuRbf<const D: usize> {
     edge: f64,
     /// Box coordinates → patch.
     index: FxHashMap<[i64; D], u32>,
-    /// Each patch's box middle and fit.
-    patches: Vec<(Vect<D>, Rbf<D>)>,
+    /// The patches, by box order.
+    patches: Vec<Patch<D>>,
     /// The patches' middles, for the nearest patch outside every support.
     middles: kiddo::ImmutableKdTree<f64, D>,
+    /// The cells the patches fit (for fits made on demand).
+    source: Field<D>,
+    /// Fits made on demand that failed (their patches are left out of the blend).
+    failed: AtomicUsize,
+}
+
+/// A patch: its box middle, the cells it fits, and its fit once made.
+struct Patch<const D: usize> {
+    middle: Vect<D>,
+    members: Vec<u32>,
+    fit: OnceLock<Option<Rbf<D>>>,
 }
 
 /// Wendland's C² function on `[0, 1]`: `(1 − t)⁴ (4t + 1)`, zero beyond.
@@ -67,8 +81,23 @@ fn wendland(t: f64) -> f64 {
 }
 
 impl<const D: usize> PuRbf<D> {
-    /// Cuts the field into patches and fits each.
+    /// Cuts the field into patches and fits each (in parallel).
     pub fn new(field: &Field<D>) -> Result<Self> {
+        let pu = Self::lazy(field)?;
+        pu.patches.par_iter().try_for_each(|p| {
+            let fit = Rbf::new_serial(&patch_field(&pu.source, &p.members))?;
+            let _ = p.fit.set(Some(fit));
+            Ok::<_, Error>(())
+        })?;
+        Ok(pu)
+    }
+
+    /// Cuts the field into patches and fits each only when a sample first needs it: a tile
+    /// of a large field fits only the patches around it (`apply`), with the same bits as
+    /// [`PuRbf::new`], since each patch's fit depends on its own cells only. A fit that fails
+    /// here (where [`PuRbf::new`] would have returned the error) is left out of the blend and
+    /// counted ([`PuRbf::fits`]).
+    pub fn lazy(field: &Field<D>) -> Result<Self> {
         let n = field.centers.len();
         if n == 0 {
             return Err(Error::Solver("the field has no cells".into()));
@@ -126,20 +155,23 @@ impl<const D: usize> PuRbf<D> {
             .map_err(|e| Error::Solver(format!("kd-tree over cell centers: {e:?}")))?;
         let middle =
             |k: &[i64; D]| Vect::<D>::from_fn(|a, _| lower[a] + (k[a] as f64 + 0.5) * edge);
-        let patches: Vec<(Vect<D>, Rbf<D>)> = keys
+        let patches: Vec<Patch<D>> = keys
             .par_iter()
             .map(|k| {
-                let m = middle(k);
-                let members = gather(field, &by_box, &near, k, &m, reach);
-                Ok((m, Rbf::new_serial(&patch_field(field, &members))?))
+                let middle = middle(k);
+                Patch {
+                    middle,
+                    members: gather(field, &by_box, &near, k, &middle, reach),
+                    fit: OnceLock::new(),
+                }
             })
-            .collect::<Result<_>>()?;
+            .collect();
         let index = keys
             .iter()
             .enumerate()
             .map(|(p, k)| (*k, p as u32))
             .collect();
-        let points: Vec<[f64; D]> = patches.iter().map(|(m, _)| (*m).into()).collect();
+        let points: Vec<[f64; D]> = patches.iter().map(|p| p.middle.into()).collect();
         Ok(Self {
             lower,
             edge,
@@ -147,7 +179,45 @@ impl<const D: usize> PuRbf<D> {
             middles: kiddo::ImmutableKdTree::new_from_slice(&points)
                 .map_err(|e| Error::Solver(format!("kd-tree over patches: {e:?}")))?,
             patches,
+            source: Field {
+                origin: field.origin,
+                centers: field.centers.clone(),
+                halves: field.halves.clone(),
+                motions: field.motions.clone(),
+                prescribed: Default::default(),
+            },
+            failed: AtomicUsize::new(0),
         })
+    }
+
+    /// The fit of patch `p`, made now if it was not (`None`: it failed).
+    #[inline]
+    fn fit(&self, p: u32) -> Option<&Rbf<D>> {
+        let patch = &self.patches[p as usize];
+        patch
+            .fit
+            .get_or_init(|| {
+                let fit = Rbf::new_serial(&patch_field(&self.source, &patch.members)).ok();
+                if fit.is_none() {
+                    self.failed.fetch_add(1, Ordering::Relaxed);
+                }
+                fit
+            })
+            .as_ref()
+    }
+
+    /// Patches fitted so far, in all, and fits that failed.
+    pub fn fits(&self) -> (usize, usize, usize) {
+        let made = self
+            .patches
+            .iter()
+            .filter(|p| p.fit.get().is_some())
+            .count();
+        (
+            made,
+            self.patches.len(),
+            self.failed.load(Ordering::Relaxed),
+        )
     }
 
     /// Patches in all.
@@ -189,7 +259,7 @@ impl<const D: usize> PuRbf<D> {
             let Some(&p) = self.index.get(&k) else {
                 continue;
             };
-            let m = &self.patches[p as usize].0;
+            let m = &self.patches[p as usize].middle;
             let mut w = 1.0;
             for a in 0..D {
                 w *= wendland((x[a] - m[a]).abs() / reach);
@@ -205,30 +275,38 @@ impl<const D: usize> PuRbf<D> {
     /// The displacement at the local point `x`.
     pub fn displacement(&self, x: &Vect<D>) -> Vect<D> {
         let (around, n) = self.around(x);
-        if n == 0 {
-            return self.nearest(x).displacement(x);
-        }
-        let mut total = 0.0;
-        let mut sum = Vect::<D>::zeros();
-        for &(p, w) in &around[..n] {
-            total += w;
-            sum += self.patches[p as usize].1.displacement(x) * w;
-        }
-        sum / total
+        self.blend(x, &around[..n])
     }
 
-    /// The fit of the patch nearest to `x` (outside every support).
-    fn nearest(&self, x: &Vect<D>) -> &Rbf<D> {
+    /// The weighted mean of the fits of `around` at `x` (the nearest patch's fit where none
+    /// holds `x`, or none of them could be fitted).
+    fn blend(&self, x: &Vect<D>, around: &[(u32, f64)]) -> Vect<D> {
+        let mut total = 0.0;
+        let mut sum = Vect::<D>::zeros();
+        for &(p, w) in around {
+            if let Some(fit) = self.fit(p) {
+                total += w;
+                sum += fit.displacement(x) * w;
+            }
+        }
+        if total > 0.0 {
+            return sum / total;
+        }
+        self.nearest(x)
+            .map_or(Vect::<D>::zeros(), |fit| fit.displacement(x))
+    }
+
+    /// The fit of the patch nearest to `x` (outside every support), or of the nearest of the
+    /// eight nearest that could be fitted.
+    fn nearest(&self, x: &Vect<D>) -> Option<&Rbf<D>> {
         let p: [f64; D] = (*x).into();
-        let one = std::num::NonZero::new(1).expect("1 > 0");
-        let nearest = self
-            .middles
+        let eight = std::num::NonZero::new(8).expect("8 > 0");
+        self.middles
             .query(&p)
-            .nearest_n::<kiddo::SquaredEuclidean<f64>>(one)
+            .nearest_n::<kiddo::SquaredEuclidean<f64>>(eight)
             .execute()
-            .first()
-            .map_or(0, |r| r.item);
-        &self.patches[nearest as usize].1
+            .iter()
+            .find_map(|r| self.fit(r.item))
     }
 }
 
@@ -347,34 +425,27 @@ impl<const D: usize> Warp<D> for PuRbf<D> {
                 let mut total = [0.0f64; 4];
                 let mut sum = [Vect::<D>::zeros(); 4];
                 for k in 0..n {
-                    let d = self.patches[sets[i].0[k].0 as usize]
-                        .1
-                        .displacements4(&four);
+                    let Some(fit) = self.fit(sets[i].0[k].0) else {
+                        continue;
+                    };
+                    let d = fit.displacements4(&four);
                     for s in 0..4 {
                         let w = sets[i + s].0[k].1;
                         total[s] += w;
                         sum[s] += d[s] * w;
                     }
                 }
-                for s in 0..4 {
-                    out[i + s] = four[s] + sum[s] / total[s] + origin;
+                if total.iter().all(|&t| t > 0.0) {
+                    for s in 0..4 {
+                        out[i + s] = four[s] + sum[s] / total[s] + origin;
+                    }
+                    i += 4;
+                    continue;
                 }
-                i += 4;
-                continue;
             }
             let x = &xs[i];
-            let d = if n == 0 {
-                self.nearest(x).displacement(x)
-            } else {
-                let mut total = 0.0;
-                let mut sum = Vect::<D>::zeros();
-                for &(p, w) in &sets[i].0[..n] {
-                    total += w;
-                    sum += self.patches[p as usize].1.displacement(x) * w;
-                }
-                sum / total
-            };
-            out[i] = x + d + origin;
+            let (set, n) = &sets[i];
+            out[i] = x + self.blend(x, &set[..*n]) + origin;
             i += 1;
         }
     }

@@ -45,7 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let pu = PuRbf::new(&field)?;
         let pu_fit = t.elapsed().as_secs_f64();
         let patches = pu.patch_count();
-        let pu = Deformer::Pu(pu);
+        let pu = Deformer::Pu(Box::new(pu));
         let mut a = samples.clone();
         let t = Instant::now();
         apply(&dense, &field.origin, &mut a);
@@ -150,7 +150,7 @@ fn terrain_scale() -> Result<(), Box<dyn std::error::Error>> {
                 .expect("finite")
         });
         let t = Instant::now();
-        apply(&Deformer::Pu(pu), &field.origin, &mut points);
+        apply(&Deformer::Pu(Box::new(pu)), &field.origin, &mut points);
         let eval = t.elapsed().as_secs_f64();
         println!(
             "| {} | {patches} | {fit:.2} | {eval:.3} | {:.1} |",
