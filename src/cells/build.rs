@@ -778,53 +778,58 @@ fn classify_flood<const D: usize>(
         }
         i
     }
-    // The joins are found in parallel and applied in order.
-    let joins: Vec<(u32, u32)> = blocks
-        .par_iter()
-        .enumerate()
-        .fold(Vec::new, |mut out, (k, &(level, code))| {
-            let dims = grid.dims(level);
-            let c = coords::<D>(code);
-            for a in 0..D {
-                for step in [-1i64, 1] {
-                    let mut n = c;
-                    n[a] += step;
-                    if n[a] < 0 || n[a] >= dims[a] {
-                        out.push((k as u32, outside));
-                        continue;
-                    }
-                    let (mut l, mut m) = (level as usize, morton(&n));
-                    loop {
-                        if let Some(&other) = index[l].get(&m) {
-                            out.push((k as u32, other));
-                            break;
+    // The joins are found in parallel and applied in order, a bounded batch of blocks at a
+    // time.
+    const BATCH: usize = 1 << 18;
+    for (b, batch) in blocks.chunks(BATCH).enumerate() {
+        let joins: Vec<(u32, u32)> = batch
+            .par_iter()
+            .enumerate()
+            .fold(Vec::new, |mut out, (i, &(level, code))| {
+                let k = (b * BATCH + i) as u32;
+                let dims = grid.dims(level);
+                let c = coords::<D>(code);
+                for a in 0..D {
+                    for step in [-1i64, 1] {
+                        let mut n = c;
+                        n[a] += step;
+                        if n[a] < 0 || n[a] >= dims[a] {
+                            out.push((k, outside));
+                            continue;
                         }
-                        if levels[l].binary_search(&m).is_ok() || l == 0 {
-                            break;
+                        let (mut l, mut m) = (level as usize, morton(&n));
+                        loop {
+                            if let Some(&other) = index[l].get(&m) {
+                                out.push((k, other));
+                                break;
+                            }
+                            if levels[l].binary_search(&m).is_ok() || l == 0 {
+                                break;
+                            }
+                            l -= 1;
+                            m >>= D;
                         }
-                        l -= 1;
-                        m >>= D;
                     }
                 }
-            }
-            out
-        })
-        .reduce(Vec::new, |mut a, b| {
-            a.extend(b);
-            a
-        });
-    drop(index);
-    for (a, b) in joins {
-        let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-        // The outside node stays a root, so a block is outside when its root is.
-        if ra != rb {
-            if ra == outside {
-                parent[rb as usize] = ra;
-            } else {
-                parent[ra as usize] = rb;
+                out
+            })
+            .reduce(Vec::new, |mut a, b| {
+                a.extend(b);
+                a
+            });
+        for (a, b) in joins {
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            // The outside node stays a root, so a block is outside when its root is.
+            if ra != rb {
+                if ra == outside {
+                    parent[rb as usize] = ra;
+                } else {
+                    parent[ra as usize] = rb;
+                }
             }
         }
     }
+    drop(index);
     (0..outside)
         .map(|k| root(&mut parent, k) != outside)
         .collect()
