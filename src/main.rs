@@ -175,17 +175,18 @@ struct DeformArgs {
 
 impl DeformArgs {
     /// The library's parameters for these arguments, keeping a proxy of `proxy_samples`.
-    fn params(&self, proxy_samples: Option<usize>) -> DeformParams {
-        DeformParams {
-            build: self.cells.params(),
+    fn params(&self, proxy_samples: Option<usize>) -> Result<DeformParams, Error> {
+        let (build, solve) = self.cells.params()?;
+        Ok(DeformParams {
+            build,
             solve: SolveParams {
                 refine_strain: self.refine_strain,
-                ..self.cells.solve_params()
+                ..solve
             },
             transfer: self.transfer.into(),
             rbf_tolerance: self.tolerance.rbf_tolerance,
             proxy_samples,
-        }
+        })
     }
 }
 
@@ -265,6 +266,10 @@ struct CellArgs {
     /// About this many cells: picks the finest cell size (overrides --cell-size).
     #[arg(long)]
     cells: Option<usize>,
+    /// Adaptive cells: start from cells 8× this size and split, round by round, only the
+    /// cells whose solved strain is high (above a quarter of the largest), down to this size.
+    #[arg(long, value_name = "S", conflicts_with_all = ["cell_size", "cells"])]
+    min_cell_size: Option<f64>,
     /// Octree levels above the finest cells [default: enough for the largest cell that fits the
     /// input's shortest extent].
     #[arg(long)]
@@ -323,7 +328,17 @@ impl CellArgs {
         }
     }
 
-    fn params(&self) -> BuildParams {
+    /// The build's and the solver's parameters; with `--min-cell-size`, those of an adaptive
+    /// solve ([`rigidcells::solve::adaptive`]).
+    fn params(&self) -> Result<(BuildParams, SolveParams), Error> {
+        let (build, solve) = (self.build_params(), self.solve_params());
+        match self.min_cell_size {
+            Some(size) => rigidcells::solve::adaptive(size, &build, &solve),
+            None => Ok((build, solve)),
+        }
+    }
+
+    fn build_params(&self) -> BuildParams {
         BuildParams {
             cell_size: self.cell_size,
             target_cells: self.cells,
@@ -482,9 +497,10 @@ fn run_cells(
         .into());
     }
     let spec = edit.map(read_spec::<3>).transpose()?;
+    let (build, solve) = cells.params()?;
     let params = DeformParams {
-        build: cells.params(),
-        solve: cells.solve_params(),
+        build,
+        solve,
         ..Default::default()
     };
     let (complex, info, solution, warnings) = pipeline::file_cells(
@@ -518,7 +534,7 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         return run_deform_xy(args);
     }
     // The proxy serves the fold-over check, the report's residual and the preview.
-    let params = args.params(Some(pipeline::FOLDOVER_SAMPLES));
+    let params = args.params(Some(pipeline::FOLDOVER_SAMPLES))?;
     for extra in [&args.save_field, &args.report, &args.preview]
         .into_iter()
         .flatten()
@@ -686,7 +702,7 @@ fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
     }
     let file = rigidcells::io::XyFile::read(&args.input)?;
     let spec = read_spec::<2>(&args.edit)?;
-    let params = args.params(None);
+    let params = args.params(None)?;
     let bar = Bar::new(args.quiet);
     let (moved, solution, info) = pipeline::deform(file.points(), &[], &spec, &params, &bar)?;
     file.write(&args.output, &moved)?;
@@ -722,9 +738,10 @@ fn run_image(
     let background = background.map(parse_color).transpose()?;
     let spec = read_spec::<2>(edit)?;
     let raster = rigidcells::image::Raster::read_png(input)?;
+    let (build, solve) = cells.params()?;
     let params = DeformParams {
-        build: cells.params(),
-        solve: cells.solve_params(),
+        build,
+        solve,
         transfer,
         ..Default::default()
     };
@@ -1049,6 +1066,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
         &CellArgs {
             cell_size: None,
             cells: None,
+            min_cell_size: None,
             max_level: None,
             shell: false,
             inside: InsideArg::Auto,

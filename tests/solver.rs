@@ -417,3 +417,61 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
         "Newton {newton:?} vs Gauss-Newton {gauss:?}"
     );
 }
+
+/// Issue 15 item 4: merging sibling cells of one role keeps every fine cell's role (a region
+/// ends where it ended), and the adaptive solve splits the strained cells again, meeting the
+/// handle exactly with fewer cells than the uniform complex.
+#[test]
+fn coarsened_cells_keep_their_roles_and_adaptive_refines_where_it_bends() {
+    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
+    let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    let fine = cells(&pts, &mesh.triangles, 0.125);
+    let spec = "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }\n\
+                [[handle]]\nbox = { min = [7.0, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
+                rotate = { axis = [0.0, 1.0, 0.0], degrees = -45.0 }\n";
+    let constraints = resolved(&fine, &pts, spec);
+    let (coarse, merged) = solve::coarsen(&fine, &constraints, 2);
+    coarse.validate().unwrap();
+    assert!(
+        3 * coarse.len() < fine.len(),
+        "{} of {}",
+        coarse.len(),
+        fine.len()
+    );
+    for (c, cell) in fine.cells.iter().enumerate() {
+        let k = coarse
+            .locate(&cell.center)
+            .expect("a fine cell lies in a coarse one");
+        assert_eq!(merged.roles[k], constraints.roles[c], "fine cell {c}");
+    }
+    let (_, params) = solve::adaptive(
+        0.125,
+        &rigidcells::cells::BuildParams::default(),
+        &SolveParams::default(),
+    )
+    .unwrap();
+    let s = solve::solve(fine.clone(), constraints.clone(), &params, &Silent).unwrap();
+    let (start, _) = solve::coarsen(&fine, &constraints, solve::ADAPTIVE_LEVELS);
+    assert_eq!(s.info.cells_initial, start.len());
+    assert!(
+        s.info.cells_final > s.info.cells_initial && s.info.cells_final < fine.len(),
+        "{:?} of {}",
+        s.info.refinements,
+        fine.len()
+    );
+    // Handle cells follow the handle exactly, fixed cells stay.
+    for (c, cell) in s.complex.cells.iter().enumerate() {
+        let m = &s.motions[c];
+        match s.constraints.roles[c] {
+            Role::Fixed => assert!((m.pos - cell.center).norm() < 1e-12),
+            Role::Handle(k) => {
+                let want = s
+                    .constraints
+                    .handle_map(k as usize, 1.0)
+                    .apply(&cell.center);
+                assert!((m.pos - want).norm() < 1e-9, "cell {c}");
+            }
+            _ => {}
+        }
+    }
+}

@@ -456,3 +456,101 @@ pub fn inherit<const D: usize>(
         warnings: old.warnings.clone(),
     }
 }
+
+/// The complex with sibling leaves merged into their parent, up to `levels` times, wherever
+/// all the leaves inside the parent are its children and share one role and one stiffness,
+/// and none holds a pin or a soft target; with its constraints. The cells along a
+/// constraint's border (where roles differ) keep the size they were resolved at, so a region
+/// ends where it ends on the fine cells; elsewhere the cells are as coarse as `levels`
+/// allows, and [`super::adaptive`] splits them again where the solved strain is high.
+pub fn coarsen<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    levels: u8,
+) -> (CellComplex<D>, Constraints<D>) {
+    use crate::cells::CellKind;
+    use rustc_hash::FxHashMap;
+    let mut keep = vec![false; complex.len()];
+    for p in &constraints.pins {
+        keep[p.cell as usize] = true;
+    }
+    for t in &constraints.targets {
+        keep[t.cell as usize] = true;
+    }
+    // (key, kind, role, stiffness, keep)
+    let mut leaves: Vec<(CellKey<D>, CellKind, Role, f64, bool)> = complex
+        .cells
+        .iter()
+        .enumerate()
+        .map(|(c, cell)| {
+            let keep = keep[c] || matches!(constraints.roles[c], Role::Pin(_));
+            let role = constraints.roles[c];
+            (cell.key, cell.kind, role, constraints.stiffness[c], keep)
+        })
+        .collect();
+    let deepest = leaves.iter().map(|l| l.0.level).max().unwrap_or(0);
+    for level in (1..=deepest).rev().take(levels as usize) {
+        // Parents whose inside holds a leaf other than their mergeable children.
+        let mut blocked: rustc_hash::FxHashSet<CellKey<D>> = Default::default();
+        let mut groups: FxHashMap<CellKey<D>, Vec<usize>> = FxHashMap::default();
+        for (i, l) in leaves.iter().enumerate() {
+            if l.0.level > level {
+                let mut k = l.0;
+                while k.level >= level {
+                    k = k.parent().expect("level > 0");
+                }
+                blocked.insert(k);
+            } else if l.0.level == level {
+                let parent = l.0.parent().expect("level > 0");
+                if l.4 {
+                    blocked.insert(parent);
+                }
+                groups.entry(parent).or_default().push(i);
+            }
+        }
+        let mut merged = vec![false; leaves.len()];
+        let mut parents = Vec::new();
+        for (parent, members) in &groups {
+            let first = &leaves[members[0]];
+            if blocked.contains(parent)
+                || members
+                    .iter()
+                    .any(|&i| leaves[i].2 != first.2 || leaves[i].3 != first.3)
+            {
+                continue;
+            }
+            let kind = if members.iter().any(|&i| leaves[i].1 == CellKind::Boundary) {
+                CellKind::Boundary
+            } else {
+                CellKind::Interior
+            };
+            for &i in members {
+                merged[i] = true;
+            }
+            parents.push((*parent, kind, first.2, first.3, false));
+        }
+        let mut next: Vec<_> = leaves
+            .iter()
+            .zip(&merged)
+            .filter(|(_, m)| !**m)
+            .map(|(l, _)| *l)
+            .collect();
+        next.extend(parents);
+        leaves = next;
+    }
+    leaves.sort_unstable_by_key(|l| l.0);
+    let coarse = CellComplex::from_keys(complex.grid, leaves.iter().map(|l| (l.0, l.1)).collect());
+    let mut out = Constraints {
+        roles: leaves.iter().map(|l| l.2).collect(),
+        stiffness: leaves.iter().map(|l| l.3).collect(),
+        ..constraints.clone()
+    };
+    // Pins and targets kept their cells; find them again by position.
+    for p in &mut out.pins {
+        p.cell = coarse.locate(&p.point).unwrap_or(0) as u32;
+    }
+    for t in &mut out.targets {
+        t.cell = coarse.locate(&t.from).unwrap_or(0) as u32;
+    }
+    (coarse, out)
+}

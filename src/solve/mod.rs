@@ -42,7 +42,7 @@ mod system;
 
 use std::time::Instant;
 
-pub use constraints::{Constraints, Role, Selections, inherit, resolve, resolve_selected};
+pub use constraints::{Constraints, Role, Selections, coarsen, inherit, resolve, resolve_selected};
 pub use energy::{cell_strain, glue_energy, pair_energy};
 
 use crate::cells::CellComplex;
@@ -66,6 +66,12 @@ pub struct SolveParams {
     pub max_step_fraction: f64,
     /// Split cells whose strain exceeds this; `None` (default): no refinement.
     pub refine_strain: Option<f64>,
+    /// Split cells whose strain exceeds this fraction of the largest cell strain of the round
+    /// (when `refine_strain` is `None`); `None` (default): no refinement. See [`adaptive`].
+    pub refine_fraction: Option<f64>,
+    /// Before solving, merge sibling cells of one role into their parent up to this many
+    /// times ([`coarsen`]). Default 0. See [`adaptive`].
+    pub coarsen_levels: u8,
     /// Levels refinement may add below the finest static level. Default 2.
     pub refine_levels: u8,
     /// Rounds of refinement at most. Default 4.
@@ -102,6 +108,8 @@ impl Default for SolveParams {
             max_step_degrees: 30.0,
             max_step_fraction: 0.25,
             refine_strain: None,
+            refine_fraction: None,
+            coarsen_levels: 0,
             refine_levels: 2,
             max_refinements: 4,
             memory_limit: None,
@@ -189,15 +197,24 @@ where
     Dim<D>: Rigid<D>,
 {
     let start = Instant::now();
+    let (complex, constraints) = match params.coarsen_levels {
+        0 => (complex, constraints),
+        levels => coarsen(&complex, &constraints, levels),
+    };
     let (mut system, mut motions, mut info) = from_rest(&complex, &constraints, params, observer)?;
     let mut complex = complex;
     let mut constraints = constraints;
-    if let Some(tau) = params.refine_strain {
+    if params.refine_strain.is_some() || params.refine_fraction.is_some() {
         let limit = complex.grid.max_level + params.refine_levels;
         observer.stage("refining", params.max_refinements as u64);
         for _ in 0..params.max_refinements {
             observer.advance(1);
             let strain = cell_strain(&complex, &motions);
+            let tau = params.refine_strain.unwrap_or_else(|| {
+                let largest = strain.iter().cloned().fold(0.0, f64::max);
+                // A complex with no strain anywhere (a rigid edit) needs no cell split.
+                params.refine_fraction.unwrap_or(1.0) * largest.max(f64::MIN_POSITIVE)
+            });
             let split: Vec<bool> = complex
                 .cells
                 .iter()
@@ -340,6 +357,44 @@ where
         observer.advance(1);
     }
     Ok(())
+}
+
+/// Levels an adaptive solve ([`adaptive`]) starts above its smallest cells.
+pub const ADAPTIVE_LEVELS: u8 = 3;
+/// An adaptive solve splits the cells whose strain exceeds this fraction of the largest.
+pub const ADAPTIVE_FRACTION: f64 = 0.25;
+
+/// The parameters of an adaptive solve down to cells of `min_cell_size` (issue 15 item 4, the
+/// paper's §5 at scale). The complex is built at `min_cell_size` and the constraints resolved
+/// there, so every region ends where it ends on uniform cells of that size; then sibling cells
+/// of one role are merged up to [`ADAPTIVE_LEVELS`] times ([`coarsen`]: cells along a
+/// region's border stay small), the coarse complex is solved, and the cells whose strain
+/// exceeds [`ADAPTIVE_FRACTION`] of the round's largest are split, one level a round, and the
+/// solve goes on. A local edit in a large scan then costs small cells only where it bends
+/// (BENCHMARKS.md). An error for a size that is not positive.
+pub fn adaptive(
+    min_cell_size: f64,
+    build: &crate::cells::BuildParams,
+    solve: &SolveParams,
+) -> Result<(crate::cells::BuildParams, SolveParams)> {
+    if !(min_cell_size.is_finite() && min_cell_size > 0.0) {
+        return Err(Error::Param(format!(
+            "minimum cell size {min_cell_size} must be positive"
+        )));
+    }
+    let build = crate::cells::BuildParams {
+        cell_size: Some(min_cell_size),
+        target_cells: None,
+        ..*build
+    };
+    let solve = SolveParams {
+        coarsen_levels: ADAPTIVE_LEVELS,
+        refine_fraction: Some(ADAPTIVE_FRACTION),
+        refine_levels: 0,
+        max_refinements: ADAPTIVE_LEVELS as usize,
+        ..*solve
+    };
+    Ok((build, solve))
 }
 
 /// The tolerance of the load steps before the last.
