@@ -475,3 +475,44 @@ fn coarsened_cells_keep_their_roles_and_adaptive_refines_where_it_bends() {
         }
     }
 }
+
+/// A part kept at rest on the fine cells only for want of a constraint (a speck above the
+/// bar) merges into the bar's cells when coarsened, and is then free: a cell at rest inside a
+/// constrained part would pin it down (it sagged the corridor's middle from 13 m to 2 m).
+#[test]
+fn coarsening_frees_rest_parts_that_join_a_constrained_one() {
+    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
+    let mut pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    let speck: Vec<Vect<3>> = (0..20)
+        .map(|i| Vect::<3>::new(4.0 + 0.01 * i as f64, 0.5, 1.45))
+        .collect();
+    pts.extend(&speck);
+    let fine = cells(&pts, &mesh.triangles, 0.125);
+    let constraints = resolved(
+        &fine,
+        &pts,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [7.0, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
+         translate = [0.0, 0.0, 1.0]\n",
+    );
+    assert!(
+        constraints.roles.contains(&Role::Rest),
+        "the speck is its own part"
+    );
+    let (coarse, merged) = solve::coarsen(&fine, &constraints, 3);
+    let (component, count) = coarse.components();
+    let mut anchored = vec![false; count];
+    for (c, r) in merged.roles.iter().enumerate() {
+        anchored[component[c] as usize] |= matches!(r, Role::Fixed | Role::Handle(_));
+    }
+    for (c, r) in merged.roles.iter().enumerate() {
+        if *r == Role::Rest {
+            assert!(
+                !anchored[component[c] as usize],
+                "cell {c} at rest in a moving part"
+            );
+        }
+    }
+    let speck_cell = coarse.locate(&(speck[0] - coarse.grid.origin)).unwrap();
+    assert_eq!(merged.roles[speck_cell], Role::Free);
+}

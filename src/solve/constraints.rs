@@ -375,29 +375,14 @@ where
         .into_iter()
         .map(|o| o.map_or(Role::Free, |(_, r)| r))
         .collect();
-    let (component, count) = complex.components();
-    let mut anchored = vec![false; count];
-    for (c, r) in roles.iter().enumerate() {
-        anchored[component[c] as usize] |= *r != Role::Free;
-    }
-    for t in &targets {
-        anchored[component[t.cell as usize] as usize] = true;
-    }
-    if !anchored.iter().any(|&a| a) {
+    let (parts, count, loose) = anchor(complex, &mut roles, &targets);
+    if parts == count {
         return Err(Error::NoConstraints);
     }
-    let loose: Vec<usize> = (0..n)
-        .filter(|&c| !anchored[component[c] as usize])
-        .collect();
-    if !loose.is_empty() {
-        let parts = anchored.iter().filter(|&&a| !a).count();
+    if loose > 0 {
         warnings.push(format!(
-            "{parts} of {count} connected parts ({} cells) have no constraint and keep their rest pose",
-            loose.len()
+            "{parts} of {count} connected parts ({loose} cells) have no constraint and keep their rest pose"
         ));
-        for c in loose {
-            roles[c] = Role::Rest;
-        }
     }
     Ok(Constraints {
         roles,
@@ -408,6 +393,34 @@ where
         origin,
         warnings,
     })
+}
+
+/// Gives [`Role::Rest`] to the cells of every connected part of `complex` that holds no
+/// constraint (no role other than free or rest, no target), and [`Role::Free`] to rest cells
+/// of parts that do. Returns the parts without a constraint, all parts, and their cells.
+fn anchor<const D: usize>(
+    complex: &CellComplex<D>,
+    roles: &mut [Role],
+    targets: &[TargetLocal<D>],
+) -> (usize, usize, usize) {
+    let (component, count) = complex.components();
+    let mut anchored = vec![false; count];
+    for (c, r) in roles.iter().enumerate() {
+        anchored[component[c] as usize] |= !matches!(r, Role::Free | Role::Rest);
+    }
+    for t in targets {
+        anchored[component[t.cell as usize] as usize] = true;
+    }
+    let mut loose = 0;
+    for (c, r) in roles.iter_mut().enumerate() {
+        if !anchored[component[c] as usize] {
+            *r = Role::Rest;
+            loose += 1;
+        } else if *r == Role::Rest {
+            *r = Role::Free;
+        }
+    }
+    (anchored.iter().filter(|&&a| !a).count(), count, loose)
 }
 
 /// The constraints of a complex made by [`CellComplex::split`]: children inherit their parent's
@@ -484,7 +497,12 @@ pub fn coarsen<const D: usize>(
         .enumerate()
         .map(|(c, cell)| {
             let keep = keep[c] || matches!(constraints.roles[c], Role::Pin(_));
-            let role = constraints.roles[c];
+            // A part kept at rest only for want of a constraint may merge into a neighbor and
+            // so join a constrained part: its role is decided again below.
+            let role = match constraints.roles[c] {
+                Role::Rest => Role::Free,
+                r => r,
+            };
             (cell.key, cell.kind, role, constraints.stiffness[c], keep)
         })
         .collect();
@@ -551,6 +569,14 @@ pub fn coarsen<const D: usize>(
     }
     for t in &mut out.targets {
         t.cell = coarse.locate(&t.from).unwrap_or(0) as u32;
+    }
+    let (parts, count, loose) = anchor(&coarse, &mut out.roles, &out.targets);
+    out.warnings
+        .retain(|w| !w.ends_with("have no constraint and keep their rest pose"));
+    if loose > 0 {
+        out.warnings.push(format!(
+            "{parts} of {count} connected parts ({loose} cells) have no constraint and keep their rest pose"
+        ));
     }
     (coarse, out)
 }
