@@ -102,9 +102,14 @@ where
 {
     let (complex, build_info) = build(points, triangles, &params.build)?;
     let constraints = solve::resolve(&complex, spec, points, None)?;
-    let warnings = build_warnings(&build_info, &complex, &constraints.warnings);
     check_rbf_memory::<D>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+    // The solved constraints' warnings: an adaptive solve decides its parts at rest again.
+    let warnings = build_warnings(
+        &build_info,
+        &solution.complex,
+        &solution.constraints.warnings,
+    );
     let t = Instant::now();
     check_rbf_memory::<D>(solution.complex.len(), params)?;
     let field = Field::from_solution(&solution);
@@ -265,9 +270,13 @@ pub fn deform_file(
     )?;
     info.seconds_read = t0.elapsed().as_secs_f64();
     let constraints = solve::resolve_selected(&complex, spec, &selections)?;
-    let warnings = build_warnings(&build_info, &complex, &constraints.warnings);
     check_rbf_memory::<3>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+    let warnings = build_warnings(
+        &build_info,
+        &solution.complex,
+        &solution.constraints.warnings,
+    );
     check_rbf_memory::<3>(solution.complex.len(), params)?;
 
     let t1 = Instant::now();
