@@ -79,28 +79,63 @@ impl<const D: usize> Rbf<D> {
         let (c, shift, inv_scale) = scaled_centers(field)?;
         let n = c.len();
         let m = n + D + 1;
-        let a = nalgebra::DMatrix::<f64>::from_fn(m, m, |r, k| match (r < n, k < n) {
+        use faer::linalg::lu::partial_pivoting::{factor, solve};
+        let a = faer::Mat::<f64>::from_fn(m, m, |r, k| match (r < n, k < n) {
             (true, true) => (c[r] - c[k]).norm().powi(3),
             (true, false) => poly(&c[r], k - n),
             (false, true) => poly(&c[k], r - n),
             (false, false) => 0.0,
         });
-        let rhs = nalgebra::DMatrix::<f64>::from_fn(m, D, |r, k| {
+        let rhs = faer::Mat::<f64>::from_fn(m, D, |r, k| {
             if r < n {
                 (field.motions[r].pos[k] - field.centers[r][k]) * inv_scale
             } else {
                 0.0
             }
         });
-        let lu = a.clone().lu();
+        // faer's sequential LU with partial pivoting (a third of `apply`'s time went to
+        // nalgebra's on the corridor's patches); the patches are fitted in parallel already.
+        let par = faer::Par::Seq;
+        let mut lu = a.clone();
+        let (mut fwd, mut inv) = (vec![0usize; m], vec![0usize; m]);
+        let mut mem = faer::dyn_stack::MemBuffer::new(faer::dyn_stack::StackReq::any_of(&[
+            factor::lu_in_place_scratch::<usize, f64>(m, m, par, Default::default()),
+            solve::solve_in_place_scratch::<usize, f64>(m, D, par),
+        ]));
+        let stack = faer::dyn_stack::MemStack::new(&mut mem);
+        let (_, perm) = factor::lu_in_place(
+            lu.as_mut(),
+            &mut fwd,
+            &mut inv,
+            par,
+            stack,
+            Default::default(),
+        );
+        let mut solved = |b: &mut faer::Mat<f64>| {
+            solve::solve_in_place_with_conj(
+                lu.as_ref(),
+                lu.as_ref(),
+                perm,
+                faer::Conj::No,
+                b.as_mut(),
+                par,
+                stack,
+            )
+        };
         let singular =
             || Error::Solver("the RBF system is singular (coincident cell centers?)".into());
-        let mut x = lu.solve(&rhs).ok_or_else(singular)?;
-        if let Some(correction) = lu.solve(&(&rhs - &a * &x)) {
-            x += correction;
-        }
-        if !x.iter().all(|v| v.is_finite()) {
+        let mut x = rhs.clone();
+        solved(&mut x);
+        if !x.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
             return Err(singular());
+        }
+        let mut correction = &rhs - &a * &x;
+        solved(&mut correction);
+        if correction
+            .col_iter()
+            .all(|col| col.iter().all(|v| v.is_finite()))
+        {
+            x += &correction;
         }
         Ok(Self::from_solution(&c, |r, k| x[(r, k)], shift, inv_scale))
     }
