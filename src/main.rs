@@ -266,8 +266,9 @@ struct CellArgs {
     /// About this many cells: picks the finest cell size (overrides --cell-size).
     #[arg(long)]
     cells: Option<usize>,
-    /// Adaptive cells: start from cells 8× this size and split, round by round, only the
-    /// cells whose solved strain is high (above a quarter of the largest), down to this size.
+    /// Adaptive cells: built at this size, merged up to 8× it wherever one role holds (the
+    /// edit's regions keep their borders), solved, and split again, round by round, where the
+    /// solved strain is high (above a quarter of the largest), down to this size.
     #[arg(long, value_name = "S", conflicts_with_all = ["cell_size", "cells"])]
     min_cell_size: Option<f64>,
     /// Octree levels above the finest cells [default: enough for the largest cell that fits the
@@ -283,7 +284,8 @@ struct CellArgs {
     inside: InsideArg,
     /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
     /// conjugate gradients with a two-level rigid-motion multigrid (reaches the same minimum;
-    /// slower than the factorization up to at least 342k cells, BENCHMARKS.md).
+    /// slower than the factorization up to at least 342k cells, BENCHMARKS.md); auto: the
+    /// factorization where its factor fits the memory budget, else the multigrid.
     #[arg(long, value_enum, default_value_t = SolverArg::Auto)]
     solver: SolverArg,
     #[command(flatten)]
