@@ -16,7 +16,8 @@
 //! rotated arm; `System::step`), which makes the iteration Newton's on the rotations and
 //! quadratically convergent. Where that matrix is indefinite (far from the minimum) its
 //! factorization fails and the step falls back to the term's positive part per cell, which
-//! keeps the matrix positive definite. The first iteration of each load step, which starts
+//! keeps the matrix positive definite (the multilevel path, whose conjugate gradients then
+//! fail, falls back to plain Gauss-Newton). The first iteration of each load step, which starts
 //! where the handles jumped, uses the positive part too. A load step before the last only
 //! has to bring the motions near the path's minimum (so that the next starts on the right
 //! side of a saddle): it stops at [`INTERMEDIATE_TOLERANCE`] or after
