@@ -18,6 +18,15 @@ fn line(dir: &std::path::Path) -> std::path::PathBuf {
     path
 }
 
+/// The line and an edit fixing its first cells.
+fn fixed_line(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let spec = edit(
+        dir,
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [10, 10, 10] }\n",
+    );
+    (line(dir), spec)
+}
+
 fn edit(dir: &std::path::Path, text: &str) -> std::path::PathBuf {
     let path = dir.join("edit.toml");
     std::fs::write(&path, text).unwrap();
@@ -27,11 +36,7 @@ fn edit(dir: &std::path::Path, text: &str) -> std::path::PathBuf {
 #[test]
 fn a_tiny_cell_size_on_a_long_thin_input_is_refused_at_once() {
     let dir = tempfile::tempdir().unwrap();
-    let input = line(dir.path());
-    let spec = edit(
-        dir.path(),
-        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [10, 10, 10] }\n",
-    );
+    let (input, spec) = fixed_line(dir.path());
     let out = dir.path().join("out.xyz");
     let start = std::time::Instant::now();
     // Past what a cell's coordinates can hold.
@@ -61,15 +66,11 @@ fn a_tiny_cell_size_on_a_long_thin_input_is_refused_at_once() {
 }
 
 /// Issue 15: the cells' memory goes with the occupied cells, not with the bounding box: the
-/// line at 0.5 (a dense grid of 134M finest cells before) and at 0.01 runs in a 64 MB budget.
+/// line at 0.5 (a dense grid of 1024³ finest cells before) and at 0.01 runs in a 64 MB budget.
 #[test]
 fn a_long_thin_input_costs_memory_by_its_cells() {
     let dir = tempfile::tempdir().unwrap();
-    let input = line(dir.path());
-    let spec = edit(
-        dir.path(),
-        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [10, 10, 10] }\n",
-    );
+    let (input, spec) = fixed_line(dir.path());
     for size in ["0.5", "0.01"] {
         let out = dir.path().join(format!("out{size}.xyz"));
         let r = deform(

@@ -36,6 +36,22 @@ fn cells<const D: usize>(pts: &[Vect<D>], triangles: &[[u32; 3]], cell: f64) -> 
     build(pts, triangles, &params).unwrap().0
 }
 
+/// The vertices and triangles of `data_gen::bar(size, density)`.
+fn bar(size: [f64; 3], density: f64) -> (Vec<Vect<3>>, Vec<[u32; 3]>) {
+    let mesh = data_gen::bar(size, density);
+    let pts = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    (pts, mesh.triangles)
+}
+
+/// The 8-long bar's edit of the Newton and adaptive tests: the first 1.0 fixed, the last 1.0 a
+/// handle moved by `motion` (spec lines).
+fn bar_ends(motion: &str) -> String {
+    format!(
+        "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }}\n\
+         [[handle]]\nbox = {{ min = [7.0, -0.1, -0.1], max = [8.1, 1.1, 1.1] }}\n{motion}\n"
+    )
+}
+
 /// The edit spec `text` resolved on `complex` with the samples `pts`.
 fn resolved<const D: usize>(
     complex: &CellComplex<D>,
@@ -220,9 +236,8 @@ translate = [-1.0, 0.5]
 /// continues, and the refined complex is valid and lower in energy.
 #[test]
 fn refinement_splits_strained_cells_and_continues() {
-    let mesh = data_gen::bar([6.0, 1.0, 1.0], 8.0);
-    let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
-    let complex = cells(&pts, &mesh.triangles, 0.5);
+    let (pts, triangles) = bar([6.0, 1.0, 1.0], 8.0);
+    let complex = cells(&pts, &triangles, 0.5);
     let constraints = resolved(
         &complex,
         &pts,
@@ -324,11 +339,10 @@ translate = [0.0, 0.0, {lift}]
 /// turned handle, both large enough for a coarse level.
 #[test]
 fn multilevel_solve_reaches_the_direct_minimum() {
-    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
-    let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
     same_minimum(
         &pts,
-        &mesh.triangles,
+        &triangles,
         0.125,
         "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
          [[handle]]\nbox = { min = [7.5, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
@@ -380,15 +394,14 @@ where
 /// and Gauss-Newton converges only linearly.
 #[test]
 fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
-    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
-    let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
-    let complex = cells(&pts, &mesh.triangles, 0.25);
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let complex = cells(&pts, &triangles, 0.25);
     let constraints = resolved(
         &complex,
         &pts,
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [7.0, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
-         rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]\n",
+        &bar_ends(
+            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]",
+        ),
     );
     let solved = |newton| {
         let params = SolveParams {
@@ -423,13 +436,10 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
 /// handle exactly with fewer cells than the uniform complex.
 #[test]
 fn coarsened_cells_keep_their_roles_and_adaptive_refines_where_it_bends() {
-    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
-    let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
-    let fine = cells(&pts, &mesh.triangles, 0.125);
-    let spec = "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }\n\
-                [[handle]]\nbox = { min = [7.0, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
-                rotate = { axis = [0.0, 1.0, 0.0], degrees = -45.0 }\n";
-    let constraints = resolved(&fine, &pts, spec);
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let fine = cells(&pts, &triangles, 0.125);
+    let spec = bar_ends("rotate = { axis = [0.0, 1.0, 0.0], degrees = -45.0 }");
+    let constraints = resolved(&fine, &pts, &spec);
     let (coarse, merged) = solve::coarsen(&fine, &constraints, 2);
     coarse.validate().unwrap();
     assert!(
@@ -481,20 +491,13 @@ fn coarsened_cells_keep_their_roles_and_adaptive_refines_where_it_bends() {
 /// constrained part would pin it down (it sagged the corridor's middle from 13 m to 2 m).
 #[test]
 fn coarsening_frees_rest_parts_that_join_a_constrained_one() {
-    let mesh = data_gen::bar([8.0, 1.0, 1.0], 12.0);
-    let mut pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    let (mut pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
     let speck: Vec<Vect<3>> = (0..20)
         .map(|i| Vect::<3>::new(4.0 + 0.01 * i as f64, 0.5, 1.45))
         .collect();
     pts.extend(&speck);
-    let fine = cells(&pts, &mesh.triangles, 0.125);
-    let constraints = resolved(
-        &fine,
-        &pts,
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [7.0, -0.1, -0.1], max = [8.1, 1.1, 1.1] }\n\
-         translate = [0.0, 0.0, 1.0]\n",
-    );
+    let fine = cells(&pts, &triangles, 0.125);
+    let constraints = resolved(&fine, &pts, &bar_ends("translate = [0.0, 0.0, 1.0]"));
     assert!(
         constraints.roles.contains(&Role::Rest),
         "the speck is its own part"

@@ -27,8 +27,9 @@
 //! shortest extent's choice of levels). Memory is checked against the budget as the codes
 //! grow ([`BYTES_PER_OCCUPIED`]), the coarsest level and the triangles' candidate cells before
 //! they are enumerated. A dense byte grid held the finest level before: a 257-point diagonal
-//! line 256 units long at 0.5 cells needed 134M of them for 257 occupied ones. The 64-bit codes bound the finest cells along an
-//! axis to 2²¹ in 3D (2³¹ in 2D), which [`build`] checks up front ([`Error::GridTooLarge`]).
+//! line 256 units long at 0.5 cells needed 1024³ of them (3.4 GB at the peak) for 257 occupied
+//! ones. The 64-bit codes bound the finest cells along an axis to 2²¹ in 3D (2³¹ in 2D), which
+//! [`build`] checks up front ([`Error::GridTooLarge`]).
 
 use std::time::Instant;
 
@@ -839,74 +840,66 @@ fn classify_flood<const D: usize>(
 /// parent's code is its child's shifted right by `D` bits.
 #[inline]
 fn morton<const D: usize>(c: &[i64; D]) -> u64 {
-    let mut code = 0;
-    for (a, &v) in c.iter().enumerate() {
-        code |= if D == 3 {
-            spread3(v as u64)
-        } else {
-            spread2(v as u64)
-        } << a;
-    }
-    code
+    let masks = spread_of::<D>();
+    c.iter()
+        .enumerate()
+        .fold(0, |code, (a, &v)| code | spread(v as u64, masks) << a)
 }
 
 /// The coordinates of a Morton code ([`morton`]).
 #[inline]
 fn coords<const D: usize>(code: u64) -> [i64; D] {
-    std::array::from_fn(|a| {
-        (if D == 3 {
-            compact3(code >> a)
-        } else {
-            compact2(code >> a)
-        }) as i64
-    })
+    let masks = spread_of::<D>();
+    std::array::from_fn(|a| compact(code >> a, masks) as i64)
 }
 
-/// The low 21 bits of `x` spread to every third bit.
+/// The spreading masks of dimension `D`.
 #[inline]
-fn spread3(x: u64) -> u64 {
-    let mut x = x & 0x1f_ffff;
-    x = (x | x << 32) & 0x001f_0000_0000_ffff;
-    x = (x | x << 16) & 0x001f_0000_ff00_00ff;
-    x = (x | x << 8) & 0x100f_00f0_0f00_f00f;
-    x = (x | x << 4) & 0x10c3_0c30_c30c_30c3;
-    x = (x | x << 2) & 0x1249_2492_4924_9249;
-    x
+fn spread_of<const D: usize>() -> &'static Spread {
+    if D == 3 { &SPREAD3 } else { &SPREAD2 }
 }
 
-/// The inverse of [`spread3`].
+/// The masks spreading a coordinate's bits apart: the mask of the coordinate's own bits, then
+/// each step's shift and the mask after it (3D: 21 bits to every third bit; 2D: 32 bits to
+/// every other bit).
+type Spread = (u64, [(u32, u64); 5]);
+const SPREAD3: Spread = (
+    0x1f_ffff,
+    [
+        (32, 0x001f_0000_0000_ffff),
+        (16, 0x001f_0000_ff00_00ff),
+        (8, 0x100f_00f0_0f00_f00f),
+        (4, 0x10c3_0c30_c30c_30c3),
+        (2, 0x1249_2492_4924_9249),
+    ],
+);
+const SPREAD2: Spread = (
+    0xffff_ffff,
+    [
+        (16, 0x0000_ffff_0000_ffff),
+        (8, 0x00ff_00ff_00ff_00ff),
+        (4, 0x0f0f_0f0f_0f0f_0f0f),
+        (2, 0x3333_3333_3333_3333),
+        (1, 0x5555_5555_5555_5555),
+    ],
+);
+
+/// The low bits of `x` spread apart by `masks`.
 #[inline]
-fn compact3(x: u64) -> u64 {
-    let mut x = x & 0x1249_2492_4924_9249;
-    x = (x | x >> 2) & 0x10c3_0c30_c30c_30c3;
-    x = (x | x >> 4) & 0x100f_00f0_0f00_f00f;
-    x = (x | x >> 8) & 0x001f_0000_ff00_00ff;
-    x = (x | x >> 16) & 0x001f_0000_0000_ffff;
-    x = (x | x >> 32) & 0x1f_ffff;
-    x
+fn spread(x: u64, (own, steps): &Spread) -> u64 {
+    steps
+        .iter()
+        .fold(x & own, |x, &(shift, mask)| (x | x << shift) & mask)
 }
 
-/// The low 32 bits of `x` spread to every other bit.
+/// The inverse of [`spread`]: the steps undone in reverse.
 #[inline]
-fn spread2(x: u64) -> u64 {
-    let mut x = x & 0xffff_ffff;
-    x = (x | x << 16) & 0x0000_ffff_0000_ffff;
-    x = (x | x << 8) & 0x00ff_00ff_00ff_00ff;
-    x = (x | x << 4) & 0x0f0f_0f0f_0f0f_0f0f;
-    x = (x | x << 2) & 0x3333_3333_3333_3333;
-    x = (x | x << 1) & 0x5555_5555_5555_5555;
-    x
-}
-
-/// The inverse of [`spread2`].
-#[inline]
-fn compact2(x: u64) -> u64 {
-    let mut x = x & 0x5555_5555_5555_5555;
-    x = (x | x >> 1) & 0x3333_3333_3333_3333;
-    x = (x | x >> 2) & 0x0f0f_0f0f_0f0f_0f0f;
-    x = (x | x >> 4) & 0x00ff_00ff_00ff_00ff;
-    x = (x | x >> 8) & 0x0000_ffff_0000_ffff;
-    x = (x | x >> 16) & 0xffff_ffff;
+fn compact(x: u64, (own, steps): &Spread) -> u64 {
+    let mut x = x & steps[steps.len() - 1].1;
+    for i in (0..steps.len()).rev() {
+        let mask = if i == 0 { *own } else { steps[i - 1].1 };
+        x = (x | x >> steps[i].0) & mask;
+    }
     x
 }
 

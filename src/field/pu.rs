@@ -55,8 +55,9 @@ pub struct PuRbf<const D: usize> {
     patches: Vec<Patch<D>>,
     /// The patches' middles, for the nearest patch outside every support.
     middles: kiddo::ImmutableKdTree<f64, D>,
-    /// The cells the patches fit (for fits made on demand).
-    source: Field<D>,
+    /// The cells the patches fit, kept for fits made on demand ([`PuRbf::lazy`]; `None` when
+    /// every fit was made up front).
+    source: Option<Field<D>>,
     /// Fits made on demand that failed (their patches are left out of the blend).
     failed: AtomicUsize,
 }
@@ -83,10 +84,12 @@ fn wendland(t: f64) -> f64 {
 impl<const D: usize> PuRbf<D> {
     /// Cuts the field into patches and fits each (in parallel).
     pub fn new(field: &Field<D>) -> Result<Self> {
-        let pu = Self::lazy(field)?;
-        pu.patches.par_iter().try_for_each(|p| {
-            let fit = Rbf::new_serial(&patch_field(&pu.source, &p.members))?;
+        let mut pu = Self::layout(field)?;
+        pu.patches.par_iter_mut().try_for_each(|p| {
+            let fit = Rbf::new_serial(&patch_field(field, &p.members))?;
             let _ = p.fit.set(Some(fit));
+            // Every fit is made: the members are not needed again.
+            p.members = Vec::new();
             Ok::<_, Error>(())
         })?;
         Ok(pu)
@@ -98,6 +101,20 @@ impl<const D: usize> PuRbf<D> {
     /// here (where [`PuRbf::new`] would have returned the error) is left out of the blend and
     /// counted ([`PuRbf::fits`]).
     pub fn lazy(field: &Field<D>) -> Result<Self> {
+        Ok(Self {
+            source: Some(Field {
+                origin: field.origin,
+                centers: field.centers.clone(),
+                halves: field.halves.clone(),
+                motions: field.motions.clone(),
+                prescribed: Default::default(),
+            }),
+            ..Self::layout(field)?
+        })
+    }
+
+    /// The patches of `field` and the members of each, none fitted yet.
+    fn layout(field: &Field<D>) -> Result<Self> {
         let n = field.centers.len();
         if n == 0 {
             return Err(Error::Solver("the field has no cells".into()));
@@ -179,13 +196,7 @@ impl<const D: usize> PuRbf<D> {
             middles: kiddo::ImmutableKdTree::new_from_slice(&points)
                 .map_err(|e| Error::Solver(format!("kd-tree over patches: {e:?}")))?,
             patches,
-            source: Field {
-                origin: field.origin,
-                centers: field.centers.clone(),
-                halves: field.halves.clone(),
-                motions: field.motions.clone(),
-                prescribed: Default::default(),
-            },
+            source: None,
             failed: AtomicUsize::new(0),
         })
     }
@@ -197,7 +208,10 @@ impl<const D: usize> PuRbf<D> {
         patch
             .fit
             .get_or_init(|| {
-                let fit = Rbf::new_serial(&patch_field(&self.source, &patch.members)).ok();
+                let fit = self
+                    .source
+                    .as_ref()
+                    .and_then(|f| Rbf::new_serial(&patch_field(f, &patch.members)).ok());
                 if fit.is_none() {
                     self.failed.fetch_add(1, Ordering::Relaxed);
                 }

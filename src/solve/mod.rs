@@ -745,12 +745,15 @@ const REFINE_ADVICE: &str = "use a larger --refine-strain threshold";
 
 /// [`crate::memory::check`] of the solver's estimate for `cells` cells.
 fn check_solver_memory(cells: usize, params: &SolveParams, advice: &str) -> Result<()> {
-    let per_cell = match params.method {
-        Method::Multilevel => crate::memory::MULTILEVEL_BYTES_PER_CELL,
-        _ => crate::memory::SOLVER_BYTES_PER_CELL,
+    let (per_cell, by) = match params.method {
+        Method::Multilevel => (
+            crate::memory::MULTILEVEL_BYTES_PER_CELL,
+            " by the multilevel solver",
+        ),
+        _ => (crate::memory::SOLVER_BYTES_PER_CELL, ""),
     };
     crate::memory::check(
-        &format!("solving {cells} cells"),
+        &format!("solving {cells} cells{by}"),
         cells as f64 * per_cell as f64,
         crate::memory::limit(params.memory_limit),
         advice,

@@ -616,18 +616,7 @@ fn galerkin(a: &BlockMatrix, p: &Prolongation) -> BlockMatrix {
                             blocks.extend(std::iter::repeat_n(0.0, bb));
                             (blocks.len() / bb - 1) as u32
                         }) as usize;
-                        let out = &mut blocks[at * bb..(at + 1) * bb];
-                        // out += pbᵀ m
-                        for k in 0..d {
-                            for r in 0..d {
-                                let v = pb[k * d + r];
-                                if v != 0.0 {
-                                    for c in 0..d {
-                                        out[r * d + c] += v * m[k * d + c];
-                                    }
-                                }
-                            }
-                        }
+                        mul_add(&mut blocks[at * bb..(at + 1) * bb], pb, true, m, d);
                     }
                 }
             }
@@ -692,9 +681,20 @@ fn accumulate(row: &mut Vec<(u32, Block)>, g: u32, m: &Block) {
 
 fn matmul(x: &[f64], y: &[f64], d: usize) -> Block {
     let mut out = [0.0; MAX_DOF * MAX_DOF];
+    mul_add(&mut out, x, false, y, d);
+    out
+}
+
+/// `out += x y` (`x` transposed with `transpose`) for `d × d` blocks stored row by row,
+/// skipping the zero entries of `x` (a rigid prolongation block is mostly zeros).
+fn mul_add(out: &mut [f64], x: &[f64], transpose: bool, y: &[f64], d: usize) {
     for r in 0..d {
         for k in 0..d {
-            let v = x[r * d + k];
+            let v = if transpose {
+                x[k * d + r]
+            } else {
+                x[r * d + k]
+            };
             if v != 0.0 {
                 for c in 0..d {
                     out[r * d + c] += v * y[k * d + c];
@@ -702,7 +702,6 @@ fn matmul(x: &[f64], y: &[f64], d: usize) -> Block {
             }
         }
     }
-    out
 }
 
 /// The sparse Cholesky factor of the coarsest level.

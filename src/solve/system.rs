@@ -188,12 +188,11 @@ where
                 Method::Auto => match system.set_up_direct(complex, params, advice) {
                     Ok(()) => {}
                     Err(Error::Memory { .. } | Error::Solver(_)) => {
-                        crate::memory::check(
-                            &format!("solving {} cells by the multilevel solver", complex.len()),
-                            complex.len() as f64 * crate::memory::MULTILEVEL_BYTES_PER_CELL as f64,
-                            crate::memory::limit(params.memory_limit),
-                            advice,
-                        )?;
+                        let multilevel = SolveParams {
+                            method: Method::Multilevel,
+                            ..*params
+                        };
+                        super::check_solver_memory(complex.len(), &multilevel, advice)?;
                         system.buffers = Buffers::default();
                         system.set_up_multilevel(complex);
                     }
@@ -500,7 +499,9 @@ where
         idx
     }
 
-    /// The Jacobian columns of `T_i(q)` for cell `c` (`len` of them) and `T_i(q)` itself.
+    /// The Jacobian columns of `T_i(q)` for cell `c` (`len` of them), `T_i(q)` itself, and the
+    /// lever `R_i (q − z_i)` of its rotation (`z_i` its rotation center: the rest center of a
+    /// free cell, the point of a pinned one; `None` for a cell that does not turn).
     #[inline]
     fn jacobian(
         &self,
@@ -509,57 +510,45 @@ where
         motions: &[Motion<D>],
         c: usize,
         q: &Vect<D>,
-    ) -> ([Vect<D>; MAX_DOF], Vect<D>) {
+    ) -> ([Vect<D>; MAX_DOF], Vect<D>, Option<Vect<D>>) {
         let cell = &complex.cells[c];
         let m = &motions[c];
         let value = m.apply(&cell.center, q);
         let mut cols = [Vect::<D>::zeros(); MAX_DOF];
         let rot = <Dim<D> as Rigid<D>>::ROT;
-        match constraints.roles[c] {
+        let (center, first) = match constraints.roles[c] {
             Role::Free => {
                 for a in 0..D {
                     cols[a][a] = 1.0;
                 }
-                let w = <Dim<D> as Rigid<D>>::cross_jacobian(&(m.rot * (q - cell.center)));
-                cols[D..D + rot].copy_from_slice(&w[..rot]);
+                (cell.center, D)
             }
-            Role::Pin(k) => {
-                let o = constraints.pins[k as usize].point;
-                let w = <Dim<D> as Rigid<D>>::cross_jacobian(&(m.rot * (q - o)));
-                cols[..rot].copy_from_slice(&w[..rot]);
-            }
-            _ => {}
-        }
-        (cols, value)
-    }
-
-    /// The lever `R_i (q − z_i)` of the rotation of cell `c` at `q` (`z_i` its rotation center),
-    /// if the cell turns freely.
-    fn arm(
-        &self,
-        complex: &CellComplex<D>,
-        constraints: &Constraints<D>,
-        motions: &[Motion<D>],
-        c: usize,
-        q: &Vect<D>,
-    ) -> Option<Vect<D>> {
-        let center = match constraints.roles[c] {
-            Role::Free => complex.cells[c].center,
-            Role::Pin(k) => constraints.pins[k as usize].point,
-            _ => return None,
+            Role::Pin(k) => (constraints.pins[k as usize].point, 0),
+            _ => return (cols, value, None),
         };
-        Some(motions[c].rot * (q - center))
+        let arm = m.rot * (q - center);
+        let w = <Dim<D> as Rigid<D>>::cross_jacobian(&arm);
+        cols[first..first + rot].copy_from_slice(&w[..rot]);
+        (cols, value, Some(arm))
     }
 
-    /// Adds `sign ·` each free cell's rotational curvature block (lower triangle, one per free
-    /// cell) to the cell's own rotation block.
-    fn add_curvature(&self, cell_vals: &mut [f64], blocks: &[[f64; 6]], sign: f64) {
+    /// Adds `sign ·` each free cell's rotational curvature block (`curvature[cell]`, the lower
+    /// triangle; with `positive`, its positive semidefinite part) to the cell's own rotation
+    /// block.
+    fn add_curvature(
+        &self,
+        cell_vals: &mut [f64],
+        curvature: &[[f64; 6]],
+        positive: bool,
+        sign: f64,
+    ) {
         let rot = <Dim<D> as Rigid<D>>::ROT;
         for (k, &c) in self.free_cells.iter().enumerate() {
             let s = self.slots[c as usize];
             let first = s.len - rot;
             let vals = &mut cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT];
-            let m = &blocks[k];
+            let m = &curvature[c as usize];
+            let m = if positive { positive_part(m, rot) } else { *m };
             for x in 0..rot {
                 for y in 0..=x {
                     vals[tri(first + x) + first + y] += sign * m[tri(x) + y];
@@ -634,13 +623,13 @@ where
                 let (hjj, hij) = rest.split_at_mut(Self::CELL_SLOT);
                 for (q, w) in quadrature(ci, cj) {
                     let a = s * w;
-                    let (ji, ti) = this.jacobian(complex, constraints, motions, i, &q);
-                    let (jj, tj) = this.jacobian(complex, constraints, motions, j, &q);
+                    let (ji, ti, arm_i) = this.jacobian(complex, constraints, motions, i, &q);
+                    let (jj, tj, arm_j) = this.jacobian(complex, constraints, motions, j, &q);
                     let r = ti - tj;
-                    if let Some(arm) = this.arm(complex, constraints, motions, i, &q) {
+                    if let Some(arm) = arm_i {
                         accumulate_curvature(&mut curv[0], &r, &arm, a);
                     }
-                    if let Some(arm) = this.arm(complex, constraints, motions, j, &q) {
+                    if let Some(arm) = arm_j {
                         accumulate_curvature(&mut curv[1], &r, &arm, -a);
                     }
                     accumulate_diag(hii, &ji, ni, a);
@@ -685,12 +674,11 @@ where
             let (lo, hi) = self.target_range[k];
             for &t in &self.target_order[lo as usize..hi as usize] {
                 let target = &constraints.targets[t as usize];
-                let (jc, value) =
+                let (jc, value, arm) =
                     self.jacobian(complex, constraints, motions, c as usize, &target.from);
                 let r = value - targets_to[t as usize];
                 accumulate_diag(vals, &jc, s.len, target.weight);
-                if let Some(arm) = self.arm(complex, constraints, motions, c as usize, &target.from)
-                {
+                if let Some(arm) = arm {
                     accumulate_curvature(&mut curvature[c as usize], &r, &arm, target.weight);
                 }
                 for a in 0..s.len {
@@ -699,29 +687,16 @@ where
                 }
             }
         }
-        let rot = <Dim<D> as Rigid<D>>::ROT;
-        let positive: Vec<[f64; 6]> = self
-            .free_cells
-            .iter()
-            .map(|&c| positive_part(&curvature[c as usize], rot))
-            .collect();
-        let exact: Vec<[f64; 6]> = self
-            .free_cells
-            .iter()
-            .map(|&c| curvature[c as usize])
-            .collect();
         // The direct path falls back to the curvature's positive part where the exact one
         // makes the matrix indefinite; the multilevel path falls back to Gauss-Newton (with the
         // positive part its conjugate gradients took 7 iterations instead of 5 on the 1.25 m
         // corridor, and twice as long; with the exact curvature, 4 instead of 5 at 2.5 m).
         let mut newton = newton;
-        let curvature: &[[f64; 6]] = match (newton, self.multilevel.is_some()) {
-            (true, _) => &exact,
-            (false, false) => &positive,
-            (false, true) => &[],
-        };
-        if !curvature.is_empty() {
-            self.add_curvature(&mut values[..cell_part], curvature, 1.0);
+        let cells = &mut values[..cell_part];
+        match (newton, self.multilevel.is_some()) {
+            (true, _) => self.add_curvature(cells, &curvature, false, 1.0),
+            (false, false) => self.add_curvature(cells, &curvature, true, 1.0),
+            (false, true) => {}
         }
         let scale = diag
             .iter()
@@ -745,7 +720,7 @@ where
                     return Ok(step);
                 }
                 if newton {
-                    self.add_curvature(&mut values[..cell_part], &exact, -1.0);
+                    self.add_curvature(&mut values[..cell_part], &curvature, false, -1.0);
                     newton = false;
                     continue;
                 }
@@ -793,8 +768,8 @@ where
             // system first falls back to the curvature's positive part, undamped.
             self.damp(&mut values[..cell_part], &diag, -mu, -1e-12 * scale);
             if newton {
-                self.add_curvature(&mut values[..cell_part], &exact, -1.0);
-                self.add_curvature(&mut values[..cell_part], &positive, 1.0);
+                self.add_curvature(&mut values[..cell_part], &curvature, false, -1.0);
+                self.add_curvature(&mut values[..cell_part], &curvature, true, 1.0);
                 newton = false;
                 continue;
             }
