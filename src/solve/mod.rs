@@ -607,6 +607,9 @@ where
     let size = complex.grid.finest_size();
     let floor = (1e-12 * size).powi(2) * complex.pairs.iter().map(|p| p.weight).sum::<f64>();
     let mut iterations = 0;
+    // Whether the last step lowered the energy by less than half: the multilevel path may
+    // keep its hierarchy (coarse levels built at motions that have hardly moved since).
+    let mut settled = false;
     info.converged = false;
     while iterations < params.max_iterations {
         if energy <= floor {
@@ -616,7 +619,7 @@ where
         let t0 = Instant::now();
         // Newton's curvature once Gauss-Newton has brought the load step near its minimum.
         let newton = params.newton && iterations > 0;
-        let delta = system.step(complex, constraints, motions, &targets_to, newton)?;
+        let delta = system.step(complex, constraints, motions, &targets_to, newton, settled)?;
         info.seconds_factor += t0.elapsed().as_secs_f64();
         if let Some((linear, levels)) = system.multilevel_stats() {
             info.linear_iterations += linear;
@@ -663,6 +666,7 @@ where
         };
         motions.copy_from_slice(&trial);
         let decrease = energy - e;
+        settled = newton && 2.0 * decrease < energy;
         energy = e;
         iterations += 1;
         info.iterations += 1;

@@ -84,6 +84,8 @@ struct Multilevel {
     /// Conjugate-gradient iterations of the last solve and levels of its hierarchy.
     iterations: AtomicUsize,
     levels: AtomicUsize,
+    /// The last hierarchy and the iterations of its first solve.
+    kept: std::sync::Mutex<Option<(Hierarchy, usize)>>,
 }
 
 /// The storage of an iteration: the assembled values (one slot per block entry), the numeric
@@ -348,6 +350,7 @@ where
             edge_pairs,
             iterations: AtomicUsize::new(0),
             levels: AtomicUsize::new(0),
+            kept: std::sync::Mutex::new(None),
         }
     }
 
@@ -365,6 +368,7 @@ where
         motions: &[Motion<D>],
         mu: f64,
         floor: f64,
+        settled: bool,
     ) -> Option<Vec<f64>> {
         let dof = Self::DOF;
         let bb = dof * dof;
@@ -434,7 +438,23 @@ where
                 .map(|&c| matches!(constraints.roles[c as usize], Role::Pin(_)))
                 .collect(),
         };
-        let hierarchy = Hierarchy::new::<D>(matrix, nodes, complex.grid.finest_size());
+        let kept = ml
+            .kept
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .take()
+            .filter(|_| settled);
+        let (hierarchy, first) = match kept {
+            Some((mut h, first)) => {
+                h.refresh(matrix);
+                (h, Some(first))
+            }
+            None => {
+                let limits = [super::multilevel::COARSEST, super::multilevel::FACTORED];
+                let size = complex.grid.finest_size();
+                (Hierarchy::new::<D>(matrix, nodes, size, limits), None)
+            }
+        };
         let mut rhs = vec![0.0; self.free_cells.len() * dof];
         for (k, &c) in self.free_cells.iter().enumerate() {
             let s = self.slots[c as usize];
@@ -445,6 +465,13 @@ where
         let (x, iterations) = hierarchy.solve(&rhs)?;
         ml.iterations.store(iterations, Ordering::Relaxed);
         ml.levels.store(hierarchy.depth(), Ordering::Relaxed);
+        // Kept for the next step unless it has aged: twice the iterations it first took.
+        let first = first.unwrap_or(iterations);
+        if iterations <= 2 * first + 2 {
+            let mut hierarchy = hierarchy;
+            hierarchy.shed_finest();
+            *ml.kept.lock().unwrap_or_else(|e| e.into_inner()) = Some((hierarchy, first));
+        }
         let mut step = vec![0.0; self.n];
         for (k, &c) in self.free_cells.iter().enumerate() {
             let s = self.slots[c as usize];
@@ -567,6 +594,7 @@ where
         motions: &[Motion<D>],
         targets_to: &[Vect<D>],
         newton: bool,
+        settled: bool,
     ) -> Result<Vec<f64>> {
         let cell_part = self.free_cells.len() * Self::CELL_SLOT;
         let mut buffers = std::mem::take(&mut self.buffers);
@@ -578,6 +606,7 @@ where
             motions,
             targets_to,
             newton,
+            settled,
         );
         self.buffers = buffers;
         result
@@ -593,6 +622,7 @@ where
         motions: &[Motion<D>],
         targets_to: &[Vect<D>],
         newton: bool,
+        settled: bool,
     ) -> Result<Vec<f64>> {
         let dof = Self::DOF;
         let Buffers {
@@ -716,6 +746,7 @@ where
                     motions,
                     mu,
                     scale_floor,
+                    settled && mu == 0.0,
                 ) {
                     return Ok(step);
                 }
