@@ -185,34 +185,21 @@ where
             match params.method {
                 Method::Multilevel => system.set_up_multilevel(complex),
                 Method::Direct => system.set_up_direct(complex, params, advice)?,
-                // Cells of one size (a scan, a shell) beyond one level's worth: the multilevel
-                // path, faster from 4k free cells on (BENCHMARKS.md: the tube's 4.2k, 1.6 s
-                // against 1.9 s; the corridor at 2.5 m, 13 s against 24 s). A solid with large
-                // interior cells (the bunny at 20k cells: 38 s against 15 s) or a small system:
-                // the factorization where it fits, else the multilevel path (memory linear in
+                // The factorization where it fits, else the multilevel path (memory linear in
                 // the cells).
-                Method::Auto => {
-                    let level = complex.cells.first().map(|c| c.key.level);
-                    let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);
-                    let multilevel = SolveParams {
-                        method: Method::Multilevel,
-                        ..*params
-                    };
-                    if uniform && system.free_cells.len() > super::multilevel::COARSEST {
+                Method::Auto => match system.set_up_direct(complex, params, advice) {
+                    Ok(()) => {}
+                    Err(Error::Memory { .. } | Error::Solver(_)) => {
+                        let multilevel = SolveParams {
+                            method: Method::Multilevel,
+                            ..*params
+                        };
                         super::check_solver_memory(complex.len(), &multilevel, advice)?;
+                        system.buffers = Buffers::default();
                         system.set_up_multilevel(complex);
-                    } else {
-                        match system.set_up_direct(complex, params, advice) {
-                            Ok(()) => {}
-                            Err(Error::Memory { .. } | Error::Solver(_)) => {
-                                super::check_solver_memory(complex.len(), &multilevel, advice)?;
-                                system.buffers = Buffers::default();
-                                system.set_up_multilevel(complex);
-                            }
-                            Err(e) => return Err(e),
-                        }
                     }
-                }
+                    Err(e) => return Err(e),
+                },
             }
         }
         Ok(system)
