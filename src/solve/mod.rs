@@ -90,8 +90,9 @@ pub struct SolveParams {
 /// How the Gauss-Newton normal equations are solved.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum Method {
-    /// [`Method::Direct`] where its factor fits the memory budget and its 32-bit indices (it
-    /// is the faster where it fits: BENCHMARKS.md), else [`Method::Multilevel`].
+    /// [`Method::Multilevel`] for cells of one size (a scan, a shell) past 100,000 free cells;
+    /// otherwise [`Method::Direct`] where its factor fits the memory budget and its 32-bit
+    /// indices, else [`Method::Multilevel`] (BENCHMARKS.md: which is faster where).
     #[default]
     Auto,
     /// faer's supernodal sparse Cholesky (memory grows faster than the cells: its fill).

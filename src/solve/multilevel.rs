@@ -32,7 +32,8 @@
 //! (a third level of 13.7k groups with 71 neighbors each took 13 s to factor, 239 s in all);
 //! unsmoothed levels below the first keep the stencil and the iteration count (12–16 per step
 //! against 10–13): 115 s and 4.4 GB instead of 10.5. A fourth unsmoothed level (2.8k groups)
-//! doubled the iterations. Geometric nested dissection of the coarse level, tried instead of
+//! doubled the iterations; so the coarsening stops at [`FACTORED`] nodes, as few unsmoothed
+//! levels as the factor's cost allows. Geometric nested dissection of the coarse level, tried instead of
 //! faer's AMD, gave a factor half as large again (77M entries against 49M at 13.7k groups).
 //! Earlier tried and not kept: plain (unsmoothed) rigid aggregation on every level, whose
 //! piecewise-rigid groups represent a bending plate badly (100–140 iterations per step on a
@@ -49,8 +50,10 @@ use crate::rigid::{Dim, MAX_DOF, Rigid, Vect};
 /// A system of at most this many nodes is factored directly, without a hierarchy.
 pub(crate) const COARSEST: usize = 2000;
 /// Levels past the first are coarsened until they have at most this many nodes; the last is
-/// factored directly (about a second at 15,000 nodes with the first level's wide stencil).
-pub(crate) const FACTORED: usize = 15_000;
+/// factored directly (1–2 s at 14–20k nodes with the first level's wide stencil). Each
+/// unsmoothed level costs iterations: on the 10M-point terrain at 123k cells, a third level
+/// below a first coarse level of 20k groups took 224 CG iterations where two levels took 26.
+pub(crate) const FACTORED: usize = 30_000;
 /// The Chebyshev smoother's degree.
 const SMOOTH_DEGREE: usize = 2;
 /// The smoother targets the upper `1/RATIO` of the spectrum of `D⁻¹H`.

@@ -73,6 +73,11 @@ pub(crate) struct System<const D: usize> {
     positions: Positions,
 }
 
+/// Free cells past which `auto` solves a complex of one-size cells by the multilevel path: on
+/// the 10M-point terrain the factorization is the faster up to 80k free cells (12.3 s against
+/// 15.1 s), the multilevel path from 229k (27 s against 42 s; at 742k in half the memory).
+const MULTILEVEL_FROM: usize = 100_000;
+
 /// The multilevel path's view of the unknowns: node `k` is the free cell `free_cells[k]`; the
 /// pairs of each node (`2 · pair slot + side`, over `pair_start`), and the pairs joining two
 /// nodes, with their nodes.
@@ -185,21 +190,32 @@ where
             match params.method {
                 Method::Multilevel => system.set_up_multilevel(complex),
                 Method::Direct => system.set_up_direct(complex, params, advice)?,
-                // The factorization where it fits, else the multilevel path (memory linear in
-                // the cells).
-                Method::Auto => match system.set_up_direct(complex, params, advice) {
-                    Ok(()) => {}
-                    Err(Error::Memory { .. } | Error::Solver(_)) => {
-                        let multilevel = SolveParams {
-                            method: Method::Multilevel,
-                            ..*params
-                        };
+                // Cells of one size (a scan, a shell) past `MULTILEVEL_FROM` free cells: the
+                // multilevel path (BENCHMARKS.md, "Which solver `auto` takes": faster from
+                // there, in half the memory). Otherwise the factorization where it fits, else
+                // the multilevel path (memory linear in the cells).
+                Method::Auto => {
+                    let level = complex.cells.first().map(|c| c.key.level);
+                    let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);
+                    let multilevel = SolveParams {
+                        method: Method::Multilevel,
+                        ..*params
+                    };
+                    if uniform && system.free_cells.len() > MULTILEVEL_FROM {
                         super::check_solver_memory(complex.len(), &multilevel, advice)?;
-                        system.buffers = Buffers::default();
                         system.set_up_multilevel(complex);
+                    } else {
+                        match system.set_up_direct(complex, params, advice) {
+                            Ok(()) => {}
+                            Err(Error::Memory { .. } | Error::Solver(_)) => {
+                                super::check_solver_memory(complex.len(), &multilevel, advice)?;
+                                system.buffers = Buffers::default();
+                                system.set_up_multilevel(complex);
+                            }
+                            Err(e) => return Err(e),
+                        }
                     }
-                    Err(e) => return Err(e),
-                },
+                }
             }
         }
         Ok(system)
