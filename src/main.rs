@@ -76,6 +76,9 @@ enum Command {
         edit: Option<PathBuf>,
         #[command(flatten)]
         cells: CellArgs,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
     },
     /// Render a file to a PNG: meshes and soups as shaded triangles, point clouds as shaded
     /// splats (LAS RGB, or intensity, when present).
@@ -294,7 +297,8 @@ struct CellArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum SolverArg {
-    /// The factorization where it fits the memory budget, else the multilevel solver.
+    /// Multilevel for cells of one size past 100,000 free cells; else the factorization where it
+    /// fits the memory budget, else multilevel.
     Auto,
     /// Sparse Cholesky factorization (fill-in: memory grows faster than the cells).
     Direct,
@@ -447,7 +451,8 @@ fn main() -> ExitCode {
             output,
             edit,
             cells,
-        } => run_cells(&input, &output, edit.as_deref(), &cells),
+            quiet,
+        } => run_cells(&input, &output, edit.as_deref(), &cells, quiet),
         Command::Demo { out, quiet } => run_demo(&out, quiet),
     };
     match result {
@@ -486,6 +491,7 @@ fn run_cells(
     output: &Path,
     edit: Option<&Path>,
     cells: &CellArgs,
+    quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
     let ply = output
@@ -512,10 +518,13 @@ fn run_cells(
         CHUNK,
         &rigidcells::progress::Silent,
     )?;
+    write_cells_ply(output, &complex, solution.as_ref())?;
+    if quiet {
+        return Ok(());
+    }
     for w in &warnings {
         eprintln!("warning: {w}");
     }
-    write_cells_ply(output, &complex, solution.as_ref())?;
     let shown = solution.as_ref().map_or(&complex, |s| &s.complex);
     println!(
         "{} -> {}: {} cells ({} boundary, {} interior), finest cell {}",

@@ -193,6 +193,19 @@ fn cells_export_writes_closed_boxes() {
         (volumes[1] / volumes[0] - 1.0).abs() < 1e-9,
         "rigid boxes keep their volume: {volumes:?}"
     );
+    // `-q` writes the same file and prints nothing.
+    let quiet = dir.path().join("quiet.ply");
+    let r = common::run(&[
+        "cells",
+        input.to_str().unwrap(),
+        "-o",
+        quiet.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stdout.is_empty() && r.stderr.is_empty(), "{r:?}");
+    let same = std::fs::read(dir.path().join("cells_false.ply")).unwrap();
+    assert_eq!(std::fs::read(&quiet).unwrap(), same);
 }
 
 /// `--cells N` picks the finest cell size that gives about N cells, for a mesh (bisection on its

@@ -22,8 +22,10 @@ pub fn files(dir: &Path, input: &str, output: &str) -> (PathBuf, PathBuf, PathBu
     (dir.join(input), dir.join(output), dir.join("edit.toml"))
 }
 
+#[derive(Debug)]
 pub struct Run {
     pub code: i32,
+    pub stdout: String,
     pub stderr: String,
 }
 
@@ -31,6 +33,7 @@ pub fn run(args: &[&str]) -> Run {
     let out = bin().args(args).output().expect("run rigidcells");
     Run {
         code: out.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
         stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
     }
 }
