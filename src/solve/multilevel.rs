@@ -2,8 +2,8 @@
 //!
 //! The normal equations `H δ = −g` of [`super::system`] are block-sparse: one `DOF × DOF` block
 //! per cell with freedom and one per pair of such face neighbors. This module solves them by
-//! conjugate gradients preconditioned with a two-level smoothed-aggregation multigrid whose
-//! coarse space is the rigid motions themselves:
+//! conjugate gradients preconditioned with a smoothed-aggregation multigrid whose coarse space
+//! is the rigid motions themselves:
 //!
 //! - **Groups.** Cells are grouped by the blocks of a regular grid of twice the finest cell
 //!   size (rest centers); where that merges too little (large interior cells) the step doubles.
@@ -17,6 +17,8 @@
 //! - **Smoothing.** A Chebyshev polynomial of degree [`SMOOTH_DEGREE`] in the block-Jacobi
 //!   preconditioned matrix over `[λ/RATIO, λ]`, `λ` its largest eigenvalue by power iteration,
 //!   the same before and after the coarse correction (a symmetric positive preconditioner).
+//!   It multiplies by `f32` copies of the level matrices (half the memory traffic of the
+//!   smoothing, which is most of an iteration); conjugate gradients multiply by the `f64` one.
 //! - **Kept between steps.** Once a Gauss-Newton step has lowered the energy by less than
 //!   half, the next step keeps the coarse levels and renews only the finest level's matrix and
 //!   smoother ([`Hierarchy::refresh`]): the preconditioner stays symmetric positive definite,
@@ -24,7 +26,8 @@
 //!
 //! Conjugate gradients stop at [`TOLERANCE`] of the right-hand side: Gauss-Newton needs a
 //! descent direction, and its line search and energy test are unchanged, so it reaches the
-//! direct solve's minimum (tested in `tests/solver.rs`).
+//! direct solve's minimum (tested in `tests/solver.rs`; the levels and the refresh on a lattice
+//! plate in this module's tests).
 //!
 //! **Why these levels** (BENCHMARKS.md, the 1 km corridor at 1.25 m, 432k free cells): with
 //! two levels the coarse level (74k groups, the smoothed prolongation's wide stencil) took
@@ -33,8 +36,9 @@
 //! unsmoothed levels below the first keep the stencil and the iteration count (12–16 per step
 //! against 10–13): 115 s and 4.4 GB instead of 10.5. A fourth unsmoothed level (2.8k groups)
 //! doubled the iterations; so the coarsening stops at [`FACTORED`] nodes, as few unsmoothed
-//! levels as the factor's cost allows. Geometric nested dissection of the coarse level, tried instead of
-//! faer's AMD, gave a factor half as large again (77M entries against 49M at 13.7k groups).
+//! levels as the factor's cost allows. Geometric nested dissection of the coarse level, tried
+//! instead of faer's AMD, gave a factor half as large again (77M entries against 49M at 13.7k
+//! groups).
 //! Earlier tried and not kept: plain (unsmoothed) rigid aggregation on every level, whose
 //! piecewise-rigid groups represent a bending plate badly (100–140 iterations per step on a
 //! one-cell-thick terrain), and a K-cycle (Notay) over the same levels.
