@@ -20,8 +20,8 @@
 //! fail, falls back to plain Gauss-Newton). The first iteration of each load step, which starts
 //! where the handles jumped, uses the positive part too. A load step before the last only
 //! has to bring the motions near the path's minimum (so that the next starts on the right
-//! side of a saddle): it stops at [`INTERMEDIATE_TOLERANCE`] or after
-//! [`INTERMEDIATE_ITERATIONS`]. On the tube: 42 iterations and 5.6 s became 11 iterations and
+//! side of a saddle): it stops at `INTERMEDIATE_TOLERANCE` or after
+//! `INTERMEDIATE_ITERATIONS`. On the tube: 42 iterations and 5.6 s became 11 iterations and
 //! 1.8 s, to a slightly lower energy (BENCHMARKS.md). Tried and not kept: keeping an earlier
 //! step's Cholesky factor as the preconditioner of conjugate gradients on the next steps'
 //! matrices — 5–12 iterations, each a pair of triangular solves costing a tenth of a
