@@ -250,12 +250,16 @@ struct Level {
 }
 
 /// A block-sparse prolongation: the coarse nodes `to[start[i]..start[i + 1]]` of fine node `i`
-/// and their blocks.
+/// and their blocks; and by coarse node, its entries with their fine nodes
+/// `entries[from[g]..from[g + 1]]` (in fine node order), so that the restriction sums each coarse row in one fixed order, whatever the
+/// number of threads (the same bits on every machine).
 struct Prolongation {
     start: Vec<u32>,
     to: Vec<u32>,
     blocks: Vec<f64>,
     coarse: usize,
+    from: Vec<u32>,
+    entries: Vec<[u32; 2]>,
 }
 
 /// The multigrid hierarchy of one Gauss-Newton system.
@@ -313,12 +317,7 @@ impl Hierarchy {
             let prolongation = if levels.is_empty() {
                 smoothed(&matrix, &inverse, lambda, &group, &tentative, count)
             } else {
-                Prolongation {
-                    start: (0..=matrix.n as u32).collect(),
-                    to: group,
-                    blocks: tentative,
-                    coarse: count,
-                }
+                Prolongation::new((0..=matrix.n as u32).collect(), group, tentative, count)
             };
             let next = galerkin(&matrix, &prolongation);
             let smoother = matrix.to_f32();
@@ -593,38 +592,53 @@ where
 }
 
 impl Prolongation {
-    /// `Pᵀ r`: each thread sums its share of the fine nodes into its own coarse vector.
+    fn new(start: Vec<u32>, to: Vec<u32>, blocks: Vec<f64>, coarse: usize) -> Self {
+        let mut from = vec![0u32; coarse + 1];
+        for &g in &to {
+            from[g as usize + 1] += 1;
+        }
+        for g in 0..coarse {
+            from[g + 1] += from[g];
+        }
+        let mut fill = from.clone();
+        let mut entries = vec![[0u32; 2]; to.len()];
+        for i in 0..start.len() - 1 {
+            for e in start[i]..start[i + 1] {
+                let g = to[e as usize] as usize;
+                entries[fill[g] as usize] = [e, i as u32];
+                fill[g] += 1;
+            }
+        }
+        Self {
+            start,
+            to,
+            blocks,
+            coarse,
+            from,
+            entries,
+        }
+    }
+
+    /// `Pᵀ r`, each coarse row summed over its entries in fine node order.
     fn restrict(&self, r: &[f64], d: usize) -> Vec<f64> {
         let bb = d * d;
-        let fine = self.start.len() - 1;
-        let chunk = fine.div_ceil(rayon::current_num_threads()).max(1);
-        (0..fine.div_ceil(chunk))
-            .into_par_iter()
-            .map(|c| {
-                let mut rc = vec![0.0; self.coarse * d];
-                for i in c * chunk..((c + 1) * chunk).min(fine) {
-                    let ri = &r[i * d..(i + 1) * d];
-                    for e in self.start[i] as usize..self.start[i + 1] as usize {
-                        let p = &self.blocks[e * bb..(e + 1) * bb];
-                        let g = self.to[e] as usize;
-                        let out = &mut rc[g * d..(g + 1) * d];
-                        for row in 0..d {
-                            let v = ri[row];
-                            if v != 0.0 {
-                                for c in 0..d {
-                                    out[c] += p[row * d + c] * v;
-                                }
-                            }
+        let mut rc = vec![0.0; self.coarse * d];
+        rc.par_chunks_mut(d).enumerate().for_each(|(g, out)| {
+            for &[e, i] in &self.entries[self.from[g] as usize..self.from[g + 1] as usize] {
+                let (e, i) = (e as usize, i as usize);
+                let ri = &r[i * d..(i + 1) * d];
+                let p = &self.blocks[e * bb..(e + 1) * bb];
+                for row in 0..d {
+                    let v = ri[row];
+                    if v != 0.0 {
+                        for c in 0..d {
+                            out[c] += p[row * d + c] * v;
                         }
                     }
                 }
-                rc
-            })
-            .reduce_with(|mut a, b| {
-                add(&mut a, &b);
-                a
-            })
-            .unwrap_or_else(|| vec![0.0; self.coarse * d])
+            }
+        });
+        rc
     }
 
     /// `x += P xc`.
@@ -691,12 +705,7 @@ fn smoothed(
         }
         start.push(to.len() as u32);
     }
-    Prolongation {
-        start,
-        to,
-        blocks,
-        coarse,
-    }
+    Prolongation::new(start, to, blocks, coarse)
 }
 
 /// The Galerkin product `Pᵀ H P`.
@@ -929,8 +938,16 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(a, b)| a * b).sum()
 }
 
+/// `a · b`, summed in chunks of a fixed length and the chunks in order: the same bits whatever
+/// the number of threads.
 fn par_dot(a: &[f64], b: &[f64]) -> f64 {
-    a.par_iter().zip(b).map(|(a, b)| a * b).sum()
+    const CHUNK: usize = 1 << 14;
+    let parts: Vec<f64> = a
+        .par_chunks(CHUNK)
+        .zip(b.par_chunks(CHUNK))
+        .map(|(a, b)| dot(a, b))
+        .collect();
+    parts.iter().sum()
 }
 
 fn norm(a: &[f64]) -> f64 {
@@ -1045,5 +1062,33 @@ mod tests {
         let (x, again) = h.solve(&b).unwrap();
         assert!(again <= 30, "{again} iterations after the refresh");
         assert!(residual(&check, &x, &b) <= TOLERANCE);
+    }
+
+    /// The solve gives the same bits on one thread and on three (fixed summation orders).
+    #[test]
+    fn solves_the_same_on_any_number_of_threads() {
+        let b: Vec<f64> = (0..96 * 24 * 3)
+            .map(|i| ((i * 31) % 17) as f64 - 8.0)
+            .collect();
+        let solve = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let (matrix, nodes) = lattice(96, 24, 1.0);
+                Hierarchy::new(matrix, nodes, 1.0, [100, 60])
+                    .solve(&b)
+                    .unwrap()
+            })
+        };
+        let (one, three) = (solve(1), solve(3));
+        assert_eq!(one.1, three.1);
+        assert!(
+            one.0
+                .iter()
+                .zip(&three.0)
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        );
     }
 }
