@@ -519,3 +519,34 @@ fn coarsening_frees_rest_parts_that_join_a_constrained_one() {
     let speck_cell = coarse.locate(&(speck[0] - coarse.grid.origin)).unwrap();
     assert_eq!(merged.roles[speck_cell], Role::Free);
 }
+
+/// The glue energy, which the line search compares, is summed in a fixed order: the same bits
+/// on one thread and on three.
+#[test]
+fn glue_energy_is_the_same_on_any_number_of_threads() {
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let complex = cells(&pts, &triangles, 0.1);
+    let motions: Vec<Motion<3>> = complex
+        .cells
+        .iter()
+        .map(|c| {
+            let mut m = Motion::rest(&c.center);
+            m.pos.z += 0.01 * c.center.x * c.center.x;
+            m
+        })
+        .collect();
+    let stiffness = vec![1.0; complex.len()];
+    let energy = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| solve::glue_energy(&complex, &motions, &stiffness))
+    };
+    assert!(
+        complex.pairs.len() > 1 << 13,
+        "{} pairs",
+        complex.pairs.len()
+    );
+    assert_eq!(energy(1).to_bits(), energy(3).to_bits());
+}
