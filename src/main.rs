@@ -286,9 +286,8 @@ struct CellArgs {
     #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
     inside: InsideArg,
     /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
-    /// conjugate gradients with a two-level rigid-motion multigrid (reaches the same minimum;
-    /// slower than the factorization up to at least 342k cells, BENCHMARKS.md); auto: the
-    /// factorization where its factor fits the memory budget, else the multigrid.
+    /// conjugate gradients with a rigid-motion multigrid (the same minimum, memory linear in
+    /// the cells; BENCHMARKS.md says which is faster where).
     #[arg(long, value_enum, default_value_t = SolverArg::Auto)]
     solver: SolverArg,
     #[command(flatten)]

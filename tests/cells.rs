@@ -169,16 +169,12 @@ fn cells_export_writes_closed_boxes() {
     let mut volumes = Vec::new();
     for solved in [false, true] {
         let output = dir.path().join(format!("cells_{solved}.ply"));
-        let mut args = vec![
-            "cells",
-            input.to_str().unwrap(),
-            "-o",
-            output.to_str().unwrap(),
-        ];
-        if solved {
-            args.extend(["--edit", edit.to_str().unwrap()]);
-        }
-        let r = common::run(&args);
+        let extra = if solved {
+            vec!["--edit", common::arg(&edit)]
+        } else {
+            vec![]
+        };
+        let r = common::cells(&input, &output, &extra);
         assert_eq!(r.code, 0, "{}", r.stderr);
         let doc = Document::read(&output).unwrap();
         let n = doc.positions().len() / 8;
@@ -195,13 +191,7 @@ fn cells_export_writes_closed_boxes() {
     );
     // `-q` writes the same file and prints nothing.
     let quiet = dir.path().join("quiet.ply");
-    let r = common::run(&[
-        "cells",
-        input.to_str().unwrap(),
-        "-o",
-        quiet.to_str().unwrap(),
-        "-q",
-    ]);
+    let r = common::cells(&input, &quiet, &["-q"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(r.stdout.is_empty() && r.stderr.is_empty(), "{r:?}");
     let same = std::fs::read(dir.path().join("cells_false.ply")).unwrap();
@@ -222,14 +212,7 @@ fn cells_option_gives_about_the_asked_count() {
     ] {
         let output = dir.path().join("cells.ply");
         let want = n.to_string();
-        let r = common::run(&[
-            "cells",
-            input.to_str().unwrap(),
-            "-o",
-            output.to_str().unwrap(),
-            "--cells",
-            &want,
-        ]);
+        let r = common::cells(&input, &output, &["--cells", &want]);
         assert_eq!(r.code, 0, "{}", r.stderr);
         let got = Document::read(&output).unwrap().positions().len() / 8;
         assert!(

@@ -379,11 +379,7 @@ where
     if parts == count {
         return Err(Error::NoConstraints);
     }
-    if loose > 0 {
-        warnings.push(format!(
-            "{parts} of {count} connected parts ({loose} cells) have no constraint and keep their rest pose"
-        ));
-    }
+    warnings.extend(loose);
     Ok(Constraints {
         roles,
         handles,
@@ -395,14 +391,18 @@ where
     })
 }
 
+/// The end of the warning [`anchor`] gives.
+const LOOSE_WARNING: &str = "have no constraint and keep their rest pose";
+
 /// Gives [`Role::Rest`] to the cells of every connected part of `complex` that holds no
 /// constraint (no role other than free or rest, no target), and [`Role::Free`] to rest cells
-/// of parts that do. Returns the parts without a constraint, all parts, and their cells.
+/// of parts that do. Returns the parts without a constraint, all parts, and the warning that
+/// names them (none when every part holds a constraint).
 fn anchor<const D: usize>(
     complex: &CellComplex<D>,
     roles: &mut [Role],
     targets: &[TargetLocal<D>],
-) -> (usize, usize, usize) {
+) -> (usize, usize, Option<String>) {
     let (component, count) = complex.components();
     let mut anchored = vec![false; count];
     for (c, r) in roles.iter().enumerate() {
@@ -420,7 +420,10 @@ fn anchor<const D: usize>(
             *r = Role::Free;
         }
     }
-    (anchored.iter().filter(|&&a| !a).count(), count, loose)
+    let parts = anchored.iter().filter(|&&a| !a).count();
+    let warning = (loose > 0)
+        .then(|| format!("{parts} of {count} connected parts ({loose} cells) {LOOSE_WARNING}"));
+    (parts, count, warning)
 }
 
 /// The constraints of a complex made by [`CellComplex::split`]: children inherit their parent's
@@ -563,20 +566,21 @@ pub fn coarsen<const D: usize>(
         stiffness: leaves.iter().map(|l| l.3).collect(),
         ..constraints.clone()
     };
-    // Pins and targets kept their cells; find them again by position.
+    // The cells of pins and targets were kept as they were (`keep`): found again by key.
+    let index_of = |c: u32| {
+        let key = complex.cells[c as usize].key;
+        leaves
+            .binary_search_by_key(&key, |l| l.0)
+            .expect("a kept cell is a leaf of the coarse complex") as u32
+    };
     for p in &mut out.pins {
-        p.cell = coarse.locate(&p.point).unwrap_or(0) as u32;
+        p.cell = index_of(p.cell);
     }
     for t in &mut out.targets {
-        t.cell = coarse.locate(&t.from).unwrap_or(0) as u32;
+        t.cell = index_of(t.cell);
     }
-    let (parts, count, loose) = anchor(&coarse, &mut out.roles, &out.targets);
-    out.warnings
-        .retain(|w| !w.ends_with("have no constraint and keep their rest pose"));
-    if loose > 0 {
-        out.warnings.push(format!(
-            "{parts} of {count} connected parts ({loose} cells) have no constraint and keep their rest pose"
-        ));
-    }
+    let (_, _, loose) = anchor(&coarse, &mut out.roles, &out.targets);
+    out.warnings.retain(|w| !w.ends_with(LOOSE_WARNING));
+    out.warnings.extend(loose);
     (coarse, out)
 }

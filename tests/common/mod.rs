@@ -59,6 +59,13 @@ pub fn deform_verbose(input: &Path, output: &Path, edit: &Path, extra: &[&str]) 
     run(&args)
 }
 
+/// `rigidcells cells INPUT -o OUTPUT` plus `extra` arguments.
+pub fn cells(input: &Path, output: &Path, extra: &[&str]) -> Run {
+    let mut args = vec!["cells", arg(input), "-o", arg(output)];
+    args.extend_from_slice(extra);
+    run(&args)
+}
+
 /// A path as a command-line argument.
 pub fn arg(path: &Path) -> &str {
     path.to_str().expect("a UTF-8 path")
