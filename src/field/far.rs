@@ -81,11 +81,11 @@ struct Node<const D: usize> {
 impl<const D: usize> FarField<D> {
     /// The hierarchy over `centers` (axis by axis) with kernel `weights` (component by
     /// component), whose sums err by at most `tolerance` per component.
-    pub fn new(centers: &[Vec<f64>; D], weights: &[Vec<f64>; D], tolerance: f64) -> Self {
+    pub fn new(centers: [&[f64]; D], weights: [&[f64]; D], tolerance: f64) -> Self {
         let n = centers[0].len();
         let mut order: Vec<usize> = (0..n).collect();
         let mut nodes = Vec::new();
-        split(centers, &mut order, 0, &mut nodes);
+        split(&centers, &mut order, 0, &mut nodes);
         let centers: [Vec<f64>; D] =
             std::array::from_fn(|a| order.iter().map(|&i| centers[a][i]).collect());
         let weights: [Vec<f64>; D] =
@@ -180,7 +180,7 @@ impl<const D: usize> FarField<D> {
 /// Appends the node over `order[..]` (which starts at `start` of the whole order) and its
 /// subtree to `nodes`; returns its index.
 fn split<const D: usize>(
-    centers: &[Vec<f64>; D],
+    centers: &[&[f64]; D],
     order: &mut [usize],
     start: usize,
     nodes: &mut Vec<Node<D>>,
@@ -280,6 +280,7 @@ impl<const D: usize> Node<D> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::field::simd::slices;
 
     /// `Σ_i w_k[i] |y − c_i|³` term by term, and the same sum of `|w_k[i]|` terms (the scale of
     /// its rounding).
@@ -310,7 +311,7 @@ mod tests {
         let centers: [Vec<f64>; 3] =
             std::array::from_fn(|_| (0..n).map(|_| 0.1 * next()).collect());
         let weights: [Vec<f64>; 3] = std::array::from_fn(|_| (0..n).map(|_| next()).collect());
-        let tree = FarField::new(&centers, &weights, 1.0);
+        let tree = FarField::new(slices(&centers), slices(&weights), 1.0);
         let node = &tree.nodes[0];
         assert_eq!(node.end - node.start, n);
         for _ in 0..10 {
@@ -356,10 +357,10 @@ mod tests {
             })
             .collect();
         // A tolerance beyond every node's bound: expansions are used even at the centroid.
-        let loose = FarField::new(&centers, &weights, 1e12);
+        let loose = FarField::new(slices(&centers), slices(&weights), 1e12);
         assert!(loose.reach() < 0.0 && loose.expands_at(&loose.nodes[0].z));
         for tolerance in [10.0, 1.0, 0.1, 0.0] {
-            let tree = FarField::new(&centers, &weights, tolerance);
+            let tree = FarField::new(slices(&centers), slices(&weights), tolerance);
             let mut used = 0.0f64;
             for y in &points {
                 let (got, bound) = tree.sum_with_bound(y);

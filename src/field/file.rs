@@ -150,7 +150,10 @@ where
                 put(&mut out, inv_scale);
                 constant.iter().for_each(|&v| put(&mut out, v));
                 linear.iter().flatten().for_each(|&v| put(&mut out, v));
-                weights.iter().flatten().for_each(|&v| put(&mut out, v));
+                weights
+                    .iter()
+                    .flat_map(|w| w.iter())
+                    .for_each(|&v| put(&mut out, v));
             }
         }
         crate::io::write_atomic(path, &out)

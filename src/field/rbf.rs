@@ -31,10 +31,13 @@ use crate::rigid::Vect;
 /// The RBF transfer of a field.
 #[derive(Clone)]
 pub struct Rbf<const D: usize> {
-    /// Center coordinates, axis by axis, scaled.
-    centers: [Vec<f64>; D],
-    /// Kernel weights `a`, component by component.
-    weights: [Vec<f64>; D],
+    /// In one allocation, so that evaluating a patch of [`super::PuRbf`] reads one block of
+    /// memory: the center coordinates axis by axis (scaled), the kernel weights `a` component
+    /// by component, and `w_k[i] c_a[i]` axis by axis then component by component (the second
+    /// sums of the Jacobian, [`Rbf::jacobian`]); `n` numbers each.
+    data: Vec<f64>,
+    /// The number of centers.
+    n: usize,
     /// `b_0` per component.
     constant: Vect<D>,
     /// `B` (row: component, column: axis), in scaled coordinates.
@@ -43,9 +46,6 @@ pub struct Rbf<const D: usize> {
     shift: Vect<D>,
     /// Scale factor `1/L`.
     inv_scale: f64,
-    /// `w_k[i] c_a[i]`, axis by axis then component by component: the second sums of the
-    /// Jacobian ([`Rbf::jacobian`]).
-    weighted_centers: [[Vec<f64>; D]; D],
     /// The far-field evaluation, when one was asked for ([`Rbf::with_tolerance`]).
     far: Option<FarField<D>>,
 }
@@ -168,26 +168,47 @@ impl<const D: usize> Rbf<D> {
         shift: Vect<D>,
         inv_scale: f64,
     ) -> Self {
-        let centers: [Vec<f64>; D] = std::array::from_fn(|a| c.iter().map(|v| v[a]).collect());
-        let weighted_centers = std::array::from_fn(|a| {
-            std::array::from_fn(|k| {
-                weights[k]
-                    .iter()
-                    .zip(&centers[a])
-                    .map(|(w, c)| w * c)
-                    .collect()
-            })
-        });
+        let n = c.len();
+        let mut data = Vec::with_capacity((2 * D + D * D) * n);
+        for a in 0..D {
+            data.extend(c.iter().map(|v| v[a]));
+        }
+        for w in &weights {
+            data.extend_from_slice(w);
+        }
+        for a in 0..D {
+            for w in &weights {
+                data.extend(w.iter().zip(c).map(|(w, c)| w * c[a]));
+            }
+        }
         Self {
-            centers,
-            weights,
+            data,
+            n,
             constant,
             linear,
             shift,
             inv_scale,
-            weighted_centers,
             far: None,
         }
+    }
+
+    /// The scaled centers, axis by axis.
+    #[inline]
+    fn centers(&self) -> [&[f64]; D] {
+        std::array::from_fn(|a| &self.data[a * self.n..(a + 1) * self.n])
+    }
+
+    /// The kernel weights, component by component.
+    #[inline]
+    fn weights(&self) -> [&[f64]; D] {
+        std::array::from_fn(|k| &self.data[(D + k) * self.n..(D + k + 1) * self.n])
+    }
+
+    /// `w_k[i] c_a[i]` for axis `a` and component `k`.
+    #[inline]
+    fn weighted_centers(&self, a: usize, k: usize) -> &[f64] {
+        let s = 2 * D + a * D + k;
+        &self.data[s * self.n..(s + 1) * self.n]
     }
 
     /// Evaluates positions through the far field of [`super::far`]: each coordinate of the
@@ -196,7 +217,7 @@ impl<const D: usize> Rbf<D> {
     pub fn with_tolerance(mut self, tolerance: f64) -> Result<Self> {
         Self::check_tolerance(tolerance)?;
         self.far = (tolerance > 0.0)
-            .then(|| FarField::new(&self.centers, &self.weights, tolerance * self.inv_scale));
+            .then(|| FarField::new(self.centers(), self.weights(), tolerance * self.inv_scale));
         Ok(self)
     }
 
@@ -223,7 +244,7 @@ impl<const D: usize> Rbf<D> {
         let y = self.scaled(x);
         let sums = match &self.far {
             Some(far) if far.expands_at(&y) => far.sum(&y),
-            _ => super::simd::sum(&y, &slices(&self.centers), &slices(&self.weights)),
+            _ => super::simd::sum(&y, &self.centers(), &self.weights()),
         };
         self.finish(&y, sums)
     }
@@ -232,7 +253,7 @@ impl<const D: usize> Rbf<D> {
     /// bits (no far field).
     pub(crate) fn displacements4(&self, xs: &[Vect<D>; 4]) -> [Vect<D>; 4] {
         let ys: [[f64; D]; 4] = std::array::from_fn(|s| self.scaled(&xs[s]));
-        let sums = super::simd::sums(&ys, &slices(&self.centers), &slices(&self.weights));
+        let sums = super::simd::sums(&ys, &self.centers(), &self.weights());
         std::array::from_fn(|s| self.finish(&ys[s], sums[s]))
     }
 
@@ -516,7 +537,7 @@ impl<const D: usize> Warp<D> for Rbf<D> {
                 }
                 continue;
             }
-            let sums = super::simd::sums(&ys, &slices(&self.centers), &slices(&self.weights));
+            let sums = super::simd::sums(&ys, &self.centers(), &self.weights());
             for s in 0..S {
                 o[s] = xs[s] + self.finish(&ys[s], sums[s]) + origin;
             }
@@ -549,11 +570,11 @@ impl<const D: usize> Rbf<D> {
         // vector and their sums are not read).
         let y = self.scaled(x);
         let weights: [&[f64]; 12] = std::array::from_fn(|s| match s {
-            s if s < D => &self.weights[s][..],
-            s if s < D + D * D => &self.weighted_centers[(s - D) / D][(s - D) % D][..],
-            _ => &self.weights[0][..],
+            s if s < D => self.weights()[s],
+            s if s < D + D * D => self.weighted_centers((s - D) / D, (s - D) % D),
+            _ => self.weights()[0],
         });
-        let sums = super::simd::sum_linear(&y, &slices(&self.centers), &weights);
+        let sums = super::simd::sum_linear(&y, &self.centers(), &weights);
         let mut j = nalgebra::SMatrix::<f64, D, D>::identity();
         for a in 0..D {
             for k in 0..D {
@@ -565,13 +586,13 @@ impl<const D: usize> Rbf<D> {
 
     /// The coefficients, for saving: `(shift, inv_scale, constant, linear, weights)`.
     #[allow(clippy::type_complexity)]
-    pub fn parts(&self) -> (Vect<D>, f64, Vect<D>, [[f64; D]; D], &[Vec<f64>; D]) {
+    pub fn parts(&self) -> (Vect<D>, f64, Vect<D>, [[f64; D]; D], [&[f64]; D]) {
         (
             self.shift,
             self.inv_scale,
             self.constant,
             self.linear,
-            &self.weights,
+            self.weights(),
         )
     }
 
@@ -641,11 +662,11 @@ mod tests {
             let y = rbf.scaled(&x);
             let mut want = nalgebra::SMatrix::<f64, 3, 3>::identity();
             for i in 0..n {
-                let d: [f64; 3] = std::array::from_fn(|a| y[a] - rbf.centers[a][i]);
+                let d: [f64; 3] = std::array::from_fn(|a| y[a] - rbf.centers()[a][i]);
                 let r = d.iter().map(|v| v * v).sum::<f64>().sqrt();
                 for k in 0..3 {
                     for a in 0..3 {
-                        want[(k, a)] += 3.0 * r * rbf.weights[k][i] * d[a];
+                        want[(k, a)] += 3.0 * r * rbf.weights()[k][i] * d[a];
                     }
                 }
             }
@@ -696,8 +717,12 @@ mod tests {
                 expanded += 1;
                 let magnitude: f64 = (0..n)
                     .map(|j| {
-                        let r2: f64 = (0..3).map(|a| (y[a] - far.centers[a][j]).powi(2)).sum();
-                        (0..3).map(|k| far.weights[k][j].abs()).fold(0.0, f64::max) * r2 * r2.sqrt()
+                        let r2: f64 = (0..3).map(|a| (y[a] - far.centers()[a][j]).powi(2)).sum();
+                        (0..3)
+                            .map(|k| far.weights()[k][j].abs())
+                            .fold(0.0, f64::max)
+                            * r2
+                            * r2.sqrt()
                     })
                     .sum::<f64>()
                     / far.inv_scale;

@@ -5,7 +5,8 @@
 //! `bend_spec` at about 1.2k and 5.5k cells, 480k samples on its surface, 2 threads; then the
 //! PU alone on synthetic terrain fields of 10k to 1M cells (two layers of unit cells under a
 //! rolling surface, moved by a smooth bend), fit time and evaluation of 1M points in the order
-//! of a scan.
+//! of a scan. `pu --terrain [N]` runs the terrain table alone, or its
+//! row of about N cells (for profiling the evaluation).
 
 use std::time::Instant;
 
@@ -17,6 +18,9 @@ use rigidcells::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    if std::env::args().nth(1).as_deref() == Some("--terrain") {
+        return terrain_scale();
+    }
     let model = model_arg();
     let doc = Document::read(&model)?;
     let (points, tris) = (doc.positions(), doc.triangles());
@@ -124,7 +128,12 @@ fn terrain_scale() -> Result<(), Box<dyn std::error::Error>> {
     println!();
     println!("| terrain cells | patches | PU fit s | eval 1M points s | M points/s |");
     println!("|---|---|---|---|---|");
-    for n in [10_000usize, 100_000, 1_000_000] {
+    // `pu --terrain N`: the field of about N cells alone.
+    let sizes: Vec<usize> = match std::env::args().nth(2) {
+        Some(n) => vec![n.parse()?],
+        None => vec![10_000, 100_000, 1_000_000],
+    };
+    for n in sizes {
         let field = terrain(n);
         let t = Instant::now();
         let pu = PuRbf::new(&field)?;
