@@ -9,7 +9,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, Inside, write_cells_ply};
-use rigidcells::field::{Outside, SavedField, Transfer};
+use rigidcells::field::{Outside, Transfer};
 use rigidcells::io::{LasHeader, Source, refuse_overwrite};
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
 use rigidcells::progress::Observer;
@@ -883,18 +883,8 @@ fn run_apply(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    let saved = SavedField::<3>::load(field)?;
-    if params.rbf_tolerance.is_some() && params.transfer.unwrap_or(saved.transfer) != Transfer::Rbf
-    {
-        return Err(Error::Param(format!(
-            "--rbf-tolerance applies to the RBF transfer only, and {} was saved for another; \
-             add --transfer rbf",
-            field.display()
-        ))
-        .into());
-    }
     let bar = Bar::new(quiet);
-    let info = pipeline::apply_file(saved, input, output, params, CHUNK, &bar)?;
+    let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
     if !quiet {
         for n in &info.notes {
             println!("note: {n}");

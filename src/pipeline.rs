@@ -330,19 +330,80 @@ pub fn deform_file(
     Ok((solution, info))
 }
 
-/// Applies a saved field to the file `input`, writing `output` (one streaming pass). Samples
-/// beyond the field's margin are refused by default ([`Error::Outside`], and nothing is
-/// written), or kept or extended as `params.outside` says.
+/// Applies the field saved in `field` to the file `input`, writing `output` (one streaming
+/// pass). Samples beyond the field's margin are refused by default ([`Error::Outside`], and
+/// nothing is written), or kept or extended as `params.outside` says. With the PU transfer and
+/// an input whose header gives its bounds (LAS/LAZ), only the part of the field those bounds
+/// need is read ([`SavedField::load_window`]; not with `--outside extend`, whose samples beyond
+/// the margin follow the nearest patch of the whole field); should a sample lie outside them,
+/// the pass runs again with the whole field.
 pub fn apply_file(
-    field: SavedField<3>,
+    field: &Path,
     input: &Path,
     output: &Path,
     params: &ApplyParams,
     chunk: usize,
     observer: &dyn Observer,
 ) -> Result<FileInfo> {
-    let t = Instant::now();
     let mut source = io::open(input)?;
+    // Beyond the margin, `--outside extend` takes the nearest patch of the whole field.
+    let hint = match (params.transfer, params.outside) {
+        (_, Outside::Extend) => None,
+        (None | Some(Transfer::Pu), _) => source.bounds_hint(),
+        _ => None,
+    };
+    let saved = match hint {
+        Some(bounds) => SavedField::<3>::load_window(field, bounds)?,
+        None => SavedField::<3>::load(field)?,
+    };
+    if params.rbf_tolerance.is_some() && params.transfer.unwrap_or(saved.transfer) != Transfer::Rbf
+    {
+        return Err(Error::Param(format!(
+            "--rbf-tolerance applies to the RBF transfer only, and {} was saved for another; \
+             add --transfer rbf",
+            field.display()
+        )));
+    }
+    let windowed = saved.is_window();
+    let info = apply_saved(saved, source.as_mut(), output, params, chunk, observer)?;
+    match info {
+        Applied::Done(info) => Ok(*info),
+        Applied::BeyondWindow(count) => {
+            let whole = SavedField::<3>::load(field)?;
+            debug_assert!(windowed);
+            match apply_saved(whole, source.as_mut(), output, params, chunk, observer)? {
+                Applied::Done(mut info) => {
+                    info.notes.push(format!(
+                        "{count} samples lay outside the bounds in {}'s header; the whole \
+                         field was read",
+                        input.display()
+                    ));
+                    Ok(*info)
+                }
+                Applied::BeyondWindow(_) => Err(Error::Solver(
+                    "a whole field reported samples outside its window".into(),
+                )),
+            }
+        }
+    }
+}
+
+/// What [`apply_saved`] did: applied the field, or met samples outside the window of the
+/// field it was given (how many), whose results are not the whole field's.
+enum Applied {
+    Done(Box<FileInfo>),
+    BeyondWindow(usize),
+}
+
+fn apply_saved(
+    field: SavedField<3>,
+    source: &mut dyn Source,
+    output: &Path,
+    params: &ApplyParams,
+    chunk: usize,
+    observer: &dyn Observer,
+) -> Result<Applied> {
+    let t = Instant::now();
     let origin = field.field.origin;
     if params.transfer == Some(Transfer::Rbf) && !field.has_rbf() {
         crate::memory::check(
@@ -355,7 +416,10 @@ pub fn apply_file(
     observer.stage("transfer", 0);
     let deformer = field.tile_deformer(params.transfer, params.rbf_tolerance, params.outside)?;
     observer.finish();
-    let mut notes = transfer_pass(source.as_mut(), output, &deformer, &origin, chunk, observer)?;
+    let mut notes = transfer_pass(source, output, &deformer, &origin, chunk, observer)?;
+    if deformer.beyond_window() > 0 {
+        return Ok(Applied::BeyondWindow(deformer.beyond_window()));
+    }
     if let Deformer::Pu(pu) = deformer.inner() {
         let (made, all, failed) = pu.fits();
         notes.push(format!(
@@ -381,13 +445,13 @@ pub fn apply_file(
         )),
         _ => {}
     }
-    Ok(FileInfo {
+    Ok(Applied::Done(Box::new(FileInfo {
         samples: source.len(),
         notes,
         seconds_write: t.elapsed().as_secs_f64(),
         outside,
         ..Default::default()
-    })
+    })))
 }
 
 /// Pass 1 of [`deform_file`]: the cell complex of `source` (rerunning the pass with the
@@ -655,6 +719,11 @@ fn transfer_pass(
         )?;
         match sink {
             Some(mut s) => {
+                if warp.beyond_window() > 0 {
+                    // A window of the field met samples outside it: the caller reads the whole
+                    // field and starts again; the abandoned output is removed.
+                    return Ok(Vec::new());
+                }
                 refuse_outside(source.path(), warp)?;
                 let loose: Vec<Vect<3>> = source
                     .loose_normals()

@@ -290,14 +290,20 @@ fn apply(field: &Path, input: &Path, output: &Path) {
 }
 
 /// Writes the records `keep` of the LAS 1.2 file `input` as a LAS file (header and VLRs
-/// copied, count patched; bounds as in the input, which `apply` rewrites anyway).
-fn write_tile(input: &Path, keep: &[usize], out: &Path) {
+/// copied, count patched; the header's bounds `bounds`, as a tiler would write them: `apply`
+/// reads the part of a field they need).
+fn write_tile(input: &Path, keep: &[usize], bounds: (Vect<3>, Vect<3>), out: &Path) {
     let h = LasHeader::read(input).unwrap();
     let bytes = std::fs::read(input).unwrap();
     let off = h.point_offset as usize;
     let rl = h.record_len as usize;
     let mut tile = bytes[..off].to_vec();
     tile[107..111].copy_from_slice(&(keep.len() as u32).to_le_bytes());
+    for a in 0..3 {
+        let at = 179 + 16 * a;
+        tile[at..at + 8].copy_from_slice(&bounds.1[a].to_le_bytes());
+        tile[at + 8..at + 16].copy_from_slice(&bounds.0[a].to_le_bytes());
+    }
     for &k in keep {
         tile.extend_from_slice(&bytes[off + k * rl..off + (k + 1) * rl]);
     }
@@ -348,17 +354,27 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
         let keep: Vec<usize> = (0..pos.len())
             .filter(|&k| ((pos[k].x >= mx) as usize) + 2 * ((pos[k].y >= my) as usize) == q)
             .collect();
-        let tile = dir.path().join(format!("tile{q}.las"));
-        let out = dir.path().join(format!("tile{q}_out.las"));
-        write_tile(&input, &keep, &tile);
-        apply(&field, &tile, &out);
-        let (_, tile_raw, _, _) = records(&out);
-        for (i, &k) in keep.iter().enumerate() {
-            assert_eq!(
-                tile_raw[i * rl..(i + 1) * rl],
-                moved[k * rl..(k + 1) * rl],
-                "tile {q} record {i}"
-            );
+        let lo = keep.iter().fold(pos[keep[0]], |a, &k| a.inf(&pos[k]));
+        let hi = keep.iter().fold(pos[keep[0]], |a, &k| a.sup(&pos[k]));
+        // The tile's own bounds; for the last tile, bounds that miss a part of it (a wrong
+        // header), after which `apply` reads the whole field.
+        let wrong = (lo, (lo + hi) * 0.5);
+        for (name, bounds) in [("", (lo, hi)), ("wrong", wrong)] {
+            if q < 3 && name == "wrong" {
+                continue;
+            }
+            let tile = dir.path().join(format!("tile{q}{name}.las"));
+            let out = dir.path().join(format!("tile{q}{name}_out.las"));
+            write_tile(&input, &keep, bounds, &tile);
+            apply(&field, &tile, &out);
+            let (_, tile_raw, _, _) = records(&out);
+            for (i, &k) in keep.iter().enumerate() {
+                assert_eq!(
+                    tile_raw[i * rl..(i + 1) * rl],
+                    moved[k * rl..(k + 1) * rl],
+                    "tile {q}{name} record {i}"
+                );
+            }
         }
         covered += keep.len();
     }

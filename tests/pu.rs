@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use rigidcells::cells::BuildParams;
-use rigidcells::field::{Field, PuRbf, Rbf, Warp};
+use rigidcells::field::{Field, Outside, PuRbf, Rbf, SavedField, Transfer, Warp};
 use rigidcells::pipeline::{self, DeformParams};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
@@ -207,4 +207,51 @@ fn fits_on_demand_only_the_patches_a_tile_reaches() {
     let (made, all, failed) = tile.fits();
     assert_eq!((whole.fits().0, failed), (all, 0));
     assert!(made > 0 && 4 * made < all, "fitted {made} of {all}");
+}
+
+/// A PU field saved and applied to a tile reads only the cells the tile needs (the file's
+/// window section) and gives every sample of the tile the whole field's bits, across the fixed
+/// end's border too; a sample outside the tile's box is counted, so `apply` can start again.
+#[test]
+fn a_window_of_a_saved_field_gives_the_whole_fields_bits() {
+    let f = bent_bar(0.25);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bar.field");
+    SavedField::new(f.clone(), Transfer::Pu, None)
+        .save(&path)
+        .unwrap();
+    let whole = SavedField::<3>::load(&path)
+        .unwrap()
+        .tile_deformer(None, None, Outside::Keep)
+        .unwrap();
+    // A tile over the fixed end and its border: x in [-0.2, 1] of the bar's [0, 10].
+    let o = f.origin;
+    let points: Vec<Vect<3>> = (0..3000)
+        .map(|i| {
+            let s = i as f64;
+            o + Vect::<3>::new(
+                -0.2 + s * 4e-4,
+                0.5 + 0.45 * (s * 0.37).sin(),
+                0.5 + 0.45 * (s * 0.11).cos(),
+            )
+        })
+        .collect();
+    let lo = points.iter().fold(points[0], |a, p| a.inf(p));
+    let hi = points.iter().fold(points[0], |a, p| a.sup(p));
+    let window = SavedField::<3>::load_window(&path, (lo, hi)).unwrap();
+    assert!(window.is_window());
+    let (part, all) = (window.field.centers.len(), f.centers.len());
+    assert!(2 * part < all, "read {part} of {all} cells");
+    let tile = window.tile_deformer(None, None, Outside::Keep).unwrap();
+    let (mut a, mut b) = (
+        vec![Vect::<3>::zeros(); points.len()],
+        vec![Vect::<3>::zeros(); points.len()],
+    );
+    whole.warp_run(&o, &points, &mut a);
+    tile.warp_run(&o, &points, &mut b);
+    assert!(a.iter().zip(&points).any(|(q, p)| q != p), "nothing moved");
+    assert_eq!(a, b);
+    assert_eq!(tile.beyond_window(), 0);
+    tile.warp_run(&o, &[o + Vect::<3>::new(5.0, 0.5, 0.5)], &mut b[..1]);
+    assert_eq!(tile.beyond_window(), 1);
 }

@@ -192,6 +192,36 @@ pub struct Constrained<const D: usize> {
     bounds: (Vect<D>, Vect<D>),
     outside: Outside,
     tally: Mutex<OutsideTally<D>>,
+    /// For a window of a field's cells ([`Constrained::in_window`]): the box (local) its
+    /// samples must lie in, and how many did not.
+    window: Option<(Vect<D>, Vect<D>)>,
+    beyond_window: std::sync::atomic::AtomicUsize,
+}
+
+/// What a window of a field's cells needs from the whole field to treat samples as the whole
+/// field does ([`Constrained::in_window`]; saved in field files).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame<const D: usize> {
+    /// The voxel grid of the leaves: voxel 0's lower corner (local) and the voxels' edge.
+    pub lower: Vect<D>,
+    /// The smallest cells' edge.
+    pub edge: f64,
+    /// The margin voxels are `2^margin_shift` voxels.
+    pub margin_shift: u32,
+    /// The cells' bounding box (local).
+    pub bounds: (Vect<D>, Vect<D>),
+    /// The largest cell's half-size.
+    pub largest_half: f64,
+}
+
+impl<const D: usize> Frame<D> {
+    /// How far past a box of samples the cells a window needs may lie: a sample's leaf, its
+    /// margin voxels and the bands around it are all within this distance (in each axis).
+    pub fn reach(&self) -> f64 {
+        3.0 * self.edge * f64::from(1u32 << self.margin_shift.min(31))
+            + 2.0 * self.largest_half
+            + 2.0 * self.edge
+    }
 }
 
 /// `10t³ − 15t⁴ + 6t⁵`: 0 at 0, 1 at 1, with zero first and second derivatives at both.
@@ -209,6 +239,49 @@ where
     /// damaged field file).
     pub fn new(field: &Field<D>, inner: Deformer<D>, outside: Outside) -> Result<Self> {
         let leaves = Leaves::new(&field.centers, &field.halves).map_err(Error::Solver)?;
+        let mut lo = Vect::<D>::repeat(f64::INFINITY);
+        let mut hi = Vect::<D>::repeat(f64::NEG_INFINITY);
+        for (c, h) in field.centers.iter().zip(&field.halves) {
+            lo = lo.inf(&c.add_scalar(-h));
+            hi = hi.sup(&c.add_scalar(*h));
+        }
+        Self::assemble(field, inner, outside, leaves, None, (lo, hi), None)
+    }
+
+    /// `inner` for the cells of a window of a field, as [`Constrained::new`] for the whole
+    /// field would map every sample in the box `window` (local) when the window holds every
+    /// cell within [`Frame::reach`] of that box: the leaves on the whole field's grid, its
+    /// margin's voxel size and its bounds from `frame`. Samples outside `window` are counted
+    /// ([`Constrained::beyond_window`]); their results are not the whole field's.
+    pub fn in_window(
+        field: &Field<D>,
+        inner: Deformer<D>,
+        outside: Outside,
+        frame: &Frame<D>,
+        window: (Vect<D>, Vect<D>),
+    ) -> Result<Self> {
+        let leaves = Leaves::in_frame(&field.centers, &field.halves, frame.lower, frame.edge)
+            .map_err(Error::Solver)?;
+        Self::assemble(
+            field,
+            inner,
+            outside,
+            leaves,
+            Some(frame.margin_shift),
+            frame.bounds,
+            Some(window),
+        )
+    }
+
+    fn assemble(
+        field: &Field<D>,
+        inner: Deformer<D>,
+        outside: Outside,
+        leaves: Leaves<D>,
+        margin_shift: Option<u32>,
+        bounds: (Vect<D>, Vect<D>),
+        window: Option<(Vect<D>, Vect<D>)>,
+    ) -> Result<Self> {
         let prescribed = field.prescribed.clone();
         if !prescribed.cells.is_empty() && prescribed.cells.len() != field.centers.len() {
             return Err(Error::Solver(
@@ -225,14 +298,8 @@ where
             .iter()
             .map(|m| *m == Affine::identity())
             .collect();
-        let mut lo = Vect::<D>::repeat(f64::INFINITY);
-        let mut hi = Vect::<D>::repeat(f64::NEG_INFINITY);
-        for (c, h) in field.centers.iter().zip(&field.halves) {
-            lo = lo.inf(&c.add_scalar(-h));
-            hi = hi.sup(&c.add_scalar(*h));
-        }
         let bands = bands(&leaves, field, &prescribed);
-        let (margin_voxels, margin_shift) = margin(&leaves);
+        let (margin_voxels, margin_shift) = margin(&leaves, margin_shift);
         Ok(Self {
             inner,
             origin: field.origin,
@@ -245,10 +312,48 @@ where
             bands,
             margin_voxels,
             margin_shift,
-            bounds: (lo, hi),
+            bounds,
             outside,
             tally: Mutex::new(OutsideTally::default()),
+            window,
+            beyond_window: Default::default(),
         })
+    }
+
+    /// What a window of this field's cells needs from it ([`Constrained::in_window`]).
+    pub fn frame(&self) -> Frame<D> {
+        Frame {
+            lower: self.leaves.lower,
+            edge: self.leaves.edge,
+            margin_shift: self.margin_shift,
+            bounds: self.bounds,
+            largest_half: self.halves.iter().cloned().fold(0.0, f64::max),
+        }
+    }
+
+    /// Samples met outside the window's box ([`Constrained::in_window`]; 0 for a whole
+    /// field): when any were, the results are not the whole field's.
+    pub fn beyond_window(&self) -> usize {
+        self.beyond_window
+            .load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Counts the samples of `points` (world) outside the window's box.
+    fn check_window(&self, origin: &Vect<D>, points: &[Vect<D>]) {
+        let Some((lo, hi)) = &self.window else {
+            return;
+        };
+        let beyond = points
+            .iter()
+            .filter(|p| {
+                let x = *p - origin;
+                !(0..D).all(|a| x[a] >= lo[a] && x[a] <= hi[a])
+            })
+            .count();
+        if beyond > 0 {
+            self.beyond_window
+                .fetch_add(beyond, std::sync::atomic::Ordering::Relaxed);
+        }
     }
 
     /// The margin: samples within this distance of a cell (in each axis) are inside the
@@ -481,6 +586,7 @@ where
         out: &mut [Vect<D>],
         out_normals: &mut [Vect<D>],
     ) {
+        self.check_window(origin, points);
         for (((o, on), p), n) in out.iter_mut().zip(out_normals).zip(points).zip(normals) {
             let x = p - origin;
             let class = self.class_of(&x);
@@ -509,6 +615,7 @@ where
     /// Runs of samples the transfer moves alone go to its own `warp_run`; samples of prescribed
     /// cells take their map (the identity returns the sample as it came, bit for bit).
     fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
+        self.check_window(origin, points);
         let mut tally = OutsideTally::default();
         let mut last: Option<([i64; D], Class)> = None;
         let mut run = 0;
@@ -658,24 +765,48 @@ fn bands<const D: usize>(
 /// The margin voxels and their size (as a shift of the voxels): the size of the largest cell
 /// on the complex's outer boundary (a cell with a face that no leaf of its size or larger
 /// covers), and every margin voxel within one of a voxel that such a cell meets.
-fn margin<const D: usize>(leaves: &Leaves<D>) -> (FxHashSet<[i64; D]>, u32) {
+/// The [`Frame`] of the whole `field` (for saving it).
+pub(crate) fn frame_of<const D: usize>(field: &Field<D>) -> Result<Frame<D>> {
+    let leaves = Leaves::new(&field.centers, &field.halves).map_err(Error::Solver)?;
+    let (_, margin_shift) = margin(&leaves, None);
+    let mut lo = Vect::<D>::repeat(f64::INFINITY);
+    let mut hi = Vect::<D>::repeat(f64::NEG_INFINITY);
+    for (c, h) in field.centers.iter().zip(&field.halves) {
+        lo = lo.inf(&c.add_scalar(-h));
+        hi = hi.sup(&c.add_scalar(*h));
+    }
+    Ok(Frame {
+        lower: leaves.lower,
+        edge: leaves.edge,
+        margin_shift,
+        bounds: (lo, hi),
+        largest_half: field.halves.iter().cloned().fold(0.0, f64::max),
+    })
+}
+
+fn margin<const D: usize>(leaves: &Leaves<D>, fixed: Option<u32>) -> (FxHashSet<[i64; D]>, u32) {
     let boundary: Vec<usize> = (0..leaves.keys.len())
         .filter(|&c| {
             let (shift, coord) = leaves.keys[c];
-            (0..D).any(|a| {
-                [-1i64, 1].iter().any(|&side| {
-                    let mut next = coord;
-                    next[a] += side;
-                    !leaves.covered(shift, &next)
+            // In a window, a cell larger than the whole field's margin voxel is not on its
+            // boundary (it only looks so where the window cuts its neighbors away).
+            fixed.is_none_or(|f| shift <= f)
+                && (0..D).any(|a| {
+                    [-1i64, 1].iter().any(|&side| {
+                        let mut next = coord;
+                        next[a] += side;
+                        !leaves.covered(shift, &next)
+                    })
                 })
-            })
         })
         .collect();
-    let shift = boundary
-        .iter()
-        .map(|&c| leaves.keys[c].0)
-        .max()
-        .unwrap_or(0);
+    let shift = fixed.unwrap_or_else(|| {
+        boundary
+            .iter()
+            .map(|&c| leaves.keys[c].0)
+            .max()
+            .unwrap_or(0)
+    });
     let mut set = FxHashSet::default();
     for &c in &boundary {
         let (s, coord) = leaves.keys[c];

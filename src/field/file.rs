@@ -12,7 +12,25 @@
 //!        and if r > 0: u32[n] the map of each cell (u32::MAX: none)
 //! u8 has_rbf, then if 1: f64[D] shift, f64 inv_scale, f64[D] constant, f64[D·D] linear,
 //!                        f64[D·n] weights (component by component)
+//! u8 has_window (v3), then if 1:
+//!     f64[D] leaves' grid corner, f64 smallest edge, u32 margin shift,      the Frame
+//!     f64[D] bounds low, f64[D] bounds high, f64 largest half-size
+//!     f64[D] patch grid corner, f64 patch edge, u64 p,                      the PU's layout
+//!     p × i64[D] patch box, (p + 1) × u64 offsets into the members, u32[] members
 //! ```
+//!
+//! **Applying to a tile reads what the tile needs** (version 3, for the PU transfer). The
+//! window section lets [`SavedField::load_window`] read, through a memory map, only the cells
+//! of the patches whose support comes within [`Frame::reach`] of the tile's box (the LAS
+//! header's bounds): the PU's patches there with every cell they fit (so each fit has the
+//! whole field's bits) and every cell that locates a sample of the tile among the cells, its
+//! margin and its bands. The [`Frame`] carries what those lookups take from the whole field
+//! (its voxel grid, margin voxel and bounds). Memory and time then grow with the tile, not
+//! with the field; a sample outside the box (a header whose bounds are wrong) is counted
+//! ([`Constrained::beyond_window`]) and `apply` starts again with the whole field. The PU
+//! coefficients themselves are not stored: each patch's fit is a small dense solve of its own
+//! cells on one thread, the same bits wherever it runs, and cheaper to redo than to read
+//! (a patch's weights and cell list would take about three times the cells' bytes).
 //!
 //! The RBF coefficients are stored rather than recomputed, because a parallel dense
 //! factorization need not give the same last bits on another machine or thread count.
@@ -25,12 +43,13 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::{Constrained, Deformer, FREE, Field, Outside, Rbf, Transfer};
+use super::pu::{Layout, OVERLAP};
+use super::{Constrained, Deformer, FREE, Field, Frame, Outside, PuRbf, Rbf, Transfer};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
 
 const MAGIC: &[u8; 8] = b"RCFIELD\0";
-const VERSION: u32 = 2;
+const VERSION: u32 = 3;
 
 /// A field with its transfer and the RBF coefficients it was saved with, if any.
 pub struct SavedField<const D: usize> {
@@ -39,6 +58,16 @@ pub struct SavedField<const D: usize> {
     /// The transfer the field was made for.
     pub transfer: Transfer,
     rbf: Option<Rbf<D>>,
+    /// For a window of the file's cells ([`SavedField::load_window`]): the whole field's
+    /// frame, the PU's patches over the window's cells, and the samples' box (local).
+    window: Option<Window<D>>,
+}
+
+/// What [`SavedField::load_window`] keeps besides the window's cells.
+struct Window<const D: usize> {
+    frame: Frame<D>,
+    layout: Layout<D>,
+    samples: (Vect<D>, Vect<D>),
 }
 
 impl<const D: usize> SavedField<D>
@@ -51,7 +80,13 @@ where
             field,
             transfer,
             rbf,
+            window: None,
         }
+    }
+
+    /// Whether only a window of the file's cells was read ([`SavedField::load_window`]).
+    pub fn is_window(&self) -> bool {
+        self.window.is_some()
     }
 
     /// Whether the file holds the RBF's coefficients.
@@ -90,7 +125,17 @@ where
         outside: Outside,
         make: fn(&Field<D>, Transfer) -> Result<Deformer<D>>,
     ) -> Result<Constrained<D>> {
-        let inner = match (transfer.unwrap_or(self.transfer), self.rbf) {
+        let transfer = transfer.unwrap_or(self.transfer);
+        if let Some(w) = self.window {
+            if transfer != Transfer::Pu {
+                return Err(Error::Solver(
+                    "a window of a field serves the PU transfer only".into(),
+                ));
+            }
+            let inner = Deformer::Pu(Box::new(PuRbf::from_layout(&self.field, w.layout)?));
+            return Constrained::in_window(&self.field, inner, outside, &w.frame, w.samples);
+        }
+        let inner = match (transfer, self.rbf) {
             (Transfer::Rbf, Some(r)) => Deformer::Rbf(r),
             (t, _) => make(&self.field, t)?,
         }
@@ -156,6 +201,36 @@ where
                     .for_each(|&v| put(&mut out, v));
             }
         }
+        if self.transfer == Transfer::Pu && self.window.is_none() {
+            out.push(1);
+            let frame = super::exact::frame_of(f)?;
+            frame.lower.iter().for_each(|&v| put(&mut out, v));
+            put(&mut out, frame.edge);
+            out.extend_from_slice(&frame.margin_shift.to_le_bytes());
+            frame.bounds.0.iter().for_each(|&v| put(&mut out, v));
+            frame.bounds.1.iter().for_each(|&v| put(&mut out, v));
+            put(&mut out, frame.largest_half);
+            let layout = PuRbf::layout_of(f)?;
+            layout.lower.iter().for_each(|&v| put(&mut out, v));
+            put(&mut out, layout.edge);
+            out.extend_from_slice(&(layout.patches.len() as u64).to_le_bytes());
+            for (k, _) in &layout.patches {
+                k.iter()
+                    .for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+            }
+            let mut offset = 0u64;
+            out.extend_from_slice(&offset.to_le_bytes());
+            for (_, m) in &layout.patches {
+                offset += m.len() as u64;
+                out.extend_from_slice(&offset.to_le_bytes());
+            }
+            for (_, m) in &layout.patches {
+                m.iter()
+                    .for_each(|v| out.extend_from_slice(&v.to_le_bytes()));
+            }
+        } else {
+            out.push(0);
+        }
         crate::io::write_atomic(path, &out)
     }
 
@@ -165,11 +240,20 @@ where
         std::fs::File::open(path)
             .and_then(|mut f| f.read_to_end(&mut bytes))
             .map_err(|e| Error::io(path, e))?;
-        let mut r = Cursor {
-            bytes: &bytes,
-            at: 0,
-            path,
-        };
+        Self::parse(&bytes, path, None)
+    }
+
+    /// Reads the part of the field saved in `path` that samples in the box `samples` (world
+    /// coordinates) need, for the PU transfer (see the module docs): a window when the file has
+    /// the section for one (version 3, saved for the PU) and a patch of the field reaches the
+    /// box, else the whole field.
+    pub fn load_window(path: &Path, samples: (Vect<D>, Vect<D>)) -> Result<Self> {
+        let map = crate::io::mapped::map(path)?;
+        Self::parse(&map, path, Some(samples))
+    }
+
+    fn parse(bytes: &[u8], path: &Path, samples: Option<(Vect<D>, Vect<D>)>) -> Result<Self> {
+        let mut r = Cursor { bytes, at: 0, path };
         if r.take(8)? != MAGIC {
             return Err(Error::format(path, "not a rigidcells field (bad magic)"));
         }
@@ -199,31 +283,14 @@ where
         };
         let origin = r.vect::<D>()?;
         let n = r.u64()? as usize;
-        if n == 0 || n > bytes.len() {
+        let record = 8 * (D + 1 + D * D + D);
+        if n == 0 || n > bytes.len() / record {
             return Err(Error::format(path, format!("cell count {n} is wrong")));
         }
-        let (mut centers, mut halves, mut motions) = (vec![], vec![], vec![]);
-        for _ in 0..n {
-            centers.push(r.vect::<D>()?);
-            halves.push(r.f64()?);
-            let mut rot = Mat::<D>::zeros();
-            for row in 0..D {
-                for k in 0..D {
-                    rot[(row, k)] = r.f64()?;
-                }
-            }
-            motions.push(Motion {
-                rot,
-                pos: r.vect::<D>()?,
-            });
-        }
-        let mut field = Field {
-            origin,
-            centers,
-            halves,
-            motions,
-            prescribed: Default::default(),
-        };
+        let cells_at = r.at;
+        r.take(n * record)?;
+        let mut maps = Vec::new();
+        let mut maps_at = None;
         if version >= 2 {
             let count = r.u64()? as usize;
             if count > n {
@@ -237,21 +304,124 @@ where
                     }
                 }
                 let translation = r.vect::<D>()?;
-                field.prescribed.maps.push(Affine {
+                maps.push(Affine {
                     linear,
                     translation,
                 });
             }
             if count > 0 {
-                for _ in 0..n {
-                    let m = r.u32()?;
-                    if m != FREE && m as usize >= count {
-                        return Err(Error::format(path, format!("map index {m} is wrong")));
-                    }
-                    field.prescribed.cells.push(m);
-                }
+                maps_at = Some(r.at);
+                r.take(4 * n)?;
             }
         }
+        let rbf_at = r.at;
+        if r.take(1)?[0] != 0 {
+            r.take(8 * (D + 1 + D + D * D + D * n))?;
+        }
+        let window_at = r.at;
+        let has_window = version >= 3 && r.take(1)?[0] != 0;
+        let section = if has_window {
+            Some(Section::read(&mut r)?)
+        } else {
+            None
+        };
+        if r.at != bytes.len() {
+            return Err(Error::format(path, "trailing bytes after the field"));
+        }
+        let cell = |i: usize| -> Result<(Vect<D>, f64, Motion<D>)> {
+            let mut c = Cursor {
+                bytes,
+                at: cells_at + i * record,
+                path,
+            };
+            let center = c.vect::<D>()?;
+            let half = c.f64()?;
+            let mut rot = Mat::<D>::zeros();
+            for row in 0..D {
+                for k in 0..D {
+                    rot[(row, k)] = c.f64()?;
+                }
+            }
+            Ok((
+                center,
+                half,
+                Motion {
+                    rot,
+                    pos: c.vect::<D>()?,
+                },
+            ))
+        };
+        let map_of = |i: usize| -> Result<Option<u32>> {
+            let Some(at) = maps_at else { return Ok(None) };
+            let m = u32::from_le_bytes(bytes[at + 4 * i..at + 4 * i + 4].try_into().expect("4"));
+            if m != FREE && m as usize >= maps.len() {
+                return Err(Error::format(path, format!("map index {m} is wrong")));
+            }
+            Ok(Some(m))
+        };
+        // The cells a window needs, in ascending order, when one is asked for and possible.
+        // (A window that holds no patch, of samples far from every cell, is the whole field:
+        // the samples are refused or kept, and the message names the whole field's margin.)
+        let window = match (samples, &section) {
+            (Some(box_), Some(sec)) if transfer == Transfer::Pu => {
+                let center = |i: usize| {
+                    if i >= n {
+                        return Err(Error::format(
+                            path,
+                            "the window section's members are wrong",
+                        ));
+                    }
+                    Cursor {
+                        bytes,
+                        at: cells_at + i * record,
+                        path,
+                    }
+                    .vect::<D>()
+                };
+                Some(sec.window(bytes, path, box_, origin, center)?)
+                    .filter(|(_, layout, _)| !layout.patches.is_empty())
+            }
+            _ => None,
+        };
+        let chosen: Box<dyn Iterator<Item = usize>> = match &window {
+            Some((cells, _, _)) => Box::new(cells.clone().into_iter()),
+            None => Box::new(0..n),
+        };
+        let mut field = Field {
+            origin,
+            centers: Vec::new(),
+            halves: Vec::new(),
+            motions: Vec::new(),
+            prescribed: Default::default(),
+        };
+        field.prescribed.maps = maps.clone();
+        for i in chosen {
+            let (c, h, m) = cell(i)?;
+            field.centers.push(c);
+            field.halves.push(h);
+            field.motions.push(m);
+            if let Some(m) = map_of(i)? {
+                field.prescribed.cells.push(m);
+            }
+        }
+        if let Some((_, layout, box_)) = window {
+            let frame = section.expect("a window has its section").frame;
+            return Ok(Self {
+                field,
+                transfer,
+                rbf: None,
+                window: Some(Window {
+                    frame,
+                    layout,
+                    samples: box_,
+                }),
+            });
+        }
+        let mut r = Cursor {
+            bytes,
+            at: rbf_at,
+            path,
+        };
         let rbf = match r.take(1)?[0] {
             0 => None,
             _ => {
@@ -275,9 +445,7 @@ where
                 )?)
             }
         };
-        if r.at != bytes.len() {
-            return Err(Error::format(path, "trailing bytes after the field"));
-        }
+        debug_assert!(r.at <= window_at);
         // Every field that `deform` saves has the leaves of an octree for cells: a damaged file
         // is a format error here, not a failure later.
         super::leaves::check_cells(&field).map_err(|e| Error::format(path, e))?;
@@ -285,7 +453,153 @@ where
             field,
             transfer,
             rbf,
+            window: None,
         })
+    }
+}
+
+/// The window section of a version-3 file: the frame, the PU's grid, and where the patches'
+/// boxes, member offsets and members lie in the file.
+struct Section<const D: usize> {
+    frame: Frame<D>,
+    lower: Vect<D>,
+    edge: f64,
+    patches: usize,
+    keys_at: usize,
+    offsets_at: usize,
+    members_at: usize,
+}
+
+impl<const D: usize> Section<D> {
+    fn read(r: &mut Cursor<'_>) -> Result<Self> {
+        let frame = Frame {
+            lower: r.vect::<D>()?,
+            edge: r.f64()?,
+            margin_shift: r.u32()?,
+            bounds: (r.vect::<D>()?, r.vect::<D>()?),
+            largest_half: r.f64()?,
+        };
+        let lower = r.vect::<D>()?;
+        let edge = r.f64()?;
+        let patches = r.u64()? as usize;
+        let path = r.path;
+        let bad = |what: &str| Error::format(path, format!("the window section's {what} is wrong"));
+        let sizes_ok = [frame.edge, frame.largest_half, edge]
+            .iter()
+            .all(|v| *v > 0.0 && v.is_finite())
+            && frame.margin_shift <= 60
+            && patches <= r.bytes.len() / (8 * D + 8);
+        if !sizes_ok {
+            return Err(bad("grid"));
+        }
+        let keys_at = r.at;
+        r.take(8 * D * patches)?;
+        let offsets_at = r.at;
+        r.take(8 * (patches + 1))?;
+        let offset = |i: usize| {
+            u64::from_le_bytes(
+                r.bytes[offsets_at + 8 * i..offsets_at + 8 * i + 8]
+                    .try_into()
+                    .expect("8"),
+            ) as usize
+        };
+        let total = offset(patches);
+        if offset(0) != 0 || total > r.bytes.len() / 4 {
+            return Err(bad("member count"));
+        }
+        let members_at = r.at;
+        r.take(4 * total)?;
+        Ok(Self {
+            frame,
+            lower,
+            edge,
+            patches,
+            keys_at,
+            offsets_at,
+            members_at,
+        })
+    }
+
+    /// The cells (ascending) that samples in `samples` (world) need, the PU layout over them,
+    /// and the samples' box in the local frame of `origin` (`center`: cell `i`'s center).
+    #[allow(clippy::type_complexity)]
+    fn window(
+        &self,
+        bytes: &[u8],
+        path: &Path,
+        samples: (Vect<D>, Vect<D>),
+        origin: Vect<D>,
+        center: impl Fn(usize) -> Result<Vect<D>>,
+    ) -> Result<(Vec<usize>, Layout<D>, (Vect<D>, Vect<D>))> {
+        let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8"));
+        let slack = |a: usize| 1e-9 * (samples.1[a] - samples.0[a]).abs().max(1.0);
+        let lo = Vect::<D>::from_fn(|a, _| samples.0[a] - origin[a] - slack(a));
+        let hi = Vect::<D>::from_fn(|a, _| samples.1[a] - origin[a] + slack(a));
+        let reach = self.frame.reach();
+        let support = OVERLAP * self.edge;
+        let mut chosen = Vec::new();
+        let mut cells = Vec::new();
+        for p in 0..self.patches {
+            let key: [i64; D] =
+                std::array::from_fn(|a| u64_at(self.keys_at + 8 * (D * p + a)) as i64);
+            let meets = |pad: f64, reach: f64| {
+                (0..D).all(|a| {
+                    let from = self.lower[a] + key[a] as f64 * self.edge - pad;
+                    let to = self.lower[a] + (key[a] + 1) as f64 * self.edge + pad;
+                    to >= lo[a] - reach && from <= hi[a] + reach
+                })
+            };
+            // A patch whose support meets the samples' box is fitted (with all its cells);
+            // the cells of one whose box comes within the reach locate samples.
+            let fitted = meets(support, 0.0);
+            if !fitted && !meets(0.0, reach) {
+                continue;
+            }
+            let (from, to) = (
+                u64_at(self.offsets_at + 8 * p) as usize,
+                u64_at(self.offsets_at + 8 * (p + 1)) as usize,
+            );
+            if from > to || to > (bytes.len() - self.members_at) / 4 {
+                return Err(Error::format(
+                    path,
+                    "the window section's members are wrong",
+                ));
+            }
+            let members: Vec<u32> = (from..to)
+                .map(|i| {
+                    let at = self.members_at + 4 * i;
+                    u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4"))
+                })
+                .collect();
+            if fitted {
+                cells.extend(members.iter().map(|&i| i as usize));
+                chosen.push((key, members));
+            } else {
+                for &i in &members {
+                    let c = center(i as usize)?;
+                    if (0..D).all(|a| c[a] >= lo[a] - reach && c[a] <= hi[a] + reach) {
+                        cells.push(i as usize);
+                    }
+                }
+            }
+        }
+        cells.sort_unstable();
+        cells.dedup();
+        // The members as indices into the window's cells (the order kept).
+        for (_, members) in &mut chosen {
+            for m in members.iter_mut() {
+                *m = cells
+                    .binary_search(&(*m as usize))
+                    .map_err(|_| Error::format(path, "the window section's members are wrong"))?
+                    as u32;
+            }
+        }
+        let layout = Layout {
+            lower: self.lower,
+            edge: self.edge,
+            patches: chosen,
+        };
+        Ok((cells, layout, (lo, hi)))
     }
 }
 
@@ -380,15 +694,16 @@ mod tests {
         assert_eq!(bytes[cells..cells + 8], 0u64.to_le_bytes(), "no maps");
         bytes.drain(cells..cells + 8);
         bytes.remove(16);
+        assert_eq!(bytes.pop(), Some(0), "no window section (version 3)");
         let v1 = dir.path().join("v1.field");
         std::fs::write(&v1, &bytes).unwrap();
         let back = SavedField::<3>::load(&v1).unwrap();
         assert_eq!(back.transfer, Transfer::Rbf);
         assert_eq!(back.field, f);
         assert!(back.rbf.is_some());
-        bytes[8..12].copy_from_slice(&3u32.to_le_bytes());
+        bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
         std::fs::write(&v1, &bytes).unwrap();
         let e = SavedField::<3>::load(&v1).err().unwrap().to_string();
-        assert!(e.contains("version 3"), "{e}");
+        assert!(e.contains("version 4"), "{e}");
     }
 }

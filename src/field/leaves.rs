@@ -45,6 +45,24 @@ impl<const D: usize> Leaves<D> {
         let lower = Vect::<D>::from_fn(|a, _| {
             anchor[a] - largest * ((anchor[a] - low[a]) / largest).ceil()
         });
+        Self::in_frame(centers, halves, lower, edge)
+    }
+
+    /// The octree of a part of a field's cells, on the whole field's grid: voxel 0 at `lower`,
+    /// voxels of `edge` (what [`Leaves::new`] finds for the whole field), so that a window of
+    /// the cells locates samples with the same arithmetic.
+    pub(super) fn in_frame(
+        centers: &[Vect<D>],
+        halves: &[f64],
+        lower: Vect<D>,
+        edge: f64,
+    ) -> std::result::Result<Self, String> {
+        if centers.is_empty() {
+            return Err("the field has no cells".into());
+        }
+        if !(edge > 0.0 && edge.is_finite() && lower.iter().all(|v| v.is_finite())) {
+            return Err(format!("a grid of voxels of {edge} is not usable"));
+        }
         let mut shifts = Vec::new();
         let mut map = FxHashMap::default();
         map.reserve(centers.len());

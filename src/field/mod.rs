@@ -24,10 +24,10 @@ mod rbf;
 mod simd;
 
 pub use blend::{Blend, Weights};
-pub use exact::{Constrained, FREE, Outside, OutsideTally, Prescribed};
+pub use exact::{Constrained, FREE, Frame, Outside, OutsideTally, Prescribed};
 pub use file::SavedField;
 pub use nearest::{Anchor, NEAR, Nearest, Neighbors};
-pub use pu::PuRbf;
+pub use pu::{Layout, PuRbf};
 pub use rbf::Rbf;
 
 use rayon::prelude::*;

@@ -91,6 +91,17 @@ struct Candidates<const D: usize> {
     count: usize,
 }
 
+/// Where the patches of a PU are and which cells each fits ([`PuRbf::layout_of`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layout<const D: usize> {
+    /// Box 0's lower corner (local frame).
+    pub lower: Vect<D>,
+    /// The boxes' edge.
+    pub edge: f64,
+    /// Each patch's box and the cells it fits, in ascending order.
+    pub patches: Vec<([i64; D], Vec<u32>)>,
+}
+
 /// A patch: its box middle, the cells it fits, and its fit once made.
 struct Patch<const D: usize> {
     middle: Vect<D>,
@@ -201,15 +212,29 @@ impl<const D: usize> PuRbf<D> {
             .map_err(|e| Error::Solver(format!("kd-tree over cell centers: {e:?}")))?;
         let middle =
             |k: &[i64; D]| Vect::<D>::from_fn(|a, _| lower[a] + (k[a] as f64 + 0.5) * edge);
-        let patches: Vec<Patch<D>> = keys
+        let members: Vec<Vec<u32>> = keys
             .par_iter()
-            .map(|k| {
-                let middle = middle(k);
-                Patch {
-                    middle,
-                    members: gather(field, &by_box, &near, k, &middle, reach),
-                    fit: OnceLock::new(),
-                }
+            .map(|k| gather(field, &by_box, &near, k, &middle(k), reach))
+            .collect();
+        Self::assemble(lower, edge, keys, members)
+    }
+
+    /// The patches of boxes `keys` (edge `edge`, box 0's lower corner at `lower`) fitting the
+    /// cells `members` each, none fitted yet.
+    fn assemble(
+        lower: Vect<D>,
+        edge: f64,
+        keys: Vec<[i64; D]>,
+        members: Vec<Vec<u32>>,
+    ) -> Result<Self> {
+        let reach = (0.5 + OVERLAP) * edge;
+        let patches: Vec<Patch<D>> = keys
+            .iter()
+            .zip(members)
+            .map(|(k, members)| Patch {
+                middle: Vect::<D>::from_fn(|a, _| lower[a] + (k[a] as f64 + 0.5) * edge),
+                members,
+                fit: OnceLock::new(),
             })
             .collect();
         let index = keys
@@ -229,6 +254,53 @@ impl<const D: usize> PuRbf<D> {
             patches,
             source: None,
             failed: AtomicUsize::new(0),
+        })
+    }
+
+    /// The layout of the patches of `field`, for saving it ([`super::SavedField`]): box 0's
+    /// lower corner, the boxes' edge, and each patch's box and cells.
+    pub fn layout_of(field: &Field<D>) -> Result<Layout<D>> {
+        let pu = Self::layout(field)?;
+        let mut keys = vec![[0i64; D]; pu.patches.len()];
+        for (k, &p) in &pu.index {
+            keys[p as usize] = *k;
+        }
+        Ok(Layout {
+            lower: pu.lower,
+            edge: pu.edge,
+            patches: keys
+                .into_iter()
+                .zip(pu.patches)
+                .map(|(k, patch)| (k, patch.members))
+                .collect(),
+        })
+    }
+
+    /// The PU of `layout` over `field`, fitting each patch on demand as [`PuRbf::lazy`] does:
+    /// a window of a saved field's cells (whose patches' cells are all in `field`, their
+    /// indices mapped to it in the same order) gives the whole field's bits.
+    pub fn from_layout(field: &Field<D>, layout: Layout<D>) -> Result<Self> {
+        let n = field.centers.len() as u32;
+        if !(layout.edge > 0.0 && layout.edge.is_finite())
+            || layout
+                .patches
+                .iter()
+                .any(|(_, m)| m.is_empty() || m.iter().any(|&i| i >= n))
+        {
+            return Err(Error::Solver(
+                "the PU layout does not match the cells".into(),
+            ));
+        }
+        let (keys, members) = layout.patches.into_iter().unzip();
+        Ok(Self {
+            source: Some(Field {
+                origin: field.origin,
+                centers: field.centers.clone(),
+                halves: field.halves.clone(),
+                motions: field.motions.clone(),
+                prescribed: Default::default(),
+            }),
+            ..Self::assemble(layout.lower, layout.edge, keys, members)?
         })
     }
 
@@ -498,7 +570,7 @@ impl<const D: usize> Warp<D> for PuRbf<D> {
     }
 
     /// The samples are evaluated patch by patch: each patch's fit runs over its centers once
-    /// for every four samples it weighs ([`Rbf::displacements4`], the same bits as one by one),
+    /// for every four samples it weighs (`Rbf::displacements4`, the same bits as one by one),
     /// and each sample then blends its patches' displacements in its own order, so every
     /// result has [`Warp::warp`]'s bits whatever the other samples of the run.
     fn warp_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {

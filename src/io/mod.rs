@@ -6,7 +6,7 @@
 //! file under the output's name, and the input is never opened for writing.
 
 mod las;
-mod mapped;
+pub(crate) mod mapped;
 mod obj;
 mod ply;
 mod ply_stream;
