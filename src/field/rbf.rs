@@ -192,6 +192,11 @@ impl<const D: usize> Rbf<D> {
         }
     }
 
+    /// Brings the centers and weights (what an evaluation reads) into the caches.
+    pub(crate) fn prefetch(&self) {
+        super::simd::prefetch(&self.data[..2 * D * self.n]);
+    }
+
     /// The scaled centers, axis by axis.
     #[inline]
     fn centers(&self) -> [&[f64]; D] {
