@@ -6,13 +6,23 @@ use std::path::PathBuf;
 /// Everything that can go wrong in rigidcells.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// An operating-system error on a file.
-    #[error("{path}: {source}")]
+    /// An operating-system error on a file. The OS error is part of the message, not a
+    /// `source`, so that a report of the whole chain says it once.
+    #[error("{path}: {error}")]
     Io {
         /// The file.
         path: PathBuf,
         /// The underlying error.
-        source: std::io::Error,
+        error: std::io::Error,
+    },
+    /// An output that cannot be written (a full disk, a folder that is read-only or missing):
+    /// named by the user's path, not the temporary file's.
+    #[error("{path}: cannot write: {error}")]
+    Write {
+        /// The output the user named.
+        path: PathBuf,
+        /// The underlying error.
+        error: std::io::Error,
     },
     /// A file's content is not what its format requires.
     #[error("{path}: {message}")]
@@ -128,10 +138,30 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
     /// An I/O error on `path`.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         Self::Io {
             path: path.into(),
-            source,
+            error,
+        }
+    }
+
+    /// An error writing the output `path` (the user's name for it).
+    pub fn write(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        Self::Write {
+            path: path.into(),
+            error,
+        }
+    }
+
+    /// An edit spec, or a file it names, that cannot be read: a problem of the spec (exit 4).
+    pub fn spec_file(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        let message = match error.kind() {
+            std::io::ErrorKind::InvalidData => "not UTF-8 text".to_string(),
+            _ => error.to_string(),
+        };
+        Self::Spec {
+            path: path.into(),
+            message,
         }
     }
 

@@ -51,6 +51,7 @@ pub mod cells;
 pub mod error;
 pub mod field;
 pub mod image;
+pub mod interrupt;
 pub mod io;
 pub mod memory;
 pub mod pipeline;

@@ -395,6 +395,7 @@ enum TransferArg {
 }
 
 fn main() -> ExitCode {
+    rigidcells::interrupt::remove_temporaries_on_signals();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Deform(args) => run_deform(&args),
@@ -540,17 +541,27 @@ fn run_cells(
 fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     refuse_overwrite(&args.input, &args.output)?;
     args.tolerance.check(args.transfer)?;
-    if is_xy(&args.input) {
-        return run_deform_xy(args);
-    }
-    // The proxy serves the fold-over check, the report's residual and the preview.
-    let params = args.params(Some(pipeline::FOLDOVER_SAMPLES))?;
     for extra in [&args.save_field, &args.report, &args.preview]
         .into_iter()
         .flatten()
     {
         refuse_overwrite(&args.input, extra)?;
     }
+    let outputs: Vec<(&str, &Path)> = [
+        ("-o", Some(&args.output)),
+        ("--save-field", args.save_field.as_ref()),
+        ("--report", args.report.as_ref()),
+        ("--preview", args.preview.as_ref()),
+    ]
+    .into_iter()
+    .filter_map(|(option, path)| Some((option, path?.as_path())))
+    .collect();
+    rigidcells::io::refuse_same_outputs(&outputs)?;
+    if is_xy(&args.input) {
+        return run_deform_xy(args);
+    }
+    // The proxy serves the fold-over check, the report's residual and the preview.
+    let params = args.params(Some(pipeline::FOLDOVER_SAMPLES))?;
     let view = args.view.view()?;
     if let Some(p) = &args.preview {
         png_path(p)?;

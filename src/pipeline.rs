@@ -522,6 +522,7 @@ fn proxy_cell_size(
     target: usize,
     chunk_len: usize,
 ) -> Result<f64> {
+    crate::cells::check_target(target)?;
     source.rewind()?;
     let voxel = (hi - lo).max().max(f64::MIN_POSITIVE) / PROXY_RESOLUTION;
     let keep_all = !source.triangles().is_empty();

@@ -127,10 +127,7 @@ pub(crate) fn write_png(
     data: &[u8],
 ) -> Result<()> {
     let mut bytes = Vec::new();
-    let fail = |e: png::EncodingError| Error::Io {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e),
-    };
+    let fail = |e: png::EncodingError| Error::write(path, std::io::Error::other(e));
     {
         let mut enc = png::Encoder::new(&mut bytes, width, height);
         enc.set_color(color);

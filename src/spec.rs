@@ -264,7 +264,7 @@ pub fn read_spec<const D: usize>(path: &Path) -> Result<EditSpec<D>>
 where
     Dim<D>: Rigid<D>,
 {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let text = std::fs::read_to_string(path).map_err(|e| Error::spec_file(path, e))?;
     parse_spec(&text, path.parent().unwrap_or(Path::new(".")), path)
 }
 
@@ -482,7 +482,7 @@ impl Ctx<'_> {
 
     fn read_indices(&self, file: &str, line: usize) -> Result<HashSet<u64>> {
         let path = self.resolve(file);
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::spec_file(&path, e))?;
         text.split(|c: char| c.is_whitespace() || c == ',')
             .filter(|s| !s.is_empty())
             .map(|s| {
@@ -641,7 +641,7 @@ impl Ctx<'_> {
         line: usize,
     ) -> Result<Vec<Target<D>>> {
         let path = self.resolve(file);
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::spec_file(&path, e))?;
         let mut out = Vec::new();
         for (k, row) in text.lines().enumerate() {
             let row = row.trim();

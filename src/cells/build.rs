@@ -177,6 +177,7 @@ pub fn cell_size_for<const D: usize>(
     params: &BuildParams,
     target: usize,
 ) -> Result<f64> {
+    check_target(target)?;
     let (lo, hi) = bounds(points)?;
     let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
     // `small` gives too many cells (or fails), `large` at most `target`.
@@ -233,6 +234,16 @@ pub fn cell_size_for<const D: usize>(
         }
     }
     Ok(large)
+}
+
+/// Refuses `--cells 0`.
+pub(crate) fn check_target(target: usize) -> Result<()> {
+    if target == 0 {
+        return Err(Error::Param(
+            "--cells 0 asks for no cells; ask for at least 1".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// The bounding box of `points`; an error for no points or a coordinate that is not finite.

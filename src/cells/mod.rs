@@ -24,6 +24,7 @@ pub(crate) use export::BOX_QUADS;
 mod tri_box;
 mod winding;
 
+pub(crate) use build::check_target;
 pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, cell_size_for};
 pub use export::write_cells_ply;
 pub use tri_box::triangle_box_overlap;

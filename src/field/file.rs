@@ -304,6 +304,11 @@ where
                     }
                 }
                 let translation = r.vect::<D>()?;
+                if !(linear.iter().all(|v| v.is_finite())
+                    && translation.iter().all(|v| v.is_finite()))
+                {
+                    return Err(Error::format(path, "a prescribed map is not finite"));
+                }
                 maps.push(Affine {
                     linear,
                     translation,
@@ -342,14 +347,9 @@ where
                     rot[(row, k)] = c.f64()?;
                 }
             }
-            Ok((
-                center,
-                half,
-                Motion {
-                    rot,
-                    pos: c.vect::<D>()?,
-                },
-            ))
+            let pos = c.vect::<D>()?;
+            check_cell(i, &center, half, &rot, &pos).map_err(|m| Error::format(path, m))?;
+            Ok((center, half, Motion { rot, pos }))
         };
         let map_of = |i: usize| -> Result<Option<u32>> {
             let Some(at) = maps_at else { return Ok(None) };
@@ -440,6 +440,14 @@ where
                         w.push(r.f64()?);
                     }
                 }
+                let finite = shift.iter().chain(constant.iter()).all(|v| v.is_finite())
+                    && inv_scale.is_finite()
+                    && inv_scale > 0.0
+                    && linear.iter().flatten().all(|v| v.is_finite())
+                    && weights.iter().flatten().all(|v| v.is_finite());
+                if !finite {
+                    return Err(Error::format(path, "the RBF coefficients are not finite"));
+                }
                 Some(Rbf::from_parts(
                     &field, shift, inv_scale, constant, linear, weights,
                 )?)
@@ -456,6 +464,33 @@ where
             window: None,
         })
     }
+}
+
+/// Why cell `i` of a field file cannot be trusted, if it cannot: a coordinate that is not
+/// finite, a half-size that is not positive, a rotation that is not orthonormal (to 1e-6).
+fn check_cell<const D: usize>(
+    i: usize,
+    center: &Vect<D>,
+    half: f64,
+    rot: &Mat<D>,
+    pos: &Vect<D>,
+) -> std::result::Result<(), String> {
+    let finite = center
+        .iter()
+        .chain(rot.iter())
+        .chain(pos.iter())
+        .all(|v| v.is_finite());
+    if !finite {
+        return Err(format!("cell {i} has a number that is not finite"));
+    }
+    if !(half > 0.0 && half.is_finite()) {
+        return Err(format!("cell {i} has a half-size of {half}"));
+    }
+    let off = (rot.transpose() * rot - Mat::<D>::identity()).abs().max();
+    if off > 1e-6 || super::determinant(rot) <= 0.0 {
+        return Err(format!("cell {i}'s rotation is not a rotation"));
+    }
+    Ok(())
 }
 
 /// The window section of a version-3 file: the frame, the PU's grid, and where the patches'
@@ -487,6 +522,9 @@ impl<const D: usize> Section<D> {
         let sizes_ok = [frame.edge, frame.largest_half, edge]
             .iter()
             .all(|v| *v > 0.0 && v.is_finite())
+            && [frame.lower, frame.bounds.0, frame.bounds.1, lower]
+                .iter()
+                .all(|v| v.iter().all(|x| x.is_finite()))
             && frame.margin_shift <= 60
             && patches <= r.bytes.len() / (8 * D + 8);
         if !sizes_ok {

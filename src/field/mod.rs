@@ -326,7 +326,7 @@ pub fn count_foldovers<const D: usize>(
 }
 
 /// The determinant of a small square matrix, by elimination with partial pivoting.
-fn determinant<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> f64 {
+pub(crate) fn determinant<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> f64 {
     let mut a = *m;
     let mut det = 1.0;
     for k in 0..D {

@@ -711,7 +711,7 @@ impl RawSink {
     ) -> Result<Self> {
         let (tmp, mut out) = TempFile::create(output)?;
         out.write_all(&input[..header.point_offset as usize])
-            .map_err(|e| Error::io(output, e))?;
+            .map_err(|e| Error::write(output, e))?;
         Ok(Self {
             tmp,
             out,
@@ -745,7 +745,7 @@ impl Sink for RawSink {
         )?;
         self.out
             .write_all(&self.buf)
-            .map_err(|e| Error::io(&target, e))
+            .map_err(|e| Error::write(&target, e))
     }
 
     /// The records come from the input's map: the source need not copy them.
@@ -767,7 +767,7 @@ impl Sink for RawSink {
             ..
         } = *self;
         let target = tmp.target().to_path_buf();
-        let io = |e| Error::io(&target, e);
+        let io = |e| Error::write(&target, e);
         let end = header.point_offset as usize + header.count as usize * header.record_len as usize;
         out.write_all(&input[end..]).map_err(io)?;
         let mut file = out.into_inner().map_err(|e| io(e.into_error()))?;
@@ -859,7 +859,7 @@ impl CrateSink {
             las_header,
             WriterOptions::default().with_laz_parallelism(LazParallelism::Yes),
         )
-        .map_err(|e| Error::format(output, format!("{e}")))?;
+        .map_err(|e| write_error(output, e))?;
         Ok(Self {
             tmp: Some(tmp),
             writer: Some(writer),
@@ -888,7 +888,7 @@ impl CrateSink {
             .as_mut()
             .expect("writer open until finish")
             .write_points(&self.slab)
-            .map_err(|e| Error::format(&target, format!("{e}")))
+            .map_err(|e| write_error(&target, e))
     }
 
     fn target(&self) -> PathBuf {
@@ -937,10 +937,10 @@ impl Sink for CrateSink {
         let mut file = std::fs::OpenOptions::new()
             .write(true)
             .open(self.tmp.as_ref().expect("open until finish").path())
-            .map_err(|e| Error::io(&target, e))?;
+            .map_err(|e| Error::write(&target, e))?;
         file.seek(SeekFrom::Start(6))
             .and_then(|_| file.write_all(&self.global_encoding.to_le_bytes()))
-            .map_err(|e| Error::io(&target, e))?;
+            .map_err(|e| Error::write(&target, e))?;
         drop(file);
         self.tmp.take().expect("open until finish").commit()?;
         Ok(std::mem::take(&mut self.notes))
@@ -956,6 +956,15 @@ impl Drop for CrateSink {
         {
             std::mem::forget(w);
         }
+    }
+}
+
+/// An error of the `las` crate's writer on `output`: its I/O errors are errors writing the
+/// output (exit 1), the others the crate refusing what it was given.
+fn write_error(output: &Path, e: las::Error) -> Error {
+    match e {
+        las::Error::Io(e) => Error::write(output, e),
+        other => Error::format(output, other.to_string()),
     }
 }
 

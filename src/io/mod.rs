@@ -240,13 +240,7 @@ pub(crate) fn extension(path: &Path) -> Option<String> {
 /// Fails when `output` names the same file as `input` (through links or `..` too).
 pub fn refuse_overwrite(input: &Path, output: &Path) -> Result<()> {
     let canon_in = std::fs::canonicalize(input).map_err(|e| Error::io(input, e))?;
-    let parent = match output.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let canon_out = std::fs::canonicalize(&parent)
-        .map_err(|e| Error::io(&parent, e))?
-        .join(output.file_name().unwrap_or_default());
+    let canon_out = output_identity(output)?;
     let same = canon_out == canon_in || std::fs::canonicalize(output).is_ok_and(|o| o == canon_in);
     if same {
         return Err(Error::Param(format!(
@@ -257,12 +251,41 @@ pub fn refuse_overwrite(input: &Path, output: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The file `output` names, for comparing outputs that may not exist yet: its folder resolved
+/// (links and `..`), then its name.
+fn output_identity(output: &Path) -> Result<PathBuf> {
+    let parent = match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    Ok(std::fs::canonicalize(&parent)
+        .map_err(|e| Error::write(output, e))?
+        .join(output.file_name().unwrap_or_default()))
+}
+
+/// Refuses two of the `outputs` (each with the option that names it) that name the same file,
+/// before any work: one would silently replace the other.
+pub fn refuse_same_outputs(outputs: &[(&str, &Path)]) -> Result<()> {
+    let mut seen: Vec<(&str, PathBuf)> = Vec::new();
+    for &(option, path) in outputs {
+        let id = output_identity(path)?;
+        if let Some((first, _)) = seen.iter().find(|(_, other)| *other == id) {
+            return Err(Error::Param(format!(
+                "{}: {first} and {option} name the same file; give each its own",
+                path.display()
+            )));
+        }
+        seen.push((option, id));
+    }
+    Ok(())
+}
+
 /// Writes `bytes` to a temporary file beside `path` and renames it over `path`.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let (tmp, mut out) = TempFile::create(path)?;
     out.write_all(bytes)
         .and_then(|_| out.flush())
-        .map_err(|e| Error::io(path, e))?;
+        .map_err(|e| Error::write(path, e))?;
     drop(out);
     tmp.commit()
 }

@@ -304,7 +304,7 @@ impl PlySink {
     fn put(&mut self, bytes: &[u8]) -> Result<()> {
         self.out
             .write_all(bytes)
-            .map_err(|e| Error::io(self.file.path(), e))
+            .map_err(|e| Error::write(self.file.target(), e))
     }
 }
 

@@ -143,7 +143,8 @@ impl TempFile {
             name.to_string_lossy(),
             std::process::id()
         ));
-        let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        let file = File::create(&tmp).map_err(|e| Error::write(target, e))?;
+        crate::interrupt::register(&tmp);
         Ok((
             Self {
                 tmp,
@@ -167,7 +168,7 @@ impl TempFile {
     /// Flushes `out` (the writer [`TempFile::create`] gave), then commits.
     pub fn commit_writer(self, out: BufWriter<File>) -> Result<()> {
         out.into_inner()
-            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
+            .map_err(|e| Error::write(&self.target, e.into_error()))?;
         self.commit()
     }
 
@@ -175,8 +176,9 @@ impl TempFile {
     pub fn commit(mut self) -> Result<()> {
         let sync = File::open(&self.tmp).and_then(|f| f.sync_all());
         sync.and_then(|_| std::fs::rename(&self.tmp, &self.target))
-            .map_err(|e| Error::io(&self.target, e))?;
+            .map_err(|e| Error::write(&self.target, e))?;
         self.committed = true;
+        crate::interrupt::forget(&self.tmp);
         Ok(())
     }
 }
@@ -185,6 +187,7 @@ impl Drop for TempFile {
     fn drop(&mut self) {
         if !self.committed {
             let _ = std::fs::remove_file(&self.tmp);
+            crate::interrupt::forget(&self.tmp);
         }
     }
 }

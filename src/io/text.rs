@@ -173,7 +173,7 @@ impl Sink for SpanSink {
         }
         self.out
             .write_all(&rewrite(&chunk.raw, edits, self.numbers))
-            .map_err(|e| Error::io(self.file.path(), e))
+            .map_err(|e| Error::write(self.file.target(), e))
     }
 
     fn finish(self: Box<Self>) -> Result<Vec<String>> {

@@ -1,0 +1,75 @@
+//! Interruption (issue 16): SIGINT or SIGTERM during a run removes the temporary outputs
+//! (hidden `.NAME.PID.tmp` files beside the outputs, [`crate::io::TempFile`]) instead of
+//! leaving them behind, then exits with 128 + the signal's number, as a shell reports it.
+//!
+//! The signals are blocked in every thread ([`remove_temporaries_on_signals`] runs before
+//! any other thread starts, and threads inherit the mask) and taken by one thread that waits
+//! for them with `sigwait`: it is an ordinary thread, so it may lock the registry and remove
+//! files, which a signal handler may not. The module's `unsafe` code is the three libc calls
+//! that set this up, on values it owns.
+
+#![allow(unsafe_code)]
+
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// The temporary files alive now.
+static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Notes the temporary file `path`, to be removed if the run is interrupted.
+pub(crate) fn register(path: &Path) {
+    if let Ok(mut t) = TEMPORARIES.lock() {
+        t.push(path.to_path_buf());
+    }
+}
+
+/// Forgets the temporary file `path` (committed or removed).
+pub(crate) fn forget(path: &Path) {
+    if let Ok(mut t) = TEMPORARIES.lock()
+        && let Some(i) = t.iter().position(|p| p == path)
+    {
+        t.swap_remove(i);
+    }
+}
+
+/// Blocks SIGINT and SIGTERM in this thread (and so in the threads it starts) and starts a
+/// thread that, when one arrives, removes the temporary outputs and exits. Call it first in
+/// `main`, before any other thread exists. Does nothing where signals are not Unix's.
+pub fn remove_temporaries_on_signals() {
+    #[cfg(unix)]
+    {
+        // SAFETY: `set` is a local, initialized by `sigemptyset` before use; the calls only
+        // read it and change this thread's signal mask.
+        let set = unsafe {
+            let mut set: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut set);
+            libc::sigaddset(&mut set, libc::SIGINT);
+            libc::sigaddset(&mut set, libc::SIGTERM);
+            if libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut()) != 0 {
+                return;
+            }
+            set
+        };
+        let spawned = std::thread::Builder::new()
+            .name("signals".into())
+            .spawn(move || {
+                let mut signal: libc::c_int = 0;
+                // SAFETY: `set` was initialized above and `signal` is a local to write to.
+                if unsafe { libc::sigwait(&set, &mut signal) } != 0 {
+                    return;
+                }
+                if let Ok(t) = TEMPORARIES.lock() {
+                    for path in t.iter() {
+                        let _ = std::fs::remove_file(path);
+                    }
+                }
+                eprintln!("interrupted: no output was written");
+                std::process::exit(128 + signal);
+            });
+        if spawned.is_err() {
+            // Without the thread, let the signals act as they would have.
+            // SAFETY: as above.
+            unsafe { libc::pthread_sigmask(libc::SIG_UNBLOCK, &set, std::ptr::null_mut()) };
+        }
+    }
+}

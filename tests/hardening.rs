@@ -1,0 +1,214 @@
+//! Issue 16, in part: errors said once with the user's path, the exit-code contract for edit
+//! specs and parameters, outputs that collide, and field files that cannot be trusted. Each
+//! case is a minimal reproducer: the command, its exit code, its message, and nothing written.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{arg, deform, run};
+
+/// The 10×1×1 bar, a bend of it, and a field saved from it (PU, format 3).
+fn bar(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
+    let (input, output, edit) = common::files(dir, "bar.ply", "out.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0, 0, 1]\n",
+    )
+    .unwrap();
+    let field = dir.join("bar.field");
+    let r = deform(
+        &input,
+        &output,
+        &edit,
+        &["--cell-size", "0.5", "--save-field", arg(&field)],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    std::fs::remove_file(&output).unwrap();
+    (input, edit, field)
+}
+
+#[test]
+fn an_os_error_is_said_once_with_the_users_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, edit, _) = bar(dir.path());
+    let missing = dir.path().join("missing.las");
+    let r = deform(&missing, &dir.path().join("o.las"), &edit, &[]);
+    assert_eq!(r.code, 3, "{}", r.stderr);
+    assert!(r.stderr.contains("missing.las"), "{}", r.stderr);
+    assert_eq!(r.stderr.matches("os error 2").count(), 1, "{}", r.stderr);
+}
+
+#[test]
+fn edit_spec_problems_exit_4() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, _, _) = bar(dir.path());
+    let out = dir.path().join("o.ply");
+    let cases: [(&str, &[u8]); 3] = [
+        ("missing.toml", b""),
+        ("latin1.toml", b"# caf\xe9\n[[fixed]]\n"),
+        ("csv.toml", b"[[target]]\nfile = \"nowhere.csv\"\n"),
+    ];
+    for (name, text) in cases {
+        let spec = dir.path().join(name);
+        if !text.is_empty() {
+            std::fs::write(&spec, text).unwrap();
+        }
+        let r = deform(&input, &out, &spec, &[]);
+        assert_eq!(r.code, 4, "{name}: {}", r.stderr);
+        assert_eq!(r.stderr.lines().count(), 1, "{name}: {}", r.stderr);
+        assert!(!out.exists(), "{name}");
+    }
+}
+
+#[test]
+fn cells_0_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, _) = bar(dir.path());
+    let out = dir.path().join("o.ply");
+    let r = deform(&input, &out, &edit, &["--cells", "0"]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("--cells 0"), "{}", r.stderr);
+    assert!(!out.exists());
+}
+
+#[test]
+fn outputs_that_name_the_same_file_are_refused_before_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, _) = bar(dir.path());
+    let out = dir.path().join("o.ply");
+    let same = dir.path().join(".").join("o.ply");
+    let field = dir.path().join("f.field");
+    for extra in [
+        vec!["--report", arg(&same)],
+        vec!["--save-field", arg(&out)],
+        vec!["--save-field", arg(&field), "--report", arg(&field)],
+    ] {
+        let r = deform(&input, &out, &edit, &extra);
+        assert_eq!(r.code, 4, "{extra:?}: {}", r.stderr);
+        assert!(r.stderr.contains("name the same file"), "{}", r.stderr);
+        assert!(!out.exists() && !field.exists(), "{extra:?}");
+    }
+}
+
+/// A saved field with one number replaced, at `at` bytes past the first cell's record.
+fn damaged(field: &Path, at: usize, value: f64, out: &Path) {
+    let mut bytes = std::fs::read(field).unwrap();
+    // magic 8, version 4, dimension 4, transfer 1, origin 24, cell count 8.
+    let first = 8 + 4 + 4 + 1 + 24 + 8;
+    bytes[first + at..first + at + 8].copy_from_slice(&value.to_le_bytes());
+    std::fs::write(out, bytes).unwrap();
+}
+
+#[test]
+fn field_files_that_cannot_be_trusted_are_format_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, _, field) = bar(dir.path());
+    let out = dir.path().join("o.ply");
+    // The first cell's record: center (3), half-size, rotation (9, row-major), position (3).
+    let cases = [
+        ("a NaN center", 0, f64::NAN),
+        ("a zero half-size", 24, 0.0),
+        ("an infinite half-size", 24, f64::INFINITY),
+        ("a rotation that is not one", 32, 2.0),
+        ("a NaN position", 8 * 13, f64::NAN),
+        ("a huge position", 8 * 13, 1e308),
+    ];
+    for (what, at, value) in cases {
+        let bad = dir.path().join("bad.field");
+        damaged(&field, at, value, &bad);
+        let started = std::time::Instant::now();
+        let r = run(&["apply", arg(&bad), arg(&input), "-o", arg(&out), "-q"]);
+        assert!(started.elapsed().as_secs() < 20, "{what}: took too long");
+        let code = r.code;
+        if what == "a huge position" {
+            // A finite motion is the user's to make; the output must then be finite too.
+            assert!(code == 0 || code == 3, "{what}: {}", r.stderr);
+            if code == 0 {
+                let moved = rigidcells::io::Document::read(&out).unwrap();
+                assert!(
+                    moved
+                        .positions()
+                        .iter()
+                        .all(|p| p.iter().all(|v| v.is_finite())),
+                    "{what}: NaN written"
+                );
+                std::fs::remove_file(&out).unwrap();
+            }
+            continue;
+        }
+        assert_eq!(code, 3, "{what}: {}", r.stderr);
+        assert!(r.stderr.contains("bad.field"), "{what}: {}", r.stderr);
+        assert!(!out.exists(), "{what}");
+    }
+}
+
+#[test]
+fn an_output_that_cannot_be_written_exits_1_naming_the_users_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, field) = bar(dir.path());
+    let out = dir.path().join("no such folder").join("out.ply");
+    for r in [
+        deform(&input, &out, &edit, &["--cell-size", "0.5"]),
+        run(&["apply", arg(&field), arg(&input), "-o", arg(&out), "-q"]),
+    ] {
+        assert_eq!(r.code, 1, "{}", r.stderr);
+        assert!(r.stderr.contains("out.ply: cannot write"), "{}", r.stderr);
+        assert!(!r.stderr.contains(".out.ply."), "{}", r.stderr);
+        assert_eq!(r.stderr.matches("os error").count(), 1, "{}", r.stderr);
+    }
+}
+
+/// SIGINT while the output is being written removes the temporary output and exits 130.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_run_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("terrain.las");
+    data_gen::write_las_terrain(&input, 1_500_000, false).unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [499990, 4999990, 0], max = [500300, 5002010, 1000] }\n\
+         [[handle]]\nbox = { min = [501700, 4999990, 0], max = [502010, 5002010, 1000] }\n\
+         translate = [0, 0, 20]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.las");
+    let mut child = common::bin()
+        .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&edit)])
+        .args(["--cell-size", "40", "--transfer", "rbf", "-q"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait for the temporary output to appear, then interrupt.
+    let temporary = || {
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".tmp"))
+    };
+    let started = std::time::Instant::now();
+    while !temporary() {
+        assert!(
+            started.elapsed().as_secs() < 120,
+            "no temporary output appeared"
+        );
+        if child.try_wait().unwrap().is_some() {
+            // Finished before it could be interrupted: nothing to check on this machine.
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    assert!(!temporary(), "the temporary output was left behind");
+    assert!(!out.exists());
+}
