@@ -61,6 +61,15 @@ impl Raster {
         let size = reader
             .output_buffer_size()
             .ok_or_else(|| bad("the picture is too large".into()))?;
+        // The header's dimensions are checked before they size an allocation: a damaged or
+        // hostile header can claim 2³¹ rows of a few bytes of data.
+        let (w, h) = (reader.info().width, reader.info().height);
+        crate::memory::check(
+            &format!("{}: the {w} × {h} picture", path.display()),
+            size as f64 + 4.0 * w as f64 * h as f64,
+            crate::memory::limit(None),
+            "use a smaller picture",
+        )?;
         let mut buf = vec![0; size];
         let info = reader
             .next_frame(&mut buf)

@@ -212,3 +212,69 @@ fn an_interrupted_run_leaves_no_temporary_file() {
     assert!(!temporary(), "the temporary output was left behind");
     assert!(!out.exists());
 }
+
+/// CRC-32 (PNG's), bit by bit.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 == 1 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A PNG whose header claims 2³¹ − 1 rows (with a valid checksum) is refused before anything
+/// is allocated for it, with the budget's message, not an abort.
+#[test]
+fn a_png_claiming_huge_dimensions_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("huge.png");
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&64u32.to_be_bytes());
+    ihdr.extend_from_slice(&0x7fff_ffffu32.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]); // 8-bit RGBA
+    let mut bytes = b"\x89PNG\r\n\x1a\n".to_vec();
+    bytes.extend_from_slice(&13u32.to_be_bytes());
+    bytes.extend_from_slice(&ihdr);
+    bytes.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    for (kind, data) in [
+        (&b"IDAT"[..], &[0x78u8, 0x9c, 0x03, 0x00][..]),
+        (b"IEND", &[]),
+    ] {
+        let mut chunk = kind.to_vec();
+        chunk.extend_from_slice(data);
+        bytes.extend_from_slice(&(data.len() as u32).to_be_bytes());
+        bytes.extend_from_slice(&chunk);
+        bytes.extend_from_slice(&crc32(&chunk).to_be_bytes());
+    }
+    std::fs::write(&png, &bytes).unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [0, 0], max = [10, 10] }\n\
+         [[handle]]\nbox = { min = [50, 0], max = [64, 10] }\ntranslate = [0, 5]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.png");
+    let started = std::time::Instant::now();
+    let r = run(&[
+        "image",
+        arg(&png),
+        "--edit",
+        arg(&edit),
+        "-o",
+        arg(&out),
+        "-q",
+    ]);
+    assert!(started.elapsed().as_secs() < 20);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("huge.png"), "{}", r.stderr);
+    assert!(r.stderr.contains("memory limit"), "{}", r.stderr);
+    assert!(!out.exists());
+}
