@@ -1,4 +1,10 @@
-//! Interruption (issue 16): SIGINT or SIGTERM during a run removes the temporary outputs
+//! Interruption and faults (issue 16). A dependency that panics on hostile bytes is called
+//! through [`guarded`]: its panic becomes a format error naming the file, and the panic hook
+//! installed by [`remove_temporaries_on_signals`] stays quiet about it. A closed pipe on
+//! standard output (`rigidcells info f.las | head`) ends the process as it ends other Unix
+//! tools, by SIGPIPE, instead of a panic.
+//!
+//! SIGINT or SIGTERM during a run removes the temporary outputs
 //! (hidden `.NAME.PID.tmp` files beside the outputs, [`crate::io::TempFile`]) instead of
 //! leaving them behind, then exits with 128 + the signal's number, as a shell reports it.
 //!
@@ -12,6 +18,27 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use crate::error::{Error, Result};
+
+/// Calls into a dependency now under [`guarded`] (their panics are not reported).
+static GUARDED: AtomicUsize = AtomicUsize::new(0);
+
+/// Runs `f`, a call into a dependency that may panic on hostile bytes of `path` (an assertion
+/// or `capacity overflow` inside `laz`'s decompressor): a panic becomes a format error naming
+/// `path` and what was being done.
+pub fn guarded<T>(path: &Path, doing: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    GUARDED.fetch_add(1, Ordering::SeqCst);
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    GUARDED.fetch_sub(1, Ordering::SeqCst);
+    result.unwrap_or_else(|_| {
+        Err(Error::format(
+            path,
+            format!("the data is damaged (the decoder failed while {doing})"),
+        ))
+    })
+}
 
 /// The temporary files alive now.
 static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
@@ -33,11 +60,20 @@ pub(crate) fn forget(path: &Path) {
 }
 
 /// Blocks SIGINT and SIGTERM in this thread (and so in the threads it starts) and starts a
-/// thread that, when one arrives, removes the temporary outputs and exits. Call it first in
-/// `main`, before any other thread exists. Does nothing where signals are not Unix's.
+/// thread that, when one arrives, removes the temporary outputs and exits; restores SIGPIPE's
+/// default action; and keeps the panic hook quiet inside [`guarded`]. Call it first in `main`,
+/// before any other thread exists. The signals' part does nothing where they are not Unix's.
 pub fn remove_temporaries_on_signals() {
+    let report = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if GUARDED.load(Ordering::SeqCst) == 0 {
+            report(info);
+        }
+    }));
     #[cfg(unix)]
     {
+        // SAFETY: restoring SIGPIPE's default action takes no pointers.
+        unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
         // SAFETY: `set` is a local, initialized by `sigemptyset` before use; the calls only
         // read it and change this thread's signal mask.
         let set = unsafe {

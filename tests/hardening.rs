@@ -278,3 +278,29 @@ fn a_png_claiming_huge_dimensions_is_refused() {
     assert!(r.stderr.contains("memory limit"), "{}", r.stderr);
     assert!(!out.exists());
 }
+
+/// A LAZ whose header's record length disagrees with its LAZ items made `laz`'s parallel
+/// decompressor panic (exit 101): now a format error naming the file, without a panic message.
+#[test]
+fn a_laz_whose_record_length_disagrees_with_its_items_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = std::fs::read(common::shared("las/autzen_trim.laz")).unwrap();
+    let len = u16::from_le_bytes([bytes[105], bytes[106]]);
+    bytes[105..107].copy_from_slice(&(len + 2).to_le_bytes());
+    let input = dir.path().join("bad.laz");
+    std::fs::write(&input, bytes).unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
+         translate = [0, 0, 20]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.laz");
+    let r = deform(&input, &out, &edit, &[]);
+    assert_eq!(r.code, 3, "{}", r.stderr);
+    assert!(r.stderr.contains("bad.laz"), "{}", r.stderr);
+    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
+    assert!(!out.exists());
+}

@@ -375,11 +375,13 @@ impl LasSource {
             Body::PointWise(Box::new(point_wise(path, &header)?))
         } else if header.compressed {
             let file = File::open(path).map_err(|e| Error::io(path, e))?;
-            let reader = las::Reader::with_options(
-                BufReader::with_capacity(1 << 20, file),
-                ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes),
-            )
-            .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
+            let reader = crate::interrupt::guarded(path, "opening it", || {
+                las::Reader::with_options(
+                    BufReader::with_capacity(1 << 20, file),
+                    ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes),
+                )
+                .map_err(|e| Error::format(path, format!("LAZ: {e}")))
+            })?;
             let slab = PointDataBuilder::new().for_header(reader.header()).build();
             Body::Laz(Box::new(reader), slab, 0)
         } else {
@@ -450,9 +452,12 @@ impl Source for LasSource {
 
     fn rewind(&mut self) -> Result<()> {
         if let Body::Laz(reader, slab, used) = &mut self.body {
-            reader
-                .seek(0)
-                .map_err(|e| Error::format(&self.path, format!("LAZ: {e}")))?;
+            let path = &self.path;
+            crate::interrupt::guarded(path, "seeking in it", || {
+                reader
+                    .seek(0)
+                    .map_err(|e| Error::format(path, format!("LAZ: {e}")))
+            })?;
             slab.resize_for(0);
             *used = 0;
         }
@@ -531,8 +536,11 @@ impl LasSource {
             Body::Laz(reader, slab, used) => {
                 if *used * rl == slab.raw_bytes().len() {
                     let want = (h.count - self.next).min(LAZ_BATCH as u64);
-                    let got = reader.fill_points(want, slab).map_err(|e| {
-                        Error::format(&self.path, format!("LAZ: point {} onwards: {e}", self.next))
+                    let (path, next) = (&self.path, self.next);
+                    let got = crate::interrupt::guarded(path, "decompressing it", || {
+                        reader.fill_points(want, slab).map_err(|e| {
+                            Error::format(path, format!("LAZ: point {next} onwards: {e}"))
+                        })
                     })?;
                     if got != want {
                         return Err(Error::format(
