@@ -2,7 +2,8 @@
 //! through [`guarded`]: its panic becomes a format error naming the file, and the panic hook
 //! installed by [`remove_temporaries_on_signals`] stays quiet about it. A closed pipe on
 //! standard output (`rigidcells info f.las | head`) ends the process as it ends other Unix
-//! tools, by SIGPIPE, instead of a panic.
+//! tools, by SIGPIPE, instead of a panic. A file-size limit (`ulimit -f`, as a full disk) makes
+//! the write fail (SIGXFSZ ignored): exit 1 naming the output, and no file left.
 //!
 //! SIGINT or SIGTERM during a run removes the temporary outputs
 //! (hidden `.NAME.PID.tmp` files beside the outputs, [`crate::io::TempFile`]) instead of
@@ -72,8 +73,13 @@ pub fn remove_temporaries_on_signals() {
     }));
     #[cfg(unix)]
     {
-        // SAFETY: restoring SIGPIPE's default action takes no pointers.
-        unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
+        // SAFETY: setting a signal's action to a constant takes no pointers. SIGPIPE gets its
+        // default back; SIGXFSZ (a file-size limit reached) is ignored, so the write fails
+        // with EFBIG and the output's error path removes the temporary.
+        unsafe {
+            libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+        }
         // SAFETY: `set` is a local, initialized by `sigemptyset` before use; the calls only
         // read it and change this thread's signal mask.
         let set = unsafe {

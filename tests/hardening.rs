@@ -304,3 +304,34 @@ fn a_laz_whose_record_length_disagrees_with_its_items_is_a_format_error() {
     assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
     assert!(!out.exists());
 }
+
+/// A write that fails for lack of room (a file-size limit standing for a full disk) exits 1
+/// naming the output, and leaves neither the output nor its temporary.
+#[cfg(unix)]
+#[test]
+fn a_full_disk_exits_1_and_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, _) = bar(dir.path());
+    let out = dir.path().join("out.ply");
+    // 1 block of 512 bytes: the bar's PLY (about 10 KB) does not fit.
+    let r = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "ulimit -f 1; exec '{}' deform '{}' -o '{}' --edit '{}' --cell-size 0.5 -q",
+            env!("CARGO_BIN_EXE_rigidcells"),
+            arg(&input),
+            arg(&out),
+            arg(&edit)
+        ))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert_eq!(r.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("out.ply: cannot write"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("out.ply"))
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
