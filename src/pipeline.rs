@@ -105,11 +105,12 @@ where
     check_rbf_memory::<D>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
     // The solved constraints' warnings: an adaptive solve decides its parts at rest again.
-    let warnings = build_warnings(
+    let mut warnings = build_warnings(
         &build_info,
         &solution.complex,
         &solution.constraints.warnings,
     );
+    warnings.extend(solution.info.refinement_stopped.clone());
     let t = Instant::now();
     check_rbf_memory::<D>(solution.complex.len(), params)?;
     let field = Field::from_solution(&solution);
@@ -117,7 +118,6 @@ where
     let deformer = Constrained::new(&field, inner, Outside::Extend)?;
     let mut moved = points.to_vec();
     apply(&deformer, &field.origin, &mut moved);
-    let mut warnings = warnings;
     let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
     let info = DeformInfo {
         build: build_info,
@@ -272,11 +272,12 @@ pub fn deform_file(
     let constraints = solve::resolve_selected(&complex, spec, &selections)?;
     check_rbf_memory::<3>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
-    let warnings = build_warnings(
+    let mut warnings = build_warnings(
         &build_info,
         &solution.complex,
         &solution.constraints.warnings,
     );
+    warnings.extend(solution.info.refinement_stopped.clone());
     check_rbf_memory::<3>(solution.complex.len(), params)?;
 
     let t1 = Instant::now();
@@ -297,7 +298,6 @@ pub fn deform_file(
     let mut after = proxy.before.clone();
     apply(&deformer, &origin, &mut after);
     info.proxy = Proxy { after, ..proxy };
-    let mut warnings = warnings;
     let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
     observer.finish();
     let t2 = Instant::now();

@@ -335,3 +335,21 @@ fn a_full_disk_exits_1_and_leaves_nothing() {
         .collect();
     assert!(left.is_empty(), "left behind: {left:?}");
 }
+
+/// A tiny `--refine-strain` split every cell round after round (minutes on the tube): the
+/// refinement now stops at a bound and says which.
+#[test]
+fn refinement_with_a_tiny_threshold_stops_at_its_bound() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, _) = bar(dir.path());
+    let out = dir.path().join("o.ply");
+    let r = common::deform_verbose(
+        &input,
+        &out,
+        &edit,
+        &["--cell-size", "0.5", "--refine-strain", "1e-12"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.contains("refinement stopped"), "{}", r.stderr);
+    assert!(out.exists());
+}

@@ -121,6 +121,10 @@ impl Default for SolveParams {
     }
 }
 
+/// Refinement stops before the complex grows past this many times the cells it started from
+/// (issue 16: a tiny `--refine-strain` split every cell, round after round, for minutes).
+pub const REFINE_GROWTH: usize = 8;
+
 /// What [`solve`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SolverInfo {
@@ -142,6 +146,9 @@ pub struct SolverInfo {
     pub cells_final: usize,
     /// Cell counts after each refinement round.
     pub refinements: Vec<usize>,
+    /// Why refinement stopped before every cell over the threshold was split, if it did (the
+    /// bound it hit).
+    pub refinement_stopped: Option<String>,
     /// Unknowns of the last system.
     pub unknowns: usize,
     /// Seconds spent in symbolic analysis.
@@ -227,6 +234,16 @@ where
                 break;
             }
             let more = split.iter().filter(|&&s| s).count() * ((1 << D) - 1);
+            if complex.len() + more > REFINE_GROWTH * info.cells_initial.max(1) {
+                info.refinement_stopped = Some(format!(
+                    "refinement stopped at {} cells: splitting on would pass {REFINE_GROWTH}× \
+                     the {} cells it started from; raise --refine-strain or use a smaller \
+                     --cell-size",
+                    complex.len(),
+                    info.cells_initial
+                ));
+                break;
+            }
             check_solver_memory(complex.len() + more, params, REFINE_ADVICE)?;
             let (fine, parent) = complex.split(&split);
             motions = fine
