@@ -353,3 +353,38 @@ fn refinement_with_a_tiny_threshold_stops_at_its_bound() {
     assert!(r.stderr.contains("refinement stopped"), "{}", r.stderr);
     assert!(out.exists());
 }
+
+/// A LAZ whose chunk table claims 2³¹ − 1 chunks made `laz` ask for 34 GB and abort: a format
+/// error, checked before `laz` reads the table. One whose table pointer lies past the end is a
+/// format error from the decoder.
+#[test]
+fn a_laz_with_a_damaged_chunk_table_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = std::fs::read(common::shared("las/autzen_trim.laz")).unwrap();
+    let points = u32::from_le_bytes(good[96..100].try_into().unwrap()) as usize;
+    let table = i64::from_le_bytes(good[points..points + 8].try_into().unwrap()) as usize;
+    let mut count = good.clone();
+    count[table + 4..table + 8].copy_from_slice(&0x7fff_ffffu32.to_le_bytes());
+    let mut pointer = good.clone();
+    pointer[points..points + 8].copy_from_slice(&(1i64 << 40).to_le_bytes());
+    for (name, bytes) in [("count.laz", count), ("pointer.laz", pointer)] {
+        let input = dir.path().join(name);
+        std::fs::write(&input, bytes).unwrap();
+        let r = run(&["info", arg(&input)]);
+        assert!(r.code == 0 || r.code == 3, "{name}: {}", r.stderr);
+        let out = dir.path().join("out.laz");
+        let edit = dir.path().join("edit.toml");
+        std::fs::write(
+            &edit,
+            "[[fixed]]\nbox = { min = [0, 0, 0], max = [1, 1, 1] }\n",
+        )
+        .unwrap();
+        let r = deform(&input, &out, &edit, &[]);
+        assert_eq!(r.code, 3, "{name}: {}", r.stderr);
+        assert!(r.stderr.contains(name), "{name}: {}", r.stderr);
+        if name == "count.laz" {
+            assert!(r.stderr.contains("chunk table"), "{name}: {}", r.stderr);
+        }
+        assert!(!out.exists());
+    }
+}

@@ -374,6 +374,7 @@ impl LasSource {
         let body = if header.laz_compressor == Some(1) {
             Body::PointWise(Box::new(point_wise(path, &header)?))
         } else if header.compressed {
+            check_chunk_table(path, &header)?;
             let file = File::open(path).map_err(|e| Error::io(path, e))?;
             let reader = crate::interrupt::guarded(path, "opening it", || {
                 las::Reader::with_options(
@@ -965,6 +966,45 @@ impl Drop for CrateSink {
             std::mem::forget(w);
         }
     }
+}
+
+/// Checks a LAZ file's chunk table before `laz` sizes allocations from it: where the table's
+/// offset (the 8 bytes where the points begin; −1: none written) lies in the file, its chunk
+/// count must not pass the point count (a chunk holds at least one point). A damaged count
+/// asked `laz` for 34 GB and aborted; an offset outside the file the decoder reports itself.
+fn check_chunk_table(path: &Path, header: &LasHeader) -> Result<()> {
+    use std::io::Read;
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    let mut at = [0u8; 8];
+    file.seek(SeekFrom::Start(u64::from(header.point_offset)))
+        .and_then(|_| file.read_exact(&mut at))
+        .map_err(|_| Error::format(path, "LAZ: the file ends before its points"))?;
+    let table = i64::from_le_bytes(at);
+    if table == -1 {
+        return Ok(());
+    }
+    let start = u64::from(header.point_offset) + 8;
+    if table < start as i64 || table as u64 + 8 > len {
+        // Outside the file: the decoder says so itself (after naming what else is wrong with
+        // the file, as a bad compressor), without sizing anything from it.
+        return Ok(());
+    }
+    let mut head = [0u8; 8];
+    file.seek(SeekFrom::Start(table as u64))
+        .and_then(|_| file.read_exact(&mut head))
+        .map_err(|e| Error::io(path, e))?;
+    let chunks = u32::from_le_bytes(head[4..8].try_into().expect("4 bytes"));
+    if u64::from(chunks) > header.count.max(1) {
+        return Err(Error::format(
+            path,
+            format!(
+                "LAZ: the chunk table lists {chunks} chunks for {} points",
+                header.count
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// An error of the `las` crate's writer on `output`: its I/O errors are errors writing the
