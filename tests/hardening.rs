@@ -31,6 +31,28 @@ fn bar(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
     (input, edit, field)
 }
 
+/// `edit.toml` in `dir`: the x range `x[0]..x[1]` fixed, `x[2]..x[3]` lifted by 20, over the
+/// y range `y` (a scan's two ends).
+fn lift_spec(dir: &Path, x: [f64; 4], y: [f64; 2]) -> PathBuf {
+    let edit = dir.join("edit.toml");
+    let region = |a: f64, b: f64| {
+        format!(
+            "box = {{ min = [{a}, {}, 0], max = [{b}, {}, 1000] }}\n",
+            y[0], y[1]
+        )
+    };
+    std::fs::write(
+        &edit,
+        format!(
+            "[[fixed]]\n{}[[handle]]\n{}translate = [0, 0, 20]\n",
+            region(x[0], x[1]),
+            region(x[2], x[3])
+        ),
+    )
+    .unwrap();
+    edit
+}
+
 #[test]
 fn an_os_error_is_said_once_with_the_users_path() {
     let dir = tempfile::tempdir().unwrap();
@@ -169,14 +191,11 @@ fn an_interrupted_run_leaves_no_temporary_file() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("terrain.las");
     data_gen::write_las_terrain(&input, 1_500_000, false).unwrap();
-    let edit = dir.path().join("edit.toml");
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [499990, 4999990, 0], max = [500300, 5002010, 1000] }\n\
-         [[handle]]\nbox = { min = [501700, 4999990, 0], max = [502010, 5002010, 1000] }\n\
-         translate = [0, 0, 20]\n",
-    )
-    .unwrap();
+    let edit = lift_spec(
+        dir.path(),
+        [499990.0, 500300.0, 501700.0, 502010.0],
+        [4999990.0, 5002010.0],
+    );
     let out = dir.path().join("out.las");
     let mut child = common::bin()
         .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&edit)])
@@ -289,14 +308,11 @@ fn a_laz_whose_record_length_disagrees_with_its_items_is_a_format_error() {
     bytes[105..107].copy_from_slice(&(len + 2).to_le_bytes());
     let input = dir.path().join("bad.laz");
     std::fs::write(&input, bytes).unwrap();
-    let edit = dir.path().join("edit.toml");
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
-         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
-         translate = [0, 0, 20]\n",
-    )
-    .unwrap();
+    let edit = lift_spec(
+        dir.path(),
+        [636000.0, 636300.0, 636900.0, 637200.0],
+        [848900.0, 849600.0],
+    );
     let out = dir.path().join("out.laz");
     let r = deform(&input, &out, &edit, &[]);
     assert_eq!(r.code, 3, "{}", r.stderr);

@@ -220,16 +220,7 @@ impl<const D: usize> PuRbf<D> {
     /// here (where [`PuRbf::new`] would have returned the error) is left out of the blend and
     /// counted ([`PuRbf::fits`]).
     pub fn lazy(field: &Field<D>) -> Result<Self> {
-        Ok(Self {
-            source: Some(Field {
-                origin: field.origin,
-                centers: field.centers.clone(),
-                halves: field.halves.clone(),
-                motions: field.motions.clone(),
-                prescribed: Default::default(),
-            }),
-            ..Self::layout(field)?
-        })
+        Ok(Self::layout(field)?.fitting_from(field))
     }
 
     /// The patches of `field` and the members of each, none fitted yet.
@@ -371,7 +362,13 @@ impl<const D: usize> PuRbf<D> {
             ));
         }
         let (keys, members) = layout.patches.into_iter().unzip();
-        Ok(Self {
+        Ok(Self::assemble(layout.lower, layout.edge, keys, members)?.fitting_from(field))
+    }
+
+    /// These patches, fitted on demand from the cells of `field` (kept without their
+    /// prescribed maps, which the fits do not use).
+    fn fitting_from(self, field: &Field<D>) -> Self {
+        Self {
             source: Some(Field {
                 origin: field.origin,
                 centers: field.centers.clone(),
@@ -379,8 +376,8 @@ impl<const D: usize> PuRbf<D> {
                 motions: field.motions.clone(),
                 prescribed: Default::default(),
             }),
-            ..Self::assemble(layout.lower, layout.edge, keys, members)?
-        })
+            ..self
+        }
     }
 
     /// The fit of patch `p`, made now if it was not (`None`: it failed).
