@@ -33,8 +33,13 @@ pub const SOLVER_BYTES_PER_CELL: u64 = 4 << 10;
 /// The multilevel solver's memory per cell (see the module docs).
 pub const MULTILEVEL_BYTES_PER_CELL: u64 = 12 << 10;
 
-/// The memory budget when none is given: three quarters of the physical memory (or of the
-/// control group's limit, if lower); 8 GiB where neither can be read.
+/// The memory budget when none is given: three quarters of the physical memory, or of the
+/// control group's limit or the address-space limit (`ulimit -v`, `RLIMIT_AS`) where either is
+/// lower; 24 GiB where none can be read.
+///
+/// The address-space limit counts: a budget above it let an estimate pass that the allocator
+/// then could not serve, and the run aborted instead of saying which parameter to change (the
+/// fuzz harness, `tools/src/bin/fuzz.rs`, runs every case under such a limit).
 pub fn default_limit() -> u64 {
     let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
         let line = s.lines().find(|l| l.starts_with("MemTotal:"))?;
@@ -44,13 +49,30 @@ pub fn default_limit() -> u64 {
     let cgroup = std::fs::read_to_string("/sys/fs/cgroup/memory.max")
         .ok()
         .and_then(|s| s.trim().parse::<u64>().ok());
-    let physical = match (total, cgroup) {
-        (Some(t), Some(c)) => t.min(c),
-        (Some(t), None) => t,
-        (None, Some(c)) => c,
-        (None, None) => 32 << 30,
-    };
+    let physical = [total, cgroup, address_space_limit()]
+        .into_iter()
+        .flatten()
+        .min()
+        .unwrap_or(32 << 30);
     physical / 4 * 3
+}
+
+/// The process's address-space limit (`RLIMIT_AS`), when one is set.
+#[cfg(unix)]
+#[allow(unsafe_code)]
+fn address_space_limit() -> Option<u64> {
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit writes the struct it is given and nothing else.
+    let ok = unsafe { libc::getrlimit(libc::RLIMIT_AS, &mut limit) } == 0;
+    (ok && limit.rlim_cur != libc::RLIM_INFINITY).then_some(limit.rlim_cur as u64)
+}
+
+#[cfg(not(unix))]
+fn address_space_limit() -> Option<u64> {
+    None
 }
 
 /// The limit of `given`, or [`default_limit`].

@@ -406,6 +406,8 @@ where
         }
         if let Some((_, layout, box_)) = window {
             let frame = section.expect("a window has its section").frame;
+            super::leaves::check_window_cells(&field, frame.lower, frame.edge)
+                .map_err(|e| Error::format(path, e))?;
             return Ok(Self {
                 field,
                 transfer,

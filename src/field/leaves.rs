@@ -139,6 +139,15 @@ pub(crate) fn check_cells<const D: usize>(field: &Field<D>) -> std::result::Resu
     Leaves::new(&field.centers, &field.halves).map(|_| ())
 }
 
+/// As [`check_cells`], for a window of a field's cells on the whole field's grid.
+pub(crate) fn check_window_cells<const D: usize>(
+    field: &Field<D>,
+    lower: Vect<D>,
+    edge: f64,
+) -> std::result::Result<(), String> {
+    Leaves::in_frame(&field.centers, &field.halves, lower, edge).map(|_| ())
+}
+
 /// Calls `f` for every voxel of the box `from ..= to` (inclusive) that is not inside
 /// `inner_from ..= inner_to`.
 pub(super) fn for_each_shell<const D: usize>(
