@@ -310,7 +310,7 @@ enum SolverArg {
 struct MemoryArg {
     /// Stop with an error, before allocating, when the cell grid, the solver or the RBF would
     /// need more memory than this (e.g. 8G, 512M) [default: three quarters of the machine's
-    /// memory].
+    /// memory, at most half of `ulimit -v`].
     #[arg(long, value_name = "SIZE", value_parser = parse_memory)]
     memory_limit: Option<u64>,
 }

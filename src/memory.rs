@@ -5,10 +5,12 @@
 //!
 //! The budget is `--memory-limit` (library: the `memory_limit` of the parameters), by default
 //! three quarters of the machine's physical memory, or of the control group's limit where that
-//! is lower. The estimates are of the large buffers only:
+//! is lower, and at most half the address-space limit ([`default_limit`]). The estimates are
+//! of the large buffers only:
 //!
-//! - the cell construction (`cells::build`): 160 bytes per occupied finest cell (its code,
-//!   the coarser levels, the empty blocks and the flood fill's maps, the leaves), checked as
+//! - the cell construction (`cells::build`): 1 KiB per occupied finest cell (its code, the
+//!   coarser levels, the empty blocks and the flood fill's maps, the leaves, the complex's
+//!   cells and adjacency), checked as
 //!   the occupied cells grow; 24 bytes per cell of the coarsest level, which is enumerated
 //!   whole; 8 bytes per candidate cell of the triangles' boxes, counted before they are
 //!   rasterized. Nothing is sized by the bounding box's volume;
@@ -34,12 +36,15 @@ pub const SOLVER_BYTES_PER_CELL: u64 = 4 << 10;
 pub const MULTILEVEL_BYTES_PER_CELL: u64 = 12 << 10;
 
 /// The memory budget when none is given: three quarters of the physical memory, or of the
-/// control group's limit or the address-space limit (`ulimit -v`, `RLIMIT_AS`) where either is
-/// lower; 24 GiB where none can be read.
+/// control group's limit where that is lower (24 GiB where neither can be read), and at most
+/// half the address-space limit (`ulimit -v`, `RLIMIT_AS`) where one is set.
 ///
 /// The address-space limit counts: a budget above it let an estimate pass that the allocator
 /// then could not serve, and the run aborted instead of saying which parameter to change (the
-/// fuzz harness, `tools/src/bin/fuzz.rs`, runs every case under such a limit).
+/// fuzz harness, `tools/src/bin/fuzz.rs`, runs every case under such a limit). Half, because
+/// address space is spent without memory: thread stacks, malloc's per-thread arenas, and the
+/// dense kernels' per-thread scratch, which `faer`'s gemm sizes at twice the L3 cache (545 MB
+/// per thread on this machine's reported L3) and never touches whole.
 pub fn default_limit() -> u64 {
     let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
         let line = s.lines().find(|l| l.starts_with("MemTotal:"))?;
@@ -49,12 +54,16 @@ pub fn default_limit() -> u64 {
     let cgroup = std::fs::read_to_string("/sys/fs/cgroup/memory.max")
         .ok()
         .and_then(|s| s.trim().parse::<u64>().ok());
-    let physical = [total, cgroup, address_space_limit()]
+    let physical = [total, cgroup]
         .into_iter()
         .flatten()
         .min()
         .unwrap_or(32 << 30);
-    physical / 4 * 3
+    let budget = physical / 4 * 3;
+    match address_space_limit() {
+        Some(limit) => budget.min(limit / 2),
+        None => budget,
+    }
 }
 
 /// The process's address-space limit (`RLIMIT_AS`), when one is set.

@@ -470,7 +470,8 @@ fn first_pass_cells(
         None => scan_bounds(source, chunk)?,
     };
     let sized;
-    let build = match build.target_cells {
+    let target = build.target_cells;
+    let build = match target {
         Some(n) => {
             observer.stage("sizing", 0);
             let size = proxy_cell_size(source, build, (lo, hi), n, chunk)?;
@@ -506,6 +507,15 @@ fn first_pass_cells(
     drop(positions);
     let (complex, build_info) = occupancy.finish()?;
     observer.finish();
+    if let Some(n) = target
+        && complex.len().saturating_mul(2) < n
+    {
+        notes.push(format!(
+            "--cells {n}: the shape gives only {} cells at the finest size searched (too few \
+             samples, or too thin, to fill more)",
+            complex.len()
+        ));
+    }
     Ok((complex, build_info, selections, proxy))
 }
 
@@ -522,7 +532,7 @@ fn proxy_cell_size(
     target: usize,
     chunk_len: usize,
 ) -> Result<f64> {
-    crate::cells::check_target(target)?;
+    crate::cells::check_target(target, build.memory_limit)?;
     source.rewind()?;
     let voxel = (hi - lo).max().max(f64::MIN_POSITIVE) / PROXY_RESOLUTION;
     let keep_all = !source.triangles().is_empty();

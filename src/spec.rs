@@ -653,16 +653,15 @@ impl Ctx<'_> {
                 .filter(|s| !s.is_empty())
                 .map(str::parse::<f64>)
                 .collect();
-            let bad = || {
-                Error::format(
-                    &path,
-                    format!(
-                        "line {}: expected {} or {} numbers",
-                        k + 1,
-                        2 * D,
-                        2 * D + 1
-                    ),
-                )
+            // A malformed file the spec names is a problem of the spec (exit 4).
+            let bad = || Error::Spec {
+                path: path.clone(),
+                message: format!(
+                    "line {}: expected {} or {} numbers",
+                    k + 1,
+                    2 * D,
+                    2 * D + 1
+                ),
             };
             let vals = match vals {
                 Ok(v) => v,

@@ -69,10 +69,16 @@ fn edit_spec_problems_exit_4() {
     let dir = tempfile::tempdir().unwrap();
     let (input, _, _) = bar(dir.path());
     let out = dir.path().join("o.ply");
-    let cases: [(&str, &[u8]); 3] = [
+    // A target CSV the spec names whose row is not 6 or 7 numbers (the fuzz harness's
+    // `1,2` and `nan,0,0,0,0,0`) is the spec's problem too.
+    std::fs::write(dir.path().join("short.csv"), "1,2\n").unwrap();
+    std::fs::write(dir.path().join("nan.csv"), "nan,0,0,0,0,0\n").unwrap();
+    let cases: [(&str, &[u8]); 5] = [
         ("missing.toml", b""),
         ("latin1.toml", b"# caf\xe9\n[[fixed]]\n"),
         ("csv.toml", b"[[target]]\nfile = \"nowhere.csv\"\n"),
+        ("short.toml", b"[[target]]\nfile = \"short.csv\"\n"),
+        ("nan.toml", b"[[target]]\nfile = \"nan.csv\"\n"),
     ];
     for (name, text) in cases {
         let spec = dir.path().join(name);
@@ -95,6 +101,78 @@ fn cells_0_is_refused() {
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(r.stderr.contains("--cells 0"), "{}", r.stderr);
     assert!(!out.exists());
+}
+
+/// `--cells 2⁶⁴−1` (and 2³² + 1) had the size search build ever finer trial grids for minutes
+/// until an allocation aborted: refused at once against the memory budget, naming `--cells`.
+#[test]
+fn a_huge_cells_target_is_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, _) = bar(dir.path());
+    let out = dir.path().join("o.ply");
+    for n in ["18446744073709551615", "4294967297"] {
+        let started = std::time::Instant::now();
+        let r = deform(&input, &out, &edit, &["--cells", n]);
+        assert!(
+            started.elapsed().as_secs() < 10,
+            "--cells {n}: took too long"
+        );
+        assert_eq!(r.code, 4, "--cells {n}: {}", r.stderr);
+        assert!(r.stderr.contains("--cells"), "{}", r.stderr);
+        let r = common::cells(&input, &dir.path().join("c.ply"), &["--cells", n]);
+        assert_eq!(r.code, 4, "cells --cells {n}: {}", r.stderr);
+    }
+    assert!(!out.exists());
+}
+
+/// Four samples cannot fill 400 cells: the size search built ever finer grids of millions of
+/// empty blocks (20 s on a damaged LAS of four points, 9 s here); trial grids past the target
+/// are now counted as too many unbuilt, and the shortfall is said.
+#[test]
+fn a_cells_target_the_shape_cannot_reach_is_said_quickly() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("four.xyz");
+    std::fs::write(&input, "0 1 1\n0 4 4\n0 1 4\n0 4 1\n").unwrap();
+    let out = dir.path().join("cells.ply");
+    let started = std::time::Instant::now();
+    let r = run(&["cells", arg(&input), "-o", arg(&out), "--cells", "400"]);
+    assert!(started.elapsed().as_secs() < 5, "took too long");
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.contains("gives only 4 cells"), "{}", r.stderr);
+}
+
+/// The build's estimate covers the complex it hands on: at 160 B per occupied cell a soup at
+/// `--min-cell-size` 1 mm passed a 1.5 GB budget and peaked at 2.3 GB (an abort under
+/// `ulimit -v`). Here a build of ~250k occupied cells (the bar at 4 mm) is refused under 100 MB before it
+/// starts.
+#[test]
+fn the_cell_build_is_refused_when_its_complex_would_not_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, _, _) = bar(dir.path());
+    let out = dir.path().join("cells.ply");
+    let r = common::cells(
+        &input,
+        &out,
+        &["--cell-size", "0.004", "--memory-limit", "100M"],
+    );
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("occupied finest cells"), "{}", r.stderr);
+    assert!(r.stderr.contains("--cell-size"), "{}", r.stderr);
+    assert!(!out.exists());
+    // Without the limit it builds, and has the cells the old estimate passed under 100 MB.
+    let r = common::cells(&input, &out, &["--cell-size", "0.004"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let boundary: usize = r
+        .stdout
+        .split(" cells (")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count in {}", r.stdout));
+    assert!(
+        boundary * 160 < 100 << 20 && boundary * 1024 > 100 << 20,
+        "{boundary}"
+    );
 }
 
 #[test]
@@ -350,6 +428,51 @@ fn a_full_disk_exits_1_and_leaves_nothing() {
         .filter(|n| n.contains("out.ply"))
         .collect();
     assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+/// A field whose window cell lies off the grid of the others (one damaged center of a PU field
+/// applied to a tile, so that only a window of its cells is read) was a solver failure (exit 1):
+/// the file is malformed, exit 3.
+#[test]
+fn a_field_window_cell_off_the_grid_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("terrain.las");
+    data_gen::write_las_terrain(&input, 3000, false).unwrap();
+    let edit = lift_spec(
+        dir.path(),
+        [499990.0, 500300.0, 501700.0, 502010.0],
+        [4999990.0, 5002010.0],
+    );
+    let out = dir.path().join("out.las");
+    let field = dir.path().join("pu.field");
+    let r = deform(
+        &input,
+        &out,
+        &edit,
+        &[
+            "--cells",
+            "300",
+            "--transfer",
+            "pu",
+            "--save-field",
+            arg(&field),
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    std::fs::remove_file(&out).unwrap();
+    // The first cell's center moved by 0.37 of its half-size along x: off every grid voxel.
+    let saved = rigidcells::field::SavedField::<3>::load(&field).unwrap();
+    assert!(!saved.is_window());
+    let bytes = std::fs::read(&field).unwrap();
+    let first = 8 + 4 + 4 + 1 + 24 + 8;
+    let x = f64::from_le_bytes(bytes[first..first + 8].try_into().unwrap());
+    let half = f64::from_le_bytes(bytes[first + 24..first + 32].try_into().unwrap());
+    let bad = dir.path().join("bad.field");
+    damaged(&field, 0, x + 0.37 * half, &bad);
+    let r = run(&["apply", arg(&bad), arg(&input), "-o", arg(&out), "-q"]);
+    assert_eq!(r.code, 3, "{}", r.stderr);
+    assert!(r.stderr.contains("bad.field"), "{}", r.stderr);
+    assert!(!out.exists());
 }
 
 /// A tiny `--refine-strain` split every cell round after round (minutes on the tube): the

@@ -121,10 +121,14 @@ pub struct BuildInfo {
 const fn max_axis(d: usize) -> i64 {
     if d == 3 { 1 << 21 } else { 1 << 31 }
 }
-/// Bytes per occupied finest cell while the complex is built: the code, its share of the
-/// coarser levels, of the empty blocks (up to `2^D − 1` per occupied parent, with the flood
-/// fill's maps) and of the leaves.
-pub(crate) const BYTES_PER_OCCUPIED: u64 = 160;
+/// Bytes per occupied finest cell while the complex is built and used: the code, its share of
+/// the coarser levels, of the empty blocks (up to `2^D − 1` per occupied parent, with the flood
+/// fill's maps), of the leaves, and of the complex's cells and face adjacency that follow.
+/// Measured peaks (release, `rigidcells cells`): 914 B per occupied cell on a 0.5 m soup at
+/// 1 mm cells (2.56M occupied, 4.2M cells, 2.3 GB), 580 B on a 1M-point terrain at 2 m (input
+/// included). It was 160 B, counting the build's codes only: a `--min-cell-size` of 1 mm
+/// passed a 1.5 GB budget and peaked at 2.3 GB.
+pub(crate) const BYTES_PER_OCCUPIED: u64 = 1 << 10;
 /// Bytes per cell of the coarsest level, which is enumerated whole.
 const BYTES_PER_COARSEST: u64 = 24;
 
@@ -177,17 +181,30 @@ pub fn cell_size_for<const D: usize>(
     params: &BuildParams,
     target: usize,
 ) -> Result<f64> {
-    check_target(target)?;
+    check_target(target, params.memory_limit)?;
     let (lo, hi) = bounds(points)?;
     let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
     // `small` gives too many cells (or fails), `large` at most `target`.
     let (mut small, mut large) = (longest / 4096.0, longest / 2.0);
+    // A try whose coarsest level (enumerated whole, and flooded) is far past the target is
+    // counted as too many without building it: the count of a sparse shape (four samples, or
+    // a scan flattened onto a plane) may never reach the target, and the search then went on
+    // building ever finer grids of millions of empty blocks (20 s for four points). The final
+    // complex may then have fewer cells than asked; its count is reported.
+    let cap = COARSEST_PER_TARGET.saturating_mul(target as u128) + (1 << 20);
     let count = |size: f64| -> Result<Option<usize>> {
         let at = BuildParams {
             cell_size: Some(size),
             target_cells: None,
             ..*params
         };
+        match frame(&lo, &hi, &at) {
+            Ok(grid) if grid.dims0.iter().map(|&n| n as u128).product::<u128>() > cap => {
+                return Ok(None);
+            }
+            Ok(_) | Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => {}
+            Err(e) => return Err(e),
+        }
         match build(points, triangles, &at) {
             Ok((complex, _)) => Ok(Some(complex.len())),
             Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => Ok(None),
@@ -236,14 +253,31 @@ pub fn cell_size_for<const D: usize>(
     Ok(large)
 }
 
-/// Refuses `--cells 0`.
-pub(crate) fn check_target(target: usize) -> Result<()> {
+/// Bytes a complex needs per cell while it is built, its adjacency found and its cells written
+/// (550 B measured by `rigidcells cells` at 800k cells, rounded up): the least a `--cells N`
+/// run needs before any solve.
+pub(crate) const BYTES_PER_TARGET_CELL: u64 = 1 << 10;
+
+/// Cells of the coarsest level per cell asked for, past which [`cell_size_for`] counts a try as
+/// too many without building it (a complex holds every coarsest cell that is not outside, and
+/// the coarsest cells of a thin scan are about as many as its leaves).
+const COARSEST_PER_TARGET: u128 = 16;
+
+/// Refuses `--cells 0`, and a `--cells N` whose complex cannot fit the memory budget (checked
+/// before any try is built: a target of 2⁶⁴−1 had the search build ever finer trial grids for
+/// minutes until an allocation failed).
+pub(crate) fn check_target(target: usize, memory_limit: Option<u64>) -> Result<()> {
     if target == 0 {
         return Err(Error::Param(
             "--cells 0 asks for no cells; ask for at least 1".into(),
         ));
     }
-    Ok(())
+    crate::memory::check(
+        &format!("a complex of {target} cells"),
+        target as f64 * BYTES_PER_TARGET_CELL as f64,
+        crate::memory::limit(memory_limit),
+        "ask for fewer --cells (or raise --memory)",
+    )
 }
 
 /// The bounding box of `points`; an error for no points or a coordinate that is not finite.
@@ -357,7 +391,7 @@ impl<const D: usize> Occupancy<D> {
             ),
             self.sorted as f64 * BYTES_PER_OCCUPIED as f64,
             self.limit,
-            "use a larger --cell-size (or fewer --cells)",
+            "use a larger --cell-size or --min-cell-size (or fewer --cells)",
         )
     }
 
@@ -596,7 +630,7 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
         ),
         coarsest as f64 * BYTES_PER_COARSEST as f64,
         crate::memory::limit(params.memory_limit),
-        "use a larger --cell-size (or fewer --cells)",
+        "use a larger --cell-size or --min-cell-size (or fewer --cells)",
     )?;
     let size0 = size * block;
     let origin = (lo + hi) * 0.5;
@@ -667,7 +701,7 @@ fn triangle_cells<const D: usize>(
         ),
         candidates * 8.0,
         limit,
-        "use a larger --cell-size (or fewer --cells)",
+        "use a larger --cell-size or --min-cell-size (or fewer --cells)",
     )?;
     let cells: Vec<u64> = triangles
         .par_iter()
