@@ -137,6 +137,27 @@ pub enum Error {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
+    /// The command line's exit status for this error (the README's contract): 3 for an input
+    /// that cannot be read or is malformed (a field file included), 4 for the edit spec, a file
+    /// it names, or a parameter value, 1 for the rest (writing the output, the solver).
+    /// Syntax errors of the command line itself are clap's 2.
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            Error::Io { .. }
+            | Error::Format { .. }
+            | Error::UnsupportedFormat { .. }
+            | Error::Input(_) => 3,
+            Error::Spec { .. }
+            | Error::Param(_)
+            | Error::NoConstraints
+            | Error::ConstraintConflict { .. }
+            | Error::GridTooLarge { .. }
+            | Error::Memory { .. }
+            | Error::Outside { .. } => 4,
+            _ => 1,
+        }
+    }
+
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         Self::Io {

@@ -466,24 +466,7 @@ fn main() -> ExitCode {
 
 /// 3: unreadable or malformed input; 4: a bad edit spec or parameter; 1: anything else.
 fn exit_code(e: &anyhow::Error) -> u8 {
-    match e.downcast_ref::<Error>() {
-        Some(
-            Error::Io { .. }
-            | Error::Format { .. }
-            | Error::UnsupportedFormat { .. }
-            | Error::Input(_),
-        ) => 3,
-        Some(
-            Error::Spec { .. }
-            | Error::Param(_)
-            | Error::NoConstraints
-            | Error::ConstraintConflict { .. }
-            | Error::GridTooLarge { .. }
-            | Error::Memory { .. }
-            | Error::Outside { .. },
-        ) => 4,
-        _ => 1,
-    }
+    e.downcast_ref::<Error>().map_or(1, Error::exit_code)
 }
 
 fn run_cells(

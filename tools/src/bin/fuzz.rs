@@ -931,7 +931,7 @@ fn float_at(bytes: &mut Vec<u8>, rng: &mut StdRng) -> String {
 
 /// Interesting values in the fields of a LAS public header, its first VLR, the LASzip VLR and
 /// a LAZ chunk table's offset.
-fn las_field(bytes: &mut Vec<u8>, rng: &mut StdRng) -> String {
+fn las_field(bytes: &mut [u8], rng: &mut StdRng) -> String {
     let read = |at: usize, w: usize| -> u64 {
         let mut b = [0u8; 8];
         if let Some(s) = bytes.get(at..at + w) {
@@ -1711,20 +1711,20 @@ fn run_case(o: &Options, index: usize, case: &Case) -> Result<Outcome, Failure> 
         code,
         seconds,
     };
-    if class.bad() || o.only.is_some() {
-        if let Some(keep) = &o.keep {
-            let to = keep.join(format!("case-{index}"));
-            let _ = fs::remove_dir_all(&to);
-            fs::create_dir_all(&to)?;
-            for (name, bytes) in &case.files {
-                fs::write(to.join(name), bytes)?;
-            }
-            fs::write(
-                to.join("command.txt"),
-                format!("rigidcells {}\n", case.args.join(" ")),
-            )?;
-            fs::write(to.join("stderr.txt"), &stderr)?;
+    if (class.bad() || o.only.is_some())
+        && let Some(keep) = &o.keep
+    {
+        let to = keep.join(format!("case-{index}"));
+        let _ = fs::remove_dir_all(&to);
+        fs::create_dir_all(&to)?;
+        for (name, bytes) in &case.files {
+            fs::write(to.join(name), bytes)?;
         }
+        fs::write(
+            to.join("command.txt"),
+            format!("rigidcells {}\n", case.args.join(" ")),
+        )?;
+        fs::write(to.join("stderr.txt"), &stderr)?;
     }
     let _ = fs::remove_dir_all(&dir);
     Ok(outcome)
