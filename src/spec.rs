@@ -257,6 +257,13 @@ struct RawRotate {
     degrees: f64,
 }
 
+/// The largest magnitude of a motion's numbers (translations, pivots, pins, targets, scales,
+/// matrix entries): f64 keeps 15–16 significant digits, so a shape moved to 1e15 keeps none
+/// below the unit, and past about 1e50 the solver's squared residuals overflow (a fuzzed
+/// `translate = [1e308, …]` ended in an indefinite Gauss-Newton system, exit 1). Regions are
+/// not bounded: a box to ±1e308 is a way of saying "everything".
+pub const LARGEST: f64 = 1e15;
+
 const REGION_KEYS: [&str; 5] = ["box", "sphere", "plane", "indices", "classification"];
 
 /// Reads and validates the edit spec in `path`.
@@ -313,8 +320,8 @@ where
         let line = ctx.line(t);
         ctx.allow_only(t.get_ref(), &["point", "to"], line)?;
         spec.pins.push(Pin {
-            point: ctx.vector(t.get_ref(), "point", line)?,
-            to: ctx.vector(t.get_ref(), "to", line)?,
+            point: ctx.motion_vector(t.get_ref(), "point", line)?,
+            to: ctx.motion_vector(t.get_ref(), "to", line)?,
             line,
         });
     }
@@ -400,6 +407,33 @@ impl Ctx<'_> {
     fn vector<const D: usize>(&self, t: &toml::Table, key: &str, line: usize) -> Result<Vect<D>> {
         let v: Vec<f64> = self.field(t, key, line)?;
         self.to_vect(&v, key, line)
+    }
+
+    /// A vector that places or moves samples (a translation, a pivot, a pin, a target): finite
+    /// and at most [`LARGEST`] in magnitude.
+    fn motion_vector<const D: usize>(
+        &self,
+        t: &toml::Table,
+        key: &str,
+        line: usize,
+    ) -> Result<Vect<D>> {
+        let v: Vect<D> = self.vector(t, key, line)?;
+        self.within_range(v.amax(), key, line)?;
+        Ok(v)
+    }
+
+    fn within_range(&self, magnitude: f64, key: &str, line: usize) -> Result<()> {
+        if magnitude <= LARGEST {
+            Ok(())
+        } else {
+            Err(self.error(
+                Some(line),
+                format!(
+                    "`{key}` reaches {magnitude:e}, beyond {LARGEST:e}: a shape moved or \
+                     scaled that far keeps no detail in 64-bit floats, and the solve fails"
+                ),
+            ))
+        }
     }
 
     fn to_vect<const D: usize>(&self, v: &[f64], key: &str, line: usize) -> Result<Vect<D>> {
@@ -514,11 +548,11 @@ impl Ctx<'_> {
             return self.matrix_motion(&m, line);
         }
         let translate = match t.get("translate") {
-            Some(_) => self.vector(t, "translate", line)?,
+            Some(_) => self.motion_vector(t, "translate", line)?,
             None => Vect::<D>::zeros(),
         };
         let pivot = match t.get("pivot") {
-            Some(_) => Some(self.vector(t, "pivot", line)?),
+            Some(_) => Some(self.motion_vector(t, "pivot", line)?),
             None => None,
         };
         let scale: f64 = match t.get("scale") {
@@ -528,6 +562,7 @@ impl Ctx<'_> {
         if !(scale.is_finite() && scale > 0.0) {
             return Err(self.error(Some(line), format!("scale {scale} must be positive")));
         }
+        self.within_range(scale, "scale", line)?;
         let (rotation, turn) = match t.get("rotate") {
             Some(_) => {
                 let r: RawRotate = self.field(t, "rotate", line)?;
@@ -587,6 +622,8 @@ impl Ctx<'_> {
                 ),
             ));
         }
+        let largest = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+        self.within_range(largest, "matrix", line)?;
         let linear = Mat::<D>::from_fn(|r, c| m[r][c]);
         if <Dim<D> as Rigid<D>>::determinant(&linear) <= 0.0 {
             return Err(self.error(
@@ -627,8 +664,8 @@ impl Ctx<'_> {
             return self.read_targets(&file, weight, line);
         }
         Ok(vec![Target {
-            from: self.vector(t, "from", line)?,
-            to: self.vector(t, "to", line)?,
+            from: self.motion_vector(t, "from", line)?,
+            to: self.motion_vector(t, "to", line)?,
             weight,
             line,
         }])

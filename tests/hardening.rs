@@ -73,7 +73,15 @@ fn edit_spec_problems_exit_4() {
     // `1,2` and `nan,0,0,0,0,0`) is the spec's problem too.
     std::fs::write(dir.path().join("short.csv"), "1,2\n").unwrap();
     std::fs::write(dir.path().join("nan.csv"), "nan,0,0,0,0,0\n").unwrap();
-    let cases: [(&str, &[u8]); 5] = [
+    // A motion past 1e15 (the fuzz harness's `translate = [1e308, …]`) was a solver failure,
+    // exit 1: the spec asks what 64-bit floats cannot hold.
+    let far = b"[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+                [[handle]]\nbox = { min = [0, 0, 0], max = [0, 0, 0] }\ntranslate = [1e308, 0, 0]\n";
+    let huge = b"[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+                 [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\nscale = 1e300\n";
+    let cases: [(&str, &[u8]); 7] = [
+        ("far.toml", far),
+        ("huge.toml", huge),
         ("missing.toml", b""),
         ("latin1.toml", b"# caf\xe9\n[[fixed]]\n"),
         ("csv.toml", b"[[target]]\nfile = \"nowhere.csv\"\n"),
@@ -472,6 +480,70 @@ fn a_field_window_cell_off_the_grid_is_a_format_error() {
     let r = run(&["apply", arg(&bad), arg(&input), "-o", arg(&out), "-q"]);
     assert_eq!(r.code, 3, "{}", r.stderr);
     assert!(r.stderr.contains("bad.field"), "{}", r.stderr);
+    assert!(!out.exists());
+}
+
+/// A PLY header claiming 2³² − 1 vertices in a small file had 206 GB reserved and aborted: the
+/// counts are checked against the body's bytes first, for every element and both readers.
+#[test]
+fn a_ply_whose_counts_cannot_fit_its_body_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, _) = bar(dir.path());
+    let good = std::fs::read(&input).unwrap();
+    let text = String::from_utf8_lossy(&good[..200]).into_owned();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("element vertex"))
+        .unwrap()
+        .to_string();
+    for (name, claim) in [
+        ("vertex.ply", "element vertex 4294967295"),
+        ("extra.ply", ""),
+    ] {
+        let mut bytes = good.clone();
+        let at = text.find(&line).unwrap();
+        let replacement = if claim.is_empty() {
+            // An element without properties and a huge count, before the vertices.
+            format!("element nothing 4294967295\n{line}")
+        } else {
+            claim.to_string()
+        };
+        bytes.splice(at..at + line.len(), replacement.bytes());
+        let bad = dir.path().join(name);
+        std::fs::write(&bad, &bytes).unwrap();
+        let out = dir.path().join("o.ply");
+        for r in [
+            run(&["render", arg(&bad), "-o", arg(&dir.path().join("r.png"))]),
+            deform(&bad, &out, &edit, &[]),
+        ] {
+            assert_eq!(r.code, 3, "{name}: {}", r.stderr);
+            assert!(r.stderr.contains("cannot fit"), "{name}: {}", r.stderr);
+        }
+        assert!(!out.exists());
+    }
+}
+
+/// A LAS 1.4 file whose extended VLR claims 35 TB had `las` size a buffer from it and abort:
+/// the extended VLRs are walked against the file's length first.
+#[test]
+fn a_las_whose_extended_vlr_runs_past_the_end_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = std::fs::read(common::shared("las/1_4_w_evlr.las")).unwrap();
+    let start = u64::from_le_bytes(bytes[235..243].try_into().unwrap()) as usize;
+    bytes[start + 20..start + 28].copy_from_slice(&35_201_149_304_832u64.to_le_bytes());
+    let input = dir.path().join("evlr.las");
+    std::fs::write(&input, &bytes).unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [0, 0, 0], max = [1, 1, 1] }\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.las");
+    let r = deform(&input, &out, &edit, &[]);
+    assert_eq!(r.code, 3, "{}", r.stderr);
+    assert!(r.stderr.contains("extended VLR 1"), "{}", r.stderr);
+    assert!(r.stderr.contains("evlr.las"), "{}", r.stderr);
     assert!(!out.exists());
 }
 

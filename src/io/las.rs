@@ -371,6 +371,7 @@ impl LasSource {
     /// Opens `path` (LAS or LAZ, decided by the header).
     pub fn open(path: &Path) -> Result<Self> {
         let header = LasHeader::read(path)?;
+        check_evlrs(path, &header)?;
         let body = if header.laz_compressor == Some(1) {
             Body::PointWise(Box::new(point_wise(path, &header)?))
         } else if header.compressed {
@@ -966,6 +967,53 @@ impl Drop for CrateSink {
             std::mem::forget(w);
         }
     }
+}
+
+/// Checks that a LAS 1.4 file's extended VLRs lie within it before `las` reads them: it sizes
+/// each one's buffer from its 8-byte length (a damaged length asked for 35 TB and aborted).
+fn check_evlrs(path: &Path, header: &LasHeader) -> Result<()> {
+    use std::io::Read;
+    if header.evlr_count == 0 {
+        return Ok(());
+    }
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    let mut start = [0u8; 8];
+    file.seek(SeekFrom::Start(235))
+        .and_then(|_| file.read_exact(&mut start))
+        .map_err(|e| Error::io(path, e))?;
+    let mut at = u64::from_le_bytes(start);
+    if at == 0 {
+        return Ok(()); // `las` reads none
+    }
+    let bad = |m: String| Err(Error::format(path, m));
+    const HEADER: u64 = 60;
+    if at < u64::from(header.point_offset)
+        || u64::from(header.evlr_count).saturating_mul(HEADER) > len.saturating_sub(at)
+    {
+        return bad(format!(
+            "the header's {} extended VLRs from byte {at} cannot fit the file ({len} bytes)",
+            header.evlr_count
+        ));
+    }
+    for k in 0..header.evlr_count {
+        let mut head = [0u8; HEADER as usize];
+        file.seek(SeekFrom::Start(at))
+            .and_then(|_| file.read_exact(&mut head))
+            .map_err(|e| Error::io(path, e))?;
+        let data = le_u64(&head, 20);
+        match at.checked_add(HEADER).and_then(|a| a.checked_add(data)) {
+            Some(end) if end <= len => at = end,
+            _ => {
+                return bad(format!(
+                    "extended VLR {} of {} claims {data} bytes past the end of the file",
+                    k + 1,
+                    header.evlr_count
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Checks a LAZ file's chunk table before `laz` sizes allocations from it: where the table's
