@@ -168,7 +168,7 @@ struct DeformArgs {
     strain: bool,
     #[command(flatten)]
     view: ViewArgs,
-    /// Samples per streamed chunk.
+    /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
     #[arg(long, default_value_t = CHUNK)]
     chunk: usize,
     /// Print nothing but errors.
@@ -465,6 +465,10 @@ fn main() -> ExitCode {
 }
 
 /// 3: unreadable or malformed input; 4: a bad edit spec or parameter; 1: anything else.
+/// The largest `--chunk`: a chunk's buffers are sized by what it holds, but 2⁶⁴ − 1 overflowed
+/// the index arithmetic of the readers.
+const MAX_CHUNK: usize = 1 << 24;
+
 fn exit_code(e: &anyhow::Error) -> u8 {
     e.downcast_ref::<Error>().map_or(1, Error::exit_code)
 }
@@ -554,7 +558,7 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         &args.output,
         &args.edit,
         &params,
-        args.chunk.max(1),
+        args.chunk.clamp(1, MAX_CHUNK),
         args.save_field.as_deref(),
         args.report.as_deref(),
         args.preview.as_deref().map(|p| (p, view, args.strain)),

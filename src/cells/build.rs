@@ -587,8 +587,15 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     let longest = extent.max();
     let shortest = extent.min();
     let size = match params.cell_size {
-        Some(s) if s.is_finite() && s > 0.0 => s,
-        Some(s) => return Err(Error::Param(format!("cell size {s} must be positive"))),
+        // Past 1e15 the cells' corners leave f64 no digits for the shape (a fuzzed
+        // `--min-cell-size 1e300` ended in an indefinite Gauss-Newton system).
+        Some(s) if s.is_finite() && s > 0.0 && s <= crate::spec::LARGEST => s,
+        Some(s) => {
+            return Err(Error::Param(format!(
+                "cell size {s:?} must be positive and at most {:e}",
+                crate::spec::LARGEST
+            )));
+        }
         None if longest > 0.0 => longest / 32.0,
         None => 1.0,
     };

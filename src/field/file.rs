@@ -47,6 +47,7 @@ use super::pu::{Layout, OVERLAP};
 use super::{Constrained, Deformer, FREE, Field, Frame, Outside, PuRbf, Rbf, Transfer};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
+use crate::spec::LARGEST;
 
 const MAGIC: &[u8; 8] = b"RCFIELD\0";
 const VERSION: u32 = 3;
@@ -282,6 +283,15 @@ where
             },
         };
         let origin = r.vect::<D>()?;
+        if !origin.iter().all(|v| in_range(*v)) {
+            return Err(Error::format(
+                path,
+                format!(
+                    "the origin {:?} is not finite or beyond {LARGEST:e}",
+                    origin.as_slice()
+                ),
+            ));
+        }
         let n = r.u64()? as usize;
         let record = 8 * (D + 1 + D * D + D);
         if n == 0 || n > bytes.len() / record {
@@ -304,10 +314,13 @@ where
                     }
                 }
                 let translation = r.vect::<D>()?;
-                if !(linear.iter().all(|v| v.is_finite())
-                    && translation.iter().all(|v| v.is_finite()))
+                if !(linear.iter().all(|v| in_range(*v))
+                    && translation.iter().all(|v| in_range(*v)))
                 {
-                    return Err(Error::format(path, "a prescribed map is not finite"));
+                    return Err(Error::format(
+                        path,
+                        format!("a prescribed map is not finite or beyond {LARGEST:e}"),
+                    ));
                 }
                 maps.push(Affine {
                     linear,
@@ -468,8 +481,17 @@ where
     }
 }
 
+/// Whether a number of a field file is one `deform` could have written: finite and at most
+/// [`LARGEST`] in magnitude, the bound of the edit spec's motions and of cell sizes (a fuzzed
+/// position of −1.8e308 made the RBF's system singular, a solver failure instead of a
+/// format error).
+fn in_range(v: f64) -> bool {
+    v.is_finite() && v.abs() <= LARGEST
+}
+
 /// Why cell `i` of a field file cannot be trusted, if it cannot: a coordinate that is not
-/// finite, a half-size that is not positive, a rotation that is not orthonormal (to 1e-6).
+/// finite or beyond [`LARGEST`], a half-size that is not positive, a rotation that is not
+/// orthonormal (to 1e-6).
 fn check_cell<const D: usize>(
     i: usize,
     center: &Vect<D>,
@@ -481,11 +503,13 @@ fn check_cell<const D: usize>(
         .iter()
         .chain(rot.iter())
         .chain(pos.iter())
-        .all(|v| v.is_finite());
+        .all(|v| in_range(*v));
     if !finite {
-        return Err(format!("cell {i} has a number that is not finite"));
+        return Err(format!(
+            "cell {i} has a number that is not finite or beyond {LARGEST:e}"
+        ));
     }
-    if !(half > 0.0 && half.is_finite()) {
+    if !(half > 0.0 && in_range(half)) {
         return Err(format!("cell {i} has a half-size of {half}"));
     }
     let off = (rot.transpose() * rot - Mat::<D>::identity()).abs().max();

@@ -59,11 +59,15 @@ impl<const D: usize> Rbf<D> {
         let d = Mat::<f64>::from_fn(n, D, |r, k| {
             (field.motions[r].pos[k] - field.centers[r][k]) * inv_scale
         });
-        let x = match projected(&c, &d) {
+        let finite = |x: &Mat<f64>| (0..m).all(|r| (0..D).all(|k| x[(r, k)].is_finite()));
+        let mut x = match projected(&c, &d) {
             Some(x) => x,
-            None => saddle(&c, &d),
+            None => saddle(&c, &d, 0.0),
         };
-        if !(0..m).all(|r| (0..D).all(|k| x[(r, k)].is_finite())) {
+        if !finite(&x) {
+            x = saddle(&c, &d, DEGENERATE);
+        }
+        if !finite(&x) {
             return Err(Error::Solver(
                 "the RBF system is singular (coincident cell centers?)".into(),
             ));
@@ -76,6 +80,11 @@ impl<const D: usize> Rbf<D> {
     /// patches of [`super::PuRbf`], which are fitted in parallel, many small fits each asking
     /// for threads of their own overflowed the worker threads' stacks.
     pub(crate) fn new_serial(field: &Field<D>) -> Result<Self> {
+        Self::new_serial_with(field, 0.0).or_else(|_| Self::new_serial_with(field, DEGENERATE))
+    }
+
+    /// [`Rbf::new_serial`] with `regularize` on the polynomial block ([`DEGENERATE`]).
+    fn new_serial_with(field: &Field<D>, regularize: f64) -> Result<Self> {
         let (c, shift, inv_scale) = scaled_centers(field)?;
         let n = c.len();
         let m = n + D + 1;
@@ -84,6 +93,7 @@ impl<const D: usize> Rbf<D> {
             (true, true) => (c[r] - c[k]).norm().powi(3),
             (true, false) => poly(&c[r], k - n),
             (false, true) => poly(&c[k], r - n),
+            (false, false) if r == k => -regularize,
             (false, false) => 0.0,
         });
         let rhs = faer::Mat::<f64>::from_fn(m, D, |r, k| {
@@ -278,6 +288,13 @@ impl<const D: usize> Rbf<D> {
 
 /// The centers of `field` scaled to the unit box around their middle, with the shift and the
 /// inverse scale (so the system's conditioning does not depend on the input's units).
+/// The regularization of the polynomial block when the exact system is singular: centers on one
+/// plane (or line) leave the linear part's component across it undetermined (a four-point scan
+/// with `--transfer rbf` failed the solve, exit 1). `−ε I` there picks the least-norm linear
+/// part, zero across the plane, and leaves the interpolation conditions exact; the kernel block's
+/// entries are of order 1 to 40 in the scaled coordinates.
+const DEGENERATE: f64 = 1e-9;
+
 fn scaled_centers<const D: usize>(field: &Field<D>) -> Result<(Vec<Vect<D>>, Vect<D>, f64)> {
     if field.centers.is_empty() {
         return Err(Error::Solver("the field has no cells".into()));
@@ -299,13 +316,15 @@ fn scaled_centers<const D: usize>(field: &Field<D>) -> Result<(Vec<Vect<D>>, Vec
 
 /// The coefficients (`a`, then `b_0`, then `B` by rows of axes) by LU with partial pivoting of
 /// the whole saddle-point system: for fields with too few cells for [`projected`].
-fn saddle<const D: usize>(c: &[Vect<D>], d: &Mat<f64>) -> Mat<f64> {
+/// `regularize` goes on the polynomial block's diagonal ([`DEGENERATE`]; 0: the exact system).
+fn saddle<const D: usize>(c: &[Vect<D>], d: &Mat<f64>, regularize: f64) -> Mat<f64> {
     let n = c.len();
     let m = n + D + 1;
     let a = Mat::<f64>::from_fn(m, m, |r, k| match (r < n, k < n) {
         (true, true) => (c[r] - c[k]).norm().powi(3),
         (true, false) => poly(&c[r], k - n),
         (false, true) => poly(&c[k], r - n),
+        (false, false) if r == k => -regularize,
         (false, false) => 0.0,
     });
     let rhs = Mat::<f64>::from_fn(m, D, |r, k| if r < n { d[(r, k)] } else { 0.0 });
@@ -650,6 +669,31 @@ mod tests {
                 .collect(),
             centers,
             prescribed: Default::default(),
+        }
+    }
+
+    /// Centers on one plane leave the linear part across it undetermined: the exact system is
+    /// singular (a four-point scan with `--transfer rbf` failed, exit 1). The fit now takes the
+    /// least-norm linear part and still interpolates every center's motion; for few centers
+    /// (the saddle-point LU), many (the projected Cholesky), and the patches' serial fit.
+    #[test]
+    fn centers_on_one_plane_are_fitted() {
+        let mut next = super::super::test_numbers(5);
+        for n in [4, 40] {
+            let mut field = random_field(n, &mut next);
+            for (c, m) in field.centers.iter_mut().zip(&mut field.motions) {
+                c.x = 0.5;
+                m.pos.x = 0.5;
+            }
+            for rbf in [Rbf::new(&field).unwrap(), Rbf::new_serial(&field).unwrap()] {
+                for (c, m) in field.centers.iter().zip(&field.motions) {
+                    let got = rbf.warp(c);
+                    assert!((got - m.pos).norm() < 1e-6, "{n}: {got:?} for {:?}", m.pos);
+                }
+                // Off the plane the map is finite, and moves nothing across it.
+                let off = rbf.warp(&Vect::<3>::new(2.0, 1.0, 1.0));
+                assert!(off.iter().all(|v| v.is_finite()), "{off:?}");
+            }
         }
     }
 

@@ -98,7 +98,7 @@ impl Source for DocumentSource {
 
     fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
         let all = self.doc.positions();
-        let end = (self.next + max).min(all.len());
+        let end = self.next.saturating_add(max).min(all.len());
         chunk.clear(self.next as u64);
         chunk.positions.extend_from_slice(&all[self.next..end]);
         if let Some(normals) = self.doc.normals() {

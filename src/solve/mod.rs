@@ -396,9 +396,11 @@ pub fn adaptive(
     build: &crate::cells::BuildParams,
     solve: &SolveParams,
 ) -> Result<(crate::cells::BuildParams, SolveParams)> {
-    if !(min_cell_size.is_finite() && min_cell_size > 0.0) {
+    if !(min_cell_size.is_finite() && min_cell_size > 0.0 && min_cell_size <= crate::spec::LARGEST)
+    {
         return Err(Error::Param(format!(
-            "minimum cell size {min_cell_size} must be positive"
+            "minimum cell size {min_cell_size:?} must be positive and at most {:e}",
+            crate::spec::LARGEST
         )));
     }
     let build = crate::cells::BuildParams {
