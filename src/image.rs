@@ -193,6 +193,7 @@ pub fn deform_image(
     }
     let mut moved = rest.clone();
     apply(&deformer, &field.origin, &mut moved);
+    crate::pipeline::check_moved(0, &moved)?;
     info.clipped = moved
         .iter()
         .filter(|p| !(p.x >= 0.0 && p.x <= w as f64 && p.y >= 0.0 && p.y <= h as f64))

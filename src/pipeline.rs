@@ -118,6 +118,7 @@ where
     let deformer = Constrained::new(&field, inner, Outside::Extend)?;
     let mut moved = points.to_vec();
     apply(&deformer, &field.origin, &mut moved);
+    check_moved(0, &moved)?;
     let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
     let info = DeformInfo {
         build: build_info,
@@ -774,6 +775,19 @@ fn refuse_outside(input: &Path, warp: &Constrained<3>) -> Result<()> {
     })
 }
 
+/// Refuses a transfer's result that is not finite, before it is written: the last guard
+/// against writing NaN (the solve, the spec and field files are checked before; a field whose
+/// RBF frame was damaged to 5e-324 reached the output as NaN).
+pub(crate) fn check_moved<const D: usize>(first: u64, moved: &[Vect<D>]) -> Result<()> {
+    match moved.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+        Some(i) => Err(Error::Solver(format!(
+            "the transfer moved sample {} to a position that is not finite",
+            first + i as u64
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Reads and warps chunks on this thread while a second thread writes the previous ones, so
 /// the sink's encoding, compression and system calls overlap the transfer. Returns the sink
 /// (`None` when it overflowed and `may_overflow` allowed giving up on it) and the moved bounds.
@@ -835,6 +849,7 @@ fn pipelined_pass(
                 moved,
                 normals,
             );
+            check_moved(chunk.first, moved)?;
             for p in moved.iter() {
                 moved_bounds.0 = moved_bounds.0.inf(p);
                 moved_bounds.1 = moved_bounds.1.sup(p);

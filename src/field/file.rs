@@ -455,13 +455,22 @@ where
                         w.push(r.f64()?);
                     }
                 }
-                let finite = shift.iter().chain(constant.iter()).all(|v| v.is_finite())
-                    && inv_scale.is_finite()
-                    && inv_scale > 0.0
-                    && linear.iter().flatten().all(|v| v.is_finite())
-                    && weights.iter().flatten().all(|v| v.is_finite());
+                let finite = shift.iter().chain(constant.iter()).all(|v| in_range(*v))
+                    && linear.iter().flatten().all(|v| in_range(*v))
+                    && weights.iter().flatten().all(|v| in_range(*v));
                 if !finite {
-                    return Err(Error::format(path, "the RBF coefficients are not finite"));
+                    return Err(Error::format(
+                        path,
+                        format!("the RBF coefficients are not finite or beyond {LARGEST:e}"),
+                    ));
+                }
+                // The frame is the cells' own (their box's center and half extent): one that
+                // is not (a fuzzed 1/scale of 5e-324) made every sample NaN.
+                if Rbf::frame_of(&field).ok() != Some((shift, inv_scale)) {
+                    return Err(Error::format(
+                        path,
+                        "the RBF's frame does not match the cells' centers",
+                    ));
                 }
                 Some(Rbf::from_parts(
                     &field, shift, inv_scale, constant, linear, weights,

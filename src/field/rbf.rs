@@ -620,6 +620,13 @@ impl<const D: usize> Rbf<D> {
         )
     }
 
+    /// The frame the coefficients are computed in: the center of the cells' centers' box and
+    /// one over its half longest extent.
+    pub(crate) fn frame_of(field: &Field<D>) -> Result<(Vect<D>, f64)> {
+        let (_, shift, inv_scale) = scaled_centers(field)?;
+        Ok((shift, inv_scale))
+    }
+
     /// Rebuilds the transfer from saved coefficients over the field's centers.
     pub fn from_parts(
         field: &Field<D>,

@@ -1048,12 +1048,17 @@ fn check_chunk_table(path: &Path, header: &LasHeader) -> Result<()> {
         .and_then(|_| file.read_exact(&mut head))
         .map_err(|e| Error::io(path, e))?;
     let chunks = u32::from_le_bytes(head[4..8].try_into().expect("4 bytes"));
-    if u64::from(chunks) > header.count.max(1) {
+    // A chunk holds at least one point and begins with it stored raw (at least 8 bytes here,
+    // to be safe): a damaged point count of 3.4e9 let a damaged chunk count through, and the
+    // table's entries asked for 3.7 GB.
+    let room = (table as u64 - start) / 8;
+    if u64::from(chunks) > header.count.max(1) || u64::from(chunks) > room.max(1) {
         return Err(Error::format(
             path,
             format!(
-                "LAZ: the chunk table lists {chunks} chunks for {} points",
-                header.count
+                "LAZ: the chunk table lists {chunks} chunks for {} points in {} bytes",
+                header.count,
+                table as u64 - start
             ),
         ));
     }
