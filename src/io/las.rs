@@ -231,11 +231,15 @@ impl LasHeader {
         };
         let scale = f3(131);
         let offset = f3(155);
-        if !scale.iter().all(|s| s.is_finite() && *s != 0.0)
-            || !offset.iter().all(|o| o.is_finite())
+        // Scales are positive (the record's integers times the scale, plus the offset, are the
+        // coordinates); one of 5e-324, −1 or 1e300, or an offset of −1.8e308, left no output
+        // frame that could hold the moved coordinates (exit 1 after the whole solve).
+        if !scale.iter().all(|s| (1e-15..=1e15).contains(s))
+            || !offset.iter().all(|o| o.is_finite() && o.abs() <= 1e15)
         {
             return Err(err(format!(
-                "scale {scale:?} / offset {offset:?} are not finite and non-zero"
+                "scale {scale:?} / offset {offset:?} are out of range (scales positive, 1e-15 \
+                 to 1e15; offsets finite, within ±1e15)"
             )));
         }
         let b = |at: usize| le_f64(prefix, at);
