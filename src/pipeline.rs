@@ -292,6 +292,9 @@ pub fn deform_file(
     if let Some(path) = save_field {
         saved.save(path)?;
     }
+    // The field is written before the output; should the output fail, the field goes too (a
+    // run that fails leaves no file under any name it was given).
+    let mut saved_guard = RemoveOnDrop(save_field);
     let origin = saved.field.origin;
     // Every sample made the cells, so none lies beyond the margin.
     let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
@@ -328,7 +331,19 @@ pub fn deform_file(
         foldovers,
         warnings,
     };
+    saved_guard.0 = None;
     Ok((solution, info))
+}
+
+/// Removes the file it names when dropped, unless disarmed (`.0 = None`).
+struct RemoveOnDrop<'a>(Option<&'a Path>);
+
+impl Drop for RemoveOnDrop<'_> {
+    fn drop(&mut self) {
+        if let Some(path) = self.0 {
+            let _ = std::fs::remove_file(path);
+        }
+    }
 }
 
 /// Applies the field saved in `field` to the file `input`, writing `output` (one streaming

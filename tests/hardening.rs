@@ -665,6 +665,69 @@ fn the_rbf_of_a_flat_scan_is_solved() {
     assert!(moved.lines().any(|l| l == "0 4 5"), "{moved}");
 }
 
+/// A LAS header whose z scale is 5e-324 (or negative, or 1e300) left no output frame that could
+/// hold the moved coordinates: exit 1 after the whole solve. Such a header is malformed.
+#[test]
+fn a_las_header_with_an_absurd_scale_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("terrain.las");
+    data_gen::write_las_terrain(&good, 3000, false).unwrap();
+    let edit = lift_spec(
+        dir.path(),
+        [499990.0, 500300.0, 501700.0, 502010.0],
+        [4999990.0, 5002010.0],
+    );
+    // The z scale is the third f64 from byte 131; the x offset the first from 155.
+    for (name, at, value) in [
+        ("tiny.las", 147, 5e-324),
+        ("negative.las", 147, -1.0),
+        ("huge.las", 147, 1e300),
+        ("offset.las", 155, -f64::MAX),
+    ] {
+        let mut bytes = std::fs::read(&good).unwrap();
+        bytes[at..at + 8].copy_from_slice(&value.to_le_bytes());
+        let input = dir.path().join(name);
+        std::fs::write(&input, bytes).unwrap();
+        let out = dir.path().join("out.las");
+        let r = deform(&input, &out, &edit, &["--cells", "300"]);
+        assert_eq!(r.code, 3, "{name}: {}", r.stderr);
+        assert!(r.stderr.contains("out of range"), "{name}: {}", r.stderr);
+        assert!(!out.exists());
+    }
+}
+
+/// A LAZ whose header gives 32,768-byte records for 26-byte LASzip items had `laz` ask for
+/// 3.6 GB and abort; one whose header claims 603,353 extended VLRs failed only when the output
+/// was written, and left the `--save-field` file behind. Both exit 3 and leave nothing.
+#[test]
+fn a_laz_header_that_contradicts_its_body_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = std::fs::read(common::shared("las/autzen_trim.laz")).unwrap();
+    let mut record = good.clone();
+    record[105..107].copy_from_slice(&32768u16.to_le_bytes());
+    let mut evlrs = good.clone();
+    evlrs[243..247].copy_from_slice(&603_353u32.to_le_bytes());
+    let edit = lift_spec(
+        dir.path(),
+        [636000.0, 636300.0, 636900.0, 637200.0],
+        [848900.0, 849600.0],
+    );
+    for (name, bytes) in [("record.laz", record), ("evlrs.laz", evlrs)] {
+        let input = dir.path().join(name);
+        std::fs::write(&input, bytes).unwrap();
+        let out = dir.path().join("out.laz");
+        let field = dir.path().join("s.field");
+        let r = deform(
+            &input,
+            &out,
+            &edit,
+            &["--cells", "300", "--save-field", arg(&field)],
+        );
+        assert_eq!(r.code, 3, "{name}: {}", r.stderr);
+        assert!(!out.exists() && !field.exists(), "{name}: a file was left");
+    }
+}
+
 /// A tiny `--refine-strain` split every cell round after round (minutes on the tube): the
 /// refinement now stops at a bound and says which.
 #[test]
