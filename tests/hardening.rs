@@ -728,6 +728,27 @@ fn a_laz_header_that_contradicts_its_body_leaves_nothing() {
     }
 }
 
+/// A layered LAZ (point format 7, LASzip v4) whose first chunk's first layer claims 4 GB had
+/// `laz` resize a buffer to it and abort: the layer sizes of every chunk are checked against
+/// the chunk's bytes first.
+#[test]
+fn a_layered_laz_chunk_whose_layers_claim_too_much_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = std::fs::read(common::shared("las/pdrf7-v4-1.4.laz")).unwrap();
+    let points = u32::from_le_bytes(bytes[96..100].try_into().unwrap()) as usize;
+    let record = u16::from_le_bytes([bytes[105], bytes[106]]) as usize;
+    // Past the chunk table's offset: the first point raw, the point count, then the sizes.
+    let first_size = points + 8 + record + 4;
+    bytes[first_size..first_size + 4].copy_from_slice(&0xF000_0000u32.to_le_bytes());
+    let input = dir.path().join("layers.laz");
+    std::fs::write(&input, bytes).unwrap();
+    let out = dir.path().join("cells.ply");
+    let r = common::cells(&input, &out, &["-q"]);
+    assert_eq!(r.code, 3, "{}", r.stderr);
+    assert!(r.stderr.contains("layers claim"), "{}", r.stderr);
+    assert!(!out.exists());
+}
+
 /// A tiny `--refine-strain` split every cell round after round (minutes on the tube): the
 /// refinement now stops at a bound and says which.
 #[test]

@@ -378,6 +378,7 @@ impl LasSource {
         check_evlrs(path, &header)?;
         let body = if header.laz_compressor == Some(1) {
             check_items(path, &header)?;
+            check_point_wise_layers(path, &header)?;
             let d = crate::interrupt::guarded(path, "opening it", || point_wise(path, &header))?;
             Body::PointWise(Box::new(d))
         } else if header.compressed {
@@ -1098,6 +1099,12 @@ fn check_chunk_table(path: &Path, header: &LasHeader) -> Result<()> {
             .map_err(|e| Error::format(path, format!("LAZ: the chunk table: {e}")))
     })?;
     let most = header.count.max(1 << 24);
+    let mut chunks = Vec::with_capacity(table.as_ref().len());
+    let mut at = start;
+    for entry in table.as_ref() {
+        chunks.push((at, entry.byte_count));
+        at = at.saturating_add(entry.byte_count);
+    }
     for (k, entry) in table.as_ref().iter().enumerate() {
         if entry.point_count > most || entry.byte_count > len {
             return Err(Error::format(
@@ -1111,6 +1118,82 @@ fn check_chunk_table(path: &Path, header: &LasHeader) -> Result<()> {
                     header.count
                 ),
             ));
+        }
+    }
+    check_layers(path, header, &vlr, &mut file, &chunks)
+}
+
+/// [`check_layers`] for a point-wise LAZ whose items are layered: one chunk, the whole body.
+fn check_point_wise_layers(path: &Path, header: &LasHeader) -> Result<()> {
+    let vlr = laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default())
+        .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    let start = u64::from(header.point_offset);
+    check_layers(path, header, &vlr, &mut file, &[(start, len - start)])
+}
+
+/// The layers of a LASzip item in a layered chunk, `None` for an item that is not layered.
+fn layers(item: &laz::LazItem) -> Option<u64> {
+    use laz::LazItemType as T;
+    match item.item_type() {
+        T::Point14 => Some(9),
+        T::RGB14 | T::WavePacket14 => Some(1),
+        T::RGBNIR14 => Some(2),
+        T::Byte14(n) => Some(u64::from(n)),
+        _ => None,
+    }
+}
+
+/// Checks the layer sizes at the head of each layered chunk (`chunks`: where each begins, and
+/// its bytes) against the chunk's bytes: `laz` resizes a buffer to each size it reads there
+/// before reading it (damaged sizes asked for 3.6 and 4.1 GB and aborted). A layered chunk is
+/// its first point raw, a point count, then one u32 size per layer of each item.
+fn check_layers(
+    path: &Path,
+    header: &LasHeader,
+    vlr: &laz::LazVlr,
+    file: &mut File,
+    chunks: &[(u64, u64)],
+) -> Result<()> {
+    use std::io::Read;
+    let Some(count) = vlr
+        .items()
+        .iter()
+        .map(layers)
+        .sum::<Option<u64>>()
+        .filter(|&n| n > 0)
+    else {
+        return Ok(());
+    };
+    let sizes_at = u64::from(header.record_len) + 4;
+    let head = sizes_at + 4 * count;
+    let mut bytes = vec![0u8; head as usize];
+    for (k, &(at, len)) in chunks.iter().enumerate() {
+        if len == 0 {
+            continue;
+        }
+        let bad = |what: String| {
+            Error::format(
+                path,
+                format!("LAZ: chunk {} of {}: {what}", k + 1, chunks.len()),
+            )
+        };
+        if len < head {
+            return Err(bad(format!(
+                "{len} bytes cannot hold its first point and {count} layer sizes"
+            )));
+        }
+        file.seek(SeekFrom::Start(at))
+            .and_then(|_| file.read_exact(&mut bytes))
+            .map_err(|_| bad("the file ends within it".into()))?;
+        let layers: u64 = (0..count as usize)
+            .map(|i| u64::from(le_u32(&bytes, sizes_at as usize + 4 * i)))
+            .sum();
+        if layers > len - head {
+            return Err(bad(format!(
+                "its layers claim {layers} bytes, past its {len} bytes"
+            )));
         }
     }
     Ok(())
