@@ -665,8 +665,8 @@ fn the_rbf_of_a_flat_scan_is_solved() {
     assert!(moved.lines().any(|l| l == "0 4 5"), "{moved}");
 }
 
-/// A LAS header whose z scale is 5e-324 (or negative, or 1e300) left no output frame that could
-/// hold the moved coordinates: exit 1 after the whole solve. Such a header is malformed.
+/// A LAS header whose z scale is 5e-324 (or negative, or 1e-300) left no output frame that
+/// could hold the moved coordinates: exit 1 after the whole solve. Such a header is malformed.
 #[test]
 fn a_las_header_with_an_absurd_scale_is_a_format_error() {
     let dir = tempfile::tempdir().unwrap();
@@ -682,6 +682,7 @@ fn a_las_header_with_an_absurd_scale_is_a_format_error() {
         ("tiny.las", 147, 5e-324),
         ("negative.las", 147, -1.0),
         ("huge.las", 147, 1e300),
+        ("tiny-x.las", 131, 1e-300),
         ("offset.las", 155, -f64::MAX),
     ] {
         let mut bytes = std::fs::read(&good).unwrap();
@@ -747,6 +748,29 @@ fn a_layered_laz_chunk_whose_layers_claim_too_much_is_a_format_error() {
     assert_eq!(r.code, 3, "{}", r.stderr);
     assert!(r.stderr.contains("layers claim"), "{}", r.stderr);
     assert!(!out.exists());
+}
+
+/// A handle stretching z by 1e15 (the largest the spec allows) moved a scan to 5.6e18: the
+/// writer's frame (scale 2.3e9, offset 2.8e18) was refused by our own reader. Every output
+/// must read back.
+#[test]
+fn an_extreme_allowed_motion_writes_a_las_that_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("terrain.las");
+    data_gen::write_las_terrain(&input, 3000, false).unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [499990, 4999990, 0], max = [500300, 5002010, 1000] }\n\
+         [[handle]]\nbox = { min = [501700, 4999990, 0], max = [502010, 5002010, 1000] }\n\
+         matrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e15, 0], [0, 0, 0, 1]]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.las");
+    let r = deform(&input, &out, &edit, &["--cells", "300"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let r = run(&["info", arg(&out)]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
 }
 
 /// A tiny `--refine-strain` split every cell round after round (minutes on the tube): the

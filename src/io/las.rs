@@ -232,14 +232,16 @@ impl LasHeader {
         let scale = f3(131);
         let offset = f3(155);
         // Scales are positive (the record's integers times the scale, plus the offset, are the
-        // coordinates); one of 5e-324, −1 or 1e300, or an offset of −1.8e308, left no output
-        // frame that could hold the moved coordinates (exit 1 after the whole solve).
-        if !scale.iter().all(|s| (1e-15..=1e15).contains(s))
-            || !offset.iter().all(|o| o.is_finite() && o.abs() <= 1e15)
+        // coordinates); one of 5e-324 or −1, or an offset of −1.8e308, left no output frame
+        // that could hold the moved coordinates (exit 1 after the whole solve). The upper
+        // bounds are far past what the writer makes of any spec's motions (a 1e15 translation
+        // gave a scale of 2.3e9 and an offset past 1e18), so every output reads back.
+        if !scale.iter().all(|s| (1e-15..=1e100).contains(s))
+            || !offset.iter().all(|o| o.is_finite() && o.abs() <= 1e100)
         {
             return Err(err(format!(
                 "scale {scale:?} / offset {offset:?} are out of range (scales positive, 1e-15 \
-                 to 1e15; offsets finite, within ±1e15)"
+                 to 1e100; offsets finite, within ±1e100)"
             )));
         }
         let b = |at: usize| le_f64(prefix, at);
