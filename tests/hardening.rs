@@ -10,15 +10,7 @@ use common::{arg, deform, run};
 
 /// The 10×1×1 bar, a bend of it, and a field saved from it (PU, format 3).
 fn bar(dir: &Path) -> (PathBuf, PathBuf, PathBuf) {
-    let (input, output, edit) = common::files(dir, "bar.ply", "out.ply");
-    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-         translate = [0, 0, 1]\n",
-    )
-    .unwrap();
+    let (input, output, edit) = common::lifted_bar(dir, 8.0);
     let field = dir.join("bar.field");
     let r = deform(
         &input,

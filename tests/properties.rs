@@ -285,15 +285,7 @@ fn saved_field() -> &'static [u8] {
     static FIELD: OnceLock<Vec<u8>> = OnceLock::new();
     FIELD.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        let (input, output, edit) = common::files(dir.path(), "bar.ply", "out.ply");
-        data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
-        std::fs::write(
-            &edit,
-            "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
-             [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-             translate = [0, 0, 1]\n",
-        )
-        .unwrap();
+        let (input, output, edit) = common::lifted_bar(dir.path(), 4.0);
         let field: PathBuf = dir.path().join("bar.field");
         let r = common::deform(
             &input,

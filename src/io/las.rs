@@ -343,10 +343,9 @@ const LAZ_BATCH: usize = 1 << 20;
 fn point_wise(
     path: &Path,
     header: &LasHeader,
+    vlr: laz::LazVlr,
 ) -> Result<laz::LasZipDecompressor<'static, BufReader<File>>> {
     let err = |e: laz::LasZipError| Error::format(path, format!("LAZ: {e}"));
-    let vlr =
-        laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default()).map_err(err)?;
     let chunked = vlr.uses_variable_size_chunks();
     let mut file =
         BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?);
@@ -379,13 +378,12 @@ impl LasSource {
         let header = LasHeader::read(path)?;
         check_evlrs(path, &header)?;
         let body = if header.laz_compressor == Some(1) {
-            check_items(path, &header)?;
-            check_point_wise_layers(path, &header)?;
-            let d = crate::interrupt::guarded(path, "opening it", || point_wise(path, &header))?;
+            let vlr = check_laz(path, &header)?;
+            let d =
+                crate::interrupt::guarded(path, "opening it", || point_wise(path, &header, vlr))?;
             Body::PointWise(Box::new(d))
         } else if header.compressed {
-            check_items(path, &header)?;
-            check_chunk_table(path, &header)?;
+            check_laz(path, &header)?;
             let file = File::open(path).map_err(|e| Error::io(path, e))?;
             let reader = crate::interrupt::guarded(path, "opening it", || {
                 las::Reader::with_options(
@@ -474,7 +472,11 @@ impl Source for LasSource {
             *used = 0;
         }
         if let Body::PointWise(d) = &mut self.body {
-            **d = point_wise(&self.path, &self.header)?;
+            **d = point_wise(
+                &self.path,
+                &self.header,
+                laszip_vlr(&self.path, &self.header)?,
+            )?;
         }
         self.next = 0;
         Ok(())
@@ -1033,9 +1035,7 @@ fn check_evlrs(path: &Path, header: &LasHeader) -> Result<()> {
 /// Checks that a LAZ file's records are as long as its LASzip items say: `laz` sizes its
 /// buffers by the header's record length (32,768 bytes for 110,000 points asked for 3.6 GB and
 /// aborted) and panicked where the two disagree.
-fn check_items(path: &Path, header: &LasHeader) -> Result<()> {
-    let vlr = laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default())
-        .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
+fn check_items(path: &Path, header: &LasHeader, vlr: &laz::LazVlr) -> Result<()> {
     let items = vlr.items_size();
     if items != u64::from(header.record_len) {
         return Err(Error::format(
@@ -1053,23 +1053,28 @@ fn check_items(path: &Path, header: &LasHeader) -> Result<()> {
 /// offset (the 8 bytes where the points begin; −1: none written) lies in the file, its chunk
 /// count must not pass the point count (a chunk holds at least one point). A damaged count
 /// asked `laz` for 34 GB and aborted; an offset outside the file the decoder reports itself.
-fn check_chunk_table(path: &Path, header: &LasHeader) -> Result<()> {
+/// Returns where each chunk begins and its bytes, `None` where there is no table to check.
+fn check_chunk_table(
+    path: &Path,
+    header: &LasHeader,
+    vlr: &laz::LazVlr,
+    file: &mut File,
+    len: u64,
+) -> Result<Option<Vec<(u64, u64)>>> {
     use std::io::Read;
-    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
-    let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     let mut at = [0u8; 8];
     file.seek(SeekFrom::Start(u64::from(header.point_offset)))
         .and_then(|_| file.read_exact(&mut at))
         .map_err(|_| Error::format(path, "LAZ: the file ends before its points"))?;
     let table = i64::from_le_bytes(at);
     if table == -1 {
-        return Ok(());
+        return Ok(None);
     }
     let start = u64::from(header.point_offset) + 8;
     if table < start as i64 || table as u64 + 8 > len {
         // Outside the file: the decoder says so itself (after naming what else is wrong with
         // the file, as a bad compressor), without sizing anything from it.
-        return Ok(());
+        return Ok(None);
     }
     let mut head = [0u8; 8];
     file.seek(SeekFrom::Start(table as u64))
@@ -1092,22 +1097,18 @@ fn check_chunk_table(path: &Path, header: &LasHeader) -> Result<()> {
     }
     // The entries size `laz`'s buffers: its largest chunk's point count (a fuzzed fixed chunk
     // size of 3.85e9 for 1,000 points asked for 3.85 GB and aborted) and each chunk's bytes.
-    let vlr = laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default())
-        .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
     file.seek(SeekFrom::Start(u64::from(header.point_offset)))
         .map_err(|e| Error::io(path, e))?;
     let table = crate::interrupt::guarded(path, "reading its chunk table", || {
-        laz::laszip::ChunkTable::read_from(&mut file, &vlr)
+        laz::laszip::ChunkTable::read_from(&mut *file, vlr)
             .map_err(|e| Error::format(path, format!("LAZ: the chunk table: {e}")))
     })?;
     let most = header.count.max(1 << 24);
     let mut chunks = Vec::with_capacity(table.as_ref().len());
     let mut at = start;
-    for entry in table.as_ref() {
+    for (k, entry) in table.as_ref().iter().enumerate() {
         chunks.push((at, entry.byte_count));
         at = at.saturating_add(entry.byte_count);
-    }
-    for (k, entry) in table.as_ref().iter().enumerate() {
         if entry.point_count > most || entry.byte_count > len {
             return Err(Error::format(
                 path,
@@ -1122,17 +1123,34 @@ fn check_chunk_table(path: &Path, header: &LasHeader) -> Result<()> {
             ));
         }
     }
-    check_layers(path, header, &vlr, &mut file, &chunks)
+    Ok(Some(chunks))
 }
 
-/// [`check_layers`] for a point-wise LAZ whose items are layered: one chunk, the whole body.
-fn check_point_wise_layers(path: &Path, header: &LasHeader) -> Result<()> {
-    let vlr = laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default())
-        .map_err(|e| Error::format(path, format!("LAZ: {e}")))?;
+/// The LASzip VLR of a LAZ file's header.
+fn laszip_vlr(path: &Path, header: &LasHeader) -> Result<laz::LazVlr> {
+    laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default())
+        .map_err(|e| Error::format(path, format!("LAZ: {e}")))
+}
+
+/// Everything of a LAZ file that `laz` sizes buffers by, checked before it reads any
+/// ([`check_items`], [`check_chunk_table`], [`check_layers`]; a point-wise body is one chunk);
+/// returns the parsed LASzip VLR.
+fn check_laz(path: &Path, header: &LasHeader) -> Result<laz::LazVlr> {
+    let vlr = laszip_vlr(path, header)?;
+    check_items(path, header, &vlr)?;
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     let start = u64::from(header.point_offset);
-    check_layers(path, header, &vlr, &mut file, &[(start, len - start)])
+    let chunks = if header.laz_compressor == Some(1) {
+        vec![(start, len.saturating_sub(start))]
+    } else {
+        match check_chunk_table(path, header, &vlr, &mut file, len)? {
+            Some(chunks) => chunks,
+            None => return Ok(vlr),
+        }
+    };
+    check_layers(path, header, &vlr, &mut file, &chunks)?;
+    Ok(vlr)
 }
 
 /// The layers of a LASzip item in a layered chunk, `None` for an item that is not layered.
@@ -1169,6 +1187,8 @@ fn check_layers(
         return Ok(());
     };
     let sizes_at = u64::from(header.record_len) + 4;
+    // No item has more layers than bytes ([`check_items`] matched their bytes to the record
+    // length), so this buffer is at most five records long.
     let head = sizes_at + 4 * count;
     let mut bytes = vec![0u8; head as usize];
     for (k, &(at, len)) in chunks.iter().enumerate() {

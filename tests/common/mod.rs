@@ -22,6 +22,21 @@ pub fn files(dir: &Path, input: &str, output: &str) -> (PathBuf, PathBuf, PathBu
     (dir.join(input), dir.join(output), dir.join("edit.toml"))
 }
 
+/// The 10×1×1 bar (`per_unit` vertices per unit, binary PLY) in `dir` with an edit that fixes
+/// its left end and lifts its right end by 1: the input, output and edit paths.
+pub fn lifted_bar(dir: &Path, per_unit: f64) -> (PathBuf, PathBuf, PathBuf) {
+    let (input, output, edit) = files(dir, "bar.ply", "out.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], per_unit), true).unwrap();
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0, 0, 1]\n",
+    )
+    .unwrap();
+    (input, output, edit)
+}
+
 #[derive(Debug)]
 pub struct Run {
     pub code: i32,

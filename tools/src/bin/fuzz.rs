@@ -1185,9 +1185,12 @@ fn mutate_spec(
                 raw_tail = vec![0xff, 0xfe, b'\n', 0xc3];
                 "bytes that are not UTF-8".to_string()
             }
-            8 => {
-                // A target file, valid or not, or missing.
-                let (name, body): (&str, Option<&[u8]>) = *[
+            8 => named_file(
+                rng,
+                files,
+                &mut lines,
+                "[[target]]\nfile",
+                &[
                     ("gcp.csv", Some(&b"1,2\n"[..])),
                     ("gcp.csv", Some(&b"a,b,c,d,e,f\n"[..])),
                     ("gcp.csv", Some(&b"nan,0,0,0,0,0\n"[..])),
@@ -1198,38 +1201,22 @@ fn mutate_spec(
                         Some(&b"1e308,1e308,1e308,-1e308,-1e308,-1e308\n"[..]),
                     ),
                     ("missing.csv", None),
-                ]
-                .choose(rng)
-                .expect("not empty");
-                if let Some(body) = body {
-                    add_file(files, name, body);
-                }
-                lines.push(format!("[[target]]\nfile = \"{name}\""));
-                format!(
-                    "target file {name}: {:?}",
-                    body.map(String::from_utf8_lossy)
-                )
-            }
-            9 => {
-                let (name, body): (&str, Option<&[u8]>) = *[
+                ],
+            ),
+            9 => named_file(
+                rng,
+                files,
+                &mut lines,
+                "[[fixed]]\nindices",
+                &[
                     ("idx.txt", Some(&b"0\n18446744073709551615\n"[..])),
                     ("idx.txt", Some(&b"-1\n"[..])),
                     ("idx.txt", Some(&b"1.5\nx\n"[..])),
                     ("idx.txt", Some(&b"99999999999\n"[..])),
                     ("idx.txt", Some(&b""[..])),
                     ("missing.txt", None),
-                ]
-                .choose(rng)
-                .expect("not empty");
-                if let Some(body) = body {
-                    add_file(files, name, body);
-                }
-                lines.push(format!("[[fixed]]\nindices = \"{name}\""));
-                format!(
-                    "indices file {name}: {:?}",
-                    body.map(String::from_utf8_lossy)
-                )
-            }
+                ],
+            ),
             _ => {
                 // A region or motion of extreme or wrong shape.
                 let zero = vec!["0.0"; dim].join(", ");
@@ -1256,6 +1243,24 @@ fn mutate_spec(
     let mut bytes = text.into_bytes();
     bytes.extend(raw_tail);
     (bytes, done.join("; "))
+}
+
+/// An entry `entry = "NAME"` (`[[target]]\nfile`, `[[fixed]]\nindices`) naming one of
+/// `choices`, whose body (if any: `None` leaves it missing) joins the case's files; says which.
+fn named_file(
+    rng: &mut StdRng,
+    files: &mut Vec<(String, Vec<u8>)>,
+    lines: &mut Vec<String>,
+    entry: &str,
+    choices: &[(&str, Option<&[u8]>)],
+) -> String {
+    let (name, body) = *choices.choose(rng).expect("not empty");
+    if let Some(body) = body {
+        add_file(files, name, body);
+    }
+    lines.push(format!("{entry} = \"{name}\""));
+    let what = entry.rsplit('\n').next().unwrap_or(entry);
+    format!("{what} {name}: {:?}", body.map(String::from_utf8_lossy))
 }
 
 /// Adds a file to a case, replacing one of the same name.
