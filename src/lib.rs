@@ -48,6 +48,7 @@
 //! ```
 
 pub mod cells;
+pub mod control;
 pub mod error;
 pub mod field;
 pub mod image;

@@ -171,6 +171,10 @@ struct DeformArgs {
     /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
     #[arg(long, default_value_t = CHUNK)]
     chunk: usize,
+    /// Check the control points (`[[target]]`): solve again without each in turn and report
+    /// how far the others predict it (leave-one-out).
+    #[arg(long)]
+    check_gcp: bool,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
@@ -189,6 +193,7 @@ impl DeformArgs {
             transfer: self.transfer.into(),
             rbf_tolerance: self.tolerance.rbf_tolerance,
             proxy_samples,
+            check_control_points: self.check_gcp,
         })
     }
 }
@@ -609,12 +614,17 @@ fn deform_file(
     }
     if !quiet {
         report(input, output, &info);
+        let checked = if summary.residual_samples > 0 {
+            format!(
+                "  constraints: fixed samples within {:.3e} of their rest positions, handle \
+                 samples within {:.3e} of where they were sent ({} checked);",
+                summary.residual_fixed_max, summary.residual_handle_max, summary.residual_samples,
+            )
+        } else {
+            " ".to_string()
+        };
         println!(
-            "  constraints: fixed samples within {:.3e} of their rest positions, handle samples \
-             within {:.3e} of where they were sent ({} checked); total {:.2} s{}",
-            summary.residual_fixed_max,
-            summary.residual_handle_max,
-            summary.residual_samples,
+            "{checked} total {:.2} s{}",
             summary.timings_s.total,
             summary
                 .peak_memory_bytes
@@ -727,6 +737,7 @@ fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             solution.info.iterations,
             solution.info.energies.last().copied().unwrap_or(0.0)
         );
+        print_control_points(&info.control_points);
     }
     Ok(())
 }
@@ -1007,6 +1018,15 @@ fn report(input: &Path, output: &Path, file: &FileInfo) {
     let (checked, folded) = info.foldovers;
     if checked > 0 {
         println!("  fold-overs: {folded} of {checked} samples checked");
+    }
+    print_control_points(&info.control_points);
+}
+
+/// The control points' table: the ten largest residuals and the RMSE.
+fn print_control_points(points: &[rigidcells::control::ControlPoint]) {
+    let table = rigidcells::control::table(points, 10);
+    if !table.is_empty() {
+        println!("{table}");
     }
 }
 

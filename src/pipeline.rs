@@ -8,6 +8,7 @@ use std::sync::mpsc;
 use std::time::Instant;
 
 use crate::cells::{BuildInfo, BuildParams, CellComplex, Occupancy, build};
+use crate::control::ControlPoint;
 use crate::error::{Error, Result};
 use crate::field::{
     Constrained, Deformer, Field, Outside, Rbf, SavedField, Transfer, Warp, apply, apply_into,
@@ -35,6 +36,8 @@ pub struct DeformParams {
     /// The most samples in the preview proxy of [`deform_file`] (`None`: [`PROXY_SAMPLES`];
     /// `Some(0)`: no proxy).
     pub proxy_samples: Option<usize>,
+    /// Run the control points' leave-one-out check ([`crate::control::leave_one_out`]).
+    pub check_control_points: bool,
 }
 
 /// The default bound on the samples of a [`Proxy`].
@@ -84,8 +87,31 @@ pub struct DeformInfo {
     /// determinant not positive): at most [`FOLDOVER_SAMPLES`], evenly strided over the samples
     /// of [`deform`] or the proxy of [`deform_file`].
     pub foldovers: (usize, usize),
+    /// The control points (`[[target]]` entries): where each went, its residual.
+    pub control_points: Vec<ControlPoint>,
     /// Messages for the user.
     pub warnings: Vec<String>,
+}
+
+/// The control points of `spec` in `solution` as `warp` moves them, with the leave-one-out
+/// check when `params` asks for it.
+fn control_results<const D: usize>(
+    spec: &EditSpec<D>,
+    solution: &Solution<D>,
+    warp: &impl Warp<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<Vec<ControlPoint>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut got = crate::control::from_points(solution);
+    apply(warp, &solution.constraints.origin, &mut got);
+    let mut points = crate::control::control_points(spec, solution, &got);
+    if params.check_control_points {
+        crate::control::leave_one_out(spec, solution, &params.solve, &mut points, observer)?;
+    }
+    Ok(points)
 }
 
 /// Deforms `points` (with `triangles` over them, or none) under `spec`; returns the moved
@@ -120,11 +146,13 @@ where
     apply(&deformer, &field.origin, &mut moved);
     check_moved(0, &moved)?;
     let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
+    let control_points = control_results(spec, &solution, &deformer, params, observer)?;
     let info = DeformInfo {
         build: build_info,
         solver: solution.info.clone(),
         seconds_transfer: t.elapsed().as_secs_f64(),
         foldovers,
+        control_points,
         warnings,
     };
     Ok((moved, solution, info))
@@ -304,6 +332,7 @@ pub fn deform_file(
     info.proxy = Proxy { after, ..proxy };
     let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
     observer.finish();
+    let control_points = control_results(spec, &solution, &deformer, params, observer)?;
     let t2 = Instant::now();
     info.notes.extend(transfer_pass(
         source.as_mut(),
@@ -329,6 +358,7 @@ pub fn deform_file(
         solver: solution.info.clone(),
         seconds_transfer: t1.elapsed().as_secs_f64(),
         foldovers,
+        control_points,
         warnings,
     };
     saved_guard.0 = None;

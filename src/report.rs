@@ -76,6 +76,14 @@ pub struct Report {
     pub peak_memory_bytes: Option<u64>,
     /// Warnings, as printed.
     pub warnings: Vec<String>,
+    /// Every control point (`[[target]]`): id, where it was given, from (after snapping),
+    /// wanted, got (where the output puts it), residual, how far it was snapped, whether it is
+    /// 2D, and its leave-one-out prediction error (`--check-gcp`).
+    pub control_points: Vec<crate::control::ControlPoint>,
+    /// The root mean square of the control points' residuals (absent without any).
+    pub control_rmse: Option<f64>,
+    /// The root mean square of their leave-one-out prediction errors (with `--check-gcp`).
+    pub control_rmse_left_out: Option<f64>,
 }
 
 /// Seconds per stage of [`crate::pipeline::deform_file`].
@@ -167,6 +175,9 @@ impl Report {
             },
             peak_memory_bytes: peak_memory(),
             warnings: d.warnings.clone(),
+            control_points: d.control_points.clone(),
+            control_rmse: crate::control::rmse(&d.control_points),
+            control_rmse_left_out: crate::control::rmse_left_out(&d.control_points),
         }
     }
 

@@ -18,16 +18,20 @@
 //! [[target]]
 //! from = [1.0, 0.5, 1.0]
 //! to = [1.0, 0.5, 1.2]
-//! weight = 1.0          # or file = "gcp.csv" with rows x,y,z,x2,y2,z2[,weight]
+//! weight = 1.0          # or file = "gcp.csv": control points ([`read_control_points`])
+//! # snap = 5.0          # move `from` to the nearest sample within 5 units first
 //!
 //! [[stiffness]]
 //! box = { min = [4.0, 0.0, 0.0], max = [6.0, 1.0, 1.0] }
 //! scale = 0.2
 //! ```
 //!
-//! A region is one of `box`, `sphere`, `plane` (the half-space behind `normal`, i.e. the points
-//! `x` with `(x − point)·normal ≤ 0`), `indices = "file.txt"` (sample indices, whitespace or
-//! comma separated, 0-based) or `classification = [..]` (LAS classes). A handle's transform is
+//! A region is one or more of `box`, `sphere`, `plane` (the half-space behind `normal`, i.e.
+//! the points `x` with `(x − point)·normal ≤ 0`), `polygon = [[x, y], ..]` or
+//! `polygon_file = "area.geojson"` (a prism over x, y, with an optional height range
+//! `z = [lo, hi]`), `indices = "file.txt"` (sample indices, whitespace or comma separated,
+//! 0-based) or `classification = [..]` (LAS classes); several in one entry combine (a sample
+//! must satisfy all), and `invert = true` takes the rest. A handle's transform is
 //! `A(x) = S·R·(x − pivot) + pivot + translate`, or a general affine `matrix` (row-major 4×4 in
 //! 3D, 3×3 in 2D, last row `0 … 0 1`). Unknown keys are errors, so typos do not pass silently;
 //! every error names the line.
@@ -69,16 +73,87 @@ pub enum Region<const D: usize> {
     Indices(HashSet<u64>),
     /// Samples by LAS classification.
     Classification(HashSet<u8>),
+    /// The prism over a polygon in the first two coordinates (x, y), between heights `z`
+    /// (3D; all heights when `None`). Several rings combine by the even–odd rule: a ring inside
+    /// another is a hole, and disjoint rings are a union.
+    Polygon(Polygon),
+    /// The samples every region selects (an entry with several region keys).
+    All(Vec<Region<D>>),
+    /// The samples the region does not select (`invert = true`).
+    Not(Box<Region<D>>),
+}
+
+/// Rings of `[x, y]` vertices (closed implicitly), with their bounding box and height range.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Polygon {
+    /// The rings.
+    pub rings: Vec<Vec<[f64; 2]>>,
+    /// The heights between which the prism lies (`None`: all).
+    pub z: Option<[f64; 2]>,
+    lo: [f64; 2],
+    hi: [f64; 2],
+}
+
+impl Polygon {
+    /// A polygon of `rings`, between heights `z`.
+    pub fn new(rings: Vec<Vec<[f64; 2]>>, z: Option<[f64; 2]>) -> Self {
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for v in rings.iter().flatten() {
+            for a in 0..2 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        Self { rings, z, lo, hi }
+    }
+
+    /// Whether `(x, y)` lies inside (even–odd rule; points on an edge may go either way), at
+    /// height `z` when the polygon has a height range.
+    pub fn contains(&self, x: f64, y: f64, z: Option<f64>) -> bool {
+        if let (Some([z0, z1]), Some(z)) = (self.z, z)
+            && !(z >= z0 && z <= z1)
+        {
+            return false;
+        }
+        if !(x >= self.lo[0] && x <= self.hi[0] && y >= self.lo[1] && y <= self.hi[1]) {
+            return false;
+        }
+        let mut inside = false;
+        for ring in &self.rings {
+            let mut j = ring.len() - 1;
+            for i in 0..ring.len() {
+                let ([xi, yi], [xj, yj]) = (ring[i], ring[j]);
+                if (yi > y) != (yj > y) && x < xi + (y - yi) / (yj - yi) * (xj - xi) {
+                    inside = !inside;
+                }
+                j = i;
+            }
+        }
+        inside
+    }
 }
 
 impl<const D: usize> Region<D> {
     /// Whether the region is a region of space (a box, sphere or half-space), as opposed to a
     /// selection of samples by index or attribute.
     pub fn is_geometric(&self) -> bool {
-        matches!(
-            self,
-            Self::Box { .. } | Self::Sphere { .. } | Self::Plane { .. }
-        )
+        match self {
+            Self::Box { .. } | Self::Sphere { .. } | Self::Plane { .. } | Self::Polygon(_) => true,
+            Self::Indices(_) | Self::Classification(_) => false,
+            Self::All(parts) => parts.iter().all(Self::is_geometric),
+            Self::Not(r) => r.is_geometric(),
+        }
+    }
+
+    /// Whether the region selects by LAS classification anywhere.
+    pub fn uses_classes(&self) -> bool {
+        match self {
+            Self::Classification(_) => true,
+            Self::All(parts) => parts.iter().any(Self::uses_classes),
+            Self::Not(r) => r.uses_classes(),
+            _ => false,
+        }
     }
 
     /// Whether the point `x` (input coordinates) lies in a geometric region (always false for a
@@ -88,6 +163,9 @@ impl<const D: usize> Region<D> {
             Self::Box { min, max } => (0..D).all(|a| x[a] >= min[a] && x[a] <= max[a]),
             Self::Sphere { center, radius } => (x - center).norm_squared() <= radius * radius,
             Self::Plane { point, normal } => (x - point).dot(normal) <= 0.0,
+            Self::Polygon(p) => p.contains(x[0], x[1], (D > 2).then(|| x[D - 1])),
+            Self::All(parts) => parts.iter().all(|r| r.contains_point(x)),
+            Self::Not(r) => r.is_geometric() && !r.contains_point(x),
             Self::Indices(_) | Self::Classification(_) => false,
         }
     }
@@ -97,6 +175,8 @@ impl<const D: usize> Region<D> {
         match self {
             Self::Indices(set) => set.contains(&index),
             Self::Classification(set) => class.is_some_and(|c| set.contains(&c)),
+            Self::All(parts) => parts.iter().all(|r| r.selects(index, x, class)),
+            Self::Not(r) => !r.selects(index, x, class),
             _ => self.contains_point(x),
         }
     }
@@ -183,17 +263,60 @@ pub struct Pin<const D: usize> {
     pub line: usize,
 }
 
-/// A soft target: the point `from` should land on `to`, with weight `weight`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A soft target (a control point): the point `from` should land on `to`, with weight `weight`.
+#[derive(Debug, Clone, PartialEq)]
 pub struct Target<const D: usize> {
-    /// The point (input coordinates).
+    /// The point (input coordinates). For a [`Target::horizontal`] point its height is not
+    /// known until it is snapped to the samples.
     pub from: Vect<D>,
     /// Where it should go.
     pub to: Vect<D>,
     /// Weight, relative to the glue between two finest cells.
     pub weight: f64,
-    /// The line of the entry (1-based).
+    /// The line of the `[[target]]` entry in the spec (1-based).
     pub line: usize,
+    /// The point's name: the file's ID column, else `#k` (the k-th target of the spec).
+    pub id: String,
+    /// Where the point was given, for messages: `gcp.csv line 9` or `edit.toml line 12`.
+    pub place: String,
+    /// A 2D control point (3D inputs only): it pulls horizontally and leaves the height free;
+    /// its height is the nearest sample's horizontally (within [`Target::snap`] or
+    /// [`HORIZONTAL_SNAP`] finest cells).
+    pub horizontal: bool,
+    /// Move `from` to the nearest sample within this distance before solving (`None`: keep
+    /// it where it was given).
+    pub snap: Option<f64>,
+}
+
+/// The pull on a horizontal control point's height, relative to its horizontal pull
+/// ([`Target::mask`]); its weight in the energy is the square, 1 %.
+pub const HEIGHT_HOLD: f64 = 0.1;
+
+/// How far, in finest cells, a 2D control point without `snap` looks for its height.
+pub const HORIZONTAL_SNAP: f64 = 2.0;
+
+impl<const D: usize> Target<D> {
+    /// Per axis, how hard the target pulls: 1, except the height of a horizontal control
+    /// point, [`HEIGHT_HOLD`]: the point prescribes no height, but its height is held lightly
+    /// at the surface's. With a height entirely free, a scan pulled only sideways buckles —
+    /// its cells tilt so that horizontal distances change cheaply (autzen_trim with three 2D
+    /// points: heights off by 24 m at 1e-3; within 2 cm at 0.1, with the same horizontal
+    /// residuals as at 1).
+    pub fn mask(&self) -> Vect<D> {
+        let mut m = Vect::<D>::repeat(1.0);
+        if self.horizontal {
+            m[D - 1] = HEIGHT_HOLD;
+        }
+        m
+    }
+
+    /// `x` along the axes the target constrains: all of them, or the horizontal ones.
+    pub fn pulled(&self, mut x: Vect<D>) -> Vect<D> {
+        if self.horizontal {
+            x[D - 1] = 0.0;
+        }
+        x
+    }
 }
 
 /// A parsed and validated edit spec.
@@ -264,7 +387,18 @@ struct RawRotate {
 /// not bounded: a box to ±1e308 is a way of saying "everything".
 pub const LARGEST: f64 = 1e15;
 
-const REGION_KEYS: [&str; 5] = ["box", "sphere", "plane", "indices", "classification"];
+/// The keys that select: one or more in an entry, combined (all must hold).
+const REGION_KEYS: [&str; 7] = [
+    "box",
+    "sphere",
+    "plane",
+    "indices",
+    "classification",
+    "polygon",
+    "polygon_file",
+];
+/// Keys that qualify a selection.
+const SELECTION_KEYS: [&str; 2] = ["z", "invert"];
 
 /// Reads and validates the edit spec in `path`.
 pub fn read_spec<const D: usize>(path: &Path) -> Result<EditSpec<D>>
@@ -327,8 +461,9 @@ where
     }
     for t in &raw.target {
         let line = ctx.line(t);
-        ctx.allow_only(t.get_ref(), &["from", "to", "weight", "file"], line)?;
-        spec.targets.extend(ctx.targets(t.get_ref(), line)?);
+        ctx.allow_only(t.get_ref(), &["from", "to", "weight", "file", "snap"], line)?;
+        let first = spec.targets.len();
+        spec.targets.extend(ctx.targets(t.get_ref(), line, first)?);
     }
     for t in &raw.stiffness {
         let line = ctx.line(t);
@@ -376,7 +511,12 @@ impl Ctx<'_> {
     }
 
     fn allow(&self, t: &toml::Table, extra: &[&str], line: usize) -> Result<()> {
-        let keys: Vec<&str> = REGION_KEYS.iter().chain(extra).copied().collect();
+        let keys: Vec<&str> = REGION_KEYS
+            .iter()
+            .chain(&SELECTION_KEYS)
+            .chain(extra)
+            .copied()
+            .collect();
         self.allow_only(t, &keys, line)
     }
 
@@ -446,26 +586,60 @@ impl Ctx<'_> {
         Ok(Vect::<D>::from_column_slice(v))
     }
 
+    /// The region of an entry: its region keys combined (a sample must satisfy all), then
+    /// `invert`ed.
     fn region<const D: usize>(&self, t: &toml::Table, line: usize) -> Result<Region<D>> {
         let present: Vec<&str> = REGION_KEYS
             .iter()
             .copied()
             .filter(|k| t.contains_key(*k))
             .collect();
-        let [key] = present[..] else {
+        if present.is_empty() {
             return Err(self.error(
                 Some(line),
                 format!(
-                    "an entry needs exactly one region ({}), found {}",
-                    REGION_KEYS.join(", "),
-                    if present.is_empty() {
-                        "none".to_string()
-                    } else {
-                        present.join(" and ")
-                    }
+                    "an entry needs a region ({}; several combine)",
+                    REGION_KEYS.join(", ")
                 ),
             ));
+        }
+        if present.contains(&"polygon") && present.contains(&"polygon_file") {
+            return Err(self.error(
+                Some(line),
+                "`polygon` and `polygon_file` exclude each other".into(),
+            ));
+        }
+        if t.contains_key("z") && !present.iter().any(|k| k.starts_with("polygon")) {
+            return Err(self.error(
+                Some(line),
+                "`z` (a height range) goes with a `polygon` or `polygon_file`".into(),
+            ));
+        }
+        let mut parts = present
+            .iter()
+            .map(|k| self.region_part::<D>(t, k, line))
+            .collect::<Result<Vec<_>>>()?;
+        let region = match parts.len() {
+            1 => parts.pop().unwrap(),
+            _ => Region::All(parts),
         };
+        let invert = match t.get("invert") {
+            Some(_) => self.field::<bool>(t, "invert", line)?,
+            None => false,
+        };
+        Ok(if invert {
+            Region::Not(Box::new(region))
+        } else {
+            region
+        })
+    }
+
+    fn region_part<const D: usize>(
+        &self,
+        t: &toml::Table,
+        key: &str,
+        line: usize,
+    ) -> Result<Region<D>> {
         Ok(match key {
             "box" => {
                 let b: RawBox = self.field(t, key, line)?;
@@ -503,11 +677,73 @@ impl Ctx<'_> {
                 let file: String = self.field(t, key, line)?;
                 Region::Indices(self.read_indices(&file, line)?)
             }
+            "polygon" | "polygon_file" => {
+                let rings = if key == "polygon" {
+                    let ring: Vec<Vec<f64>> = self.field(t, key, line)?;
+                    vec![self.ring(&ring, "polygon", line)?]
+                } else {
+                    let file: String = self.field(t, key, line)?;
+                    self.read_geojson(&file)?
+                };
+                let z = match t.get("z") {
+                    Some(_) if D == 2 => {
+                        return Err(self.error(Some(line), "`z` is for 3D inputs".into()));
+                    }
+                    Some(_) => {
+                        let z: Vec<f64> = self.field(t, "z", line)?;
+                        match z[..] {
+                            [a, b] if a <= b => Some([a, b]),
+                            _ => {
+                                return Err(self.error(
+                                    Some(line),
+                                    format!("`z` must be [lowest, highest], got {z:?}"),
+                                ));
+                            }
+                        }
+                    }
+                    None => None,
+                };
+                Region::Polygon(Polygon::new(rings, z))
+            }
             _ => {
                 let classes: Vec<u8> = self.field(t, key, line)?;
                 Region::Classification(classes.into_iter().collect())
             }
         })
+    }
+
+    /// A ring of `[x, y]` vertices: at least 3, finite.
+    fn ring(&self, v: &[Vec<f64>], key: &str, line: usize) -> Result<Vec<[f64; 2]>> {
+        if v.len() < 3
+            || v.iter()
+                .any(|p| p.len() != 2 || !p.iter().all(|x| x.is_finite()))
+        {
+            return Err(self.error(
+                Some(line),
+                format!("`{key}` must be at least 3 points [x, y] of finite numbers"),
+            ));
+        }
+        Ok(v.iter().map(|p| [p[0], p[1]]).collect())
+    }
+
+    /// The rings of every polygon in a GeoJSON file (a FeatureCollection, a Feature or a bare
+    /// geometry; Polygon and MultiPolygon, holes included; heights ignored). The coordinates
+    /// must be those of the input.
+    fn read_geojson(&self, file: &str) -> Result<Vec<Vec<[f64; 2]>>> {
+        let path = self.resolve(file);
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::spec_file(&path, e))?;
+        let bad = |message: String| Error::Spec {
+            path: path.clone(),
+            message,
+        };
+        let json: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| bad(format!("not GeoJSON: {e}")))?;
+        let mut rings = Vec::new();
+        collect_rings(&json, &mut rings).map_err(bad)?;
+        if rings.is_empty() {
+            return Err(bad("holds no Polygon or MultiPolygon".into()));
+        }
+        Ok(rings)
     }
 
     fn resolve(&self, file: &str) -> PathBuf {
@@ -642,7 +878,12 @@ impl Ctx<'_> {
         })
     }
 
-    fn targets<const D: usize>(&self, t: &toml::Table, line: usize) -> Result<Vec<Target<D>>> {
+    fn targets<const D: usize>(
+        &self,
+        t: &toml::Table,
+        line: usize,
+        first: usize,
+    ) -> Result<Vec<Target<D>>> {
         let weight: f64 = match t.get("weight") {
             Some(_) => self.field(t, "weight", line)?,
             None => 1.0,
@@ -650,6 +891,18 @@ impl Ctx<'_> {
         if !(weight.is_finite() && weight > 0.0) {
             return Err(self.error(Some(line), format!("weight {weight} must be positive")));
         }
+        let snap = match t.get("snap") {
+            Some(_) => {
+                let d: f64 = self.field(t, "snap", line)?;
+                if !(d.is_finite() && d > 0.0) {
+                    return Err(
+                        self.error(Some(line), format!("snap {d} must be a positive distance"))
+                    );
+                }
+                Some(d)
+            }
+            None => None,
+        };
         if let Some(file) = t.get("file") {
             if t.contains_key("from") || t.contains_key("to") {
                 return Err(self.error(
@@ -661,70 +914,381 @@ impl Ctx<'_> {
                 .clone()
                 .try_into()
                 .map_err(|e| self.error(Some(line), format!("`file`: {e}")))?;
-            return self.read_targets(&file, weight, line);
+            let path = self.resolve(&file);
+            let text = std::fs::read_to_string(&path).map_err(|e| Error::spec_file(&path, e))?;
+            let rows = read_control_points::<D>(&text, &path)?;
+            let mut out = Vec::with_capacity(rows.len());
+            for (k, row) in rows.into_iter().enumerate() {
+                let place = format!("{file} line {}", row.line);
+                let key = |what: &str| format!("{place}: {what}");
+                self.within_range(row.from.amax(), &key("from"), line)?;
+                self.within_range(row.to.amax(), &key("to"), line)?;
+                out.push(Target {
+                    from: row.from,
+                    to: row.to,
+                    weight: row.weight.unwrap_or(weight),
+                    line,
+                    id: row.id.unwrap_or_else(|| format!("#{}", first + k + 1)),
+                    place,
+                    horizontal: row.horizontal,
+                    snap,
+                });
+            }
+            return Ok(out);
         }
         Ok(vec![Target {
             from: self.motion_vector(t, "from", line)?,
             to: self.motion_vector(t, "to", line)?,
             weight,
             line,
+            id: format!("#{}", first + 1),
+            place: format!("{} line {line}", file_name(self.name)),
+            horizontal: false,
+            snap,
         }])
     }
+}
 
-    fn read_targets<const D: usize>(
-        &self,
-        file: &str,
-        weight: f64,
-        line: usize,
-    ) -> Result<Vec<Target<D>>> {
-        let path = self.resolve(file);
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::spec_file(&path, e))?;
-        let mut out = Vec::new();
-        for (k, row) in text.lines().enumerate() {
-            let row = row.trim();
-            if row.is_empty() || row.starts_with('#') {
+/// Adds the rings of the polygons in the GeoJSON value `v` to `out`.
+fn collect_rings(
+    v: &serde_json::Value,
+    out: &mut Vec<Vec<[f64; 2]>>,
+) -> std::result::Result<(), String> {
+    let ring = |r: &serde_json::Value| -> std::result::Result<Vec<[f64; 2]>, String> {
+        let points = r.as_array().ok_or("a ring is not an array")?;
+        let ring = points
+            .iter()
+            .map(|p| {
+                let c = p
+                    .as_array()
+                    .filter(|c| c.len() >= 2)
+                    .ok_or("a position is not [x, y]")?;
+                match (c[0].as_f64(), c[1].as_f64()) {
+                    (Some(x), Some(y)) if x.is_finite() && y.is_finite() => Ok([x, y]),
+                    _ => Err("a position is not two numbers"),
+                }
+            })
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        if ring.len() < 3 {
+            return Err("a ring has fewer than 3 positions".into());
+        }
+        Ok(ring)
+    };
+    match v.get("type").and_then(|t| t.as_str()) {
+        Some("FeatureCollection") => {
+            for f in v
+                .get("features")
+                .and_then(|f| f.as_array())
+                .ok_or("no `features`")?
+            {
+                collect_rings(f, out)?;
+            }
+        }
+        Some("Feature") => {
+            if let Some(g) = v.get("geometry").filter(|g| !g.is_null()) {
+                collect_rings(g, out)?;
+            }
+        }
+        Some("GeometryCollection") => {
+            for g in v
+                .get("geometries")
+                .and_then(|g| g.as_array())
+                .ok_or("no `geometries`")?
+            {
+                collect_rings(g, out)?;
+            }
+        }
+        Some("Polygon") => {
+            for r in v
+                .get("coordinates")
+                .and_then(|c| c.as_array())
+                .ok_or("no `coordinates`")?
+            {
+                out.push(ring(r)?);
+            }
+        }
+        Some("MultiPolygon") => {
+            for p in v
+                .get("coordinates")
+                .and_then(|c| c.as_array())
+                .ok_or("no `coordinates`")?
+            {
+                for r in p.as_array().ok_or("a polygon is not an array")? {
+                    out.push(ring(r)?);
+                }
+            }
+        }
+        // Points and lines select nothing.
+        Some(_) => {}
+        None => return Err("an object without a `type`".into()),
+    }
+    Ok(())
+}
+
+/// The file name of `path` for messages.
+fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into(),
+    )
+}
+
+/// One row of a control-point file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlRow<const D: usize> {
+    /// The ID column, if the file has one.
+    pub id: Option<String>,
+    /// The point (for a horizontal point, its height is 0 until snapped).
+    pub from: Vect<D>,
+    /// Where it goes (for a horizontal point, its height is 0).
+    pub to: Vect<D>,
+    /// The weight column, if the file has one.
+    pub weight: Option<f64>,
+    /// Whether the file gives x and y only.
+    pub horizontal: bool,
+    /// The line in the file (1-based).
+    pub line: usize,
+}
+
+/// What a column of a control-point file holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Column {
+    Id,
+    From(usize),
+    To(usize),
+    Weight,
+}
+
+/// Reads a control-point file (`[[target]] file = …`), naming `path` in errors with the line
+/// and column.
+///
+/// - Separators: `,`, `;`, tab or spaces, the first that the first data row holds, in that
+///   order. With `;`, tab or spaces, a decimal comma (`12,5`) reads as `12.5`. Fields may be
+///   quoted (`"P1"`); `#` starts a comment line; blank lines are skipped.
+/// - Columns by count, without a header (3D): `x,y,z,X,Y,Z` (6), `id,x,y,z,X,Y,Z` (7),
+///   `id,x,y,z,X,Y,Z,weight` (8); 2D control points, whose height is free: `x,y,X,Y` (4),
+///   `id,x,y,X,Y` (5). A first field that is not a number is an ID whatever the count. In a
+///   2D (image) spec: `x,y,X,Y`, `id,x,y,X,Y`, `id,x,y,X,Y,weight`.
+/// - A header row (a first data row that is not numbers) names the columns, in any order:
+///   `id` (or `name`, `point`, `label`), `x y z` (or `from_x …`) for the point, `X Y Z` (or
+///   `to_x …`, `x2 …`) for where it goes, `weight` (or `w`). Unknown names are errors.
+pub fn read_control_points<const D: usize>(text: &str, path: &Path) -> Result<Vec<ControlRow<D>>> {
+    let fail = |line: usize, column: Option<usize>, message: String| Error::Spec {
+        path: path.to_path_buf(),
+        message: match column {
+            Some(c) => format!("line {line}, column {c}: {message}"),
+            None => format!("line {line}: {message}"),
+        },
+    };
+    let mut rows = text
+        .lines()
+        .enumerate()
+        .map(|(k, l)| (k + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
+    let Some((first_line, first)) = rows.next() else {
+        return Ok(Vec::new());
+    };
+    let sep = [';', ',', '\t']
+        .into_iter()
+        .find(|c| first.contains(*c))
+        .unwrap_or(' ');
+    let split = |row: &str| -> Vec<String> {
+        let fields: Vec<&str> = if sep == ' ' {
+            row.split_whitespace().collect()
+        } else {
+            row.split(sep).collect()
+        };
+        fields
+            .iter()
+            .map(|f| f.trim().trim_matches('"').trim().to_string())
+            .collect()
+    };
+    let number = |f: &str| -> Option<f64> {
+        let v = match f.parse::<f64>() {
+            Ok(v) => Some(v),
+            Err(_) if sep != ',' && f.contains(',') && !f.contains('.') => {
+                f.replace(',', ".").parse::<f64>().ok()
+            }
+            Err(_) => None,
+        };
+        v.filter(|v| v.is_finite())
+    };
+    let head = split(first);
+    let all_numbers = head.iter().skip(1).all(|f| number(f).is_some());
+    let (layout, mut pending) = if all_numbers {
+        let id = number(&head[0]).is_none();
+        (
+            by_count::<D>(head.len(), id).ok_or_else(|| {
+                fail(
+                    first_line,
+                    None,
+                    format!(
+                        "{} columns; expected {} (see the README's control points)",
+                        head.len(),
+                        expected_counts::<D>()
+                    ),
+                )
+            })?,
+            Some((first_line, first)),
+        )
+    } else {
+        (
+            by_header::<D>(&head).map_err(|(c, m)| fail(first_line, Some(c), m))?,
+            None,
+        )
+    };
+    let horizontal = D == 3 && !layout.contains(&Column::From(2));
+    let mut out = Vec::new();
+    let mut next = || pending.take().or_else(|| rows.next());
+    while let Some((line, row)) = next() {
+        let fields = split(row);
+        if fields.len() != layout.len() {
+            return Err(fail(
+                line,
+                None,
+                format!(
+                    "{} columns, the file's rows have {}",
+                    fields.len(),
+                    layout.len()
+                ),
+            ));
+        }
+        let mut r = ControlRow {
+            id: None,
+            from: Vect::<D>::zeros(),
+            to: Vect::<D>::zeros(),
+            weight: None,
+            horizontal,
+            line,
+        };
+        for (c, (field, col)) in fields.iter().zip(&layout).enumerate() {
+            if *col == Column::Id {
+                r.id = Some(field.clone());
                 continue;
             }
-            let vals: std::result::Result<Vec<f64>, _> = row
-                .split(|c: char| c == ',' || c.is_whitespace())
-                .filter(|s| !s.is_empty())
-                .map(str::parse::<f64>)
-                .collect();
-            // A malformed file the spec names is a problem of the spec (exit 4).
-            let bad = || Error::Spec {
-                path: path.clone(),
-                message: format!(
-                    "line {}: expected {} or {} numbers",
-                    k + 1,
-                    2 * D,
-                    2 * D + 1
-                ),
-            };
-            let vals = match vals {
-                Ok(v) => v,
-                // A header row of column names is allowed as the first row.
-                Err(_) if out.is_empty() && k == 0 => continue,
-                Err(_) => return Err(bad()),
-            };
-            if (vals.len() != 2 * D && vals.len() != 2 * D + 1)
-                || vals.iter().any(|v| !v.is_finite())
-            {
-                return Err(bad());
+            let v = number(field).ok_or_else(|| {
+                fail(
+                    line,
+                    Some(c + 1),
+                    format!("`{field}` is not a finite number"),
+                )
+            })?;
+            match *col {
+                Column::From(a) => r.from[a] = v,
+                Column::To(a) => r.to[a] = v,
+                Column::Weight if v > 0.0 => r.weight = Some(v),
+                Column::Weight => {
+                    return Err(fail(
+                        line,
+                        Some(c + 1),
+                        format!("weight {v} must be positive"),
+                    ));
+                }
+                Column::Id => {}
             }
-            let w = if vals.len() > 2 * D {
-                vals[2 * D]
-            } else {
-                weight
-            };
-            out.push(Target {
-                from: Vect::<D>::from_column_slice(&vals[..D]),
-                to: Vect::<D>::from_column_slice(&vals[D..2 * D]),
-                weight: w,
-                line,
-            });
         }
-        Ok(out)
+        out.push(r);
     }
+    Ok(out)
+}
+
+fn expected_counts<const D: usize>() -> &'static str {
+    if D == 3 {
+        "6 (x,y,z,X,Y,Z), 7 (id,x,y,z,X,Y,Z), 8 (id,…,weight), 4 (x,y,X,Y) or 5 (id,x,y,X,Y)"
+    } else {
+        "4 (x,y,X,Y), 5 (id,x,y,X,Y) or 6 (id,x,y,X,Y,weight)"
+    }
+}
+
+/// The columns of a file without a header, from their count and whether the first field is
+/// an ID that is not a number.
+fn by_count<const D: usize>(count: usize, text_id: bool) -> Option<Vec<Column>> {
+    let points = |dims: usize, id: bool, weight: bool| {
+        let mut c = Vec::new();
+        if id {
+            c.push(Column::Id);
+        }
+        c.extend((0..dims).map(Column::From));
+        c.extend((0..dims).map(Column::To));
+        if weight {
+            c.push(Column::Weight);
+        }
+        c
+    };
+    let layout = match (D, count) {
+        (3, 6) if !text_id => points(3, false, false),
+        (3, 7) => points(3, true, false),
+        (3, 8) => points(3, true, true),
+        (3, 4) if !text_id => points(2, false, false),
+        (3, 5) => points(2, true, false),
+        (2, 4) if !text_id => points(2, false, false),
+        (2, 5) => points(2, true, false),
+        (2, 6) => points(2, true, true),
+        _ => return None,
+    };
+    Some(layout)
+}
+
+/// The columns of a file from its header row; an error gives the column (1-based).
+fn by_header<const D: usize>(
+    names: &[String],
+) -> std::result::Result<Vec<Column>, (usize, String)> {
+    const AXES: [&str; 3] = ["x", "y", "z"];
+    let mut layout = Vec::new();
+    for (c, name) in names.iter().enumerate() {
+        let lower = name.to_ascii_lowercase();
+        let axis = |n: &str| AXES[..D].iter().position(|a| *a == n);
+        let col = match name.as_str() {
+            "X" | "Y" | "Z" => axis(&lower).map(Column::To),
+            "x" | "y" | "z" => axis(name).map(Column::From),
+            _ => match lower.as_str() {
+                "id" | "name" | "point" | "label" | "gcp" => Some(Column::Id),
+                "weight" | "w" => Some(Column::Weight),
+                _ => {
+                    let (prefix, a) = lower.split_at(lower.len().saturating_sub(1));
+                    match prefix {
+                        "from_" | "from" | "src_" => axis(a).map(Column::From),
+                        "to_" | "to" | "dst_" => axis(a).map(Column::To),
+                        _ => match lower.strip_suffix('2') {
+                            Some(a) => axis(a).map(Column::To),
+                            None => None,
+                        },
+                    }
+                }
+            },
+        };
+        let col = col.ok_or_else(|| {
+            (
+                c + 1,
+                format!(
+                    "unknown column `{name}` (expected id, x, y{z}, X, Y{Z}, weight)",
+                    z = if D == 3 { ", z" } else { "" },
+                    Z = if D == 3 { ", Z" } else { "" },
+                ),
+            )
+        })?;
+        if layout.contains(&col) {
+            return Err((c + 1, format!("column `{name}` appears twice")));
+        }
+        layout.push(col);
+    }
+    let has = |c: Column| layout.contains(&c);
+    let dims = if D == 3 && !has(Column::From(2)) && !has(Column::To(2)) {
+        2
+    } else {
+        D
+    };
+    if let Some(a) = (0..dims).find(|&a| !has(Column::From(a)) || !has(Column::To(a))) {
+        return Err((
+            1,
+            format!(
+                "the header names no column for {} or {}",
+                AXES[a],
+                AXES[a].to_ascii_uppercase()
+            ),
+        ));
+    }
+    Ok(layout)
 }
 
 #[cfg(test)]
@@ -811,6 +1375,67 @@ scale = 0.2
             ),
             Err(Error::NoConstraints)
         ));
+    }
+
+    #[test]
+    fn regions_combine_invert_and_polygons_have_holes() {
+        let spec = parse(
+            "[[fixed]]\nclassification = [2, 6]\npolygon = [[0, 0], [10, 0], [10, 10], [0, 10]]\n\
+             z = [0, 5]\n[[stiffness]]\nsphere = { center = [0, 0, 0], radius = 1 }\n\
+             invert = true\nscale = 2\n",
+        )
+        .unwrap();
+        let r = &spec.fixed[0].region;
+        let p = Vect::<3>::new(5.0, 5.0, 1.0);
+        assert!(r.selects(0, &p, Some(2)) && !r.selects(0, &p, Some(3)));
+        assert!(!r.selects(0, &Vect::<3>::new(5.0, 5.0, 6.0), Some(2)));
+        assert!(!r.selects(0, &Vect::<3>::new(11.0, 5.0, 1.0), Some(6)));
+        assert!(!r.is_geometric() && r.uses_classes());
+        let s = &spec.stiffness[0].region;
+        assert!(s.is_geometric() && !s.contains_point(&Vect::<3>::zeros()));
+        assert!(s.contains_point(&Vect::<3>::new(2.0, 0.0, 0.0)));
+        // Even–odd: a ring inside another is a hole.
+        let square = |a: f64, b: f64| vec![[a, a], [b, a], [b, b], [a, b]];
+        let holed = Polygon::new(vec![square(0.0, 10.0), square(4.0, 6.0)], None);
+        assert!(holed.contains(1.0, 1.0, None) && !holed.contains(5.0, 5.0, None));
+        assert!(!holed.contains(11.0, 5.0, None));
+    }
+
+    #[test]
+    fn control_point_files_by_count_and_by_header() {
+        let read = |text: &str| read_control_points::<3>(text, Path::new("gcp.csv"));
+        // By count: 6, 7 (an ID), 8 (an ID and a weight), 4 and 5 (2D).
+        let r = read("1 2 3 4 5 6\n").unwrap();
+        assert_eq!(
+            (r[0].id.clone(), r[0].to[2], r[0].horizontal),
+            (None, 6.0, false)
+        );
+        let r = read("7;1;2;3;4;5;6\n").unwrap();
+        assert_eq!((r[0].id.as_deref(), r[0].from[0]), (Some("7"), 1.0));
+        let r = read("A,1,2,3,4,5,6,2.5\n").unwrap();
+        assert_eq!(r[0].weight, Some(2.5));
+        let r = read("1\t2\t3\t4\n").unwrap();
+        assert!(r[0].horizontal && r[0].to[1] == 4.0);
+        let r = read("P9 1 2 3 4\n").unwrap();
+        assert!(r[0].horizontal && r[0].id.as_deref() == Some("P9"));
+        // A text ID needs its column: 6 fields with a name first is not 3D without one.
+        assert!(read("P1,1,2,3,4,5\n").is_err());
+        // By header, in any order; decimal commas with `;`.
+        let r = read("# c\n\nZ;Y;X;z;y;x;name\n6;5;4;3;2;1,5;Q\n").unwrap();
+        assert_eq!(r[0].from, Vect::<3>::new(1.5, 2.0, 3.0));
+        assert_eq!(r[0].to, Vect::<3>::new(4.0, 5.0, 6.0));
+        assert_eq!((r[0].id.as_deref(), r[0].line), (Some("Q"), 4));
+        let r = read("point,from_x,from_y,to_x,to_y,w\nA,1,2,3,4,0.5\n").unwrap();
+        assert!(r[0].horizontal && r[0].weight == Some(0.5));
+        let e = read("id,x,y,X\n").unwrap_err().to_string();
+        assert!(e.contains("no column for y or Y"), "{e}");
+        let e = read("id,x,x,y,X,Y\n").unwrap_err().to_string();
+        assert!(e.contains("column 3") && e.contains("twice"), "{e}");
+        let e = read("1,2,3,4,5,6\n1,2,3,4,5,-6,7\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2") && e.contains("7 columns"), "{e}");
+        assert!(read("# nothing\n").unwrap().is_empty());
     }
 
     #[test]

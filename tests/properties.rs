@@ -194,11 +194,7 @@ fn base() -> &'static Path {
     static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
     DIR.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
-        std::fs::write(
-            dir.path().join("good.csv"),
-            "0,0,0,1,1,1\n1,1,1,2,2,2,0.5\n",
-        )
-        .unwrap();
+        std::fs::write(dir.path().join("good.csv"), "0,0,0,1,1,1\n1,1,1,2,2,2\n").unwrap();
         std::fs::write(dir.path().join("bad.csv"), "x,y\n1,2\nnan,0,0,0,0,0\n").unwrap();
         std::fs::write(dir.path().join("ids.txt"), "0 1 2, 18446744073709551615\n").unwrap();
         dir

@@ -80,6 +80,9 @@ pub struct TargetLocal<const D: usize> {
     pub weight: f64,
     /// The cell holding `from`.
     pub cell: u32,
+    /// Per axis, how hard the target pulls ([`crate::spec::Target::mask`]): the residual is
+    /// `mask ∘ (value − to)`.
+    pub mask: Vect<D>,
 }
 
 /// The edit spec resolved onto a cell complex.
@@ -105,6 +108,15 @@ impl<const D: usize> Constraints<D>
 where
     Dim<D>: Rigid<D>,
 {
+    /// These constraints without target `i`: a part of the shape held by that target alone
+    /// keeps its rest pose. `None` when nothing else constrains any part.
+    pub fn without_target(&self, complex: &CellComplex<D>, i: usize) -> Option<Self> {
+        let mut c = self.clone();
+        c.targets.remove(i);
+        let (parts, count, _) = anchor(complex, &mut c.roles, &c.targets);
+        (parts < count).then_some(c)
+    }
+
     /// The affine map of handle `k` at load fraction `f`, in the local frame.
     pub fn handle_map(&self, k: usize, f: f64) -> Affine<D> {
         let h = &self.handles[k];
@@ -124,6 +136,156 @@ where
 #[derive(Debug, Clone)]
 pub struct Selections<const D: usize> {
     regions: Vec<RegionSamples<D>>,
+    snaps: Snaps<D>,
+}
+
+/// The nearest sample of each target that asks to be snapped (`snap`, or a horizontal control
+/// point), within its distance: the targets sit in buckets of a hash grid twice the largest
+/// distance wide, so that each sample looks in one bucket (two with both kinds of target).
+#[derive(Debug, Clone, Default)]
+struct Snaps<const D: usize> {
+    /// Per target: the distance it looks within (`None`: not snapped), whether horizontally.
+    wanted: Vec<Option<(f64, bool)>>,
+    /// Per target: the squared distance and position of the nearest sample so far.
+    best: Vec<Option<(f64, Vect<D>)>>,
+    /// The bucket size (0 until the first samples come, when the finest cell size is known).
+    size: f64,
+    buckets: rustc_hash::FxHashMap<[i64; D], Vec<u32>>,
+    any_horizontal: bool,
+    any_spatial: bool,
+}
+
+impl<const D: usize> Snaps<D> {
+    fn new(spec: &EditSpec<D>) -> Self {
+        let wanted = spec
+            .targets
+            .iter()
+            .map(|t| match (t.snap, t.horizontal) {
+                (Some(d), h) => Some((d, h)),
+                // Filled in with the finest cell size when the grid is known.
+                (None, true) => Some((f64::NAN, true)),
+                (None, false) => None,
+            })
+            .collect::<Vec<_>>();
+        Self {
+            best: vec![None; wanted.len()],
+            any_horizontal: wanted.iter().flatten().any(|w| w.1),
+            any_spatial: wanted.iter().flatten().any(|w| !w.1),
+            wanted,
+            ..Default::default()
+        }
+    }
+
+    /// The bucket of `p` (horizontally: its last coordinate's key is `i64::MIN`).
+    fn key(&self, p: &Vect<D>, horizontal: bool) -> [i64; D] {
+        let mut k = [0i64; D];
+        for a in 0..D {
+            k[a] = (p[a] / self.size).floor() as i64;
+        }
+        if horizontal {
+            k[D - 1] = i64::MIN;
+        }
+        k
+    }
+
+    fn place(&mut self, spec: &EditSpec<D>, finest: f64) {
+        for w in self.wanted.iter_mut().flatten() {
+            if w.0.is_nan() {
+                w.0 = crate::spec::HORIZONTAL_SNAP * finest;
+            }
+        }
+        let largest = self.wanted.iter().flatten().fold(0.0f64, |m, w| m.max(w.0));
+        self.size = (2.0 * largest).max(f64::MIN_POSITIVE);
+        for (i, w) in self.wanted.iter().enumerate() {
+            let Some((r, horizontal)) = *w else { continue };
+            let p = spec.targets[i].from;
+            let axes = if horizontal { D - 1 } else { D };
+            // Every bucket the ball (or disc) of radius r about p meets: at most 2 per axis.
+            let lo = self.key(&p.map(|v| v - r), horizontal);
+            let hi = self.key(&p.map(|v| v + r), horizontal);
+            let mut k = lo;
+            'cells: loop {
+                self.buckets.entry(k).or_default().push(i as u32);
+                for a in 0..axes {
+                    if k[a] < hi[a] {
+                        k[a] += 1;
+                        continue 'cells;
+                    }
+                    k[a] = lo[a];
+                }
+                break;
+            }
+        }
+    }
+
+    fn add(&mut self, spec: &EditSpec<D>, finest: f64, points: &[Vect<D>]) {
+        if self.wanted.iter().all(Option::is_none) {
+            return;
+        }
+        if self.size == 0.0 {
+            self.place(spec, finest);
+        }
+        for p in points {
+            for horizontal in [false, true] {
+                if !(if horizontal {
+                    self.any_horizontal
+                } else {
+                    self.any_spatial
+                }) {
+                    continue;
+                }
+                let Some(list) = self.buckets.get(&self.key(p, horizontal)) else {
+                    continue;
+                };
+                for &i in list {
+                    let i = i as usize;
+                    let Some((r, h)) = self.wanted[i] else {
+                        continue;
+                    };
+                    if h != horizontal {
+                        continue;
+                    }
+                    let mut d = p - spec.targets[i].from;
+                    if h {
+                        d[D - 1] = 0.0;
+                    }
+                    let d2 = d.norm_squared();
+                    if d2 <= r * r && self.best[i].is_none_or(|(b, _)| d2 < b) {
+                        self.best[i] = Some((d2, *p));
+                    }
+                }
+            }
+        }
+    }
+
+    /// Where target `i` starts — snapped to its nearest sample, or as given — and the point
+    /// whose cell carries it: the sample (a horizontal point at the sample's height may lie in
+    /// no cell, on a steep slope), or the point itself. An error when it asked to be snapped
+    /// and no sample lies within its distance.
+    fn from(&self, i: usize, t: &crate::spec::Target<D>) -> Result<(Vect<D>, Vect<D>)> {
+        let Some((r, horizontal)) = self.wanted[i] else {
+            return Ok((t.from, t.from));
+        };
+        match self.best[i] {
+            Some((_, p)) if horizontal => {
+                let mut q = t.from;
+                q[D - 1] = p[D - 1];
+                Ok((q, p))
+            }
+            Some((_, p)) => Ok((p, p)),
+            None => Err(Error::Param(format!(
+                "control point {} ({}) at {:?}: no sample within {r:.6}{}; give it a larger \
+                 `snap` distance",
+                t.id,
+                t.place,
+                t.from
+                    .iter()
+                    .take(if horizontal { D - 1 } else { D })
+                    .collect::<Vec<_>>(),
+                if horizontal { " horizontally" } else { "" },
+            ))),
+        }
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -138,11 +300,7 @@ impl<const D: usize> Selections<D> {
     /// no classes.
     pub fn new(spec: &EditSpec<D>, has_classes: bool) -> Result<Self> {
         let regions: Vec<&Region<D>> = regions(spec).collect();
-        if !has_classes
-            && regions
-                .iter()
-                .any(|r| matches!(r, Region::Classification(_)))
-        {
+        if !has_classes && regions.iter().any(|r| r.uses_classes()) {
             return Err(Error::Param(
                 "a `classification` region needs an input with LAS classes".into(),
             ));
@@ -156,6 +314,7 @@ impl<const D: usize> Selections<D> {
                     count: 0,
                 })
                 .collect(),
+            snaps: Snaps::new(spec),
         })
     }
 
@@ -169,6 +328,7 @@ impl<const D: usize> Selections<D> {
         points: &[Vect<D>],
         classes: Option<&[u8]>,
     ) {
+        self.snaps.add(spec, grid.finest_size(), points);
         for (region, acc) in regions(spec).zip(&mut self.regions) {
             // Consecutive samples of a scan mostly share a cell: one set insertion per run.
             let mut last = None;
@@ -329,17 +489,17 @@ where
             claim(c, &name, Role::Handle(k as u32))?;
         }
     }
-    let locate = |x: &Vect<D>, what: &str, line: usize| {
+    let locate = |x: &Vect<D>, what: &str, hint: &str| {
         complex.locate(&(x - origin)).ok_or_else(|| {
             Error::Param(format!(
-                "{what} (line {line}) at {:?} lies outside every cell of the shape",
+                "{what} at {:?} lies outside every cell of the shape{hint}",
                 x.iter().collect::<Vec<_>>()
             ))
         })
     };
     let mut pins = Vec::new();
     for (k, p) in spec.pins.iter().enumerate() {
-        let cell = locate(&p.point, "pin", p.line)?;
+        let cell = locate(&p.point, &format!("pin (line {})", p.line), "")?;
         claim(
             cell,
             &format!("pin #{} (line {})", k + 1, p.line),
@@ -355,12 +515,25 @@ where
     let targets = spec
         .targets
         .iter()
-        .map(|t| {
+        .enumerate()
+        .map(|(i, t)| {
+            let (from, carrier) = selections.snaps.from(i, t)?;
+            let mut to = t.to;
+            if t.horizontal {
+                to[D - 1] = from[D - 1];
+            }
+            let what = format!("control point {} ({})", t.id, t.place);
+            let hint = if t.snap.is_none() {
+                "; give its `[[target]]` a `snap` distance to move it onto the nearest samples"
+            } else {
+                ""
+            };
             Ok(TargetLocal {
-                from: t.from - origin,
-                to: t.to - origin,
+                from: from - origin,
+                to: to - origin,
                 weight: t.weight * glue,
-                cell: locate(&t.from, "target", t.line)? as u32,
+                cell: locate(&carrier, &what, hint)? as u32,
+                mask: t.mask(),
             })
         })
         .collect::<Result<Vec<_>>>()?;

@@ -486,7 +486,7 @@ where
                 .targets
                 .iter()
                 .zip(&self.constraints.targets)
-                .all(|(a, b)| a.cell == b.cell && a.weight == b.weight);
+                .all(|(a, b)| a.cell == b.cell && a.weight == b.weight && a.mask == b.mask);
         if !same_structure {
             self.system = timed(&mut info.seconds_symbolic, || {
                 System::new(&self.complex, &constraints, &self.params, CELLS_ADVICE)
@@ -564,6 +564,34 @@ where
     )
 }
 
+/// Runs Gauss-Newton on `complex` under `constraints` at full load from `motions` (no load
+/// steps, no refinement) and returns the motions it ends at: a warm start for a small change of
+/// the constraints (the leave-one-out check of [`crate::control`]).
+pub fn minimize_from<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &[Motion<D>],
+    params: &SolveParams,
+) -> Result<Vec<Motion<D>>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut system = System::new(complex, constraints, params, CELLS_ADVICE)?;
+    let mut motions = motions.to_vec();
+    let mut info = SolverInfo::default();
+    minimize_with(
+        &mut system,
+        complex,
+        constraints,
+        &mut motions,
+        1.0,
+        params,
+        &mut info,
+        &crate::progress::Silent,
+    )?;
+    Ok(motions)
+}
+
 /// The total energy: glue plus soft targets.
 pub fn total_energy<const D: usize>(
     complex: &CellComplex<D>,
@@ -578,7 +606,8 @@ pub fn total_energy<const D: usize>(
         .zip(targets_to)
         .map(|(t, to)| {
             let c = t.cell as usize;
-            t.weight * (motions[c].apply(&complex.cells[c].center, &t.from) - to).norm_squared()
+            let r = motions[c].apply(&complex.cells[c].center, &t.from) - to;
+            t.weight * r.component_mul(&t.mask).norm_squared()
         })
         .sum();
     glue + soft

@@ -127,6 +127,9 @@ impl Positions {
             let c = t.cell as usize;
             if let Some(r) = self.row[c] {
                 let m = &motions[c];
+                // Along an axis the target leaves free it asks for where the point is now.
+                let now = m.apply(&complex.cells[c].center, &t.from);
+                let to = to.component_mul(&t.mask) + now.component_mul(&t.mask.map(|v| 1.0 - v));
                 add(
                     r,
                     (to - m.rot * (t.from - complex.cells[c].center)) * t.weight,
@@ -203,6 +206,7 @@ mod tests {
             to: complex.cells[n / 2].center + Vect::<3>::new(0.3, 0.0, 0.0),
             weight: 2.0,
             cell: (n / 2) as u32,
+            mask: Vect::<3>::repeat(1.0),
         };
         let constraints = Constraints {
             roles,

@@ -720,12 +720,18 @@ where
             let (lo, hi) = self.target_range[k];
             for &t in &self.target_order[lo as usize..hi as usize] {
                 let target = &constraints.targets[t as usize];
-                let (jc, value, arm) =
+                let (mut jc, value, arm) =
                     self.jacobian(complex, constraints, motions, c as usize, &target.from);
-                let r = value - targets_to[t as usize];
+                // The residual is `M r` with `M = diag(mask)` (a horizontal control point
+                // barely holds its height): its Jacobian is `M J`, and the curvature term
+                // `(M r) · M ∂²x` takes `M² r`.
+                let r = (value - targets_to[t as usize]).component_mul(&target.mask);
+                jc.iter_mut()
+                    .for_each(|j| j.component_mul_assign(&target.mask));
                 accumulate_diag(vals, &jc, s.len, target.weight);
                 if let Some(arm) = arm {
-                    accumulate_curvature(&mut curvature[c as usize], &r, &arm, target.weight);
+                    let r2 = r.component_mul(&target.mask);
+                    accumulate_curvature(&mut curvature[c as usize], &r2, &arm, target.weight);
                 }
                 for a in 0..s.len {
                     grad[s.offset + a] += target.weight * jc[a].dot(&r);

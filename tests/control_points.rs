@@ -1,0 +1,265 @@
+//! Control points a surveyor can use (issue 17): CSV/TXT formats, errors that name the CSV's
+//! line and column, 2D points, snapping, the per-point table, RMSE and the leave-one-out check —
+//! run through the CLI on a real airborne scan.
+
+mod common;
+
+use common::{deform, deform_verbose, shared};
+use std::path::Path;
+
+fn autzen() -> std::path::PathBuf {
+    shared("las/autzen_trim.laz")
+}
+
+fn report(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn point<'a>(json: &'a serde_json::Value, id: &str) -> &'a serde_json::Value {
+    json["control_points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["id"] == id)
+        .unwrap_or_else(|| panic!("no control point {id}: {json}"))
+}
+
+fn coords(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+#[test]
+fn semicolon_file_with_header_ids_and_decimal_commas() {
+    let dir = tempfile::tempdir().unwrap();
+    // The points were given off the surface (up to 50 m above it): `snap` puts them on it.
+    std::fs::write(
+        dir.path().join("gcp.csv"),
+        "# surveyed, EPSG:2994\nid;x;y;z;X;Y;Z;weight\n\
+         P1;636200,0;849000,0;420;636200,5;849000,0;420;10\n\
+         P2;637000;849400;440;637000;849400,8;440;10\n\
+         \"P3\";636600;849200;450;636600;849200;451,5;10\n",
+    )
+    .unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nsnap = 60.0\n").unwrap();
+    let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
+    let r = deform_verbose(
+        &autzen(),
+        &out,
+        &edit,
+        &["--report", json.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stdout.contains("control points: 3"), "{}", r.stdout);
+    assert!(r.stdout.contains("RMSE"), "{}", r.stdout);
+    for id in ["P1", "P2", "P3"] {
+        assert!(r.stdout.contains(&format!("  {id} ")), "{}", r.stdout);
+    }
+    let json = report(&json);
+    let p3 = point(&json, "P3");
+    assert_eq!(p3["place"], "gcp.csv line 5");
+    // Snapped onto a sample: moved, and its wanted point kept.
+    assert!(p3["snapped"].as_f64().unwrap() > 0.0);
+    assert_eq!(coords(&p3["wanted"]), vec![636600.0, 849200.0, 451.5]);
+    // Weight 10 against the glue: each lands within half a metre of where it was wanted,
+    // and the residual is the distance the report gives between got and wanted.
+    for id in ["P1", "P2", "P3"] {
+        let p = point(&json, id);
+        let (got, wanted) = (coords(&p["got"]), coords(&p["wanted"]));
+        let d = got
+            .iter()
+            .zip(&wanted)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        assert!((d - p["residual"].as_f64().unwrap()).abs() < 1e-9, "{p}");
+        assert!(d < 0.5, "{id}: {p}");
+    }
+    let rmse = json["control_rmse"].as_f64().unwrap();
+    assert!(rmse > 0.0 && rmse < 0.5, "{rmse}");
+}
+
+#[test]
+fn separators_tab_spaces_and_comma_read_alike() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = [
+        ["P1", "636200", "849000", "636201", "849000"],
+        ["P2", "637000", "849400", "637000", "849401.5"],
+        ["P3", "636600", "849200", "636600", "849200"],
+    ];
+    let mut results = Vec::new();
+    for (name, sep) in [("tab.txt", "\t"), ("spaces.txt", "   "), ("comma.csv", ",")] {
+        let text: String = rows.iter().map(|r| r.join(sep) + "\n").collect();
+        std::fs::write(dir.path().join(name), text).unwrap();
+        let edit = dir.path().join("edit.toml");
+        std::fs::write(&edit, format!("[[target]]\nfile = \"{name}\"\n")).unwrap();
+        let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
+        let r = deform(
+            &autzen(),
+            &out,
+            &edit,
+            &["--report", json.to_str().unwrap()],
+        );
+        assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+        results.push(report(&json)["control_points"].clone());
+    }
+    assert_eq!(results[0].as_array().unwrap().len(), 3);
+    for other in &results[1..] {
+        for (a, b) in results[0]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(other.as_array().unwrap())
+        {
+            assert_eq!(
+                (&a["id"], &a["from"], &a["got"]),
+                (&b["id"], &b["from"], &b["got"])
+            );
+        }
+    }
+}
+
+#[test]
+fn two_d_points_pull_horizontally_and_keep_the_heights() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("gcp.txt"),
+        "P1 636200 849000 636201 849000\nP2 637000 849400 637000 849401.5\n\
+         P3 636600 849200 636600 849200\n",
+    )
+    .unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(&edit, "[[target]]\nfile = \"gcp.txt\"\n").unwrap();
+    let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
+    let r = deform(
+        &autzen(),
+        &out,
+        &edit,
+        &["--report", json.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let json = report(&json);
+    for id in ["P1", "P2", "P3"] {
+        let p = point(&json, id);
+        assert_eq!(p["horizontal"], true);
+        let (from, got, wanted) = (coords(&p["from"]), coords(&p["got"]), coords(&p["wanted"]));
+        // x and y as given; the height the nearest sample's.
+        assert!(from[2] > 380.0 && from[2] < 530.0, "{p}");
+        // Pulled horizontally; the height kept (it was free, not pulled up or down).
+        assert!(p["residual"].as_f64().unwrap() < 0.15, "{p}");
+        assert!((got[0] - wanted[0]).hypot(got[1] - wanted[1]) < 0.15, "{p}");
+        assert!((got[2] - from[2]).abs() < 0.1, "{p}");
+    }
+}
+
+#[test]
+fn a_point_off_the_surface_needs_snap_and_errors_name_the_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\n").unwrap();
+    let out = dir.path().join("o.laz");
+    let cases = [
+        // 80 m above the highest sample: outside every cell, and the message says what to do.
+        (
+            "P1,636600,849200,600,636600,849200,600\n",
+            "gcp.csv line 1",
+            "snap",
+        ),
+        (
+            "id,x,y,z,X,Y,Z\nP1,636600,849200,450,636600,849200,4x0\n",
+            "gcp.csv: line 2, column 7",
+            "`4x0`",
+        ),
+        (
+            "id;x;y;z;X;Y;H\n",
+            "gcp.csv: line 1, column 7",
+            "unknown column `H`",
+        ),
+        (
+            "P1;636600;849200;450;636600;849200;450\nP2;1;2;3\n",
+            "gcp.csv: line 2",
+            "4 columns",
+        ),
+        ("1,2,3\n", "gcp.csv: line 1", "3 columns"),
+    ];
+    for (text, place, what) in cases {
+        std::fs::write(dir.path().join("gcp.csv"), text).unwrap();
+        let r = deform(&autzen(), &out, &edit, &[]);
+        assert_eq!(r.code, 4, "{text}: {}", r.stderr);
+        assert!(
+            r.stderr.contains(place) && r.stderr.contains(what),
+            "{text}: {}",
+            r.stderr
+        );
+        assert_eq!(r.stderr.lines().count(), 1, "{}", r.stderr);
+        assert!(!out.exists());
+    }
+    // With `snap`, the point 80 m up moves onto the scan; too short a snap says so.
+    std::fs::write(
+        dir.path().join("gcp.csv"),
+        "P1,636600,849200,600,636600,849200,600\n",
+    )
+    .unwrap();
+    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nsnap = 5.0\n").unwrap();
+    let r = deform(&autzen(), &out, &edit, &[]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("no sample within 5"), "{}", r.stderr);
+    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nsnap = 200.0\n").unwrap();
+    let json = dir.path().join("r.json");
+    let r = deform(
+        &autzen(),
+        &out,
+        &edit,
+        &["--report", json.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let p = point(&report(&json), "P1").clone();
+    assert!(p["snapped"].as_f64().unwrap() > 70.0, "{p}");
+}
+
+#[test]
+fn leave_one_out_finds_the_blunder() {
+    let dir = tempfile::tempdir().unwrap();
+    // A 3×3 grid of 2D points 200 m apart agrees on a 0.5 m shift east; P5, in the middle,
+    // says 6 m north as well.
+    let mut csv = String::from("id,x,y,X,Y\n");
+    let mut k = 0;
+    for x in [636200.0, 636600.0, 637000.0] {
+        for y in [849000.0, 849200.0, 849400.0] {
+            k += 1;
+            let north = if k == 5 { 6.0 } else { 0.0 };
+            csv += &format!("P{k},{x},{y},{},{}\n", x + 0.5, y + north);
+        }
+    }
+    std::fs::write(dir.path().join("gcp.csv"), csv).unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nweight = 10\n").unwrap();
+    let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
+    let r = deform_verbose(
+        &autzen(),
+        &out,
+        &edit,
+        &["--check-gcp", "--report", json.to_str().unwrap()],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stdout.contains("leave-one-out RMSE"), "{}", r.stdout);
+    let json = report(&json);
+    let left_out = |id: &str| point(&json, id)["left_out"].as_f64().unwrap();
+    // The others predict P5 6 m off; each other point is predicted closer (its neighbours,
+    // pulled by P5 when they are left out, the least well).
+    let blunder = left_out("P5");
+    assert!(blunder > 5.5, "{blunder}");
+    for k in [1, 2, 3, 4, 6, 7, 8, 9] {
+        let id = format!("P{k}");
+        assert!(
+            left_out(&id) < 0.7 * blunder,
+            "{id}: {} vs {blunder}",
+            left_out(&id)
+        );
+    }
+    assert!(json["control_rmse_left_out"].as_f64().unwrap() > 1.0);
+}

@@ -1,0 +1,144 @@
+//! Selections that combine (issue 17): classification AND a polygon, polygons from GeoJSON,
+//! `invert` — run through the CLI on a real airborne scan, checked sample by sample.
+
+mod common;
+
+use common::{deform, shared};
+use rigidcells::io::{Chunk, LasSource, Source};
+use rigidcells::rigid::Vect;
+use rigidcells::spec::Polygon;
+
+/// Positions and classes of every record.
+fn samples(path: &std::path::Path) -> (Vec<Vect<3>>, Vec<u8>) {
+    let mut src = LasSource::open(path).unwrap();
+    let mut chunk = Chunk::default();
+    let (mut pos, mut classes) = (Vec::new(), Vec::new());
+    while src.read_samples(100_000, &mut chunk).unwrap() > 0 {
+        pos.extend_from_slice(&chunk.positions);
+        classes.extend_from_slice(&chunk.classes);
+    }
+    (pos, classes)
+}
+
+const OUTER: [[f64; 2]; 5] = [
+    [636300.0, 849000.0],
+    [636900.0, 849000.0],
+    [636950.0, 849250.0],
+    [636700.0, 849420.0],
+    [636300.0, 849400.0],
+];
+const INNER: [[f64; 2]; 4] = [
+    [636500.0, 849120.0],
+    [636700.0, 849120.0],
+    [636700.0, 849280.0],
+    [636500.0, 849280.0],
+];
+
+fn toml_ring(ring: &[[f64; 2]]) -> String {
+    let v: Vec<String> = ring
+        .iter()
+        .map(|p| format!("[{}, {}]", p[0], p[1]))
+        .collect();
+    format!("[{}]", v.join(", "))
+}
+
+#[test]
+fn ground_in_a_polygon_lifts_and_everything_outside_another_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.laz");
+    // The outer area from a GeoJSON file (a FeatureCollection, as GIS tools write it).
+    let ring: Vec<String> = OUTER
+        .iter()
+        .chain(&OUTER[..1])
+        .map(|p| format!("[{}, {}]", p[0], p[1]))
+        .collect();
+    std::fs::write(
+        dir.path().join("area.geojson"),
+        format!(
+            r#"{{"type": "FeatureCollection", "features": [{{"type": "Feature", "properties": {{}},
+                "geometry": {{"type": "Polygon", "coordinates": [[{}]]}}}}]}}"#,
+            ring.join(", ")
+        ),
+    )
+    .unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        format!(
+            "[[fixed]]\npolygon_file = \"area.geojson\"\ninvert = true\n\n\
+             [[handle]]\nclassification = [2]\npolygon = {}\nz = [300, 600]\ntranslate = [0, 0, 5]\n",
+            toml_ring(&INNER)
+        ),
+    )
+    .unwrap();
+    let out = dir.path().join("o.laz");
+    let r = deform(&input, &out, &edit, &[]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (before, classes) = samples(&input);
+    let (after, _) = samples(&out);
+    let (outer, inner) = (
+        Polygon::new(vec![OUTER.to_vec()], None),
+        Polygon::new(vec![INNER.to_vec()], None),
+    );
+    let (mut still, mut lifted, mut other_inside) = (0, 0, 0);
+    for ((b, a), c) in before.iter().zip(&after).zip(&classes) {
+        if !outer.contains(b.x, b.y, None) {
+            // Fixed: exactly where it was.
+            assert_eq!(a, b);
+            still += 1;
+        } else if inner.contains(b.x, b.y, None) && *c == 2 {
+            // The handle: lifted 5 m exactly (to the file's centimetres).
+            assert!(
+                (a - b - Vect::<3>::new(0.0, 0.0, 5.0)).amax() < 0.006,
+                "{b} -> {a}"
+            );
+            lifted += 1;
+        } else if inner.contains(b.x, b.y, None) {
+            other_inside += 1;
+        }
+    }
+    assert!(still > 10_000 && lifted > 500, "{still} {lifted}");
+    // The polygon held other classes too; the classification kept them out of the handle.
+    assert!(other_inside > 0, "{other_inside}");
+}
+
+#[test]
+fn entries_combine_and_errors_say_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.laz");
+    let edit = dir.path().join("edit.toml");
+    let out = dir.path().join("o.laz");
+    let cases = [
+        ("[[fixed]]\ninvert = true\n", "needs a region"),
+        (
+            "[[fixed]]\nz = [0, 1]\nbox = { min = [0, 0, 0], max = [1, 1, 1] }\n",
+            "`z`",
+        ),
+        (
+            "[[fixed]]\npolygon = [[0, 0], [1, 0]]\n",
+            "at least 3 points",
+        ),
+        (
+            "[[fixed]]\npolygon_file = \"none.geojson\"\n",
+            "none.geojson",
+        ),
+        ("[[fixed]]\npolygon_file = \"bad.geojson\"\n", "bad.geojson"),
+    ];
+    std::fs::write(dir.path().join("bad.geojson"), "{\"type\": \"Point\"").unwrap();
+    for (text, what) in cases {
+        std::fs::write(&edit, text).unwrap();
+        let r = deform(&input, &out, &edit, &[]);
+        assert_eq!(r.code, 4, "{text}: {}", r.stderr);
+        assert!(r.stderr.contains(what), "{text}: {}", r.stderr);
+    }
+    // A classification on an input without classes says so.
+    let (bar, bar_out, _) = common::lifted_bar(dir.path(), 4.0);
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nclassification = [2]\nbox = { min = [-1, -1, -1], max = [1, 2, 2] }\n",
+    )
+    .unwrap();
+    let r = deform(&bar, &bar_out, &edit, &[]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("LAS classes"), "{}", r.stderr);
+}
