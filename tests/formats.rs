@@ -653,3 +653,58 @@ fn deform_warns_where_the_edit_folds_space_over() {
     assert_eq!(bent.code, 0, "{}", bent.stderr);
     assert!(!bent.stderr.contains("folds space over"), "{}", bent.stderr);
 }
+
+#[test]
+fn outputs_name_rigidcells_and_text_numbers_are_the_shortest_that_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = translate_spec(dir.path());
+    // LAS through the raw sink and LAZ through the `las` writer: the generating software is
+    // ours, the system identifier the input's.
+    for name in ["las/autzen_trim.las", "las/autzen_trim.laz"] {
+        let input = shared(name);
+        let (_, output) = translate(dir.path(), &spec, &input, &[]).unwrap();
+        let (before, _, _, _) = common::records(&input);
+        let (after, _, _, _) = common::records(&output);
+        assert_eq!(after.software, rigidcells::io::SOFTWARE, "{name}");
+        assert_eq!(after.system, before.system, "{name}");
+    }
+    // OBJ and ASCII PLY: every number written is the shortest text that reads back as itself.
+    for name in ["meshes/spot.obj", "meshes/greg_turk_example2_ok_ascii.ply"] {
+        let input = shared(name);
+        let (_, output) = translate(dir.path(), &spec, &input, &[]).unwrap();
+        let text = std::fs::read_to_string(&output).unwrap();
+        // The coordinates: the first three numbers of `v` lines, or of the vertex lines after
+        // a PLY header (the other fields keep the input's text).
+        let coords: Vec<&str> = if name.ends_with(".obj") {
+            text.lines()
+                .filter_map(|l| l.strip_prefix("v "))
+                .flat_map(|l| l.split_whitespace().take(3))
+                .collect()
+        } else {
+            let vertices: usize = text
+                .lines()
+                .find_map(|l| l.strip_prefix("element vertex "))
+                .unwrap()
+                .trim()
+                .parse()
+                .unwrap();
+            text.lines()
+                .skip_while(|l| *l != "end_header")
+                .skip(1)
+                .take(vertices)
+                .flat_map(|l| l.split_whitespace().take(3))
+                .collect()
+        };
+        let mut checked = 0;
+        for tok in coords {
+            let v: f64 = tok.parse().unwrap();
+            let shortest = [format!("{v}"), format!("{}", v as f32)];
+            assert!(
+                shortest.iter().any(|s| s == tok),
+                "{name}: `{tok}` is not the shortest ({shortest:?})"
+            );
+            checked += 1;
+        }
+        assert!(checked > 10, "{name}: {checked}");
+    }
+}

@@ -736,7 +736,9 @@ impl RawSink {
         notes: Vec<String>,
     ) -> Result<Self> {
         let (tmp, mut out) = TempFile::create(output)?;
-        out.write_all(&input[..header.point_offset as usize])
+        let mut prefix = input[..header.point_offset as usize].to_vec();
+        prefix[58..90].copy_from_slice(&generating_software());
+        out.write_all(&prefix)
             .map_err(|e| Error::write(output, e))?;
         Ok(Self {
             tmp,
@@ -841,6 +843,7 @@ impl CrateSink {
         let (input, header, max_return) = (&source.path, &source.header, source.max_return);
         let mut b = Builder::from(source.las_header()?);
         b.point_format.is_compressed = out_laz;
+        b.generating_software = SOFTWARE.to_string();
         if max_return > 5 && header.version.1 < 4 {
             // The `las` writer cannot count returns 6 and 7 in a legacy header (CRATES.md).
             b.version = las::Version::new(1, 4);
@@ -1223,6 +1226,18 @@ fn check_layers(
 
 /// An error of the `las` crate's writer on `output`: its I/O errors are errors writing the
 /// output (exit 1), the others the crate refusing what it was given.
+/// What outputs name in the header's generating-software field (the system identifier is the
+/// input's): `rigidcells` and its version.
+pub const SOFTWARE: &str = concat!("rigidcells ", env!("CARGO_PKG_VERSION"));
+
+/// [`SOFTWARE`] as the header's 32-byte, zero-padded field.
+fn generating_software() -> [u8; 32] {
+    let mut field = [0u8; 32];
+    let n = SOFTWARE.len().min(32);
+    field[..n].copy_from_slice(&SOFTWARE.as_bytes()[..n]);
+    field
+}
+
 fn write_error(output: &Path, e: las::Error) -> Error {
     match e {
         las::Error::Io(e) => Error::write(output, e),

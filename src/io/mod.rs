@@ -15,7 +15,7 @@ mod text;
 mod xy;
 mod xyz;
 
-pub use las::{LasHeader, LasSource, VlrInfo};
+pub use las::{LasHeader, LasSource, SOFTWARE, VlrInfo};
 pub use obj::ObjFile;
 pub use ply::PlyFile;
 pub use ply_stream::{PlyRecordStream, PlyStream};
