@@ -52,6 +52,7 @@ pub mod control;
 pub mod error;
 pub mod field;
 pub mod image;
+pub mod info;
 pub mod interrupt;
 pub mod io;
 pub mod memory;

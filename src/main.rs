@@ -10,7 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, Inside, write_cells_ply};
 use rigidcells::field::{Outside, Transfer};
-use rigidcells::io::{LasHeader, Source, refuse_overwrite};
+use rigidcells::io::{LasHeader, refuse_overwrite};
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
 use rigidcells::progress::Observer;
 use rigidcells::render::{self, View};
@@ -114,7 +114,9 @@ enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
-    /// Describe a file: format, version, counts, attributes, bounds, CRS.
+    /// Describe a file (LAS/LAZ, PLY, OBJ, XYZ, .xy, .png, .field): format, counts, bounds and
+    /// centroid to the file's precision, CRS by name and EPSG code, record fields, a saved
+    /// field's cells, levels and transfer.
     Info {
         /// Input file.
         input: PathBuf,
@@ -910,61 +912,9 @@ fn run_apply(
 }
 
 fn run_info(input: &Path) -> anyhow::Result<()> {
-    let ext = input
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase());
-    if matches!(ext.as_deref(), Some("las") | Some("laz")) {
-        let h = LasHeader::read(input)?;
-        println!("{}", input.display());
-        println!(
-            "  format: {} {}.{}, point data record format {}, {} bytes per record",
-            if h.compressed { "LAZ" } else { "LAS" },
-            h.version.0,
-            h.version.1,
-            h.format,
-            h.record_len
-        );
-        println!("  points: {}", h.count);
-        println!(
-            "  bounds: x [{}, {}]  y [{}, {}]  z [{}, {}]",
-            h.min[0], h.max[0], h.min[1], h.max[1], h.min[2], h.max[2]
-        );
-        println!("  scale: {:?}  offset: {:?}", h.scale, h.offset);
-        println!(
-            "  VLRs: {} ({}), EVLRs: {}",
-            h.vlrs.len(),
-            h.vlrs
-                .iter()
-                .map(|v| format!("{}:{}", v.user_id, v.record_id))
-                .collect::<Vec<_>>()
-                .join(", "),
-            h.evlr_count
-        );
-        println!(
-            "  CRS: {}",
-            if h.vlrs.iter().any(|v| v.is_crs()) {
-                "present"
-            } else {
-                "none"
-            }
-        );
-        println!("  software: {} / {}", h.system, h.software);
-        return Ok(());
-    }
-    let source = rigidcells::io::open(input)?;
-    print_summary(input, source.as_ref());
+    let info = rigidcells::info::describe(input, &Bar::new(false))?;
+    print!("{info}");
     Ok(())
-}
-
-fn print_summary(input: &Path, source: &dyn Source) {
-    println!("{}", input.display());
-    println!("  samples: {}", source.len());
-    println!("  triangles: {}", source.triangles().len());
-    let properties = rigidcells::io::describe(input).unwrap_or_default();
-    if !properties.is_empty() {
-        println!("  {properties}");
-    }
 }
 
 fn report(input: &Path, output: &Path, file: &FileInfo) {

@@ -411,6 +411,19 @@ impl LasSource {
         &self.header
     }
 
+    /// Every VLR and EVLR: user id, record id and payload (empty when the `las` crate cannot
+    /// read the header).
+    pub fn vlr_payloads(&self) -> Vec<(String, u16, Vec<u8>)> {
+        let Ok(h) = self.las_header() else {
+            return Vec::new();
+        };
+        h.vlrs()
+            .iter()
+            .chain(h.evlrs())
+            .map(|v| (v.user_id.clone(), v.record_id, v.data.clone()))
+            .collect()
+    }
+
     /// The `las` crate's header: the open LAZ reader's, or read for an uncompressed input.
     fn las_header(&self) -> Result<las::Header> {
         let err = |e: las::Error| Error::format(&self.path, format!("{e}"));

@@ -1,0 +1,608 @@
+//! What `rigidcells info` tells about a file, for every format it reads: counts, bounds and
+//! centroid, the coordinate reference system by name, the fields of the records, and the
+//! format's own details (LAS header and VLRs, a PLY header, a saved field's cells, levels,
+//! transfer and domain, a picture's size and foreground).
+//!
+//! Coordinates are printed to the file's precision: a LAS file's scale (0.01 → two decimals),
+//! single precision where the file holds `float` vertices, else the shortest text that reads
+//! back as the number. The centroid takes the bounds' decimals.
+
+use std::fmt;
+use std::path::Path;
+
+use crate::error::{Error, Result};
+use crate::io::{self, Chunk, LasHeader};
+use crate::progress::Observer;
+
+/// A file's description; [`fmt::Display`] prints it as `rigidcells info` does.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FileInfo {
+    /// The file.
+    pub path: String,
+    /// The format in words (`LAZ 1.2, point data record format 3, 34 bytes per record`).
+    pub format: String,
+    /// Samples (points, vertices, foreground pixels, cells of a field).
+    pub samples: u64,
+    /// What a sample is, for the count's label (`points`, `vertices`, `cells`, …).
+    pub samples_are: &'static str,
+    /// Triangles of a mesh.
+    pub triangles: Option<usize>,
+    /// The lowest and highest coordinate per axis (2 or 3 axes).
+    pub bounds: Option<(Vec<f64>, Vec<f64>)>,
+    /// The mean of the samples.
+    pub centroid: Option<Vec<f64>>,
+    /// Decimals per axis to print coordinates with (`None`: the shortest round-trip text).
+    pub decimals: Option<Vec<usize>>,
+    /// Whether coordinates are single precision (print them as `f32`).
+    pub single: bool,
+    /// The coordinate reference system.
+    pub crs: Option<Crs>,
+    /// The fields of each record (LAS), or the vertex properties (PLY).
+    pub fields: Vec<String>,
+    /// Further lines: a label and its text.
+    pub details: Vec<(String, String)>,
+}
+
+/// A coordinate reference system, as a file declares it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Crs {
+    /// Its name (the WKT's, or the GeoTIFF citation).
+    pub name: Option<String>,
+    /// The EPSG code of the horizontal system.
+    pub epsg: Option<u32>,
+    /// The EPSG code of the vertical system (GeoTIFF keys).
+    pub vertical_epsg: Option<u32>,
+    /// Where it was found: `WKT` or `GeoTIFF keys`.
+    pub from: &'static str,
+}
+
+impl fmt::Display for Crs {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut parts = Vec::new();
+        if let Some(n) = &self.name {
+            parts.push(n.clone());
+        }
+        if let Some(e) = self.epsg {
+            parts.push(format!("EPSG:{e}"));
+        }
+        if let Some(e) = self.vertical_epsg {
+            parts.push(format!("vertical EPSG:{e}"));
+        }
+        if parts.is_empty() {
+            parts.push("present, unnamed".into());
+        }
+        write!(f, "{} (from the {})", parts.join(", "), self.from)
+    }
+}
+
+impl FileInfo {
+    fn coord(&self, axis: usize, v: f64) -> String {
+        match &self.decimals {
+            Some(d) => format!("{v:.*}", d[axis.min(d.len() - 1)]),
+            None if self.single => format!("{}", v as f32),
+            None => format!("{v}"),
+        }
+    }
+
+    /// Decimals of the bounds as printed, per axis (for the centroid).
+    fn bound_decimals(&self) -> Vec<usize> {
+        let Some((lo, hi)) = &self.bounds else {
+            return Vec::new();
+        };
+        (0..lo.len())
+            .map(|a| {
+                [lo[a], hi[a]]
+                    .iter()
+                    .map(|&v| {
+                        let s = self.coord(a, v);
+                        s.split_once('.').map_or(0, |(_, d)| d.len())
+                    })
+                    .max()
+                    .unwrap_or(0)
+                    .min(9)
+            })
+            .collect()
+    }
+}
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+
+impl fmt::Display for FileInfo {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "{}", self.path)?;
+        writeln!(f, "  format: {}", self.format)?;
+        writeln!(f, "  {}: {}", self.samples_are, self.samples)?;
+        if let Some(t) = self.triangles {
+            writeln!(f, "  triangles: {t}")?;
+        }
+        if let Some((lo, hi)) = &self.bounds {
+            let axes: Vec<String> = (0..lo.len())
+                .map(|a| {
+                    format!(
+                        "{} [{}, {}]",
+                        AXES[a],
+                        self.coord(a, lo[a]),
+                        self.coord(a, hi[a])
+                    )
+                })
+                .collect();
+            writeln!(f, "  bounds: {}", axes.join("  "))?;
+            let size: Vec<String> = (0..lo.len())
+                .map(|a| {
+                    let d = self.bound_decimals()[a];
+                    format!("{:.d$}", hi[a] - lo[a])
+                })
+                .collect();
+            writeln!(f, "  size: {}", size.join(" × "))?;
+        }
+        if let Some(c) = &self.centroid {
+            let d = self.bound_decimals();
+            let v: Vec<String> = c
+                .iter()
+                .enumerate()
+                .map(|(a, v)| format!("{v:.*}", d.get(a).copied().unwrap_or(6)))
+                .collect();
+            writeln!(f, "  centroid: [{}]", v.join(", "))?;
+        }
+        match &self.crs {
+            Some(c) => writeln!(f, "  CRS: {c}")?,
+            None if self.format.starts_with("LA") => writeln!(f, "  CRS: none")?,
+            None => {}
+        }
+        if !self.fields.is_empty() {
+            writeln!(f, "  fields: {}", self.fields.join(", "))?;
+        }
+        for (k, v) in &self.details {
+            writeln!(f, "  {k}: {v}")?;
+        }
+        Ok(())
+    }
+}
+
+/// Describes the file at `path` (module docs). Reads every sample once for the centroid (and
+/// the bounds where the header gives none), with progress on `observer`.
+pub fn describe(path: &Path, observer: &dyn Observer) -> Result<FileInfo> {
+    let mut info = FileInfo {
+        path: path.display().to_string(),
+        ..Default::default()
+    };
+    match io::extension(path).as_deref() {
+        Some("las") | Some("laz") => las(path, &mut info)?,
+        Some("field") => return field(path, info),
+        Some("png") => return picture(path, info),
+        Some("xy") => {
+            let file = io::XyFile::read(path)?;
+            info.format = "2D point set (x y per line)".into();
+            info.samples_are = "points";
+            info.samples = file.points().len() as u64;
+            let pts: Vec<[f64; 2]> = file.points().iter().map(|p| [p.x, p.y]).collect();
+            set_extent(&mut info, pts.iter().map(|p| &p[..]), 2);
+            return Ok(info);
+        }
+        _ => {}
+    }
+    let mut source = io::open(path)?;
+    if info.format.is_empty() {
+        other_format(path, source.as_ref(), &mut info)?;
+    }
+    // One pass: bounds (where the header gave none) and the centroid.
+    observer.stage("reading", source.len());
+    source.rewind()?;
+    let mut chunk = Chunk::default();
+    let (mut sum, mut n) = ([0.0f64; 3], 0u64);
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    // Sums relative to the first sample keep the digits of georeferenced coordinates.
+    let mut base = None;
+    while source.read_samples(1 << 16, &mut chunk)? > 0 {
+        for p in &chunk.positions {
+            let b = *base.get_or_insert(*p);
+            for a in 0..3 {
+                sum[a] += p[a] - b[a];
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+            n += 1;
+        }
+        observer.advance(chunk.len() as u64);
+    }
+    observer.finish();
+    if let (Some(b), true) = (base, n > 0) {
+        info.centroid = Some((0..3).map(|a| b[a] + sum[a] / n as f64).collect());
+        if info.bounds.is_none() {
+            info.bounds = Some((lo.to_vec(), hi.to_vec()));
+        }
+    }
+    Ok(info)
+}
+
+/// Bounds and centroid of points given in memory.
+fn set_extent<'a>(info: &mut FileInfo, points: impl Iterator<Item = &'a [f64]>, dim: usize) {
+    let mut lo = vec![f64::INFINITY; dim];
+    let mut hi = vec![f64::NEG_INFINITY; dim];
+    let mut sum = vec![0.0; dim];
+    let mut n = 0usize;
+    for p in points {
+        for a in 0..dim {
+            lo[a] = lo[a].min(p[a]);
+            hi[a] = hi[a].max(p[a]);
+            sum[a] += p[a];
+        }
+        n += 1;
+    }
+    if n > 0 {
+        info.centroid = Some(sum.iter().map(|s| s / n as f64).collect());
+        info.bounds = Some((lo, hi));
+    }
+}
+
+fn other_format(path: &Path, source: &dyn io::Source, info: &mut FileInfo) -> Result<()> {
+    let triangles = source.triangles().len();
+    let ext = io::extension(path).unwrap_or_default();
+    info.samples = source.len();
+    match ext.as_str() {
+        "ply" => {
+            let header = io::describe(path)?;
+            info.format = format!(
+                "PLY, {}",
+                header
+                    .lines()
+                    .find_map(|l| l.trim().strip_prefix("format "))
+                    .unwrap_or("?")
+            );
+            info.samples_are = "vertices";
+            // The vertex element's properties, and whether x is a float.
+            let mut in_vertex = false;
+            for l in header.lines().map(str::trim) {
+                if let Some(e) = l.strip_prefix("element ") {
+                    in_vertex = e.starts_with("vertex ");
+                } else if in_vertex && let Some(p) = l.strip_prefix("property ") {
+                    let words: Vec<&str> = p.split_whitespace().collect();
+                    if let Some(name) = words.last() {
+                        info.fields.push(name.to_string());
+                        if *name == "x" {
+                            info.single = matches!(words[0], "float" | "float32");
+                        }
+                    }
+                }
+            }
+            // Elements with their counts and properties; comments.
+            let mut elements: Vec<String> = Vec::new();
+            for l in header.lines().map(str::trim) {
+                if let Some(e) = l.strip_prefix("element ") {
+                    elements.push(format!("{e} ("));
+                } else if let (Some(p), Some(last)) =
+                    (l.strip_prefix("property "), elements.last_mut())
+                {
+                    if !last.ends_with('(') {
+                        last.push_str(", ");
+                    }
+                    last.push_str(p.split_whitespace().last().unwrap_or(""));
+                } else if let Some(c) = l.strip_prefix("comment ") {
+                    info.details.push(("comment".into(), c.to_string()));
+                }
+            }
+            let elements: Vec<String> = elements.into_iter().map(|e| e + ")").collect();
+            info.details.push(("elements".into(), elements.join(", ")));
+        }
+        "obj" => {
+            info.format = "OBJ".into();
+            info.samples_are = "vertices";
+            info.details
+                .push(("statements".into(), io::describe(path)?));
+        }
+        _ => {
+            info.format = "XYZ text (x y z per line, more columns kept)".into();
+            info.samples_are = "points";
+        }
+    }
+    if ext != "xyz" {
+        info.triangles = Some(triangles);
+    }
+    Ok(())
+}
+
+/// The point-record fields of each LAS point data record format.
+fn las_fields(format: u8) -> Vec<&'static str> {
+    let mut f = vec![
+        "X",
+        "Y",
+        "Z",
+        "intensity",
+        "return number",
+        "number of returns",
+    ];
+    if format >= 6 {
+        f.extend(["classification flags", "scanner channel"]);
+    }
+    f.extend([
+        "scan direction",
+        "edge of flight line",
+        "classification",
+        "scan angle",
+        "user data",
+        "point source ID",
+    ]);
+    if matches!(format, 1 | 3 | 4 | 5) || format >= 6 {
+        f.push("GPS time");
+    }
+    if matches!(format, 2 | 3 | 5 | 7 | 8 | 10) {
+        f.push("RGB");
+    }
+    if matches!(format, 8 | 10) {
+        f.push("NIR");
+    }
+    if matches!(format, 4 | 5 | 9 | 10) {
+        f.push("wave packet");
+    }
+    f
+}
+
+fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
+    let h = LasHeader::read(path)?;
+    info.format = format!(
+        "{} {}.{}, point data record format {}, {} bytes per record",
+        if h.compressed { "LAZ" } else { "LAS" },
+        h.version.0,
+        h.version.1,
+        h.format,
+        h.record_len
+    );
+    info.samples_are = "points";
+    info.samples = h.count;
+    info.bounds = Some((h.min.to_vec(), h.max.to_vec()));
+    info.decimals = Some(h.scale.iter().map(|&s| decimals_of(s)).collect());
+    info.fields = las_fields(h.format).iter().map(|s| s.to_string()).collect();
+    let records = crate::io::LasSource::open(path)?.vlr_payloads();
+    for (user, id, data) in &records {
+        if user == "LASF_Spec" && *id == 4 {
+            // Extra-bytes descriptors: 192 bytes each, the name at bytes 4..36.
+            for d in data.chunks_exact(192) {
+                let name = String::from_utf8_lossy(&d[4..36])
+                    .trim_end_matches('\0')
+                    .to_string();
+                info.fields.push(format!("{name} (extra bytes)"));
+            }
+        }
+    }
+    info.crs = crs(&records);
+    info.details.push((
+        "scale".into(),
+        format!("{:?}  offset: {:?}", h.scale, h.offset),
+    ));
+    info.details.push((
+        "VLRs".into(),
+        format!(
+            "{} ({}), EVLRs: {}",
+            h.vlrs.len(),
+            h.vlrs
+                .iter()
+                .map(|v| format!("{}:{}", v.user_id, v.record_id))
+                .collect::<Vec<_>>()
+                .join(", "),
+            h.evlr_count
+        ),
+    ));
+    if records.iter().any(|(u, _, _)| u == "copc") {
+        info.details
+            .push(("COPC".into(), "yes (a cloud-optimized point cloud)".into()));
+    }
+    info.details
+        .push(("software".into(), format!("{} / {}", h.system, h.software)));
+    Ok(())
+}
+
+/// The decimals a LAS scale keeps: 0.01 → 2, 0.001 → 3, 0.5 → 1, 1 → 0.
+fn decimals_of(scale: f64) -> usize {
+    if scale.is_nan() || scale <= 0.0 {
+        return 6;
+    }
+    let d = -scale.log10();
+    (d - 1e-9).ceil().clamp(0.0, 12.0) as usize
+}
+
+/// The CRS of a LAS file's (E)VLRs: the WKT's name and EPSG code, else the GeoTIFF keys'.
+pub fn crs(records: &[(String, u16, Vec<u8>)]) -> Option<Crs> {
+    let find = |id: u16| {
+        records
+            .iter()
+            .find(|(u, r, _)| u == "LASF_Projection" && *r == id)
+            .map(|(_, _, d)| d.as_slice())
+    };
+    let keys = find(34735);
+    if let Some(wkt) = find(2112) {
+        let text = String::from_utf8_lossy(wkt);
+        let text = text.trim_end_matches('\0');
+        let keys = keys.and_then(|k| geotiff(k, find(34737).unwrap_or(&[])));
+        return Some(Crs {
+            name: wkt_name(text),
+            // A WKT without a code of its own: the GeoTIFF keys' when the file has both.
+            epsg: wkt_epsg(text).or(keys.as_ref().and_then(|k| k.epsg)),
+            vertical_epsg: keys.and_then(|k| k.vertical_epsg),
+            from: "WKT",
+        });
+    }
+    geotiff(keys?, find(34737).unwrap_or(&[]))
+}
+
+/// The CRS of a GeoTIFF key directory (`keys`, LASF_Projection 34735) and its ASCII parameters
+/// (`ascii`, 34737).
+fn geotiff(keys: &[u8], ascii: &[u8]) -> Option<Crs> {
+    let words: Vec<u16> = keys
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect();
+    let mut crs = Crs {
+        from: "GeoTIFF keys",
+        ..Default::default()
+    };
+    let n = words.get(3).copied().unwrap_or(0) as usize;
+    let (mut projected, mut geographic, mut citation) = (None, None, None);
+    for e in words.get(4..).unwrap_or(&[]).chunks_exact(4).take(n) {
+        let (key, location, count, value) = (e[0], e[1], e[2] as usize, e[3] as usize);
+        let code = (location == 0 && value != 0 && value != 32767).then_some(value as u32);
+        match key {
+            3072 => projected = code,
+            2048 => geographic = code,
+            4096 => crs.vertical_epsg = code,
+            1026 | 3073 if location == 34737 => {
+                let s = ascii.get(value..value + count).unwrap_or(&[]);
+                let s = String::from_utf8_lossy(s)
+                    .trim_end_matches(['|', '\0'])
+                    .trim()
+                    .to_string();
+                if !s.is_empty() && (key == 3073 || citation.is_none()) {
+                    citation = Some(s);
+                }
+            }
+            _ => {}
+        }
+    }
+    crs.epsg = projected.or(geographic);
+    crs.name = citation;
+    Some(crs)
+}
+
+/// The name of a WKT's outermost object: its first quoted string.
+fn wkt_name(wkt: &str) -> Option<String> {
+    let start = wkt.find('"')? + 1;
+    let len = wkt[start..].find('"')?;
+    Some(wkt[start..start + len].to_string())
+}
+
+/// The EPSG code of a WKT's outermost object: its own `AUTHORITY["EPSG","n"]` (WKT 1) or
+/// `ID["EPSG",n]` (WKT 2), at depth 1 — not a unit's or a datum's deeper down. A compound
+/// system without one of its own gives its first component's.
+fn wkt_epsg(wkt: &str) -> Option<u32> {
+    let bytes = wkt.as_bytes();
+    let (mut depth, mut quoted) = (0usize, false);
+    let mut found: [Option<u32>; 3] = [None; 3];
+    for (i, &b) in bytes.iter().enumerate() {
+        match b {
+            b'"' => quoted = !quoted,
+            b'[' | b'(' if !quoted => {
+                depth += 1;
+                // The keyword before this bracket.
+                let start = wkt[..i]
+                    .rfind(|c: char| !c.is_ascii_alphanumeric() && c != '_')
+                    .map_or(0, |k| k + 1);
+                let keyword = wkt[start..i].to_ascii_uppercase();
+                if (keyword == "AUTHORITY" || keyword == "ID")
+                    && depth <= 3
+                    && found[depth - 1].is_none()
+                    && wkt[i + 1..]
+                        .trim_start()
+                        .to_ascii_uppercase()
+                        .starts_with("\"EPSG\"")
+                {
+                    let digits: String = wkt[i + 1..]
+                        .chars()
+                        .skip(6)
+                        .skip_while(|c| !c.is_ascii_digit())
+                        .take_while(|c| c.is_ascii_digit())
+                        .collect();
+                    found[depth - 1] = digits.parse().ok();
+                }
+            }
+            b']' | b')' if !quoted => depth = depth.saturating_sub(1),
+            _ => {}
+        }
+    }
+    // found[1]: depth 2 (the outermost object's own); found[2]: a compound's component's.
+    let compound = wkt.trim_start().to_ascii_uppercase();
+    let compound = compound.starts_with("COMPD_CS") || compound.starts_with("COMPOUNDCRS");
+    found[1].or(if compound { found[2] } else { None })
+}
+
+fn field(path: &Path, mut info: FileInfo) -> Result<FileInfo> {
+    // "RCFIELD\0", u32 version, u32 dimension.
+    let mut head = [0u8; 16];
+    std::io::Read::read_exact(
+        &mut std::fs::File::open(path).map_err(|e| Error::io(path, e))?,
+        &mut head,
+    )
+    .map_err(|_| Error::format(path, "too short for a saved field"))?;
+    match u32::from_le_bytes([head[12], head[13], head[14], head[15]]) {
+        2 => fill_field(&mut info, &crate::field::SavedField::<2>::load(path)?),
+        _ => fill_field(&mut info, &crate::field::SavedField::<3>::load(path)?),
+    }
+    Ok(info)
+}
+
+fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedField<D>) {
+    let f = &saved.field;
+    info.format = format!("rigidcells saved field, {D}D");
+    info.samples_are = "cells";
+    info.samples = f.centers.len() as u64;
+    // The domain: the cells' cubes in world coordinates.
+    let mut lo = vec![f64::INFINITY; D];
+    let mut hi = vec![f64::NEG_INFINITY; D];
+    let mut sizes: Vec<f64> = Vec::new();
+    for (c, &h) in f.centers.iter().zip(&f.halves) {
+        for a in 0..D {
+            lo[a] = lo[a].min(f.origin[a] + c[a] - h);
+            hi[a] = hi[a].max(f.origin[a] + c[a] + h);
+        }
+        if !sizes.contains(&(2.0 * h)) {
+            sizes.push(2.0 * h);
+        }
+    }
+    sizes.sort_by(f64::total_cmp);
+    if !f.centers.is_empty() {
+        info.bounds = Some((lo, hi));
+    }
+    info.details.push((
+        "levels".into(),
+        format!(
+            "{} (cell sizes {})",
+            sizes.len(),
+            sizes
+                .iter()
+                .map(|s| format!("{s}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    ));
+    info.details.push((
+        "transfer".into(),
+        format!("{:?}", saved.transfer).to_lowercase(),
+    ));
+    let moved = f
+        .motions
+        .iter()
+        .zip(&f.centers)
+        .map(|(m, c)| (m.pos - c).norm())
+        .fold(0.0f64, f64::max);
+    info.details.push((
+        "domain".into(),
+        "the bounds above: the cells' cubes, in the input's coordinates".into(),
+    ));
+    info.details
+        .push(("largest cell motion".into(), format!("{moved:.6}")));
+}
+
+fn picture(path: &Path, mut info: FileInfo) -> Result<FileInfo> {
+    let r = crate::image::Raster::read_png(path)?;
+    info.format = format!("PNG, {} × {} pixels", r.width, r.height);
+    info.samples_are = "foreground pixels";
+    let opaque = r.rgba.chunks_exact(4).all(|p| p[3] == 255);
+    let w = r.width as usize;
+    let centers: Vec<[f64; 2]> = r
+        .rgba
+        .chunks_exact(4)
+        .enumerate()
+        .filter(|(_, p)| opaque || p[3] > 0)
+        .map(|(i, _)| [(i % w) as f64 + 0.5, (i / w) as f64 + 0.5])
+        .collect();
+    info.samples = centers.len() as u64;
+    set_extent(&mut info, centers.iter().map(|p| &p[..]), 2);
+    if opaque {
+        info.details.push((
+            "foreground".into(),
+            "the picture is opaque: `image` needs its background color (--background R,G,B)".into(),
+        ));
+    }
+    info.details
+        .push(("coordinates".into(), "pixels, x right, y down".into()));
+    Ok(info)
+}
