@@ -297,8 +297,20 @@ struct CellArgs {
     /// the cells; BENCHMARKS.md says which is faster where).
     #[arg(long, value_enum, default_value_t = SolverArg::Auto)]
     solver: SolverArg,
+    /// Parts of the shape that no constraint reaches (leaves, fittings, a loose piece of a
+    /// soup): carried rigidly by the nearest constrained part, or kept where they were.
+    #[arg(long, value_enum, default_value_t = LooseArg::Carry)]
+    loose_parts: LooseArg,
     #[command(flatten)]
     memory: MemoryArg,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+enum LooseArg {
+    /// Each rides along rigidly with the nearest cell of a constrained part.
+    Carry,
+    /// Each keeps its rest pose.
+    Rest,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -336,6 +348,7 @@ impl CellArgs {
                 SolverArg::Direct => Method::Direct,
                 SolverArg::Multilevel => Method::Multilevel,
             },
+            carry_loose: self.loose_parts == LooseArg::Carry,
             ..Default::default()
         }
     }
@@ -1039,6 +1052,7 @@ fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             shell: false,
             inside: InsideArg::Auto,
             solver: SolverArg::Auto,
+            loose_parts: LooseArg::Carry,
             memory: MemoryArg { memory_limit: None },
         },
         quiet,

@@ -128,6 +128,7 @@ impl Report {
                 Role::Handle(_) => "handle",
                 Role::Pin(_) => "pin",
                 Role::Rest => "rest",
+                Role::Carried(_) => "carried",
             };
             *cell_roles.entry(name).or_insert(0) += 1;
         }

@@ -75,6 +75,7 @@ pub fn write_cells_ply(
             Role::Handle(_) => 2,
             Role::Pin(_) => 3,
             Role::Rest => 4,
+            Role::Carried(_) => 5,
         });
         let s = strain.as_ref().map_or(0.0, |s| s[i]);
         let color = match (&strain, cell.kind) {

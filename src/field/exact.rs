@@ -6,7 +6,8 @@
 //! (or anywhere inside it, with the RBF) moved a little, and a handle's samples missed its
 //! transform. [`Constrained`] adds, for every region `r` of cells that follow one prescribed map
 //! `A_r` (the fixed cells and the cells kept at rest follow the identity; each handle its
-//! transform), a C² indicator `w_r`:
+//! transform; the cells of a loose part carried along, their carrier's rigid motion), a C²
+//! indicator `w_r`:
 //!
 //! ```text
 //! x' = F(x) + Σ_r w_r(x) (A_r(x) − F(x))          F: the transfer (blend or RBF)

@@ -67,6 +67,19 @@ impl<const D: usize> Field<D> {
         for (c, role) in constraints.roles.iter().enumerate() {
             match role {
                 Role::Fixed | Role::Rest => prescribed.set(c, n, Affine::identity()),
+                Role::Carried(_) => {
+                    // The cell's rigid motion, exactly: A(x) = R (x − c) + p.
+                    let m = &solution.motions[c];
+                    let center = solution.complex.cells[c].center;
+                    prescribed.set(
+                        c,
+                        n,
+                        Affine {
+                            linear: m.rot,
+                            translation: m.pos - m.rot * center,
+                        },
+                    );
+                }
                 Role::Handle(k) => prescribed.set(c, n, maps[*k as usize]),
                 Role::Free | Role::Pin(_) => {}
             }

@@ -13,8 +13,10 @@
 //!   weight of 1 pulls as hard as one face of glue whatever the units.
 //! - stiffness scales multiply on cells in several regions; a pair's scale is the geometric mean
 //!   of its cells' scales.
-//! - a connected component of cells with no constraint at all keeps its rest pose, with a
-//!   warning; no constrained cell anywhere is [`Error::NoConstraints`].
+//! - a connected component of cells with no constraint at all keeps its rest pose during the
+//!   solve; afterwards it rides along rigidly with the nearest cell of a constrained part
+//!   ([`carry_loose`], the default) or stays at rest, with a warning either way; no
+//!   constrained cell anywhere is [`Error::NoConstraints`].
 //!
 //! Everything here is in the local frame of the complex.
 
@@ -38,12 +40,18 @@ pub enum Role {
     Pin(u32),
     /// In a component without any constraint: kept at its rest pose.
     Rest,
+    /// In a component without any constraint, carried rigidly by cell `k` — the nearest
+    /// cell of a constrained part ([`carry_loose`]).
+    Carried(u32),
 }
 
 impl Role {
     /// Whether the cell's motion is prescribed entirely (no degrees of freedom).
     pub fn is_prescribed(&self) -> bool {
-        matches!(self, Self::Fixed | Self::Handle(_) | Self::Rest)
+        matches!(
+            self,
+            Self::Fixed | Self::Handle(_) | Self::Rest | Self::Carried(_)
+        )
     }
 }
 
@@ -566,6 +574,82 @@ where
 
 /// The end of the warning [`anchor`] gives.
 const LOOSE_WARNING: &str = "have no constraint and keep their rest pose";
+/// The end of the warning once [`carry_loose`] moved them.
+const CARRIED_WARNING: &str = "have no constraint and ride along rigidly with the nearest \
+                               cell of a constrained part (--loose-parts rest keeps them at rest)";
+
+/// Moves every cell at rest (in a part without constraints) rigidly with the nearest cell of a
+/// constrained part — as a leaf follows its twig, a fitting its wall — and marks it
+/// [`Role::Carried`]: each loose part takes, whole, the motion of the constrained cell nearest
+/// to any of its cells, so it keeps its shape and its place beside that cell. `motions` are
+/// the solved motions of `complex`; the warning about the parts at rest says what happened.
+pub fn carry_loose<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &mut Constraints<D>,
+    motions: &mut [crate::rigid::Motion<D>],
+) {
+    let roles = &mut constraints.roles;
+    if !roles.contains(&Role::Rest) {
+        return;
+    }
+    let anchored: Vec<u32> = (0..roles.len() as u32)
+        .filter(|&c| !matches!(roles[c as usize], Role::Rest | Role::Carried(_)))
+        .collect();
+    if anchored.is_empty() {
+        return;
+    }
+    let centers: Vec<[f64; D]> = anchored
+        .iter()
+        .map(|&c| complex.cells[c as usize].center.into())
+        .collect();
+    // Cell centers are distinct, so the tree builds; should it not, the parts stay at rest
+    // and the warning still says so.
+    let Ok(tree) = kiddo::ImmutableKdTree::<f64, D>::new_from_slice(&centers) else {
+        return;
+    };
+    // Per loose part: its nearest constrained cell and the distance to it.
+    let (component, count) = complex.components();
+    let mut nearest: Vec<Option<(f64, u32)>> = vec![None; count];
+    for (c, r) in roles.iter().enumerate() {
+        if *r != Role::Rest {
+            continue;
+        }
+        let q: [f64; D] = complex.cells[c].center.into();
+        let one = std::num::NonZero::new(1).expect("1 is not 0");
+        let Some(hit) = tree
+            .query(&q)
+            .nearest_n::<kiddo::SquaredEuclidean<f64>>(one)
+            .execute()
+            .first()
+            .map(|r| (r.distance, r.item))
+        else {
+            continue;
+        };
+        let slot = &mut nearest[component[c] as usize];
+        if slot.is_none_or(|(d, _)| hit.0 < d) {
+            *slot = Some((hit.0, anchored[hit.1 as usize]));
+        }
+    }
+    for c in 0..roles.len() {
+        if roles[c] != Role::Rest {
+            continue;
+        }
+        let Some((_, a)) = nearest[component[c] as usize] else {
+            continue;
+        };
+        let (anchor, m) = (&complex.cells[a as usize], motions[a as usize]);
+        motions[c] = crate::rigid::Motion {
+            rot: m.rot,
+            pos: m.apply(&anchor.center, &complex.cells[c].center),
+        };
+        roles[c] = Role::Carried(a);
+    }
+    for w in &mut constraints.warnings {
+        if let Some(head) = w.strip_suffix(LOOSE_WARNING) {
+            *w = format!("{head}{CARRIED_WARNING}");
+        }
+    }
+}
 
 /// Gives [`Role::Rest`] to the cells of every connected part of `complex` that holds no
 /// constraint (no role other than free or rest, no target), and [`Role::Free`] to rest cells

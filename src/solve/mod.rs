@@ -43,7 +43,9 @@ mod system;
 
 use std::time::Instant;
 
-pub use constraints::{Constraints, Role, Selections, coarsen, inherit, resolve, resolve_selected};
+pub use constraints::{
+    Constraints, Role, Selections, carry_loose, coarsen, inherit, resolve, resolve_selected,
+};
 pub use energy::{cell_strain, glue_energy, pair_energy};
 
 use crate::cells::CellComplex;
@@ -82,6 +84,9 @@ pub struct SolveParams {
     pub memory_limit: Option<u64>,
     /// How each Gauss-Newton system is solved. Default [`Method::Auto`].
     pub method: Method,
+    /// Parts of the shape without any constraint ride along rigidly with the nearest cell of
+    /// a constrained part ([`carry_loose`]); `false` keeps them at rest. Default `true`.
+    pub carry_loose: bool,
     /// After a load step's first iteration, add the rotations' second-order term to the
     /// Gauss-Newton matrix (Newton's method; see the module docs). Default `true`.
     pub newton: bool,
@@ -117,6 +122,7 @@ impl Default for SolveParams {
             memory_limit: None,
             method: Method::Auto,
             newton: true,
+            carry_loose: true,
         }
     }
 }
@@ -279,6 +285,9 @@ where
         }
     }
     observer.finish();
+    if params.carry_loose {
+        carry_loose(&complex, &mut constraints, &mut motions);
+    }
     info.cells_final = complex.len();
     info.unknowns = system.unknowns();
     info.seconds = start.elapsed().as_secs_f64();
