@@ -10,6 +10,6 @@ $bin deform "$work/bar.ply" -o "$work/bar_out.ply" --edit "$work/bend.toml" --ce
     --preview docs/bar_preview.png --strain --size 300x220 -q
 cp "$work/gingerbread.png" docs/gingerbread.png
 cp "$work/gingerbread_bent.png" docs/gingerbread_bent.png
-$bin render ../shared/data/meshes/dragon_11k_binary.ply -o docs/dragon.png --size 360x300
+$bin render ../shared/data/meshes/dragon_11k_binary.ply -o docs/dragon.png --size 360x300 --up z
 $bin render ../shared/data/las/autzen_trim.las -o docs/autzen.png --azimuth -90 --elevation 90 --size 360x300
 ls -l docs/*.png

@@ -57,6 +57,7 @@ pub mod interrupt;
 pub mod io;
 pub mod memory;
 pub mod pipeline;
+pub mod preview;
 pub mod progress;
 pub mod render;
 pub mod report;

@@ -16,8 +16,8 @@ use rigidcells::progress::Observer;
 use rigidcells::render::{self, View};
 use rigidcells::report::Report;
 use rigidcells::rigid::Vect;
+use rigidcells::solve::Solution;
 use rigidcells::solve::{Method, SolveParams};
-use rigidcells::solve::{Role, Solution};
 use rigidcells::spec::read_spec;
 
 #[derive(Parser)]
@@ -237,10 +237,26 @@ struct ViewArgs {
     /// Picture size in pixels, WIDTHxHEIGHT (a preview has two of them side by side).
     #[arg(long, default_value = "640x480")]
     size: String,
+    /// The vertical axis [default: z for LAS/LAZ and XYZ, y for PLY and OBJ meshes unless
+    /// their header names another with a comment such as `up z`].
+    #[arg(long, value_enum)]
+    up: Option<UpArg>,
+    /// Magnify about the picture's center (2 shows the middle half of the box).
+    #[arg(long, default_value_t = 1.0)]
+    zoom: f64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum UpArg {
+    X,
+    Y,
+    Z,
 }
 
 impl ViewArgs {
-    fn view(&self) -> anyhow::Result<View> {
+    /// The view of these arguments for pictures of `input` (whose file decides the default
+    /// vertical axis).
+    fn view(&self, input: &Path) -> anyhow::Result<View> {
         let bad = || {
             Error::Param(format!(
                 "--size {}: expected WIDTHxHEIGHT, e.g. 640x480",
@@ -258,11 +274,25 @@ impl ViewArgs {
         if !self.azimuth.is_finite() || !self.elevation.is_finite() {
             return Err(Error::Param("--azimuth and --elevation must be finite".into()).into());
         }
+        if !(self.zoom.is_finite() && self.zoom > 0.0 && self.zoom <= 1e6) {
+            return Err(Error::Param(format!(
+                "--zoom {}: a factor above 0, at most 1e6",
+                self.zoom
+            ))
+            .into());
+        }
         Ok(View {
             azimuth: self.azimuth,
             elevation: self.elevation,
             width,
             height,
+            up: match self.up {
+                Some(UpArg::X) => 0,
+                Some(UpArg::Y) => 1,
+                Some(UpArg::Z) => 2,
+                None => render::up_of(input),
+            },
+            zoom: self.zoom,
         })
     }
 }
@@ -465,7 +495,9 @@ fn main() -> ExitCode {
             input,
             output,
             view,
-        } => view.view().and_then(|v| run_render(&input, &output, &v)),
+        } => view
+            .view(&input)
+            .and_then(|v| run_render(&input, &output, &v)),
         Command::Cells {
             input,
             output,
@@ -525,7 +557,7 @@ fn run_cells(
         CHUNK,
         &rigidcells::progress::Silent,
     )?;
-    write_cells_ply(output, &complex, solution.as_ref())?;
+    write_cells_ply(output, &complex, solution.as_ref(), render::up_of(input))?;
     if quiet {
         return Ok(());
     }
@@ -567,9 +599,14 @@ fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
-    // The proxy serves the fold-over check, the report's residual and the preview.
-    let params = args.params(Some(pipeline::FOLDOVER_SAMPLES))?;
-    let view = args.view.view()?;
+    // The proxy serves the fold-over check, the report's residual and the preview (which
+    // draws a mesh's triangles when it holds every vertex).
+    let proxy = match args.preview {
+        Some(_) => pipeline::PROXY_SAMPLES,
+        None => pipeline::FOLDOVER_SAMPLES,
+    };
+    let params = args.params(Some(proxy))?;
+    let view = args.view.view(&args.input)?;
     if let Some(p) = &args.preview {
         png_path(p)?;
     }
@@ -661,11 +698,6 @@ fn png_path(path: &Path) -> anyhow::Result<()> {
     }
 }
 
-/// Fixed samples gray, handle samples yellow, the rest blue (paper Fig. 1).
-const FIXED: [u8; 3] = [150, 150, 150];
-const HANDLE: [u8; 3] = [240, 200, 30];
-const FREE: [u8; 3] = [90, 140, 220];
-
 /// The preview of a deformation: the proxy before and after, side by side in one view fitted
 /// to both, each sample colored by its cell's role; with `strain`, the deformed cells colored
 /// by their strain beside them.
@@ -675,37 +707,7 @@ fn preview_image(
     view: &View,
     strain: bool,
 ) -> render::Image {
-    let proxy = &info.proxy;
-    let origin = solution.constraints.origin;
-    let colors: Vec<[u8; 3]> = proxy
-        .before
-        .iter()
-        .map(|p| match solution.role_at(p) {
-            Some(Role::Fixed) => FIXED,
-            Some(Role::Handle(_)) => HANDLE,
-            _ => FREE,
-        })
-        .collect();
-    let both: Vec<Vect<3>> = proxy.before.iter().chain(&proxy.after).copied().collect();
-    let fit = render::bounds(&both);
-    let side = |points: &[Vect<3>]| render::render(points, &[], None, |i| colors[i], view, fit);
-    let mut panels = vec![side(&proxy.before), side(&proxy.after)];
-    if let (true, Some((lo, hi))) = (strain, fit) {
-        let complex = &solution.complex;
-        let values = rigidcells::solve::cell_strain(complex, &solution.motions);
-        let top = values
-            .iter()
-            .cloned()
-            .fold(0.0, f64::max)
-            .max(f64::MIN_POSITIVE);
-        let centers: Vec<Vect<3>> = solution.motions.iter().map(|m| m.pos + origin).collect();
-        let halves: Vec<f64> = complex.cells.iter().map(|c| c.half).collect();
-        let mut canvas = render::Canvas::new(render::Camera::fit(&lo, &hi, view));
-        let range = canvas.depth_range(&centers);
-        canvas.squares(&centers, &halves, range, |i| render::heat(values[i] / top));
-        panels.push(canvas.image);
-    }
-    render::Image::beside(&panels)
+    rigidcells::preview::preview(solution, &info.proxy, view, strain)
 }
 
 fn is_xy(path: &Path) -> bool {
@@ -828,19 +830,29 @@ fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
     png_path(output)?;
     let image = match rigidcells::io::Document::read(input) {
         Ok(doc) => {
-            let gray = |_| [200, 200, 200];
-            render::render(
-                doc.positions(),
-                doc.triangles(),
-                doc.normals(),
-                gray,
-                view,
-                None,
-            )
+            // A PLY's vertex colors (a `cells` output's roles or strain), else gray; a
+            // triangle takes its first vertex's.
+            use rigidcells::io::Colors;
+            let triangles = doc.triangles();
+            let colors = match rigidcells::io::extension(input).as_deref() {
+                Some("ply") => rigidcells::io::colors(input)?,
+                _ => None,
+            }
+            .filter(|c| match c {
+                Colors::Vertices(v) => v.len() == doc.positions().len(),
+                Colors::Triangles(t) => t.len() == triangles.len(),
+            });
+            let color = |i: usize| match &colors {
+                Some(Colors::Vertices(c)) if triangles.is_empty() => c[i],
+                Some(Colors::Vertices(c)) => c[triangles[i][0] as usize],
+                Some(Colors::Triangles(c)) => c[i],
+                None => [200, 200, 200],
+            };
+            render::render_annotated(doc.positions(), triangles, doc.normals(), color, view)
         }
         Err(Error::UnsupportedFormat { .. }) => {
             let (points, colors) = read_colored_points(input, RENDER_POINTS)?;
-            render::render(&points, &[], None, |i| colors[i], view, None)
+            render::render_annotated(&points, &[], None, |i| colors[i], view)
         }
         Err(e) => return Err(e.into()),
     };

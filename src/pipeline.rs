@@ -55,6 +55,8 @@ pub struct Proxy {
     pub before: Vec<Vect<3>>,
     /// Deformed positions.
     pub after: Vec<Vect<3>>,
+    /// The input's triangles, when it has some and the proxy holds every sample.
+    pub triangles: Vec<[u32; 3]>,
 }
 
 impl Proxy {
@@ -329,7 +331,16 @@ pub fn deform_file(
     observer.stage("checking", 0);
     let mut after = proxy.before.clone();
     apply(&deformer, &origin, &mut after);
-    info.proxy = Proxy { after, ..proxy };
+    let triangles = if proxy.stride == 1 && proxy.before.len() as u64 == source.len() {
+        source.triangles().to_vec()
+    } else {
+        Vec::new()
+    };
+    info.proxy = Proxy {
+        after,
+        triangles,
+        ..proxy
+    };
     let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
     observer.finish();
     let control_points = control_results(spec, &solution, &deformer, params, observer)?;

@@ -5,6 +5,15 @@
 //! flat-shaded by a headlight (two-sided: soups have no consistent orientation); points are
 //! square splats, shaded by their normals when they have them and by depth when not, so that a
 //! cloud reads as a surface. Images are RGB PNGs written atomically.
+//!
+//! **Which way is up.** The view turns about the file's vertical axis ([`View::up`]): z for
+//! LAS/LAZ and XYZ scans, y for meshes (PLY, OBJ — the convention of the modelling tools and of
+//! the Stanford and Blender models), unless a PLY header says otherwise with a comment
+//! `up x|y|z` (or `x_up`…, as the demo's files do) or an OBJ comment `# up z` ([`up_of`]).
+//!
+//! **Annotations** are drawn with a 5×7 pixel font written here: an axis triad (x red, y green,
+//! z blue) in the lower left corner, a scale bar of a round length in the lower right, a strain
+//! legend with its numbers, and markers for pins and targets.
 
 use std::path::Path;
 
@@ -22,6 +31,10 @@ pub struct View {
     pub width: u32,
     /// Pixels down.
     pub height: u32,
+    /// The vertical axis: 0 x, 1 y, 2 z.
+    pub up: usize,
+    /// Magnification about the picture's center (1: the whole box fits).
+    pub zoom: f64,
 }
 
 impl Default for View {
@@ -31,8 +44,55 @@ impl Default for View {
             elevation: 25.0,
             width: 640,
             height: 480,
+            up: 2,
+            zoom: 1.0,
         }
     }
+}
+
+/// The vertical axis of the file at `path` (module docs): a PLY or OBJ comment that names it,
+/// else y for meshes and z for everything else.
+pub fn up_of(path: &Path) -> usize {
+    let ext = crate::io::extension(path).unwrap_or_default();
+    if ext != "ply" && ext != "obj" {
+        return 2;
+    }
+    // The header, or the first comments of an OBJ.
+    let mut head = vec![0u8; 64 * 1024];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+        .unwrap_or(0);
+    let text = String::from_utf8_lossy(&head[..n]).to_ascii_lowercase();
+    for line in text.lines() {
+        let comment = match ext.as_str() {
+            "ply" => line.trim().strip_prefix("comment "),
+            _ => line.trim().strip_prefix('#'),
+        };
+        let Some(c) = comment else {
+            if ext == "ply" && line.starts_with("end_header") {
+                break;
+            }
+            continue;
+        };
+        let words: Vec<&str> = c
+            .split(|ch: char| !ch.is_ascii_alphanumeric())
+            .filter(|w| !w.is_empty())
+            .collect();
+        for (i, w) in words.iter().enumerate() {
+            let axis = |a: &str| ["x", "y", "z"].iter().position(|x| *x == a);
+            // `up z`, `z up`, `z_up`, `zup`.
+            let named = match *w {
+                "up" => words.get(i + 1).and_then(|a| axis(a)),
+                "xup" | "yup" | "zup" => axis(&w[..1]),
+                _ if words.get(i + 1) == Some(&"up") => axis(w),
+                _ => None,
+            };
+            if let Some(a) = named {
+                return a;
+            }
+        }
+    }
+    1
 }
 
 /// An RGB image.
@@ -153,8 +213,12 @@ impl Camera {
     /// The camera of `view` that shows the box `lo..hi` whole, with a margin.
     pub fn fit(lo: &Vect<3>, hi: &Vect<3>, view: &View) -> Self {
         let (az, el) = (view.azimuth.to_radians(), view.elevation.to_radians());
-        let toward = Vect::<3>::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-        let right = Vect::<3>::new(-az.sin(), az.cos(), 0.0);
+        // A right-handed frame (h1, h2, up) about the vertical axis.
+        let e = |a: usize| Vect::<3>::from_fn(|i, _| if i == a % 3 { 1.0 } else { 0.0 });
+        let u = view.up.min(2);
+        let (h1, h2, vertical) = (e(u + 1), e(u + 2), e(u));
+        let toward = (h1 * az.cos() + h2 * az.sin()) * el.cos() + vertical * el.sin();
+        let right = h2 * az.cos() - h1 * az.sin();
         let up = toward.cross(&right);
         let axes = [right, up, toward];
         let center = (lo + hi) * 0.5;
@@ -166,8 +230,14 @@ impl Camera {
             ey = ey.max(d.dot(&up).abs());
         }
         let margin = 0.92;
-        let scale = (margin * 0.5 * view.width as f64 / ex.max(1e-300))
-            .min(margin * 0.5 * view.height as f64 / ey.max(1e-300));
+        let zoom = if view.zoom.is_finite() && view.zoom > 0.0 {
+            view.zoom
+        } else {
+            1.0
+        };
+        let scale = zoom
+            * (margin * 0.5 * view.width as f64 / ex.max(1e-300))
+                .min(margin * 0.5 * view.height as f64 / ey.max(1e-300));
         Self {
             axes,
             center,
@@ -189,6 +259,11 @@ impl Camera {
     /// The direction towards the viewer.
     pub fn toward(&self) -> Vect<3> {
         self.axes[2]
+    }
+
+    /// Pixels per world unit.
+    pub fn scale(&self) -> f64 {
+        self.scale
     }
 }
 
@@ -310,6 +385,162 @@ impl Canvas {
         }
     }
 
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// Sets pixel `(x, y)` regardless of depth (annotations), when it lies in the picture.
+    pub fn paint(&mut self, x: i64, y: i64, c: [u8; 3]) {
+        if x >= 0 && y >= 0 && x < self.image.width as i64 && y < self.image.height as i64 {
+            self.image.set(x as usize, y as usize, c);
+        }
+    }
+
+    /// A line from `a` to `b` (pixels), `width` pixels wide, over everything.
+    pub fn line(&mut self, a: (f64, f64), b: (f64, f64), width: i64, c: [u8; 3]) {
+        let steps = ((b.0 - a.0).abs().max((b.1 - a.1).abs()).ceil() as i64).clamp(1, 100_000);
+        for s in 0..=steps {
+            let t = s as f64 / steps as f64;
+            let (x, y) = (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1));
+            for dy in 0..width {
+                for dx in 0..width {
+                    self.paint(
+                        x.round() as i64 + dx - width / 2,
+                        y.round() as i64 + dy - width / 2,
+                        c,
+                    );
+                }
+            }
+        }
+    }
+
+    /// `text` in the 5×7 font at pixel `(x, y)` (its top left), scaled by `size`, over a
+    /// white box so that it reads over anything.
+    pub fn text(&mut self, x: i64, y: i64, text: &str, size: i64, c: [u8; 3]) {
+        let w = text_width(text, size);
+        for dy in -size..8 * size {
+            for dx in -size..w + size {
+                self.paint(x + dx, y + dy, BACKGROUND);
+            }
+        }
+        for (k, ch) in text.chars().enumerate() {
+            let rows = glyph(ch);
+            for (r, bits) in rows.iter().enumerate() {
+                for col in 0..5 {
+                    if bits >> (4 - col) & 1 == 1 {
+                        for sy in 0..size {
+                            for sx in 0..size {
+                                self.paint(
+                                    x + (k as i64 * 6 + col) * size + sx,
+                                    y + r as i64 * size + sy,
+                                    c,
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// A marker at the world point `p`: a ring of `radius` pixels in `c`.
+    pub fn marker(&mut self, p: &Vect<3>, radius: f64, c: [u8; 3]) {
+        let (x, y, _) = self.camera.project(p);
+        if !(x.is_finite() && y.is_finite()) {
+            return;
+        }
+        let n = (radius * 8.0).ceil().max(8.0) as usize;
+        for k in 0..n {
+            let a = std::f64::consts::TAU * k as f64 / n as f64;
+            for r in [radius, radius + 1.0] {
+                self.paint(
+                    (x + r * a.cos()).round() as i64,
+                    (y + r * a.sin()).round() as i64,
+                    c,
+                );
+            }
+        }
+        self.paint(x.round() as i64, y.round() as i64, c);
+    }
+
+    /// The annotations every picture carries: the axis triad (x red, y green, z blue) in the
+    /// lower left corner and a scale bar of a round length in the lower right.
+    pub fn annotate(&mut self) {
+        let h = self.image.height as f64;
+        let w = self.image.width as f64;
+        let size = if self.image.width >= 480 { 2 } else { 1 };
+        let arm = 20.0 * size as f64;
+        let origin = (14.0 + arm, h - 14.0 - arm);
+        let colors = [[220, 40, 40], [30, 160, 30], [40, 70, 230]];
+        for (a, name) in ["x", "y", "z"].iter().enumerate() {
+            let d = Vect::<3>::from_fn(|i, _| if i == a { 1.0 } else { 0.0 });
+            let (dx, dy) = (d.dot(&self.camera.axes[0]), -d.dot(&self.camera.axes[1]));
+            let tip = (origin.0 + arm * dx, origin.1 + arm * dy);
+            self.line(origin, tip, size, colors[a]);
+            // The label beyond the tip, unless the axis points at the viewer.
+            let len = dx.hypot(dy);
+            if len > 0.25 {
+                let reach = arm * len + 7.0 * size as f64;
+                let at = (origin.0 + reach * dx / len, origin.1 + reach * dy / len);
+                self.text(
+                    at.0 as i64 - 2 * size,
+                    at.1 as i64 - 3 * size,
+                    name,
+                    size,
+                    colors[a],
+                );
+            }
+        }
+        // A scale bar of 1, 2 or 5 times a power of ten, about a sixth of the width.
+        let want = w / 6.0 / self.camera.scale;
+        if want.is_finite() && want > 0.0 {
+            let p = 10f64.powf(want.log10().floor());
+            let len = [1.0, 2.0, 5.0, 10.0]
+                .iter()
+                .map(|m| m * p)
+                .rfind(|l| *l <= want)
+                .unwrap_or(p);
+            let px = len * self.camera.scale;
+            let (x1, y) = (w - 12.0, h - 12.0 - 4.0 * size as f64);
+            let x0 = x1 - px;
+            let ink = [40, 40, 40];
+            self.line((x0, y), (x1, y), size, ink);
+            self.line((x0, y - 4.0), (x0, y + 4.0), size, ink);
+            self.line((x1, y - 4.0), (x1, y + 4.0), size, ink);
+            let label = number(len);
+            let tw = text_width(&label, size);
+            self.text(
+                ((x0 + x1) * 0.5) as i64 - tw / 2,
+                (y - 6.0 - 8.0 * size as f64) as i64,
+                &label,
+                size,
+                ink,
+            );
+        }
+    }
+
+    /// A vertical color bar for values 0..`top` colored by [`heat`], with its numbers, at the
+    /// right edge: the strain legend.
+    pub fn legend(&mut self, top: f64, title: &str) {
+        let size = if self.image.width >= 480 { 2 } else { 1 };
+        let (w, h) = (self.image.width as i64, self.image.height as i64);
+        let (bar_w, bar_h) = (8 * size, (h / 2).max(20));
+        let x = w - 12 - bar_w - text_width(&number(top), size);
+        let y0 = (h - bar_h) / 2;
+        for dy in 0..bar_h {
+            let c = heat(1.0 - dy as f64 / (bar_h - 1).max(1) as f64);
+            for dx in 0..bar_w {
+                self.paint(x + dx, y0 + dy, c);
+            }
+        }
+        let ink = [40, 40, 40];
+        self.text(x + bar_w + 3, y0 - 3 * size, &number(top), size, ink);
+        self.text(x + bar_w + 3, y0 + bar_h - 4 * size, "0", size, ink);
+        let tw = text_width(title, size);
+        self.text(x + bar_w / 2 - tw / 2, y0 - 12 * size, title, size, ink);
+    }
+
     /// The depth range of `points` in this camera: (nearest, farthest).
     pub fn depth_range(&self, points: &[Vect<3>]) -> (f64, f64) {
         points.iter().fold((f64::MIN, f64::MAX), |(n, f), p| {
@@ -354,6 +585,63 @@ pub(crate) fn raster(
                 f(x as usize, y as usize, [l0, l1, l2]);
             }
         }
+    }
+}
+
+/// The width in pixels of `text` in the 5×7 font at `size`.
+pub fn text_width(text: &str, size: i64) -> i64 {
+    (text.chars().count() as i64 * 6 - 1).max(0) * size
+}
+
+/// A number for a label: up to three significant digits, in exponent form when very large or
+/// small.
+pub fn number(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        return "0".into();
+    }
+    if !(1e-3..1e5).contains(&a) {
+        return format!("{v:.2e}");
+    }
+    let decimals = (2 - a.log10().floor() as i64).clamp(0, 6) as usize;
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// The rows of the 5×7 glyph of `c` (bit 4 the leftmost column); unknown characters are
+/// blank.
+fn glyph(c: char) -> [u8; 7] {
+    match c.to_ascii_lowercase() {
+        '0' => [0x0e, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0e],
+        '1' => [0x04, 0x0c, 0x04, 0x04, 0x04, 0x04, 0x0e],
+        '2' => [0x0e, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1f],
+        '3' => [0x1f, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0e],
+        '4' => [0x02, 0x06, 0x0a, 0x12, 0x1f, 0x02, 0x02],
+        '5' => [0x1f, 0x10, 0x1e, 0x01, 0x01, 0x11, 0x0e],
+        '6' => [0x06, 0x08, 0x10, 0x1e, 0x11, 0x11, 0x0e],
+        '7' => [0x1f, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
+        '8' => [0x0e, 0x11, 0x11, 0x0e, 0x11, 0x11, 0x0e],
+        '9' => [0x0e, 0x11, 0x11, 0x0f, 0x01, 0x02, 0x0c],
+        '.' => [0, 0, 0, 0, 0, 0x0c, 0x0c],
+        '-' => [0, 0, 0, 0x1f, 0, 0, 0],
+        '+' => [0, 0x04, 0x04, 0x1f, 0x04, 0x04, 0],
+        'a' => [0, 0, 0x0e, 0x01, 0x0f, 0x11, 0x0f],
+        'e' => [0, 0, 0x0e, 0x11, 0x1f, 0x10, 0x0e],
+        'i' => [0x04, 0, 0x0c, 0x04, 0x04, 0x04, 0x0e],
+        'n' => [0, 0, 0x16, 0x19, 0x11, 0x11, 0x11],
+        'p' => [0, 0, 0x1e, 0x11, 0x1e, 0x10, 0x10],
+        'r' => [0, 0, 0x16, 0x19, 0x10, 0x10, 0x10],
+        's' => [0, 0, 0x0e, 0x10, 0x0e, 0x01, 0x1e],
+        't' => [0x08, 0x08, 0x1c, 0x08, 0x08, 0x09, 0x06],
+        'g' => [0, 0, 0x0f, 0x11, 0x0f, 0x01, 0x0e],
+        'x' => [0, 0, 0x11, 0x0a, 0x04, 0x0a, 0x11],
+        'y' => [0, 0, 0x11, 0x11, 0x0f, 0x01, 0x0e],
+        'z' => [0, 0, 0x1f, 0x02, 0x04, 0x08, 0x1f],
+        _ => [0; 7],
     }
 }
 
@@ -421,6 +709,28 @@ pub fn render(
     canvas.image
 }
 
+/// [`render`] with the axis triad and the scale bar ([`Canvas::annotate`]): what `rigidcells
+/// render` writes.
+pub fn render_annotated(
+    points: &[Vect<3>],
+    triangles: &[[u32; 3]],
+    normals: Option<&[Vect<3>]>,
+    color: impl Fn(usize) -> [u8; 3],
+    view: &View,
+) -> Image {
+    let Some((lo, hi)) = bounds(points) else {
+        return Image::blank(view.width, view.height);
+    };
+    let camera = Camera::fit(&lo, &hi, view);
+    let mut canvas = Canvas {
+        image: render(points, triangles, normals, color, view, Some((lo, hi))),
+        depth: Vec::new(),
+        camera,
+    };
+    canvas.annotate();
+    canvas.image
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -445,6 +755,7 @@ mod tests {
             elevation: 0.0,
             width: 200,
             height: 100,
+            ..Default::default()
         };
         let (p, t) = cube(Vect::<3>::zeros());
         let fit = Some((Vect::<3>::zeros(), Vect::<3>::new(3.0, 1.0, 1.0)));

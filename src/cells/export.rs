@@ -28,11 +28,13 @@ pub(crate) const BOX_QUADS: [[u32; 4]; 6] = [
 ];
 
 /// Writes `complex` (or, when given, the solution's complex in its solved pose) to `path` as a
-/// binary little-endian PLY.
+/// binary little-endian PLY; its header names the vertical axis `up` (0 x, 1 y, 2 z: the
+/// input's, so that `render` shows the cells as it shows the input).
 pub fn write_cells_ply(
     path: &Path,
     complex: &CellComplex<3>,
     solution: Option<&Solution<3>>,
+    up: usize,
 ) -> Result<()> {
     let complex = solution.map_or(complex, |s| &s.complex);
     let strain = solution.map(|s| cell_strain(&s.complex, &s.motions));
@@ -44,10 +46,12 @@ pub fn write_cells_ply(
     let _ = write!(
         out,
         "ply\nformat binary_little_endian 1.0\ncomment rigidcells cell complex: {n} cells\n\
+         comment up {}\n\
          element vertex {}\nproperty double x\nproperty double y\nproperty double z\n\
          element face {}\nproperty list uchar int vertex_indices\nproperty uchar level\n\
          property uchar kind\nproperty uchar role\nproperty float strain\n\
          property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+        ["x", "y", "z"][up.min(2)],
         8 * n,
         6 * n
     );

@@ -17,7 +17,7 @@ mod xyz;
 
 pub use las::{LasHeader, LasSource, SOFTWARE, VlrInfo};
 pub use obj::ObjFile;
-pub use ply::PlyFile;
+pub use ply::{Colors, PlyFile, colors};
 pub use ply_stream::{PlyRecordStream, PlyStream};
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
 pub use xy::XyFile;
@@ -231,7 +231,8 @@ impl Document {
     }
 }
 
-pub(crate) fn extension(path: &Path) -> Option<String> {
+/// The lowercase extension of `path` (`None` without one).
+pub fn extension(path: &Path) -> Option<String> {
     path.extension()
         .and_then(|e| e.to_str())
         .map(|e| e.to_ascii_lowercase())

@@ -535,3 +535,72 @@ pub(super) fn scalar_size(t: &ScalarType) -> usize {
         ScalarType::Double => 8,
     }
 }
+
+/// Colors a PLY file gives its geometry, for pictures.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Colors {
+    /// One per vertex.
+    Vertices(Vec<[u8; 3]>),
+    /// One per triangle (a face's color repeated over its fan's triangles).
+    Triangles(Vec<[u8; 3]>),
+}
+
+/// The colors of the PLY file `path`: `red`, `green`, `blue` on its vertices, else on its
+/// faces (8-bit, 16-bit scaled down, or floats in 0..1); `None` when neither has them. For
+/// pictures: the whole file is parsed once more.
+pub fn colors(path: &Path) -> Result<Option<Colors>> {
+    use ply_rs_bw::ply::Property;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let (header, _) = parse_header(&bytes).map_err(|m| Error::format(path, m))?;
+    let has = |element: &str| {
+        header.elements.get(element).is_some_and(|e| {
+            ["red", "green", "blue"]
+                .iter()
+                .all(|c| e.properties.contains_key(*c))
+        })
+    };
+    let (vertex, face) = (has("vertex"), has("face"));
+    if !vertex && !face {
+        return Ok(None);
+    }
+    let ply = Parser::<DefaultElement>::new()
+        .read_ply(&mut Cursor::new(&bytes))
+        .map_err(|e| Error::format(path, format!("{e}")))?;
+    let channel = |p: Option<&Property>| -> u8 {
+        match p {
+            Some(Property::UChar(v)) => *v,
+            Some(Property::Char(v)) => (*v).max(0) as u8,
+            Some(Property::UShort(v)) => (*v / 257) as u8,
+            Some(Property::Float(v)) => (v.clamp(0.0, 1.0) * 255.0).round() as u8,
+            Some(Property::Double(v)) => (v.clamp(0.0, 1.0) * 255.0).round() as u8,
+            _ => 200,
+        }
+    };
+    let rgb = |e: &DefaultElement| [e.get("red"), e.get("green"), e.get("blue")].map(channel);
+    if vertex {
+        return Ok(ply
+            .payload
+            .get("vertex")
+            .map(|v| Colors::Vertices(v.iter().map(rgb).collect())));
+    }
+    // A face of n corners is n − 2 triangles of the fan.
+    let corners = |e: &DefaultElement| -> usize {
+        match e.get("vertex_indices").or_else(|| e.get("vertex_index")) {
+            Some(Property::ListInt(l)) => l.len(),
+            Some(Property::ListUInt(l)) => l.len(),
+            Some(Property::ListShort(l)) => l.len(),
+            Some(Property::ListUShort(l)) => l.len(),
+            Some(Property::ListChar(l)) => l.len(),
+            Some(Property::ListUChar(l)) => l.len(),
+            _ => 3,
+        }
+    };
+    Ok(ply.payload.get("face").map(|faces| {
+        Colors::Triangles(
+            faces
+                .iter()
+                .flat_map(|f| std::iter::repeat_n(rgb(f), corners(f).saturating_sub(2)))
+                .collect(),
+        )
+    }))
+}
