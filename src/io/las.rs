@@ -93,6 +93,12 @@ pub struct LasHeader {
     pub system: String,
     /// Generating software.
     pub software: String,
+    /// File source ID.
+    pub file_source_id: u16,
+    /// Project ID (GUID).
+    pub guid: [u8; 16],
+    /// File creation day of the year and year.
+    pub creation: (u16, u16),
 }
 
 fn le_u16(b: &[u8], at: usize) -> u16 {
@@ -281,6 +287,9 @@ impl LasHeader {
             laszip_vlr,
             system: text(&prefix[26..58]),
             software: text(&prefix[58..90]),
+            file_source_id: le_u16(prefix, 4),
+            guid: prefix[8..24].try_into().expect("16 bytes"),
+            creation: (le_u16(prefix, 90), le_u16(prefix, 92)),
         })
     }
 
@@ -411,6 +420,29 @@ impl LasSource {
         &self.header
     }
 
+    /// Every VLR and EVLR: user id, record id, description, payload and whether it is an
+    /// EVLR (none when the `las` crate cannot read the header).
+    pub(crate) fn vlr_records(&self) -> Vec<(String, u16, String, Vec<u8>, bool)> {
+        let Ok(h) = self.las_header() else {
+            return Vec::new();
+        };
+        let record = |v: &las::Vlr, extended: bool| {
+            let e = extended || v.data.len() > u16::MAX as usize;
+            (
+                v.user_id.clone(),
+                v.record_id,
+                v.description.clone(),
+                v.data.clone(),
+                e,
+            )
+        };
+        h.vlrs()
+            .iter()
+            .map(|v| record(v, false))
+            .chain(h.evlrs().iter().map(|v| record(v, true)))
+            .collect()
+    }
+
     /// Every VLR and EVLR: user id, record id and payload (empty when the `las` crate cannot
     /// read the header).
     pub fn vlr_payloads(&self) -> Vec<(String, u16, Vec<u8>)> {
@@ -517,6 +549,15 @@ impl Source for LasSource {
         };
         let mut notes = Vec::new();
         let (scale, offset) = output_frame(&self.header, bounds, &mut notes);
+        if super::copc::is_copc(output) {
+            return Ok(Box::new(super::copc::CopcSink::new(
+                output,
+                self.header.clone(),
+                self.vlr_records(),
+                (scale, offset),
+                notes,
+            )?));
+        }
         match (&self.body, out_laz) {
             (Body::Mapped(map), false) => Ok(Box::new(RawSink::new(
                 output,
@@ -683,9 +724,9 @@ fn output_frame(
 /// Writes the moved coordinates into the first 12 bytes of each record of `raw`, tracking
 /// the bounds of the encoded values.
 /// A scale and an offset per axis.
-type Frame = ([f64; 3], [f64; 3]);
+pub(crate) type Frame = ([f64; 3], [f64; 3]);
 
-fn encode(
+pub(crate) fn encode(
     raw: &mut [u8],
     record_len: usize,
     moved: &[Vect<3>],
@@ -873,7 +914,8 @@ impl CrateSink {
         let copc = before - b.vlrs.len() - b.evlrs.len() > usize::from(header.compressed);
         if copc {
             notes.push(
-                "the COPC index is dropped: the output is a plain LAZ in the input's point order"
+                "the COPC index is dropped: the output is a plain LAZ in the input's point order \
+                 (name it *.copc.laz for a COPC)"
                     .into(),
             );
         }

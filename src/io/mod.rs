@@ -5,6 +5,7 @@
 //! output's folder that is renamed over the target at the end: a failure never leaves a partial
 //! file under the output's name, and the input is never opened for writing.
 
+pub mod copc;
 mod las;
 pub(crate) mod mapped;
 mod obj;

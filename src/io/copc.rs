@@ -1,0 +1,637 @@
+//! COPC output (`-o out.copc.laz`): a cloud-optimized point cloud, built while streaming with
+//! bounded memory.
+//!
+//! A COPC file is a LAS 1.4 LAZ file whose points are grouped into the nodes of an octree,
+//! each node one LAZ chunk (variable-size chunks), with a `copc` info VLR first (the octree's
+//! cube and spacing, where the hierarchy is) and a `copc` hierarchy EVLR listing every node
+//! (its key, the file offset and size of its chunk, its point count). Readers fetch the nodes
+//! a view needs and no others.
+//!
+//! **How it is built.** The sink converts each record to point format 6, 7 or 8 (formats 0–5
+//! map to 6 or 7, their fields moved to the 1.4 layout; 9 and 10 lose their wave packet and
+//! become 6 and 8, with a note) and appends it, with its moved coordinates, to a spill file
+//! beside the output. At the end, with the bounds known, the cube is fixed and every record
+//! gets the Morton code of its position in the cube (21 bits per axis); an external sort by
+//! that code (sorted runs of at most [`RUN_BYTES`], merged) walks the points in octree order,
+//! where the points of any node, at any level, are contiguous. One pass then samples the
+//! levels: a node of level `l` keeps the first point of each cell of a `2^7`-per-axis grid over
+//! it (its *spacing* is the node's edge / 128) that no shallower node kept; points every level
+//! down to [`MAX_LEVEL`] declined go to the deepest node. Each level's points go to a file of
+//! their own, in octree order, so a node's points are contiguous there; the levels are then
+//! compressed node by node into the output. Memory: one run, plus the merge's buffers.
+//! Every point lands in exactly one node, inside that node's cube, and a node's ancestors all
+//! hold points (the first point of a cell at level `l` lies in a cell of level `l − 1` whose
+//! first point was kept there or higher).
+//!
+//! The input's VLRs are kept (the CRS WKT among them; LASzip's and an input COPC's own are
+//! replaced), and its EVLRs after the hierarchy.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use super::las::{Frame, LasHeader, SOFTWARE, encode};
+use super::stream::{Chunk, Sink, TempFile};
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
+/// The deepest octree level; points declined by every level down to it go to its nodes.
+pub const MAX_LEVEL: u32 = 14;
+/// Sampling cells per node edge at every level (`2^GRID_BITS`).
+const GRID_BITS: u32 = 7;
+/// Bytes of records sorted in memory at a time.
+pub const RUN_BYTES: usize = 256 << 20;
+
+/// Whether `path` names a COPC output (`*.copc.laz`).
+pub fn is_copc(path: &Path) -> bool {
+    path.file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n.to_ascii_lowercase().ends_with(".copc.laz"))
+}
+
+/// A (E)VLR to write: user id, record id, description, payload.
+pub(crate) type Record = (String, u16, String, Vec<u8>);
+
+/// The sink of a COPC output; see the module docs.
+pub(crate) struct CopcSink {
+    output: PathBuf,
+    input: LasHeader,
+    /// Output point format (6, 7 or 8) and record length (with the input's extra bytes).
+    format: u8,
+    record_len: usize,
+    extra: usize,
+    frame: Frame,
+    vlrs: Vec<Record>,
+    evlrs: Vec<Record>,
+    spill: Option<(TempFile, BufWriter<File>)>,
+    count: u64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    gps: (f64, f64),
+    /// Points by return number (1–15).
+    by_return: [u64; 15],
+    buf: Vec<u8>,
+    notes: Vec<String>,
+}
+
+/// The standard length of point format `f`'s records.
+fn standard_len(f: u8) -> usize {
+    [20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67][f as usize]
+}
+
+impl CopcSink {
+    pub(crate) fn new(
+        output: &Path,
+        input: LasHeader,
+        records: Vec<(String, u16, String, Vec<u8>, bool)>,
+        frame: Frame,
+        mut notes: Vec<String>,
+    ) -> Result<Self> {
+        let format = match input.format {
+            0 | 1 | 4 | 6 | 9 => 6,
+            2 | 3 | 5 | 7 => 7,
+            _ => 8,
+        };
+        if matches!(input.format, 4 | 5 | 9 | 10) {
+            notes.push(format!(
+                "COPC holds point formats 6-8: the wave packets of format {} are dropped",
+                input.format
+            ));
+        }
+        if input.format < 6 {
+            notes.push(format!(
+                "point format {} becomes {format} (COPC holds formats 6-8): every field kept",
+                input.format
+            ));
+        }
+        let extra = (input.record_len as usize).saturating_sub(standard_len(input.format));
+        let keep = |(u, id, _, _, _): &(String, u16, String, Vec<u8>, bool)| {
+            !(u == "copc" || (u == "laszip encoded" && *id == 22204))
+        };
+        let (mut vlrs, mut evlrs) = (Vec::new(), Vec::new());
+        for r in records.into_iter().filter(keep) {
+            let (u, id, d, data, extended) = r;
+            if extended {
+                evlrs.push((u, id, d, data));
+            } else {
+                vlrs.push((u, id, d, data));
+            }
+        }
+        let spill_name = output.with_file_name(format!(
+            "{}.points",
+            output.file_name().unwrap_or_default().to_string_lossy()
+        ));
+        Ok(Self {
+            output: output.to_path_buf(),
+            format,
+            record_len: standard_len(format) + extra,
+            extra,
+            frame,
+            vlrs,
+            evlrs,
+            spill: Some(TempFile::create(&spill_name)?),
+            count: 0,
+            lo: [f64::INFINITY; 3],
+            hi: [f64::NEG_INFINITY; 3],
+            gps: (f64::INFINITY, f64::NEG_INFINITY),
+            by_return: [0; 15],
+            buf: Vec::new(),
+            input,
+            notes,
+        })
+    }
+
+    /// The record `rec` (input format, coordinates already encoded) in the output format.
+    fn convert(&mut self, rec: &[u8], out: &mut Vec<u8>) {
+        let f = self.input.format;
+        let start = out.len();
+        out.extend_from_slice(&rec[..14]);
+        let gps_at = match f {
+            1 | 3 | 4 | 5 => Some(20),
+            6.. => Some(22),
+            _ => None,
+        };
+        let rgb_at = match f {
+            2 => Some(20),
+            3 | 5 => Some(28),
+            7 | 8 | 10 => Some(30),
+            _ => None,
+        };
+        if f >= 6 {
+            out.extend_from_slice(&rec[14..22]);
+        } else {
+            let (b14, class) = (rec[14], rec[15]);
+            out.push((b14 & 0x07) | ((b14 >> 3 & 0x07) << 4));
+            // Flags: synthetic, key-point, withheld; scan direction and edge of flight line.
+            out.push((class >> 5 & 0x07) | (b14 & 0xc0));
+            out.push(class & 0x1f);
+            out.push(rec[17]);
+            let angle = ((rec[16] as i8) as f64 / 0.006).round() as i16;
+            out.extend_from_slice(&angle.to_le_bytes());
+            out.extend_from_slice(&rec[18..20]);
+        }
+        let gps = gps_at.map_or(0.0, |at| {
+            f64::from_le_bytes(rec[at..at + 8].try_into().expect("8 bytes"))
+        });
+        out.extend_from_slice(&gps.to_le_bytes());
+        if gps.is_finite() {
+            self.gps = (self.gps.0.min(gps), self.gps.1.max(gps));
+        }
+        if self.format >= 7 {
+            match rgb_at {
+                Some(at) => out.extend_from_slice(&rec[at..at + 6]),
+                None => out.extend_from_slice(&[0; 6]),
+            }
+        }
+        if self.format == 8 {
+            match f {
+                8 | 10 => out.extend_from_slice(&rec[36..38]),
+                _ => out.extend_from_slice(&[0; 2]),
+            }
+        }
+        let tail = rec.len() - self.extra;
+        out.extend_from_slice(&rec[tail..]);
+        let r = out[start + 14] & 0x0f;
+        if (1..=15).contains(&r) {
+            self.by_return[r as usize - 1] += 1;
+        }
+        debug_assert_eq!(out.len() - start, self.record_len);
+    }
+}
+
+impl Sink for CopcSink {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
+        let rl = self.input.record_len as usize;
+        let mut raw = chunk.raw[..moved.len() * rl].to_vec();
+        let (mut lo, mut hi) = (self.lo, self.hi);
+        encode(
+            &mut raw,
+            rl,
+            moved,
+            &self.frame,
+            (&mut lo, &mut hi),
+            &self.output,
+        )?;
+        (self.lo, self.hi) = (lo, hi);
+        let mut out = std::mem::take(&mut self.buf);
+        out.clear();
+        for rec in raw.chunks_exact(rl) {
+            self.convert(rec, &mut out);
+        }
+        let (tmp, w) = self.spill.as_mut().expect("open until finish");
+        w.write_all(&out).map_err(|e| Error::write(tmp.path(), e))?;
+        self.count += moved.len() as u64;
+        self.buf = out;
+        Ok(())
+    }
+
+    fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
+        let (spill, w) = self.spill.take().expect("open until finish");
+        let io = |p: &Path| {
+            let p = p.to_path_buf();
+            move |e: std::io::Error| Error::write(&p, e)
+        };
+        w.into_inner()
+            .map_err(|e| io(spill.path())(e.into_error()))?
+            .sync_all()
+            .ok();
+        let (tmp, out) = TempFile::create(&self.output)?;
+        write_copc(&self, spill.path(), out, tmp.path())?;
+        tmp.commit()?;
+        drop(spill);
+        Ok(std::mem::take(&mut self.notes))
+    }
+}
+
+/// The octree's cube: its center and half edge (a little past the bounds, so that the highest
+/// point falls inside).
+fn cube(lo: &[f64; 3], hi: &[f64; 3]) -> ([f64; 3], f64) {
+    let center = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
+    let half = (0..3).map(|a| 0.5 * (hi[a] - lo[a])).fold(0.0, f64::max);
+    (center, (half * (1.0 + 1e-9)).max(1e-9))
+}
+
+/// The 63-bit Morton code of a point's cell at depth 21 in the cube.
+fn morton(p: [f64; 3], center: &[f64; 3], half: f64) -> u64 {
+    let cells = (1u64 << 21) as f64;
+    let mut code = 0u64;
+    let q: [u64; 3] = std::array::from_fn(|a| {
+        let t = (p[a] - (center[a] - half)) / (2.0 * half);
+        ((t * cells).floor().clamp(0.0, cells - 1.0)) as u64
+    });
+    for bit in (0..21).rev() {
+        for v in &q {
+            code = (code << 1) | (v >> bit & 1);
+        }
+    }
+    code
+}
+
+/// A sorted run being merged: its reader and its current record's key.
+struct Run {
+    reader: BufReader<File>,
+    key: u64,
+    record: Vec<u8>,
+    left: u64,
+}
+
+impl Run {
+    fn advance(&mut self) -> std::io::Result<bool> {
+        if self.left == 0 {
+            return Ok(false);
+        }
+        let mut k = [0u8; 8];
+        self.reader.read_exact(&mut k)?;
+        self.key = u64::from_le_bytes(k);
+        self.reader.read_exact(&mut self.record)?;
+        self.left -= 1;
+        Ok(true)
+    }
+}
+
+fn write_copc(
+    sink: &CopcSink,
+    spill: &Path,
+    mut out: BufWriter<File>,
+    target: &Path,
+) -> Result<()> {
+    let rl = sink.record_len;
+    let werr = |e: std::io::Error| Error::write(target, e);
+    let (scale, offset) = sink.frame;
+    let (lo, hi) = if sink.count > 0 {
+        (sink.lo, sink.hi)
+    } else {
+        ([0.0; 3], [0.0; 3])
+    };
+    let (center, half) = cube(&lo, &hi);
+    let position = |rec: &[u8]| -> [f64; 3] {
+        std::array::from_fn(|a| {
+            let v = i32::from_le_bytes(rec[4 * a..4 * a + 4].try_into().expect("4 bytes"));
+            v as f64 * scale[a] + offset[a]
+        })
+    };
+    // 1. Sorted runs of (Morton code, record).
+    let run_len = (RUN_BYTES / (rl + 8)).max(1);
+    let mut reader = BufReader::new(File::open(spill).map_err(|e| Error::io(spill, e))?);
+    let mut runs = Vec::new();
+    let mut left = sink.count;
+    let mut block = Vec::new();
+    while left > 0 {
+        let n = (left as usize).min(run_len);
+        block.resize(n * rl, 0);
+        reader
+            .read_exact(&mut block)
+            .map_err(|e| Error::io(spill, e))?;
+        let mut order: Vec<(u64, u32)> = block
+            .chunks_exact(rl)
+            .enumerate()
+            .map(|(i, rec)| (morton(position(rec), &center, half), i as u32))
+            .collect();
+        order.sort_unstable();
+        let name = sink.output.with_file_name(format!(
+            "{}.run{}",
+            sink.output
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy(),
+            runs.len()
+        ));
+        let (tmp, mut w) = TempFile::create(&name)?;
+        for (key, i) in &order {
+            w.write_all(&key.to_le_bytes())
+                .and_then(|_| w.write_all(&block[*i as usize * rl..(*i as usize + 1) * rl]))
+                .map_err(|e| Error::write(tmp.path(), e))?;
+        }
+        w.flush().map_err(|e| Error::write(tmp.path(), e))?;
+        runs.push((tmp, n as u64));
+        left -= n as u64;
+    }
+    drop(block);
+    // 2. Merge, sampling levels, into one file per level.
+    let mut open = Vec::new();
+    for (tmp, n) in &runs {
+        let file = File::open(tmp.path()).map_err(|e| Error::io(tmp.path(), e))?;
+        let mut run = Run {
+            reader: BufReader::with_capacity(1 << 16, file),
+            key: 0,
+            record: vec![0; rl],
+            left: *n,
+        };
+        if run.advance().map_err(|e| Error::io(tmp.path(), e))? {
+            open.push(run);
+        }
+    }
+    let mut heap: std::collections::BinaryHeap<std::cmp::Reverse<(u64, usize)>> = open
+        .iter()
+        .enumerate()
+        .map(|(i, r)| std::cmp::Reverse((r.key, i)))
+        .collect();
+    let levels = MAX_LEVEL as usize + 1;
+    let mut level_files: Vec<Option<(TempFile, BufWriter<File>)>> =
+        (0..levels).map(|_| None).collect();
+    let mut level_counts = vec![0u64; levels];
+    // Per level: the sampling cell of the last point seen, and whether a point took it.
+    let mut cell = vec![u64::MAX; levels];
+    let mut taken = vec![false; levels];
+    while let Some(std::cmp::Reverse((key, i))) = heap.pop() {
+        let mut level = levels - 1;
+        for l in 0..levels {
+            // The sampling cell at level l: the Morton prefix at depth l + GRID_BITS.
+            let depth = (l as u32 + GRID_BITS).min(21);
+            let c = key >> (3 * (21 - depth));
+            if c != cell[l] {
+                cell[l] = c;
+                taken[l] = false;
+            }
+        }
+        if let Some(l) = (0..levels).find(|&l| !taken[l]) {
+            level = l;
+        }
+        taken[level] = true;
+        let slot = &mut level_files[level];
+        if slot.is_none() {
+            let name = sink.output.with_file_name(format!(
+                "{}.level{level}",
+                sink.output
+                    .file_name()
+                    .unwrap_or_default()
+                    .to_string_lossy()
+            ));
+            *slot = Some(TempFile::create(&name)?);
+        }
+        let (tmp, w) = slot.as_mut().expect("just opened");
+        let run = &mut open[i];
+        w.write_all(&key.to_le_bytes())
+            .and_then(|_| w.write_all(&run.record))
+            .map_err(|e| Error::write(tmp.path(), e))?;
+        level_counts[level] += 1;
+        if run.advance().map_err(|e| Error::io(&sink.output, e))? {
+            heap.push(std::cmp::Reverse((run.key, i)));
+        }
+    }
+    drop(open);
+    drop(runs);
+    // 3. The output: header and VLRs, then the nodes level by level, the chunk table, the
+    // hierarchy and the input's EVLRs.
+    let laz_vlr = laz::LazVlrBuilder::default()
+        .with_point_format(sink.format, sink.extra as u16)
+        .map_err(|e| Error::Solver(format!("LASzip items: {e}")))?
+        .with_variable_chunk_size()
+        .build();
+    let mut laz_bytes = Vec::new();
+    laz_vlr.write_to(&mut laz_bytes).map_err(werr)?;
+    let mut vlrs: Vec<Record> = vec![
+        ("copc".into(), 1, "COPC info".into(), vec![0; 160]),
+        ("laszip encoded".into(), 22204, "LASzip".into(), laz_bytes),
+    ];
+    vlrs.extend(sink.vlrs.iter().cloned());
+    let point_offset = 375 + vlrs.iter().map(|v| 54 + v.3.len()).sum::<usize>();
+    out.write_all(&[0u8; 375]).map_err(werr)?;
+    for v in &vlrs {
+        write_vlr(&mut out, v, false).map_err(werr)?;
+    }
+    let mut compressor = laz::LasZipCompressor::new(out, laz_vlr)
+        .map_err(|e| Error::Solver(format!("LAZ compressor: {e}")))?;
+    compressor.reserve_offset_to_chunk_table().map_err(werr)?;
+    // (key, offset, bytes, points) per node.
+    let mut nodes: Vec<([i32; 4], u64, i32, i32)> = Vec::new();
+    for (level, file) in level_files.into_iter().enumerate() {
+        let Some((tmp, w)) = file else { continue };
+        drop(
+            w.into_inner()
+                .map_err(|e| Error::write(tmp.path(), e.into_error()))?,
+        );
+        let mut r = BufReader::with_capacity(
+            1 << 16,
+            File::open(tmp.path()).map_err(|e| Error::io(tmp.path(), e))?,
+        );
+        let shift = 3 * (21 - level as u32);
+        let mut current: Option<u64> = None;
+        let mut points = 0i32;
+        let mut start = compressor.get_mut().stream_position().map_err(werr)?;
+        let mut record = vec![0u8; rl];
+        let mut k = [0u8; 8];
+        let mut finish = |node: u64,
+                          points: i32,
+                          start: &mut u64,
+                          c: &mut laz::LasZipCompressor<BufWriter<File>>|
+         -> Result<()> {
+            c.finish_current_chunk().map_err(werr)?;
+            let end = c.get_mut().stream_position().map_err(werr)?;
+            nodes.push((
+                node_key(level as u32, node),
+                *start,
+                (end - *start) as i32,
+                points,
+            ));
+            *start = end;
+            Ok(())
+        };
+        for _ in 0..level_counts[level] {
+            r.read_exact(&mut k)
+                .and_then(|_| r.read_exact(&mut record))
+                .map_err(|e| Error::io(tmp.path(), e))?;
+            let node = u64::from_le_bytes(k) >> shift;
+            if current.is_some_and(|c| c != node) {
+                finish(current.expect("some"), points, &mut start, &mut compressor)?;
+                points = 0;
+            }
+            current = Some(node);
+            compressor.compress_one(&record).map_err(werr)?;
+            points += 1;
+        }
+        if let Some(c) = current {
+            finish(c, points, &mut start, &mut compressor)?;
+        }
+    }
+    compressor.done().map_err(werr)?;
+    let mut out = compressor.into_inner();
+    // The hierarchy: one page with every node.
+    let evlr_start = out.stream_position().map_err(werr)?;
+    let mut page = Vec::with_capacity(nodes.len() * 32);
+    for (key, offset, bytes, points) in &nodes {
+        for v in key {
+            page.extend_from_slice(&v.to_le_bytes());
+        }
+        page.extend_from_slice(&offset.to_le_bytes());
+        page.extend_from_slice(&bytes.to_le_bytes());
+        page.extend_from_slice(&points.to_le_bytes());
+    }
+    let page_len = page.len() as u64;
+    let hierarchy: Record = ("copc".into(), 1000, "EPT hierarchy".into(), page);
+    write_vlr(&mut out, &hierarchy, true).map_err(werr)?;
+    for v in &sink.evlrs {
+        write_vlr(&mut out, v, true).map_err(werr)?;
+    }
+    // The COPC info, now that the hierarchy's place is known.
+    let mut info = Vec::with_capacity(160);
+    for v in [
+        center[0],
+        center[1],
+        center[2],
+        half,
+        2.0 * half / (1u32 << GRID_BITS) as f64,
+    ] {
+        info.extend_from_slice(&v.to_le_bytes());
+    }
+    info.extend_from_slice(&(evlr_start + 60).to_le_bytes());
+    info.extend_from_slice(&page_len.to_le_bytes());
+    let gps = if sink.gps.0 <= sink.gps.1 {
+        sink.gps
+    } else {
+        (0.0, 0.0)
+    };
+    info.extend_from_slice(&gps.0.to_le_bytes());
+    info.extend_from_slice(&gps.1.to_le_bytes());
+    info.resize(160, 0);
+    out.seek(SeekFrom::Start(375 + 54)).map_err(werr)?;
+    out.write_all(&info).map_err(werr)?;
+    let header = header_bytes(
+        sink,
+        point_offset as u32,
+        vlrs.len() as u32,
+        evlr_start,
+        1 + sink.evlrs.len() as u32,
+        (lo, hi),
+    );
+    out.seek(SeekFrom::Start(0)).map_err(werr)?;
+    out.write_all(&header).map_err(werr)?;
+    out.flush().map_err(werr)?;
+    Ok(())
+}
+
+/// The key (level, x, y, z) of the node at `level` whose Morton prefix is `prefix`.
+fn node_key(level: u32, prefix: u64) -> [i32; 4] {
+    let mut xyz = [0i32; 3];
+    for bit in 0..level {
+        for a in 0..3 {
+            // Bits interleave x, y, z from the most significant: x is the highest of each triple.
+            let v = (prefix >> (3 * bit + (2 - a as u32))) & 1;
+            xyz[a] |= (v as i32) << bit;
+        }
+    }
+    [level as i32, xyz[0], xyz[1], xyz[2]]
+}
+
+fn write_vlr(
+    out: &mut impl Write,
+    (user, id, desc, data): &Record,
+    extended: bool,
+) -> std::io::Result<()> {
+    let mut h = Vec::with_capacity(60);
+    h.extend_from_slice(&0u16.to_le_bytes());
+    let mut u = [0u8; 16];
+    let n = user.len().min(16);
+    u[..n].copy_from_slice(&user.as_bytes()[..n]);
+    h.extend_from_slice(&u);
+    h.extend_from_slice(&id.to_le_bytes());
+    if extended {
+        h.extend_from_slice(&(data.len() as u64).to_le_bytes());
+    } else {
+        h.extend_from_slice(&(data.len().min(u16::MAX as usize) as u16).to_le_bytes());
+    }
+    let mut d = [0u8; 32];
+    let n = desc.len().min(32);
+    d[..n].copy_from_slice(&desc.as_bytes()[..n]);
+    h.extend_from_slice(&d);
+    out.write_all(&h)?;
+    out.write_all(data)
+}
+
+/// The LAS 1.4 header of the COPC output.
+fn header_bytes(
+    sink: &CopcSink,
+    point_offset: u32,
+    vlr_count: u32,
+    evlr_start: u64,
+    evlr_count: u32,
+    (lo, hi): ([f64; 3], [f64; 3]),
+) -> Vec<u8> {
+    let h = &sink.input;
+    let mut b = Vec::with_capacity(375);
+    b.extend_from_slice(b"LASF");
+    b.extend_from_slice(&h.file_source_id.to_le_bytes());
+    // Global encoding: GPS time as the input's; the CRS is WKT (bit 4) for formats 6+.
+    let wkt = sink
+        .vlrs
+        .iter()
+        .chain(&sink.evlrs)
+        .any(|v| v.0 == "LASF_Projection" && v.1 == 2112);
+    b.extend_from_slice(&((h.global_encoding & 0x1) | if wkt { 0x10 } else { 0 }).to_le_bytes());
+    b.extend_from_slice(&h.guid);
+    b.extend_from_slice(&[1, 4]);
+    let mut system = [0u8; 32];
+    let n = h.system.len().min(32);
+    system[..n].copy_from_slice(&h.system.as_bytes()[..n]);
+    b.extend_from_slice(&system);
+    let mut software = [0u8; 32];
+    software[..SOFTWARE.len().min(32)]
+        .copy_from_slice(&SOFTWARE.as_bytes()[..SOFTWARE.len().min(32)]);
+    b.extend_from_slice(&software);
+    b.extend_from_slice(&h.creation.0.to_le_bytes());
+    b.extend_from_slice(&h.creation.1.to_le_bytes());
+    b.extend_from_slice(&375u16.to_le_bytes());
+    b.extend_from_slice(&point_offset.to_le_bytes());
+    b.extend_from_slice(&vlr_count.to_le_bytes());
+    b.push(sink.format | 0x80);
+    b.extend_from_slice(&(sink.record_len as u16).to_le_bytes());
+    b.extend_from_slice(&0u32.to_le_bytes());
+    b.extend_from_slice(&[0u8; 20]);
+    let (scale, offset) = sink.frame;
+    for v in scale.iter().chain(&offset) {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    for a in 0..3 {
+        b.extend_from_slice(&hi[a].to_le_bytes());
+        b.extend_from_slice(&lo[a].to_le_bytes());
+    }
+    b.extend_from_slice(&0u64.to_le_bytes());
+    b.extend_from_slice(&evlr_start.to_le_bytes());
+    b.extend_from_slice(&evlr_count.to_le_bytes());
+    b.extend_from_slice(&sink.count.to_le_bytes());
+    for n in sink.by_return {
+        b.extend_from_slice(&n.to_le_bytes());
+    }
+    debug_assert_eq!(b.len(), 375);
+    b
+}

@@ -1,0 +1,124 @@
+//! COPC out (issue 17): `-o out.copc.laz` writes a valid COPC — LAS 1.4, the info VLR first,
+//! the hierarchy EVLR, one LAZ chunk per octree node, the CRS kept — holding exactly the
+//! records of the plain LAZ output, read back by our reader and by laspy's `CopcReader`.
+
+mod common;
+
+use common::{arg, deform, records, shared};
+use rigidcells::io::{Chunk, LasSource, Source};
+
+/// Every record's position, classification, intensity and color, sorted (COPC reorders the
+/// points and may change the point format).
+#[allow(clippy::type_complexity)]
+fn sorted(path: &std::path::Path) -> Vec<([i64; 3], u8, [u8; 2], [u16; 3])> {
+    let mut src = LasSource::open(path).unwrap();
+    let header = src.header().clone();
+    let mut chunk = Chunk::default();
+    let mut out = Vec::new();
+    while src.read(50_000, &mut chunk).unwrap() > 0 {
+        let records = chunk.raw.chunks_exact(chunk.record_len);
+        for ((p, c), rec) in chunk.positions.iter().zip(&chunk.classes).zip(records) {
+            out.push((
+                [0, 1, 2].map(|a| (p[a] * 100.0).round() as i64),
+                *c,
+                [rec[12], rec[13]],
+                header.color(rec),
+            ));
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
+fn le_u32(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(b[at..at + 4].try_into().unwrap())
+}
+
+fn le_u64(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().unwrap())
+}
+
+#[test]
+fn copc_out_holds_the_plain_outputs_records_in_octree_nodes() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849500, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849500, 1000] }\n\
+         translate = [0, 0, 5]\n",
+    )
+    .unwrap();
+    for input in ["las/autzen_trim.laz", "las/1.2-with-color.copc.laz"] {
+        let input = shared(input);
+        let (plain, copc) = (dir.path().join("o.laz"), dir.path().join("o.copc.laz"));
+        for out in [&plain, &copc] {
+            let r = deform(&input, out, &edit, &["--cells", "500"]);
+            assert_eq!(r.code, 0, "{}", r.stderr);
+        }
+        // The same records (positions and classes; COPC stores them in octree order).
+        assert_eq!(sorted(&plain), sorted(&copc), "{}", input.display());
+        let bytes = std::fs::read(&copc).unwrap();
+        assert_eq!(&bytes[24..26], &[1, 4]);
+        assert!(matches!(bytes[104] & 0x3f, 6..=8));
+        // The COPC info VLR comes first, right after the 375-byte header.
+        assert_eq!(&bytes[375 + 2..375 + 6], b"copc");
+        assert_eq!(u16::from_le_bytes([bytes[375 + 18], bytes[375 + 19]]), 1);
+        // The hierarchy EVLR: where the info says, entries of 32 bytes whose chunks lie in the
+        // point data and whose counts add up to the points.
+        let info = 375 + 54;
+        let (at, len) = (
+            le_u64(&bytes, info + 40) as usize,
+            le_u64(&bytes, info + 48) as usize,
+        );
+        assert_eq!(&bytes[at - 60 + 2..at - 60 + 6], b"copc");
+        assert_eq!(len % 32, 0);
+        let offset = le_u32(&bytes, 96) as u64;
+        let mut total = 0u64;
+        for e in bytes[at..at + len].chunks_exact(32) {
+            let (chunk_at, size, count) = (
+                le_u64(e, 16),
+                i32::from_le_bytes(e[24..28].try_into().unwrap()),
+                i32::from_le_bytes(e[28..32].try_into().unwrap()),
+            );
+            assert!(chunk_at > offset && size > 0 && count > 0);
+            assert!(chunk_at + size as u64 <= at as u64);
+            total += count as u64;
+        }
+        assert_eq!(total, le_u64(&bytes, 247));
+        // The CRS is kept.
+        let (h, _, _, _) = records(&copc);
+        assert!(h.vlrs.iter().any(|v| v.is_crs()));
+        // A third-party reader, where one is installed (CI installs laspy and lazrs).
+        check_with_laspy(&copc);
+    }
+}
+
+/// Runs `tests/copc_check.py` with `$RIGIDCELLS_PYTHON` (CI's venv) or a `python3` that has
+/// laspy and lazrs; says so and returns when none has them.
+fn check_with_laspy(copc: &std::path::Path) {
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/copc_check.py");
+    let python = std::env::var("RIGIDCELLS_PYTHON").ok();
+    let required = python.is_some();
+    let python = python.unwrap_or_else(|| "python3".into());
+    let has = std::process::Command::new(&python)
+        .args(["-c", "import laspy, lazrs"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !has {
+        assert!(!required, "{python} lacks laspy and lazrs");
+        eprintln!("note: no python with laspy and lazrs; the COPC is checked by our reader only");
+        return;
+    }
+    let out = std::process::Command::new(&python)
+        .arg(&script)
+        .arg(arg(copc))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "laspy: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

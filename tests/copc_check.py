@@ -1,0 +1,30 @@
+"""Reads a COPC file with a third-party reader (laspy's CopcReader, lazrs for LAZ) and checks
+what a viewer relies on: the hierarchy reaches every point, a box query returns points inside
+the box only and as many as a full read finds there, and level 0 is a subsample.
+
+Usage: python copc_check.py FILE.copc.laz   (exit 0 and `ok` on success)
+"""
+import sys
+
+import laspy
+import numpy as np
+
+path = sys.argv[1]
+with laspy.CopcReader.open(path) as r:
+    h = r.header
+    assert h.version.major == 1 and h.version.minor == 4, h.version
+    assert h.point_format.id in (6, 7, 8), h.point_format.id
+    every = r.query()
+    assert len(every) == h.point_count, (len(every), h.point_count)
+    lo = h.mins + 0.3 * (h.maxs - h.mins)
+    hi = h.mins + 0.7 * (h.maxs - h.mins)
+    box = r.query(bounds=laspy.copc.Bounds(mins=lo, maxs=hi))
+    xyz = np.stack([box.x, box.y, box.z], 1)
+    inside = np.all((xyz >= lo - 1e-9) & (xyz <= hi + 1e-9), axis=1)
+    assert inside.all(), "a box query returned points outside the box"
+    all_xyz = np.stack([every.x, every.y, every.z], 1)
+    expected = np.all((all_xyz >= lo - 1e-9) & (all_xyz <= hi + 1e-9), axis=1).sum()
+    assert len(box) == expected, (len(box), expected)
+    root = r.query(level=0)
+    assert 0 < len(root) < h.point_count, len(root)
+print("ok", h.point_count, len(box), len(root))
