@@ -70,6 +70,8 @@ pub(crate) struct CopcSink {
     gps: (f64, f64),
     /// Points by return number (1–15).
     by_return: [u64; 15],
+    /// Bytes of records sorted in memory at a time ([`RUN_BYTES`]).
+    run_bytes: usize,
     buf: Vec<u8>,
     notes: Vec<String>,
 }
@@ -135,6 +137,7 @@ impl CopcSink {
             hi: [f64::NEG_INFINITY; 3],
             gps: (f64::INFINITY, f64::NEG_INFINITY),
             by_return: [0; 15],
+            run_bytes: RUN_BYTES,
             buf: Vec::new(),
             input,
             notes,
@@ -311,7 +314,7 @@ fn write_copc(
         })
     };
     // 1. Sorted runs of (Morton code, record).
-    let run_len = (RUN_BYTES / (rl + 8)).max(1);
+    let run_len = (sink.run_bytes / (rl + 8)).max(1);
     let mut reader = BufReader::new(File::open(spill).map_err(|e| Error::io(spill, e))?);
     let mut runs = Vec::new();
     let mut left = sink.count;
@@ -634,4 +637,88 @@ fn header_bytes(
     }
     debug_assert_eq!(b.len(), 375);
     b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::{LasSource, Source};
+
+    /// Every position of a LAS file, in centimetres, sorted.
+    fn positions(path: &Path) -> Vec<[i64; 3]> {
+        let mut src = LasSource::open(path).unwrap();
+        let mut chunk = Chunk::default();
+        let mut out = Vec::new();
+        while src.read_samples(10_000, &mut chunk).unwrap() > 0 {
+            out.extend(
+                chunk
+                    .positions
+                    .iter()
+                    .map(|p| [0, 1, 2].map(|a| (p[a] * 100.0).round() as i64)),
+            );
+        }
+        out.sort_unstable();
+        out
+    }
+
+    /// Runs of 2,000 records: the merge of 55 runs gives the file every point once, in nodes
+    /// whose points lie in their cubes.
+    #[test]
+    fn many_sorted_runs_merge_into_one_octree() {
+        let input =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/las/autzen_trim.las");
+        let dir = std::env::temp_dir().join(format!("rigidcells-copc-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let output = dir.join("runs.copc.laz");
+        let mut src = LasSource::open(&input).unwrap();
+        let header = src.header().clone();
+        let frame = (header.scale, header.offset);
+        let mut sink =
+            CopcSink::new(&output, header, src.vlr_records(), frame, Vec::new()).unwrap();
+        sink.run_bytes = 2_000 * (sink.record_len + 8);
+        let mut chunk = Chunk::default();
+        while src.read(7_000, &mut chunk).unwrap() > 0 {
+            let moved = chunk.positions.clone();
+            sink.write(&chunk, &moved, &[]).unwrap();
+        }
+        Box::new(sink).finish().unwrap();
+        assert_eq!(positions(&input), positions(&output));
+        // Each node's points lie in its cube.
+        let bytes = std::fs::read(&output).unwrap();
+        let f = |at: usize| f64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
+        let info = 375 + 54;
+        let (center, half) = ([f(info), f(info + 8), f(info + 16)], f(info + 24));
+        let mut src = LasSource::open(&output).unwrap();
+        let mut all = Vec::new();
+        while src.read_samples(100_000, &mut chunk).unwrap() > 0 {
+            all.extend_from_slice(&chunk.positions);
+        }
+        let at = u64::from_le_bytes(bytes[info + 40..info + 48].try_into().unwrap()) as usize;
+        let len = u64::from_le_bytes(bytes[info + 48..info + 56].try_into().unwrap()) as usize;
+        let mut entries: Vec<(u64, [i32; 4], usize)> = bytes[at..at + len]
+            .chunks_exact(32)
+            .map(|e| {
+                let k = |i: usize| i32::from_le_bytes(e[4 * i..4 * i + 4].try_into().unwrap());
+                let offset = u64::from_le_bytes(e[16..24].try_into().unwrap());
+                let n = i32::from_le_bytes(e[28..32].try_into().unwrap()) as usize;
+                (offset, [k(0), k(1), k(2), k(3)], n)
+            })
+            .collect();
+        // Chunks are in file order: the points of node k follow those of node k − 1.
+        entries.sort_unstable_by_key(|e| e.0);
+        let mut first = 0;
+        for (_, [level, x, y, z], n) in &entries {
+            let edge = 2.0 * half / (1u64 << level) as f64;
+            let lo = [x, y, z].map(|v| *v as f64);
+            for p in &all[first..first + n] {
+                for a in 0..3 {
+                    let t = (p[a] - (center[a] - half)) / edge - lo[a];
+                    assert!((-1e-6..=1.0 + 1e-6).contains(&t), "level {level}: {t}");
+                }
+            }
+            first += n;
+        }
+        assert_eq!(first, all.len());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
