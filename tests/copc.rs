@@ -122,3 +122,41 @@ fn check_with_laspy(copc: &std::path::Path) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Every LAS/LAZ file of `../shared/data` (up to 200,000 points) written as a COPC holds the
+/// records of its plain LAZ output — formats 0–5 moved to 6 or 7, 9 and 10 to 6 and 8 — and
+/// passes laspy's checks where it is installed.
+#[test]
+fn every_las_file_becomes_a_valid_copc() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[handle]]\nplane = { point = [0, 0, 0], normal = [0, 0, 1e-4] }\ntranslate = [1.5, -2.25, 0.75]\n\
+         [[handle]]\nplane = { point = [0, 0, 0], normal = [0, 0, -1e-4] }\ntranslate = [1.5, -2.25, 0.75]\n",
+    )
+    .unwrap();
+    let mut checked = 0;
+    let mut inputs: Vec<_> = std::fs::read_dir(shared("las"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    inputs.sort();
+    for input in inputs {
+        let Ok(header) = rigidcells::io::LasHeader::read(&input) else {
+            continue;
+        };
+        if header.count > 200_000 || header.version.1 > 4 {
+            continue;
+        }
+        let (plain, copc) = (dir.path().join("o.laz"), dir.path().join("o.copc.laz"));
+        for out in [&plain, &copc] {
+            let r = deform(&input, out, &edit, &["--transfer", "blend"]);
+            assert_eq!(r.code, 0, "{}: {}", input.display(), r.stderr);
+        }
+        assert_eq!(sorted(&plain), sorted(&copc), "{}", input.display());
+        check_with_laspy(&copc);
+        checked += 1;
+    }
+    assert!(checked >= 35, "{checked}");
+}

@@ -19,12 +19,17 @@ with laspy.CopcReader.open(path) as r:
     lo = h.mins + 0.3 * (h.maxs - h.mins)
     hi = h.mins + 0.7 * (h.maxs - h.mins)
     box = r.query(bounds=laspy.copc.Bounds(mins=lo, maxs=hi))
+    # Points on the box's faces may go either way by a rounding: one scale step of slack.
+    tol = np.asarray(h.scales)
     xyz = np.stack([box.x, box.y, box.z], 1)
-    inside = np.all((xyz >= lo - 1e-9) & (xyz <= hi + 1e-9), axis=1)
+    inside = np.all((xyz >= lo - tol) & (xyz <= hi + tol), axis=1)
     assert inside.all(), "a box query returned points outside the box"
     all_xyz = np.stack([every.x, every.y, every.z], 1)
-    expected = np.all((all_xyz >= lo - 1e-9) & (all_xyz <= hi + 1e-9), axis=1).sum()
-    assert len(box) == expected, (len(box), expected)
+    def within(slack):
+        return np.all((all_xyz >= lo - slack) & (all_xyz <= hi + slack), axis=1).sum()
+    assert within(-tol) <= len(box) <= within(tol), (len(box), within(-tol), within(tol))
+    # The root holds a subsample (all of a small file).
     root = r.query(level=0)
-    assert 0 < len(root) < h.point_count, len(root)
+    assert 0 < len(root) <= h.point_count, len(root)
+    assert len(root) < h.point_count or h.point_count <= 128**2, len(root)
 print("ok", h.point_count, len(box), len(root))

@@ -78,6 +78,11 @@ fn spec_text() -> impl Strategy<Value = String> {
         "plane",
         "indices",
         "classification",
+        "polygon",
+        "polygon_file",
+        "z",
+        "invert",
+        "snap",
         "file",
         "translate",
         "rotate",
@@ -147,8 +152,17 @@ fn region(dim: usize) -> BoxedStrategy<String> {
             "indices = \"missing.txt\"",
             "classification = [2, 6]",
             "classification = [300]",
+            "polygon_file = \"area.geojson\"",
+            "polygon_file = \"bad.csv\"",
         ])
         .prop_map(str::to_string),
+        1 => (prop::collection::vec((float(), float()), 0..6), any::<bool>()).prop_map(|(ring, invert)| {
+            let v: Vec<String> = ring
+                .iter()
+                .map(|(x, y)| format!("[{}, {}]", toml_float(*x), toml_float(*y)))
+                .collect();
+            format!("polygon = [{}]\ninvert = {invert}", v.join(", "))
+        }),
     ]
     .boxed()
 }
@@ -196,6 +210,11 @@ fn base() -> &'static Path {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(dir.path().join("good.csv"), "0,0,0,1,1,1\n1,1,1,2,2,2\n").unwrap();
         std::fs::write(dir.path().join("bad.csv"), "x,y\n1,2\nnan,0,0,0,0,0\n").unwrap();
+        std::fs::write(
+            dir.path().join("area.geojson"),
+            r#"{"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 0]]]}"#,
+        )
+        .unwrap();
         std::fs::write(dir.path().join("ids.txt"), "0 1 2, 18446744073709551615\n").unwrap();
         dir
     })

@@ -433,7 +433,7 @@ fn write_copc(
     for v in &vlrs {
         write_vlr(&mut out, v, false).map_err(werr)?;
     }
-    let mut compressor = laz::LasZipCompressor::new(out, laz_vlr)
+    let mut compressor = laz::LasZipCompressor::new(out, laz_vlr.clone())
         .map_err(|e| Error::Solver(format!("LAZ compressor: {e}")))?;
     compressor.reserve_offset_to_chunk_table().map_err(werr)?;
     // (key, offset, bytes, points) per node.
@@ -487,8 +487,23 @@ fn write_copc(
             finish(c, points, &mut start, &mut compressor)?;
         }
     }
-    compressor.done().map_err(werr)?;
+    // The chunk table, written here: `done` would close one more, empty chunk after the last
+    // node's (laspy reads past it; a strict reader, ours among them, refuses it).
     let mut out = compressor.into_inner();
+    let table_at = out.stream_position().map_err(werr)?;
+    let mut table = laz::laszip::ChunkTable::with_capacity(nodes.len());
+    for (_, _, bytes, points) in &nodes {
+        table.push(laz::laszip::ChunkTableEntry {
+            point_count: *points as u64,
+            byte_count: *bytes as u64,
+        });
+    }
+    table.write_to(&mut out, &laz_vlr).map_err(werr)?;
+    let end = out.stream_position().map_err(werr)?;
+    out.seek(SeekFrom::Start(point_offset as u64))
+        .and_then(|_| out.write_all(&(table_at as i64).to_le_bytes()))
+        .and_then(|_| out.seek(SeekFrom::Start(end)))
+        .map_err(werr)?;
     // The hierarchy: one page with every node.
     let evlr_start = out.stream_position().map_err(werr)?;
     let mut page = Vec::with_capacity(nodes.len() * 32);

@@ -1095,7 +1095,7 @@ fn text_step(bytes: &mut Vec<u8>, rng: &mut StdRng, ply: bool) -> String {
     what
 }
 
-const SPEC_KEYS: [&str; 28] = [
+const SPEC_KEYS: [&str; 32] = [
     "box",
     "sphere",
     "plane",
@@ -1119,6 +1119,10 @@ const SPEC_KEYS: [&str; 28] = [
     "indices",
     "file",
     "polygon",
+    "polygon_file",
+    "invert",
+    "snap",
+    "z",
     "[[fixed]]",
     "[[handle]]",
     "[[pin]]",
@@ -1195,12 +1199,37 @@ fn mutate_spec(
                     ("gcp.csv", Some(&b"a,b,c,d,e,f\n"[..])),
                     ("gcp.csv", Some(&b"nan,0,0,0,0,0\n"[..])),
                     ("gcp.csv", Some(&b"0;0;0;1;1;1\n"[..])),
+                    ("gcp.csv", Some(&b"id;x;y;z;X;Y;Z\nP1;0,5;0;0;1;1;1\n"[..])),
+                    ("gcp.csv", Some(&b"id,x,y,X,Y\nP1,0.5,0.5,0.6,0.5\nP2,1e300,0,0,0\n"[..])),
+                    ("gcp.csv", Some(&b"P1 0.5 0.5 0.6 0.5\nP2 9 0.5 9 0.7\n"[..])),
+                    ("gcp.csv", Some(&b"x,x,y,Y,z,Z,weight\n1,1,1,1,1,1,-1\n"[..])),
+                    ("gcp.csv", Some(&b"\"id\"\t\"x\"\n\"\n"[..])),
                     ("gcp.csv", Some(&b"\xff\xfe\n"[..])),
                     (
                         "gcp.csv",
                         Some(&b"1e308,1e308,1e308,-1e308,-1e308,-1e308\n"[..]),
                     ),
                     ("missing.csv", None),
+                ],
+            ),
+            9 if rng.random_bool(0.4) => named_file(
+                rng,
+                files,
+                &mut lines,
+                "[[fixed]]\ninvert = true\npolygon_file",
+                &[
+                    (
+                        "area.geojson",
+                        Some(&br#"{"type":"Polygon","coordinates":[[[0,0],[5,0],[5,1],[0,1],[0,0]]]}"#[..]),
+                    ),
+                    (
+                        "area.geojson",
+                        Some(&br#"{"type":"FeatureCollection","features":[{"type":"Feature","geometry":{"type":"MultiPolygon","coordinates":[[[[0,0],[1e308,0],[0,-1e308]]],[[[1,1],[2,2]]]]}}]}"#[..]),
+                    ),
+                    ("area.geojson", Some(&br#"{"type":"Feature","geometry":null}"#[..])),
+                    ("area.geojson", Some(&br#"{"type":"Polygon","coordinates":[[["a",0]]]}"#[..])),
+                    ("area.geojson", Some(&b"[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[["[..])),
+                    ("missing.geojson", None),
                 ],
             ),
             9 => named_file(
@@ -1230,6 +1259,9 @@ fn mutate_spec(
                     format!("[[stiffness]]\nsphere = {{ center = [{zero}], radius = 1e300 }}\nscale = 1e-300"),
                     "[[handle]]\npolygon = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]\ntranslate = [0.0, 0.0, 1.0]".to_string(),
                     "[[fixed]]\nclassification = [256, -1]".to_string(),
+                    "[[fixed]]\nclassification = [2]\npolygon = [[0.0, 0.0], [1e308, 0.0], [0.0, 1e308]]\nz = [1.0, 0.0]".to_string(),
+                    "[[fixed]]\nsphere = { center = [0.0, 0.0, 0.0], radius = 1.0 }\ninvert = true".to_string(),
+                    "[[target]]\nfrom = [0.0, 0.0, 1e9]\nto = [0.0, 0.0, 0.0]\nsnap = 1e300".to_string(),
                 ];
                 let block = blocks.choose(rng).expect("not empty").clone();
                 let first = block.lines().nth(1).unwrap_or_default().to_string();
