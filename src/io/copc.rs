@@ -106,6 +106,18 @@ impl CopcSink {
                 input.format
             ));
         }
+        let crs = |id: u16| {
+            records
+                .iter()
+                .any(|r| r.0 == "LASF_Projection" && r.1 == id)
+        };
+        if crs(34735) && !crs(2112) {
+            notes.push(
+                "the CRS is kept as the input's GeoTIFF keys; LAS 1.4 point formats 6-8 expect a \
+                 WKT, which some COPC readers require"
+                    .into(),
+            );
+        }
         let extra = (input.record_len as usize).saturating_sub(standard_len(input.format));
         let keep = |(u, id, _, _, _): &(String, u16, String, Vec<u8>, bool)| {
             !(u == "copc" || (u == "laszip encoded" && *id == 22204))
