@@ -640,6 +640,28 @@ pub fn file_cells(
     Ok((complex, info, Some(solution), warnings))
 }
 
+/// Writes the cells of [`file_cells`] as a PLY of boxes ([`crate::cells::write_cells_ply`]):
+/// `complex` at rest, or, with a `solution`, its cells in their solved pose colored by strain,
+/// with their roles; `up` is the vertical axis the header names.
+pub fn write_cells(
+    path: &Path,
+    complex: &CellComplex<3>,
+    solution: Option<&Solution<3>>,
+    up: usize,
+) -> Result<()> {
+    let Some(s) = solution else {
+        return crate::cells::write_cells_ply(path, complex, None, up);
+    };
+    let roles: Vec<u8> = s.constraints.roles.iter().map(|r| r.code()).collect();
+    let strain = solve::cell_strain(&s.complex, &s.motions);
+    let pose = crate::cells::Pose {
+        motions: &s.motions,
+        roles: &roles,
+        strain: &strain,
+    };
+    crate::cells::write_cells_ply(path, &s.complex, Some(pose), up)
+}
+
 struct FirstPass {
     occupancy: Occupancy<3>,
     selections: Selections<3>,

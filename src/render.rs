@@ -731,6 +731,89 @@ pub fn render_annotated(
     canvas.image
 }
 
+/// Samples [`render_file`] draws of a streamed file at most (every k-th sample).
+pub const RENDER_POINTS: usize = 2_000_000;
+
+/// What `rigidcells render` draws of the file `input`: a mesh's triangles (or a PLY's points)
+/// in its vertex or face colors, else gray; a streamed point file (LAS/LAZ, XYZ, large PLY)
+/// decimated to [`RENDER_POINTS`], in its LAS RGB or intensity; with the triad and scale bar.
+pub fn render_file(input: &Path, view: &View) -> Result<Image> {
+    use crate::io::Colors;
+    match crate::io::Document::read(input) {
+        Ok(doc) => {
+            // A PLY's vertex colors (a `cells` output's roles or strain), else gray; a
+            // triangle takes its first vertex's.
+            let triangles = doc.triangles();
+            let colors = match crate::io::extension(input).as_deref() {
+                Some("ply") => crate::io::colors(input)?,
+                _ => None,
+            }
+            .filter(|c| match c {
+                Colors::Vertices(v) => v.len() == doc.positions().len(),
+                Colors::Triangles(t) => t.len() == triangles.len(),
+            });
+            let color = |i: usize| match &colors {
+                Some(Colors::Vertices(c)) if triangles.is_empty() => c[i],
+                Some(Colors::Vertices(c)) => c[triangles[i][0] as usize],
+                Some(Colors::Triangles(c)) => c[i],
+                None => [200, 200, 200],
+            };
+            Ok(render_annotated(
+                doc.positions(),
+                triangles,
+                doc.normals(),
+                color,
+                view,
+            ))
+        }
+        Err(Error::UnsupportedFormat { .. }) => {
+            let (points, colors) = colored_points(input, RENDER_POINTS)?;
+            Ok(render_annotated(&points, &[], None, |i| colors[i], view))
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// Every k-th sample of a streamed file (at most `max`) with its color: LAS RGB when the point
+/// format has it, else LAS intensity as gray, else a neutral gray. Intensities and 16-bit RGB
+/// are scaled by the file's own range.
+pub fn colored_points(input: &Path, max: usize) -> Result<(Vec<Vect<3>>, Vec<[u8; 3]>)> {
+    let mut source = crate::io::open(input)?;
+    let stride = (source.len() as usize).div_ceil(max.max(1)).max(1);
+    let las = crate::io::LasHeader::read(input).ok();
+    let mut chunk = crate::io::Chunk::default();
+    let (mut points, mut raw_colors) = (Vec::new(), Vec::new());
+    let mut index = 0usize;
+    loop {
+        let n = source.read(1 << 16, &mut chunk)?;
+        if n == 0 {
+            break;
+        }
+        for i in 0..n {
+            if (index + i).is_multiple_of(stride) {
+                points.push(chunk.positions[i]);
+                let rec = (chunk.record_len > 0)
+                    .then(|| &chunk.raw[i * chunk.record_len..(i + 1) * chunk.record_len]);
+                raw_colors.push(las.as_ref().zip(rec).map(|(h, r)| h.color(r)));
+            }
+        }
+        index += n;
+    }
+    let top = raw_colors
+        .iter()
+        .flatten()
+        .flatten()
+        .fold(1u16, |a, &b| a.max(b));
+    let colors = raw_colors
+        .into_iter()
+        .map(|c| match c {
+            Some(rgb) => rgb.map(|v| (v as u32 * 255 / top as u32) as u8),
+            None => [200, 200, 200],
+        })
+        .collect();
+    Ok((points, colors))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

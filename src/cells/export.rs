@@ -2,7 +2,7 @@
 //!
 //! Every cell is 8 vertices and 6 quads, in world coordinates (double). Faces carry the cell's
 //! properties: `level`, `kind` (0 boundary, 1 interior), `role` (0 free, 1 fixed, 2 handle,
-//! 3 pin, 4 rest), `strain` and a color: after a solve, the boxes are drawn in their solved pose
+//! 3 pin, 4 rest, 5 carried along), `strain` and a color: after a solve, the boxes are drawn in their solved pose
 //! (each cell moved by its own rigid motion, as in the paper's Fig. 5) and colored blue → red by
 //! strain relative to the largest; without one, boundary cells are orange and interior cells
 //! blue-gray.
@@ -14,7 +14,20 @@ use super::{CellComplex, CellKind};
 use crate::error::Result;
 use crate::io::write_atomic;
 use crate::rigid::{Motion, Vect};
-use crate::solve::{Role, Solution, cell_strain};
+
+/// A solved pose of a complex, for [`write_cells_ply`]: per cell its rigid motion, its role
+/// code (0 free, 1 fixed, 2 handle, 3 pin, 4 rest, 5 carried along) and its strain.
+/// [`crate::pipeline::write_cells`] makes one from a solution; the export does not depend on
+/// the solver.
+#[derive(Debug, Clone, Copy)]
+pub struct Pose<'a> {
+    /// One motion per cell (local frame).
+    pub motions: &'a [Motion<3>],
+    /// One role code per cell.
+    pub roles: &'a [u8],
+    /// One strain per cell.
+    pub strain: &'a [f64],
+}
 
 /// The faces of a box as quads of its corners, outward, corners numbered by bits (x = 1,
 /// y = 2, z = 4).
@@ -27,20 +40,17 @@ pub(crate) const BOX_QUADS: [[u32; 4]; 6] = [
     [4, 5, 7, 6],
 ];
 
-/// Writes `complex` (or, when given, the solution's complex in its solved pose) to `path` as a
+/// Writes `complex` (in `pose` when given: its cells moved, colored by strain) to `path` as a
 /// binary little-endian PLY; its header names the vertical axis `up` (0 x, 1 y, 2 z: the
 /// input's, so that `render` shows the cells as it shows the input).
 pub fn write_cells_ply(
     path: &Path,
     complex: &CellComplex<3>,
-    solution: Option<&Solution<3>>,
+    pose: Option<Pose<'_>>,
     up: usize,
 ) -> Result<()> {
-    let complex = solution.map_or(complex, |s| &s.complex);
-    let strain = solution.map(|s| cell_strain(&s.complex, &s.motions));
-    let top = strain
-        .as_ref()
-        .map_or(0.0, |s| s.iter().cloned().fold(0.0, f64::max));
+    let strain = pose.map(|p| p.strain);
+    let top = strain.map_or(0.0, |s| s.iter().cloned().fold(0.0, f64::max));
     let n = complex.len();
     let mut out = Vec::with_capacity(n * (8 * 24 + 6 * 28) + 512);
     let _ = write!(
@@ -57,7 +67,7 @@ pub fn write_cells_ply(
     );
     let origin = complex.grid.origin;
     for (i, cell) in complex.cells.iter().enumerate() {
-        let motion = solution.map_or(Motion::rest(&cell.center), |s| s.motions[i]);
+        let motion = pose.map_or(Motion::rest(&cell.center), |p| p.motions[i]);
         for corner in 0..8 {
             let offset = Vect::<3>::from_fn(|a, _| {
                 if corner >> a & 1 == 1 {
@@ -73,15 +83,8 @@ pub fn write_cells_ply(
         }
     }
     for (i, cell) in complex.cells.iter().enumerate() {
-        let role = solution.map_or(0u8, |s| match s.constraints.roles[i] {
-            Role::Free => 0,
-            Role::Fixed => 1,
-            Role::Handle(_) => 2,
-            Role::Pin(_) => 3,
-            Role::Rest => 4,
-            Role::Carried(_) => 5,
-        });
-        let s = strain.as_ref().map_or(0.0, |s| s[i]);
+        let role = pose.map_or(0u8, |p| p.roles[i]);
+        let s = strain.map_or(0.0, |s| s[i]);
         let color = match (&strain, cell.kind) {
             (Some(_), _) => {
                 let t = if top > 0.0 {

@@ -26,7 +26,7 @@ mod winding;
 
 pub(crate) use build::check_target;
 pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, cell_size_for};
-pub use export::write_cells_ply;
+pub use export::{Pose, write_cells_ply};
 pub use tri_box::triangle_box_overlap;
 pub use winding::Winding;
 

@@ -46,6 +46,18 @@ pub enum Role {
 }
 
 impl Role {
+    /// The role's code in exports: 0 free, 1 fixed, 2 handle, 3 pin, 4 rest, 5 carried along.
+    pub fn code(&self) -> u8 {
+        match self {
+            Self::Free => 0,
+            Self::Fixed => 1,
+            Self::Handle(_) => 2,
+            Self::Pin(_) => 3,
+            Self::Rest => 4,
+            Self::Carried(_) => 5,
+        }
+    }
+
     /// Whether the cell's motion is prescribed entirely (no degrees of freedom).
     pub fn is_prescribed(&self) -> bool {
         matches!(

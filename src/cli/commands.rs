@@ -1,0 +1,501 @@
+//! The commands: each calls the library and prints what it returns.
+
+use std::path::Path;
+
+use anyhow::Context;
+use rigidcells::Error;
+use rigidcells::cells::BuildParams;
+use rigidcells::field::Transfer;
+use rigidcells::io::refuse_overwrite;
+use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
+use rigidcells::render::{self, View};
+use rigidcells::report::Report;
+use rigidcells::solve::Solution;
+use rigidcells::spec::read_spec;
+
+use super::progress::Bar;
+use super::*;
+
+pub(super) fn run_cells(
+    input: &Path,
+    output: &Path,
+    edit: Option<&Path>,
+    cells: &CellArgs,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    let ply = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    if !ply {
+        return Err(Error::Param(format!(
+            "{}: the cells are written as .ply",
+            output.display()
+        ))
+        .into());
+    }
+    let spec = edit.map(read_spec::<3>).transpose()?;
+    let (build, solve) = cells.params()?;
+    let params = DeformParams {
+        build,
+        solve,
+        ..Default::default()
+    };
+    let (complex, info, solution, warnings) = pipeline::file_cells(
+        input,
+        spec.as_ref(),
+        &params,
+        CHUNK,
+        &rigidcells::progress::Silent,
+    )?;
+    pipeline::write_cells(output, &complex, solution.as_ref(), render::up_of(input))?;
+    if quiet {
+        return Ok(());
+    }
+    for w in &warnings {
+        eprintln!("warning: {w}");
+    }
+    let shown = solution.as_ref().map_or(&complex, |s| &s.complex);
+    println!(
+        "{} -> {}: {} cells ({} boundary, {} interior), finest cell {}",
+        input.display(),
+        output.display(),
+        shown.len(),
+        info.boundary_cells,
+        info.interior_cells,
+        shown.grid.finest_size()
+    );
+    Ok(())
+}
+
+pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
+    refuse_overwrite(&args.input, &args.output)?;
+    args.tolerance.check(args.transfer)?;
+    for extra in [&args.save_field, &args.report, &args.preview]
+        .into_iter()
+        .flatten()
+    {
+        refuse_overwrite(&args.input, extra)?;
+    }
+    let outputs: Vec<(&str, &Path)> = [
+        ("-o", Some(&args.output)),
+        ("--save-field", args.save_field.as_ref()),
+        ("--report", args.report.as_ref()),
+        ("--preview", args.preview.as_ref()),
+    ]
+    .into_iter()
+    .filter_map(|(option, path)| Some((option, path?.as_path())))
+    .collect();
+    rigidcells::io::refuse_same_outputs(&outputs)?;
+    if is_xy(&args.input) {
+        return run_deform_xy(args);
+    }
+    // The proxy serves the fold-over check, the report's residual and the preview (which
+    // draws a mesh's triangles when it holds every vertex).
+    let proxy = match args.preview {
+        Some(_) => pipeline::PROXY_SAMPLES,
+        None => pipeline::FOLDOVER_SAMPLES,
+    };
+    let params = args.params(Some(proxy))?;
+    let view = args.view.view(&args.input)?;
+    if let Some(p) = &args.preview {
+        png_path(p)?;
+    }
+    deform_file(
+        &args.input,
+        &args.output,
+        &args.edit,
+        &params,
+        args.chunk.clamp(1, MAX_CHUNK),
+        args.save_field.as_deref(),
+        args.report.as_deref(),
+        args.preview.as_deref().map(|p| (p, view, args.strain)),
+        args.quiet,
+    )
+}
+
+impl From<TransferArg> for Transfer {
+    fn from(t: TransferArg) -> Self {
+        match t {
+            TransferArg::Blend => Transfer::Blend,
+            TransferArg::BlendIdw => Transfer::BlendIdw,
+            TransferArg::Rbf => Transfer::Rbf,
+            TransferArg::Pu => Transfer::Pu,
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+pub(super) fn deform_file(
+    input: &Path,
+    output: &Path,
+    edit: &Path,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: Option<&Path>,
+    report_to: Option<&Path>,
+    preview: Option<(&Path, View, bool)>,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    let start = std::time::Instant::now();
+    let spec = read_spec::<3>(edit)?;
+    let bar = Bar::new(quiet);
+    let (solution, info) =
+        pipeline::deform_file(input, output, &spec, params, chunk, save_field, &bar)?;
+    let summary = Report::new(
+        input,
+        output,
+        &solution,
+        &info,
+        start.elapsed().as_secs_f64(),
+    );
+    if let Some(path) = report_to {
+        summary.write(path)?;
+    }
+    if let Some((path, view, strain)) = preview {
+        preview_image(&solution, &info, &view, strain).write_png(path)?;
+    }
+    if !quiet {
+        report(input, output, &info);
+        let checked = if summary.residual_samples > 0 {
+            format!(
+                "  constraints: fixed samples within {:.3e} of their rest positions, handle \
+                 samples within {:.3e} of where they were sent ({} checked);",
+                summary.residual_fixed_max, summary.residual_handle_max, summary.residual_samples,
+            )
+        } else {
+            " ".to_string()
+        };
+        println!(
+            "{checked} total {:.2} s{}",
+            summary.timings_s.total,
+            summary
+                .peak_memory_bytes
+                .map_or(String::new(), |b| format!(", peak memory {} MB", b >> 20))
+        );
+    }
+    Ok(())
+}
+
+/// `path`, when it names a PNG.
+pub(super) fn png_path(path: &Path) -> anyhow::Result<()> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        Ok(())
+    } else {
+        Err(Error::Param(format!("{}: pictures are written as .png", path.display())).into())
+    }
+}
+
+/// The preview of a deformation: the proxy before and after, side by side in one view fitted
+/// to both, each sample colored by its cell's role; with `strain`, the deformed cells colored
+/// by their strain beside them.
+pub(super) fn preview_image(
+    solution: &Solution<3>,
+    info: &FileInfo,
+    view: &View,
+    strain: bool,
+) -> render::Image {
+    rigidcells::preview::preview(solution, &info.proxy, view, strain)
+}
+
+pub(super) fn is_xy(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("xy"))
+}
+
+/// `deform` of a 2D point set (`.xy`) under a 2D edit spec: the whole set in memory.
+pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
+    if !is_xy(&args.output) {
+        return Err(Error::Param(format!(
+            "{}: a .xy point set is written as .xy",
+            args.output.display()
+        ))
+        .into());
+    }
+    for (flag, set) in [
+        ("--save-field", args.save_field.is_some()),
+        ("--report", args.report.is_some()),
+        ("--preview", args.preview.is_some()),
+    ] {
+        if set {
+            return Err(
+                Error::Param(format!("{flag} is for 3D inputs, not .xy point sets")).into(),
+            );
+        }
+    }
+    let file = rigidcells::io::XyFile::read(&args.input)?;
+    let spec = read_spec::<2>(&args.edit)?;
+    let params = args.params(None)?;
+    let bar = Bar::new(args.quiet);
+    let (moved, solution, info) = pipeline::deform(file.points(), &[], &spec, &params, &bar)?;
+    file.write(&args.output, &moved)?;
+    if !args.quiet {
+        for w in &info.warnings {
+            eprintln!("warning: {w}");
+        }
+        println!(
+            "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {:.3e}",
+            args.input.display(),
+            args.output.display(),
+            moved.len(),
+            solution.complex.len(),
+            solution.info.iterations,
+            solution.info.energies.last().copied().unwrap_or(0.0)
+        );
+        print_control_points(&info.control_points);
+    }
+    Ok(())
+}
+
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run_image(
+    input: &Path,
+    edit: &Path,
+    output: &Path,
+    background: Option<&str>,
+    transfer: Transfer,
+    cells: &CellArgs,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    png_path(output)?;
+    let background = background.map(parse_color).transpose()?;
+    let spec = read_spec::<2>(edit)?;
+    let raster = rigidcells::image::Raster::read_png(input)?;
+    let (build, solve) = cells.params()?;
+    let params = DeformParams {
+        build,
+        solve,
+        transfer,
+        ..Default::default()
+    };
+    let (out, info) = rigidcells::image::deform_image(&raster, &spec, &params, background)
+        .with_context(|| format!("deforming {}", input.display()))?;
+    out.write_png(output)?;
+    if !quiet {
+        for w in &info.warnings {
+            eprintln!("warning: {w}");
+        }
+        if info.folded > 0 {
+            eprintln!(
+                "warning: the edit folds the picture over itself at {} pixel triangles",
+                info.folded
+            );
+        }
+        if info.clipped > 0 {
+            eprintln!(
+                "warning: {} pixel corners moved outside the {}x{} picture and were clipped",
+                info.clipped, out.width, out.height
+            );
+        }
+        println!(
+            "{} -> {}: {} foreground pixels ({} after), {} cells, {} Gauss-Newton iterations",
+            input.display(),
+            output.display(),
+            info.pixels.0,
+            info.pixels.1,
+            info.cells,
+            info.iterations
+        );
+    }
+    Ok(())
+}
+
+/// `R,G,B` with each in 0–255.
+pub(super) fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
+    let parts: Vec<Option<u8>> = text.split(',').map(|v| v.trim().parse().ok()).collect();
+    match parts.as_slice() {
+        [Some(r), Some(g), Some(b)] => Ok([*r, *g, *b]),
+        _ => Err(Error::Param(format!(
+            "--background {text}: expected R,G,B with each 0–255"
+        ))
+        .into()),
+    }
+}
+
+pub(super) fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    png_path(output)?;
+    let image = render::render_file(input, view)?;
+    image.write_png(output)?;
+    println!(
+        "{} -> {}: {}x{}, {} pixels drawn",
+        input.display(),
+        output.display(),
+        image.width,
+        image.height,
+        image.foreground()
+    );
+    Ok(())
+}
+
+pub(super) fn run_apply(
+    field: &Path,
+    input: &Path,
+    output: &Path,
+    params: &pipeline::ApplyParams,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    let bar = Bar::new(quiet);
+    let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
+    if !quiet {
+        for n in &info.notes {
+            println!("note: {n}");
+        }
+        println!(
+            "{} -> {}: {} samples, {:.2} s",
+            input.display(),
+            output.display(),
+            info.samples,
+            info.seconds_write
+        );
+    }
+    Ok(())
+}
+
+pub(super) fn run_info(input: &Path) -> anyhow::Result<()> {
+    let info = rigidcells::info::describe(input, &Bar::new(false))?;
+    print!("{info}");
+    Ok(())
+}
+
+pub(super) fn report(input: &Path, output: &Path, file: &FileInfo) {
+    let info = &file.deform;
+    let points = file.samples;
+    for w in &info.warnings {
+        eprintln!("warning: {w}");
+    }
+    for n in &file.notes {
+        println!("note: {n}");
+    }
+    let s = &info.solver;
+    println!(
+        "{} -> {}: {points} points, {} cells ({} boundary, {} interior by {}){}",
+        input.display(),
+        output.display(),
+        s.cells_final,
+        info.build.boundary_cells,
+        info.build.interior_cells,
+        match info.build.inside {
+            Inside::Winding => "winding number",
+            Inside::Flood => "flood fill",
+            _ => "none",
+        },
+        if s.refinements.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", refined from {} to {} cells",
+                s.cells_initial, s.cells_final
+            )
+        }
+    );
+    println!(
+        "  solve: {} load steps, {} Gauss-Newton iterations, energy {:.3e}, {:.2} s ({:.1} ms/iteration){}",
+        s.load_steps,
+        s.iterations,
+        s.energies.last().copied().unwrap_or(0.0),
+        s.seconds,
+        1e3 * s.seconds_per_iteration(),
+        if s.converged {
+            ""
+        } else {
+            ", stopped at the iteration limit"
+        }
+    );
+    println!(
+        "  cells {:.2} s, transfer {:.2} s",
+        info.build.seconds, info.seconds_transfer
+    );
+    let (checked, folded) = info.foldovers;
+    if checked > 0 {
+        println!("  fold-overs: {folded} of {checked} samples checked");
+    }
+    print_control_points(&info.control_points);
+}
+
+/// The control points' table: the ten largest residuals and the RMSE.
+pub(super) fn print_control_points(points: &[rigidcells::control::ControlPoint]) {
+    let table = rigidcells::control::table(points, 10);
+    if !table.is_empty() {
+        println!("{table}");
+    }
+}
+
+pub(super) fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let size = [10.0, 1.0, 1.0];
+    let shapes = [
+        ("bar", data_gen::bar(size, 8.0), Transfer::Pu),
+        ("soup", data_gen::soup(size, 8.0), Transfer::Blend),
+    ];
+    let edit = out.join("bend.toml");
+    let spec = "# Bend the bar 90 degrees upwards: fix the left end, turn the right end.\n\
+        [[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\n\
+        [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+        rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\n\
+        translate = [-3.4, 0.0, 5.9]\n";
+    rigidcells::io::write_atomic(&edit, spec.as_bytes())?;
+    for (name, mesh, transfer) in shapes {
+        let input = out.join(format!("{name}.ply"));
+        let output = out.join(format!("{name}_bent.ply"));
+        data_gen::write_ply(&input, &mesh, true)
+            .with_context(|| format!("writing {}", input.display()))?;
+        let params = DeformParams {
+            build: BuildParams {
+                cell_size: Some(0.25),
+                ..Default::default()
+            },
+            transfer,
+            ..Default::default()
+        };
+        deform_file(
+            &input, &output, &edit, &params, CHUNK, None, None, None, quiet,
+        )?;
+    }
+    // The 2D picture of paper Fig. 7: a gingerbread figure with its arms moved.
+    let (width, height, rgba) = data_gen::gingerbread();
+    let figure = rigidcells::image::Raster {
+        width,
+        height,
+        rgba,
+    };
+    let (png_in, png_out, png_edit) = (
+        out.join("gingerbread.png"),
+        out.join("gingerbread_bent.png"),
+        out.join("gingerbread.toml"),
+    );
+    figure.write_png(&png_in)?;
+    rigidcells::io::write_atomic(&png_edit, data_gen::GINGERBREAD_SPEC.as_bytes())?;
+    run_image(
+        &png_in,
+        &png_edit,
+        &png_out,
+        None,
+        rigidcells::image::IMAGE_TRANSFER,
+        &CellArgs {
+            cell_size: None,
+            cells: None,
+            min_cell_size: None,
+            max_level: None,
+            shell: false,
+            inside: InsideArg::Auto,
+            solver: SolverArg::Auto,
+            loose_parts: LooseArg::Carry,
+            memory: MemoryArg { memory_limit: None },
+        },
+        quiet,
+    )?;
+    if !quiet {
+        println!(
+            "demo: wrote bar.ply, soup.ply (inputs), bar_bent.ply (partition-of-unity RBF), soup_bent.ply (blend), bend.toml, \
+             gingerbread.png, gingerbread.toml and gingerbread_bent.png in {}",
+            out.display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,525 @@
+//! The command line: argument definitions and dispatch. The commands themselves
+//! (`commands.rs`) call the library and print what it returns; the progress bar is
+//! `progress.rs`.
+
+mod commands;
+mod progress;
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use rigidcells::Error;
+use rigidcells::cells::{BuildParams, Inside};
+use rigidcells::field::Outside;
+use rigidcells::pipeline::{self, CHUNK, DeformParams};
+use rigidcells::render::{self, View};
+use rigidcells::solve::{Method, SolveParams};
+
+use commands::*;
+
+#[derive(Parser)]
+#[command(
+    name = "rigidcells",
+    version,
+    about = "Adaptive space deformations based on rigid cells (Botsch, Pauly, Wicke, Gross 2007)"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Deform a LAS/LAZ scan, a PLY or OBJ mesh or point cloud, an XYZ point cloud, or a 2D
+    /// point set (.xy, with a 2D spec) under an edit spec.
+    Deform(DeformArgs),
+    /// Apply a field saved by `deform --save-field` to a file (the same, a denser one, a tile).
+    Apply {
+        /// The field file.
+        field: PathBuf,
+        /// Input file.
+        input: PathBuf,
+        /// Output file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Transfer of the cells' motions to the samples [default: the one the field was
+        /// saved with by `deform --transfer`].
+        #[arg(long, value_enum)]
+        transfer: Option<TransferArg>,
+        #[command(flatten)]
+        tolerance: ToleranceArg,
+        /// Samples farther outside the field's cells than its margin (the size of the cells on
+        /// its boundary): refuse (exit 4, nothing written), keep (they keep their coordinates;
+        /// the shape tears at the margin), or extend (the transfer is extrapolated: the RBF's
+        /// linear part grows with the distance, the blend follows the nearest cells).
+        #[arg(long, value_enum, default_value_t = OutsideArg::Refuse)]
+        outside: OutsideArg,
+        #[command(flatten)]
+        memory: MemoryArg,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Export the cell complex of a file as a PLY of boxes (per-cell level, kind, role, strain
+    /// and color); with `--edit`, solved and drawn in the solved pose, colored by strain.
+    Cells {
+        /// Input file.
+        input: PathBuf,
+        /// Output PLY file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Edit spec (TOML) to solve before exporting.
+        #[arg(long)]
+        edit: Option<PathBuf>,
+        #[command(flatten)]
+        cells: CellArgs,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Render a file to a PNG: meshes and soups as shaded triangles, point clouds as shaded
+    /// splats (LAS RGB, or intensity, when present).
+    Render {
+        /// Input file.
+        input: PathBuf,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        view: ViewArgs,
+    },
+    /// Deform the foreground of a PNG (alpha > 0, or not the --background color) under an edit
+    /// spec in pixel coordinates (x right, y down), on a quadtree of 2D rigid cells.
+    Image {
+        /// Input PNG.
+        input: PathBuf,
+        /// Edit spec (TOML) in pixel coordinates.
+        #[arg(long)]
+        edit: PathBuf,
+        /// Output PNG.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The background color of an opaque picture, R,G,B (0–255 each).
+        #[arg(long)]
+        background: Option<String>,
+        /// Transfer of the cells' motions to the pixels (the blend keeps fixed pixels exact).
+        #[arg(long, value_enum, default_value_t = TransferArg::Blend)]
+        transfer: TransferArg,
+        #[command(flatten)]
+        cells: CellArgs,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Describe a file (LAS/LAZ, PLY, OBJ, XYZ, .xy, .png, .field): format, counts, bounds and
+    /// centroid to the file's precision, CRS by name and EPSG code, record fields, a saved
+    /// field's cells, levels and transfer.
+    Info {
+        /// Input file.
+        input: PathBuf,
+    },
+    /// Generate a bar, a non-manifold soup and a 2D picture, deform them, and write inputs and
+    /// results.
+    Demo {
+        /// Folder for the files (created if missing).
+        #[arg(long, default_value = "rigidcells-demo")]
+        out: PathBuf,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
+}
+
+#[derive(clap::Args)]
+struct DeformArgs {
+    /// Input file (.las, .laz, .ply, .obj, .xyz; .xy for 2D points).
+    input: PathBuf,
+    /// Output file (the input's format; .las and .laz convert into each other).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Edit spec (TOML): fixed regions, handles, pins, targets, stiffness.
+    #[arg(long)]
+    edit: PathBuf,
+    #[command(flatten)]
+    cells: CellArgs,
+    /// Transfer of the cells' motions to the samples.
+    #[arg(long, value_enum, default_value_t = TransferArg::Pu)]
+    transfer: TransferArg,
+    #[command(flatten)]
+    tolerance: ToleranceArg,
+    /// Split cells whose strain exceeds this threshold, and solve again.
+    #[arg(long)]
+    refine_strain: Option<f64>,
+    /// Also write the solved field to this file, for `rigidcells apply`.
+    #[arg(long)]
+    save_field: Option<PathBuf>,
+    /// Also write a JSON report: counts, cell levels, iterations, energies, residuals,
+    /// fold-overs, timings per stage, peak memory.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Also write a PNG of the input and the output side by side (a decimated proxy of the
+    /// samples: fixed regions gray, handles yellow, the rest blue).
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// Add a third panel to the preview: the deformed cells colored by strain, blue (none) to
+    /// red (the most).
+    #[arg(long, requires = "preview")]
+    strain: bool,
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
+    #[arg(long, default_value_t = CHUNK)]
+    chunk: usize,
+    /// Check the control points (`[[target]]`): solve again without each in turn and report
+    /// how far the others predict it (leave-one-out).
+    #[arg(long)]
+    check_gcp: bool,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+impl DeformArgs {
+    /// The library's parameters for these arguments, keeping a proxy of `proxy_samples`.
+    fn params(&self, proxy_samples: Option<usize>) -> Result<DeformParams, Error> {
+        let (build, solve) = self.cells.params()?;
+        Ok(DeformParams {
+            build,
+            solve: SolveParams {
+                refine_strain: self.refine_strain,
+                ..solve
+            },
+            transfer: self.transfer.into(),
+            rbf_tolerance: self.tolerance.rbf_tolerance,
+            proxy_samples,
+            check_control_points: self.check_gcp,
+        })
+    }
+}
+
+/// The RBF's far-field evaluation.
+#[derive(clap::Args)]
+struct ToleranceArg {
+    /// With the RBF transfer: sum far groups of cells through a Barnes–Hut expansion wherever
+    /// its error bound keeps each output coordinate within this length (model units) of the
+    /// exact RBF's. On real models that is only far outside the model (90 extents away at 1 %
+    /// of the extent on the dragon, BENCHMARKS.md); elsewhere every cell is summed exactly, at
+    /// the same speed.
+    #[arg(long, value_name = "LENGTH")]
+    rbf_tolerance: Option<f64>,
+}
+
+impl ToleranceArg {
+    /// Refuses a tolerance given with a transfer other than the RBF, or not a length.
+    fn check(&self, transfer: TransferArg) -> anyhow::Result<()> {
+        match self.rbf_tolerance {
+            Some(_) if !matches!(transfer, TransferArg::Rbf) => {
+                Err(Error::Param("--rbf-tolerance applies to --transfer rbf only".into()).into())
+            }
+            Some(t) => Ok(rigidcells::field::Rbf::<3>::check_tolerance(t)?),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Where pictures are seen from.
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// Degrees about the vertical (z) axis of the view direction.
+    #[arg(long, default_value_t = -60.0, allow_hyphen_values = true)]
+    azimuth: f64,
+    /// Degrees above the horizon of the view direction.
+    #[arg(long, default_value_t = 25.0, allow_hyphen_values = true)]
+    elevation: f64,
+    /// Picture size in pixels, WIDTHxHEIGHT (a preview has two of them side by side).
+    #[arg(long, default_value = "640x480")]
+    size: String,
+    /// The vertical axis [default: z for LAS/LAZ and XYZ, y for PLY and OBJ meshes unless
+    /// their header names another with a comment such as `up z`].
+    #[arg(long, value_enum)]
+    up: Option<UpArg>,
+    /// Magnify about the picture's center (2 shows the middle half of the box).
+    #[arg(long, default_value_t = 1.0)]
+    zoom: f64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum UpArg {
+    X,
+    Y,
+    Z,
+}
+
+impl ViewArgs {
+    /// The view of these arguments for pictures of `input` (whose file decides the default
+    /// vertical axis).
+    fn view(&self, input: &Path) -> anyhow::Result<View> {
+        let bad = || {
+            Error::Param(format!(
+                "--size {}: expected WIDTHxHEIGHT, e.g. 640x480",
+                self.size
+            ))
+        };
+        let (w, h) = self.size.split_once('x').ok_or_else(bad)?;
+        let (width, height): (u32, u32) =
+            (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+        if !(16..=8192).contains(&width) || !(16..=8192).contains(&height) {
+            return Err(
+                Error::Param(format!("--size {}: 16 to 8192 pixels each way", self.size)).into(),
+            );
+        }
+        if !self.azimuth.is_finite() || !self.elevation.is_finite() {
+            return Err(Error::Param("--azimuth and --elevation must be finite".into()).into());
+        }
+        if !(self.zoom.is_finite() && self.zoom > 0.0 && self.zoom <= 1e6) {
+            return Err(Error::Param(format!(
+                "--zoom {}: a factor above 0, at most 1e6",
+                self.zoom
+            ))
+            .into());
+        }
+        Ok(View {
+            azimuth: self.azimuth,
+            elevation: self.elevation,
+            width,
+            height,
+            up: match self.up {
+                Some(UpArg::X) => 0,
+                Some(UpArg::Y) => 1,
+                Some(UpArg::Z) => 2,
+                None => render::up_of(input),
+            },
+            zoom: self.zoom,
+        })
+    }
+}
+
+/// How the cell complex is built.
+#[derive(clap::Args)]
+struct CellArgs {
+    /// Edge length of the finest cells, in input units [default: longest extent / 32].
+    #[arg(long)]
+    cell_size: Option<f64>,
+    /// About this many cells: picks the finest cell size (overrides --cell-size).
+    #[arg(long)]
+    cells: Option<usize>,
+    /// Adaptive cells: built at this size, merged up to 8× it wherever one role holds (the
+    /// edit's regions keep their borders), solved, and split again, round by round, where the
+    /// solved strain is high (above a quarter of the largest), down to this size.
+    #[arg(long, value_name = "S", conflicts_with_all = ["cell_size", "cells"])]
+    min_cell_size: Option<f64>,
+    /// Octree levels above the finest cells [default: enough for the largest cell that fits the
+    /// input's shortest extent].
+    #[arg(long)]
+    max_level: Option<u8>,
+    /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.
+    #[arg(long)]
+    shell: bool,
+    /// Inside classification of empty cells: winding numbers for meshes, soups and point
+    /// clouds with normals, exterior flood fill for point clouds without (auto), or as named.
+    #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
+    inside: InsideArg,
+    /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
+    /// conjugate gradients with a rigid-motion multigrid (the same minimum, memory linear in
+    /// the cells; BENCHMARKS.md says which is faster where).
+    #[arg(long, value_enum, default_value_t = SolverArg::Auto)]
+    solver: SolverArg,
+    /// Parts of the shape that no constraint reaches (leaves, fittings, a loose piece of a
+    /// soup): carried rigidly by the nearest constrained part, or kept where they were.
+    #[arg(long, value_enum, default_value_t = LooseArg::Carry)]
+    loose_parts: LooseArg,
+    #[command(flatten)]
+    memory: MemoryArg,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+enum LooseArg {
+    /// Each rides along rigidly with the nearest cell of a constrained part.
+    Carry,
+    /// Each keeps its rest pose.
+    Rest,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SolverArg {
+    /// Multilevel for cells of one size past 100,000 free cells; else the factorization where it
+    /// fits the memory budget, else multilevel.
+    Auto,
+    /// Sparse Cholesky factorization (fill-in: memory grows faster than the cells).
+    Direct,
+    /// Conjugate gradients with a rigid-motion multigrid (memory linear in the cells).
+    Multilevel,
+}
+
+/// The memory budget.
+#[derive(clap::Args, Clone, Copy)]
+struct MemoryArg {
+    /// Stop with an error, before allocating, when the cell grid, the solver or the RBF would
+    /// need more memory than this (e.g. 8G, 512M) [default: three quarters of the machine's
+    /// memory, at most half of `ulimit -v`].
+    #[arg(long, value_name = "SIZE", value_parser = parse_memory)]
+    memory_limit: Option<u64>,
+}
+
+fn parse_memory(text: &str) -> Result<u64, String> {
+    rigidcells::memory::parse_size(text)
+}
+
+impl CellArgs {
+    /// The solver's parameters: the defaults, with the memory budget.
+    fn solve_params(&self) -> SolveParams {
+        SolveParams {
+            memory_limit: self.memory.memory_limit,
+            method: match self.solver {
+                SolverArg::Auto => Method::Auto,
+                SolverArg::Direct => Method::Direct,
+                SolverArg::Multilevel => Method::Multilevel,
+            },
+            carry_loose: self.loose_parts == LooseArg::Carry,
+            ..Default::default()
+        }
+    }
+
+    /// The build's and the solver's parameters; with `--min-cell-size`, those of an adaptive
+    /// solve ([`rigidcells::solve::adaptive`]).
+    fn params(&self) -> Result<(BuildParams, SolveParams), Error> {
+        let (build, solve) = (self.build_params(), self.solve_params());
+        match self.min_cell_size {
+            Some(size) => rigidcells::solve::adaptive(size, &build, &solve),
+            None => Ok((build, solve)),
+        }
+    }
+
+    fn build_params(&self) -> BuildParams {
+        BuildParams {
+            cell_size: self.cell_size,
+            target_cells: self.cells,
+            memory_limit: self.memory.memory_limit,
+            max_level: self.max_level,
+            inside: match (self.shell, self.inside) {
+                (true, _) | (_, InsideArg::None) => Inside::None,
+                (_, InsideArg::Auto) => Inside::Auto,
+                (_, InsideArg::Winding) => Inside::Winding,
+                (_, InsideArg::Flood) => Inside::Flood,
+            },
+        }
+    }
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum InsideArg {
+    /// Winding numbers when the input has triangles or normals, flood fill otherwise.
+    Auto,
+    /// Generalized winding number of the triangles or oriented points.
+    Winding,
+    /// Exterior flood fill on the finest grid.
+    Flood,
+    /// No interior cells (a shell).
+    None,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum OutsideArg {
+    /// Fail with exit code 4, naming how many samples and how far; write nothing.
+    Refuse,
+    /// Samples beyond the margin keep their coordinates bit for bit.
+    Keep,
+    /// The transfer is evaluated beyond the margin as anywhere.
+    Extend,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum TransferArg {
+    /// Continuous blend of the 4 nearest cells (fast preview).
+    Blend,
+    /// The paper's inverse-distance blend of the 4 nearest cells (seams where the set changes).
+    BlendIdw,
+    /// Triharmonic RBF interpolation (smooth, final).
+    Rbf,
+    /// Partition-of-unity RBF: triharmonic fits on overlapping patches blended smoothly (C²),
+    /// for any number of cells.
+    Pu,
+}
+
+/// Parses the command line, runs the command, prints an error and gives the exit code.
+pub(crate) fn main() -> ExitCode {
+    rigidcells::interrupt::remove_temporaries_on_signals();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Deform(args) => run_deform(&args),
+        Command::Apply {
+            field,
+            input,
+            output,
+            transfer,
+            tolerance,
+            outside,
+            memory,
+            quiet,
+        } => tolerance
+            .check(transfer.unwrap_or(TransferArg::Rbf))
+            .and_then(|()| {
+                let params = pipeline::ApplyParams {
+                    transfer: transfer.map(Into::into),
+                    rbf_tolerance: tolerance.rbf_tolerance,
+                    outside: match outside {
+                        OutsideArg::Refuse => Outside::Refuse,
+                        OutsideArg::Keep => Outside::Keep,
+                        OutsideArg::Extend => Outside::Extend,
+                    },
+                    memory_limit: memory.memory_limit,
+                };
+                run_apply(&field, &input, &output, &params, quiet)
+            }),
+        Command::Info { input } => run_info(&input),
+        Command::Image {
+            input,
+            edit,
+            output,
+            background,
+            transfer,
+            cells,
+            quiet,
+        } => run_image(
+            &input,
+            &edit,
+            &output,
+            background.as_deref(),
+            transfer.into(),
+            &cells,
+            quiet,
+        ),
+        Command::Render {
+            input,
+            output,
+            view,
+        } => view
+            .view(&input)
+            .and_then(|v| run_render(&input, &output, &v)),
+        Command::Cells {
+            input,
+            output,
+            edit,
+            cells,
+            quiet,
+        } => run_cells(&input, &output, edit.as_deref(), &cells, quiet),
+        Command::Demo { out, quiet } => run_demo(&out, quiet),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(exit_code(&e))
+        }
+    }
+}
+
+/// 3: unreadable or malformed input; 4: a bad edit spec or parameter; 1: anything else.
+/// The largest `--chunk`: a chunk's buffers are sized by what it holds, but 2⁶⁴ − 1 overflowed
+/// the index arithmetic of the readers.
+const MAX_CHUNK: usize = 1 << 24;
+
+fn exit_code(e: &anyhow::Error) -> u8 {
+    e.downcast_ref::<Error>().map_or(1, Error::exit_code)
+}
