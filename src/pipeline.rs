@@ -283,45 +283,24 @@ pub fn deform_file(
     save_field: Option<&Path>,
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo)> {
-    let t0 = Instant::now();
     let mut source = io::open(input)?;
-    let mut info = FileInfo {
-        samples: source.len(),
-        ..Default::default()
-    };
-    let proxy_max = params.proxy_samples.unwrap_or(PROXY_SAMPLES);
-    let (complex, build_info, selections, proxy) = first_pass_cells(
+    let mut info = FileInfo::default();
+    let Solved {
+        solution,
+        saved,
+        build: build_info,
+        proxy,
+        mut warnings,
+        transfer_start: t1,
+    } = solve_source(
         source.as_mut(),
         spec,
-        &params.build,
+        params,
         chunk,
-        proxy_max,
-        &mut info.notes,
+        save_field,
+        &mut info,
         observer,
     )?;
-    info.seconds_read = t0.elapsed().as_secs_f64();
-    let constraints = solve::resolve_selected(&complex, spec, &selections)?;
-    check_rbf_memory::<3>(complex.len(), params)?;
-    let solution = solve::solve(complex, constraints, &params.solve, observer)?;
-    let mut warnings = build_warnings(
-        &build_info,
-        &solution.complex,
-        &solution.constraints.warnings,
-    );
-    warnings.extend(solution.info.refinement_stopped.clone());
-    check_rbf_memory::<3>(solution.complex.len(), params)?;
-
-    let t1 = Instant::now();
-    let field = Field::from_solution(&solution);
-    observer.stage("factoring", 0);
-    let rbf = match params.transfer {
-        Transfer::Rbf => Some(Rbf::new(&field)?),
-        _ => None,
-    };
-    let saved = SavedField::new(field, params.transfer, rbf);
-    if let Some(path) = save_field {
-        saved.save(path)?;
-    }
     // The field is written before the output; should the output fail, the field goes too (a
     // run that fails leaves no file under any name it was given).
     let mut saved_guard = RemoveOnDrop(save_field);
@@ -374,6 +353,118 @@ pub fn deform_file(
     };
     saved_guard.0 = None;
     Ok((solution, info))
+}
+
+/// What [`solve_source`] gives: the solution, its field (saved where asked), the cells'
+/// construction, the proxy of pass 1 and the warnings so far.
+struct Solved {
+    solution: Solution<3>,
+    saved: SavedField<3>,
+    build: BuildInfo,
+    proxy: Proxy,
+    warnings: Vec<String>,
+    /// When the field's construction began (after the solve): the start of the transfer's time.
+    transfer_start: Instant,
+}
+
+/// Pass 1 over `source`, the constraints, the solve and the field (with the RBF's factorization
+/// when that is the transfer), saved to `save_field` when given: what [`deform_file`] does
+/// before its transfer pass, and all that [`solve_files`] does. Fills `info`'s samples, notes
+/// and read time.
+fn solve_source(
+    source: &mut dyn Source,
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: Option<&Path>,
+    info: &mut FileInfo,
+    observer: &dyn Observer,
+) -> Result<Solved> {
+    let t0 = Instant::now();
+    info.samples = source.len();
+    let proxy_max = params.proxy_samples.unwrap_or(PROXY_SAMPLES);
+    let (complex, build, selections, proxy) = first_pass_cells(
+        source,
+        spec,
+        &params.build,
+        chunk,
+        proxy_max,
+        &mut info.notes,
+        observer,
+    )?;
+    info.seconds_read = t0.elapsed().as_secs_f64();
+    let constraints = solve::resolve_selected(&complex, spec, &selections)?;
+    check_rbf_memory::<3>(complex.len(), params)?;
+    let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+    let mut warnings = build_warnings(&build, &solution.complex, &solution.constraints.warnings);
+    warnings.extend(solution.info.refinement_stopped.clone());
+    check_rbf_memory::<3>(solution.complex.len(), params)?;
+    let transfer_start = Instant::now();
+    let field = Field::from_solution(&solution);
+    observer.stage("factoring", 0);
+    let rbf = match params.transfer {
+        Transfer::Rbf => Some(Rbf::new(&field)?),
+        _ => None,
+    };
+    let saved = SavedField::new(field, params.transfer, rbf);
+    observer.finish();
+    if let Some(path) = save_field {
+        saved.save(path)?;
+    }
+    Ok(Solved {
+        solution,
+        saved,
+        build,
+        proxy,
+        warnings,
+        transfer_start,
+    })
+}
+
+/// Solves `spec` over the files `inputs` taken as one (the tiles of a scan; pass 1 reads every
+/// one, [`Tiles`](crate::io::Tiles)) and writes only the field, to `save_field`; `apply` then
+/// deforms each tile on its own. The cells, and so the field, are those [`deform_file`] builds
+/// for the tiles merged in this order: each tile's `apply` writes, record for record, what
+/// `deform` writes for the merged file (with the union of the tiles' header bounds as its own).
+/// `info.deform.control_points` holds the control points as the field moves them.
+pub fn solve_files(
+    inputs: &[std::path::PathBuf],
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: &Path,
+    observer: &dyn Observer,
+) -> Result<(Solution<3>, FileInfo)> {
+    let mut tiles = io::Tiles::open(inputs)?;
+    let mut info = FileInfo::default();
+    let params = DeformParams {
+        proxy_samples: Some(0),
+        ..*params
+    };
+    let solved = solve_source(
+        &mut tiles,
+        spec,
+        &params,
+        chunk,
+        Some(save_field),
+        &mut info,
+        observer,
+    )?;
+    let mut guard = RemoveOnDrop(Some(save_field));
+    let deformer = solved
+        .saved
+        .deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    let control_points = control_results(spec, &solved.solution, &deformer, &params, observer)?;
+    info.deform = DeformInfo {
+        build: solved.build,
+        solver: solved.solution.info.clone(),
+        seconds_transfer: solved.transfer_start.elapsed().as_secs_f64(),
+        foldovers: (0, 0),
+        control_points,
+        warnings: solved.warnings,
+    };
+    guard.0 = None;
+    Ok((solved.solution, info))
 }
 
 /// Removes the file it names when dropped, unless disarmed (`.0 = None`).

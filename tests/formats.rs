@@ -392,6 +392,91 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
     assert!(mean > 10.0, "east end rose by {mean}");
 }
 
+/// Issue 18 item 2: `solve` over four tiles cut from one scan builds the field `deform` builds
+/// for the merged file; `apply` of it to each tile gives, record for record, what `deform`
+/// gives on the merged file.
+#[test]
+fn solve_over_tiles_then_apply_equals_deform_of_the_merged_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.las");
+    let spec = dir.path().join("bend.toml");
+    std::fs::write(
+        &spec,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
+         translate = [0, 0, 20]\nrotate = { axis = [0, 1, 0], degrees = 5 }\n",
+    )
+    .unwrap();
+    let (_, _, pos, rl) = records(&input);
+    let bounds = |keep: &[usize]| {
+        let lo = keep.iter().fold(pos[keep[0]], |a, &k| a.inf(&pos[k]));
+        let hi = keep.iter().fold(pos[keep[0]], |a, &k| a.sup(&pos[k]));
+        (lo, hi)
+    };
+    // Four tiles by quadrant; the merged file is their records in tile order.
+    let mid = |ax: usize| {
+        let mut v: Vec<f64> = pos.iter().map(|p| p[ax]).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (mx, my) = (mid(0), mid(1));
+    let quadrants: Vec<Vec<usize>> = (0..4)
+        .map(|q| {
+            (0..pos.len())
+                .filter(|&k| ((pos[k].x >= mx) as usize) + 2 * ((pos[k].y >= my) as usize) == q)
+                .collect()
+        })
+        .collect();
+    let mut tiles = Vec::new();
+    for (q, keep) in quadrants.iter().enumerate() {
+        let tile = dir.path().join(format!("tile{q}.las"));
+        write_tile(&input, keep, bounds(keep), &tile);
+        tiles.push(tile);
+    }
+    let order: Vec<usize> = quadrants.concat();
+    let merged = dir.path().join("merged.las");
+    write_tile(&input, &order, bounds(&order), &merged);
+    let merged_out = dir.path().join("merged_out.las");
+    let r = deform(&merged, &merged_out, &spec, &[]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let field = dir.path().join("tiles.field");
+    let mut args = vec!["solve"];
+    args.extend(tiles.iter().map(|t| t.to_str().unwrap()));
+    args.extend([
+        "--edit",
+        spec.to_str().unwrap(),
+        "--save-field",
+        field.to_str().unwrap(),
+        "-q",
+    ]);
+    let r = common::run(&args);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (_, moved, _, _) = records(&merged_out);
+    let mut at = 0;
+    for (q, tile) in tiles.iter().enumerate() {
+        let out = dir.path().join(format!("tile{q}_out.las"));
+        apply(&field, tile, &out);
+        let (_, raw, _, _) = records(&out);
+        assert_eq!(raw, moved[at * rl..at * rl + raw.len()], "tile {q}");
+        at += raw.len() / rl;
+    }
+    assert_eq!(at, pos.len());
+    // Solving a mesh among tiles, or writing the tiles, is refused.
+    let mesh = dir.path().join("bar.ply");
+    data_gen::write_ply(&mesh, &data_gen::bar([1.0, 1.0, 1.0], 2.0), true).unwrap();
+    let r = common::run(&[
+        "solve",
+        tiles[0].to_str().unwrap(),
+        mesh.to_str().unwrap(),
+        "--edit",
+        spec.to_str().unwrap(),
+        "--save-field",
+        field.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("bar.ply"), "{}", r.stderr);
+}
+
 /// Every PLY streams (binary by the record layout, ASCII by walking tokens): the memory-mapped
 /// source decodes the same positions and triangles as the whole-file reader, and its sink, fed
 /// in small chunks, writes the same bytes as the whole-file encoder.

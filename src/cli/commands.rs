@@ -357,6 +357,53 @@ pub(super) fn run_apply(
     Ok(())
 }
 
+/// `solve`: the field of an edit over several files taken as one.
+pub(super) fn run_solve(
+    inputs: &[std::path::PathBuf],
+    edit: &Path,
+    field: &Path,
+    cells: &CellArgs,
+    transfer: Transfer,
+    chunk: usize,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    for input in inputs {
+        refuse_overwrite(input, field)?;
+    }
+    let spec = read_spec::<3>(edit)?;
+    let (build, solve) = cells.params()?;
+    let params = DeformParams {
+        build,
+        solve,
+        transfer,
+        ..Default::default()
+    };
+    let bar = Bar::new(quiet);
+    let (solution, info) = pipeline::solve_files(inputs, &spec, &params, chunk, field, &bar)?;
+    if !quiet {
+        for w in &info.deform.warnings {
+            eprintln!("warning: {w}");
+        }
+        for n in &info.notes {
+            println!("note: {n}");
+        }
+        let s = &solution.info;
+        println!(
+            "{} files, {} samples -> {}: {} cells, {} Gauss-Newton iterations, energy {:.3e}, \
+             {:.2} s",
+            inputs.len(),
+            info.samples,
+            field.display(),
+            s.cells_final,
+            s.iterations,
+            s.energies.last().copied().unwrap_or(0.0),
+            s.seconds
+        );
+        print_control_points(&info.deform.control_points);
+    }
+    Ok(())
+}
+
 pub(super) fn run_info(input: &Path) -> anyhow::Result<()> {
     let info = rigidcells::info::describe(input, &Bar::new(false))?;
     print!("{info}");

@@ -112,6 +112,31 @@ enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// Solve an edit over several files taken as one (the tiles of a scan) and write only the
+    /// field; `apply` it to each tile: together they give what `deform` gives on the merged
+    /// file, record for record.
+    Solve {
+        /// Input files (LAS/LAZ, XYZ, PLY point clouds), read in this order as one.
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// Edit spec (TOML).
+        #[arg(long)]
+        edit: PathBuf,
+        /// The field to write, for `rigidcells apply`.
+        #[arg(long)]
+        save_field: PathBuf,
+        #[command(flatten)]
+        cells: CellArgs,
+        /// The transfer `apply` will use (and the field is made for).
+        #[arg(long, value_enum, default_value_t = TransferArg::Pu)]
+        transfer: TransferArg,
+        /// Samples per streamed chunk.
+        #[arg(long, default_value_t = CHUNK)]
+        chunk: usize,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Describe a file (LAS/LAZ, PLY, OBJ, XYZ, .xy, .png, .field): format, counts, bounds and
     /// centroid to the file's precision, CRS by name and EPSG code, record fields, a saved
     /// field's cells, levels and transfer.
@@ -473,6 +498,23 @@ pub(crate) fn main() -> ExitCode {
                 run_apply(&field, &input, &output, &params, quiet)
             }),
         Command::Info { input } => run_info(&input),
+        Command::Solve {
+            inputs,
+            edit,
+            save_field,
+            cells,
+            transfer,
+            chunk,
+            quiet,
+        } => run_solve(
+            &inputs,
+            &edit,
+            &save_field,
+            &cells,
+            transfer.into(),
+            chunk.clamp(1, MAX_CHUNK),
+            quiet,
+        ),
         Command::Image {
             input,
             edit,

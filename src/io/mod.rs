@@ -13,6 +13,7 @@ mod ply;
 mod ply_stream;
 mod stream;
 mod text;
+mod tiles;
 mod xy;
 mod xyz;
 
@@ -21,6 +22,7 @@ pub use obj::ObjFile;
 pub use ply::{Colors, PlyFile, colors};
 pub use ply_stream::{PlyRecordStream, PlyStream};
 pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
+pub use tiles::Tiles;
 pub use xy::XyFile;
 pub use xyz::{XyzFile, XyzStream};
 
