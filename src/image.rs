@@ -21,13 +21,11 @@
 
 use std::path::Path;
 
-use crate::cells::build;
 use crate::error::{Error, Result};
-use crate::field::{Constrained, Deformer, Field, Outside, Transfer, apply};
+use crate::field::{Transfer, apply};
 use crate::pipeline::DeformParams;
 use crate::progress::Silent;
 use crate::rigid::Vect;
-use crate::solve;
 use crate::spec::EditSpec;
 
 /// An RGBA picture, 8 bits per channel, straight (not premultiplied) alpha.
@@ -156,19 +154,14 @@ pub fn deform_image(
     if samples.is_empty() {
         return Err(Error::Input("the picture has no foreground pixels".into()));
     }
-    let (complex, _) = build(&samples, &[], &params.build)?;
-    let constraints = solve::resolve(&complex, spec, &samples, None)?;
+    let staged = crate::pipeline::stages(&samples, &[], spec, params, &Silent)?;
+    let (solution, field, deformer) = (&staged.solution, &staged.field, &staged.deformer);
     let mut info = ImageInfo {
-        warnings: constraints.warnings.clone(),
+        warnings: staged.warnings.clone(),
+        cells: solution.complex.len(),
+        iterations: solution.info.iterations,
         ..Default::default()
     };
-    crate::pipeline::check_rbf_memory::<2>(complex.len(), params)?;
-    let solution = solve::solve(complex, constraints, &params.solve, &Silent)?;
-    info.cells = solution.complex.len();
-    info.iterations = solution.info.iterations;
-    let field = Field::from_solution(&solution);
-    let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
-    let deformer = Constrained::new(&field, inner, Outside::Extend)?;
 
     // The corners of the foreground pixels, numbered on first use, and where they go.
     let mut corner = vec![u32::MAX; (w + 1) * (h + 1)];
@@ -192,7 +185,7 @@ pub fn deform_image(
         ]);
     }
     let mut moved = rest.clone();
-    apply(&deformer, &field.origin, &mut moved);
+    apply(deformer, &field.origin, &mut moved);
     crate::pipeline::check_moved(0, &moved)?;
     info.clipped = moved
         .iter()

@@ -128,22 +128,14 @@ pub fn deform<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let (complex, build_info) = build(points, triangles, &params.build)?;
-    let constraints = solve::resolve(&complex, spec, points, None)?;
-    check_rbf_memory::<D>(complex.len(), params)?;
-    let solution = solve::solve(complex, constraints, &params.solve, observer)?;
-    // The solved constraints' warnings: an adaptive solve decides its parts at rest again.
-    let mut warnings = build_warnings(
-        &build_info,
-        &solution.complex,
-        &solution.constraints.warnings,
-    );
-    warnings.extend(solution.info.refinement_stopped.clone());
-    let t = Instant::now();
-    check_rbf_memory::<D>(solution.complex.len(), params)?;
-    let field = Field::from_solution(&solution);
-    let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
-    let deformer = Constrained::new(&field, inner, Outside::Extend)?;
+    let Staged {
+        solution,
+        field,
+        deformer,
+        build: build_info,
+        mut warnings,
+        transfer_start: t,
+    } = stages(points, triangles, spec, params, observer)?;
     let mut moved = points.to_vec();
     apply(&deformer, &field.origin, &mut moved);
     check_moved(0, &moved)?;
@@ -158,6 +150,57 @@ where
         warnings,
     };
     Ok((moved, solution, info))
+}
+
+/// What [`stages`] gives.
+pub(crate) struct Staged<const D: usize> {
+    pub(crate) solution: Solution<D>,
+    pub(crate) field: Field<D>,
+    pub(crate) deformer: Constrained<D>,
+    pub(crate) build: BuildInfo,
+    pub(crate) warnings: Vec<String>,
+    pub(crate) transfer_start: Instant,
+}
+
+/// The method's stage sequence on samples in memory, written once: the cells of `points` (and
+/// `triangles`), the spec resolved onto them, the solve, the field and its transfer with exact
+/// constraints. [`deform`] applies it to the samples; [`crate::image::deform_image`] to the
+/// corners of a picture's pixels. (The streaming [`deform_file`] builds its cells in pass 1
+/// and shares [`solve_source`].)
+pub(crate) fn stages<const D: usize>(
+    points: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    spec: &EditSpec<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<Staged<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let (complex, build_info) = build(points, triangles, &params.build)?;
+    let constraints = solve::resolve(&complex, spec, points, None)?;
+    check_rbf_memory::<D>(complex.len(), params)?;
+    let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+    // The solved constraints' warnings: an adaptive solve decides its parts at rest again.
+    let mut warnings = build_warnings(
+        &build_info,
+        &solution.complex,
+        &solution.constraints.warnings,
+    );
+    warnings.extend(solution.info.refinement_stopped.clone());
+    let transfer_start = Instant::now();
+    check_rbf_memory::<D>(solution.complex.len(), params)?;
+    let field = Field::from_solution(&solution);
+    let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
+    let deformer = Constrained::new(&field, inner, Outside::Extend)?;
+    Ok(Staged {
+        solution,
+        field,
+        deformer,
+        build: build_info,
+        warnings,
+        transfer_start,
+    })
 }
 
 /// [`crate::memory::check`] of the dense RBF of `cells` cells, when that is the transfer:
