@@ -152,6 +152,41 @@ where
     Ok((moved, solution, info))
 }
 
+/// Solves `spec` over samples in memory and returns the field (with its transfer, and the
+/// RBF's coefficients when that is the transfer), to apply to these or other samples, or to
+/// save: the Python package's `solve`. The info's control points are as the field moves them.
+pub fn solve_points(
+    points: &[Vect<3>],
+    triangles: &[[u32; 3]],
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(SavedField<3>, Solution<3>, DeformInfo)> {
+    let Staged {
+        solution,
+        field,
+        deformer,
+        build,
+        warnings,
+        transfer_start,
+    } = stages(points, triangles, spec, params, observer)?;
+    let control_points = control_results(spec, &solution, &deformer, params, observer)?;
+    drop(deformer);
+    let rbf = match params.transfer {
+        Transfer::Rbf => Some(Rbf::new(&field)?),
+        _ => None,
+    };
+    let info = DeformInfo {
+        build,
+        solver: solution.info.clone(),
+        seconds_transfer: transfer_start.elapsed().as_secs_f64(),
+        foldovers: (0, 0),
+        control_points,
+        warnings,
+    };
+    Ok((SavedField::new(field, params.transfer, rbf), solution, info))
+}
+
 /// What [`stages`] gives.
 pub(crate) struct Staged<const D: usize> {
     pub(crate) solution: Solution<D>,

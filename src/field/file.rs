@@ -107,6 +107,28 @@ where
         self.deformer_with(transfer, rbf_tolerance, outside, Deformer::new)
     }
 
+    /// As [`SavedField::deformer`], keeping the field (the RBF's coefficients are copied): for
+    /// a field applied more than once (the Python package's `Field.apply`). A window of a file
+    /// ([`SavedField::load_window`]) goes through [`SavedField::deformer`] only.
+    pub fn deformer_of(
+        &self,
+        transfer: Option<Transfer>,
+        rbf_tolerance: Option<f64>,
+        outside: Outside,
+    ) -> Result<Constrained<D>> {
+        if self.window.is_some() {
+            return Err(Error::Param(
+                "a window of a saved field is applied once, through `deformer`".into(),
+            ));
+        }
+        let inner = match (transfer.unwrap_or(self.transfer), &self.rbf) {
+            (Transfer::Rbf, Some(r)) => Deformer::Rbf(r.clone()),
+            (t, _) => Deformer::new(&self.field, t)?,
+        }
+        .with_rbf_tolerance(rbf_tolerance)?;
+        Constrained::new(&self.field, inner, outside)
+    }
+
     /// As [`SavedField::deformer`], but the PU transfer fits its patches only where samples
     /// reach ([`Deformer::on_demand`]): applying a large field to one tile fits the patches
     /// around the tile, with the same bits.

@@ -1,0 +1,138 @@
+"""The Python package against the command line: the same geometry bit for bit, structured
+arrays round trip, errors are exceptions."""
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rigidcells
+
+ROOT = Path(__file__).resolve().parents[2]
+SHARED = ROOT.parent / "shared" / "data"
+
+BEND = """
+[[fixed]]
+box = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }
+[[handle]]
+box = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }
+rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }
+translate = [-3.4, 0.0, 5.9]
+"""
+
+
+def cli() -> str:
+    """The rigidcells binary: $RIGIDCELLS_BIN, else the workspace's release or debug build."""
+    for candidate in (
+        os.environ.get("RIGIDCELLS_BIN"),
+        ROOT / "target" / "release" / "rigidcells",
+        ROOT / "target" / "debug" / "rigidcells",
+    ):
+        if candidate and Path(candidate).exists():
+            return str(candidate)
+    pytest.skip("no rigidcells binary built")
+
+
+def bar_points() -> np.ndarray:
+    """A 10 × 1 × 1 bar of points, 6 per unit."""
+    xs = np.linspace(0.0, 10.0, 61)
+    ys = np.linspace(0.0, 1.0, 7)
+    g = np.stack(np.meshgrid(xs, ys, ys, indexing="ij"), axis=-1).reshape(-1, 3)
+    return np.ascontiguousarray(g)
+
+
+def test_deform_gives_the_command_lines_geometry_bit_for_bit(tmp_path):
+    pts = bar_points()
+    xyz = tmp_path / "bar.xyz"
+    xyz.write_text("".join(f"{float(x)!r} {float(y)!r} {float(z)!r}\n" for x, y, z in pts))
+    edit = tmp_path / "bend.toml"
+    edit.write_text(BEND)
+    out = tmp_path / "out.xyz"
+    subprocess.run(
+        [cli(), "deform", str(xyz), "-o", str(out), "--edit", str(edit), "--cell-size", "0.25", "-q"],
+        check=True,
+    )
+    cli_moved = np.array([[float(v) for v in line.split()[:3]] for line in out.read_text().splitlines()])
+    for spec in (BEND, edit, str(edit)):
+        moved, info = rigidcells.deform(pts, spec, cell_size=0.25)
+        assert moved.shape == pts.shape and moved.dtype == np.float64
+        assert np.array_equal(moved, cli_moved)
+        assert info["cells"] > 100 and info["iterations"] > 0 and info["warnings"] == []
+    # The right end turned up: its points now stand near x = 6.6, z from 5.4 to 6.4.
+    end = moved[pts[:, 0] > 9.9]
+    assert abs(end[:, 0].mean() - 6.6) < 0.3 and end[:, 2].mean() > 5.0
+
+
+def test_deform_file_writes_the_command_lines_bytes(tmp_path):
+    src = SHARED / "las" / "autzen_trim.laz"
+    spec = {
+        "fixed": [{"box": {"min": [636000, 848900, 0], "max": [636300, 849600, 1000]}}],
+        "handle": [
+            {"box": {"min": [636900, 848900, 0], "max": [637200, 849600, 1000]}, "translate": [0, 0, 20]}
+        ],
+    }
+    edit = tmp_path / "edit.toml"
+    edit.write_text(
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n"
+        "[[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n"
+        "translate = [0, 0, 20]\n"
+    )
+    ours, theirs = tmp_path / "py.las", tmp_path / "cli.las"
+    info = rigidcells.deform_file(src, ours, spec, save_field=tmp_path / "f.field")
+    assert info["samples"] == 110000
+    subprocess.run([cli(), "deform", str(src), "-o", str(theirs), "--edit", str(edit), "-q"], check=True)
+    assert ours.read_bytes() == theirs.read_bytes()
+    again = tmp_path / "again.las"
+    rigidcells.apply_file(tmp_path / "f.field", src, again)
+    assert again.read_bytes() == theirs.read_bytes()
+
+
+def test_a_solved_field_applies_saves_and_loads(tmp_path):
+    pts = bar_points()
+    field = rigidcells.solve(pts, BEND, cell_size=0.25)
+    assert field.cells > 100
+    moved, _ = rigidcells.deform(pts, BEND, cell_size=0.25)
+    assert np.array_equal(field.apply(pts), moved)
+    path = tmp_path / "bend.field"
+    field.save(path)
+    assert np.array_equal(rigidcells.Field.load(path).apply(pts), moved)
+    with pytest.raises(ValueError, match="beyond the field"):
+        field.apply(pts + 100.0)
+
+
+def test_a_structured_array_comes_back_with_only_xyz_changed():
+    pts = bar_points()
+    dtype = [("X", "<f8"), ("Y", "<f8"), ("Z", "<f8"), ("Intensity", "<u2"), ("Classification", "u1")]
+    arr = np.zeros(len(pts), dtype=dtype)
+    arr["X"], arr["Y"], arr["Z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+    arr["Intensity"] = np.arange(len(pts)) % 65535
+    arr["Classification"] = 2
+    out, _ = rigidcells.deform(arr, BEND, cell_size=0.25)
+    assert out.dtype == arr.dtype and len(out) == len(arr)
+    assert np.array_equal(out["Intensity"], arr["Intensity"])
+    assert np.array_equal(out["Classification"], arr["Classification"])
+    moved, _ = rigidcells.deform(pts, BEND, cell_size=0.25)
+    assert np.array_equal(np.stack([out["X"], out["Y"], out["Z"]], 1), moved)
+
+
+def test_errors_are_exceptions(tmp_path):
+    pts = bar_points()
+    with pytest.raises(ValueError, match="unknown key"):
+        rigidcells.deform(pts, "[[fixed]]\nbox = { min = [0,0,0], max = [1,1,1] }\nradius = 2\n")
+    with pytest.raises(ValueError):
+        rigidcells.deform(pts, BEND, transfer="cubic")
+    with pytest.raises(ValueError):
+        rigidcells.deform(pts[:, :2], BEND)
+    with pytest.raises(OSError):
+        rigidcells.deform(pts, tmp_path / "missing.toml")
+    with pytest.raises(OSError):
+        rigidcells.deform_file(tmp_path / "missing.las", tmp_path / "o.las", BEND)
+    bad = tmp_path / "bad.las"
+    bad.write_bytes(b"LASF" + b"\0" * 300)
+    with pytest.raises(rigidcells.FormatError):
+        rigidcells.deform_file(bad, tmp_path / "o.las", BEND)
+    assert issubclass(rigidcells.FormatError, ValueError)
+    assert not (tmp_path / "o.las").exists()
