@@ -25,7 +25,7 @@ from typing import Any, Optional, Tuple, Union
 
 import numpy as np
 
-from . import _rigidcells
+from . import _rigidcells, dask
 from ._rigidcells import Field, FormatError
 
 __all__ = ["deform", "solve", "deform_file", "apply_file", "Field", "FormatError"]
