@@ -128,6 +128,32 @@ pub fn deform<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
+    let (moved, _, solution, info) =
+        deform_oriented(points, &[], triangles, spec, params, observer)?;
+    Ok((moved, solution, info))
+}
+
+/// [`deform`] of points with unit normals (one per point, or none): returns the moved points
+/// and their normals as the map turns them (the transpose of the inverse Jacobian, DESIGN §6).
+#[allow(clippy::type_complexity)]
+pub fn deform_oriented<const D: usize>(
+    points: &[Vect<D>],
+    normals: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    spec: &EditSpec<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(Vec<Vect<D>>, Vec<Vect<D>>, Solution<D>, DeformInfo)>
+where
+    Dim<D>: Rigid<D>,
+{
+    if !normals.is_empty() && normals.len() != points.len() {
+        return Err(Error::Param(format!(
+            "{} normals for {} points: give one per point, or none",
+            normals.len(),
+            points.len()
+        )));
+    }
     let Staged {
         solution,
         field,
@@ -136,8 +162,15 @@ where
         mut warnings,
         transfer_start: t,
     } = stages(points, triangles, spec, params, observer)?;
-    let mut moved = points.to_vec();
-    apply(&deformer, &field.origin, &mut moved);
+    let (mut moved, mut moved_normals) = (Vec::new(), Vec::new());
+    apply_into(
+        &deformer,
+        &field.origin,
+        points,
+        normals,
+        &mut moved,
+        &mut moved_normals,
+    );
     check_moved(0, &moved)?;
     let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
     let control_points = control_results(spec, &solution, &deformer, params, observer)?;
@@ -149,7 +182,7 @@ where
         control_points,
         warnings,
     };
-    Ok((moved, solution, info))
+    Ok((moved, moved_normals, solution, info))
 }
 
 /// Solves `spec` over samples in memory and returns the field (with its transfer, and the

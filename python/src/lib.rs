@@ -152,10 +152,11 @@ fn info_dict<'py>(
     Ok(d)
 }
 
-/// Deforms `points` ((n, 3) float64) under the TOML `spec` (relative file names against
-/// `base`); returns the moved points and what was done.
+/// Deforms `points` ((n, 3) float64), with their `normals` when given, under the TOML `spec`
+/// (relative file names against `base`); returns the moved points and what was done (with the
+/// turned normals under `"normals"` when normals were given).
 #[pyfunction]
-#[pyo3(signature = (points, spec_text, base, triangles=None, cell_size=None, cells=None, transfer=None))]
+#[pyo3(signature = (points, spec_text, base, triangles=None, normals=None, cell_size=None, cells=None, transfer=None))]
 #[allow(clippy::too_many_arguments)]
 fn deform<'py>(
     py: Python<'py>,
@@ -163,21 +164,27 @@ fn deform<'py>(
     spec_text: &str,
     base: &str,
     triangles: Option<PyReadonlyArray2<'py, i64>>,
+    normals: Option<PyReadonlyArray2<'py, f64>>,
     cell_size: Option<f64>,
     cells: Option<usize>,
     transfer: Option<&str>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
     let pts = self::points(&points)?;
+    let nrm = match &normals {
+        Some(n) => self::points(n)?,
+        None => Vec::new(),
+    };
     let tris = self::triangles(triangles.as_ref(), pts.len())?;
     let spec = self::spec(spec_text, base)?;
     let params = params(cell_size, cells, transfer)?;
-    let (moved, _, info) = py
-        .detach(|| pipeline::deform(&pts, &tris, &spec, &params, &Silent))
+    let (moved, moved_normals, _, info) = py
+        .detach(|| pipeline::deform_oriented(&pts, &nrm, &tris, &spec, &params, &Silent))
         .map_err(py_err)?;
-    Ok((
-        moved_array(py, &moved),
-        info_dict(py, &info, pts.len() as u64)?,
-    ))
+    let d = info_dict(py, &info, pts.len() as u64)?;
+    if normals.is_some() {
+        d.set_item("normals", moved_array(py, &moved_normals))?;
+    }
+    Ok((moved_array(py, &moved), d))
 }
 
 /// A solved field: apply it to samples, save it for `rigidcells apply`, load one.

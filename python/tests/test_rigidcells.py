@@ -90,6 +90,23 @@ def test_deform_file_writes_the_command_lines_bytes(tmp_path):
     assert again.read_bytes() == theirs.read_bytes()
 
 
+def test_normals_turn_with_the_bend():
+    pts = bar_points()
+    up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    moved, info = rigidcells.deform(pts, BEND, normals=up, cell_size=0.25)
+    same, _ = rigidcells.deform(pts, BEND, cell_size=0.25)
+    assert np.array_equal(moved, same)
+    turned = info["normals"]
+    assert turned.shape == pts.shape
+    assert np.allclose(np.linalg.norm(turned, axis=1), 1.0, atol=1e-9)
+    # The fixed end keeps its normals; the turned end's point along -x (turned by -90° about y).
+    assert np.allclose(turned[pts[:, 0] < 0.3], [0.0, 0.0, 1.0], atol=1e-9)
+    end = turned[pts[:, 0] > 9.9].mean(axis=0)
+    assert end[0] < -0.9, end
+    with pytest.raises(ValueError):
+        rigidcells.deform(pts, BEND, normals=up[:5])
+
+
 def test_a_solved_field_applies_saves_and_loads(tmp_path):
     pts = bar_points()
     field = rigidcells.solve(pts, BEND, cell_size=0.25)

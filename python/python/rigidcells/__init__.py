@@ -97,14 +97,16 @@ def deform(
 
     ``transfer``: ``"pu"`` (the command line's default), ``"rbf"``, ``"blend"`` or
     ``"blend-idw"``. ``cell_size`` or ``cells`` size the cells as ``--cell-size``/``--cells``
-    do. ``normals`` are not supported yet and must be None.
+    do. ``normals`` ((n, 3), one per point): turned as the map turns the surface, returned
+    as ``info["normals"]``.
     """
-    if normals is not None:
-        raise ValueError("normals are not supported by the Python package yet")
     xyz, structured = _xyz(points)
     text, base = _spec(spec)
+    nrm = None
+    if normals is not None:
+        nrm, _ = _xyz(normals)
     moved, info = _rigidcells.deform(
-        xyz, text, base, _triangles(triangles), cell_size, cells, transfer
+        xyz, text, base, _triangles(triangles), nrm, cell_size, cells, transfer
     )
     return _back(moved, structured), info
 
