@@ -49,6 +49,7 @@
 
 pub mod cells;
 pub mod control;
+pub mod demo;
 pub mod error;
 pub mod field;
 pub mod image;

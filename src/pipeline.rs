@@ -185,6 +185,28 @@ where
     Ok((moved, moved_normals, solution, info))
 }
 
+/// `deform` of a 2D point set file (`.xy`, read whole): the points deformed in memory under the
+/// 2D `spec`, written to `output` (which must be `.xy`) with every other byte as read.
+/// Returns the solution, what was done and the number of points.
+pub fn deform_xy_file(
+    input: &Path,
+    output: &Path,
+    spec: &EditSpec<2>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(Solution<2>, DeformInfo, usize)> {
+    if io::extension(output).as_deref() != Some("xy") {
+        return Err(Error::Param(format!(
+            "{}: a .xy point set is written as .xy",
+            output.display()
+        )));
+    }
+    let file = io::XyFile::read(input)?;
+    let (moved, solution, info) = deform(file.points(), &[], spec, params, observer)?;
+    file.write(output, &moved)?;
+    Ok((solution, info, moved.len()))
+}
+
 /// Solves `spec` over samples in memory and returns the field (with its transfer, and the
 /// RBF's coefficients when that is the transfer), to apply to these or other samples, or to
 /// save: the Python package's `solve`. The info's control points are as the field moves them.

@@ -4,7 +4,6 @@ use std::path::Path;
 
 use anyhow::Context;
 use rigidcells::Error;
-use rigidcells::cells::BuildParams;
 use rigidcells::field::Transfer;
 use rigidcells::io::refuse_overwrite;
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
@@ -208,13 +207,6 @@ pub(super) fn is_xy(path: &Path) -> bool {
 
 /// `deform` of a 2D point set (`.xy`) under a 2D edit spec: the whole set in memory.
 pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
-    if !is_xy(&args.output) {
-        return Err(Error::Param(format!(
-            "{}: a .xy point set is written as .xy",
-            args.output.display()
-        ))
-        .into());
-    }
     for (flag, set) in [
         ("--save-field", args.save_field.is_some()),
         ("--report", args.report.is_some()),
@@ -226,12 +218,11 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             );
         }
     }
-    let file = rigidcells::io::XyFile::read(&args.input)?;
     let spec = read_spec::<2>(&args.edit)?;
     let params = args.params(None)?;
     let bar = Bar::new(args.quiet);
-    let (moved, solution, info) = pipeline::deform(file.points(), &[], &spec, &params, &bar)?;
-    file.write(&args.output, &moved)?;
+    let (solution, info, points) =
+        pipeline::deform_xy_file(&args.input, &args.output, &spec, &params, &bar)?;
     if !args.quiet {
         for w in &info.warnings {
             eprintln!("warning: {w}");
@@ -240,7 +231,7 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {:.3e}",
             args.input.display(),
             args.output.display(),
-            moved.len(),
+            points,
             solution.complex.len(),
             solution.info.iterations,
             solution.info.energies.last().copied().unwrap_or(0.0)
@@ -260,11 +251,6 @@ pub(super) fn run_image(
     cells: &CellArgs,
     quiet: bool,
 ) -> anyhow::Result<()> {
-    refuse_overwrite(input, output)?;
-    png_path(output)?;
-    let background = background.map(parse_color).transpose()?;
-    let spec = read_spec::<2>(edit)?;
-    let raster = rigidcells::image::Raster::read_png(input)?;
     let (build, solve) = cells.params()?;
     let params = DeformParams {
         build,
@@ -272,7 +258,24 @@ pub(super) fn run_image(
         transfer,
         ..Default::default()
     };
-    let (out, info) = rigidcells::image::deform_image(&raster, &spec, &params, background)
+    image_job(input, edit, output, background, &params, quiet)
+}
+
+/// `image` with its parameters: deform the picture, write it, print what happened.
+pub(super) fn image_job(
+    input: &Path,
+    edit: &Path,
+    output: &Path,
+    background: Option<&str>,
+    params: &DeformParams,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    refuse_overwrite(input, output)?;
+    png_path(output)?;
+    let background = background.map(parse_color).transpose()?;
+    let spec = read_spec::<2>(edit)?;
+    let raster = rigidcells::image::Raster::read_png(input)?;
+    let (out, info) = rigidcells::image::deform_image(&raster, &spec, params, background)
         .with_context(|| format!("deforming {}", input.display()))?;
     out.write_png(output)?;
     if !quiet {
@@ -474,69 +477,22 @@ pub(super) fn print_control_points(points: &[rigidcells::control::ControlPoint])
 }
 
 pub(super) fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let size = [10.0, 1.0, 1.0];
-    let shapes = [
-        ("bar", data_gen::bar(size, 8.0), Transfer::Pu),
-        ("soup", data_gen::soup(size, 8.0), Transfer::Blend),
-    ];
-    let edit = out.join("bend.toml");
-    let spec = "# Bend the bar 90 degrees upwards: fix the left end, turn the right end.\n\
-        [[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\n\
-        [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-        rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\n\
-        translate = [-3.4, 0.0, 5.9]\n";
-    rigidcells::io::write_atomic(&edit, spec.as_bytes())?;
-    for (name, mesh, transfer) in shapes {
-        let input = out.join(format!("{name}.ply"));
-        let output = out.join(format!("{name}_bent.ply"));
-        data_gen::write_ply(&input, &mesh, true)
-            .with_context(|| format!("writing {}", input.display()))?;
-        let params = DeformParams {
-            build: BuildParams {
-                cell_size: Some(0.25),
-                ..Default::default()
-            },
-            transfer,
-            ..Default::default()
-        };
+    let demo = rigidcells::demo::prepare(out)?;
+    for job in &demo.shapes {
         deform_file(
-            &input, &output, &edit, &params, CHUNK, None, None, None, quiet,
+            &job.input,
+            &job.output,
+            &job.edit,
+            &job.params,
+            CHUNK,
+            None,
+            None,
+            None,
+            quiet,
         )?;
     }
-    // The 2D picture of paper Fig. 7: a gingerbread figure with its arms moved.
-    let (width, height, rgba) = data_gen::gingerbread();
-    let figure = rigidcells::image::Raster {
-        width,
-        height,
-        rgba,
-    };
-    let (png_in, png_out, png_edit) = (
-        out.join("gingerbread.png"),
-        out.join("gingerbread_bent.png"),
-        out.join("gingerbread.toml"),
-    );
-    figure.write_png(&png_in)?;
-    rigidcells::io::write_atomic(&png_edit, data_gen::GINGERBREAD_SPEC.as_bytes())?;
-    run_image(
-        &png_in,
-        &png_edit,
-        &png_out,
-        None,
-        rigidcells::image::IMAGE_TRANSFER,
-        &CellArgs {
-            cell_size: None,
-            cells: None,
-            min_cell_size: None,
-            max_level: None,
-            shell: false,
-            inside: InsideArg::Auto,
-            solver: SolverArg::Auto,
-            loose_parts: LooseArg::Carry,
-            memory: MemoryArg { memory_limit: None },
-        },
-        quiet,
-    )?;
+    let p = &demo.picture;
+    image_job(&p.input, &p.edit, &p.output, None, &p.params, quiet)?;
     if !quiet {
         println!(
             "demo: wrote bar.ply, soup.ply (inputs), bar_bent.ply (partition-of-unity RBF), soup_bent.ply (blend), bend.toml, \
