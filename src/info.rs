@@ -209,9 +209,35 @@ pub fn describe(path: &Path, observer: &dyn Observer) -> Result<FileInfo> {
     observer.finish();
     if let (Some(b), true) = (base, n > 0) {
         info.centroid = Some((0..3).map(|a| b[a] + sum[a] / n as f64).collect());
-        if info.bounds.is_none() {
-            info.bounds = Some((lo.to_vec(), hi.to_vec()));
+        // The bounds are the samples' own; a LAS header that declares others (a damaged or
+        // stale header) is shown beside them, not in their place.
+        let tolerance = |a: usize| {
+            info.decimals
+                .as_ref()
+                .map_or(0.0, |d| 0.5 * 10f64.powi(-(d[a] as i32)))
+        };
+        if let Some((hlo, hhi)) = info.bounds.take() {
+            let differs = (0..3).any(|a| {
+                (hlo[a] - lo[a]).abs() > tolerance(a) || (hhi[a] - hi[a]).abs() > tolerance(a)
+            });
+            if differs {
+                let axes: Vec<String> = (0..3)
+                    .map(|a| {
+                        format!(
+                            "{} [{}, {}]",
+                            AXES[a],
+                            info.coord(a, hlo[a]),
+                            info.coord(a, hhi[a])
+                        )
+                    })
+                    .collect();
+                info.details.push((
+                    "header bounds".into(),
+                    format!("{} (differ from the points')", axes.join("  ")),
+                ));
+            }
         }
+        info.bounds = Some((lo.to_vec(), hi.to_vec()));
     }
     Ok(info)
 }
@@ -353,11 +379,11 @@ fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
     info.bounds = Some((h.min.to_vec(), h.max.to_vec()));
     info.decimals = Some(h.scale.iter().map(|&s| decimals_of(s)).collect());
     info.fields = las_fields(h.format).iter().map(|s| s.to_string()).collect();
-    let records = crate::io::LasSource::open(path)?.vlr_payloads();
-    for (user, id, data) in &records {
-        if user == "LASF_Spec" && *id == 4 {
+    let records = crate::io::LasSource::open(path)?.vlr_records();
+    for r in &records {
+        if r.is("LASF_Spec", 4) {
             // Extra-bytes descriptors: 192 bytes each, the name at bytes 4..36.
-            for d in data.chunks_exact(192) {
+            for d in r.data.chunks_exact(192) {
                 let name = String::from_utf8_lossy(&d[4..36])
                     .trim_end_matches('\0')
                     .to_string();
@@ -383,7 +409,7 @@ fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
             h.evlr_count
         ),
     ));
-    if records.iter().any(|(u, _, _)| u == "copc") {
+    if records.iter().any(|r| r.user_id == "copc") {
         info.details
             .push(("COPC".into(), "yes (a cloud-optimized point cloud)".into()));
     }
@@ -402,12 +428,12 @@ fn decimals_of(scale: f64) -> usize {
 }
 
 /// The CRS of a LAS file's (E)VLRs: the WKT's name and EPSG code, else the GeoTIFF keys'.
-pub fn crs(records: &[(String, u16, Vec<u8>)]) -> Option<Crs> {
+pub fn crs(records: &[crate::io::VlrRecord]) -> Option<Crs> {
     let find = |id: u16| {
         records
             .iter()
-            .find(|(u, r, _)| u == "LASF_Projection" && *r == id)
-            .map(|(_, _, d)| d.as_slice())
+            .find(|r| r.is("LASF_Projection", id))
+            .map(|r| r.data.as_slice())
     };
     let keys = find(34735);
     if let Some(wkt) = find(2112) {

@@ -54,6 +54,18 @@ fn las_bounds_to_the_scale_crs_by_name_and_fields() {
         line(&t, "bounds:").contains("x [-94.6834654, -94.6606311]"),
         "{t}"
     );
+    // A header that declares bounds in record units (simple1_3.las): the points' own bounds,
+    // and the header's beside them, marked.
+    let t = info(&shared("las/simple1_3.las"));
+    assert!(
+        line(&t, "bounds:").contains("x [-235434.519, -234935.841]"),
+        "{t}"
+    );
+    assert!(
+        line(&t, "header bounds:").contains("differ from the points'"),
+        "{t}"
+    );
+    assert!(!info(&shared("las/autzen_trim.laz")).contains("header bounds"));
     // Extra bytes by name.
     let t = info(&shared("las/extrabytes.las"));
     assert!(line(&t, "fields:").contains("Colors (extra bytes)"), "{t}");
@@ -114,8 +126,14 @@ fn fields_and_pictures() {
     let cells: usize = line(&t, "cells:")[9..].trim().parse().unwrap();
     assert!(cells > 100, "{t}");
     assert!(line(&t, "bounds:").contains("x [-0.25, 10.25]"), "{t}");
-    let t = info(&dir.path().join("gingerbread.png"));
+    let png = dir.path().join("gingerbread.png");
+    let t = info(&png);
     assert!(line(&t, "format:").contains("240 × 240"), "{t}");
-    assert!(line(&t, "foreground pixels:").len() > 20, "{t}");
+    let raster = rigidcells::image::Raster::read_png(&png).unwrap();
+    let opaque = raster.rgba.chunks_exact(4).filter(|p| p[3] > 0).count();
+    assert_eq!(
+        line(&t, "foreground pixels:"),
+        format!("  foreground pixels: {opaque}")
+    );
     assert!(line(&t, "centroid:").contains('['), "{t}");
 }

@@ -30,7 +30,7 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use super::las::{Frame, LasHeader, SOFTWARE, encode};
+use super::las::{Frame, LasHeader, SOFTWARE, VlrRecord, encode, text_field};
 use super::stream::{Chunk, Sink, TempFile};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
@@ -49,9 +49,6 @@ pub fn is_copc(path: &Path) -> bool {
         .is_some_and(|n| n.to_ascii_lowercase().ends_with(".copc.laz"))
 }
 
-/// A (E)VLR to write: user id, record id, description, payload.
-pub(crate) type Record = (String, u16, String, Vec<u8>);
-
 /// The sink of a COPC output; see the module docs.
 pub(crate) struct CopcSink {
     output: PathBuf,
@@ -61,8 +58,8 @@ pub(crate) struct CopcSink {
     record_len: usize,
     extra: usize,
     frame: Frame,
-    vlrs: Vec<Record>,
-    evlrs: Vec<Record>,
+    vlrs: Vec<VlrRecord>,
+    evlrs: Vec<VlrRecord>,
     spill: Option<(TempFile, BufWriter<File>)>,
     count: u64,
     lo: [f64; 3],
@@ -85,7 +82,7 @@ impl CopcSink {
     pub(crate) fn new(
         output: &Path,
         input: LasHeader,
-        records: Vec<(String, u16, String, Vec<u8>, bool)>,
+        records: Vec<VlrRecord>,
         frame: Frame,
         mut notes: Vec<String>,
     ) -> Result<Self> {
@@ -106,11 +103,7 @@ impl CopcSink {
                 input.format
             ));
         }
-        let crs = |id: u16| {
-            records
-                .iter()
-                .any(|r| r.0 == "LASF_Projection" && r.1 == id)
-        };
+        let crs = |id: u16| records.iter().any(|r| r.is("LASF_Projection", id));
         if crs(34735) && !crs(2112) {
             notes.push(
                 "the CRS is kept as the input's GeoTIFF keys; LAS 1.4 point formats 6-8 expect a \
@@ -119,18 +112,8 @@ impl CopcSink {
             );
         }
         let extra = (input.record_len as usize).saturating_sub(standard_len(input.format));
-        let keep = |(u, id, _, _, _): &(String, u16, String, Vec<u8>, bool)| {
-            !(u == "copc" || (u == "laszip encoded" && *id == 22204))
-        };
-        let (mut vlrs, mut evlrs) = (Vec::new(), Vec::new());
-        for r in records.into_iter().filter(keep) {
-            let (u, id, d, data, extended) = r;
-            if extended {
-                evlrs.push((u, id, d, data));
-            } else {
-                vlrs.push((u, id, d, data));
-            }
-        }
+        let keep = |r: &VlrRecord| !(r.user_id == "copc" || r.is("laszip encoded", 22204));
+        let (evlrs, vlrs) = records.into_iter().filter(keep).partition(|r| r.extended);
         let spill_name = output.with_file_name(format!(
             "{}.points",
             output.file_name().unwrap_or_default().to_string_lossy()
@@ -435,12 +418,19 @@ fn write_copc(
         .build();
     let mut laz_bytes = Vec::new();
     laz_vlr.write_to(&mut laz_bytes).map_err(werr)?;
-    let mut vlrs: Vec<Record> = vec![
-        ("copc".into(), 1, "COPC info".into(), vec![0; 160]),
-        ("laszip encoded".into(), 22204, "LASzip".into(), laz_bytes),
+    let record = |user_id: &str, record_id, description: &str, data| VlrRecord {
+        user_id: user_id.into(),
+        record_id,
+        description: description.into(),
+        data,
+        extended: false,
+    };
+    let mut vlrs = vec![
+        record("copc", 1, "COPC info", vec![0; 160]),
+        record("laszip encoded", 22204, "LASzip", laz_bytes),
     ];
     vlrs.extend(sink.vlrs.iter().cloned());
-    let point_offset = 375 + vlrs.iter().map(|v| 54 + v.3.len()).sum::<usize>();
+    let point_offset = 375 + vlrs.iter().map(|v| 54 + v.data.len()).sum::<usize>();
     out.write_all(&[0u8; 375]).map_err(werr)?;
     for v in &vlrs {
         write_vlr(&mut out, v, false).map_err(werr)?;
@@ -462,23 +452,19 @@ fn write_copc(
         );
         let shift = 3 * (21 - level as u32);
         let mut current: Option<u64> = None;
-        let mut points = 0i32;
+        let mut points = 0u64;
         let mut start = compressor.get_mut().stream_position().map_err(werr)?;
         let mut record = vec![0u8; rl];
         let mut k = [0u8; 8];
         let mut finish = |node: u64,
-                          points: i32,
+                          points: u64,
                           start: &mut u64,
                           c: &mut laz::LasZipCompressor<BufWriter<File>>|
          -> Result<()> {
             c.finish_current_chunk().map_err(werr)?;
             let end = c.get_mut().stream_position().map_err(werr)?;
-            nodes.push((
-                node_key(level as u32, node),
-                *start,
-                (end - *start) as i32,
-                points,
-            ));
+            let (bytes, points) = entry_sizes(&sink.output, end - *start, points)?;
+            nodes.push((node_key(level as u32, node), *start, bytes, points));
             *start = end;
             Ok(())
         };
@@ -528,7 +514,7 @@ fn write_copc(
         page.extend_from_slice(&points.to_le_bytes());
     }
     let page_len = page.len() as u64;
-    let hierarchy: Record = ("copc".into(), 1000, "EPT hierarchy".into(), page);
+    let hierarchy = record("copc", 1000, "EPT hierarchy", page);
     write_vlr(&mut out, &hierarchy, true).map_err(werr)?;
     for v in &sink.evlrs {
         write_vlr(&mut out, v, true).map_err(werr)?;
@@ -570,6 +556,21 @@ fn write_copc(
     Ok(())
 }
 
+/// A node's chunk size and point count as the hierarchy's 32-bit entries hold them; a node
+/// past them (samples piled at one spot, below every level's sampling cells) is an error, not
+/// a wrapped number.
+fn entry_sizes(output: &Path, bytes: u64, points: u64) -> Result<(i32, i32)> {
+    match (i32::try_from(bytes), i32::try_from(points)) {
+        (Ok(b), Ok(p)) => Ok((b, p)),
+        _ => Err(Error::Param(format!(
+            "{}: an octree node would hold {points} points in {bytes} bytes, past what a COPC \
+             hierarchy entry records (2^31 - 1): the samples pile up at one spot (duplicates?); \
+             write a plain .laz instead",
+            output.display()
+        ))),
+    }
+}
+
 /// The key (level, x, y, z) of the node at `level` whose Morton prefix is `prefix`.
 fn node_key(level: u32, prefix: u64) -> [i32; 4] {
     let mut xyz = [0i32; 3];
@@ -583,29 +584,20 @@ fn node_key(level: u32, prefix: u64) -> [i32; 4] {
     [level as i32, xyz[0], xyz[1], xyz[2]]
 }
 
-fn write_vlr(
-    out: &mut impl Write,
-    (user, id, desc, data): &Record,
-    extended: bool,
-) -> std::io::Result<()> {
+/// Writes `v` as a VLR (54-byte header) or, with `extended`, an EVLR (60-byte header).
+fn write_vlr(out: &mut impl Write, v: &VlrRecord, extended: bool) -> std::io::Result<()> {
     let mut h = Vec::with_capacity(60);
     h.extend_from_slice(&0u16.to_le_bytes());
-    let mut u = [0u8; 16];
-    let n = user.len().min(16);
-    u[..n].copy_from_slice(&user.as_bytes()[..n]);
-    h.extend_from_slice(&u);
-    h.extend_from_slice(&id.to_le_bytes());
+    h.extend_from_slice(&text_field::<16>(&v.user_id));
+    h.extend_from_slice(&v.record_id.to_le_bytes());
     if extended {
-        h.extend_from_slice(&(data.len() as u64).to_le_bytes());
+        h.extend_from_slice(&(v.data.len() as u64).to_le_bytes());
     } else {
-        h.extend_from_slice(&(data.len().min(u16::MAX as usize) as u16).to_le_bytes());
+        h.extend_from_slice(&(v.data.len().min(u16::MAX as usize) as u16).to_le_bytes());
     }
-    let mut d = [0u8; 32];
-    let n = desc.len().min(32);
-    d[..n].copy_from_slice(&desc.as_bytes()[..n]);
-    h.extend_from_slice(&d);
+    h.extend_from_slice(&text_field::<32>(&v.description));
     out.write_all(&h)?;
-    out.write_all(data)
+    out.write_all(&v.data)
 }
 
 /// The LAS 1.4 header of the COPC output.
@@ -626,18 +618,12 @@ fn header_bytes(
         .vlrs
         .iter()
         .chain(&sink.evlrs)
-        .any(|v| v.0 == "LASF_Projection" && v.1 == 2112);
+        .any(|v| v.is("LASF_Projection", 2112));
     b.extend_from_slice(&((h.global_encoding & 0x1) | if wkt { 0x10 } else { 0 }).to_le_bytes());
     b.extend_from_slice(&h.guid);
     b.extend_from_slice(&[1, 4]);
-    let mut system = [0u8; 32];
-    let n = h.system.len().min(32);
-    system[..n].copy_from_slice(&h.system.as_bytes()[..n]);
-    b.extend_from_slice(&system);
-    let mut software = [0u8; 32];
-    software[..SOFTWARE.len().min(32)]
-        .copy_from_slice(&SOFTWARE.as_bytes()[..SOFTWARE.len().min(32)]);
-    b.extend_from_slice(&software);
+    b.extend_from_slice(&text_field::<32>(&h.system));
+    b.extend_from_slice(&text_field::<32>(SOFTWARE));
     b.extend_from_slice(&h.creation.0.to_le_bytes());
     b.extend_from_slice(&h.creation.1.to_le_bytes());
     b.extend_from_slice(&375u16.to_le_bytes());
@@ -686,6 +672,15 @@ mod tests {
         }
         out.sort_unstable();
         out
+    }
+
+    #[test]
+    fn a_node_past_the_hierarchys_32_bits_is_an_error() {
+        let out = Path::new("o.copc.laz");
+        assert_eq!(entry_sizes(out, 1000, 10).unwrap(), (1000, 10));
+        let e = entry_sizes(out, 1 << 31, 10).unwrap_err().to_string();
+        assert!(e.contains("o.copc.laz") && e.contains("plain .laz"), "{e}");
+        assert!(entry_sizes(out, 10, 1 << 31).is_err());
     }
 
     /// Runs of 2,000 records: the merge of 55 runs gives the file every point once, in nodes

@@ -47,6 +47,28 @@ pub struct VlrInfo {
     pub description: String,
 }
 
+/// A variable-length record with its payload.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VlrRecord {
+    /// User id.
+    pub user_id: String,
+    /// Record id.
+    pub record_id: u16,
+    /// Description.
+    pub description: String,
+    /// Payload.
+    pub data: Vec<u8>,
+    /// Whether it is (or must be written as) an extended VLR.
+    pub extended: bool,
+}
+
+impl VlrRecord {
+    /// Whether it is the record `user_id`/`record_id`.
+    pub fn is(&self, user_id: &str, record_id: u16) -> bool {
+        self.user_id == user_id && self.record_id == record_id
+    }
+}
+
 impl VlrInfo {
     /// Whether this record describes a coordinate reference system.
     pub fn is_crs(&self) -> bool {
@@ -420,39 +442,23 @@ impl LasSource {
         &self.header
     }
 
-    /// Every VLR and EVLR: user id, record id, description, payload and whether it is an
-    /// EVLR (none when the `las` crate cannot read the header).
-    pub(crate) fn vlr_records(&self) -> Vec<(String, u16, String, Vec<u8>, bool)> {
+    /// Every VLR, then every EVLR, with its payload (none when the `las` crate cannot read the
+    /// header). A VLR too long for a VLR's 16-bit length is marked extended.
+    pub fn vlr_records(&self) -> Vec<VlrRecord> {
         let Ok(h) = self.las_header() else {
             return Vec::new();
         };
-        let record = |v: &las::Vlr, extended: bool| {
-            let e = extended || v.data.len() > u16::MAX as usize;
-            (
-                v.user_id.clone(),
-                v.record_id,
-                v.description.clone(),
-                v.data.clone(),
-                e,
-            )
+        let record = |v: &las::Vlr, extended: bool| VlrRecord {
+            user_id: v.user_id.clone(),
+            record_id: v.record_id,
+            description: v.description.clone(),
+            data: v.data.clone(),
+            extended: extended || v.data.len() > u16::MAX as usize,
         };
         h.vlrs()
             .iter()
             .map(|v| record(v, false))
             .chain(h.evlrs().iter().map(|v| record(v, true)))
-            .collect()
-    }
-
-    /// Every VLR and EVLR: user id, record id and payload (empty when the `las` crate cannot
-    /// read the header).
-    pub fn vlr_payloads(&self) -> Vec<(String, u16, Vec<u8>)> {
-        let Ok(h) = self.las_header() else {
-            return Vec::new();
-        };
-        h.vlrs()
-            .iter()
-            .chain(h.evlrs())
-            .map(|v| (v.user_id.clone(), v.record_id, v.data.clone()))
             .collect()
     }
 
@@ -791,7 +797,7 @@ impl RawSink {
     ) -> Result<Self> {
         let (tmp, mut out) = TempFile::create(output)?;
         let mut prefix = input[..header.point_offset as usize].to_vec();
-        prefix[58..90].copy_from_slice(&generating_software());
+        prefix[58..90].copy_from_slice(&text_field::<32>(SOFTWARE));
         out.write_all(&prefix)
             .map_err(|e| Error::write(output, e))?;
         Ok(Self {
@@ -1285,11 +1291,11 @@ fn check_layers(
 /// input's): `rigidcells` and its version.
 pub const SOFTWARE: &str = concat!("rigidcells ", env!("CARGO_PKG_VERSION"));
 
-/// [`SOFTWARE`] as the header's 32-byte, zero-padded field.
-fn generating_software() -> [u8; 32] {
-    let mut field = [0u8; 32];
-    let n = SOFTWARE.len().min(32);
-    field[..n].copy_from_slice(&SOFTWARE.as_bytes()[..n]);
+/// `text` as a LAS text field of `N` bytes: cut to `N`, zero-padded.
+pub(crate) fn text_field<const N: usize>(text: &str) -> [u8; N] {
+    let mut field = [0u8; N];
+    let n = text.len().min(N);
+    field[..n].copy_from_slice(&text.as_bytes()[..n]);
     field
 }
 

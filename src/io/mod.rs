@@ -17,7 +17,7 @@ mod tiles;
 mod xy;
 mod xyz;
 
-pub use las::{LasHeader, LasSource, SOFTWARE, VlrInfo};
+pub use las::{LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord};
 pub use obj::ObjFile;
 pub use ply::{Colors, PlyFile, colors};
 pub use ply_stream::{PlyRecordStream, PlyStream};
