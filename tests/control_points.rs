@@ -4,15 +4,30 @@
 
 mod common;
 
-use common::{deform, deform_verbose, shared};
+use common::{Run, deform_verbose, shared};
 use std::path::Path;
 
 fn autzen() -> std::path::PathBuf {
     shared("las/autzen_trim.laz")
 }
 
-fn report(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+/// Writes the control-point file `name` (`rows`) and an edit of one `[[target]]` naming it
+/// (with the `extra` lines) into `dir`, deforms autzen_trim with `--report` and `args`, and
+/// returns the run and its report (`Null` when the run failed).
+fn gcp(dir: &Path, name: &str, rows: &str, extra: &str, args: &[&str]) -> (Run, serde_json::Value) {
+    std::fs::write(dir.join(name), rows).unwrap();
+    let edit = dir.join("edit.toml");
+    std::fs::write(&edit, format!("[[target]]\nfile = \"{name}\"\n{extra}")).unwrap();
+    let (out, json) = (dir.join("o.laz"), dir.join("r.json"));
+    let _ = std::fs::remove_file(&json);
+    let mut all = vec!["--report", json.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let r = deform_verbose(&autzen(), &out, &edit, &all);
+    let report = match r.code {
+        0 => serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap(),
+        _ => serde_json::Value::Null,
+    };
+    (r, report)
 }
 
 fn point<'a>(json: &'a serde_json::Value, id: &str) -> &'a serde_json::Value {
@@ -36,22 +51,15 @@ fn coords(v: &serde_json::Value) -> Vec<f64> {
 fn semicolon_file_with_header_ids_and_decimal_commas() {
     let dir = tempfile::tempdir().unwrap();
     // The points were given off the surface (up to 50 m above it): `snap` puts them on it.
-    std::fs::write(
-        dir.path().join("gcp.csv"),
+    let (r, json) = gcp(
+        dir.path(),
+        "gcp.csv",
         "# surveyed, EPSG:2994\nid;x;y;z;X;Y;Z;weight\n\
          P1;636200,0;849000,0;420;636200,5;849000,0;420;10\n\
          P2;637000;849400;440;637000;849400,8;440;10\n\
          \"P3\";636600;849200;450;636600;849200;451,5;10\n",
-    )
-    .unwrap();
-    let edit = dir.path().join("edit.toml");
-    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nsnap = 60.0\n").unwrap();
-    let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
-    let r = deform_verbose(
-        &autzen(),
-        &out,
-        &edit,
-        &["--report", json.to_str().unwrap()],
+        "snap = 60.0\n",
+        &[],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(r.stdout.contains("control points: 3"), "{}", r.stdout);
@@ -59,7 +67,6 @@ fn semicolon_file_with_header_ids_and_decimal_commas() {
     for id in ["P1", "P2", "P3"] {
         assert!(r.stdout.contains(&format!("  {id} ")), "{}", r.stdout);
     }
-    let json = report(&json);
     let p3 = point(&json, "P3");
     assert_eq!(p3["place"], "gcp.csv line 5");
     // Snapped onto a sample: moved, and its wanted point kept.
@@ -94,18 +101,9 @@ fn separators_tab_spaces_and_comma_read_alike() {
     let mut results = Vec::new();
     for (name, sep) in [("tab.txt", "\t"), ("spaces.txt", "   "), ("comma.csv", ",")] {
         let text: String = rows.iter().map(|r| r.join(sep) + "\n").collect();
-        std::fs::write(dir.path().join(name), text).unwrap();
-        let edit = dir.path().join("edit.toml");
-        std::fs::write(&edit, format!("[[target]]\nfile = \"{name}\"\n")).unwrap();
-        let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
-        let r = deform(
-            &autzen(),
-            &out,
-            &edit,
-            &["--report", json.to_str().unwrap()],
-        );
+        let (r, json) = gcp(dir.path(), name, &text, "", &[]);
         assert_eq!(r.code, 0, "{name}: {}", r.stderr);
-        results.push(report(&json)["control_points"].clone());
+        results.push(json["control_points"].clone());
     }
     assert_eq!(results[0].as_array().unwrap().len(), 3);
     for other in &results[1..] {
@@ -126,23 +124,15 @@ fn separators_tab_spaces_and_comma_read_alike() {
 #[test]
 fn two_d_points_pull_horizontally_and_keep_the_heights() {
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(
-        dir.path().join("gcp.txt"),
+    let (r, json) = gcp(
+        dir.path(),
+        "gcp.txt",
         "P1 636200 849000 636201 849000\nP2 637000 849400 637000 849401.5\n\
          P3 636600 849200 636600 849200\n",
-    )
-    .unwrap();
-    let edit = dir.path().join("edit.toml");
-    std::fs::write(&edit, "[[target]]\nfile = \"gcp.txt\"\n").unwrap();
-    let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
-    let r = deform(
-        &autzen(),
-        &out,
-        &edit,
-        &["--report", json.to_str().unwrap()],
+        "",
+        &[],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
-    let json = report(&json);
     for id in ["P1", "P2", "P3"] {
         let p = point(&json, id);
         assert_eq!(p["horizontal"], true);
@@ -159,8 +149,6 @@ fn two_d_points_pull_horizontally_and_keep_the_heights() {
 #[test]
 fn a_point_off_the_surface_needs_snap_and_errors_name_the_csv() {
     let dir = tempfile::tempdir().unwrap();
-    let edit = dir.path().join("edit.toml");
-    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\n").unwrap();
     let out = dir.path().join("o.laz");
     let cases = [
         // 80 m above the highest sample: outside every cell, and the message says what to do.
@@ -187,8 +175,7 @@ fn a_point_off_the_surface_needs_snap_and_errors_name_the_csv() {
         ("1,2,3\n", "gcp.csv: line 1", "3 columns"),
     ];
     for (text, place, what) in cases {
-        std::fs::write(dir.path().join("gcp.csv"), text).unwrap();
-        let r = deform(&autzen(), &out, &edit, &[]);
+        let (r, _) = gcp(dir.path(), "gcp.csv", text, "", &[]);
         assert_eq!(r.code, 4, "{text}: {}", r.stderr);
         assert!(
             r.stderr.contains(place) && r.stderr.contains(what),
@@ -199,25 +186,13 @@ fn a_point_off_the_surface_needs_snap_and_errors_name_the_csv() {
         assert!(!out.exists());
     }
     // With `snap`, the point 80 m up moves onto the scan; too short a snap says so.
-    std::fs::write(
-        dir.path().join("gcp.csv"),
-        "P1,636600,849200,600,636600,849200,600\n",
-    )
-    .unwrap();
-    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nsnap = 5.0\n").unwrap();
-    let r = deform(&autzen(), &out, &edit, &[]);
+    let high = "P1,636600,849200,600,636600,849200,600\n";
+    let (r, _) = gcp(dir.path(), "gcp.csv", high, "snap = 5.0\n", &[]);
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(r.stderr.contains("no sample within 5"), "{}", r.stderr);
-    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nsnap = 200.0\n").unwrap();
-    let json = dir.path().join("r.json");
-    let r = deform(
-        &autzen(),
-        &out,
-        &edit,
-        &["--report", json.to_str().unwrap()],
-    );
+    let (r, json) = gcp(dir.path(), "gcp.csv", high, "snap = 200.0\n", &[]);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    let p = point(&report(&json), "P1").clone();
+    let p = point(&json, "P1").clone();
     assert!(p["snapped"].as_f64().unwrap() > 70.0, "{p}");
 }
 
@@ -235,19 +210,15 @@ fn leave_one_out_finds_the_blunder() {
             csv += &format!("P{k},{x},{y},{},{}\n", x + 0.5, y + north);
         }
     }
-    std::fs::write(dir.path().join("gcp.csv"), csv).unwrap();
-    let edit = dir.path().join("edit.toml");
-    std::fs::write(&edit, "[[target]]\nfile = \"gcp.csv\"\nweight = 10\n").unwrap();
-    let (out, json) = (dir.path().join("o.laz"), dir.path().join("r.json"));
-    let r = deform_verbose(
-        &autzen(),
-        &out,
-        &edit,
-        &["--check-gcp", "--report", json.to_str().unwrap()],
+    let (r, json) = gcp(
+        dir.path(),
+        "gcp.csv",
+        &csv,
+        "weight = 10\n",
+        &["--check-gcp"],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(r.stdout.contains("leave-one-out RMSE"), "{}", r.stdout);
-    let json = report(&json);
     let left_out = |id: &str| point(&json, id)["left_out"].as_f64().unwrap();
     // The others predict P5 6 m off; each other point is predicted closer (its neighbours,
     // pulled by P5 when they are left out, the least well).

@@ -315,6 +315,30 @@ fn write_tile(input: &Path, keep: &[usize], bounds: (Vect<3>, Vect<3>), out: &Pa
     std::fs::write(out, tile).unwrap();
 }
 
+/// The indices of `pos` in the four quadrants about the medians of x and y.
+fn quadrants(pos: &[Vect<3>]) -> Vec<Vec<usize>> {
+    let mid = |ax: usize| {
+        let mut v: Vec<f64> = pos.iter().map(|p| p[ax]).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (mx, my) = (mid(0), mid(1));
+    (0..4)
+        .map(|q| {
+            (0..pos.len())
+                .filter(|&k| ((pos[k].x >= mx) as usize) + 2 * ((pos[k].y >= my) as usize) == q)
+                .collect()
+        })
+        .collect()
+}
+
+/// The bounds of the samples `keep` of `pos`.
+fn bounds_of(pos: &[Vect<3>], keep: &[usize]) -> (Vect<3>, Vect<3>) {
+    let lo = keep.iter().fold(pos[keep[0]], |a, &k| a.inf(&pos[k]));
+    let hi = keep.iter().fold(pos[keep[0]], |a, &k| a.sup(&pos[k]));
+    (lo, hi)
+}
+
 #[test]
 fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
     let dir = tempfile::tempdir().unwrap();
@@ -347,20 +371,10 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
 
     // Four spatial tiles, each applied alone, merge into the whole.
     let (_, raw, pos, rl) = records(&input);
-    let mid = |ax: usize| {
-        let mut v: Vec<f64> = pos.iter().map(|p| p[ax]).collect();
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    let (mx, my) = (mid(0), mid(1));
     let (_, moved, _, _) = records(&whole);
     let mut covered = 0;
-    for q in 0..4 {
-        let keep: Vec<usize> = (0..pos.len())
-            .filter(|&k| ((pos[k].x >= mx) as usize) + 2 * ((pos[k].y >= my) as usize) == q)
-            .collect();
-        let lo = keep.iter().fold(pos[keep[0]], |a, &k| a.inf(&pos[k]));
-        let hi = keep.iter().fold(pos[keep[0]], |a, &k| a.sup(&pos[k]));
+    for (q, keep) in quadrants(&pos).into_iter().enumerate() {
+        let (lo, hi) = bounds_of(&pos, &keep);
         // The tile's own bounds; for the last tile, bounds that miss a part of it (a wrong
         // header), after which `apply` reads the whole field.
         let wrong = (lo, (lo + hi) * 0.5);
@@ -408,34 +422,17 @@ fn solve_over_tiles_then_apply_equals_deform_of_the_merged_file() {
     )
     .unwrap();
     let (_, _, pos, rl) = records(&input);
-    let bounds = |keep: &[usize]| {
-        let lo = keep.iter().fold(pos[keep[0]], |a, &k| a.inf(&pos[k]));
-        let hi = keep.iter().fold(pos[keep[0]], |a, &k| a.sup(&pos[k]));
-        (lo, hi)
-    };
     // Four tiles by quadrant; the merged file is their records in tile order.
-    let mid = |ax: usize| {
-        let mut v: Vec<f64> = pos.iter().map(|p| p[ax]).collect();
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    let (mx, my) = (mid(0), mid(1));
-    let quadrants: Vec<Vec<usize>> = (0..4)
-        .map(|q| {
-            (0..pos.len())
-                .filter(|&k| ((pos[k].x >= mx) as usize) + 2 * ((pos[k].y >= my) as usize) == q)
-                .collect()
-        })
-        .collect();
+    let quadrants = quadrants(&pos);
     let mut tiles = Vec::new();
     for (q, keep) in quadrants.iter().enumerate() {
         let tile = dir.path().join(format!("tile{q}.las"));
-        write_tile(&input, keep, bounds(keep), &tile);
+        write_tile(&input, keep, bounds_of(&pos, keep), &tile);
         tiles.push(tile);
     }
     let order: Vec<usize> = quadrants.concat();
     let merged = dir.path().join("merged.las");
-    write_tile(&input, &order, bounds(&order), &merged);
+    write_tile(&input, &order, bounds_of(&pos, &order), &merged);
     let merged_out = dir.path().join("merged_out.las");
     let r = deform(&merged, &merged_out, &spec, &[]);
     assert_eq!(r.code, 0, "{}", r.stderr);

@@ -117,6 +117,27 @@ fn params(
     })
 }
 
+/// The arguments `deform` and `solve` share, checked and converted.
+#[allow(clippy::type_complexity)]
+fn inputs(
+    points: &PyReadonlyArray2<f64>,
+    triangles: Option<&PyReadonlyArray2<i64>>,
+    spec_text: &str,
+    base: &str,
+    cell_size: Option<f64>,
+    cells: Option<usize>,
+    transfer: Option<&str>,
+) -> PyResult<(Vec<Vect<3>>, Vec<[u32; 3]>, EditSpec<3>, DeformParams)> {
+    let pts = self::points(points)?;
+    let tris = self::triangles(triangles, pts.len())?;
+    Ok((
+        pts,
+        tris,
+        self::spec(spec_text, base)?,
+        params(cell_size, cells, transfer)?,
+    ))
+}
+
 /// What a deformation did, as a dict.
 fn info_dict<'py>(
     py: Python<'py>,
@@ -169,14 +190,19 @@ fn deform<'py>(
     cells: Option<usize>,
     transfer: Option<&str>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
-    let pts = self::points(&points)?;
+    let (pts, tris, spec, params) = inputs(
+        &points,
+        triangles.as_ref(),
+        spec_text,
+        base,
+        cell_size,
+        cells,
+        transfer,
+    )?;
     let nrm = match &normals {
         Some(n) => self::points(n)?,
         None => Vec::new(),
     };
-    let tris = self::triangles(triangles.as_ref(), pts.len())?;
-    let spec = self::spec(spec_text, base)?;
-    let params = params(cell_size, cells, transfer)?;
     let (moved, moved_normals, _, info) = py
         .detach(|| pipeline::deform_oriented(&pts, &nrm, &tris, &spec, &params, &Silent))
         .map_err(py_err)?;
@@ -262,10 +288,15 @@ fn solve<'py>(
     cells: Option<usize>,
     transfer: Option<&str>,
 ) -> PyResult<(Field, Bound<'py, PyDict>)> {
-    let pts = self::points(&points)?;
-    let tris = self::triangles(triangles.as_ref(), pts.len())?;
-    let spec = self::spec(spec_text, base)?;
-    let params = params(cell_size, cells, transfer)?;
+    let (pts, tris, spec, params) = inputs(
+        &points,
+        triangles.as_ref(),
+        spec_text,
+        base,
+        cell_size,
+        cells,
+        transfer,
+    )?;
     let (saved, _, info) = py
         .detach(|| pipeline::solve_points(&pts, &tris, &spec, &params, &Silent))
         .map_err(py_err)?;

@@ -2,36 +2,19 @@
 output byte-identical to the command line's `apply` of that tile."""
 
 import subprocess
+import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 import rigidcells
-from test_rigidcells import SHARED, cli
+from test_rigidcells import ROOT, SHARED, cli
 
 distributed = pytest.importorskip("dask.distributed")
-laspy = pytest.importorskip("laspy")
-
-
-def cut_tiles(src: Path, out: Path, n: int = 4) -> list:
-    """The scan cut into n × n tiles by x and y quantiles, written as LAS."""
-    las = laspy.read(src)
-    xs = np.quantile(las.x, np.linspace(0, 1, n + 1))
-    ys = np.quantile(las.y, np.linspace(0, 1, n + 1))
-    ix = np.clip(np.searchsorted(xs, las.x, side="right") - 1, 0, n - 1)
-    iy = np.clip(np.searchsorted(ys, las.y, side="right") - 1, 0, n - 1)
-    tiles = []
-    for i in range(n):
-        for j in range(n):
-            keep = (ix == i) & (iy == j)
-            tile = laspy.LasData(las.header)
-            tile.points = las.points[keep].copy()
-            path = out / f"tile_{i}_{j}.las"
-            tile.write(path)
-            tiles.append(path)
-    return tiles
+pytest.importorskip("laspy")
+sys.path.insert(0, str(ROOT / "tools" / "python"))
+from tiles import cut as cut_tiles  # noqa: E402
 
 
 def test_apply_tiles_on_a_local_cluster_matches_the_cli(tmp_path):

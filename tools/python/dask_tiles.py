@@ -17,6 +17,7 @@ from dask.distributed import Client, LocalCluster
 
 import rigidcells
 import rigidcells.dask
+from tiles import cut
 
 
 def main() -> None:
@@ -25,20 +26,10 @@ def main() -> None:
     workers = int(sys.argv[3]) if len(sys.argv) > 3 else 2
     with tempfile.TemporaryDirectory(dir=".") as d:
         d = Path(d)
-        las = laspy.read(src)
-        xs = np.quantile(las.x, np.linspace(0, 1, n + 1))
-        ys = np.quantile(las.y, np.linspace(0, 1, n + 1))
-        ix = np.clip(np.searchsorted(xs, las.x, side="right") - 1, 0, n - 1)
-        iy = np.clip(np.searchsorted(ys, las.y, side="right") - 1, 0, n - 1)
-        tiles = []
-        for i in range(n):
-            for j in range(n):
-                tile = laspy.LasData(las.header)
-                tile.points = las.points[(ix == i) & (iy == j)].copy()
-                path = d / f"tile_{i}_{j}.las"
-                tile.write(path)
-                tiles.append(path)
-        lo, hi = np.array(las.header.mins), np.array(las.header.maxs)
+        tiles = cut(src, d, n)
+        with laspy.open(src) as f:
+            header = f.header
+        lo, hi = np.array(header.mins), np.array(header.maxs)
         w = hi[0] - lo[0]
         spec = {
             "fixed": [{"box": {"min": list(lo - 1), "max": [lo[0] + 0.15 * w, hi[1] + 1, hi[2] + 1]}}],
@@ -48,7 +39,7 @@ def main() -> None:
         }
         field = d / "bend.field"
         rigidcells.deform_file(src, d / "whole.laz", spec, save_field=field, cells=5000)
-        points = len(las.points)
+        points = header.point_count
         (d / "seq").mkdir()
         t = time.perf_counter()
         for tile in tiles:

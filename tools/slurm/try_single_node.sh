@@ -55,21 +55,7 @@ scontrol update nodename="$host" state=resume 2>/dev/null || true
 sinfo
 
 # 2. Tiles, a field, and the reference outputs run here.
-"$python" - "$scan" "$work/tiles" "$n" <<'PY'
-import sys
-from pathlib import Path
-import laspy, numpy as np
-src, out, n = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3])
-out.mkdir(parents=True)
-las = laspy.read(src)
-xs = np.quantile(las.x, np.linspace(0, 1, n + 1)); ys = np.quantile(las.y, np.linspace(0, 1, n + 1))
-ix = np.clip(np.searchsorted(xs, las.x, side="right") - 1, 0, n - 1)
-iy = np.clip(np.searchsorted(ys, las.y, side="right") - 1, 0, n - 1)
-for i in range(n):
-    for j in range(n):
-        t = laspy.LasData(las.header); t.points = las.points[(ix == i) & (iy == j)].copy()
-        t.write(out / f"tile_{i}_{j}.las")
-PY
+"$python" "$repo/tools/python/tiles.py" "$scan" "$work/tiles" "$n" > /dev/null
 read -r x0 y0 z0 x1 y1 z1 < <("$python" -c "import laspy,sys; h=laspy.open(sys.argv[1]).header; print(*h.mins, *h.maxs)" "$scan")
 cat > "$work/bend.toml" <<TOML
 [[fixed]]
