@@ -226,9 +226,9 @@ pub fn solve_points(
         transfer_start,
     } = stages(points, triangles, spec, params, observer)?;
     let control_points = control_results(spec, &solution, &deformer, params, observer)?;
-    drop(deformer);
-    let rbf = match params.transfer {
-        Transfer::Rbf => Some(Rbf::new(&field)?),
+    // The RBF the transfer factorized is the field's: kept, not factorized again.
+    let rbf = match deformer.into_inner() {
+        Deformer::Rbf(r) => Some(r),
         _ => None,
     };
     let info = DeformInfo {
@@ -1045,7 +1045,11 @@ fn transfer_pass(
                     .map(|(at, n)| warp.warp_normal(&(at - origin), n))
                     .collect();
                 s.loose_normals(loose);
-                match s.finish() {
+                // Finishing may be long (a COPC sorts and compresses every point there).
+                observer.stage("finishing", 0);
+                let finished = s.finish();
+                observer.finish();
+                match finished {
                     Err(Error::Retry(_)) if !retried => retried = true,
                     other => return other,
                 }

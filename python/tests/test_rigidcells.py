@@ -120,6 +120,15 @@ def test_a_solved_field_applies_saves_and_loads(tmp_path):
         field.apply(pts + 100.0)
 
 
+def test_an_rbf_field_keeps_the_transfers_coefficients(tmp_path):
+    pts = bar_points()
+    field = rigidcells.solve(pts, BEND, cell_size=0.5, transfer="rbf")
+    moved, _ = rigidcells.deform(pts, BEND, cell_size=0.5, transfer="rbf")
+    assert np.array_equal(field.apply(pts), moved)
+    field.save(tmp_path / "rbf.field")
+    assert np.array_equal(rigidcells.Field.load(tmp_path / "rbf.field").apply(pts), moved)
+
+
 def test_a_structured_array_comes_back_with_only_xyz_changed():
     pts = bar_points()
     dtype = [("X", "<f8"), ("Y", "<f8"), ("Z", "<f8"), ("Intensity", "<u2"), ("Classification", "u1")]

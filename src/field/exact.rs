@@ -235,6 +235,12 @@ impl<const D: usize> Constrained<D>
 where
     Dim<D>: Rigid<D>,
 {
+    /// The transfer inside, for keeping what it built (the RBF's factorized coefficients)
+    /// once the exact layer is no longer needed.
+    pub fn into_inner(self) -> Deformer<D> {
+        self.inner
+    }
+
     /// `inner` for `field`, with `field.prescribed` exact and samples beyond the margin
     /// handled by `outside`. Fails when the field's cells are not the leaves of an octree (a
     /// damaged field file).
