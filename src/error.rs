@@ -98,17 +98,6 @@ pub enum Error {
         /// The cell's edge length.
         size: f64,
     },
-    /// A moved coordinate does not fit the output's integer encoding (LAS) with its scale and
-    /// offset; the pipeline retries with an offset chosen from the moved bounds.
-    #[error("{path}: a moved coordinate does not fit the output's scale and offset")]
-    CoordinateOverflow {
-        /// The output file.
-        path: PathBuf,
-    },
-    /// The output must be written again, now that the whole input has been seen (a LAS header
-    /// that must change with what the points hold).
-    #[error("{0}: the output must be written again")]
-    Retry(PathBuf),
     /// Samples lie beyond the margin of the field's cells, where the field is not defined.
     #[error(
         "{path}: {count} samples lie farther than {margin} outside the field's cells (the \

@@ -14,7 +14,7 @@ use crate::field::{
     Constrained, Deformer, Field, Outside, Rbf, SavedField, Transfer, Warp, apply, apply_into,
     count_foldovers,
 };
-use crate::io::{self, Bounds, Chunk, Sink, Source};
+use crate::io::{self, Accepted, Bounds, Chunk, Sink, Source};
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
 use crate::solve::Selections;
@@ -1004,10 +1004,13 @@ struct Job {
 /// Chunks in flight in pass 2: one being read and warped, one queued, one being written.
 const IN_FLIGHT: usize = 3;
 
-/// Pass 2: streams the source through `warp` into `output`. When a moved coordinate overflows
-/// the output's encoding, the pass finishes computing the moved bounds and runs again with a
-/// sink chosen for them. Samples beyond the field's margin, when `warp` refuses them, fail the
-/// pass before the output is renamed into place.
+/// Pass 2: streams the source through `warp` into `output`. A sink that refuses a chunk
+/// ([`Accepted`]) is dropped, with its temporary file, and the pass runs again with a sink made
+/// for what the refusal showed: after an overflow of the output's encoding the pass first
+/// finishes computing the moved bounds. Each refusal is allowed once: a sink framed for the
+/// moved bounds fits them, and a source that has seen the records makes a header for them.
+/// Samples beyond the field's margin, when `warp` refuses them, fail the pass before the output
+/// is renamed into place.
 fn transfer_pass(
     source: &mut dyn Source,
     output: &Path,
@@ -1017,22 +1020,22 @@ fn transfer_pass(
     observer: &dyn Observer,
 ) -> Result<Vec<String>> {
     let mut bounds = None;
-    let mut retried = false;
+    let mut restarted = false;
     loop {
         source.rewind()?;
         warp.reset_outside();
         let sink = source.sink(output, bounds)?;
-        let (sink, moved_bounds) = pipelined_pass(
-            source,
-            sink,
-            bounds.is_none(),
-            warp,
-            origin,
-            chunk_len,
-            observer,
-        )?;
-        match sink {
-            Some(mut s) => {
+        let (pass, moved_bounds) = pipelined_pass(source, sink, warp, origin, chunk_len, observer)?;
+        match pass {
+            Pass::Refused(Accepted::Overflow) if bounds.is_none() => bounds = Some(moved_bounds),
+            Pass::Refused(Accepted::Restart) if !restarted => restarted = true,
+            Pass::Refused(refusal) => {
+                return Err(Error::Solver(format!(
+                    "{}: the output's writer refused the samples twice ({refusal:?})",
+                    output.display()
+                )));
+            }
+            Pass::Written(mut s) => {
                 if warp.beyond_window() > 0 {
                     // A window of the field met samples outside it: the caller reads the whole
                     // field and starts again; the abandoned output is removed.
@@ -1049,14 +1052,18 @@ fn transfer_pass(
                 observer.stage("finishing", 0);
                 let finished = s.finish();
                 observer.finish();
-                match finished {
-                    Err(Error::Retry(_)) if !retried => retried = true,
-                    other => return other,
-                }
+                return finished;
             }
-            None => bounds = Some(moved_bounds),
         }
     }
+}
+
+/// How one attempt of pass 2 ended.
+enum Pass {
+    /// Every chunk went into the sink, to be finished.
+    Written(Box<dyn Sink>),
+    /// The sink refused a chunk (and was dropped).
+    Refused(Accepted),
 }
 
 /// [`Error::Outside`] when `warp` refuses samples beyond its margin and met some.
@@ -1095,42 +1102,44 @@ pub(crate) fn check_moved<const D: usize>(first: u64, moved: &[Vect<D>]) -> Resu
 }
 
 /// Reads and warps chunks on this thread while a second thread writes the previous ones, so
-/// the sink's encoding, compression and system calls overlap the transfer. Returns the sink
-/// (`None` when it overflowed and `may_overflow` allowed giving up on it) and the moved bounds.
+/// the sink's encoding, compression and system calls overlap the transfer. Returns how the
+/// sink took the chunks and the moved bounds: of every sample, also after an overflow (the
+/// reader goes on), but not after a [`Accepted::Restart`] (the reader stops).
 fn pipelined_pass(
     source: &mut dyn Source,
     sink: Box<dyn Sink>,
-    may_overflow: bool,
     warp: &impl Warp<3>,
     origin: &Vect<3>,
     chunk_len: usize,
     observer: &dyn Observer,
-) -> Result<(Option<Box<dyn Sink>>, Bounds)> {
+) -> Result<(Pass, Bounds)> {
     let mut moved_bounds = (
         Vect::<3>::repeat(f64::INFINITY),
         Vect::<3>::repeat(f64::NEG_INFINITY),
     );
     observer.stage("writing", source.len());
     let raw = sink.needs_raw();
-    let sink = std::thread::scope(|scope| -> Result<Option<Box<dyn Sink>>> {
+    let pass = std::thread::scope(|scope| -> Result<Pass> {
         let (full, queued) = mpsc::sync_channel::<Job>(1);
         let (done, empty) = mpsc::channel::<Job>();
         for _ in 0..IN_FLIGHT {
             done.send(Job::default()).expect("the receiver is alive");
         }
-        let writer = scope.spawn(move || -> Result<Option<Box<dyn Sink>>> {
-            let mut sink = Some(sink);
+        let writer = scope.spawn(move || -> Result<Pass> {
+            let mut pass = Pass::Written(sink);
             for job in queued {
-                if let Some(s) = sink.as_mut() {
-                    match s.write(&job.chunk, &job.moved, &job.normals) {
-                        Err(Error::CoordinateOverflow { .. }) if may_overflow => sink = None,
-                        other => other?,
+                if let Pass::Written(s) = &mut pass {
+                    match s.write(&job.chunk, &job.moved, &job.normals)? {
+                        Accepted::Yes => {}
+                        // Dropping the receiver stops the reader.
+                        Accepted::Restart => return Ok(Pass::Refused(Accepted::Restart)),
+                        Accepted::Overflow => pass = Pass::Refused(Accepted::Overflow),
                     }
                 }
                 // The reader may have stopped early on an error of its own.
                 let _ = done.send(job);
             }
-            Ok(sink)
+            Ok(pass)
         });
         // `recv` fails only when the writer stopped on an error, which `join` returns.
         while let Ok(mut job) = empty.recv() {
@@ -1169,5 +1178,5 @@ fn pipelined_pass(
         writer.join().expect("the writer thread does not panic")
     })?;
     observer.finish();
-    Ok((sink, moved_bounds))
+    Ok((pass, moved_bounds))
 }

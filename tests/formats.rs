@@ -6,7 +6,9 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{deform, records, run, shared};
-use rigidcells::io::{Chunk, Document, LasHeader, PlyRecordStream, PlyStream, Source, XyzStream};
+use rigidcells::io::{
+    Accepted, Chunk, Document, LasHeader, PlyRecordStream, PlyStream, Source, XyzStream,
+};
 use rigidcells::rigid::Vect;
 
 const T: [f64; 3] = [1.5, -2.25, 0.75];
@@ -516,7 +518,10 @@ fn ply_streams_like_the_whole_file_reader() {
         while stream.read(1000, &mut chunk).unwrap() > 0 {
             let moved: Vec<Vect<3>> = chunk.positions.iter().map(|p| p + shift).collect();
             positions.extend_from_slice(&chunk.positions);
-            sink.write(&chunk, &moved, &chunk.normals).unwrap();
+            assert_eq!(
+                sink.write(&chunk, &moved, &chunk.normals).unwrap(),
+                Accepted::Yes
+            );
         }
         sink.finish().unwrap();
         assert_eq!(positions, whole.positions(), "{name}");
@@ -620,7 +625,7 @@ fn xyz_streams_like_the_whole_file_reader() {
     while stream.read(7, &mut chunk).unwrap() > 0 {
         let moved: Vec<Vect<3>> = chunk.positions.iter().map(|p| p + shift).collect();
         positions.extend_from_slice(&chunk.positions);
-        sink.write(&chunk, &moved, &[]).unwrap();
+        assert_eq!(sink.write(&chunk, &moved, &[]).unwrap(), Accepted::Yes);
     }
     sink.finish().unwrap();
     assert_eq!(positions, whole.positions());
@@ -792,5 +797,86 @@ fn outputs_name_rigidcells_and_text_numbers_are_the_shortest_that_round_trip() {
             checked += 1;
         }
         assert!(checked > 10, "{name}: {checked}");
+    }
+}
+
+/// A legacy LAS header counts returns 1 to 5; a scan with returns 6 and 7 is written as LAS 1.4
+/// by a LAZ output. `deform` learns it in pass 1; `apply` reads no pass 1, so its first writer
+/// meets the records only halfway and the output is made again by a writer for them. Both give
+/// the same records, and an output coordinate past the input's frame (a 1e7 m lift) gets a new
+/// offset in a plain LAS, a LAZ and a COPC alike.
+#[test]
+fn outputs_are_made_again_for_what_the_records_hold() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("returns.las");
+    data_gen::write_las_terrain(&input, 20_000, false).unwrap();
+    let h = LasHeader::read(&input).unwrap();
+    let (off, rl) = (h.point_offset as usize, h.record_len as usize);
+    let mut bytes = std::fs::read(&input).unwrap();
+    for i in (12_000..20_000).step_by(97) {
+        // Return 6 (or 7) of 7.
+        bytes[off + i * rl + 14] = (6 + (i % 2) as u8) | 7 << 3;
+    }
+    std::fs::write(&input, &bytes).unwrap();
+    let p = |p: &Path| p.to_str().unwrap().to_string();
+    // The east edge lifted 5 m (the west edge fixed); the whole scan lifted 1e7 m.
+    let fixed =
+        "[[fixed]]\nbox = { min = [499990, 4999990, -100], max = [500300, 5002010, 1000] }\n";
+    for (lift, west, outputs) in [
+        (5.0, 501700, &["d.laz", "a.laz", "a.las"][..]),
+        (1e7, 499990, &["d.las", "d.laz", "d.copc.laz"][..]),
+    ] {
+        let spec = dir.path().join("lift.toml");
+        std::fs::write(
+            &spec,
+            format!(
+                "{}[[handle]]\nbox = {{ min = [{west}, 4999990, -100], max = [502010, 5002010, 1000] }}\n\
+                 translate = [0, 0, {lift}]\n",
+                if lift < 1e3 { fixed } else { "" }
+            ),
+        )
+        .unwrap();
+        let field = dir.path().join("lift.field");
+        let mut reference = None;
+        for name in outputs {
+            let out = dir.path().join(name);
+            let r = if name.starts_with('a') {
+                run(&["apply", &p(&field), &p(&input), "-o", &p(&out)])
+            } else {
+                let f = p(&field);
+                common::deform_verbose(&input, &out, &spec, &["--cells", "300", "--save-field", &f])
+            };
+            assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+            // Notes are a part of the summary, on stdout.
+            let said = |what: &str| r.stdout.contains(what);
+            let (header, raw, pos, out_rl) = records(&out);
+            let laz = name.ends_with(".laz") && !name.contains("copc");
+            if lift == 5.0 && laz {
+                assert_eq!(header.version, (1, 4), "{name}");
+                assert!(said("the output header is LAS 1.4"), "{name}: {}", r.stdout);
+            }
+            if lift == 1e7 {
+                assert!(
+                    said("overflow the input's encoding"),
+                    "{name}: {}",
+                    r.stdout
+                );
+                let top = pos.iter().map(|q| q[2]).fold(f64::MIN, f64::max);
+                assert!((top - 1e7).abs() < 1e3, "{name}: top {top}");
+            }
+            // The same points (a COPC reorders them and converts the records).
+            let mut pos = pos;
+            pos.sort_by(|a, b| a.iter().partial_cmp(b.iter()).unwrap());
+            let returns: Vec<u8> = raw.chunks_exact(out_rl).map(|r| r[14] & 7).collect();
+            match &reference {
+                None => reference = Some((pos, returns)),
+                Some((p0, r0)) => {
+                    assert_eq!(&pos, p0, "{name}");
+                    if !name.contains("copc") {
+                        assert_eq!(&returns, r0, "{name}");
+                    }
+                }
+            }
+        }
     }
 }

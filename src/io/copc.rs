@@ -31,7 +31,7 @@ use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use super::las::{Frame, LasHeader, SOFTWARE, VlrRecord, encode, text_field};
-use super::stream::{Chunk, Sink, TempFile};
+use super::stream::{Accepted, Chunk, Sink, TempFile};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -198,18 +198,19 @@ impl CopcSink {
 }
 
 impl Sink for CopcSink {
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
+    fn write(
+        &mut self,
+        chunk: &Chunk,
+        moved: &[Vect<3>],
+        _normals: &[Vect<3>],
+    ) -> Result<Accepted> {
         let rl = self.input.record_len as usize;
         let mut raw = chunk.raw[..moved.len() * rl].to_vec();
         let (mut lo, mut hi) = (self.lo, self.hi);
-        encode(
-            &mut raw,
-            rl,
-            moved,
-            &self.frame,
-            (&mut lo, &mut hi),
-            &self.output,
-        )?;
+        let accepted = encode(&mut raw, rl, moved, &self.frame, (&mut lo, &mut hi));
+        if accepted != Accepted::Yes {
+            return Ok(accepted);
+        }
         (self.lo, self.hi) = (lo, hi);
         let mut out = std::mem::take(&mut self.buf);
         out.clear();
@@ -220,7 +221,7 @@ impl Sink for CopcSink {
         w.write_all(&out).map_err(|e| Error::write(tmp.path(), e))?;
         self.count += moved.len() as u64;
         self.buf = out;
-        Ok(())
+        Ok(Accepted::Yes)
     }
 
     fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
@@ -701,7 +702,7 @@ mod tests {
         let mut chunk = Chunk::default();
         while src.read(7_000, &mut chunk).unwrap() > 0 {
             let moved = chunk.positions.clone();
-            sink.write(&chunk, &moved, &[]).unwrap();
+            assert_eq!(sink.write(&chunk, &moved, &[]).unwrap(), Accepted::Yes);
         }
         Box::new(sink).finish().unwrap();
         assert_eq!(positions(&input), positions(&output));

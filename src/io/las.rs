@@ -27,7 +27,7 @@ use las::{Builder, LazParallelism, PointData, PointDataBuilder, ReaderOptions, W
 use memmap2::Mmap;
 
 use super::mapped;
-use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
+use super::stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -676,14 +676,14 @@ fn decode(
         ));
         let class = rec[class_at];
         classes.push(if five_bits { class & 0x1f } else { class });
-        let ret = if five_bits {
-            rec[14] & 0x07
-        } else {
-            rec[14] & 0x0f
-        };
-        max_return = max_return.max(ret);
+        max_return = max_return.max(return_number(rec, five_bits));
     }
     max_return
+}
+
+/// A record's return number: 3 bits in formats 0–5 (`five_bits`: 5-bit classes), 4 bits after.
+fn return_number(record: &[u8], five_bits: bool) -> u8 {
+    record[14] & if five_bits { 0x07 } else { 0x0f }
 }
 
 /// The output's scale and offset: the input's, unless `bounds` (of the moved samples, known
@@ -727,33 +727,31 @@ fn output_frame(
     (scale, offset)
 }
 
-/// Writes the moved coordinates into the first 12 bytes of each record of `raw`, tracking
-/// the bounds of the encoded values.
 /// A scale and an offset per axis.
 pub(crate) type Frame = ([f64; 3], [f64; 3]);
 
+/// Writes the moved coordinates into the first 12 bytes of each record of `raw`, tracking
+/// the bounds of the encoded values; [`Accepted::Overflow`] (the records half written) when
+/// one does not fit `frame`.
 pub(crate) fn encode(
     raw: &mut [u8],
     record_len: usize,
     moved: &[Vect<3>],
     (scale, offset): &Frame,
     (lo, hi): (&mut [f64; 3], &mut [f64; 3]),
-    path: &Path,
-) -> Result<()> {
+) -> Accepted {
     for (rec, p) in raw.chunks_exact_mut(record_len).zip(moved) {
         for a in 0..3 {
-            let v = round_to_i32((p[a] - offset[a]) / scale[a]).ok_or_else(|| {
-                Error::CoordinateOverflow {
-                    path: path.to_path_buf(),
-                }
-            })?;
+            let Some(v) = round_to_i32((p[a] - offset[a]) / scale[a]) else {
+                return Accepted::Overflow;
+            };
             rec[4 * a..4 * a + 4].copy_from_slice(&v.to_le_bytes());
             let x = v as f64 * scale[a] + offset[a];
             lo[a] = lo[a].min(x);
             hi[a] = hi[a].max(x);
         }
     }
-    Ok(())
+    Accepted::Yes
 }
 
 /// `r` rounded half away from zero (as `f64::round`), if it fits an `i32`. `f64::round` is a
@@ -816,24 +814,31 @@ impl RawSink {
 }
 
 impl Sink for RawSink {
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
+    fn write(
+        &mut self,
+        chunk: &Chunk,
+        moved: &[Vect<3>],
+        _normals: &[Vect<3>],
+    ) -> Result<Accepted> {
         let rl = self.header.record_len as usize;
         let start = self.header.point_offset as usize + chunk.first as usize * rl;
         self.buf.clear();
         self.buf
             .extend_from_slice(&self.input[start..start + moved.len() * rl]);
-        let target = self.tmp.target().to_path_buf();
-        encode(
+        let frame = (self.scale, self.offset);
+        let accepted = encode(
             &mut self.buf,
             rl,
             moved,
-            &(self.scale, self.offset),
+            &frame,
             (&mut self.lo, &mut self.hi),
-            &target,
-        )?;
-        self.out
-            .write_all(&self.buf)
-            .map_err(|e| Error::write(&target, e))
+        );
+        if accepted == Accepted::Yes {
+            self.out
+                .write_all(&self.buf)
+                .map_err(|e| Error::write(self.tmp.target(), e))?;
+        }
+        Ok(accepted)
     }
 
     /// The records come from the input's map: the source need not copy them.
@@ -889,6 +894,9 @@ struct CrateSink {
     scale: [f64; 3],
     offset: [f64; 3],
     global_encoding: u16,
+    /// The header is LAS 1.0–1.3, whose return counts stop at 5: a record with return 6 or 7
+    /// makes the writer fail at the end ([`Accepted::Restart`] at once instead).
+    legacy_returns: bool,
     notes: Vec<String>,
 }
 
@@ -912,6 +920,7 @@ impl CrateSink {
                 header.version.1
             ));
         }
+        let legacy_returns = b.version < las::Version::new(1, 4);
         let before = b.vlrs.len() + b.evlrs.len();
         b.vlrs.retain(|v| {
             !(v.user_id == "laszip encoded" && v.record_id == 22204) && v.user_id != "copc"
@@ -959,6 +968,7 @@ impl CrateSink {
             scale,
             offset,
             global_encoding: header.global_encoding,
+            legacy_returns,
             notes,
         })
     }
@@ -990,25 +1000,33 @@ impl CrateSink {
 }
 
 impl Sink for CrateSink {
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], _normals: &[Vect<3>]) -> Result<()> {
-        let target = self.target();
+    fn write(
+        &mut self,
+        chunk: &Chunk,
+        moved: &[Vect<3>],
+        _normals: &[Vect<3>],
+    ) -> Result<Accepted> {
+        if self.legacy_returns
+            && (chunk.raw.chunks_exact(chunk.record_len)).any(|r| return_number(r, true) > 5)
+        {
+            return Ok(Accepted::Restart);
+        }
         let start = self.pending.len();
         self.pending.extend_from_slice(&chunk.raw);
         self.record_len = chunk.record_len;
         // The writer computes its header bounds itself.
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        encode(
+        let accepted = encode(
             &mut self.pending[start..],
             chunk.record_len,
             moved,
             &(self.scale, self.offset),
             (&mut lo, &mut hi),
-            &target,
-        )?;
-        if self.pending.len() >= LAZ_BATCH * chunk.record_len {
+        );
+        if accepted == Accepted::Yes && self.pending.len() >= LAZ_BATCH * chunk.record_len {
             self.flush()?;
         }
-        Ok(())
+        Ok(accepted)
     }
 
     fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
@@ -1017,10 +1035,7 @@ impl Sink for CrateSink {
         let mut writer = self.writer.take().expect("writer open until finish");
         if let Err(e) = writer.close() {
             std::mem::forget(writer);
-            return Err(match e {
-                las::Error::ReturnNumber { .. } => Error::Retry(target),
-                e => Error::format(&target, format!("{e}")),
-            });
+            return Err(Error::format(&target, format!("{e}")));
         }
         drop(writer);
         // Restore the global encoding word (waveform bits) that the crate reduces.

@@ -21,7 +21,7 @@ pub use las::{LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord};
 pub use obj::ObjFile;
 pub use ply::{Colors, PlyFile, colors};
 pub use ply_stream::{PlyRecordStream, PlyStream};
-pub use stream::{Bounds, Chunk, Sink, Source, TempFile};
+pub use stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
 pub use tiles::Tiles;
 pub use xy::XyFile;
 pub use xyz::{XyzFile, XyzStream};
@@ -134,10 +134,15 @@ struct DocumentSink {
 }
 
 impl Sink for DocumentSink {
-    fn write(&mut self, _chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
+    fn write(
+        &mut self,
+        _chunk: &Chunk,
+        moved: &[Vect<3>],
+        normals: &[Vect<3>],
+    ) -> Result<Accepted> {
         self.positions.extend_from_slice(moved);
         self.normals.extend_from_slice(normals);
-        Ok(())
+        Ok(Accepted::Yes)
     }
 
     fn loose_normals(&mut self, normals: Vec<Vect<3>>) {

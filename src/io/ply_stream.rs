@@ -26,7 +26,7 @@ use super::ply::{
     VertexFields, Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element,
 };
 use super::require_extension;
-use super::stream::{Bounds, Chunk, Sink, Source, TempFile};
+use super::stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
 use super::text::SpanSink;
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
@@ -309,7 +309,7 @@ impl PlySink {
 }
 
 impl Sink for PlySink {
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<Accepted> {
         let map = self.map.clone();
         let l = self.layout;
         if chunk.first as usize != self.next || self.next + moved.len() > l.count {
@@ -339,7 +339,7 @@ impl Sink for PlySink {
         self.put(&buf)?;
         self.buf = buf;
         self.next += moved.len();
-        Ok(())
+        Ok(Accepted::Yes)
     }
 
     fn finish(mut self: Box<Self>) -> Result<Vec<String>> {

@@ -101,12 +101,28 @@ pub trait Source {
     fn sink(&self, output: &Path, bounds: Option<Bounds>) -> Result<Box<dyn Sink>>;
 }
 
+/// What a [`Sink`] made of a chunk. The two refusals are not errors: the output is made again
+/// by a sink chosen for what the refused chunk showed, and the user sees a note.
+#[must_use]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Accepted {
+    /// Written (or buffered for writing).
+    Yes,
+    /// A moved coordinate does not fit the output's integer encoding (a LAS scale and offset):
+    /// the pass goes on without writing to learn the moved bounds, and a sink framed for them
+    /// ([`Source::sink`] with `bounds`) writes the output again.
+    Overflow,
+    /// The header already written cannot describe the records (return numbers 6 and 7 under a
+    /// legacy LAS header, in a file whose first pass the caller skipped): a sink made now, by
+    /// a source that has seen them, writes the output again.
+    Restart,
+}
+
 /// The output of a [`Source`]'s samples after deformation.
 pub trait Sink: Send {
     /// Writes the next chunk with its moved samples and normals (empty when the chunk has
-    /// none). Returns [`Error::CoordinateOverflow`] when a coordinate does not fit the output's
-    /// encoding; the caller then makes a new sink with the moved bounds.
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()>;
+    /// none), or says why this sink cannot ([`Accepted`]); the caller then makes a new one.
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<Accepted>;
     /// Whether [`Sink::write`] needs the chunks' raw records; a sink that reads them from the
     /// input itself (a memory-mapped LAS) lets the source skip copying them
     /// ([`Source::read_samples`]).

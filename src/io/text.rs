@@ -7,7 +7,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use super::require_extension;
-use super::stream::{Chunk, Sink, TempFile};
+use super::stream::{Accepted, Chunk, Sink, TempFile};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -155,7 +155,7 @@ impl SpanSink {
 }
 
 impl Sink for SpanSink {
-    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<()> {
+    fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<Accepted> {
         let with_normals = !chunk.normals.is_empty();
         let stride = if with_normals { 6 } else { 3 };
         check_count(&self.input, chunk.spans.len(), stride * moved.len())?;
@@ -173,7 +173,8 @@ impl Sink for SpanSink {
         }
         self.out
             .write_all(&rewrite(&chunk.raw, edits, self.numbers))
-            .map_err(|e| Error::write(self.file.target(), e))
+            .map_err(|e| Error::write(self.file.target(), e))?;
+        Ok(Accepted::Yes)
     }
 
     fn finish(self: Box<Self>) -> Result<Vec<String>> {
