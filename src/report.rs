@@ -221,3 +221,88 @@ fn peak_memory() -> Option<u64> {
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
 }
+
+/// The summary `deform` prints on stdout, as a Rust or Python caller can print it too: the
+/// notes, what was made, the solve, the timings, the fold-overs, the control points' table and
+/// the constraints' residuals. The warnings are apart ([`Report::warnings`], on stderr).
+pub struct Summary<'a> {
+    /// The report of the deformation.
+    pub report: &'a Report,
+    /// What [`crate::pipeline::deform_file`] returned with it.
+    pub file: &'a FileInfo,
+}
+
+impl std::fmt::Display for Summary<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (r, d) = (self.report, &self.file.deform);
+        let s = &d.solver;
+        for n in &self.file.notes {
+            writeln!(f, "note: {n}")?;
+        }
+        let inside = match d.build.inside {
+            crate::cells::Inside::Winding => "winding number",
+            crate::cells::Inside::Flood => "flood fill",
+            _ => "none",
+        };
+        write!(
+            f,
+            "{} -> {}: {} points, {} cells ({} boundary, {} interior by {inside})",
+            r.input,
+            r.output,
+            r.points,
+            s.cells_final,
+            d.build.boundary_cells,
+            d.build.interior_cells,
+        )?;
+        if !s.refinements.is_empty() {
+            write!(
+                f,
+                ", refined from {} to {} cells",
+                s.cells_initial, s.cells_final
+            )?;
+        }
+        writeln!(
+            f,
+            "\n  solve: {} load steps, {} Gauss-Newton iterations, energy {:.3e}, {:.2} s \
+             ({:.1} ms/iteration){}",
+            s.load_steps,
+            s.iterations,
+            s.energies.last().copied().unwrap_or(0.0),
+            s.seconds,
+            1e3 * s.seconds_per_iteration(),
+            if s.converged {
+                ""
+            } else {
+                ", stopped at the iteration limit"
+            }
+        )?;
+        writeln!(
+            f,
+            "  cells {:.2} s, transfer {:.2} s",
+            d.build.seconds, d.seconds_transfer
+        )?;
+        let (checked, folded) = d.foldovers;
+        if checked > 0 {
+            writeln!(f, "  fold-overs: {folded} of {checked} samples checked")?;
+        }
+        let table = crate::control::table(&d.control_points, 10);
+        if !table.is_empty() {
+            writeln!(f, "{table}")?;
+        }
+        if r.residual_samples > 0 {
+            write!(
+                f,
+                "  constraints: fixed samples within {:.3e} of their rest positions, handle \
+                 samples within {:.3e} of where they were sent ({} checked);",
+                r.residual_fixed_max, r.residual_handle_max, r.residual_samples,
+            )?;
+        } else {
+            write!(f, " ")?;
+        }
+        write!(f, " total {:.2} s", r.timings_s.total)?;
+        if let Some(b) = r.peak_memory_bytes {
+            write!(f, ", peak memory {} MB", b >> 20)?;
+        }
+        writeln!(f)
+    }
+}

@@ -8,7 +8,7 @@ use rigidcells::field::Transfer;
 use rigidcells::io::refuse_overwrite;
 use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
 use rigidcells::render::{self, View};
-use rigidcells::report::Report;
+use rigidcells::report::{Report, Summary};
 use rigidcells::solve::Solution;
 use rigidcells::spec::read_spec;
 
@@ -155,22 +155,15 @@ pub(super) fn deform_file(
         preview_image(&solution, &info, &view, strain).write_png(path)?;
     }
     if !quiet {
-        report(input, output, &info);
-        let checked = if summary.residual_samples > 0 {
-            format!(
-                "  constraints: fixed samples within {:.3e} of their rest positions, handle \
-                 samples within {:.3e} of where they were sent ({} checked);",
-                summary.residual_fixed_max, summary.residual_handle_max, summary.residual_samples,
-            )
-        } else {
-            " ".to_string()
-        };
-        println!(
-            "{checked} total {:.2} s{}",
-            summary.timings_s.total,
-            summary
-                .peak_memory_bytes
-                .map_or(String::new(), |b| format!(", peak memory {} MB", b >> 20))
+        for w in &summary.warnings {
+            eprintln!("warning: {w}");
+        }
+        print!(
+            "{}",
+            Summary {
+                report: &summary,
+                file: &info
+            }
         );
     }
     Ok(())
@@ -411,61 +404,6 @@ pub(super) fn run_info(input: &Path) -> anyhow::Result<()> {
     let info = rigidcells::info::describe(input, &Bar::new(false))?;
     print!("{info}");
     Ok(())
-}
-
-pub(super) fn report(input: &Path, output: &Path, file: &FileInfo) {
-    let info = &file.deform;
-    let points = file.samples;
-    for w in &info.warnings {
-        eprintln!("warning: {w}");
-    }
-    for n in &file.notes {
-        println!("note: {n}");
-    }
-    let s = &info.solver;
-    println!(
-        "{} -> {}: {points} points, {} cells ({} boundary, {} interior by {}){}",
-        input.display(),
-        output.display(),
-        s.cells_final,
-        info.build.boundary_cells,
-        info.build.interior_cells,
-        match info.build.inside {
-            Inside::Winding => "winding number",
-            Inside::Flood => "flood fill",
-            _ => "none",
-        },
-        if s.refinements.is_empty() {
-            String::new()
-        } else {
-            format!(
-                ", refined from {} to {} cells",
-                s.cells_initial, s.cells_final
-            )
-        }
-    );
-    println!(
-        "  solve: {} load steps, {} Gauss-Newton iterations, energy {:.3e}, {:.2} s ({:.1} ms/iteration){}",
-        s.load_steps,
-        s.iterations,
-        s.energies.last().copied().unwrap_or(0.0),
-        s.seconds,
-        1e3 * s.seconds_per_iteration(),
-        if s.converged {
-            ""
-        } else {
-            ", stopped at the iteration limit"
-        }
-    );
-    println!(
-        "  cells {:.2} s, transfer {:.2} s",
-        info.build.seconds, info.seconds_transfer
-    );
-    let (checked, folded) = info.foldovers;
-    if checked > 0 {
-        println!("  fold-overs: {folded} of {checked} samples checked");
-    }
-    print_control_points(&info.control_points);
 }
 
 /// The control points' table: the ten largest residuals and the RMSE.
