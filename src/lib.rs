@@ -50,6 +50,7 @@
 pub mod cells;
 pub mod control;
 pub mod demo;
+pub mod edit;
 pub mod error;
 pub mod field;
 pub mod image;

@@ -279,10 +279,7 @@ where
     );
     warnings.extend(solution.info.refinement_stopped.clone());
     let transfer_start = Instant::now();
-    check_rbf_memory::<D>(solution.complex.len(), params)?;
-    let field = Field::from_solution(&solution);
-    let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
-    let deformer = Constrained::new(&field, inner, Outside::Extend)?;
+    let (field, deformer) = transfer_of(&solution, params)?;
     Ok(Staged {
         solution,
         field,
@@ -291,6 +288,22 @@ where
         warnings,
         transfer_start,
     })
+}
+
+/// The field of `solution` and its transfer (`params.transfer`) with exact constraints, for
+/// samples in memory (extrapolated outside the cells, as [`deform`] does).
+pub fn transfer_of<const D: usize>(
+    solution: &Solution<D>,
+    params: &DeformParams,
+) -> Result<(Field<D>, Constrained<D>)>
+where
+    Dim<D>: Rigid<D>,
+{
+    check_rbf_memory::<D>(solution.complex.len(), params)?;
+    let field = Field::from_solution(solution);
+    let inner = Deformer::new(&field, params.transfer)?.with_rbf_tolerance(params.rbf_tolerance)?;
+    let deformer = Constrained::new(&field, inner, Outside::Extend)?;
+    Ok((field, deformer))
 }
 
 /// [`crate::memory::check`] of the dense RBF of `cells` cells, when that is the transfer:
@@ -321,7 +334,7 @@ pub const FOLDOVER_SAMPLES: usize = 100_000;
 /// steps by up to the cells' misfit there. With a thousandth of a cell those steps read as huge
 /// derivatives: 326 of the 2,690 vertices of the demo bar, all on cell corners, "folded" under
 /// a plain lift. Space folds over at the scale of cells, which a tenth of one resolves.
-fn check_foldovers<const D: usize>(
+pub fn check_foldovers<const D: usize>(
     warp: &impl Warp<D>,
     solution: &Solution<D>,
     samples: &[Vect<D>],

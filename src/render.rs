@@ -767,51 +767,88 @@ pub fn render_file(input: &Path, view: &View) -> Result<Image> {
             ))
         }
         Err(Error::UnsupportedFormat { .. }) => {
-            let (points, colors) = colored_points(input, RENDER_POINTS)?;
-            Ok(render_annotated(&points, &[], None, |i| colors[i], view))
+            let p = colored_points(input, RENDER_POINTS, &crate::progress::Silent)?;
+            Ok(render_annotated(
+                &p.points,
+                &[],
+                None,
+                |i| p.colors[i],
+                view,
+            ))
         }
         Err(e) => Err(e),
     }
 }
 
-/// Every k-th sample of a streamed file (at most `max`) with its color: LAS RGB when the point
-/// format has it, else LAS intensity as gray, else a neutral gray. Intensities and 16-bit RGB
-/// are scaled by the file's own range.
-pub fn colored_points(input: &Path, max: usize) -> Result<(Vec<Vect<3>>, Vec<[u8; 3]>)> {
+/// Every k-th sample of a streamed file with its color and LAS class: a decimated proxy for
+/// pictures and the editor.
+#[derive(Debug, Clone, Default)]
+pub struct ColoredPoints {
+    /// World coordinates.
+    pub points: Vec<Vect<3>>,
+    /// LAS RGB when the point format has it, else LAS intensity as gray, else a neutral gray;
+    /// intensities and 16-bit RGB scaled by the file's own range.
+    pub colors: Vec<[u8; 3]>,
+    /// LAS classes (empty for formats without them).
+    pub classes: Vec<u8>,
+    /// Samples from one kept to the next.
+    pub stride: u64,
+    /// Samples in the file.
+    pub total: u64,
+}
+
+/// Every k-th sample of a streamed file (at most `max`) with its color and class
+/// ([`ColoredPoints`]).
+pub fn colored_points(
+    input: &Path,
+    max: usize,
+    observer: &dyn crate::progress::Observer,
+) -> Result<ColoredPoints> {
     let mut source = crate::io::open(input)?;
-    let stride = (source.len() as usize).div_ceil(max.max(1)).max(1);
+    let total = source.len();
+    let stride = (total as usize).div_ceil(max.max(1)).max(1);
     let las = crate::io::LasHeader::read(input).ok();
     let mut chunk = crate::io::Chunk::default();
-    let (mut points, mut raw_colors) = (Vec::new(), Vec::new());
+    let mut out = ColoredPoints {
+        stride: stride as u64,
+        total,
+        ..Default::default()
+    };
+    let mut raw_colors = Vec::new();
     let mut index = 0usize;
+    observer.stage("reading", total);
     loop {
         let n = source.read(1 << 16, &mut chunk)?;
         if n == 0 {
             break;
         }
-        for i in 0..n {
-            if (index + i).is_multiple_of(stride) {
-                points.push(chunk.positions[i]);
-                let rec = (chunk.record_len > 0)
-                    .then(|| &chunk.raw[i * chunk.record_len..(i + 1) * chunk.record_len]);
-                raw_colors.push(las.as_ref().zip(rec).map(|(h, r)| h.color(r)));
+        let first = (stride - index % stride) % stride;
+        for i in (first..n).step_by(stride) {
+            out.points.push(chunk.positions[i]);
+            if let Some(&c) = chunk.classes.get(i) {
+                out.classes.push(c);
             }
+            let rec = (chunk.record_len > 0)
+                .then(|| &chunk.raw[i * chunk.record_len..(i + 1) * chunk.record_len]);
+            raw_colors.push(las.as_ref().zip(rec).map(|(h, r)| h.color(r)));
         }
         index += n;
+        observer.advance(n as u64);
     }
+    observer.finish();
     let top = raw_colors
         .iter()
         .flatten()
         .flatten()
         .fold(1u16, |a, &b| a.max(b));
-    let colors = raw_colors
+    out.colors = raw_colors
         .into_iter()
         .map(|c| match c {
             Some(rgb) => rgb.map(|v| (v as u32 * 255 / top as u32) as u8),
             None => [200, 200, 200],
         })
         .collect();
-    Ok((points, colors))
+    Ok(out)
 }
 
 #[cfg(test)]

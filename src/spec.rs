@@ -29,7 +29,10 @@
 //! A region is one or more of `box`, `sphere`, `plane` (the half-space behind `normal`, i.e.
 //! the points `x` with `(x − point)·normal ≤ 0`), `polygon = [[x, y], ..]` or
 //! `polygon_file = "area.geojson"` (a prism over x, y, with an optional height range
-//! `z = [lo, hi]`), `indices = "file.txt"` (sample indices, whitespace or comma separated,
+//! `z = [lo, hi]`; or, with `view = [[..] × 4]`, a lasso drawn on a screen: the polygon is in
+//! the view's normalized device coordinates `[-1, 1]²` and the region is every point in front
+//! of the camera that the 4×4 world-to-clip matrix projects into it, as the editor writes it),
+//! `indices = "file.txt"` (sample indices, whitespace or comma separated,
 //! 0-based) or `classification = [..]` (LAS classes); several in one entry combine (a sample
 //! must satisfy all), and `invert = true` takes the rest. A handle's transform is
 //! `A(x) = S·R·(x − pivot) + pivot + translate`, or a general affine `matrix` (row-major 4×4 in
@@ -77,6 +80,15 @@ pub enum Region<const D: usize> {
     /// (3D; all heights when `None`). Several rings combine by the even–odd rule: a ring inside
     /// another is a hole, and disjoint rings are a union.
     Polygon(Polygon),
+    /// The points in front of a camera that project into a polygon on its screen: `view` is
+    /// the row-major world-to-clip matrix, the polygon's rings are in normalized device
+    /// coordinates (`x/w, y/w`), `w > 0` is in front (3D; the editor's box and lasso).
+    Screen {
+        /// The world-to-clip matrix.
+        view: [[f64; 4]; 4],
+        /// The polygon on the screen (no height range).
+        polygon: Polygon,
+    },
     /// The samples every region selects (an entry with several region keys).
     All(Vec<Region<D>>),
     /// The samples the region does not select (`invert = true`).
@@ -139,7 +151,11 @@ impl<const D: usize> Region<D> {
     /// selection of samples by index or attribute.
     pub fn is_geometric(&self) -> bool {
         match self {
-            Self::Box { .. } | Self::Sphere { .. } | Self::Plane { .. } | Self::Polygon(_) => true,
+            Self::Box { .. }
+            | Self::Sphere { .. }
+            | Self::Plane { .. }
+            | Self::Polygon(_)
+            | Self::Screen { .. } => true,
             Self::Indices(_) | Self::Classification(_) => false,
             Self::All(parts) => parts.iter().all(Self::is_geometric),
             Self::Not(r) => r.is_geometric(),
@@ -164,6 +180,11 @@ impl<const D: usize> Region<D> {
             Self::Sphere { center, radius } => (x - center).norm_squared() <= radius * radius,
             Self::Plane { point, normal } => (x - point).dot(normal) <= 0.0,
             Self::Polygon(p) => p.contains(x[0], x[1], (D > 2).then(|| x[D - 1])),
+            Self::Screen { view, polygon } => {
+                let row = |r: &[f64; 4]| (0..D).map(|a| r[a] * x[a]).sum::<f64>() + r[3];
+                let w = row(&view[3]);
+                w > 0.0 && polygon.contains(row(&view[0]) / w, row(&view[1]) / w, None)
+            }
             Self::All(parts) => parts.iter().all(|r| r.contains_point(x)),
             Self::Not(r) => r.is_geometric() && !r.contains_point(x),
             Self::Indices(_) | Self::Classification(_) => false,
@@ -398,7 +419,7 @@ const REGION_KEYS: [&str; 7] = [
     "polygon_file",
 ];
 /// Keys that qualify a selection.
-const SELECTION_KEYS: [&str; 2] = ["z", "invert"];
+const SELECTION_KEYS: [&str; 3] = ["z", "invert", "view"];
 
 /// Reads and validates the edit spec in `path`.
 pub fn read_spec<const D: usize>(path: &Path) -> Result<EditSpec<D>>
@@ -609,6 +630,12 @@ impl Ctx<'_> {
                 "`polygon` and `polygon_file` exclude each other".into(),
             ));
         }
+        if t.contains_key("view") && !present.contains(&"polygon") {
+            return Err(self.error(
+                Some(line),
+                "`view` (a screen's world-to-clip matrix) goes with a `polygon`".into(),
+            ));
+        }
         if t.contains_key("z") && !present.iter().any(|k| k.starts_with("polygon")) {
             return Err(self.error(
                 Some(line),
@@ -685,6 +712,9 @@ impl Ctx<'_> {
                     let file: String = self.field(t, key, line)?;
                     self.read_geojson(&file)?
                 };
+                if t.contains_key("view") {
+                    return self.screen::<D>(t, rings, line);
+                }
                 let z = match t.get("z") {
                     Some(_) if D == 2 => {
                         return Err(self.error(Some(line), "`z` is for 3D inputs".into()));
@@ -709,6 +739,38 @@ impl Ctx<'_> {
                 let classes: Vec<u8> = self.field(t, key, line)?;
                 Region::Classification(classes.into_iter().collect())
             }
+        })
+    }
+
+    /// A `polygon` on the screen of `view`.
+    fn screen<const D: usize>(
+        &self,
+        t: &toml::Table,
+        rings: Vec<Vec<[f64; 2]>>,
+        line: usize,
+    ) -> Result<Region<D>> {
+        if D != 3 || t.contains_key("z") {
+            return Err(self.error(Some(line), "`view` is for 3D inputs, without `z`".into()));
+        }
+        let rows: Vec<Vec<f64>> = self.field(t, "view", line)?;
+        let mut view = [[0.0; 4]; 4];
+        if rows.len() != 4 || rows.iter().any(|r| r.len() != 4) {
+            return Err(self.error(Some(line), "`view` must be 4 rows of 4 numbers".into()));
+        }
+        for (out, row) in view.iter_mut().zip(&rows) {
+            for (o, v) in out.iter_mut().zip(row) {
+                if !v.is_finite() {
+                    return Err(self.error(
+                        Some(line),
+                        "`view` holds a number that is not finite".into(),
+                    ));
+                }
+                *o = *v;
+            }
+        }
+        Ok(Region::Screen {
+            view,
+            polygon: Polygon::new(rings, None),
         })
     }
 

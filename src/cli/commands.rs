@@ -440,3 +440,37 @@ pub(super) fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// `edit`: load the proxy, build the cells, serve the page until interrupted.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run_edit(
+    input: &Path,
+    port: u16,
+    open: bool,
+    proxy: usize,
+    transfer: Transfer,
+    cells: &CellArgs,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    if proxy == 0 {
+        return Err(Error::Param("--proxy 0: the page needs samples to show".into()).into());
+    }
+    let (build, solve) = cells.params()?;
+    let params = DeformParams {
+        build,
+        solve,
+        transfer,
+        ..Default::default()
+    };
+    let scene = rigidcells::edit::Scene::load(input, proxy, &Bar::new(quiet))?;
+    let editor = rigidcells::edit::Editor::new(scene, params)?;
+    let server = rigidcells::edit::server::Server::bind(editor, port)?;
+    println!("{}", server.url());
+    if open {
+        let _ = std::process::Command::new("xdg-open")
+            .arg(server.url())
+            .spawn();
+    }
+    server.run()?;
+    Ok(())
+}

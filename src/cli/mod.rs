@@ -144,6 +144,30 @@ enum Command {
         /// Input file.
         input: PathBuf,
     },
+    /// Edit interactively in the browser: select fixed and handle regions on a proxy of the
+    /// input, drag the handle and see the shape follow; save the edit spec, or apply it to the
+    /// whole file. Serves on 127.0.0.1 only, behind a random token in the printed address.
+    Edit {
+        /// Input file (LAS/LAZ, PLY, OBJ, XYZ).
+        input: PathBuf,
+        /// Port to listen on (0: any free one).
+        #[arg(long, default_value_t = 0)]
+        port: u16,
+        /// Open the page in the system's browser.
+        #[arg(long)]
+        open: bool,
+        /// The most samples in the proxy the page shows and the cells are built from.
+        #[arg(long, default_value_t = pipeline::PROXY_SAMPLES)]
+        proxy: usize,
+        /// Transfer of the cells' motions to the samples on release and on Apply.
+        #[arg(long, value_enum, default_value_t = TransferArg::Pu)]
+        transfer: TransferArg,
+        #[command(flatten)]
+        cells: CellArgs,
+        /// Print nothing but the address and errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Generate a bar, a non-manifold soup and a 2D picture, deform them, and write inputs and
     /// results.
     Demo {
@@ -547,6 +571,15 @@ pub(crate) fn main() -> ExitCode {
             quiet,
         } => run_cells(&input, &output, edit.as_deref(), &cells, quiet),
         Command::Demo { out, quiet } => run_demo(&out, quiet),
+        Command::Edit {
+            input,
+            port,
+            open,
+            proxy,
+            transfer,
+            cells,
+            quiet,
+        } => run_edit(&input, port, open, proxy, transfer.into(), &cells, quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,505 @@
+//! The interactive editor (`rigidcells edit`): the paper's setting, in a browser.
+//!
+//! The server ([`server`]) holds an [`Editor`]: a decimated proxy of the input ([`Scene`], at
+//! most [`crate::pipeline::PROXY_SAMPLES`] samples), the cells built from it once, and a
+//! [`Session`] that re-solves warm (Gauss-Newton from the current motions, the symbolic
+//! factorization kept) each time the page moves a handle. The page sends the whole edit
+//! ([`Edit`]: its selections and handle poses) on every change; the editor writes it as an edit
+//! spec in TOML ([`Editor::spec_text`]) — the file *Save edit* writes and the CLI reads — and
+//! parses that same text, so what the page shows and what `deform --edit` computes come from
+//! one spec. When only the poses changed, the resolved constraints are kept and only the handle
+//! maps are replaced (no pass over the proxy); a new selection resolves them again and starts
+//! a new session from rest.
+//!
+//! While dragging, the page blends the cells' motions itself on the GPU ([`Editor::blend`]:
+//! each proxy sample's four nearest cells and weights, the continuous blend of
+//! [`crate::field::Blend`], sent once), so drawing costs the same whatever the solver does. On
+//! release, [`Editor::release`] runs the chosen transfer on the proxy with the exact
+//! constraints, and counts fold-overs as `deform` does.
+//!
+//! Coordinates on the wire are relative to the proxy's center ([`Scene::center`]) in `f32`, so
+//! georeferenced scans keep their detail on the GPU; the spec is written in the input's own
+//! coordinates in `f64`.
+
+pub mod server;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::Deserialize;
+
+use crate::cells::CellComplex;
+use crate::error::{Error, Result};
+use crate::field::{Blend, Field, Prescribed, Weights};
+use crate::pipeline::DeformParams;
+use crate::progress::Observer;
+use crate::rigid::{Motion, Vect};
+use crate::solve::{self, Constraints, Session};
+use crate::spec::EditSpec;
+
+/// The proxy of the input the editor shows and solves on.
+#[derive(Debug, Clone, Default)]
+pub struct Scene {
+    /// The input file.
+    pub input: PathBuf,
+    /// Samples (world coordinates).
+    pub points: Vec<Vect<3>>,
+    /// One color per sample (LAS RGB or intensity, a PLY's vertex colors, else gray).
+    pub colors: Vec<[u8; 3]>,
+    /// LAS classes per sample (empty when the format has none).
+    pub classes: Vec<u8>,
+    /// Triangles over the samples (a mesh whose vertices the proxy holds all).
+    pub triangles: Vec<[u32; 3]>,
+    /// The center of the samples' bounds: the origin of the coordinates on the wire.
+    pub center: Vect<3>,
+    /// Bounds of the samples.
+    pub bounds: (Vect<3>, Vect<3>),
+    /// Samples in the file.
+    pub total: u64,
+    /// The vertical axis (0, 1, 2), as `render` decides it.
+    pub up: usize,
+}
+
+impl Scene {
+    /// Reads at most `max` samples of `input`: a mesh or small PLY/OBJ/XYZ whole (with its
+    /// triangles and PLY colors), a streamed file every k-th sample.
+    pub fn load(input: &Path, max: usize, observer: &dyn Observer) -> Result<Self> {
+        let mut scene = match crate::io::Document::read(input) {
+            Ok(doc) if doc.positions().len() <= max => {
+                let colors = match crate::io::extension(input).as_deref() {
+                    Some("ply") => crate::io::colors(input)?,
+                    _ => None,
+                };
+                let n = doc.positions().len();
+                let colors = match colors {
+                    Some(crate::io::Colors::Vertices(c)) if c.len() == n => c,
+                    _ => vec![[200, 200, 200]; n],
+                };
+                Scene {
+                    points: doc.positions().to_vec(),
+                    colors,
+                    triangles: doc.triangles().to_vec(),
+                    total: n as u64,
+                    ..Default::default()
+                }
+            }
+            Ok(_) | Err(Error::UnsupportedFormat { .. }) => {
+                let p = crate::render::colored_points(input, max, observer)?;
+                Scene {
+                    points: p.points,
+                    colors: p.colors,
+                    classes: p.classes,
+                    total: p.total,
+                    ..Default::default()
+                }
+            }
+            Err(e) => return Err(e),
+        };
+        let Some(bounds) = crate::render::bounds(&scene.points) else {
+            return Err(Error::format(input, "no samples to edit"));
+        };
+        scene.input = input.to_path_buf();
+        scene.center = (bounds.0 + bounds.1) * 0.5;
+        scene.bounds = bounds;
+        scene.up = crate::render::up_of(input);
+        Ok(scene)
+    }
+
+    /// The samples relative to [`Scene::center`], as `f32` triples.
+    pub fn relative(&self) -> Vec<f32> {
+        self.points
+            .iter()
+            .flat_map(|p| {
+                (p - self.center)
+                    .iter()
+                    .map(|&v| v as f32)
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    }
+}
+
+/// A selection the page made: a box or lasso on the screen (`polygon` in normalized device
+/// coordinates with the `view` it was drawn in), LAS classes, or both (then both must hold).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Selection {
+    /// The polygon on the screen, `[-1, 1]²`.
+    #[serde(default)]
+    pub polygon: Option<Vec<[f64; 2]>>,
+    /// The row-major world-to-clip matrix of the view, in coordinates relative to
+    /// [`Scene::center`].
+    #[serde(default)]
+    pub view: Option<[[f64; 4]; 4]>,
+    /// LAS classes.
+    #[serde(default)]
+    pub classification: Option<Vec<u8>>,
+}
+
+/// A handle: its selections and its pose.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HandleEdit {
+    /// What it holds (a union).
+    pub selections: Vec<Selection>,
+    /// Its translation.
+    #[serde(default)]
+    pub translate: [f64; 3],
+    /// The axis of its rotation.
+    #[serde(default = "z_axis")]
+    pub axis: [f64; 3],
+    /// The angle of its rotation about `pivot`, in degrees.
+    #[serde(default)]
+    pub degrees: f64,
+    /// The center of its rotation, relative to [`Scene::center`].
+    #[serde(default)]
+    pub pivot: [f64; 3],
+}
+
+fn z_axis() -> [f64; 3] {
+    [0.0, 0.0, 1.0]
+}
+
+/// The whole edit as the page holds it.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Edit {
+    /// Fixed selections (a union).
+    #[serde(default)]
+    pub fixed: Vec<Selection>,
+    /// Handles.
+    #[serde(default)]
+    pub handles: Vec<HandleEdit>,
+    /// Pins: points (relative) held where they are.
+    #[serde(default)]
+    pub pins: Vec<[f64; 3]>,
+}
+
+/// The cells' motions after a solve, for the page: per cell the affine map
+/// `x' = A x + b` of relative coordinates, and its strain.
+#[derive(Debug, Clone, Default)]
+pub struct Motions {
+    /// Per cell: `A` row-major then `b`, 12 numbers.
+    pub maps: Vec<f32>,
+    /// Per cell: the strain (the glue energy's misfit, as `--preview` colors it).
+    pub strain: Vec<f32>,
+    /// Gauss-Newton iterations of this solve.
+    pub iterations: usize,
+    /// Seconds of this solve.
+    pub seconds: f64,
+    /// The solver's warnings (parts kept at rest, …).
+    pub warnings: Vec<String>,
+}
+
+/// The proxy deformed by the final transfer.
+#[derive(Debug, Clone, Default)]
+pub struct Released {
+    /// The moved samples, relative, as `f32` triples.
+    pub positions: Vec<f32>,
+    /// Samples checked for fold-overs and how many fold.
+    pub foldovers: (usize, usize),
+    /// Warnings (fold-overs).
+    pub warnings: Vec<String>,
+}
+
+/// The editor's state: the scene, its cells, the current spec and session.
+pub struct Editor {
+    scene: Scene,
+    complex: CellComplex<3>,
+    params: DeformParams,
+    /// The spec of the last edit, its text, and the text of its selections alone.
+    spec: Option<(EditSpec<3>, String, String)>,
+    session: Option<Session<3>>,
+    /// The constraints the session solved last.
+    constraints: Option<Constraints<3>>,
+}
+
+impl Editor {
+    /// Builds the cells of `scene` with `params` (cell size or count as `deform` takes them).
+    pub fn new(scene: Scene, params: DeformParams) -> Result<Self> {
+        let (complex, _) = crate::cells::build(&scene.points, &scene.triangles, &params.build)?;
+        Ok(Self {
+            scene,
+            complex,
+            params,
+            spec: None,
+            session: None,
+            constraints: None,
+        })
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// The cells.
+    pub fn complex(&self) -> &CellComplex<3> {
+        &self.complex
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &DeformParams {
+        &self.params
+    }
+
+    /// The cells' centers (relative) and edge lengths, `f32`, four per cell.
+    pub fn cells(&self) -> Vec<f32> {
+        let shift = self.complex.grid.origin - self.scene.center;
+        self.complex
+            .cells
+            .iter()
+            .flat_map(|c| {
+                let p = c.center + shift;
+                [p[0] as f32, p[1] as f32, p[2] as f32, (2.0 * c.half) as f32]
+            })
+            .collect()
+    }
+
+    /// Each proxy sample's four nearest cells and their continuous blend weights (summing to
+    /// one; unused slots weigh zero): `(cells, weights)`, four of each per sample.
+    pub fn blend(&self) -> Result<(Vec<u32>, Vec<f32>)> {
+        let field = Field {
+            origin: self.complex.grid.origin,
+            centers: self.complex.cells.iter().map(|c| c.center).collect(),
+            halves: self.complex.cells.iter().map(|c| c.half).collect(),
+            motions: self
+                .complex
+                .cells
+                .iter()
+                .map(|c| Motion::rest(&c.center))
+                .collect(),
+            prescribed: Prescribed::default(),
+        };
+        let blend = Blend::new(&field, Weights::Continuous)?;
+        let origin = self.complex.grid.origin;
+        let n = self.scene.points.len();
+        let (mut cells, mut weights) = (vec![0u32; 4 * n], vec![0f32; 4 * n]);
+        use rayon::prelude::*;
+        cells
+            .par_chunks_mut(4)
+            .zip(weights.par_chunks_mut(4))
+            .zip(&self.scene.points)
+            .for_each(|((c, w), p)| {
+                let (found, k) = blend.weights(&(p - origin));
+                for (slot, &(cell, weight)) in found[..k].iter().enumerate() {
+                    c[slot] = cell as u32;
+                    w[slot] = weight as f32;
+                }
+            });
+        Ok((cells, weights))
+    }
+
+    /// The edit spec of `edit` as TOML, in the input's coordinates: what *Save edit* writes.
+    pub fn spec_text(&self, edit: &Edit) -> String {
+        spec_text(edit, &self.scene)
+    }
+
+    /// Solves `edit`: warm from the current motions when only the poses changed since the
+    /// last call, from rest when the selections did. `None` when the edit constrains nothing.
+    pub fn solve(&mut self, edit: &Edit) -> Result<Option<Motions>> {
+        let text = self.spec_text(edit);
+        let selections = spec_text(&edit.posed_at_rest(), &self.scene);
+        if edit.is_empty() {
+            self.spec = None;
+            self.session = None;
+            self.constraints = None;
+            return Ok(None);
+        }
+        let name = self.scene.input.with_extension("edit.toml");
+        let base = name.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let spec = crate::spec::parse_spec::<3>(&text, &base, &name)?;
+        let start = Instant::now();
+        let same =
+            self.session.is_some() && self.spec.as_ref().is_some_and(|(_, _, s)| *s == selections);
+        let (info, warnings) = if same {
+            let mut constraints = self.constraints.clone().expect("with the session");
+            for (handle, entry) in constraints.handles.iter_mut().zip(&spec.handles) {
+                handle.motion = entry.value;
+                if let Some(p) = entry.value.pivot {
+                    handle.pivot = p;
+                }
+            }
+            let session = self.session.as_mut().expect("checked");
+            let info = session.update(constraints.clone())?;
+            self.constraints = Some(constraints);
+            (info, Vec::new())
+        } else {
+            let classes = (!self.scene.classes.is_empty()).then_some(&self.scene.classes[..]);
+            let constraints = solve::resolve(&self.complex, &spec, &self.scene.points, classes)?;
+            let warnings = constraints.warnings.clone();
+            let (session, info) = Session::new(
+                self.complex.clone(),
+                constraints.clone(),
+                &self.params.solve,
+                &crate::progress::Silent,
+            )?;
+            self.session = Some(session);
+            self.constraints = Some(constraints);
+            (info, warnings)
+        };
+        self.spec = Some((spec, text, selections));
+        let session = self.session.as_ref().expect("solved");
+        let mut motions = self.motions(session.motions());
+        motions.iterations = info.iterations;
+        motions.seconds = start.elapsed().as_secs_f64();
+        motions.warnings = warnings;
+        Ok(Some(motions))
+    }
+
+    /// The page's form of `motions` ([`Motions`]).
+    fn motions(&self, motions: &[Motion<3>]) -> Motions {
+        // x' = origin + R (x − origin − c) + p with x = x_rel + center:
+        // x'_rel = R x_rel + R (center − origin − c) + p + origin − center.
+        let origin = self.complex.grid.origin;
+        let shift = self.scene.center - origin;
+        let mut maps = Vec::with_capacity(12 * motions.len());
+        for (m, cell) in motions.iter().zip(&self.complex.cells) {
+            let b = m.rot * (shift - cell.center) + m.pos - shift;
+            for r in 0..3 {
+                for c in 0..3 {
+                    maps.push(m.rot[(r, c)] as f32);
+                }
+            }
+            maps.extend(b.iter().map(|&v| v as f32));
+        }
+        let strain = solve::cell_strain(&self.complex, motions)
+            .into_iter()
+            .map(|s| s as f32)
+            .collect();
+        Motions {
+            maps,
+            strain,
+            ..Default::default()
+        }
+    }
+
+    /// The final transfer of the last solve on the proxy, with the fold-over check.
+    pub fn release(&self) -> Result<Released> {
+        let Some(session) = &self.session else {
+            return Ok(Released {
+                positions: self.scene.relative(),
+                ..Default::default()
+            });
+        };
+        let solution = session.solution(Default::default());
+        let (field, deformer) = crate::pipeline::transfer_of(&solution, &self.params)?;
+        let mut moved = self.scene.points.clone();
+        crate::field::apply(&deformer, &field.origin, &mut moved);
+        let mut warnings = Vec::new();
+        let foldovers = crate::pipeline::check_foldovers(
+            &deformer,
+            &solution,
+            &self.scene.points,
+            &mut warnings,
+        );
+        let c = self.scene.center;
+        Ok(Released {
+            positions: moved
+                .iter()
+                .flat_map(|p| (p - c).iter().map(|&v| v as f32).collect::<Vec<_>>())
+                .collect(),
+            foldovers,
+            warnings,
+        })
+    }
+
+    /// The spec of the last [`Editor::solve`] (its TOML text).
+    pub fn last_spec(&self) -> Option<&str> {
+        self.spec.as_ref().map(|(_, t, _)| t.as_str())
+    }
+
+    /// The spec of the last [`Editor::solve`].
+    pub fn last_parsed(&self) -> Option<&EditSpec<3>> {
+        self.spec.as_ref().map(|(s, _, _)| s)
+    }
+}
+
+impl Edit {
+    /// This edit with every handle at rest: what its selections alone say.
+    fn posed_at_rest(&self) -> Edit {
+        Edit {
+            fixed: self.fixed.clone(),
+            handles: self
+                .handles
+                .iter()
+                .map(|h| HandleEdit {
+                    selections: h.selections.clone(),
+                    ..Default::default()
+                })
+                .collect(),
+            pins: self.pins.clone(),
+        }
+    }
+
+    /// Whether the edit selects nothing yet.
+    pub fn is_empty(&self) -> bool {
+        self.fixed.is_empty()
+            && self.pins.is_empty()
+            && self.handles.iter().all(|h| h.selections.is_empty())
+    }
+}
+
+/// `v` as a TOML array of the shortest round-trip numbers.
+fn array(v: &[f64]) -> String {
+    let items: Vec<String> = v.iter().map(|x| format!("{x:?}")).collect();
+    format!("[{}]", items.join(", "))
+}
+
+/// The region keys of a selection, in the input's coordinates (`center` undone).
+fn region_keys(s: &Selection, center: &Vect<3>) -> String {
+    let mut keys = String::new();
+    if let Some(polygon) = &s.polygon {
+        let ring: Vec<String> = polygon.iter().map(|p| array(p)).collect();
+        keys += &format!("polygon = [{}]\n", ring.join(", "));
+        if let Some(view) = &s.view {
+            // clip = V (x − center): the last column takes −V·center.
+            let rows: Vec<String> = view
+                .iter()
+                .map(|r| {
+                    let t = r[3] - (r[0] * center[0] + r[1] * center[1] + r[2] * center[2]);
+                    array(&[r[0], r[1], r[2], t])
+                })
+                .collect();
+            keys += &format!("view = [{}]\n", rows.join(", "));
+        }
+    }
+    if let Some(classes) = &s.classification {
+        let list: Vec<String> = classes.iter().map(|c| c.to_string()).collect();
+        keys += &format!("classification = [{}]\n", list.join(", "));
+    }
+    keys
+}
+
+/// The edit spec of `edit` on `scene`, as TOML.
+fn spec_text(edit: &Edit, scene: &Scene) -> String {
+    let c = scene.center;
+    let mut out = format!(
+        "# rigidcells edit of {}: the CLI reproduces it with\n\
+         #   rigidcells deform {} -o OUT --edit THIS.toml\n",
+        scene.input.display(),
+        scene.input.display()
+    );
+    for s in &edit.fixed {
+        out += &format!("\n[[fixed]]\n{}", region_keys(s, &c));
+    }
+    for (k, h) in edit.handles.iter().enumerate() {
+        let pivot = [h.pivot[0] + c[0], h.pivot[1] + c[1], h.pivot[2] + c[2]];
+        for s in &h.selections {
+            out += &format!(
+                "\n[[handle]] # handle {}\n{}translate = {}\nrotate = {{ axis = {}, degrees = {:?} }}\npivot = {}\n",
+                k + 1,
+                region_keys(s, &c),
+                array(&h.translate),
+                array(&h.axis),
+                h.degrees,
+                array(&pivot)
+            );
+        }
+    }
+    for p in &edit.pins {
+        let at = array(&[p[0] + c[0], p[1] + c[1], p[2] + c[2]]);
+        out += &format!("\n[[pin]]\npoint = {at}\nto = {at}\n");
+    }
+    out
+}
