@@ -100,12 +100,18 @@ pub fn remove_temporaries_on_signals() {
                 if unsafe { libc::sigwait(&set, &mut signal) } != 0 {
                     return;
                 }
+                let mut removed = false;
                 if let Ok(t) = TEMPORARIES.lock() {
                     for path in t.iter() {
-                        let _ = std::fs::remove_file(path);
+                        removed |= std::fs::remove_file(path).is_ok();
                     }
                 }
-                eprintln!("interrupted: no output was written");
+                // (The editor, stopped while idle, has nothing unfinished to speak of.)
+                if removed {
+                    eprintln!("interrupted: the unfinished output was removed");
+                } else {
+                    eprintln!("interrupted");
+                }
                 std::process::exit(128 + signal);
             });
         if spawned.is_err() {

@@ -394,7 +394,35 @@ fn solver(mut editor: Editor, queue: Receiver<(Command, Sender<Message>)>) {
     let editor_input = editor.scene().input.clone();
     let params = *editor.params();
     let applying = Arc::new(Mutex::new(false));
-    while let Ok(first) = queue.recv() {
+    // Where the last edit's answer went: the idle solver's iterations go there too.
+    let mut last: Option<(u32, Sender<Message>)> = None;
+    // Whether no pose came for [`IDLE`]: then the solver iterates until converged.
+    let mut idle = false;
+    loop {
+        let first = match (&last, editor.converged()) {
+            (Some((seq, reply)), false) => match next(&queue, idle) {
+                Ok(c) => {
+                    idle = false;
+                    c
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    idle = true;
+                    let answer = match editor.refine() {
+                        Ok(m) => motions_message(*seq, m),
+                        Err(e) => vec![error(&e.to_string())],
+                    };
+                    for m in answer {
+                        let _ = reply.send(m);
+                    }
+                    continue;
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => return,
+            },
+            _ => match queue.recv() {
+                Ok(c) => c,
+                Err(_) => return,
+            },
+        };
         let mut pending = vec![first];
         pending.extend(queue.try_iter());
         // An edit followed at once by another is stale: edits carry the whole state.
@@ -407,10 +435,13 @@ fn solver(mut editor: Editor, queue: Receiver<(Command, Sender<Message>)>) {
         for ((command, reply), stale) in pending.into_iter().zip(stale) {
             let answer = match command {
                 Command::Edit { .. } if stale => continue,
-                Command::Edit { seq, edit } => match editor.solve(&edit) {
-                    Ok(m) => motions_message(seq, m),
-                    Err(e) => vec![error(&e.to_string())],
-                },
+                Command::Edit { seq, edit } => {
+                    last = Some((seq, reply.clone()));
+                    match editor.solve(&edit) {
+                        Ok(m) => motions_message(seq, m),
+                        Err(e) => vec![error(&e.to_string())],
+                    }
+                }
                 Command::Release { seq } => match editor.release() {
                     Ok(r) => released_message(seq, r),
                     Err(e) => vec![error(&e.to_string())],
@@ -472,6 +503,26 @@ fn save(editor: &Editor, path: &Path, edit: &Edit) -> Message {
     match result {
         Ok(()) => text(serde_json::json!({"type": "saved", "path": path.display().to_string()})),
         Err(e) => error(&e.to_string()),
+    }
+}
+
+/// How long the solver waits for the next pose of a drag before it converges the last one:
+/// a drag sends a pose every few tens of milliseconds, and an iteration started between two
+/// would delay the next pose's answer by its length.
+const IDLE: Duration = Duration::from_millis(150);
+
+/// The next command: at once when `idle` (or a timeout), else within [`IDLE`].
+fn next(
+    queue: &Receiver<(Command, Sender<Message>)>,
+    idle: bool,
+) -> std::result::Result<(Command, Sender<Message>), mpsc::RecvTimeoutError> {
+    if idle {
+        queue.try_recv().map_err(|e| match e {
+            mpsc::TryRecvError::Empty => mpsc::RecvTimeoutError::Timeout,
+            mpsc::TryRecvError::Disconnected => mpsc::RecvTimeoutError::Disconnected,
+        })
+    } else {
+        queue.recv_timeout(IDLE)
     }
 }
 

@@ -475,6 +475,16 @@ where
     /// on this session's cells — starting from the current motions. The symbolic factorization
     /// is kept unless the cells' roles, stiffness or targets' cells and weights changed.
     pub fn update(&mut self, constraints: Constraints<D>) -> Result<SolverInfo> {
+        self.update_with(constraints, self.params.max_iterations)
+    }
+
+    /// [`Session::update`] with at most `max_iterations` Gauss-Newton iterations: a drag takes
+    /// one per pose and goes on from there with the next (the info says whether it converged).
+    pub fn update_with(
+        &mut self,
+        constraints: Constraints<D>,
+        max_iterations: usize,
+    ) -> Result<SolverInfo> {
         if constraints.roles.len() != self.complex.len() {
             return Err(Error::Solver(format!(
                 "the constraints are for {} cells, the session has {}",
@@ -502,13 +512,17 @@ where
             })?;
         }
         self.constraints = constraints;
+        let params = SolveParams {
+            max_iterations,
+            ..self.params
+        };
         let it = minimize_with(
             &mut self.system,
             &self.complex,
             &self.constraints,
             &mut self.motions,
             1.0,
-            &self.params,
+            &params,
             &mut info,
             &crate::progress::Silent,
         )?;

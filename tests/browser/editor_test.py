@@ -192,13 +192,20 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--screenshot", help="write the page after the drag here (the README's)")
     ap.add_argument("--figures", help="write the measured figures here (JSON)")
+    ap.add_argument("--input", help="measure on this file instead (no shape checks): fix its west tenth, "
+                    "drag its east tenth")
+    ap.add_argument("--cells", default="5000", help="with --input: about this many cells")
     args = ap.parse_args()
     binary = os.environ.get("RIGIDCELLS_BIN", "target/release/rigidcells")
     work = tempfile.mkdtemp(prefix="rigidcells-browser-")
-    subprocess.run([binary, "demo", "--out", work, "-q"], check=True)
-    bar = os.path.join(work, "bar.ply")
+    if args.input:
+        bar, cells = args.input, ["--cells", args.cells]
+    else:
+        subprocess.run([binary, "demo", "--out", work, "-q"], check=True)
+        bar, cells = os.path.join(work, "bar.ply"), ["--cell-size", "0.5"]
     port = free_port()
-    editor = subprocess.Popen([binary, "edit", bar, "--cell-size", "0.5", "--port", str(port), "-q"],
+    started = time.time()
+    editor = subprocess.Popen([binary, "edit", bar, *cells, "--port", str(port), "-q"],
                               stdout=subprocess.PIPE, text=True)
     driver_port = free_port()
     chromedriver = subprocess.Popen(["chromedriver", f"--port={driver_port}"],
@@ -214,23 +221,41 @@ def main():
             except Exception:
                 time.sleep(0.1)
         driver = Driver(driver_port)
+        served = time.time() - started
         driver.s("POST", "/url", {"url": url})
-        driver.wait("return window.rc && window.rc.ready")
+        driver.wait("return window.rc && window.rc.ready", timeout=300)
+        loaded = time.time() - started
 
         def box_around(lo, hi):
             corners = [driver.js("return rc.screenOf(arguments[0])", [x, y, z])
                        for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
             xs, ys = [c[0] for c in corners], [c[1] for c in corners]
-            return (min(xs), min(ys)), (max(xs), max(ys))
+            w, h = driver.js("return [innerWidth, innerHeight]")
+            cx = lambda x: min(max(x, 2), w - 2)
+            cy = lambda y: min(max(y, 70), h - 30)
+            return (cx(min(xs)), cy(min(ys))), (cx(max(xs)), cy(max(ys)))
 
-        # The demo bar is 10 × 1 × 1, centered on the wire at the origin.
+        # The demo bar is 10 × 1 × 1, centered on the wire at the origin; another input's west
+        # and east tenths along x.
+        st = driver.js("return rc.state()")
+        lo, hi = st["lo"], st["hi"]
+        pad = [0.3 * (hi[a] - lo[a]) + 1e-9 for a in range(3)]
+        tenth = 0.1 * (hi[0] - lo[0])
+        west = ([lo[0] - pad[0], lo[1] - pad[1], lo[2] - pad[2]], [lo[0] + tenth, hi[1] + pad[1], hi[2] + pad[2]])
+        east = ([hi[0] - tenth, lo[1] - pad[1], lo[2] - pad[2]], [hi[0] + pad[0], hi[1] + pad[1], hi[2] + pad[2]])
+        if args.input:
+            # From above, so that a box on the screen is a box on the ground.
+            driver.js("rc.look(-90, 89.9)")
+            time.sleep(0.5)
+        else:
+            west, east = ([-5.3, -0.8, -0.8], [-4.7, 0.8, 0.8]), ([4.7, -0.8, -0.8], [5.3, 0.8, 0.8])
         driver.click("m-box")
-        (x0, y0), (x1, y1) = box_around([-5.3, -0.8, -0.8], [-4.7, 0.8, 0.8])
+        (x0, y0), (x1, y1) = box_around(*west)
         driver.drag([(x0, y0), (x1, y0 + 5), (x1, y1)])
         driver.js("document.getElementById('role').value = 'handle'")
-        (x0, y0), (x1, y1) = box_around([4.7, -0.8, -0.8], [5.3, 0.8, 0.8])
+        (x0, y0), (x1, y1) = box_around(*east)
         driver.drag([(x0, y0), (x1, y0 + 5), (x1, y1)])
-        state = driver.wait("return rc.updates >= 1 && rc.state()")
+        state = driver.wait("return rc.updates >= 1 && rc.state()", timeout=300)
         assert len(state["edit"]["fixed"]) == 1 and len(state["edit"]["handles"]) == 1, state
         before = driver.screenshot()
 
@@ -239,22 +264,39 @@ def main():
         (cx, cy), (zx, zy) = g["center"], g["axes"][2]
         grab = (cx + 0.6 * (zx - cx), cy + 0.6 * (zy - cy))
         updates0 = driver.js("return rc.updates")
-        driver.js("rc.frameTimes.length = 0; rc.roundTrips.length = 0")
+        driver.js("rc.sync = true; rc.frameTimes.length = 0; rc.roundTrips.length = 0")
         start = time.time()
         path = [(grab[0], grab[1] - 6 * k) for k in range(21)]
         driver.drag(path, step_ms=50)
         dragging = time.time() - start
-        driver.wait("return rc.released >= 1 && rc.state().display === 2")
+        driver.wait("return rc.released >= 1 && rc.state().display === 2", timeout=300)
         stats = driver.js("return {frames: rc.frameTimes.slice(), trips: rc.roundTrips.slice(), updates: rc.updates}")
         after = driver.screenshot()
         if args.screenshot:
             open(args.screenshot, "wb").write(after)
 
+        frames = sorted(stats["frames"])
+        figures = {
+            "input": bar,
+            "samples_shown": state["N"],
+            "url_printed_s": served,
+            "page_ready_s": loaded,
+            "drag_seconds": dragging,
+            "solver_updates_during_drag": stats["updates"] - updates0,
+            "frames_drawn_during_drag": len(frames),
+            "frame_ms_median": frames[len(frames) // 2] if frames else None,
+            "round_trip_ms": sorted(round(t, 1) for t in stats["trips"]),
+        }
+        if args.input:
+            print(json.dumps(figures))
+            if args.figures:
+                json.dump(figures, open(args.figures, "w"), indent=1)
+            return
         # On screen: the right end went up, the left end stayed.
         right = (int(x0) - 10, int(x1) + 10)
         lo_before = top_of_shape(before, *right, 60, 780)
         lo_after = top_of_shape(after, *right, 60, 780)
-        left_x = box_around([-5.3, -0.8, -0.8], [-4.7, 0.8, 0.8])
+        left_x = box_around(*west)
         left = (int(left_x[0][0]), int(left_x[1][0]))
         assert lo_before is not None and lo_after is not None, (lo_before, lo_after)
         assert lo_after < lo_before - 40, f"the handle's top went from row {lo_before} to {lo_after}"
@@ -280,15 +322,8 @@ def main():
         assert moved > 0.5, f"the CLI's bar moved only {moved}"
         assert worst < 1e-3, f"the CLI's shape lies {worst} from the page's"
 
-        frames = sorted(stats["frames"])
-        figures = {
-            "drag_seconds": dragging,
-            "solver_updates_during_drag": stats["updates"] - updates0,
-            "frame_ms_median": frames[len(frames) // 2] if frames else None,
-            "round_trip_ms": sorted(stats["trips"]),
-            "cli_vs_page_max": worst,
-            "handle_top_rows": [lo_before, lo_after],
-        }
+        figures["cli_vs_page_max"] = worst
+        figures["handle_top_rows"] = [lo_before, lo_after]
         print(json.dumps(figures))
         if args.figures:
             json.dump(figures, open(args.figures, "w"), indent=1)
