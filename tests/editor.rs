@@ -315,3 +315,17 @@ fn screen_selections_parse_strictly() {
         assert!(e.contains("view"), "{e}");
     }
 }
+
+/// A mesh with more vertices than the proxy holds is streamed every k-th vertex (points, no
+/// triangles), not read whole; one within it keeps its triangles.
+#[test]
+fn a_mesh_larger_than_the_proxy_is_decimated() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
+    let all = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    assert!(!all.triangles.is_empty() && all.total == all.points.len() as u64);
+    let few = Scene::load(&input, 500, &rigidcells::progress::Silent).unwrap();
+    assert!(few.triangles.is_empty() && few.points.len() <= 500 && few.total == all.total);
+    assert_eq!(few.points[1], all.points[few.total.div_ceil(500) as usize]);
+}

@@ -64,8 +64,19 @@ impl Scene {
     /// Reads at most `max` samples of `input`: a mesh or small PLY/OBJ/XYZ whole (with its
     /// triangles and PLY colors), a streamed file every k-th sample.
     pub fn load(input: &Path, max: usize, observer: &dyn Observer) -> Result<Self> {
-        let mut scene = match crate::io::Document::read(input) {
-            Ok(doc) if doc.positions().len() <= max => {
+        // A file with more samples than the proxy holds is streamed, not read whole first.
+        let too_many = crate::io::open(input).is_ok_and(|s| s.len() > max as u64);
+        let whole = if too_many {
+            None
+        } else {
+            match crate::io::Document::read(input) {
+                Ok(doc) => Some(doc),
+                Err(Error::UnsupportedFormat { .. }) => None,
+                Err(e) => return Err(e),
+            }
+        };
+        let mut scene = match whole {
+            Some(doc) if doc.positions().len() <= max => {
                 let colors = match crate::io::extension(input).as_deref() {
                     Some("ply") => crate::io::colors(input)?,
                     _ => None,
@@ -83,7 +94,7 @@ impl Scene {
                     ..Default::default()
                 }
             }
-            Ok(_) | Err(Error::UnsupportedFormat { .. }) => {
+            _ => {
                 let p = crate::render::colored_points(input, max, observer)?;
                 Scene {
                     points: p.points,
@@ -93,7 +104,6 @@ impl Scene {
                     ..Default::default()
                 }
             }
-            Err(e) => return Err(e),
         };
         let Some(bounds) = crate::render::bounds(&scene.points) else {
             return Err(Error::format(input, "no samples to edit"));
