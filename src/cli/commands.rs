@@ -34,12 +34,7 @@ pub(super) fn run_cells(
         .into());
     }
     let spec = edit.map(read_spec::<3>).transpose()?;
-    let (build, solve) = cells.params()?;
-    let params = DeformParams {
-        build,
-        solve,
-        ..Default::default()
-    };
+    let params = cells.deform_params(Transfer::default())?;
     let (complex, info, solution, warnings) = pipeline::file_cells(
         input,
         spec.as_ref(),
@@ -244,13 +239,7 @@ pub(super) fn run_image(
     cells: &CellArgs,
     quiet: bool,
 ) -> anyhow::Result<()> {
-    let (build, solve) = cells.params()?;
-    let params = DeformParams {
-        build,
-        solve,
-        transfer,
-        ..Default::default()
-    };
+    let params = cells.deform_params(transfer)?;
     image_job(input, edit, output, background, &params, quiet)
 }
 
@@ -367,13 +356,7 @@ pub(super) fn run_solve(
         refuse_overwrite(input, field)?;
     }
     let spec = read_spec::<3>(edit)?;
-    let (build, solve) = cells.params()?;
-    let params = DeformParams {
-        build,
-        solve,
-        transfer,
-        ..Default::default()
-    };
+    let params = cells.deform_params(transfer)?;
     let bar = Bar::new(quiet);
     let (solution, info) = pipeline::solve_files(inputs, &spec, &params, chunk, field, &bar)?;
     if !quiet {
@@ -455,13 +438,7 @@ pub(super) fn run_edit(
     if proxy == 0 {
         return Err(Error::Param("--proxy 0: the page needs samples to show".into()).into());
     }
-    let (build, solve) = cells.params()?;
-    let params = DeformParams {
-        build,
-        solve,
-        transfer,
-        ..Default::default()
-    };
+    let params = cells.deform_params(transfer)?;
     let scene = rigidcells::edit::Scene::load(input, proxy, &Bar::new(quiet))?;
     let editor = rigidcells::edit::Editor::new(scene, params)?;
     let server = rigidcells::edit::server::Server::bind(editor, port)?;

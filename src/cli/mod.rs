@@ -11,7 +11,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, Inside};
-use rigidcells::field::Outside;
+use rigidcells::field::{Outside, Transfer};
 use rigidcells::pipeline::{self, CHUNK, DeformParams};
 use rigidcells::render::{self, View};
 use rigidcells::solve::{Method, SolveParams};
@@ -432,6 +432,17 @@ impl CellArgs {
 
     /// The build's and the solver's parameters; with `--min-cell-size`, those of an adaptive
     /// solve ([`rigidcells::solve::adaptive`]).
+    /// The parameters of a command that takes only the cells' options and a transfer.
+    fn deform_params(&self, transfer: Transfer) -> Result<DeformParams, Error> {
+        let (build, solve) = self.params()?;
+        Ok(DeformParams {
+            build,
+            solve,
+            transfer,
+            ..Default::default()
+        })
+    }
+
     fn params(&self) -> Result<(BuildParams, SolveParams), Error> {
         let (build, solve) = (self.build_params(), self.solve_params());
         match self.min_cell_size {

@@ -34,7 +34,7 @@ use crate::field::{Blend, Field, Prescribed, Weights};
 use crate::pipeline::DeformParams;
 use crate::progress::Observer;
 use crate::rigid::{Motion, Vect};
-use crate::solve::{self, Constraints, Session};
+use crate::solve::{self, Session};
 use crate::spec::EditSpec;
 
 /// The proxy of the input the editor shows and solves on.
@@ -117,15 +117,7 @@ impl Scene {
 
     /// The samples relative to [`Scene::center`], as `f32` triples.
     pub fn relative(&self) -> Vec<f32> {
-        self.points
-            .iter()
-            .flat_map(|p| {
-                (p - self.center)
-                    .iter()
-                    .map(|&v| v as f32)
-                    .collect::<Vec<_>>()
-            })
-            .collect()
+        relative(&self.points, &self.center)
     }
 }
 
@@ -220,8 +212,6 @@ pub struct Editor {
     /// The spec of the last edit, its text, and the text of its selections alone.
     spec: Option<(EditSpec<3>, String, String)>,
     session: Option<Session<3>>,
-    /// The constraints the session solved last.
-    constraints: Option<Constraints<3>>,
     /// Whether the session's last solve converged.
     converged: bool,
 }
@@ -242,7 +232,6 @@ impl Editor {
             params,
             spec: None,
             session: None,
-            constraints: None,
             converged: true,
         })
     }
@@ -337,7 +326,6 @@ impl Editor {
         if edit.is_empty() {
             self.spec = None;
             self.session = None;
-            self.constraints = None;
             return Ok(None);
         }
         let name = self.scene.input.with_extension("edit.toml");
@@ -347,29 +335,29 @@ impl Editor {
         let same =
             self.session.is_some() && self.spec.as_ref().is_some_and(|(_, _, s)| *s == selections);
         let (info, warnings) = if same {
-            let mut constraints = self.constraints.clone().expect("with the session");
+            let session = self.session.as_mut().expect("checked");
+            let mut constraints = session.constraints().clone();
             for (handle, entry) in constraints.handles.iter_mut().zip(&spec.handles) {
                 handle.motion = entry.value;
                 if let Some(p) = entry.value.pivot {
                     handle.pivot = p;
                 }
             }
-            let session = self.session.as_mut().expect("checked");
-            let info = session.update_with(constraints.clone(), DRAG_ITERATIONS)?;
-            self.constraints = Some(constraints);
-            (info, Vec::new())
+            (
+                session.update_with(constraints, DRAG_ITERATIONS)?,
+                Vec::new(),
+            )
         } else {
             let classes = (!self.scene.classes.is_empty()).then_some(&self.scene.classes[..]);
             let constraints = solve::resolve(&self.complex, &spec, &self.scene.points, classes)?;
             let warnings = constraints.warnings.clone();
             let (session, info) = Session::new(
                 self.complex.clone(),
-                constraints.clone(),
+                constraints,
                 &self.params.solve,
                 &crate::progress::Silent,
             )?;
             self.session = Some(session);
-            self.constraints = Some(constraints);
             (info, warnings)
         };
         self.spec = Some((spec, text, selections));
@@ -394,10 +382,10 @@ impl Editor {
             return Ok(None);
         }
         let start = Instant::now();
-        let (Some(session), Some(constraints)) = (self.session.as_mut(), &self.constraints) else {
+        let Some(session) = self.session.as_mut() else {
             return Ok(None);
         };
-        let info = session.update_with(constraints.clone(), DRAG_ITERATIONS)?;
+        let info = session.update_with(session.constraints().clone(), DRAG_ITERATIONS)?;
         self.converged = info.converged;
         let mut motions = self.motions(self.session.as_ref().expect("checked").motions());
         motions.iterations = info.iterations;
@@ -435,10 +423,8 @@ impl Editor {
     /// The final transfer of the last solve on the proxy, with the fold-over check; the solve
     /// is converged first.
     pub fn release(&mut self) -> Result<Released> {
-        if let (false, Some(session), Some(constraints)) =
-            (self.converged(), self.session.as_mut(), &self.constraints)
-        {
-            self.converged = session.update(constraints.clone())?.converged;
+        if let (false, Some(session)) = (self.converged(), self.session.as_mut()) {
+            self.converged = session.update(session.constraints().clone())?.converged;
         }
         let Some(session) = &self.session else {
             return Ok(Released {
@@ -457,12 +443,8 @@ impl Editor {
             &self.scene.points,
             &mut warnings,
         );
-        let c = self.scene.center;
         Ok(Released {
-            positions: moved
-                .iter()
-                .flat_map(|p| (p - c).iter().map(|&v| v as f32).collect::<Vec<_>>())
-                .collect(),
+            positions: relative(&moved, &self.scene.center),
             foldovers,
             warnings,
         })
@@ -502,6 +484,17 @@ impl Edit {
             && self.pins.is_empty()
             && self.handles.iter().all(|h| h.selections.is_empty())
     }
+}
+
+/// `points − center` as `f32` triples: coordinates on the wire.
+fn relative(points: &[Vect<3>], center: &Vect<3>) -> Vec<f32> {
+    points
+        .iter()
+        .flat_map(|p| {
+            let d = p - center;
+            [d[0] as f32, d[1] as f32, d[2] as f32]
+        })
+        .collect()
 }
 
 /// `v` as a TOML array of the shortest round-trip numbers.

@@ -542,6 +542,11 @@ where
         &self.complex
     }
 
+    /// The constraints of the last solve.
+    pub fn constraints(&self) -> &Constraints<D> {
+        &self.constraints
+    }
+
     /// The current motions, one per cell (local frame).
     pub fn motions(&self) -> &[Motion<D>] {
         &self.motions
