@@ -277,7 +277,7 @@ where
         &solution.complex,
         &solution.constraints.warnings,
     );
-    warnings.extend(solution.info.refinement_stopped.clone());
+    warnings.extend(solution.info.warnings());
     let transfer_start = Instant::now();
     let (field, deformer) = transfer_of(&solution, params)?;
     Ok(Staged {
@@ -543,7 +543,7 @@ fn solve_source(
     check_rbf_memory::<3>(complex.len(), params)?;
     let solution = solve::solve(complex, constraints, &params.solve, observer)?;
     let mut warnings = build_warnings(&build, &solution.complex, &solution.constraints.warnings);
-    warnings.extend(solution.info.refinement_stopped.clone());
+    warnings.extend(solution.info.warnings());
     check_rbf_memory::<3>(solution.complex.len(), params)?;
     let transfer_start = Instant::now();
     let field = Field::from_solution(&solution);
@@ -874,6 +874,7 @@ pub fn file_cells(
     let constraints = solve::resolve_selected(&complex, spec, &selections)?;
     warnings.extend(constraints.warnings.iter().cloned());
     let solution = solve::solve(complex.clone(), constraints, &params.solve, observer)?;
+    warnings.extend(solution.info.warnings());
     Ok((complex, info, Some(solution), warnings))
 }
 

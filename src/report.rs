@@ -45,6 +45,13 @@ pub struct Report {
     pub iterations: usize,
     /// Load steps.
     pub load_steps: usize,
+    /// Load steps taken again in halves because they left the branch of the load path (a
+    /// part untwisting the short way round).
+    pub load_step_halvings: usize,
+    /// Per turning handle: its spec line, the turn asked (`turn_asked_degrees`) and the turn
+    /// the cells carry from the fixed cells to it (`turn_taken_degrees`, null when no chain of
+    /// cells joins it to a fixed cell); see [`crate::solve::turns`].
+    pub handle_turns: Vec<HandleTurnReport>,
     /// How the linear systems were solved: `direct` or `multilevel`.
     pub linear_solver: &'static str,
     /// Conjugate-gradient iterations over all Gauss-Newton steps (multilevel; 0 when direct).
@@ -84,6 +91,27 @@ pub struct Report {
     pub control_rmse: Option<f64>,
     /// The root mean square of their leave-one-out prediction errors (with `--check-gcp`).
     pub control_rmse_left_out: Option<f64>,
+}
+
+/// One turning handle's turn in the report.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct HandleTurnReport {
+    /// The handle's line in the edit spec.
+    pub line: usize,
+    /// The turn asked, in degrees.
+    pub turn_asked_degrees: f64,
+    /// The turn the cells carry from the fixed cells to the handle, in degrees.
+    pub turn_taken_degrees: Option<f64>,
+}
+
+impl From<&crate::solve::HandleTurn> for HandleTurnReport {
+    fn from(t: &crate::solve::HandleTurn) -> Self {
+        Self {
+            line: t.line,
+            turn_asked_degrees: t.asked_degrees,
+            turn_taken_degrees: t.taken_degrees,
+        }
+    }
 }
 
 /// Seconds per stage of [`crate::pipeline::deform_file`].
@@ -154,6 +182,8 @@ impl Report {
             cell_roles,
             iterations: s.iterations,
             load_steps: s.load_steps,
+            load_step_halvings: s.halvings,
+            handle_turns: s.turns.iter().map(HandleTurnReport::from).collect(),
             linear_solver: if s.levels > 0 { "multilevel" } else { "direct" },
             linear_iterations: s.linear_iterations,
             levels: s.levels,

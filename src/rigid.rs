@@ -57,6 +57,10 @@ pub trait Rigid<const D: usize>: Send + Sync + 'static {
 
     /// An axis and a signed angle with `axis_angle(axis, angle) == r` (2D: the axis is unused).
     fn axis_angle_of(r: &Mat<D>) -> (Vect<D>, f64);
+
+    /// The signed angle in (−π, π] by which `r` turns about `axis`: the twist of its
+    /// swing-twist decomposition (2D: the rotation's angle; the axis is unused).
+    fn twist(r: &Mat<D>, axis: &Vect<D>) -> f64;
 }
 
 impl Rigid<2> for Dim<2> {
@@ -97,6 +101,10 @@ impl Rigid<2> for Dim<2> {
 
     fn axis_angle_of(r: &Mat<2>) -> (Vect<2>, f64) {
         (Vect::<2>::zeros(), r[(1, 0)].atan2(r[(0, 0)]))
+    }
+
+    fn twist(r: &Mat<2>, _axis: &Vect<2>) -> f64 {
+        r[(1, 0)].atan2(r[(0, 0)])
     }
 }
 
@@ -166,6 +174,26 @@ impl Rigid<3> for Dim<3> {
         match rot.axis_angle() {
             Some((axis, angle)) => (axis.into_inner(), angle),
             None => (Vector3::x(), 0.0),
+        }
+    }
+
+    fn twist(r: &Mat<3>, axis: &Vect<3>) -> f64 {
+        let n = axis.norm();
+        if n == 0.0 {
+            return 0.0;
+        }
+        let q = nalgebra::UnitQuaternion::from_rotation_matrix(
+            &nalgebra::Rotation3::from_matrix_unchecked(*r),
+        );
+        let along = q.i * axis.x + q.j * axis.y + q.k * axis.z;
+        // The quaternion's sign is free: ±q give angles 2π apart, the same after wrapping.
+        let t = 2.0 * (along / n).atan2(q.w);
+        if t > std::f64::consts::PI {
+            t - std::f64::consts::TAU
+        } else if t <= -std::f64::consts::PI {
+            t + std::f64::consts::TAU
+        } else {
+            t
         }
     }
 }
@@ -263,6 +291,33 @@ mod tests {
         let j = <Dim<3> as Rigid<3>>::cross_jacobian(&y);
         let lin = j[0] * w.x + j[1] * w.y + j[2] * w.z;
         assert!((lin - w.cross(&y)).norm() < 1e-15);
+    }
+
+    #[test]
+    fn twist_is_the_turn_about_the_axis() {
+        let axis = Vector3::new(0.0, 2.0, 0.0);
+        for deg in [-179.0f64, -90.0, -1.0, 0.0, 30.0, 150.0, 179.5] {
+            let r = <Dim<3> as Rigid<3>>::axis_angle(&axis, deg.to_radians());
+            let t = <Dim<3> as Rigid<3>>::twist(&r, &axis);
+            assert!(
+                (t.to_degrees() - deg).abs() < 1e-9,
+                "{deg}: {}",
+                t.to_degrees()
+            );
+            // A swing about another axis leaves the twist (nearly) alone for small swings.
+            let swing = <Dim<3> as Rigid<3>>::axis_angle(&Vector3::x(), 0.01);
+            let t = <Dim<3> as Rigid<3>>::twist(&(swing * r), &axis);
+            assert!(
+                (t.to_degrees() - deg).abs() < 0.01,
+                "{deg}: {}",
+                t.to_degrees()
+            );
+        }
+        // 270° is −90° as a rotation.
+        let r = <Dim<3> as Rigid<3>>::axis_angle(&axis, 270f64.to_radians());
+        assert!((<Dim<3> as Rigid<3>>::twist(&r, &axis).to_degrees() + 90.0).abs() < 1e-9);
+        let r2 = rotation_2d(2.0);
+        assert!((<Dim<2> as Rigid<2>>::twist(&r2, &Vect::<2>::zeros()) - 2.0).abs() < 1e-12);
     }
 
     #[test]

@@ -394,6 +394,10 @@ struct RawPlane {
     point: Vec<f64>,
     normal: Vec<f64>,
 }
+/// The largest turn a handle may ask for, in degrees: ten whole turns. Load steps interpolate
+/// the angle (at most 30° a step), so the solver's work grows with it.
+pub const MAX_TURN_DEGREES: f64 = 3600.0;
+
 #[derive(Deserialize)]
 struct RawRotate {
     #[serde(default)]
@@ -876,6 +880,17 @@ impl Ctx<'_> {
                 }
                 if !r.degrees.is_finite() {
                     return Err(self.error(Some(line), "rotate.degrees must be finite".into()));
+                }
+                if r.degrees.abs() > MAX_TURN_DEGREES {
+                    return Err(self.error(
+                        Some(line),
+                        format!(
+                            "rotate.degrees = {} is more than ten whole turns (at most \
+                             ±{MAX_TURN_DEGREES}); each whole turn costs the solver a dozen \
+                             load steps",
+                            r.degrees
+                        ),
+                    ));
                 }
                 let radians = r.degrees.to_radians();
                 (

@@ -383,6 +383,58 @@ pub fn tube(length: f64, outer: f64, inner: f64, around: usize, along: usize) ->
     mesh
 }
 
+/// A closed solid cylinder along y: radius `radius`, from y = 0 to y = `height`, `around`
+/// vertices per ring and `along` segments, with flat caps (rings shrinking to the axis in
+/// `around / 4` steps), outward oriented. Short ones (height = diameter) are the twist tests'
+/// bulky part.
+pub fn cylinder(radius: f64, height: f64, around: usize, along: usize) -> Mesh {
+    let (n, m) = (around.max(3), along.max(1));
+    let mut mesh = Mesh::default();
+    let ring = |mesh: &mut Mesh, r: f64, y: f64| {
+        let first = mesh.vertices.len() as u32;
+        for j in 0..n {
+            let t = std::f64::consts::TAU * j as f64 / n as f64;
+            mesh.vertices.push([r * t.cos(), y, r * t.sin()]);
+        }
+        first
+    };
+    let rings: Vec<u32> = (0..=m)
+        .map(|i| ring(&mut mesh, radius, height * i as f64 / m as f64))
+        .collect();
+    // Quads between rings `a` and `b`, split in two; `up` says which way they face.
+    let band = |mesh: &mut Mesh, a: u32, b: u32, out: bool| {
+        for j in 0..n as u32 {
+            let k = (j + 1) % n as u32;
+            let (p, q, r, s) = (a + j, a + k, b + k, b + j);
+            if out {
+                mesh.triangles.extend([[p, r, q], [p, s, r]]);
+            } else {
+                mesh.triangles.extend([[p, q, r], [p, r, s]]);
+            }
+        }
+    };
+    for i in 0..m {
+        band(&mut mesh, rings[i], rings[i + 1], true);
+    }
+    let steps = (n / 4).max(1);
+    for (edge, y, down) in [(rings[0], 0.0, true), (rings[m], height, false)] {
+        let mut outer = edge;
+        for k in 1..steps {
+            let inner = ring(&mut mesh, radius * (1.0 - k as f64 / steps as f64), y);
+            band(&mut mesh, outer, inner, !down);
+            outer = inner;
+        }
+        let center = mesh.vertices.len() as u32;
+        mesh.vertices.push([0.0, y, 0.0]);
+        for j in 0..n as u32 {
+            let (p, q) = (outer + j, outer + (j + 1) % n as u32);
+            mesh.triangles
+                .push(if down { [p, q, center] } else { [p, center, q] });
+        }
+    }
+    mesh
+}
+
 /// Height of the synthetic terrain at `(x, y)` (metres; a 2 km square): rolling hills, a river
 /// valley along y = 1000, flat-roofed buildings on a grid, and a bridge deck across the valley.
 pub fn terrain_height(x: f64, y: f64) -> (f64, u8) {
@@ -654,6 +706,27 @@ mod tests {
         let m = bar([10.0, 1.0, 1.0], 4.0);
         assert!((m.volume() - 10.0).abs() < 1e-9);
         // Every edge is shared by exactly two triangles, in opposite directions.
+        let mut edges = std::collections::HashMap::new();
+        for t in &m.triangles {
+            for k in 0..3 {
+                *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+            }
+        }
+        assert!(
+            edges
+                .iter()
+                .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
+        );
+    }
+
+    /// The cylinder is closed, welded and outward oriented: its signed volume is the polygonal
+    /// disk's area times its height, and every edge has two triangles in opposite directions.
+    #[test]
+    fn cylinder_is_closed_and_outward() {
+        let (n, r, h) = (48usize, 0.5, 1.0);
+        let m = cylinder(r, h, n, 24);
+        let disk = 0.5 * n as f64 * r * r * (std::f64::consts::TAU / n as f64).sin();
+        assert!((m.volume() - disk * h).abs() < 1e-9, "{}", m.volume());
         let mut edges = std::collections::HashMap::new();
         for t in &m.triangles {
             for k in 0..3 {

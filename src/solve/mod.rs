@@ -40,6 +40,7 @@ pub mod energy;
 mod multilevel;
 mod positions;
 mod system;
+pub mod turns;
 
 use std::time::Instant;
 
@@ -53,6 +54,8 @@ use crate::error::{Error, Result};
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid, Vect};
 use system::System;
+pub use turns::HandleTurn;
+use turns::TurnGauge;
 
 /// Parameters of [`solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -170,9 +173,24 @@ pub struct SolverInfo {
     pub linear_iterations: usize,
     /// Levels of the last multilevel hierarchy (0: the direct path).
     pub levels: usize,
+    /// Load steps taken again in halves because they left the branch of the load path.
+    pub halvings: usize,
+    /// Every turning handle's turn, asked and carried by the cells ([`turns`]).
+    pub turns: Vec<HandleTurn>,
 }
 
 impl SolverInfo {
+    /// What the user should hear about the solve: refinement that stopped early, and handles
+    /// whose turn the cells did not carry.
+    pub fn warnings(&self) -> Vec<String> {
+        let turns = self.turns.iter().filter_map(HandleTurn::warning);
+        self.refinement_stopped
+            .iter()
+            .cloned()
+            .chain(turns)
+            .collect()
+    }
+
     /// Mean seconds per Gauss-Newton iteration.
     pub fn seconds_per_iteration(&self) -> f64 {
         self.seconds / self.iterations.max(1) as f64
@@ -285,6 +303,7 @@ where
         }
     }
     observer.finish();
+    info.turns = TurnGauge::new(&complex).turns(&constraints, &motions);
     if params.carry_loose {
         carry_loose(&complex, &mut constraints, &mut motions);
     }
@@ -337,7 +356,11 @@ where
     Ok((system, motions, info))
 }
 
-/// The load steps `1/steps, 2/steps, …, 1` of `info.load_steps`, each minimized from the last.
+/// The load steps `1/steps, 2/steps, …, 1` of `info.load_steps`, each minimized from the
+/// last, on the branch the path is on (see the module docs): each step starts from the
+/// [`predict`]ed motions, and a step that leaves the branch is taken again in halves, at most
+/// [`MAX_HALVINGS`] times in a row. A turn that still gives way at the smallest step is
+/// [`Error::TurnNotHeld`].
 fn load_stepped<const D: usize>(
     system: &mut System<D>,
     complex: &CellComplex<D>,
@@ -350,41 +373,127 @@ fn load_stepped<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let steps = info.load_steps;
-    observer.stage("solving", steps as u64);
-    for s in 1..=steps {
-        let f = s as f64 / steps as f64;
+    let steps = info.load_steps as u64;
+    observer.stage("solving", steps);
+    // Fractions are counted in the smallest step's units, so that the unhalved steps are
+    // exactly `k / steps`.
+    let total = steps << MAX_HALVINGS;
+    let gauge = TurnGauge::new(complex);
+    let turning: Vec<usize> = turns::turning(constraints).collect();
+    let (mut at, mut halvings, mut accepted, mut reported) = (0u64, 0u32, 0usize, 0u64);
+    let mut previous: Option<(f64, Vec<Motion<D>>)> = None;
+    while at < total {
+        let to_units = (at + (1 << (MAX_HALVINGS - halvings))).min(total);
+        let (f, to) = (at as f64 / total as f64, to_units as f64 / total as f64);
+        let start = motions.to_vec();
+        if let Some((f0, before)) = &previous {
+            predict(constraints, motions, before, (to - f) / (f - f0));
+        }
+        let predicted = (!turning.is_empty()).then(|| motions.to_vec());
         // A step before the last only has to bring the motions near the path's minimum, so
         // that the next step starts on the right side of any saddle: it stops at a looser
         // tolerance (on the 480k-vertex tube bend, the three steps took 9, 17 and 16
         // iterations at 1e-6, the last ones each lowering the energy by 1e-5 of it).
-        let at = SolveParams {
-            tolerance: if s < steps {
-                params.tolerance.max(INTERMEDIATE_TOLERANCE)
-            } else {
+        let last = to_units == total;
+        let step_params = SolveParams {
+            tolerance: if last {
                 params.tolerance
-            },
-            max_iterations: if s < steps {
-                params.max_iterations.min(INTERMEDIATE_ITERATIONS)
             } else {
+                params.tolerance.max(INTERMEDIATE_TOLERANCE)
+            },
+            max_iterations: if last {
                 params.max_iterations
+            } else {
+                params.max_iterations.min(INTERMEDIATE_ITERATIONS)
             },
             ..*params
         };
+        let marks = (info.energies.len(), info.step_starts.len());
         let it = minimize_with(
             system,
             complex,
             constraints,
             motions,
-            f,
-            &at,
+            to,
+            &step_params,
             info,
             observer,
         )?;
+        let lost = turning.iter().find_map(|&k| {
+            let taken = gauge.taken(constraints, motions, k)?;
+            let asked = constraints.handles[k].motion.turn.1;
+            ((taken - to * asked).abs() > BRANCH_JUMP).then_some((k, f * asked))
+        });
+        let jumped = predicted.as_ref().is_some_and(|p| {
+            constraints.roles.iter().enumerate().any(|(c, role)| {
+                matches!(role, Role::Free | Role::Pin(_))
+                    && <Dim<D> as Rigid<D>>::angle(&(motions[c].rot * p[c].rot.transpose()))
+                        > BRANCH_JUMP
+            })
+        });
+        if (lost.is_some() || jumped) && halvings < MAX_HALVINGS {
+            motions.copy_from_slice(&start);
+            info.energies.truncate(marks.0);
+            info.step_starts.truncate(marks.1);
+            info.halvings += 1;
+            halvings += 1;
+            continue;
+        }
+        if let Some((k, held)) = lost {
+            let h = &constraints.handles[k];
+            return Err(Error::TurnNotHeld {
+                line: h.line,
+                asked_degrees: h.motion.turn.1.to_degrees(),
+                held_degrees: held.to_degrees(),
+            });
+        }
         info.iterations_per_step.push(it);
-        observer.advance(1);
+        accepted += 1;
+        previous = Some((f, start));
+        at = to_units;
+        // Back to longer steps once the path is past the place that needed short ones.
+        if halvings > 0 && at % (1 << (MAX_HALVINGS - halvings + 1)) == 0 {
+            halvings -= 1;
+        }
+        let done = at * steps / total;
+        observer.advance(done - reported);
+        reported = done;
     }
+    info.load_steps = accepted;
     Ok(())
+}
+
+/// Load steps are taken again in halves at most this many times in a row (a 30° step down to
+/// about 2°).
+const MAX_HALVINGS: u32 = 4;
+
+/// A load step has left its branch when the turn the cells carry to a handle is off the
+/// handle's by more than this, or a cell ends more than this away from its predicted rotation
+/// (a quarter turn, in radians).
+const BRANCH_JUMP: f64 = std::f64::consts::FRAC_PI_2;
+
+/// The predictor of a load step: every free or pinned cell turns on by `alpha` times the
+/// rotation it took over the last step (from `before` to `motions`), and moves on likewise.
+/// Advancing only the handles leaves the cells between them where the last step ended, and a
+/// step that starts there may end on another branch (a part twisted past a half turn untwists
+/// the short way round).
+fn predict<const D: usize>(
+    constraints: &Constraints<D>,
+    motions: &mut [Motion<D>],
+    before: &[Motion<D>],
+    alpha: f64,
+) where
+    Dim<D>: Rigid<D>,
+{
+    for (c, role) in constraints.roles.iter().enumerate() {
+        if matches!(role, Role::Free | Role::Pin(_)) {
+            let m = &mut motions[c];
+            let (axis, angle) =
+                <Dim<D> as Rigid<D>>::axis_angle_of(&(m.rot * before[c].rot.transpose()));
+            m.rot = <Dim<D> as Rigid<D>>::axis_angle(&axis, alpha * angle) * m.rot;
+            m.pos += (m.pos - before[c].pos) * alpha;
+        }
+    }
 }
 
 /// Levels an adaptive solve ([`adaptive`]) starts above its smallest cells.
@@ -458,8 +567,9 @@ where
         observer: &dyn Observer,
     ) -> Result<(Self, SolverInfo)> {
         let start = Instant::now();
-        let (system, motions, info) = from_rest(&complex, &constraints, params, observer)?;
+        let (system, motions, mut info) = from_rest(&complex, &constraints, params, observer)?;
         observer.finish();
+        info.turns = TurnGauge::new(&complex).turns(&constraints, &motions);
         let session = Self {
             complex,
             constraints,

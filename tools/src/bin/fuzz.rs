@@ -1095,6 +1095,9 @@ fn text_step(bytes: &mut Vec<u8>, rng: &mut StdRng, ply: bool) -> String {
     what
 }
 
+/// Turns at and past the spec's bound of ten whole turns, and far past it.
+const HUGE_TURNS: [&str; 7] = ["3600", "3600.5", "-3601", "7200", "1e5", "-1e308", "1e12"];
+
 const SPEC_KEYS: [&str; 32] = [
     "box",
     "sphere",
@@ -1146,7 +1149,7 @@ fn mutate_spec(
             lines.push(String::new());
         }
         let k = rng.random_range(0..lines.len());
-        let step = match rng.random_range(0..11) {
+        let step = match rng.random_range(0..12) {
             0..=2 => {
                 // A number replaced.
                 let line = lines[k].clone();
@@ -1246,6 +1249,23 @@ fn mutate_spec(
                     ("missing.txt", None),
                 ],
             ),
+            10 => {
+                // A handle turned by a huge angle: the spec's bound on the solver's work.
+                let degrees = *HUGE_TURNS.choose(rng).expect("not empty");
+                let axis = if dim == 2 { "" } else { "axis = [0.0, 1.0, 0.0], " };
+                let rotate = format!("rotate = {{ {axis}degrees = {degrees} }}");
+                match lines.iter().position(|l| l.trim_start().starts_with("rotate")) {
+                    Some(r) => lines[r] = rotate.clone(),
+                    None => match lines.iter().position(|l| l.trim() == "[[handle]]") {
+                        Some(h) => lines.insert(h + 1, rotate.clone()),
+                        None => lines.push(format!(
+                            "[[handle]]\nsphere = {{ center = [{}], radius = 1.0 }}\n{rotate}",
+                            vec!["0.0"; dim].join(", ")
+                        )),
+                    },
+                }
+                format!("huge turn: {rotate}")
+            }
             _ => {
                 // A region or motion of extreme or wrong shape.
                 let zero = vec!["0.0"; dim].join(", ");

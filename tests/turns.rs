@@ -1,0 +1,171 @@
+//! Whole turns of bulky parts: a part turns by the angle written or the run refuses, the report
+//! carries the turn asked and the turn taken, and the spec bounds the turn.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{arg as s, deform};
+use rigidcells::io::Document;
+use rigidcells::rigid::Vect;
+use rigidcells::spec::parse_spec;
+
+/// A closed cylinder of diameter 1 and `height` along y, its base at y = 0, in `dir`.
+fn cylinder(dir: &Path, height: f64) -> PathBuf {
+    let path = dir.join(format!("cylinder{height}.ply"));
+    let mesh = data_gen::cylinder(0.5, height, 48, (24.0 * height) as usize);
+    data_gen::write_ply(&path, &mesh, true).unwrap();
+    path
+}
+
+/// The cylinder's bottom tenth fixed, its top tenth turned by `degrees` about its axis.
+fn twist(dir: &Path, height: f64, degrees: f64) -> PathBuf {
+    let path = dir.join("twist.toml");
+    std::fs::write(
+        &path,
+        format!(
+            "[[fixed]]\nbox = {{ min = [-1, -1, -1], max = [1, 0.1, 1] }}\n\
+             [[handle]]\nbox = {{ min = [-1, {}, -1], max = [1, {}, 1] }}\n\
+             rotate = {{ axis = [0, 1, 0], degrees = {degrees} }}\n",
+            height - 0.1,
+            height + 1.0
+        ),
+    )
+    .unwrap();
+    path
+}
+
+/// The turn about +y of each of `n` slices of the cylinder's wall, from its base to its top,
+/// unwrapped from slice to slice (each slice's turn is the circular mean of its vertices').
+fn slice_turns(before: &[Vect<3>], after: &[Vect<3>], height: f64, n: usize) -> Vec<f64> {
+    let mut sums = vec![(0.0f64, 0.0f64); n];
+    for (p, q) in before.iter().zip(after) {
+        if p.x.hypot(p.z) < 0.3 {
+            continue;
+        }
+        let k = ((p.y / height * n as f64) as usize).min(n - 1);
+        // A turn by θ about +y takes the angle atan2(z, x) to itself minus θ.
+        let d = p.z.atan2(p.x) - q.z.atan2(q.x);
+        sums[k].0 += d.sin();
+        sums[k].1 += d.cos();
+    }
+    let (mut total, mut prev) = (0.0f64, 0.0f64);
+    sums.iter()
+        .map(|&(sin, cos)| {
+            let angle = sin.atan2(cos).to_degrees();
+            total += (angle - prev + 540.0).rem_euclid(360.0) - 180.0;
+            prev = angle;
+            total
+        })
+        .collect()
+}
+
+/// Deforms the cylinder of `height` by a turn of `degrees`: the exit code, stderr, the slices'
+/// turns and the report's `handle_turns`.
+fn turned(height: f64, degrees: f64, cell: &str) -> (i32, String, Vec<f64>, serde_json::Value) {
+    let dir = tempfile::tempdir().unwrap();
+    let input = cylinder(dir.path(), height);
+    let edit = twist(dir.path(), height, degrees);
+    let (out, report) = (dir.path().join("out.ply"), dir.path().join("r.json"));
+    let r = deform(
+        &input,
+        &out,
+        &edit,
+        &["--cell-size", cell, "--report", s(&report)],
+    );
+    if r.code != 0 {
+        assert!(!out.exists() && !report.exists(), "a refused run wrote");
+        return (r.code, r.stderr, Vec::new(), serde_json::Value::Null);
+    }
+    let before = Document::read(&input).unwrap().positions().to_vec();
+    let after = Document::read(&out).unwrap().positions().to_vec();
+    let json = std::fs::read_to_string(&report).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&json).unwrap();
+    (
+        r.code,
+        r.stderr,
+        slice_turns(&before, &after, height, 20),
+        json["handle_turns"].clone(),
+    )
+}
+
+/// The report's one handle turn: asked and taken.
+fn report_turn(turns: &serde_json::Value) -> (f64, f64) {
+    let t = &turns.as_array().expect("handle_turns")[0];
+    (
+        t["turn_asked_degrees"].as_f64().unwrap(),
+        t["turn_taken_degrees"].as_f64().unwrap(),
+    )
+}
+
+/// A cylinder as long as it is wide turns by less than a half turn as asked (the slices add up
+/// to the angle), and refuses whole turns instead of untwisting the short way round: the glue
+/// between rigid cells cannot hold a twist of a whole turn over a span that short, whatever
+/// the cell size or the load steps.
+#[test]
+fn a_part_as_short_as_it_is_wide_turns_by_half_a_turn_and_refuses_whole_turns() {
+    let (code, stderr, slices, turns) = turned(1.0, 150.0, "0.1");
+    assert_eq!(code, 0, "{stderr}");
+    let end = *slices.last().unwrap();
+    assert!(
+        (end - 150.0).abs() < 0.15 * 150.0,
+        "slices add up to {end}°"
+    );
+    let (asked, taken) = report_turn(&turns);
+    assert_eq!(asked, 150.0);
+    assert!((taken - 150.0).abs() < 15.0, "turn taken {taken}°");
+    for degrees in [360.0, 720.0] {
+        let (code, stderr, ..) = turned(1.0, degrees, "0.1");
+        assert_eq!(code, 4, "{degrees}°: {stderr}");
+        assert!(
+            stderr.contains("line 3") && stderr.contains("gives way past"),
+            "{degrees}°: {stderr}"
+        );
+    }
+}
+
+/// A cylinder eight times as long as it is wide turns by one and two whole turns: its slices
+/// add up to the angle within 15 %, and the report's turn taken is the turn asked.
+#[test]
+fn a_long_part_turns_by_whole_turns() {
+    for degrees in [360.0, 720.0] {
+        let (code, stderr, slices, turns) = turned(8.0, degrees, "0.2");
+        assert_eq!(code, 0, "{degrees}°: {stderr}");
+        let end = *slices.last().unwrap();
+        assert!(
+            (end - degrees).abs() < 0.15 * degrees,
+            "{degrees}°: slices add up to {end}°"
+        );
+        let (asked, taken) = report_turn(&turns);
+        assert_eq!(asked, degrees);
+        assert!(
+            (taken - degrees).abs() < 0.1 * degrees,
+            "{degrees}°: turn taken {taken}°"
+        );
+        assert!(!stderr.contains("did not turn"), "{stderr}");
+    }
+}
+
+/// Ten whole turns are the most a handle may ask for: beyond, the spec names the line.
+#[test]
+fn more_than_ten_whole_turns_is_a_spec_error() {
+    let spec = |degrees: &str| {
+        format!(
+            "[[fixed]]\nbox = {{ min = [0, 0, 0], max = [1, 1, 1] }}\n\
+             [[handle]]\nbox = {{ min = [9, 0, 0], max = [10, 1, 1] }}\n\
+             rotate = {{ axis = [1, 0, 0], degrees = {degrees} }}\n"
+        )
+    };
+    for ok in ["3600", "-3600", "0.5"] {
+        parse_spec::<3>(&spec(ok), Path::new("."), Path::new("t.toml")).expect(ok);
+    }
+    for bad in ["3600.5", "-3601", "1e5", "-1e308"] {
+        let e = parse_spec::<3>(&spec(bad), Path::new("."), Path::new("t.toml")).unwrap_err();
+        let text = e.to_string();
+        assert_eq!(e.exit_code(), 4, "{bad}");
+        assert!(
+            text.contains("line 3") && text.contains("ten whole turns"),
+            "{bad}: {text}"
+        );
+    }
+}
