@@ -86,7 +86,9 @@ pub enum Error {
     NoConstraints,
     /// A cell is claimed by two different hard constraints.
     #[error(
-        "{first} and {second} both claim the cell at {at:?} (size {size}); move the regions apart or use a smaller --cell-size"
+        "{first} and {second} both claim the cell at {} (size {}); move the regions apart or use a smaller --cell-size",
+        crate::human::point(at, size / 1000.0),
+        crate::human::length(*size, *size)
     )]
     ConstraintConflict {
         /// The first constraint (e.g. `fixed #1`).
@@ -100,10 +102,12 @@ pub enum Error {
     },
     /// Samples lie beyond the margin of the field's cells, where the field is not defined.
     #[error(
-        "{path}: {count} samples lie farther than {margin} outside the field's cells (the \
-         farthest, at {at}, lies {farthest:.3} from the cells' bounding box); nothing was \
+        "{path}: {count} samples lie farther than {} outside the field's cells (the \
+         farthest, at {at}, lies {} from the cells' bounding box); nothing was \
          written. Solve a field over these samples, or pass --outside keep (they keep their \
-         coordinates) or --outside extend (the transfer is extrapolated)"
+         coordinates) or --outside extend (the transfer is extrapolated)",
+        crate::human::length(*margin, *margin),
+        crate::human::length(*farthest, *margin)
     )]
     Outside {
         /// The input file.

@@ -377,7 +377,7 @@ fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
     info.samples_are = "points";
     info.samples = h.count;
     info.bounds = Some((h.min.to_vec(), h.max.to_vec()));
-    info.decimals = Some(h.scale.iter().map(|&s| decimals_of(s)).collect());
+    info.decimals = Some(h.scale.iter().map(|&s| crate::human::decimals(s)).collect());
     info.fields = las_fields(h.format).iter().map(|s| s.to_string()).collect();
     let records = crate::io::LasSource::open(path)?.vlr_records();
     for r in &records {
@@ -416,15 +416,6 @@ fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
     info.details
         .push(("software".into(), format!("{} / {}", h.system, h.software)));
     Ok(())
-}
-
-/// The decimals a LAS scale keeps: 0.01 → 2, 0.001 → 3, 0.5 → 1, 1 → 0.
-fn decimals_of(scale: f64) -> usize {
-    if scale.is_nan() || scale <= 0.0 {
-        return 6;
-    }
-    let d = -scale.log10();
-    (d - 1e-9).ceil().clamp(0.0, 12.0) as usize
 }
 
 /// The CRS of a LAS file's (E)VLRs: the WKT's name and EPSG code, else the GeoTIFF keys'.
@@ -575,6 +566,8 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
     }
     sizes.sort_by(f64::total_cmp);
     if !f.centers.is_empty() {
+        // The cubes' faces to a thousandth of the finest cell, not to 17 digits.
+        info.decimals = Some(vec![crate::human::decimals(sizes[0] / 1000.0); lo.len()]);
         info.bounds = Some((lo, hi));
     }
     info.details.push((
@@ -584,7 +577,7 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
             sizes.len(),
             sizes
                 .iter()
-                .map(|s| format!("{s}"))
+                .map(|&s| crate::human::length(s, sizes[0]))
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
@@ -603,8 +596,11 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
         "domain".into(),
         "the bounds above: the cells' cubes, in the input's coordinates".into(),
     ));
-    info.details
-        .push(("largest cell motion".into(), format!("{moved:.6}")));
+    let finest = sizes.first().copied().unwrap_or(1.0);
+    info.details.push((
+        "largest cell motion".into(),
+        crate::human::length(moved, finest),
+    ));
 }
 
 fn picture(path: &Path, mut info: FileInfo) -> Result<FileInfo> {

@@ -53,6 +53,7 @@ pub mod demo;
 pub mod edit;
 pub mod error;
 pub mod field;
+pub mod human;
 pub mod image;
 pub mod info;
 pub mod interrupt;

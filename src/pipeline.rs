@@ -85,6 +85,8 @@ pub struct DeformInfo {
     pub solver: SolverInfo,
     /// Seconds spent in the transfer (building it and applying it).
     pub seconds_transfer: f64,
+    /// Seconds of the control points' leave-one-out check (not part of `seconds_transfer`).
+    pub seconds_check: f64,
     /// Samples checked for fold-overs and how many of them the map folds over (Jacobian
     /// determinant not positive): at most [`FOLDOVER_SAMPLES`], evenly strided over the samples
     /// of [`deform`] or the proxy of [`deform_file`].
@@ -96,24 +98,26 @@ pub struct DeformInfo {
 }
 
 /// The control points of `spec` in `solution` as `warp` moves them, with the leave-one-out
-/// check when `params` asks for it.
+/// check when `params` asks for it, and the seconds that check took (a stage of its own: one
+/// solve per control point).
 fn control_results<const D: usize>(
     spec: &EditSpec<D>,
     solution: &Solution<D>,
     warp: &impl Warp<D>,
     params: &DeformParams,
     observer: &dyn Observer,
-) -> Result<Vec<ControlPoint>>
+) -> Result<(Vec<ControlPoint>, f64)>
 where
     Dim<D>: Rigid<D>,
 {
     let mut got = crate::control::from_points(solution);
     apply(warp, &solution.constraints.origin, &mut got);
     let mut points = crate::control::control_points(spec, solution, &got);
+    let start = Instant::now();
     if params.check_control_points {
         crate::control::leave_one_out(spec, solution, &params.solve, &mut points, observer)?;
     }
-    Ok(points)
+    Ok((points, start.elapsed().as_secs_f64()))
 }
 
 /// Deforms `points` (with `triangles` over them, or none) under `spec`; returns the moved
@@ -173,11 +177,13 @@ where
     );
     check_moved(0, &moved)?;
     let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
-    let control_points = control_results(spec, &solution, &deformer, params, observer)?;
+    let (control_points, seconds_check) =
+        control_results(spec, &solution, &deformer, params, observer)?;
     let info = DeformInfo {
         build: build_info,
         solver: solution.info.clone(),
-        seconds_transfer: t.elapsed().as_secs_f64(),
+        seconds_transfer: t.elapsed().as_secs_f64() - seconds_check,
+        seconds_check,
         foldovers,
         control_points,
         warnings,
@@ -225,7 +231,8 @@ pub fn solve_points(
         warnings,
         transfer_start,
     } = stages(points, triangles, spec, params, observer)?;
-    let control_points = control_results(spec, &solution, &deformer, params, observer)?;
+    let (control_points, seconds_check) =
+        control_results(spec, &solution, &deformer, params, observer)?;
     // The RBF the transfer factorized is the field's: kept, not factorized again.
     let rbf = match deformer.into_inner() {
         Deformer::Rbf(r) => Some(r),
@@ -234,7 +241,8 @@ pub fn solve_points(
     let info = DeformInfo {
         build,
         solver: solution.info.clone(),
-        seconds_transfer: transfer_start.elapsed().as_secs_f64(),
+        seconds_transfer: transfer_start.elapsed().as_secs_f64() - seconds_check,
+        seconds_check,
         foldovers: (0, 0),
         control_points,
         warnings,
@@ -468,7 +476,8 @@ pub fn deform_file(
     };
     let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
     observer.finish();
-    let control_points = control_results(spec, &solution, &deformer, params, observer)?;
+    let (control_points, seconds_check) =
+        control_results(spec, &solution, &deformer, params, observer)?;
     let t2 = Instant::now();
     info.notes.extend(transfer_pass(
         source.as_mut(),
@@ -484,7 +493,7 @@ pub fn deform_file(
         info.notes.push(format!(
             "{outside} samples lay beyond the cells' margin ({}) and were moved by the transfer \
              extended there",
-            deformer.margin()
+            crate::human::length(deformer.margin(), deformer.margin())
         ));
     }
     info.outside = outside;
@@ -492,7 +501,8 @@ pub fn deform_file(
     info.deform = DeformInfo {
         build: build_info,
         solver: solution.info.clone(),
-        seconds_transfer: t1.elapsed().as_secs_f64(),
+        seconds_transfer: t1.elapsed().as_secs_f64() - seconds_check,
+        seconds_check,
         foldovers,
         control_points,
         warnings,
@@ -600,11 +610,13 @@ pub fn solve_files(
     let deformer = solved
         .saved
         .deformer(None, params.rbf_tolerance, Outside::Extend)?;
-    let control_points = control_results(spec, &solved.solution, &deformer, &params, observer)?;
+    let (control_points, seconds_check) =
+        control_results(spec, &solved.solution, &deformer, &params, observer)?;
     info.deform = DeformInfo {
         build: solved.build,
         solver: solved.solution.info.clone(),
-        seconds_transfer: solved.transfer_start.elapsed().as_secs_f64(),
+        seconds_transfer: solved.transfer_start.elapsed().as_secs_f64() - seconds_check,
+        seconds_check,
         foldovers: (0, 0),
         control_points,
         warnings: solved.warnings,
@@ -727,15 +739,14 @@ fn apply_saved(
         }
     }
     let outside = deformer.outside().count;
+    let margin = crate::human::length(deformer.margin(), deformer.margin());
     match params.outside {
         Outside::Keep if outside > 0 => notes.push(format!(
-            "{outside} samples beyond the field's margin ({}) kept their coordinates",
-            deformer.margin()
+            "{outside} samples beyond the field's margin ({margin}) kept their coordinates"
         )),
         Outside::Extend if outside > 0 => notes.push(format!(
-            "{outside} samples beyond the field's margin ({}) were moved by the transfer \
-             extended there",
-            deformer.margin()
+            "{outside} samples beyond the field's margin ({margin}) were moved by the \
+             transfer extended there"
         )),
         _ => {}
     }
@@ -770,7 +781,10 @@ fn first_pass_cells(
             observer.stage("sizing", 0);
             let size = proxy_cell_size(source, build, (lo, hi), n, chunk)?;
             observer.finish();
-            notes.push(format!("--cells {n}: finest cell size {size}"));
+            notes.push(format!(
+                "--cells {n}: finest cell size {}",
+                crate::human::length(size, size)
+            ));
             sized = BuildParams {
                 cell_size: Some(size),
                 target_cells: None,
@@ -1091,13 +1105,9 @@ fn refuse_outside(input: &Path, warp: &Constrained<3>) -> Result<()> {
         count: tally.count,
         margin: warp.margin(),
         farthest: tally.farthest,
-        at: format!(
-            "({})",
-            (tally.at + warp.origin())
-                .iter()
-                .map(|v| format!("{v:.3}"))
-                .collect::<Vec<_>>()
-                .join(", ")
+        at: crate::human::point(
+            (tally.at + warp.origin()).as_slice(),
+            warp.margin() / 1000.0,
         ),
     })
 }

@@ -128,6 +128,9 @@ pub struct Timings {
     pub transfer: f64,
     /// Pass 2: every sample read, moved through the transfer and written.
     pub write: f64,
+    /// The control points' leave-one-out check (`--check-gcp`; 0 without it): one solve per
+    /// point.
+    pub check_gcp: f64,
     /// From the start of the deformation to the output's rename.
     pub total: f64,
 }
@@ -202,6 +205,7 @@ impl Report {
                 solve: s.seconds,
                 transfer,
                 write: file.seconds_write,
+                check_gcp: d.seconds_check,
                 total,
             },
             peak_memory_bytes: peak_memory(),
@@ -306,11 +310,15 @@ impl std::fmt::Display for Summary<'_> {
                 ", stopped at the iteration limit"
             }
         )?;
-        writeln!(
+        write!(
             f,
             "  cells {:.2} s, transfer {:.2} s",
             d.build.seconds, d.seconds_transfer
         )?;
+        if d.seconds_check > 0.0 {
+            write!(f, ", leave-one-out check {:.2} s", d.seconds_check)?;
+        }
+        writeln!(f)?;
         let (checked, folded) = d.foldovers;
         if checked > 0 {
             writeln!(f, "  fold-overs: {folded} of {checked} samples checked")?;

@@ -496,7 +496,7 @@ where
         let scale: f64 = ctx.field(t.get_ref(), "scale", line)?;
         if !(scale.is_finite() && scale > 0.0) {
             return Err(ctx.error(
-                Some(line),
+                ctx.at(line, "scale"),
                 format!("stiffness scale {scale} must be positive"),
             ));
         }
@@ -530,6 +530,32 @@ impl Ctx<'_> {
         }
     }
 
+    /// The line of `key` (its first part, for `box.min`) in the entry that starts on line
+    /// `entry`: where a value's error is reported. The entry's own line when the key is not
+    /// written on a line of its own (a dotted key, a key of an inline table).
+    fn at(&self, entry: usize, key: &str) -> Option<usize> {
+        let root = key.split('.').next().unwrap_or(key);
+        for (i, text) in self.text.lines().enumerate().skip(entry) {
+            let t = text.trim_start();
+            // The next table header ends the entry; a multi-line array's rows start with `[`
+            // and a number or another `[`.
+            let header = t.trim_start_matches('[').trim_start();
+            if t.starts_with('[') && header.starts_with(|c: char| c.is_alphabetic() || c == '"') {
+                break;
+            }
+            let unquoted = t
+                .strip_prefix('"')
+                .and_then(|r| r.strip_prefix(root)?.strip_prefix('"'))
+                .or_else(|| t.strip_prefix(root));
+            if let Some(rest) = unquoted.map(str::trim_start)
+                && (rest.starts_with('=') || rest.starts_with('.'))
+            {
+                return Some(i + 1);
+            }
+        }
+        Some(entry)
+    }
+
     fn line<T>(&self, s: &Spanned<T>) -> usize {
         let start = s.span().start.min(self.text.len());
         self.text[..start].matches('\n').count() + 1
@@ -548,7 +574,7 @@ impl Ctx<'_> {
     fn allow_only(&self, t: &toml::Table, keys: &[&str], line: usize) -> Result<()> {
         match t.keys().find(|k| !keys.contains(&k.as_str())) {
             Some(k) => Err(self.error(
-                Some(line),
+                self.at(line, k),
                 format!("unknown key `{k}` (expected one of {})", keys.join(", ")),
             )),
             None => Ok(()),
@@ -563,10 +589,10 @@ impl Ctx<'_> {
     ) -> Result<T> {
         let v = t
             .get(key)
-            .ok_or_else(|| self.error(Some(line), format!("missing `{key}`")))?;
+            .ok_or_else(|| self.error(self.at(line, key), format!("missing `{key}`")))?;
         v.clone()
             .try_into()
-            .map_err(|e| self.error(Some(line), format!("`{key}`: {e}")))
+            .map_err(|e| self.error(self.at(line, key), format!("`{key}`: {e}")))
     }
 
     fn vector<const D: usize>(&self, t: &toml::Table, key: &str, line: usize) -> Result<Vect<D>> {
@@ -592,7 +618,7 @@ impl Ctx<'_> {
             Ok(())
         } else {
             Err(self.error(
-                Some(line),
+                self.at(line, key),
                 format!(
                     "`{key}` reaches {magnitude:e}, beyond {LARGEST:e}: a shape moved or \
                      scaled that far keeps no detail in 64-bit floats, and the solve fails"
@@ -604,7 +630,7 @@ impl Ctx<'_> {
     fn to_vect<const D: usize>(&self, v: &[f64], key: &str, line: usize) -> Result<Vect<D>> {
         if v.len() != D || !v.iter().all(|x| x.is_finite()) {
             return Err(self.error(
-                Some(line),
+                self.at(line, key),
                 format!("`{key}` must be {D} finite numbers, got {v:?}"),
             ));
         }
@@ -636,13 +662,13 @@ impl Ctx<'_> {
         }
         if t.contains_key("view") && !present.contains(&"polygon") {
             return Err(self.error(
-                Some(line),
+                self.at(line, "view"),
                 "`view` (a screen's world-to-clip matrix) goes with a `polygon`".into(),
             ));
         }
         if t.contains_key("z") && !present.iter().any(|k| k.starts_with("polygon")) {
             return Err(self.error(
-                Some(line),
+                self.at(line, "z"),
                 "`z` (a height range) goes with a `polygon` or `polygon_file`".into(),
             ));
         }
@@ -679,14 +705,16 @@ impl Ctx<'_> {
                     self.to_vect(&b.max, "box.max", line)?,
                 );
                 if (0..D).any(|a| min[a] > max[a]) {
-                    return Err(self.error(Some(line), "box.min exceeds box.max".into()));
+                    return Err(self.error(self.at(line, "box"), "box.min exceeds box.max".into()));
                 }
                 Region::Box { min, max }
             }
             "sphere" => {
                 let s: RawSphere = self.field(t, key, line)?;
                 if !(s.radius.is_finite() && s.radius >= 0.0) {
-                    return Err(self.error(Some(line), "sphere.radius must be ≥ 0".into()));
+                    return Err(
+                        self.error(self.at(line, "sphere"), "sphere.radius must be ≥ 0".into())
+                    );
                 }
                 Region::Sphere {
                     center: self.to_vect(&s.center, "sphere.center", line)?,
@@ -697,7 +725,7 @@ impl Ctx<'_> {
                 let p: RawPlane = self.field(t, key, line)?;
                 let normal: Vect<D> = self.to_vect(&p.normal, "plane.normal", line)?;
                 if normal.norm() == 0.0 {
-                    return Err(self.error(Some(line), "plane.normal is zero".into()));
+                    return Err(self.error(self.at(line, "plane"), "plane.normal is zero".into()));
                 }
                 Region::Plane {
                     point: self.to_vect(&p.point, "plane.point", line)?,
@@ -721,7 +749,7 @@ impl Ctx<'_> {
                 }
                 let z = match t.get("z") {
                     Some(_) if D == 2 => {
-                        return Err(self.error(Some(line), "`z` is for 3D inputs".into()));
+                        return Err(self.error(self.at(line, "z"), "`z` is for 3D inputs".into()));
                     }
                     Some(_) => {
                         let z: Vec<f64> = self.field(t, "z", line)?;
@@ -729,7 +757,7 @@ impl Ctx<'_> {
                             [a, b] if a <= b => Some([a, b]),
                             _ => {
                                 return Err(self.error(
-                                    Some(line),
+                                    self.at(line, "z"),
                                     format!("`z` must be [lowest, highest], got {z:?}"),
                                 ));
                             }
@@ -754,18 +782,24 @@ impl Ctx<'_> {
         line: usize,
     ) -> Result<Region<D>> {
         if D != 3 || t.contains_key("z") {
-            return Err(self.error(Some(line), "`view` is for 3D inputs, without `z`".into()));
+            return Err(self.error(
+                self.at(line, "view"),
+                "`view` is for 3D inputs, without `z`".into(),
+            ));
         }
         let rows: Vec<Vec<f64>> = self.field(t, "view", line)?;
         let mut view = [[0.0; 4]; 4];
         if rows.len() != 4 || rows.iter().any(|r| r.len() != 4) {
-            return Err(self.error(Some(line), "`view` must be 4 rows of 4 numbers".into()));
+            return Err(self.error(
+                self.at(line, "view"),
+                "`view` must be 4 rows of 4 numbers".into(),
+            ));
         }
         for (out, row) in view.iter_mut().zip(&rows) {
             for (o, v) in out.iter_mut().zip(row) {
                 if !v.is_finite() {
                     return Err(self.error(
-                        Some(line),
+                        self.at(line, "view"),
                         "`view` holds a number that is not finite".into(),
                     ));
                 }
@@ -785,7 +819,7 @@ impl Ctx<'_> {
                 .any(|p| p.len() != 2 || !p.iter().all(|x| x.is_finite()))
         {
             return Err(self.error(
-                Some(line),
+                self.at(line, key),
                 format!("`{key}` must be at least 3 points [x, y] of finite numbers"),
             ));
         }
@@ -824,7 +858,7 @@ impl Ctx<'_> {
             .map(|s| {
                 s.parse::<u64>().map_err(|_| {
                     self.error(
-                        Some(line),
+                        self.at(line, "indices"),
                         format!("{}: `{s}` is not a sample index", path.display()),
                     )
                 })
@@ -862,7 +896,10 @@ impl Ctx<'_> {
             None => 1.0,
         };
         if !(scale.is_finite() && scale > 0.0) {
-            return Err(self.error(Some(line), format!("scale {scale} must be positive")));
+            return Err(self.error(
+                self.at(line, "scale"),
+                format!("scale {scale} must be positive"),
+            ));
         }
         self.within_range(scale, "scale", line)?;
         let (rotation, turn) = match t.get("rotate") {
@@ -872,18 +909,24 @@ impl Ctx<'_> {
                     (Some(a), _) => self.to_vect::<D>(a, "rotate.axis", line)?,
                     (None, 2) => Vect::<D>::zeros(),
                     (None, _) => {
-                        return Err(self.error(Some(line), "rotate needs an `axis` in 3D".into()));
+                        return Err(self.error(
+                            self.at(line, "rotate"),
+                            "rotate needs an `axis` in 3D".into(),
+                        ));
                     }
                 };
                 if D == 3 && axis.norm() == 0.0 {
-                    return Err(self.error(Some(line), "rotate.axis is zero".into()));
+                    return Err(self.error(self.at(line, "rotate"), "rotate.axis is zero".into()));
                 }
                 if !r.degrees.is_finite() {
-                    return Err(self.error(Some(line), "rotate.degrees must be finite".into()));
+                    return Err(self.error(
+                        self.at(line, "rotate"),
+                        "rotate.degrees must be finite".into(),
+                    ));
                 }
                 if r.degrees.abs() > MAX_TURN_DEGREES {
                     return Err(self.error(
-                        Some(line),
+                        self.at(line, "rotate"),
                         format!(
                             "rotate.degrees = {} is more than ten whole turns (at most \
                              ±{MAX_TURN_DEGREES}); each whole turn costs the solver a dozen \
@@ -919,7 +962,7 @@ impl Ctx<'_> {
         let n = D + 1;
         if m.len() != n || m.iter().any(|r| r.len() != n) {
             return Err(self.error(
-                Some(line),
+                self.at(line, "matrix"),
                 format!("`matrix` must be {n} rows of {n} numbers"),
             ));
         }
@@ -928,7 +971,7 @@ impl Ctx<'_> {
             || m[D][D] != 1.0
         {
             return Err(self.error(
-                Some(line),
+                self.at(line, "matrix"),
                 format!(
                     "`matrix` must be finite with last row [0 … 0 1], got {:?}",
                     m[D]
@@ -940,7 +983,7 @@ impl Ctx<'_> {
         let linear = Mat::<D>::from_fn(|r, c| m[r][c]);
         if <Dim<D> as Rigid<D>>::determinant(&linear) <= 0.0 {
             return Err(self.error(
-                Some(line),
+                self.at(line, "matrix"),
                 "`matrix` must keep orientation (positive determinant)".into(),
             ));
         }
@@ -966,15 +1009,19 @@ impl Ctx<'_> {
             None => 1.0,
         };
         if !(weight.is_finite() && weight > 0.0) {
-            return Err(self.error(Some(line), format!("weight {weight} must be positive")));
+            return Err(self.error(
+                self.at(line, "weight"),
+                format!("weight {weight} must be positive"),
+            ));
         }
         let snap = match t.get("snap") {
             Some(_) => {
                 let d: f64 = self.field(t, "snap", line)?;
                 if !(d.is_finite() && d > 0.0) {
-                    return Err(
-                        self.error(Some(line), format!("snap {d} must be a positive distance"))
-                    );
+                    return Err(self.error(
+                        self.at(line, "snap"),
+                        format!("snap {d} must be a positive distance"),
+                    ));
                 }
                 Some(d)
             }
@@ -990,7 +1037,7 @@ impl Ctx<'_> {
             let file: String = file
                 .clone()
                 .try_into()
-                .map_err(|e| self.error(Some(line), format!("`file`: {e}")))?;
+                .map_err(|e| self.error(self.at(line, "file"), format!("`file`: {e}")))?;
             let path = self.resolve(&file);
             let text = std::fs::read_to_string(&path).map_err(|e| Error::spec_file(&path, e))?;
             let rows = read_control_points::<D>(&text, &path)?;
@@ -1417,13 +1464,54 @@ scale = 0.2
         );
     }
 
+    /// An error in a value names the value's line, not its entry's; an error of the entry as
+    /// a whole names the entry's line.
+    #[test]
+    fn errors_name_the_line_of_the_bad_value() {
+        let line_of = |text: &str| {
+            let e = parse(text).unwrap_err().to_string();
+            let n = e
+                .split("line ")
+                .nth(1)
+                .expect("a line")
+                .split(':')
+                .next()
+                .unwrap();
+            (n.parse::<usize>().unwrap(), e)
+        };
+        let fixed = "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n";
+        let (n, e) = line_of(&format!(
+            "{fixed}[[handle]]\nsphere = {{ center = [5.0, 0.0, 0.0], radius = 1.0 }}\n\
+             translate = [0, 0, \"a\"]\n"
+        ));
+        assert_eq!(n, 5, "{e}");
+        let (n, e) = line_of(&format!(
+            "{fixed}[[handle]]\n# a turn\nsphere = {{ center = [5.0, 0.0, 0.0], radius = 1.0 }}\n\
+             rotate = {{ axis = [1, 0, 0], degrees = 5000 }}\n"
+        ));
+        assert_eq!(n, 6, "{e}");
+        let (n, e) =
+            line_of("[[fixed]]\n\nbox = { min = [2.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n");
+        assert_eq!(n, 3, "{e}");
+        let (n, e) = line_of(&format!(
+            "{fixed}[[handle]]\npolygon = [\n  [0.0, 0.0],\n  [1.0, 0.0],\n  [0.0, 1.0],\n]\n\
+             z = [2.0, 1.0]\ntranslate = [0, 0, 1]\n"
+        ));
+        assert_eq!(n, 9, "{e}");
+        // The next entry's keys are not this one's: a missing `to` names the pin's line.
+        let (n, e) = line_of(&format!(
+            "{fixed}[[pin]]\npoint = [0, 0, 0]\n[[pin]]\nto = [1, 1, 1]\n"
+        ));
+        assert_eq!(n, 3, "{e}");
+    }
+
     #[test]
     fn errors_name_the_line() {
         let e = parse("[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n\n[[handle]]\nsphere = { center = [0.0, 0.0], radius = 1.0 }\n")
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("line 4") && e.contains("3 finite numbers"),
+            e.contains("line 5") && e.contains("3 finite numbers"),
             "{e}"
         );
         let e = parse(
@@ -1432,7 +1520,7 @@ scale = 0.2
         .unwrap_err()
         .to_string();
         assert!(
-            e.contains("line 1") && e.contains("unknown key `radius`"),
+            e.contains("line 3") && e.contains("unknown key `radius`"),
             "{e}"
         );
         let e = parse("[[fixed]\n").unwrap_err().to_string();

@@ -233,4 +233,17 @@ fn leave_one_out_finds_the_blunder() {
         );
     }
     assert!(json["control_rmse_left_out"].as_f64().unwrap() > 1.0);
+    // The nine solves of the check are a stage of their own, not the transfer's.
+    let timings = &json["timings_s"];
+    let check = timings["check_gcp"].as_f64().unwrap();
+    assert!(check > 0.0, "{timings}");
+    assert!(
+        r.stdout
+            .contains(&format!("leave-one-out check {check:.2} s")),
+        "{}",
+        r.stdout
+    );
+    let transfer = timings["transfer"].as_f64().unwrap();
+    let total = timings["total"].as_f64().unwrap();
+    assert!(transfer + check <= total, "{timings}");
 }

@@ -137,3 +137,48 @@ fn fields_and_pictures() {
     );
     assert!(line(&t, "centroid:").contains('['), "{t}");
 }
+
+/// The decimals of every number in `text`.
+fn decimals_in(text: &str) -> Vec<usize> {
+    text.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter(|w| w.contains('.') && w.starts_with(|c: char| c.is_ascii_digit()))
+        .map(|w| w.split('.').nth(1).unwrap_or("").len())
+        .collect()
+}
+
+/// A cell size chosen for `--cells`, a field's bounds and cell sizes print to a thousandth of
+/// the finest cell, not to 17 digits.
+#[test]
+fn lengths_the_cells_decided_print_to_their_precision() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("lift.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
+         translate = [0, 0, 5]\n",
+    )
+    .unwrap();
+    let field = dir.path().join("lift.field");
+    let r = common::deform_verbose(
+        &shared("las/autzen_trim.las"),
+        &dir.path().join("o.las"),
+        &edit,
+        &["--cells", "3000", "--save-field", arg(&field)],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let note = r
+        .stderr
+        .lines()
+        .find(|l| l.contains("finest cell size"))
+        .unwrap_or_else(|| panic!("no note of the cell size in\n{}", r.stderr));
+    let size: f64 = note.rsplit(' ').next().unwrap().parse().unwrap();
+    assert!(size > 10.0 && size < 25.0, "{note}");
+    // A cell of 10–25 resolves to 0.01–0.025: two decimals at most.
+    assert!(decimals_in(&note).iter().all(|&d| d <= 2), "{note}");
+    let t = info(&field);
+    for label in ["bounds:", "size:", "levels:", "largest cell motion:"] {
+        let l = line(&t, label);
+        assert!(decimals_in(&l).iter().all(|&d| d <= 2), "{l}");
+    }
+}

@@ -164,7 +164,7 @@ fn more_than_ten_whole_turns_is_a_spec_error() {
         let text = e.to_string();
         assert_eq!(e.exit_code(), 4, "{bad}");
         assert!(
-            text.contains("line 3") && text.contains("ten whole turns"),
+            text.contains("line 5") && text.contains("ten whole turns"),
             "{bad}: {text}"
         );
     }

@@ -402,7 +402,7 @@ impl<const D: usize> Occupancy<D> {
             &format!(
                 "the cells of {} occupied finest cells of size {}",
                 self.sorted,
-                self.grid.finest_size()
+                crate::human::length(self.grid.finest_size(), self.grid.finest_size())
             ),
             self.sorted as f64 * BYTES_PER_OCCUPIED as f64,
             self.limit,
