@@ -19,7 +19,7 @@ pub fn to_step(v: f64, step: f64) -> String {
 }
 
 /// A length the cells decided, to a thousandth of the finest cell size `cell`, without
-/// trailing zeros: a margin of 11.570624999993015 beside cells of 11.57 prints `11.571`.
+/// trailing zeros: a margin of 11.570624999993015 beside cells of 11.57 prints `11.57`.
 pub fn length(v: f64, cell: f64) -> String {
     let text = to_step(v, cell / 1000.0);
     match text.contains('.') {
@@ -45,7 +45,7 @@ mod tests {
         assert_eq!(decimals(0.5), 1);
         assert_eq!(decimals(2.5), 0);
         assert_eq!(decimals(f64::NAN), 6);
-        assert_eq!(length(11.570624999993015, 11.57), "11.571");
+        assert_eq!(length(11.570624999993015, 11.57), "11.57");
         assert_eq!(length(2.187449933092767, 2.187449933092767), "2.187");
         assert_eq!(length(2.0, 2.0), "2");
         assert_eq!(to_step(484639.54500000016, 0.001), "484639.545");

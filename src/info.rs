@@ -566,8 +566,18 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
     }
     sizes.sort_by(f64::total_cmp);
     if !f.centers.is_empty() {
-        // The cubes' faces to a thousandth of the finest cell, not to 17 digits.
-        info.decimals = Some(vec![crate::human::decimals(sizes[0] / 1000.0); lo.len()]);
+        // The cubes' faces to a thousandth of the finest cell (no more decimals than that
+        // needs), not to 17 digits.
+        let decimals = lo
+            .iter()
+            .chain(&hi)
+            .map(|&v| {
+                let text = crate::human::length(v, sizes[0]);
+                text.split_once('.').map_or(0, |(_, d)| d.len())
+            })
+            .max()
+            .unwrap_or(0);
+        info.decimals = Some(vec![decimals; lo.len()]);
         info.bounds = Some((lo, hi));
     }
     info.details.push((

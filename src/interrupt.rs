@@ -7,7 +7,8 @@
 //!
 //! SIGINT or SIGTERM during a run removes the temporary outputs
 //! (hidden `.NAME.PID.tmp` files beside the outputs, [`crate::io::TempFile`]) instead of
-//! leaving them behind, then exits with 128 + the signal's number, as a shell reports it.
+//! leaving them behind, and the outputs of the run's [`ResultSet`] already in place, then exits
+//! with 128 + the signal's number, as a shell reports it.
 //!
 //! The signals are blocked in every thread ([`remove_temporaries_on_signals`] runs before
 //! any other thread starts, and threads inherit the mask) and taken by one thread that waits
@@ -43,6 +44,58 @@ pub fn guarded<T>(path: &Path, doing: &str, f: impl FnOnce() -> Result<T>) -> Re
 
 /// The temporary files alive now.
 static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The outputs of the open [`ResultSet`] already in place (`None`: no set is open).
+static RESULT_SET: Mutex<Option<Vec<PathBuf>>> = Mutex::new(None);
+
+/// The outputs of one run, there only together: the output, its saved field, its report and
+/// its preview. While a set is open, every output renamed into place is noted; an interrupt,
+/// or the set dropped before [`ResultSet::close`] (an error on the way), removes them, so a
+/// run leaves all of its files or none.
+#[derive(Debug)]
+pub struct ResultSet {
+    closed: bool,
+}
+
+impl ResultSet {
+    /// Opens the set: outputs committed from now on belong to it.
+    pub fn open() -> Self {
+        if let Ok(mut set) = RESULT_SET.lock() {
+            *set = Some(Vec::new());
+        }
+        Self { closed: false }
+    }
+
+    /// Every output is in place: they stay.
+    pub fn close(mut self) {
+        if let Ok(mut set) = RESULT_SET.lock() {
+            *set = None;
+        }
+        self.closed = true;
+    }
+}
+
+impl Drop for ResultSet {
+    fn drop(&mut self) {
+        if self.closed {
+            return;
+        }
+        if let Ok(mut set) = RESULT_SET.lock() {
+            for path in set.take().unwrap_or_default() {
+                let _ = std::fs::remove_file(path);
+            }
+        }
+    }
+}
+
+/// Notes the output `path`, just renamed into place, as a member of the open result set.
+pub(crate) fn committed(path: &Path) {
+    if let Ok(mut set) = RESULT_SET.lock()
+        && let Some(paths) = set.as_mut()
+    {
+        paths.push(path.to_path_buf());
+    }
+}
 
 /// Notes the temporary file `path`, to be removed if the run is interrupted.
 pub(crate) fn register(path: &Path) {
@@ -103,6 +156,12 @@ pub fn remove_temporaries_on_signals() {
                 let mut removed = false;
                 if let Ok(t) = TEMPORARIES.lock() {
                     for path in t.iter() {
+                        removed |= std::fs::remove_file(path).is_ok();
+                    }
+                }
+                // The outputs of an unfinished result set go with it.
+                if let Ok(mut set) = RESULT_SET.lock() {
+                    for path in set.take().unwrap_or_default() {
                         removed |= std::fs::remove_file(path).is_ok();
                     }
                 }

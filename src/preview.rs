@@ -2,8 +2,8 @@
 //! deformed cells colored by strain), all in one camera so that they share scale and framing.
 //!
 //! Samples are colored by the role of their cell: fixed gray, handles yellow, the rest blue;
-//! a mesh's triangles are drawn shaded (its vertices when the proxy holds them all), colored by
-//! their first vertex's role, so a surface reads as one. Pins are magenta rings, soft targets
+//! a mesh's triangles are drawn shaded (its vertices when the proxy holds them all), each
+//! vertex's color interpolated across them, so a triangle spanning two regions shows both. Pins are magenta rings, soft targets
 //! (control points) orange: at their points before, at where they were sent after. The strain
 //! panel carries a legend with its numbers; every panel an axis triad and a scale bar.
 
@@ -75,8 +75,7 @@ pub fn preview(solution: &Solution<3>, proxy: &Proxy, view: &View, strain: bool)
             let radius = render::splat_radius(points.len(), area);
             canvas.points(points, None, radius, range, |i| colors[i]);
         } else {
-            let tris = &proxy.triangles;
-            canvas.triangles(points, tris, |t| colors[tris[t][0] as usize]);
+            canvas.triangles(points, &proxy.triangles, |_, v| colors[v]);
         }
         let ring = 4.0 + view.width as f64 / 160.0;
         for (list, color) in [(&pins, PIN), (&targets, TARGET)] {

@@ -298,12 +298,14 @@ impl Canvas {
         }
     }
 
-    /// Draws the triangles over `points`, flat-shaded, `color(t)` for triangle `t`.
+    /// Draws the triangles over `points`, flat-shaded, in the colors of their corners
+    /// interpolated across them: `color(t, v)` for the corner of triangle `t` at vertex `v`
+    /// (per-vertex colors ignore `t`, per-triangle colors `v`).
     pub fn triangles(
         &mut self,
         points: &[Vect<3>],
         triangles: &[[u32; 3]],
-        color: impl Fn(usize) -> [u8; 3],
+        color: impl Fn(usize, usize) -> [u8; 3],
     ) {
         let toward = self.camera.toward();
         for (t, tri) in triangles.iter().enumerate() {
@@ -314,12 +316,17 @@ impl Canvas {
                 continue;
             }
             let light = 0.3 + 0.7 * (n.dot(&toward) / len).abs();
-            let shade = color(t).map(|v| (v as f64 * light).round() as u8);
+            let colors = tri.map(|v| color(t, v as usize).map(|c| c as f64 * light));
             let p = [a, b, c].map(|v| self.camera.project(&v));
             let corners = p.map(|q| Vect::<2>::new(q.0, q.1));
             let (w, h) = (self.image.width, self.image.height);
             raster(corners, w, h, |x, y, l| {
                 let z = l[0] * p[0].2 + l[1] * p[1].2 + l[2] * p[2].2;
+                let shade = std::array::from_fn(|k| {
+                    (l[0] * colors[0][k] + l[1] * colors[1][k] + l[2] * colors[2][k])
+                        .round()
+                        .clamp(0.0, 255.0) as u8
+                });
                 self.plot(x as i64, y as i64, z, shade);
             });
         }
@@ -675,12 +682,14 @@ pub fn bounds(points: &[Vect<3>]) -> Option<(Vect<3>, Vect<3>)> {
 }
 
 /// Renders a mesh (with `triangles`) or a point cloud (without), colored `color`, in `view`
-/// fitted to `fit` (the points' own bounds when `None`).
+/// fitted to `fit` (the points' own bounds when `None`). `color(t, v)` colors the corner of
+/// triangle `t` at vertex `v` (interpolated across the triangle), or point `v` of a cloud
+/// (`t == v`).
 pub fn render(
     points: &[Vect<3>],
     triangles: &[[u32; 3]],
     normals: Option<&[Vect<3>]>,
-    color: impl Fn(usize) -> [u8; 3],
+    color: impl Fn(usize, usize) -> [u8; 3],
     view: &View,
     fit: Option<(Vect<3>, Vect<3>)>,
 ) -> Image {
@@ -701,7 +710,7 @@ pub fn render(
             normals,
             splat_radius(points.len(), area),
             range,
-            color,
+            |i| color(i, i),
         );
     } else {
         canvas.triangles(points, triangles, color);
@@ -715,7 +724,7 @@ pub fn render_annotated(
     points: &[Vect<3>],
     triangles: &[[u32; 3]],
     normals: Option<&[Vect<3>]>,
-    color: impl Fn(usize) -> [u8; 3],
+    color: impl Fn(usize, usize) -> [u8; 3],
     view: &View,
 ) -> Image {
     let Some((lo, hi)) = bounds(points) else {
@@ -741,8 +750,8 @@ pub fn render_file(input: &Path, view: &View) -> Result<Image> {
     use crate::io::Colors;
     match crate::io::Document::read(input) {
         Ok(doc) => {
-            // A PLY's vertex colors (a `cells` output's roles or strain), else gray; a
-            // triangle takes its first vertex's.
+            // A PLY's vertex colors (a `cells` output's roles or strain, interpolated across
+            // each triangle) or face colors, else gray.
             let triangles = doc.triangles();
             let colors = match crate::io::extension(input).as_deref() {
                 Some("ply") => crate::io::colors(input)?,
@@ -752,10 +761,9 @@ pub fn render_file(input: &Path, view: &View) -> Result<Image> {
                 Colors::Vertices(v) => v.len() == doc.positions().len(),
                 Colors::Triangles(t) => t.len() == triangles.len(),
             });
-            let color = |i: usize| match &colors {
-                Some(Colors::Vertices(c)) if triangles.is_empty() => c[i],
-                Some(Colors::Vertices(c)) => c[triangles[i][0] as usize],
-                Some(Colors::Triangles(c)) => c[i],
+            let color = |t: usize, v: usize| match &colors {
+                Some(Colors::Vertices(c)) => c[v],
+                Some(Colors::Triangles(c)) => c[t],
                 None => [200, 200, 200],
             };
             Ok(render_annotated(
@@ -772,7 +780,7 @@ pub fn render_file(input: &Path, view: &View) -> Result<Image> {
                 &p.points,
                 &[],
                 None,
-                |i| p.colors[i],
+                |_, i| p.colors[i],
                 view,
             ))
         }
@@ -879,7 +887,7 @@ mod tests {
         };
         let (p, t) = cube(Vect::<3>::zeros());
         let fit = Some((Vect::<3>::zeros(), Vect::<3>::new(3.0, 1.0, 1.0)));
-        let image = render(&p, &t, None, |_| [200, 200, 200], &view, fit);
+        let image = render(&p, &t, None, |_, _| [200, 200, 200], &view, fit);
         // Looking along +y from −y: x runs left to right over the fitted 0..3.
         let column = |img: &Image| {
             let (mut sum, mut n) = (0.0, 0usize);
@@ -899,12 +907,12 @@ mod tests {
         let width = 0.92 * 200.0 / 3.0;
         assert!((image.foreground() as f64 - width * width).abs() < 0.05 * width * width);
         let (moved, _) = cube(Vect::<3>::new(2.0, 0.0, 0.0));
-        let shifted = render(&moved, &t, None, |_| [200, 200, 200], &view, fit);
+        let shifted = render(&moved, &t, None, |_, _| [200, 200, 200], &view, fit);
         assert_ne!(shifted, image);
         let shift = column(&shifted) - column(&image);
         assert!((shift - 2.0 * width).abs() < 2.0, "moved {shift} px");
         // As points, the cube's corners light splats at its corners.
-        let cloud = render(&p, &[], None, |_| [0, 0, 200], &view, fit);
+        let cloud = render(&p, &[], None, |_, _| [0, 0, 200], &view, fit);
         assert!(cloud.foreground() > 8);
     }
 }

@@ -247,7 +247,8 @@ fn an_output_that_cannot_be_written_exits_1_naming_the_users_path() {
     }
 }
 
-/// SIGINT while the output is being written removes the temporary output and exits 130.
+/// SIGINT while the output is being written removes the temporary output, and the field the
+/// run saved before it, and exits 130: a run leaves all its files or none.
 #[cfg(unix)]
 #[test]
 fn an_interrupted_run_leaves_no_temporary_file() {
@@ -260,9 +261,12 @@ fn an_interrupted_run_leaves_no_temporary_file() {
         [4999990.0, 5002010.0],
     );
     let out = dir.path().join("out.las");
+    let field = dir.path().join("lift.field");
+    let report = dir.path().join("lift.json");
     let mut child = common::bin()
         .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&edit)])
         .args(["--cell-size", "40", "--transfer", "rbf", "-q"])
+        .args(["--save-field", arg(&field), "--report", arg(&report)])
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
@@ -278,10 +282,10 @@ fn an_interrupted_run_leaves_no_temporary_file() {
             started.elapsed().as_secs() < 120,
             "no temporary output appeared"
         );
-        if child.try_wait().unwrap().is_some() {
-            // Finished before it could be interrupted: nothing to check on this machine.
-            return;
-        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run finished before its output appeared: give it more work to interrupt"
+        );
         std::thread::sleep(std::time::Duration::from_millis(5));
     }
     let kill = std::process::Command::new("kill")
@@ -293,6 +297,42 @@ fn an_interrupted_run_leaves_no_temporary_file() {
     assert_eq!(status.code(), Some(130));
     assert!(!temporary(), "the temporary output was left behind");
     assert!(!out.exists());
+    assert!(!field.exists(), "the field of an interrupted run was left");
+    assert!(!report.exists());
+}
+
+/// An output that fails at the end (the preview's folder does not exist) takes the run's other
+/// outputs with it: the deformed file, its field and its report were complete, and are gone.
+#[test]
+fn a_failed_output_takes_the_runs_other_outputs_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out, edit) = common::lifted_bar(dir.path(), 4.0);
+    let field = dir.path().join("bar.field");
+    let report = dir.path().join("bar.json");
+    let preview = dir.path().join("missing").join("bar.png");
+    let r = deform(
+        &input,
+        &out,
+        &edit,
+        &[
+            "--save-field",
+            arg(&field),
+            "--report",
+            arg(&report),
+            "--preview",
+            arg(&preview),
+        ],
+    );
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(r.stderr.contains("bar.png"), "{}", r.stderr);
+    for path in [&out, &field, &report, &preview] {
+        assert!(!path.exists(), "{} was left", path.display());
+    }
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left.len(), 2, "{left:?}");
 }
 
 /// CRC-32 (PNG's), bit by bit.

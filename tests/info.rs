@@ -167,8 +167,8 @@ fn lengths_the_cells_decided_print_to_their_precision() {
         &["--cells", "3000", "--save-field", arg(&field)],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
-    let note = r
-        .stderr
+    let printed = format!("{}{}", r.stdout, r.stderr);
+    let note = printed
         .lines()
         .find(|l| l.contains("finest cell size"))
         .unwrap_or_else(|| panic!("no note of the cell size in\n{}", r.stderr));

@@ -205,3 +205,74 @@ fn render_uses_the_cells_colors() {
     });
     assert!(red > 1000 && blue > 300, "red {red}, blue {blue}");
 }
+
+/// A triangle that spans the fixed end and the handle is drawn in both regions' colors,
+/// interpolated from its corners, not all in its first corner's.
+#[test]
+fn preview_colors_follow_the_regions_across_a_triangle() {
+    let dir = tempfile::tempdir().unwrap();
+    // A 10 × 1 × 1 box of 12 triangles: every long triangle has corners at both ends.
+    let mut obj = String::new();
+    for x in [0.0, 10.0] {
+        for y in [0.0, 1.0] {
+            for z in [0.0, 1.0] {
+                obj += &format!("v {x} {y} {z}\n");
+            }
+        }
+    }
+    for [a, b, c, d] in [
+        [1, 2, 4, 3],
+        [5, 7, 8, 6],
+        [1, 5, 6, 2],
+        [3, 4, 8, 7],
+        [1, 3, 7, 5],
+        [2, 6, 8, 4],
+    ] {
+        obj += &format!("f {a} {b} {c}\nf {a} {c} {d}\n");
+    }
+    let input = dir.path().join("box.obj");
+    std::fs::write(&input, obj).unwrap();
+    let edit = dir.path().join("lift.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0, 0, 1]\n",
+    )
+    .unwrap();
+    let png = dir.path().join("p.png");
+    let r = deform(
+        &input,
+        &dir.path().join("o.obj"),
+        &edit,
+        &[
+            "--preview",
+            arg(&png),
+            "--size",
+            "320x240",
+            "--cell-size",
+            "0.25",
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let p = picture(&png);
+    // Shading scales a color, so blue over green tells the region: 1 for the fixed gray, 0.15
+    // for the handle's yellow, in between where the two blend.
+    let ratio = |c: [u8; 3]| c[2] as f64 / c[1].max(1) as f64;
+    let (fixed, handle) = (
+        ratio(rigidcells::preview::FIXED),
+        ratio(rigidcells::preview::HANDLE),
+    );
+    let mut blended = 0;
+    for y in 0..p.height {
+        for x in 0..320 {
+            let q = p.pixel(x, y);
+            let c = [q[0], q[1], q[2]];
+            if c[1] > 40 && c != [255, 255, 255] && q[0] > q[2] {
+                let r = ratio(c);
+                blended += usize::from(r > handle + 0.15 && r < fixed - 0.15);
+            }
+        }
+    }
+    assert!(blended > 500, "{blended} pixels blend the two regions");
+}

@@ -21,12 +21,12 @@
 //! 4. Leaves: every occupied finest cell is a boundary leaf, every inside block an interior
 //!    leaf at its own level (the coarsest where it is all inside); outside blocks are dropped.
 //!
-//! Nothing is sized by the bounding box's volume (issue 15): occupied finest cells are sorted
+//! Nothing is sized by the bounding box's volume or extent: occupied finest cells are sorted
 //! Morton codes, the coarser levels their shifted codes, the blocks at most `2^D − 1` per
-//! occupied cell plus the coarsest level, which is enumerated whole (and bounded by the
-//! shortest extent's choice of levels). Memory is checked against the budget as the codes
-//! grow ([`BYTES_PER_OCCUPIED`]), the coarsest level and the triangles' candidate cells before
-//! they are enumerated. A dense byte grid held the finest level before: a 257-point diagonal
+//! occupied cell plus, at the coarsest level, the empty cells beside occupied ones (the others
+//! are outside: see `empty_blocks`). Four samples 21 × 42 km apart at 0.3 m cells make four
+//! cells and a few hundred blocks. Memory is checked against the budget as the codes grow
+//! ([`BYTES_PER_OCCUPIED`]), and the triangles' candidate cells before they are enumerated. A dense byte grid held the finest level before: a 257-point diagonal
 //! line 256 units long at 0.5 cells needed 1024³ of them (3.4 GB at the peak) for 257 occupied
 //! ones. The 64-bit codes bound the finest cells along an axis to 2²¹ in 3D (2³¹ in 2D), which
 //! [`build`] checks up front ([`Error::GridTooLarge`]).
@@ -106,8 +106,7 @@ pub struct BuildInfo {
     pub interior_cells: usize,
     /// The classification used ([`Inside::Auto`] resolved).
     pub inside: Inside,
-    /// Winding-number evaluations (one per empty cell of the coarsest level that has no
-    /// occupied descendant).
+    /// Winding-number evaluations (one per empty block: see [`Occupancy::finish`]).
     pub winding_queries: usize,
     /// Finest cells holding vertices of two or more parts of a mesh that are not connected
     /// (sharing no vertex position): such parts are glued there, up to the finest cell size.
@@ -129,8 +128,6 @@ const fn max_axis(d: usize) -> i64 {
 /// included). It was 160 B, counting the build's codes only: a `--min-cell-size` of 1 mm
 /// passed a 1.5 GB budget and peaked at 2.3 GB.
 pub(crate) const BYTES_PER_OCCUPIED: u64 = 1 << 10;
-/// Bytes per cell of the coarsest level, which is enumerated whole.
-const BYTES_PER_COARSEST: u64 = 24;
 
 /// Builds the cell complex of a shape given by `points` (world coordinates) and, in 3D,
 /// `triangles` (indices into `points`; pass `&[]` for a point cloud).
@@ -186,25 +183,16 @@ pub fn cell_size_for<const D: usize>(
     let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
     // `small` gives too many cells (or fails), `large` at most `target`.
     let (mut small, mut large) = (longest / 4096.0, longest / 2.0);
-    // A try whose coarsest level (enumerated whole, and flooded) is far past the target is
-    // counted as too many without building it: the count of a sparse shape (four samples, or
-    // a scan flattened onto a plane) may never reach the target, and the search then went on
-    // building ever finer grids of millions of empty blocks (20 s for four points). The final
-    // complex may then have fewer cells than asked; its count is reported.
-    let cap = COARSEST_PER_TARGET.saturating_mul(target as u128) + (1 << 20);
+    // Every try costs what its occupied cells cost, whatever the extent: the count of a
+    // sparse shape (four samples, a scan flattened onto a plane) may never reach the target,
+    // and the search ends at the finest size it tries. The final complex may then have fewer
+    // cells than asked; its count is reported.
     let count = |size: f64| -> Result<Option<usize>> {
         let at = BuildParams {
             cell_size: Some(size),
             target_cells: None,
             ..*params
         };
-        match frame(&lo, &hi, &at) {
-            Ok(grid) if grid.dims0.iter().map(|&n| n as u128).product::<u128>() > cap => {
-                return Ok(None);
-            }
-            Ok(_) | Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => {}
-            Err(e) => return Err(e),
-        }
         match build(points, triangles, &at) {
             Ok((complex, _)) => Ok(Some(complex.len())),
             Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => Ok(None),
@@ -272,11 +260,6 @@ pub fn cell_size_for<const D: usize>(
 /// (550 B measured by `rigidcells cells` at 800k cells, rounded up): the least a `--cells N`
 /// run needs before any solve.
 pub(crate) const BYTES_PER_TARGET_CELL: u64 = 1 << 10;
-
-/// Cells of the coarsest level per cell asked for, past which [`cell_size_for`] counts a try as
-/// too many without building it (a complex holds every coarsest cell that is not outside, and
-/// the coarsest cells of a thin scan are about as many as its leaves).
-const COARSEST_PER_TARGET: u128 = 16;
 
 /// Refuses `--cells 0`, and a `--cells N` whose complex cannot fit the memory budget (checked
 /// before any try is built: a target of 2⁶⁴−1 had the search build ever finer trial grids for
@@ -629,7 +612,6 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     };
     let block = (1i64 << levels) as f64;
     let mut dims0 = [0i64; D];
-    let mut coarsest = 1u128;
     for a in 0..D {
         let needed = (extent[a] / size).ceil() + 2.0;
         let along = (needed / block).ceil().max(1.0);
@@ -642,18 +624,7 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
             });
         }
         dims0[a] = along as i64;
-        coarsest = coarsest.saturating_mul(dims0[a] as u128);
     }
-    // The coarsest level is enumerated whole (its empty cells are blocks of their own).
-    crate::memory::check(
-        &format!(
-            "the coarsest level of {coarsest} cells of size {}",
-            size * block
-        ),
-        coarsest as f64 * BYTES_PER_COARSEST as f64,
-        crate::memory::limit(params.memory_limit),
-        "use a larger --cell-size or --min-cell-size (or fewer --cells)",
-    )?;
     let size0 = size * block;
     let origin = (lo + hi) * 0.5;
     let lower = Vect::<D>::from_fn(|a, _| -0.5 * dims0[a] as f64 * size0);
@@ -776,18 +747,36 @@ fn pyramid<const D: usize>(grid: &Grid<D>, finest: Vec<u64>) -> Vec<Vec<u64>> {
     levels
 }
 
-/// The maximal empty cells: every cell of level 0 that is not occupied, and every child that
-/// is not occupied of an occupied cell above the finest level. They tile the grid's empty
-/// space, and each is wholly inside or wholly outside the shape (the surface lies in
-/// occupied cells). Returned as `(level, code)`.
+/// The maximal empty cells near the shape: every cell of level 0 that is not occupied but
+/// touches an occupied one (edges and corners included), and every child that is not occupied
+/// of an occupied cell above the finest level. With the level-0 cells far from the shape,
+/// which are outside, they tile the grid's empty space, and each is wholly inside or wholly
+/// outside the shape (the surface lies in occupied cells). Returned as `(level, code)`.
 fn empty_blocks<const D: usize>(grid: &Grid<D>, levels: &[Vec<u64>]) -> Vec<(u8, u64)> {
-    let mut blocks = Vec::new();
-    for_each_coord(&grid.dims0, |c| {
-        let code = morton(&c);
-        if levels[0].binary_search(&code).is_err() {
-            blocks.push((0, code));
-        }
-    });
+    // Level 0: the empty cells among the 3^D around each occupied one. A level-0 cell is at
+    // least as large as the box's shortest extent, so one with no occupied neighbor can hold
+    // neither the surface nor any inside: it is outside, and is not enumerated (a grid of
+    // 35,000 × 70,000 of them around four samples was 2.45e9 blocks).
+    let mut near: Vec<u64> = levels[0]
+        .iter()
+        .flat_map(|&code| {
+            let c = coords::<D>(code);
+            (0..3usize.pow(D as u32)).filter_map(move |k| {
+                let mut n = c;
+                for (a, v) in n.iter_mut().enumerate() {
+                    *v += (k / 3usize.pow(a as u32) % 3) as i64 - 1;
+                    if *v < 0 || *v >= grid.dims0[a] {
+                        return None;
+                    }
+                }
+                Some(morton(&n))
+            })
+        })
+        .filter(|code| levels[0].binary_search(code).is_err())
+        .collect();
+    near.sort_unstable();
+    near.dedup();
+    let mut blocks: Vec<(u8, u64)> = near.into_iter().map(|code| (0, code)).collect();
     for level in 1..levels.len() {
         let (parents, children) = (&levels[level - 1], &levels[level]);
         // Both are sorted and the children of a parent are the codes `p << D ..`: one merge.
@@ -879,7 +868,12 @@ fn classify_flood<const D: usize>(
                                 out.push((k, other));
                                 break;
                             }
-                            if levels[l].binary_search(&m).is_ok() || l == 0 {
+                            if levels[l].binary_search(&m).is_ok() {
+                                break;
+                            }
+                            if l == 0 {
+                                // An empty level-0 cell far from the shape: outside.
+                                out.push((k, outside));
                                 break;
                             }
                             l -= 1;
@@ -976,28 +970,6 @@ fn compact(x: u64, (own, steps): &Spread) -> u64 {
         x = (x | x >> steps[i].0) & mask;
     }
     x
-}
-
-fn for_each_coord<const D: usize>(dims: &[i64; D], mut f: impl FnMut([i64; D])) {
-    if dims.iter().any(|&n| n <= 0) {
-        return;
-    }
-    let mut c = [0i64; D];
-    loop {
-        f(c);
-        let mut a = 0;
-        loop {
-            c[a] += 1;
-            if c[a] < dims[a] {
-                break;
-            }
-            c[a] = 0;
-            a += 1;
-            if a == D {
-                return;
-            }
-        }
-    }
 }
 
 #[cfg(test)]

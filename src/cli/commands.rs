@@ -134,6 +134,8 @@ pub(super) fn deform_file(
     let start = std::time::Instant::now();
     let spec = read_spec::<3>(edit)?;
     let bar = Bar::new(quiet);
+    // The output, the field, the report and the preview are there together or not at all.
+    let set = rigidcells::interrupt::ResultSet::open();
     let (solution, info) =
         pipeline::deform_file(input, output, &spec, params, chunk, save_field, &bar)?;
     let summary = Report::new(
@@ -149,6 +151,7 @@ pub(super) fn deform_file(
     if let Some((path, view, strain)) = preview {
         preview_image(&solution, &info, &view, strain).write_png(path)?;
     }
+    set.close();
     if !quiet {
         for w in &summary.warnings {
             eprintln!("warning: {w}");

@@ -195,6 +195,7 @@ impl TempFile {
             .map_err(|e| Error::write(&self.target, e))?;
         self.committed = true;
         crate::interrupt::forget(&self.tmp);
+        crate::interrupt::committed(&self.target);
         Ok(())
     }
 }
