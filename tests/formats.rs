@@ -949,3 +949,65 @@ fn laz_errors_say_what_the_file_holds() {
         }
     }
 }
+
+/// A PLY element that declares two properties of one name (or two elements of one name) is a
+/// format error (exit 3): its values are found by name, so one property was read in place of
+/// the other, the records misread, and the normals came out as NaN.
+#[test]
+fn a_ply_that_declares_a_name_twice_is_a_format_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = translate_spec(dir.path());
+    // Three vertices of 7 floats (the last a NaN where a quality is unknown) and a triangle.
+    let mut body = Vec::new();
+    for p in [[0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]] {
+        for v in p.iter().chain(&[0.0, 0.0, 1.0, f32::NAN]) {
+            body.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    body.push(3);
+    for i in [0i32, 1, 2] {
+        body.extend_from_slice(&i.to_le_bytes());
+    }
+    let header = |props: &str, more: &str| {
+        let mut bytes = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex 3\n{props}element face 1\n\
+             property list uchar int vertex_indices\n{more}end_header\n"
+        )
+        .into_bytes();
+        bytes.extend_from_slice(&body);
+        bytes
+    };
+    let props = |last: &str| {
+        format!(
+            "property float x\nproperty float y\nproperty float z\nproperty float nx\n\
+             property float ny\nproperty float nz\nproperty float {last}\n"
+        )
+    };
+    let cases = [
+        (
+            "twice.ply",
+            header(&props("nx"), ""),
+            "element `vertex` has two properties named `nx`",
+        ),
+        (
+            "elements.ply",
+            header(&props("quality"), "element face 0\nproperty uchar flag\n"),
+            "two elements are named `face`",
+        ),
+    ];
+    for (name, text, words) in cases {
+        let input = dir.path().join(name);
+        std::fs::write(&input, text).unwrap();
+        let output = dir.path().join(format!("out_{name}"));
+        let r = deform(&input, &output, &spec, &[]);
+        assert_eq!(r.code, 3, "{name}: {}", r.stderr);
+        assert!(r.stderr.contains(words), "{name}: {}", r.stderr);
+        assert_eq!(r.stderr.matches(name).count(), 1, "{name}: {}", r.stderr);
+        assert!(!output.exists(), "{name}");
+    }
+    // The same file without the second `nx` reads.
+    let input = dir.path().join("once.ply");
+    std::fs::write(&input, header(&props("quality"), "")).unwrap();
+    let r = deform(&input, &dir.path().join("out_once.ply"), &spec, &[]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+}

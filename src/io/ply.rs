@@ -211,7 +211,9 @@ pub(super) fn vertex_layout(
 /// Parses the header; returns it and the offset of the body. Exporters (Blender 2.4) write
 /// comments that run over several lines: a header line of free text (its first word is not a
 /// lowercase identifier) is read as a comment, its bytes kept as they are. A line that starts
-/// with an unknown lowercase word is a misspelled keyword and an error.
+/// with an unknown lowercase word is a misspelled keyword and an error. Two elements, or two
+/// properties of one element, of the same name are an error: the records' values are found
+/// by name, so one of the two would be read in place of the other and the records misread.
 pub(super) fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize), String> {
     let end = bytes
         .windows(10)
@@ -234,10 +236,31 @@ pub(super) fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize),
         "end_header",
     ];
     let mut text = String::new();
+    // The first name declared twice, and the names declared so far: elements, and the
+    // properties of the current element.
+    let mut twice: Option<String> = None;
+    let (mut elements, mut properties) = (Vec::<String>::new(), Vec::<String>::new());
     for line in String::from_utf8_lossy(&bytes[..end]).lines() {
         let first = line.split_whitespace().next().unwrap_or("");
         if line.trim().is_empty() {
             continue;
+        }
+        let name = line.split_whitespace().nth(1).unwrap_or("").to_string();
+        if first == "element" {
+            if elements.contains(&name) {
+                twice.get_or_insert(format!("two elements are named `{name}`"));
+            }
+            elements.push(name);
+            properties.clear();
+        } else if first == "property" {
+            let name = line.split_whitespace().last().unwrap_or("").to_string();
+            if properties.contains(&name) {
+                let element = elements.last().map_or("", String::as_str);
+                twice.get_or_insert(format!(
+                    "element `{element}` has two properties named `{name}`"
+                ));
+            }
+            properties.push(name);
         }
         if !KEYWORDS.contains(&first) {
             if first.chars().all(|c| c.is_ascii_lowercase() || c == '_') {
@@ -253,6 +276,12 @@ pub(super) fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize),
     let header = Parser::<DefaultElement>::new()
         .read_header(&mut reader)
         .map_err(|e| format!("bad header: {e}"))?;
+    if let Some(what) = twice {
+        return Err(format!(
+            "{what}: a record's values are found by their names, so its records cannot be \
+             read unambiguously"
+        ));
+    }
     check_counts(&header, bytes.len().saturating_sub(body))?;
     Ok((header, body))
 }
