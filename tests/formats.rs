@@ -152,11 +152,7 @@ fn every_mesh_file_round_trips_a_translation() {
         }
         if let (Some(na), Some(nb)) = (a.normals(), b.normals()) {
             for (m, n) in na.iter().zip(nb) {
-                let unit = m.norm();
-                assert!(
-                    (m - n * unit).norm() <= 1e-5 * unit.max(1.0),
-                    "{name}: normal"
-                );
+                assert!((m - n).norm() <= 1e-5 * m.norm().max(1.0), "{name}: normal");
             }
         }
         // Everything but the numbers of vertex lines is kept: binary PLY keeps its header and
@@ -1010,4 +1006,100 @@ fn a_ply_that_declares_a_name_twice_is_a_format_error() {
     std::fs::write(&input, header(&props("quality"), "")).unwrap();
     let r = deform(&input, &dir.path().join("out_once.ply"), &spec, &[]);
     assert_eq!(r.code, 0, "{}", r.stderr);
+}
+
+/// A binary PLY grid of single-precision normals of every length: unit, 2, 0.5, zero, 1e37 per
+/// component, and past what a float holds once turned.
+fn normals_grid(path: &Path) -> (Vec<Vect<3>>, Vec<Vect<3>>) {
+    let kinds = [
+        [0.0, 0.0, 1.0],
+        [0.0, 2.0, 0.0],
+        [0.3, 0.4, 0.0],
+        [0.0, 0.0, 0.0],
+        [1e37, 0.0, 0.0],
+        [1e37, 1e37, 1e37],
+        [3e38, 3e38, 0.0],
+        [0.6, 0.0, 0.8],
+    ];
+    let (mut points, mut normals) = (Vec::new(), Vec::new());
+    let mut body = Vec::new();
+    for i in 0..21 {
+        for j in 0..21 {
+            for k in 0..3 {
+                let p = [i as f32 / 20.0, j as f32 / 20.0, k as f32 / 20.0];
+                let n: [f32; 3] = kinds[(i + j + k) % kinds.len()];
+                for v in p.iter().chain(&n) {
+                    body.extend_from_slice(&v.to_le_bytes());
+                }
+                points.push(Vect::<3>::from(p.map(f64::from)));
+                normals.push(Vect::<3>::from(n.map(f64::from)));
+            }
+        }
+    }
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n\
+         property float y\nproperty float z\nproperty float nx\nproperty float ny\n\
+         property float nz\nend_header\n",
+        points.len()
+    )
+    .into_bytes();
+    bytes.extend_from_slice(&body);
+    std::fs::write(path, bytes).unwrap();
+    (points, normals)
+}
+
+/// Normals keep their length: the right end of a grid turned 30° about z (the left end fixed,
+/// a free band between) turns each normal and keeps its length, whatever it is, with every
+/// transfer; a zero normal stays zero, and huge single-precision normals stay finite (those
+/// past what a float holds once turned are scaled down to fit, keeping their direction).
+#[test]
+fn normals_keep_their_length() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("grid.ply");
+    let (points, normals) = normals_grid(&input);
+    let spec = dir.path().join("turn.toml");
+    std::fs::write(
+        &spec,
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [0.2, 2, 2] }\n\
+         [[handle]]\nbox = { min = [0.8, -1, -1], max = [2, 2, 2] }\n\
+         rotate = { axis = [0, 0, 1], degrees = 30, center = [1, 0, 0] }\n",
+    )
+    .unwrap();
+    let turn = nalgebra::Rotation3::from_axis_angle(&Vect::<3>::z_axis(), 30f64.to_radians());
+    for transfer in ["blend", "rbf", "pu"] {
+        let output = dir.path().join(format!("{transfer}.ply"));
+        let r = deform(&input, &output, &spec, &["--transfer", transfer]);
+        assert_eq!(r.code, 0, "{transfer}: {}", r.stderr);
+        let Document::Ply(out) = Document::read(&output).unwrap() else {
+            panic!("a PLY")
+        };
+        let (mut turned, mut free) = (0, 0);
+        for ((p, n), m) in points.iter().zip(&normals).zip(out.normals().unwrap()) {
+            let at = format!("{transfer}: {n:?} at {p:?} -> {m:?}");
+            assert!(
+                m.iter()
+                    .all(|v| v.is_finite() && v.abs() <= f32::MAX as f64),
+                "{at}"
+            );
+            let (a, b) = (n.norm(), m.norm());
+            if a == 0.0 {
+                assert_eq!(*m, *n, "{at}");
+            } else if a > f32::MAX as f64 {
+                // Scaled down to fit a float, in the direction it was turned to.
+                assert!(b <= a && b > 0.5 * f32::MAX as f64, "{at}");
+            } else {
+                assert!((b - a).abs() <= 1e-6 * a, "{at}: length {a} -> {b}");
+            }
+            if p[0] >= 0.8 && a > 0.0 {
+                let want = (turn * n).normalize();
+                assert!((m / b - want).norm() < 1e-5, "{at}: turned");
+                turned += 1;
+            }
+            free += usize::from(p[0] > 0.2 && p[0] < 0.8 && (m / b - n / a).norm() > 1e-3);
+        }
+        assert!(
+            turned > 100 && free > 50,
+            "{transfer}: {turned} turned, {free} free"
+        );
+    }
 }

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Header, PropertyType, ScalarType};
 
-use super::text::{Edit, Numbers, Span, check_count, edits3, rewrite};
+use super::text::{Edit, Numbers, Span, check_count, edits3, fit_singles, rewrite};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -141,7 +141,7 @@ impl PlyFile {
         }
         if let (Some(normals), Some(doubles)) = (normals, self.normal_doubles) {
             for ((spans, n), old) in self.normal_spans.iter().zip(normals).zip(&self.normals) {
-                add(spans, n, old, &doubles);
+                add(spans, &fit_singles(n, doubles.map(|d| !d)), old, &doubles);
             }
         }
         Ok(rewrite(&self.bytes, edits, numbers(self.encoding)))

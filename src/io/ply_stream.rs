@@ -27,7 +27,7 @@ use super::ply::{
 };
 use super::require_extension;
 use super::stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
-use super::text::SpanSink;
+use super::text::{SpanSink, fit_singles};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -331,6 +331,7 @@ impl Sink for PlySink {
                 l.put(rec, l.xyz[k], p[k]);
             }
             if let (Some(s), Some(n)) = (&l.normals, normals.get(i)) {
+                let n = fit_singles(n, s.map(|s| !s.double));
                 for k in 0..3 {
                     l.put(rec, s[k], n[k]);
                 }

@@ -48,6 +48,28 @@ pub(crate) fn check_count(path: &Path, given: usize, expected: usize) -> Result<
     )))
 }
 
+/// `n`, a normal to be written, scaled down where a component of it stored in single precision
+/// (`singles`) lies past the largest float, until each fits: a huge normal keeps its direction
+/// and stays finite instead of becoming infinite.
+pub(crate) fn fit_singles(n: &Vect<3>, singles: [bool; 3]) -> Vect<3> {
+    let max = f32::MAX as f64;
+    let largest = (0..3)
+        .filter(|&k| singles[k])
+        .map(|k| n[k].abs())
+        .fold(0.0, f64::max);
+    if largest <= max || !largest.is_finite() {
+        return *n;
+    }
+    let scaled = n * (max / largest);
+    Vect::<3>::from_fn(|k, _| {
+        if singles[k] {
+            scaled[k].clamp(-max, max)
+        } else {
+            scaled[k]
+        }
+    })
+}
+
 /// The edits writing the components of `v` that differ from the file's `old` ones over
 /// `spans` (`single`: as f32).
 pub(crate) fn edits3(
@@ -168,7 +190,7 @@ impl Sink for SpanSink {
             if let (Some(singles), Some(n)) = (self.normal_singles, normals.get(i)) {
                 let nxyz: &[Span; 3] = spans[3..].try_into().expect("3 normal spans");
                 let old = chunk.normals.get(i).unwrap_or(&unknown);
-                edits.extend(edits3(nxyz, n, old, singles));
+                edits.extend(edits3(nxyz, &fit_singles(n, singles), old, singles));
             }
         }
         self.out
@@ -205,5 +227,18 @@ mod tests {
             ],
         );
         assert_eq!(out, b"v -1.5 2 0.001 # keep\nvn 0.25 x\n");
+    }
+
+    /// A normal of floats past the largest float is scaled down to fit, keeping its direction;
+    /// doubles and normals that fit are kept.
+    #[test]
+    fn huge_single_normals_fit_their_floats() {
+        let n = Vect::<3>::new(3e38, -3e38, 1.0);
+        let fit = fit_singles(&n, [true; 3]);
+        assert!(fit.iter().all(|v| (*v as f32).is_finite()), "{fit:?}");
+        assert!((fit.normalize() - n.normalize()).norm() < 1e-12);
+        assert_eq!(fit_singles(&n, [false; 3]), n);
+        let small = Vect::<3>::new(1e37, 1e37, 1e37);
+        assert_eq!(fit_singles(&small, [true; 3]), small);
     }
 }
