@@ -11,7 +11,8 @@ use rigidcells::io::{
 };
 use rigidcells::rigid::Vect;
 
-const T: [f64; 3] = [1.5, -2.25, 0.75];
+/// The translation: exact in one decimal, the fewest any text input here has.
+const T: [f64; 3] = [1.5, -2.5, 0.5];
 
 /// Translates everything by `T`: two handles with the same motion over the half-spaces above
 /// and below z = 0, which share the cells on the plane.
@@ -741,8 +742,61 @@ fn deform_warns_where_the_edit_folds_space_over() {
     assert!(!bent.stderr.contains("folds space over"), "{}", bent.stderr);
 }
 
+/// Digits after the point of a number in plain notation (`None`: an integer), or its
+/// significant digits in exponent notation (`Some` with `true`).
+fn precision_of(token: &str) -> Option<(usize, bool)> {
+    let token = token.trim_start_matches(['-', '+']);
+    if let Some(e) = token.find(['e', 'E']) {
+        let mantissa: String = token[..e].chars().filter(|c| *c != '.').collect();
+        return Some((mantissa.trim_start_matches('0').len().max(1), true));
+    }
+    token.find('.').map(|p| (token.len() - p - 1, false))
+}
+
+/// The number tokens of a text mesh or point cloud, per line: the first `n` after the keyword
+/// of `v` (and `vn`) lines of an OBJ, of vertex lines of an ASCII PLY, of point lines of an
+/// XYZ. Each line's tokens come with the column of the first.
+fn coordinate_tokens(text: &str, name: &str, n: usize) -> Vec<(usize, Vec<String>)> {
+    let words = |l: &str, skip: usize| -> Vec<String> {
+        l.split([' ', '\t', ','])
+            .filter(|w| !w.is_empty())
+            .skip(skip)
+            .take(n)
+            .map(str::to_string)
+            .collect()
+    };
+    if name.ends_with(".obj") {
+        text.lines()
+            .filter_map(|l| match l.split_whitespace().next() {
+                Some("v") => Some((0, words(l, 1))),
+                Some("vn") => Some((3, words(l, 1))),
+                _ => None,
+            })
+            .collect()
+    } else if name.ends_with(".ply") {
+        let vertices: usize = text
+            .lines()
+            .find_map(|l| l.strip_prefix("element vertex "))
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        text.lines()
+            .skip_while(|l| *l != "end_header")
+            .skip(1)
+            .take(vertices)
+            .map(|l| (0, words(l, 0)))
+            .collect()
+    } else {
+        text.lines()
+            .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+            .map(|l| (0, words(l, 0)))
+            .collect()
+    }
+}
+
 #[test]
-fn outputs_name_rigidcells_and_text_numbers_are_the_shortest_that_round_trip() {
+fn outputs_name_rigidcells_and_text_numbers_keep_the_inputs_precision() {
     let dir = tempfile::tempdir().unwrap();
     let spec = translate_spec(dir.path());
     // LAS through the raw sink and LAZ through the `las` writer: the generating software is
@@ -755,44 +809,113 @@ fn outputs_name_rigidcells_and_text_numbers_are_the_shortest_that_round_trip() {
         assert_eq!(after.software, rigidcells::io::SOFTWARE, "{name}");
         assert_eq!(after.system, before.system, "{name}");
     }
-    // OBJ and ASCII PLY: every number written is the shortest text that reads back as itself.
-    for name in ["meshes/spot.obj", "meshes/greg_turk_example2_ok_ascii.ply"] {
-        let input = shared(name);
-        let (_, output) = translate(dir.path(), &spec, &input, &[]).unwrap();
-        let text = std::fs::read_to_string(&output).unwrap();
-        // The coordinates: the first three numbers of `v` lines, or of the vertex lines after
-        // a PLY header (the other fields keep the input's text).
-        let coords: Vec<&str> = if name.ends_with(".obj") {
-            text.lines()
-                .filter_map(|l| l.strip_prefix("v "))
-                .flat_map(|l| l.split_whitespace().take(3))
-                .collect()
-        } else {
-            let vertices: usize = text
-                .lines()
-                .find_map(|l| l.strip_prefix("element vertex "))
-                .unwrap()
-                .trim()
-                .parse()
-                .unwrap();
-            text.lines()
-                .skip_while(|l| *l != "end_header")
-                .skip(1)
-                .take(vertices)
-                .flat_map(|l| l.split_whitespace().take(3))
-                .collect()
+    // A text cloud made here: plain numbers of 3 and 1 decimals in x, of 2 decimals and
+    // integers in y, exponent notation of 2 and 4 significant digits in z.
+    let cloud = dir.path().join("cloud.xyz");
+    let mut text = String::new();
+    for i in 0..400 {
+        let f = i as f64;
+        let x = match i % 2 {
+            0 => format!("{:.3}", f * 0.011),
+            _ => format!("{:.1}", f * 0.1),
         };
-        let mut checked = 0;
-        for tok in coords {
-            let v: f64 = tok.parse().unwrap();
-            let shortest = [format!("{v}"), format!("{}", v as f32)];
-            assert!(
-                shortest.iter().any(|s| s == tok),
-                "{name}: `{tok}` is not the shortest ({shortest:?})"
-            );
-            checked += 1;
+        let y = match i % 4 {
+            0 => format!("{}", i % 9),
+            _ => format!("{:.2}", f * 0.07),
+        };
+        let z = match i % 3 {
+            0 => format!("{:.1e}", 1.0 + f),
+            _ => format!("{:.3E}", 0.5 + f * 0.01),
+        };
+        text += &format!("{x} {y} {z} 7\n");
+    }
+    std::fs::write(&cloud, text).unwrap();
+    // Every coordinate (and normal) a rotation moves (the right of the shape turned by 10°, the
+    // left fixed) is written with the decimals of its column, or in exponent notation with the
+    // significant digits of the column's numbers in that notation; one of a column of
+    // integers, as the shortest text that reads back as it. Numbers that did not move keep
+    // their text.
+    let inputs = [
+        shared("meshes/spot.obj"),
+        shared("meshes/tree1.obj"),
+        shared("meshes/Wuson.ply"),
+        shared("meshes/dragon_21k_ascii.ply"),
+        cloud,
+    ];
+    for input in inputs {
+        let name = input.file_name().unwrap().to_str().unwrap().to_string();
+        let doc = Document::read(&input).unwrap();
+        let (lo, hi) = doc.positions().iter().fold(
+            (
+                Vect::<3>::repeat(f64::INFINITY),
+                Vect::<3>::repeat(f64::NEG_INFINITY),
+            ),
+            |(lo, hi), p| (lo.inf(p), hi.sup(p)),
+        );
+        let (left, right) = (lo[0] + 0.3 * (hi[0] - lo[0]), hi[0] - 0.3 * (hi[0] - lo[0]));
+        let mid = 0.5 * (lo[0] + hi[0]);
+        let turn = dir.path().join("turn.toml");
+        std::fs::write(
+            &turn,
+            format!(
+                "[[fixed]]\nbox = {{ min = [-1e9, -1e9, -1e9], max = [{left}, 1e9, 1e9] }}\n\
+                 [[handle]]\nbox = {{ min = [{right}, -1e9, -1e9], max = [1e9, 1e9, 1e9] }}\n\
+                 rotate = {{ axis = [1, 2, 3], degrees = 10, center = [{mid}, 0, 0] }}\n"
+            ),
+        )
+        .unwrap();
+        let output = dir.path().join(format!("turned_{name}"));
+        let r = deform(&input, &output, &turn, &["--transfer", "blend"]);
+        assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+        let before = std::fs::read_to_string(&input).unwrap();
+        let after = std::fs::read_to_string(&output).unwrap();
+        let (a, b) = (
+            coordinate_tokens(&before, &name, 6),
+            coordinate_tokens(&after, &name, 6),
+        );
+        assert_eq!(a.len(), b.len(), "{name}");
+        // The most decimals (plain) and significant digits (exponent) of each input column.
+        let mut most = [[None::<usize>; 2]; 6];
+        for (first, tokens) in &a {
+            for (k, t) in tokens.iter().enumerate() {
+                if let Some((d, exp)) = precision_of(t) {
+                    let slot = &mut most[first + k][usize::from(exp)];
+                    *slot = Some(slot.map_or(d, |m| m.max(d)));
+                }
+            }
         }
-        assert!(checked > 10, "{name}: {checked}");
+        let mut moved = 0;
+        for ((first, old), (_, new)) in a.iter().zip(&b) {
+            for (k, (o, n)) in old.iter().zip(new).enumerate() {
+                if o == n {
+                    continue;
+                }
+                moved += 1;
+                // Exponent notation only where the column has numbers in it.
+                let exp = n.contains(['e', 'E']);
+                match most[first + k][usize::from(exp)] {
+                    Some(want) => assert_eq!(
+                        precision_of(n).map(|p| p.0),
+                        Some(want),
+                        "{name}: `{o}` -> `{n}` in column {}",
+                        first + k
+                    ),
+                    None => {
+                        let v: f64 = n.parse().unwrap();
+                        let shortest = [format!("{v}"), format!("{}", v as f32)];
+                        assert!(shortest.contains(n), "{name}: `{o}` -> `{n}`");
+                    }
+                }
+            }
+        }
+        assert!(moved > 100, "{name}: {moved} numbers moved");
+        // The file grows by no more than the few digits some numbers gain.
+        assert!(
+            after.len() as f64 <= 1.05 * before.len() as f64,
+            "{name}: {} -> {} bytes",
+            before.len(),
+            after.len()
+        );
     }
 }
 
