@@ -138,8 +138,9 @@ where
     Ok((moved, solution, info))
 }
 
-/// [`deform`] of points with unit normals (one per point, or none): returns the moved points
-/// and their normals as the map turns them (the transpose of the inverse Jacobian, DESIGN §6).
+/// [`deform`] of points with normals (one per point, or none): returns the moved points and
+/// their normals as the map turns them (the transpose of the inverse Jacobian, DESIGN §6), each
+/// with its length.
 #[allow(clippy::type_complexity)]
 pub fn deform_oriented<const D: usize>(
     points: &[Vect<D>],

@@ -97,6 +97,11 @@ fn copc_out_holds_the_plain_outputs_records_in_octree_nodes() {
 /// Runs `tests/copc_check.py` with `$RIGIDCELLS_PYTHON` (CI's venv) or a `python3` that has
 /// laspy and lazrs; says so and returns when none has them.
 fn check_with_laspy(copc: &std::path::Path) {
+    check_with_laspy_and_crs(copc, None);
+}
+
+/// [`check_with_laspy`], which with `epsg` also checks that the CRS is a WKT of that code.
+fn check_with_laspy_and_crs(copc: &std::path::Path, epsg: Option<u32>) {
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/copc_check.py");
     let python = std::env::var("RIGIDCELLS_PYTHON").ok();
     let required = python.is_some();
@@ -113,6 +118,7 @@ fn check_with_laspy(copc: &std::path::Path) {
     let out = std::process::Command::new(&python)
         .arg(&script)
         .arg(arg(copc))
+        .args(epsg.map(|c| c.to_string()))
         .output()
         .unwrap();
     assert!(
@@ -159,4 +165,91 @@ fn every_las_file_becomes_a_valid_copc() {
         checked += 1;
     }
     assert!(checked >= 35, "{checked}");
+}
+
+/// A legacy LAS (formats 0-5) whose CRS is GeoTIFF keys naming an EPSG code becomes a COPC
+/// (format 6-8) that states it as the WKT of that code: the global encoding's WKT bit set, a
+/// WKT VLR naming the code, the keys kept. Keys that also name a vertical system keep it alone,
+/// with a note; keys that name no code stay as they are, with a note; an input's own WKT is
+/// kept as it is.
+#[test]
+fn copc_out_states_a_legacy_crs_as_wkt() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[handle]]\nbox = { min = [-1e12, -1e12, -1e12], max = [1e12, 1e12, 1e12] }\n\
+         translate = [1, 0, 0]\n",
+    )
+    .unwrap();
+    let wkt_of = |path: &std::path::Path| {
+        let records = LasSource::open(path).unwrap().vlr_records();
+        records
+            .iter()
+            .find(|r| r.is("LASF_Projection", 2112))
+            .map(|r| r.data.clone())
+    };
+    // The input, the EPSG code its keys name, and what the summary notes.
+    let cases = [
+        (
+            "las/certainty3d-color-utm-feet-navd88.las",
+            Some(2229),
+            None,
+        ),
+        ("las/epsg_4326.las", Some(4326), None),
+        ("las/point-version-1-point-wise.laz", Some(32128), None),
+        (
+            "las/32-1-472-150-76.laz",
+            Some(25832),
+            Some("their vertical system, EPSG:5941, is in the keys only"),
+        ),
+        (
+            "las/extra_byte.las",
+            None,
+            Some("kept as the input's GeoTIFF keys (they name no EPSG code"),
+        ),
+    ];
+    for (name, code, note) in cases {
+        let input = shared(name);
+        let copc = dir.path().join("o.copc.laz");
+        let r = common::deform_verbose(&input, &copc, &edit, &["--cells", "200"]);
+        assert_eq!(r.code, 0, "{name}: {}", r.stderr);
+        let bytes = std::fs::read(&copc).unwrap();
+        let wkt_bit = u16::from_le_bytes([bytes[6], bytes[7]]) & 0x10 != 0;
+        let records = LasSource::open(&copc).unwrap().vlr_records();
+        assert!(
+            records.iter().any(|r| r.is("LASF_Projection", 34735)),
+            "{name}: the GeoTIFF keys are kept"
+        );
+        let crs = rigidcells::info::crs(&records).unwrap();
+        match code {
+            Some(code) => {
+                assert!(wkt_bit, "{name}: the WKT bit");
+                assert_eq!((crs.from, crs.epsg), ("WKT", Some(code)), "{name}");
+                let wkt = wkt_of(&copc).unwrap();
+                assert_eq!(wkt.last(), Some(&0), "{name}: a null-terminated WKT");
+                let text = String::from_utf8(wkt).unwrap();
+                let authority = format!("AUTHORITY[\"EPSG\",\"{code}\"]]\0");
+                assert!(text.ends_with(&authority), "{name}: {text}");
+                check_with_laspy_and_crs(&copc, Some(code));
+            }
+            None => {
+                assert!(!wkt_bit, "{name}: no WKT, no WKT bit");
+                assert_eq!(crs.from, "GeoTIFF keys", "{name}");
+                assert!(wkt_of(&copc).is_none(), "{name}");
+            }
+        }
+        match note {
+            Some(note) => assert!(r.stdout.contains(note), "{name}: {}", r.stdout),
+            None => assert!(!r.stdout.contains("GeoTIFF"), "{name}: {}", r.stdout),
+        }
+    }
+    // An input with a WKT of its own (and GeoTIFF keys) keeps it byte for byte.
+    let input = shared("las/autzen_trim.las");
+    let copc = dir.path().join("autzen.copc.laz");
+    let r = deform(&input, &copc, &edit, &["--cells", "200"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let bytes = std::fs::read(&copc).unwrap();
+    assert_ne!(u16::from_le_bytes([bytes[6], bytes[7]]) & 0x10, 0);
+    assert_eq!(wkt_of(&copc), wkt_of(&input));
 }

@@ -2,7 +2,10 @@
 what a viewer relies on: the hierarchy reaches every point, a box query returns points inside
 the box only and as many as a full read finds there, and level 0 is a subsample.
 
-Usage: python copc_check.py FILE.copc.laz   (exit 0 and `ok` on success)
+With an EPSG code after the file, also checks that the CRS is stated as a WKT naming that
+code: the global encoding's WKT bit set and a WKT VLR whose text has the code's authority.
+
+Usage: python copc_check.py FILE.copc.laz [EPSG]   (exit 0 and `ok` on success)
 """
 import sys
 
@@ -32,4 +35,9 @@ with laspy.CopcReader.open(path) as r:
     root = r.query(level=0)
     assert 0 < len(root) <= h.point_count, len(root)
     assert len(root) < h.point_count or h.point_count <= 128**2, len(root)
+    if len(sys.argv) > 2:
+        assert h.global_encoding.wkt, "the global encoding's WKT bit is unset"
+        authority = 'AUTHORITY["EPSG","%s"]' % sys.argv[2]
+        wkts = [v.string for v in h.vlrs if isinstance(v, laspy.vlrs.known.WktCoordinateSystemVlr)]
+        assert any(w.rstrip("\0").endswith(authority + "]") for w in wkts), wkts
 print("ok", h.point_count, len(box), len(root))

@@ -25,7 +25,7 @@
 //! nearest centers come from the exact tiled search of [`super::nearest`].
 
 use super::nearest::{Anchor, NEAR, Nearest, Neighbors};
-use super::{Field, Warp, unit_or};
+use super::{Field, Warp, normal_like};
 use crate::error::Result;
 use crate::rigid::{Affine, Vect};
 
@@ -119,7 +119,7 @@ impl<const D: usize> Blend<D> {
     }
 
     /// `x'` and the turned normal from one set of weights: `Σ w_k T_k(x)` and the normal turned
-    /// by the blended rotation `Σ w_k R_k`, renormalized. A point with no neighbors (a
+    /// by the blended rotation `Σ w_k R_k`, with its length. A point with no neighbors (a
     /// non-finite coordinate) stays where it is.
     #[inline]
     fn blend(&self, x: &Vect<D>, n: Option<&Vect<D>>) -> (Vect<D>, Vect<D>) {
@@ -163,13 +163,13 @@ impl<const D: usize> Blend<D> {
         for &(c, wk) in &w[..k] {
             turned += self.maps[c].linear * n * wk;
         }
-        (moved, unit_or(turned, n))
+        (moved, normal_like(turned, n))
     }
 
     /// `x` and its normal under one cell's motion `map`, which every blended cell follows.
     #[inline(always)]
     fn rigid(&self, map: &Affine<D>, x: &Vect<D>, n: Option<&Vect<D>>) -> (Vect<D>, Vect<D>) {
-        let turned = n.map_or_else(Vect::<D>::zeros, |n| unit_or(map.linear * n, n));
+        let turned = n.map_or_else(Vect::<D>::zeros, |n| normal_like(map.linear * n, n));
         (map.apply(x), turned)
     }
 }

@@ -55,7 +55,7 @@ use std::sync::Mutex;
 use rustc_hash::{FxHashMap, FxHashSet};
 
 use super::leaves::{Leaves, for_each_shell};
-use super::{Deformer, Field, Warp, unit_or};
+use super::{Deformer, Field, Warp, normal_like};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Rigid, Vect};
 
@@ -502,7 +502,7 @@ where
         if self.identity[m as usize] {
             *n
         } else {
-            unit_or(self.normal_maps[m as usize] * n, n)
+            normal_like(self.normal_maps[m as usize] * n, n)
         }
     }
 
@@ -516,7 +516,7 @@ where
         for &(m, wr) in &w[..k] {
             out += (self.exact_normal(m, n) - f) * wr;
         }
-        unit_or(out, n)
+        normal_like(out, n)
     }
 
     fn count_outside(&self, x: &Vect<D>) {

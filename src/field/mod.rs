@@ -115,7 +115,7 @@ pub trait Warp<const D: usize>: Sync {
     /// Where the local point `x` goes.
     fn warp(&self, x: &Vect<D>) -> Vect<D>;
 
-    /// The unit normal `n` at the local point `x` after the warp (DESIGN §6).
+    /// The normal `n` at the local point `x` after the warp (DESIGN §6), with `n`'s length.
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D>;
 
     /// Both [`Warp::warp`] and [`Warp::warp_normal`] at `x`; transfers that find neighbors
@@ -262,15 +262,35 @@ impl<const D: usize> Warp<D> for Deformer<D> {
     }
 }
 
-/// `v` normalized, or `fallback` where `v` has no direction (zero or not finite): a normal
-/// after a transfer.
+/// `v`, the normal `n` turned by a transfer, scaled to `n`'s length; `n` itself where `v` has
+/// no direction (zero or not finite). A normal keeps its length through a deformation, whatever
+/// it is (files hold unit normals, and others: area-weighted, or scaled by a tool), and a zero
+/// normal stays zero. Lengths are taken without overflow, so the largest single-precision
+/// normals (1e37 and past) stay finite.
 #[inline]
-pub(crate) fn unit_or<const D: usize>(v: Vect<D>, fallback: &Vect<D>) -> Vect<D> {
-    let len = v.norm();
-    if len > 0.0 && len.is_finite() {
-        v / len
+pub(crate) fn normal_like<const D: usize>(v: Vect<D>, n: &Vect<D>) -> Vect<D> {
+    let (turned, wanted) = (length(&v), length(n));
+    if turned > 0.0 && turned.is_finite() && wanted.is_finite() {
+        // `v / turned` is a unit vector, so the product stays within `wanted`.
+        (v / turned) * wanted
     } else {
-        *fallback
+        *n
+    }
+}
+
+/// The Euclidean length of `v`, with its largest component factored out where the sum of
+/// squares would overflow (or underflow).
+#[inline]
+fn length<const D: usize>(v: &Vect<D>) -> f64 {
+    let squares = v.norm_squared();
+    if squares.is_finite() && squares >= f64::MIN_POSITIVE {
+        return squares.sqrt();
+    }
+    let largest = v.amax();
+    if largest > 0.0 && largest.is_finite() {
+        largest * (v / largest).norm()
+    } else {
+        largest
     }
 }
 

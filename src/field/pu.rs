@@ -47,7 +47,7 @@ use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 use super::leaves::floor;
-use super::{Field, Rbf, Warp, unit_or};
+use super::{Field, Rbf, Warp, normal_like};
 use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
 
@@ -756,10 +756,10 @@ impl<const D: usize> Warp<D> for PuRbf<D> {
     }
 
     /// The normal mapped by the inverse transpose of the Jacobian (central differences of a
-    /// thousandth of a patch), renormalized.
+    /// thousandth of a patch), with its length.
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
         let j = super::central_jacobian(self, x, 1e-3 * self.edge);
         let mapped = j.try_inverse().map(|inv| inv.transpose() * n).unwrap_or(*n);
-        unit_or(mapped, n)
+        normal_like(mapped, n)
     }
 }

@@ -576,11 +576,11 @@ impl<const D: usize> Warp<D> for Rbf<D> {
         Rbf::jacobian(self, x)
     }
 
-    /// The normal mapped by the inverse transpose of the field's Jacobian, renormalized.
+    /// The normal mapped by the inverse transpose of the field's Jacobian, with its length.
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
         let j = Rbf::jacobian(self, x);
         let mapped = j.try_inverse().map(|inv| inv.transpose() * n).unwrap_or(*n);
-        super::unit_or(mapped, n)
+        super::normal_like(mapped, n)
     }
 }
 

@@ -24,7 +24,10 @@
 //! first point was kept there or higher).
 //!
 //! The input's VLRs are kept (the CRS WKT among them; LASzip's and an input COPC's own are
-//! replaced), and its EVLRs after the hierarchy.
+//! replaced), and its EVLRs after the hierarchy. Point formats 6–8 state their CRS as a WKT
+//! (global encoding bit 4), which some COPC readers require: an input of formats 0–5 whose
+//! CRS is only GeoTIFF keys gets the WKT of the EPSG code they name (its keys kept too); keys
+//! that name no code, or a code without a known definition, are kept alone, with a note.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
@@ -103,13 +106,19 @@ impl CopcSink {
                 input.format
             ));
         }
+        let mut records = records;
         let crs = |id: u16| records.iter().any(|r| r.is("LASF_Projection", id));
         if crs(34735) && !crs(2112) {
-            notes.push(
-                "the CRS is kept as the input's GeoTIFF keys; LAS 1.4 point formats 6-8 expect a \
-                 WKT, which some COPC readers require"
-                    .into(),
-            );
+            match geotiff_wkt(&records) {
+                Ok((wkt, vertical)) => {
+                    records.push(wkt);
+                    notes.extend(vertical);
+                }
+                Err(why) => notes.push(format!(
+                    "the CRS is kept as the input's GeoTIFF keys ({why}); LAS 1.4 point formats \
+                     6-8 expect a WKT, which some COPC readers require"
+                )),
+            }
         }
         let extra = (input.record_len as usize).saturating_sub(standard_len(input.format));
         let keep = |r: &VlrRecord| !(r.user_id == "copc" || r.is("laszip encoded", 22204));
@@ -240,6 +249,38 @@ impl Sink for CopcSink {
         drop(spill);
         Ok(std::mem::take(&mut self.notes))
     }
+}
+
+/// The WKT VLR (LASF_Projection 2112) of the EPSG code that the GeoTIFF keys among `records`
+/// name, and a note when they also name a vertical system, which the WKT leaves out (the
+/// definitions known are of horizontal systems); why not, when they name no code or one
+/// without a known definition.
+fn geotiff_wkt(records: &[VlrRecord]) -> std::result::Result<(VlrRecord, Option<String>), String> {
+    let crs = crate::info::crs(records).ok_or("they could not be read")?;
+    let code = crs
+        .epsg
+        .ok_or("they name no EPSG code of a horizontal system")?;
+    let def = u16::try_from(code)
+        .ok()
+        .and_then(crs_definitions::from_code)
+        .ok_or(format!("EPSG:{code} has no known WKT definition"))?;
+    // A WKT VLR holds a null-terminated string.
+    let mut data = def.wkt.as_bytes().to_vec();
+    data.push(0);
+    let vertical = crs.vertical_epsg.map(|v| {
+        format!(
+            "the CRS is written as the WKT of EPSG:{code}, which the input's GeoTIFF keys name; \
+             their vertical system, EPSG:{v}, is in the keys only (kept)"
+        )
+    });
+    let wkt = VlrRecord {
+        user_id: "LASF_Projection".into(),
+        record_id: 2112,
+        description: format!("OGC WKT of EPSG:{code}"),
+        data,
+        extended: false,
+    };
+    Ok((wkt, vertical))
 }
 
 /// The octree's cube: its center and half edge (a little past the bounds, so that the highest

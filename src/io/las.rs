@@ -376,7 +376,7 @@ fn point_wise(
     header: &LasHeader,
     vlr: laz::LazVlr,
 ) -> Result<laz::LasZipDecompressor<'static, BufReader<File>>> {
-    let err = |e: laz::LasZipError| Error::format(path, format!("LAZ: {e}"));
+    let err = |e: laz::LasZipError| Error::format(path, laz_message("", &e));
     let chunked = vlr.uses_variable_size_chunks();
     let mut file =
         BufReader::with_capacity(1 << 20, File::open(path).map_err(|e| Error::io(path, e))?);
@@ -421,7 +421,7 @@ impl LasSource {
                     BufReader::with_capacity(1 << 20, file),
                     ReaderOptions::default().with_laz_parallelism(LazParallelism::Yes),
                 )
-                .map_err(|e| Error::format(path, format!("LAZ: {e}")))
+                .map_err(|e| Error::format(path, las_message("", &e)))
             })?;
             let slab = PointDataBuilder::new().for_header(reader.header()).build();
             Body::Laz(Box::new(reader), slab, 0)
@@ -517,7 +517,7 @@ impl Source for LasSource {
             crate::interrupt::guarded(path, "seeking in it", || {
                 reader
                     .seek(0)
-                    .map_err(|e| Error::format(path, format!("LAZ: {e}")))
+                    .map_err(|e| Error::format(path, las_message("", &e)))
             })?;
             slab.resize_for(0);
             *used = 0;
@@ -613,7 +613,8 @@ impl LasSource {
                     let (path, next) = (&self.path, self.next);
                     let got = crate::interrupt::guarded(path, "decompressing it", || {
                         reader.fill_points(want, slab).map_err(|e| {
-                            Error::format(path, format!("LAZ: point {next} onwards: {e}"))
+                            let m = las_message(&format!("point {next} onwards: "), &e);
+                            Error::format(path, m)
                         })
                     })?;
                     if got != want {
@@ -642,8 +643,10 @@ impl LasSource {
                 // `laz` panics on some contradictions of its VLR and the records (a fuzzed item
                 // size of 19 for a 20-byte item): a format error like the chunked path's.
                 crate::interrupt::guarded(path, "decompressing it", || {
-                    d.decompress_many(raw)
-                        .map_err(|e| Error::format(path, format!("LAZ: point {next} onwards: {e}")))
+                    d.decompress_many(raw).map_err(|e| {
+                        let e = laz::LasZipError::IoError(e);
+                        Error::format(path, laz_message(&format!("point {next} onwards: "), &e))
+                    })
                 })?;
                 None
             }
@@ -1205,10 +1208,114 @@ fn check_chunk_table(
     Ok(Some(chunks))
 }
 
-/// The LASzip VLR of a LAZ file's header.
+/// Why LASzip data that no LAZ version defines cannot be read.
+const NEWER_OR_DAMAGED: &str = "the file is damaged or was written by a newer tool";
+
+/// A `laz` error in words: what the file holds and why it cannot be read, after `context`
+/// (where in the file, or empty). What `laz` finds in the LASzip VLR (an item type, an item
+/// version, a compressor that no LAZ version defines) and a body that ends early are said
+/// plainly; any other error keeps `laz`'s own words, after `LAZ: `.
+fn laz_message(context: &str, e: &laz::LasZipError) -> String {
+    use laz::LasZipError as E;
+    let words = match e {
+        E::UnknownLazItem(t) => format!(
+            "its LAZ compression uses item type {t}, which no LAZ version defines: \
+             {NEWER_OR_DAMAGED}"
+        ),
+        E::UnsupportedLazItemVersion(item, version) => version_words(*item, *version),
+        E::UnknownCompressorType(c) => format!(
+            "its LAZ compression names compressor {c}, which no LAZ version defines (LASzip's \
+             are 0 to 3): {NEWER_OR_DAMAGED}"
+        ),
+        E::UnsupportedCompressorType(laz::laszip::CompressorType::None) => {
+            "its LASzip VLR names compressor 0 (no compression) although the header marks the \
+             points compressed: the file is damaged"
+                .to_string()
+        }
+        E::MissingChunkTable => {
+            "its LAZ chunk table, which reading its chunks needs, is missing: the file is \
+             damaged or was cut short"
+                .to_string()
+        }
+        E::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
+            "its compressed points end early: the file is truncated".to_string()
+        }
+        other => return format!("LAZ: {context}{other}"),
+    };
+    format!("{context}{words}")
+}
+
+/// A `las` error of reading a LAZ file: its `laz` errors in [`laz_message`]'s words.
+fn las_message(context: &str, e: &las::Error) -> String {
+    match e {
+        las::Error::LasZipError(e) => laz_message(context, e),
+        other => format!("LAZ: {context}{other}"),
+    }
+}
+
+/// Words for an item of a LASzip VLR.
+fn item_words(item: laz::LazItemType) -> String {
+    use laz::LazItemType as T;
+    match item {
+        T::Byte(n) => format!("its {n} extra bytes"),
+        T::Point10 => "its point fields (formats 0-5)".into(),
+        T::GpsTime => "its GPS times".into(),
+        T::RGB12 => "its RGB colors".into(),
+        T::WavePacket13 => "its wave packets".into(),
+        T::Point14 => "its point fields (formats 6-10)".into(),
+        T::RGB14 => "its RGB colors (formats 7-10)".into(),
+        T::RGBNIR14 => "its RGB and NIR colors".into(),
+        T::WavePacket14 => "its wave packets (formats 9-10)".into(),
+        T::Byte14(n) => format!("its {n} extra bytes (formats 6-10)"),
+    }
+}
+
+/// An item of a LASzip VLR in a version of its encoding that LASzip does not define for it.
+fn version_words(item: laz::LazItemType, version: u16) -> String {
+    format!(
+        "its LAZ compression stores {} in version {version} of their encoding, which no LAZ \
+         version defines for them: {NEWER_OR_DAMAGED}",
+        item_words(item)
+    )
+}
+
+/// Whether `laz` decodes `item` in its version: 1 and 2 for the items of point formats 0–5,
+/// 3 and 4 for those of formats 6–10 (LASzip defines no others).
+fn known_version(item: &laz::LazItem) -> bool {
+    use laz::LazItemType as T;
+    match item.item_type() {
+        T::Byte(_) | T::Point10 | T::GpsTime | T::RGB12 | T::WavePacket13 => {
+            matches!(item.version(), 1 | 2)
+        }
+        _ => matches!(item.version(), 3 | 4),
+    }
+}
+
+/// The LASzip VLR of a LAZ file's header, with its coder and item versions checked: `laz`
+/// reads the coder without checking it (LASzip's only coder is 0, arithmetic coding), and finds
+/// an item version it does not decode only when it starts decoding.
 fn laszip_vlr(path: &Path, header: &LasHeader) -> Result<laz::LazVlr> {
-    laz::LazVlr::from_buffer(header.laszip_vlr.as_deref().unwrap_or_default())
-        .map_err(|e| Error::format(path, format!("LAZ: {e}")))
+    let data = header.laszip_vlr.as_deref().unwrap_or_default();
+    let vlr =
+        laz::LazVlr::from_buffer(data).map_err(|e| Error::format(path, laz_message("", &e)))?;
+    // A VLR that parsed holds its compressor and coder (2 bytes each) and more.
+    let coder = u16::from_le_bytes([data[2], data[3]]);
+    if coder != 0 {
+        return Err(Error::format(
+            path,
+            format!(
+                "its LAZ compression uses coder {coder}, which no LAZ version defines (LASzip's \
+                 only coder is 0, arithmetic coding): {NEWER_OR_DAMAGED}"
+            ),
+        ));
+    }
+    if let Some(item) = vlr.items().iter().find(|i| !known_version(i)) {
+        return Err(Error::format(
+            path,
+            version_words(item.item_type(), item.version()),
+        ));
+    }
+    Ok(vlr)
 }
 
 /// Everything of a LAZ file that `laz` sizes buffers by, checked before it reads any

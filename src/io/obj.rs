@@ -3,11 +3,12 @@
 //! Positions are the `v` lines in order; faces (`f`, any number of corners, `v/vt/vn` forms,
 //! negative relative indices) are fan-triangulated for the cells. A normal `vn k` is transformed
 //! at the vertex of its first face corner; normals no face refers to are kept as they are.
-//! Writing replaces the number tokens of `v` and `vn` lines and copies everything else.
+//! Writing replaces the number tokens of `v` and `vn` lines (with the precision of their columns
+//! in the input, [`super::text`]) and copies everything else.
 
 use std::path::{Path, PathBuf};
 
-use super::text::{Edit, Span, check_count, edits3, splice};
+use super::text::{Edit, Precision, Span, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -23,6 +24,8 @@ pub struct ObjFile {
     /// For each normal, the vertex of its first face corner.
     normal_vertex: Vec<Option<u32>>,
     triangles: Vec<[u32; 3]>,
+    /// The precision of the `v` and `vn` columns.
+    precision: Precision,
 }
 
 /// The three number tokens after the keyword of `line` (starting at byte `at` of the file).
@@ -53,6 +56,7 @@ impl ObjFile {
         let (mut coords, mut positions) = (Vec::new(), Vec::new());
         let (mut normal_spans, mut normals) = (Vec::new(), Vec::new());
         let mut normal_vertex: Vec<Option<u32>> = Vec::new();
+        let mut precision = Precision::default();
         // (line, corners (vertex, normal), vertices and normals defined before the face)
         type Face = (usize, Vec<(i64, Option<i64>)>, usize, usize);
         let mut faces: Vec<Face> = Vec::new();
@@ -76,12 +80,14 @@ impl ObjFile {
                     if !v.iter().all(|x| x.is_finite()) {
                         return Err(err(number + 1, "a coordinate is not finite".into()));
                     }
+                    precision.see3(0, &bytes, &s);
                     coords.push(s);
                     positions.push(Vect::<3>::from(v));
                 }
                 b"vn" => {
                     let (s, v) = three(&bytes, line, lead + 2)
                         .ok_or_else(|| err(number + 1, "a `vn` line needs three numbers".into()))?;
+                    precision.see3(3, &bytes, &s);
                     normal_spans.push(s);
                     normals.push(Vect::<3>::from(v));
                     normal_vertex.push(None);
@@ -143,6 +149,7 @@ impl ObjFile {
             normals,
             normal_vertex,
             triangles,
+            precision,
         })
     }
 
@@ -169,10 +176,9 @@ impl ObjFile {
     /// [`ObjFile::loose_normals`]) replaced.
     pub fn encode(&self, positions: &[Vect<3>], normals: &[Vect<3>]) -> Result<Vec<u8>> {
         check_count(&self.path, positions.len(), self.positions.len())?;
-        let at = |spans: &[Span; 3], v: &Vect<3>, old: &Vect<3>| edits3(spans, v, old, [false; 3]);
         let mut edits: Vec<Edit> = Vec::with_capacity(3 * positions.len());
         for ((spans, p), old) in self.coords.iter().zip(positions).zip(&self.positions) {
-            edits.extend(at(spans, p, old));
+            edits.extend(edits3(spans, p, old, [false; 3], 0));
         }
         let referenced = self
             .normal_spans
@@ -181,8 +187,8 @@ impl ObjFile {
             .zip(&self.normal_vertex)
             .filter(|(_, v)| v.is_some());
         for (((spans, old), _), n) in referenced.zip(normals) {
-            edits.extend(at(spans, n, old));
+            edits.extend(edits3(spans, n, old, [false; 3], 3));
         }
-        Ok(splice(&self.bytes, edits))
+        Ok(splice(&self.bytes, edits, &self.precision))
     }
 }

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Header, PropertyType, ScalarType};
 
-use super::text::{Edit, Numbers, Span, check_count, edits3, rewrite};
+use super::text::{Edit, Numbers, Precision, Span, check_count, edits3, fit_singles, rewrite};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -32,6 +32,8 @@ pub struct PlyFile {
     normal_spans: Vec<[Span; 3]>,
     normals: Vec<Vect<3>>,
     triangles: Vec<[u32; 3]>,
+    /// The precision of the coordinate and normal columns of an ASCII body.
+    precision: Precision,
 }
 
 impl PlyFile {
@@ -55,6 +57,8 @@ impl PlyFile {
         let mut coords = Vec::new();
         let mut positions = Vec::new();
         let mut triangles = Vec::new();
+        let mut precision = Precision::default();
+        let ascii = header.encoding == Encoding::Ascii;
         for (name, element) in header.elements.iter() {
             if name != "vertex" {
                 let records = 0..element.count;
@@ -78,9 +82,15 @@ impl PlyFile {
                         return Ok(());
                     };
                     let (spans, xyz, nspans, nxyz) = fields.checked(path, record)?;
+                    if ascii {
+                        precision.see3(0, &bytes, &spans);
+                    }
                     coords.push(spans);
                     positions.push(xyz);
                     if normal_doubles.is_some() {
+                        if ascii {
+                            precision.see3(3, &bytes, &nspans);
+                        }
                         normal_spans.push(nspans);
                         normals.push(nxyz);
                     }
@@ -107,6 +117,7 @@ impl PlyFile {
             normal_spans,
             normals,
             triangles,
+            precision,
         })
     }
 
@@ -133,25 +144,25 @@ impl PlyFile {
             check_count(&self.path, n.len(), self.coords.len())?;
         }
         let mut edits: Vec<Edit> = Vec::with_capacity(6 * positions.len());
-        let mut add = |spans: &[Span; 3], v: &Vect<3>, old: &Vect<3>, doubles: &[bool; 3]| {
-            edits.extend(edits3(spans, v, old, doubles.map(|d| !d)))
-        };
+        let singles = self.doubles.map(|d| !d);
         for ((spans, p), old) in self.coords.iter().zip(positions).zip(&self.positions) {
-            add(spans, p, old, &self.doubles);
+            edits.extend(edits3(spans, p, old, singles, 0));
         }
         if let (Some(normals), Some(doubles)) = (normals, self.normal_doubles) {
+            let singles = doubles.map(|d| !d);
             for ((spans, n), old) in self.normal_spans.iter().zip(normals).zip(&self.normals) {
-                add(spans, n, old, &doubles);
+                edits.extend(edits3(spans, &fit_singles(n, singles), old, singles, 3));
             }
         }
-        Ok(rewrite(&self.bytes, edits, numbers(self.encoding)))
+        let numbers = numbers(self.encoding, self.precision);
+        Ok(rewrite(&self.bytes, edits, numbers))
     }
 }
 
-/// How numbers are written in a body of `encoding`.
-pub(super) fn numbers(encoding: Encoding) -> Numbers {
+/// How numbers are written in a body of `encoding` (text: with `precision`).
+pub(super) fn numbers(encoding: Encoding, precision: Precision) -> Numbers {
     match encoding {
-        Encoding::Ascii => Numbers::Text,
+        Encoding::Ascii => Numbers::Text(precision),
         Encoding::BinaryLittleEndian => Numbers::Binary { big: false },
         Encoding::BinaryBigEndian => Numbers::Binary { big: true },
     }
@@ -211,7 +222,9 @@ pub(super) fn vertex_layout(
 /// Parses the header; returns it and the offset of the body. Exporters (Blender 2.4) write
 /// comments that run over several lines: a header line of free text (its first word is not a
 /// lowercase identifier) is read as a comment, its bytes kept as they are. A line that starts
-/// with an unknown lowercase word is a misspelled keyword and an error.
+/// with an unknown lowercase word is a misspelled keyword and an error. Two elements, or two
+/// properties of one element, of the same name are an error: the records' values are found
+/// by name, so one of the two would be read in place of the other and the records misread.
 pub(super) fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize), String> {
     let end = bytes
         .windows(10)
@@ -234,10 +247,31 @@ pub(super) fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize),
         "end_header",
     ];
     let mut text = String::new();
+    // The first name declared twice, and the names declared so far: elements, and the
+    // properties of the current element.
+    let mut twice: Option<String> = None;
+    let (mut elements, mut properties) = (Vec::<String>::new(), Vec::<String>::new());
     for line in String::from_utf8_lossy(&bytes[..end]).lines() {
         let first = line.split_whitespace().next().unwrap_or("");
         if line.trim().is_empty() {
             continue;
+        }
+        let name = line.split_whitespace().nth(1).unwrap_or("").to_string();
+        if first == "element" {
+            if elements.contains(&name) {
+                twice.get_or_insert(format!("two elements are named `{name}`"));
+            }
+            elements.push(name);
+            properties.clear();
+        } else if first == "property" {
+            let name = line.split_whitespace().last().unwrap_or("").to_string();
+            if properties.contains(&name) {
+                let element = elements.last().map_or("", String::as_str);
+                twice.get_or_insert(format!(
+                    "element `{element}` has two properties named `{name}`"
+                ));
+            }
+            properties.push(name);
         }
         if !KEYWORDS.contains(&first) {
             if first.chars().all(|c| c.is_ascii_lowercase() || c == '_') {
@@ -253,6 +287,12 @@ pub(super) fn parse_header(bytes: &[u8]) -> std::result::Result<(Header, usize),
     let header = Parser::<DefaultElement>::new()
         .read_header(&mut reader)
         .map_err(|e| format!("bad header: {e}"))?;
+    if let Some(what) = twice {
+        return Err(format!(
+            "{what}: a record's values are found by their names, so its records cannot be \
+             read unambiguously"
+        ));
+    }
     check_counts(&header, bytes.len().saturating_sub(body))?;
     Ok((header, body))
 }

@@ -27,7 +27,7 @@ use super::ply::{
 };
 use super::require_extension;
 use super::stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
-use super::text::SpanSink;
+use super::text::{Precision, SpanSink, fit_singles};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -331,6 +331,7 @@ impl Sink for PlySink {
                 l.put(rec, l.xyz[k], p[k]);
             }
             if let (Some(s), Some(n)) = (&l.normals, normals.get(i)) {
+                let n = fit_singles(n, s.map(|s| !s.double));
                 for k in 0..3 {
                     l.put(rec, s[k], n[k]);
                 }
@@ -379,6 +380,9 @@ pub struct PlyRecordStream {
     singles: [bool; 3],
     normal_singles: Option<[bool; 3]>,
     triangles: Vec<[u32; 3]>,
+    /// The precision of the coordinate and normal columns of an ASCII body, gathered while
+    /// the body is validated.
+    precision: Precision,
     /// Where the next chunk's records begin, and its first vertex.
     pos: usize,
     next: usize,
@@ -403,6 +407,9 @@ impl PlyRecordStream {
         let mut walker = Walker::new(&map, body, header.encoding, path);
         let mut triangles = Vec::new();
         let mut start = body;
+        let mut precision = Precision::default();
+        let ascii = header.encoding == Encoding::Ascii;
+        let with_normals = normal_doubles.is_some();
         for (name, element) in header.elements.iter() {
             let records = 0..element.count;
             if name != "vertex" {
@@ -419,9 +426,18 @@ impl PlyRecordStream {
                 element,
                 records,
                 &mut triangles,
-                |visit| match fields.take(visit) {
-                    Some(record) => fields.checked(path, record).map(|_| ()),
-                    None => Ok(()),
+                |visit| {
+                    let Some(record) = fields.take(visit) else {
+                        return Ok(());
+                    };
+                    let (spans, _, nspans, _) = fields.checked(path, record)?;
+                    if ascii {
+                        precision.see3(0, &map, &spans);
+                        if with_normals {
+                            precision.see3(3, &map, &nspans);
+                        }
+                    }
+                    Ok(())
                 },
             )?;
         }
@@ -446,6 +462,7 @@ impl PlyRecordStream {
             singles: doubles.map(|d| !d),
             normal_singles: normal_doubles.map(|d| d.map(|d| !d)),
             triangles,
+            precision,
             pos: start,
             next: 0,
         })
@@ -513,7 +530,7 @@ impl Source for PlyRecordStream {
             &self.path,
             output,
             "ply",
-            numbers(self.encoding),
+            numbers(self.encoding, self.precision),
             self.singles,
             self.normal_singles,
         )?;

@@ -16,7 +16,7 @@ use memmap2::Mmap;
 
 use super::mapped::map;
 use super::stream::{Bounds, Chunk, Sink, Source};
-use super::text::{Numbers, Span, SpanSink, check_count, edits3, splice};
+use super::text::{Numbers, Precision, Span, SpanSink, check_count, edits3, splice};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -114,6 +114,8 @@ pub struct XyzFile {
     /// Byte spans of the three coordinate tokens of every point.
     spans: Vec<[Span; 3]>,
     positions: Vec<Vect<3>>,
+    /// The precision of the coordinate columns.
+    precision: Precision,
 }
 
 impl XyzFile {
@@ -122,8 +124,10 @@ impl XyzFile {
         let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let mut spans = Vec::new();
         let mut positions = Vec::new();
+        let mut precision = Precision::default();
         for point in PointLines::new(&text, 0, 0, path, true) {
             let (s, p, _) = point?;
+            precision.see3(0, &text, &s);
             spans.push(s);
             positions.push(Vect::<3>::from(p));
         }
@@ -132,6 +136,7 @@ impl XyzFile {
             text,
             spans,
             positions,
+            precision,
         })
     }
 
@@ -148,9 +153,9 @@ impl XyzFile {
             .iter()
             .zip(positions)
             .zip(&self.positions)
-            .flat_map(|((s, p), old)| edits3(s, p, old, [false; 3]))
+            .flat_map(|((s, p), old)| edits3(s, p, old, [false; 3], 0))
             .collect();
-        Ok(splice(&self.text, edits))
+        Ok(splice(&self.text, edits, &self.precision))
     }
 }
 
@@ -159,6 +164,8 @@ pub struct XyzStream {
     path: PathBuf,
     map: Arc<Mmap>,
     count: u64,
+    /// The precision of the coordinate columns, gathered while counting the points.
+    precision: Precision,
     /// Byte where the next chunk starts, its first line's number, and its first point's index.
     pos: usize,
     line: usize,
@@ -166,12 +173,14 @@ pub struct XyzStream {
 }
 
 impl XyzStream {
-    /// Opens `path`, counting its point lines (the numbers are parsed chunk by chunk).
+    /// Opens `path`, counting its point lines and gathering the precision of their coordinates
+    /// (the numbers are parsed chunk by chunk).
     pub fn open(path: &Path) -> Result<Self> {
         let map = map(path)?;
         let mut count = 0;
+        let mut precision = Precision::default();
         for point in PointLines::new(&map, 0, 0, path, false) {
-            point?;
+            precision.see3(0, &map, &point?.0);
             count += 1;
         }
         if count == 0 {
@@ -181,6 +190,7 @@ impl XyzStream {
             path: path.to_path_buf(),
             map: Arc::new(map),
             count,
+            precision,
             pos: 0,
             line: 0,
             next: 0,
@@ -227,7 +237,8 @@ impl Source for XyzStream {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        let sink = SpanSink::create(&self.path, output, "xyz", Numbers::Text, [false; 3], None)?;
+        let numbers = Numbers::Text(self.precision);
+        let sink = SpanSink::create(&self.path, output, "xyz", numbers, [false; 3], None)?;
         Ok(Box::new(sink))
     }
 }
