@@ -16,6 +16,7 @@ use pyo3::types::{PyDict, PyList};
 use rigidcells::Error;
 use rigidcells::cells::BuildParams;
 use rigidcells::field::{Outside, SavedField, Transfer};
+use rigidcells::io;
 use rigidcells::pipeline::{self, DeformInfo, DeformParams};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
@@ -65,12 +66,12 @@ fn triangles(a: Option<&PyReadonlyArray2<i64>>, n: usize) -> PyResult<Vec<[u32; 
         .into_iter()
         .map(|r| {
             let t = [r[0], r[1], r[2]];
-            if t.iter().all(|&i| i >= 0 && (i as usize) < n) {
-                Ok(t.map(|i| i as u32))
-            } else {
-                Err(PyValueError::new_err(format!(
+            let index = |i: i64| u32::try_from(i).ok().filter(|&i| (i as usize) < n);
+            match (index(t[0]), index(t[1]), index(t[2])) {
+                (Some(a), Some(b), Some(c)) => Ok([a, b, c]),
+                _ => Err(PyValueError::new_err(format!(
                     "triangle {t:?} names a vertex outside 0..{n}"
-                )))
+                ))),
             }
         })
         .collect()
@@ -381,6 +382,52 @@ fn apply_file<'py>(
     Ok(d)
 }
 
+/// LAS record integers ((n, 3), of any integer type, as int64) as coordinates in the frame
+/// `scale`, `offset`: what the command line reads from a LAS file with that header.
+#[pyfunction]
+fn decode_las<'py>(
+    py: Python<'py>,
+    records: PyReadonlyArray2<'py, i64>,
+    scale: [f64; 3],
+    offset: [f64; 3],
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let v = records.as_array();
+    if v.ncols() != 3 {
+        return Err(PyValueError::new_err(format!(
+            "records must be an (n, 3) array, got {:?}",
+            v.shape()
+        )));
+    }
+    let rows: Vec<[i64; 3]> = v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+    let xyz = io::decode_coordinates(&rows, scale, offset).map_err(py_err)?;
+    Ok(moved_array(py, &xyz))
+}
+
+/// `moved` ((n, 3) float64) as LAS record integers (int32, each rounded to the nearest step as
+/// the command line's LAS writer rounds it) in the frame `scale`, `offset`. With `reframe`, an
+/// axis whose coordinates do not fit gets the offset (and scale) the command line would give
+/// its output; without, that is a `ValueError`. Returns the records, the frame's scale and
+/// offset, and a note per re-framed axis.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn encode_las<'py>(
+    py: Python<'py>,
+    moved: PyReadonlyArray2<'py, f64>,
+    scale: [f64; 3],
+    offset: [f64; 3],
+    reframe: bool,
+) -> PyResult<(Bound<'py, PyArray2<i32>>, [f64; 3], [f64; 3], Vec<String>)> {
+    let pts = self::points(&moved)?;
+    let encoded = py
+        .detach(|| io::encode_coordinates(&pts, scale, offset, reframe))
+        .map_err(py_err)?;
+    let flat: Vec<i32> = encoded.records.iter().flatten().copied().collect();
+    let records = Array2::from_shape_vec((encoded.records.len(), 3), flat)
+        .expect("n × 3")
+        .into_pyarray(py);
+    Ok((records, encoded.scale, encoded.offset, encoded.notes))
+}
+
 /// A spec given as JSON (from a Python dict) as TOML text.
 #[pyfunction]
 fn toml_from_json(json: &str) -> PyResult<String> {
@@ -398,5 +445,7 @@ fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(deform_file, m)?)?;
     m.add_function(wrap_pyfunction!(apply_file, m)?)?;
     m.add_function(wrap_pyfunction!(toml_from_json, m)?)?;
+    m.add_function(wrap_pyfunction!(decode_las, m)?)?;
+    m.add_function(wrap_pyfunction!(encode_las, m)?)?;
     Ok(())
 }

@@ -162,3 +162,80 @@ def test_errors_are_exceptions(tmp_path):
         rigidcells.deform_file(bad, tmp_path / "o.las", BEND)
     assert issubclass(rigidcells.FormatError, ValueError)
     assert not (tmp_path / "o.las").exists()
+
+
+# Every point of the bar in one handle: a rigid translation, exact at every point.
+SHIFT = """
+[[handle]]
+box = { min = [99.0, 199.0, 299.0], max = [111.0, 202.0, 302.0] }
+translate = [0.0006, -0.0006, -0.0016]
+"""
+
+
+def bar_records(dtype=np.int32) -> np.ndarray:
+    """The bar as LAS-style integer records: steps of 0.001 from the offset (100, 200, 300)."""
+    pts = bar_points() + [100.0, 200.0, 300.0]
+    arr = np.zeros(len(pts), dtype=[("X", dtype), ("Y", dtype), ("Z", dtype), ("Intensity", "<u2")])
+    for k, name in enumerate("XYZ"):
+        arr[name] = np.round((pts[:, k] - [100.0, 200.0, 300.0][k]) / 0.001)
+    arr["Intensity"] = np.arange(len(pts)) % 65535
+    return arr
+
+
+def test_integer_xyz_fields_without_scale_are_refused():
+    with pytest.raises(ValueError, match=r"X, Y, Z are integer fields .*pass scale=\(sx, sy, sz\) and offset=\(ox, oy, oz\)"):
+        rigidcells.deform(bar_records(), SHIFT)
+    with pytest.raises(ValueError, match="scale="):
+        rigidcells.solve(bar_records(), SHIFT)
+
+
+def test_integer_records_round_to_the_nearest_step_never_truncated():
+    arr = bar_records()
+    frame = dict(scale=0.001, offset=(100.0, 200.0, 300.0))
+    out, info = rigidcells.deform(arr, SHIFT, **frame)
+    assert out.dtype == arr.dtype and info["notes"] == []
+    # +0.6, −0.6 and −1.6 steps: +1, −1, −2 to the nearest (truncation gives 0, 0, −1).
+    assert np.array_equal(out["X"], arr["X"] + 1)
+    assert np.array_equal(out["Y"], arr["Y"] - 1)
+    assert np.array_equal(out["Z"], arr["Z"] - 2)
+    assert np.array_equal(out["Intensity"], arr["Intensity"])
+    field = rigidcells.solve(arr, SHIFT, **frame)
+    assert np.array_equal(field.apply(arr, **frame), out)
+    # The records alone as an (n, 3) array come back as the same integers.
+    plain = np.stack([arr["X"], arr["Y"], arr["Z"]], axis=1).astype(np.int64)
+    moved, _ = rigidcells.deform(plain, SHIFT, **frame)
+    assert moved.dtype == np.int64
+    assert np.array_equal(moved, np.stack([out["X"], out["Y"], out["Z"]], axis=1))
+
+
+def test_a_moved_record_its_field_cannot_hold_is_refused_not_wrapped():
+    arr = bar_records(np.int16)
+    with pytest.raises(ValueError, match="X: the moved records span .* int16 cannot hold"):
+        rigidcells.deform(arr, SHIFT.replace("0.0006, ", "30.0, "), scale=0.001, offset=(100, 200, 300))
+    with pytest.raises(ValueError, match="axis x: the moved coordinates span .*32-bit record integers"):
+        rigidcells.deform(bar_records(), SHIFT.replace("0.0006, ", "3.0e6, "), scale=0.001, offset=(100, 200, 300))
+
+
+def test_scale_and_offset_are_for_integers_only():
+    pts = bar_points()
+    with pytest.raises(ValueError, match="leave scale and offset out"):
+        rigidcells.deform(pts, SHIFT, scale=0.001)
+    with pytest.raises(ValueError, match="offset was given without scale"):
+        rigidcells.deform(bar_records(), SHIFT, offset=(100, 200, 300))
+    with pytest.raises(ValueError, match="scale must be a number or three numbers"):
+        rigidcells.deform(bar_records(), SHIFT, scale=(0.001, 0.001))
+    with pytest.raises(ValueError, match="out of range"):
+        rigidcells.deform(bar_records(), SHIFT, scale=-0.001)
+
+
+def test_triangles_are_whole_indices_never_truncated():
+    pts = bar_points()
+    whole, _ = rigidcells.deform(pts, BEND, triangles=[[0.0, 1.0, 2.0]], cell_size=0.5)
+    ints, _ = rigidcells.deform(pts, BEND, triangles=[[0, 1, 2]], cell_size=0.5)
+    assert np.array_equal(whole, ints)
+    with pytest.raises(ValueError, match="whole vertex indices"):
+        rigidcells.deform(pts, BEND, triangles=[[0, 1.5, 2]], cell_size=0.5)
+    with pytest.raises(ValueError, match="outside"):
+        rigidcells.deform(pts, BEND, triangles=np.array([[0, 1, 2**64 - 1]], dtype=np.uint64))
+    with pytest.raises(TypeError):
+        rigidcells.deform(pts, BEND, cells=100.5)

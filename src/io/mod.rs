@@ -17,7 +17,10 @@ mod tiles;
 mod xy;
 mod xyz;
 
-pub use las::{LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord};
+pub use las::{
+    Encoded, LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord, decode_coordinates,
+    encode_coordinates, frame_error,
+};
 pub use obj::ObjFile;
 pub use ply::{Colors, PlyFile, colors};
 pub use ply_stream::{PlyRecordStream, PlyStream};
