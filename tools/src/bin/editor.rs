@@ -30,7 +30,7 @@ fn ends(scene: &Scene, lift: f64) -> Edit {
     let strip = |a: f64, b: f64| Selection {
         polygon: Some(vec![[a, -1.1], [b, -1.1], [b, 1.1], [a, 1.1]]),
         view: Some(view),
-        classification: None,
+        ..Default::default()
     };
     Edit {
         fixed: vec![strip(-1.1, -0.8)],
