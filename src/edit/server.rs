@@ -61,14 +61,16 @@ use crate::error::{Error, Result};
 /// The page, with its script and styles, built into the binary.
 const PAGE: &str = include_str!("page.html");
 
-/// The largest WebSocket message (and frame) the server reads, in bytes: 2 MiB. The largest
+/// The largest WebSocket message (and frame) the server reads, in bytes: 1 MiB. The largest
 /// message is an edit (`edit`, `save`, `apply`), its selections' polygons most of it. The page
 /// keeps a lasso's vertices at least 3 pixels apart and at most 4,096, in normalized
-/// coordinates of 6 decimals: at most 22 bytes of JSON a vertex, 91 kB a lasso with its view;
-/// 2 MiB holds 23 such lassos (a box is 4 vertices, 0.5 kB with its view), and the page refuses
-/// a selection that would make its messages larger. Reading one holds a few times its size (the
-/// spec's text and its parse).
-pub const MAX_MESSAGE: usize = 2 << 20;
+/// coordinates of 6 decimals: at most 22 bytes of JSON a vertex, 91 kB a lasso with its view
+/// (a lasso around a whole 4K screen at 3 pixels is 4,000 vertices; one around an object on it
+/// a few hundred). 1 MiB holds 11 such lassos and a handful of regions many times over (a box
+/// is 4 vertices, 0.5 kB with its view); the page refuses a selection that would make its
+/// messages larger. An edit at the cap raises the server's peak memory by about 55 MB (its
+/// spec's text, written and parsed as the CLI reads it), a fixed bound.
+pub const MAX_MESSAGE: usize = 1 << 20;
 
 /// The scene's data as served: computed once.
 struct Assets {
