@@ -1,24 +1,24 @@
-//! What a camera sees of the cells: the rule behind a screen selection with `visible = true`
-//! (the editor's box and lasso unless x-ray is on).
-//!
-//! A sample on the screen polygon is selected when the camera sees its cell. The cell `c` is
-//! seen when the line of points that the view projects to the screen point of `c`'s center,
-//! walked from that center toward the camera (the way the depth `z/w` decreases) up to the
-//! camera (`w = 0`) or out of the grid, enters no cell of the complex that does not touch `c`
-//! (share a face, an edge or a corner with it). The cells that touch `c` are the surface around
-//! it, which a line at a slant crosses; so a surface is selected through about one cell of
-//! depth, and a cell with another cell at least one cell-width in front of it is hidden. The
-//! complex holds the shape's boundary cells and, for a closed surface, the interior cells: the
-//! far side of a solid is hidden by its inside as well as by its near side.
-//!
-//! The rule depends on the cells and the view only, never on how many samples there are: the
-//! editor's proxy and the CLI's whole file select the same cells when their cells are the same,
-//! and the samples of a seen cell that lie on the polygon are selected, all of them.
+//! What a camera sees of the cells ([`Sight`]).
 
 use crate::cells::CellComplex;
 use crate::rigid::Vect;
 
-/// The cells a camera sees ([module docs](self)).
+/// What a camera sees of the cells: the rule behind a screen selection with `visible = true`
+/// (the editor's box and lasso unless x-ray is on).
+///
+/// A sample on the screen polygon is selected when the camera sees its cell. The cell `c` is
+/// seen when the line of points that the view projects to the screen point of `c`'s center,
+/// walked from that center toward the camera (the way the depth `z/w` decreases) up to the
+/// camera (`w = 0`) or out of the grid, enters no cell of the complex that does not touch `c`
+/// (share a face, an edge or a corner with it). The cells that touch `c` are the surface around
+/// it, which a line at a slant crosses; so a surface is selected through about one cell of
+/// depth, and a cell with another cell at least one cell-width in front of it is hidden. The
+/// complex holds the shape's boundary cells and, for a closed surface, the interior cells: the
+/// far side of a solid is hidden by its inside as well as by its near side.
+///
+/// The rule depends on the cells and the view only, never on how many samples there are: the
+/// editor's proxy and the CLI's whole file select the same cells when their cells are the same,
+/// and the samples of a seen cell that lie on the polygon are selected, all of them.
 pub struct Sight<'a, const D: usize> {
     complex: &'a CellComplex<D>,
     /// The view's rows in the complex's local frame.
