@@ -31,7 +31,9 @@
 //! `polygon_file = "area.geojson"` (a prism over x, y, with an optional height range
 //! `z = [lo, hi]`; or, with `view = [[..] × 4]`, a lasso drawn on a screen: the polygon is in
 //! the view's normalized device coordinates `[-1, 1]²` and the region is every point in front
-//! of the camera that the 4×4 world-to-clip matrix projects into it, as the editor writes it),
+//! of the camera that the 4×4 world-to-clip matrix projects into it, as the editor writes it;
+//! with `visible = true` as well, only the samples whose cell the camera sees, the front
+//! surface: [`crate::solve::Sight`] states the rule),
 //! `indices = "file.txt"` (sample indices, whitespace or comma separated,
 //! 0-based) or `classification = [..]` (LAS classes); several in one entry combine (a sample
 //! must satisfy all), and `invert = true` takes the rest. A handle's transform is
@@ -88,6 +90,9 @@ pub enum Region<const D: usize> {
         view: [[f64; 4]; 4],
         /// The polygon on the screen (no height range).
         polygon: Polygon,
+        /// Only the samples whose cell the camera sees ([`crate::solve::Sight`]): a selection
+        /// of samples then, not a region of space (no cell is taken for its center alone).
+        visible: bool,
     },
     /// The samples every region selects (an entry with several region keys).
     All(Vec<Region<D>>),
@@ -151,11 +156,8 @@ impl<const D: usize> Region<D> {
     /// selection of samples by index or attribute.
     pub fn is_geometric(&self) -> bool {
         match self {
-            Self::Box { .. }
-            | Self::Sphere { .. }
-            | Self::Plane { .. }
-            | Self::Polygon(_)
-            | Self::Screen { .. } => true,
+            Self::Box { .. } | Self::Sphere { .. } | Self::Plane { .. } | Self::Polygon(_) => true,
+            Self::Screen { visible, .. } => !visible,
             Self::Indices(_) | Self::Classification(_) => false,
             Self::All(parts) => parts.iter().all(Self::is_geometric),
             Self::Not(r) => r.is_geometric(),
@@ -172,19 +174,30 @@ impl<const D: usize> Region<D> {
         }
     }
 
+    /// The view of the screen selection with `visible = true` in this region (alone or among
+    /// the parts of an entry), whose cells must be seen ([`crate::solve::Sight`]).
+    pub fn visible_from(&self) -> Option<&[[f64; 4]; 4]> {
+        match self {
+            Self::Screen {
+                view,
+                visible: true,
+                ..
+            } => Some(view),
+            Self::All(parts) => parts.iter().find_map(Self::visible_from),
+            _ => None,
+        }
+    }
+
     /// Whether the point `x` (input coordinates) lies in a geometric region (always false for a
-    /// selection by index or attribute).
+    /// selection by index or attribute, or of the visible samples).
     pub fn contains_point(&self, x: &Vect<D>) -> bool {
         match self {
             Self::Box { min, max } => (0..D).all(|a| x[a] >= min[a] && x[a] <= max[a]),
             Self::Sphere { center, radius } => (x - center).norm_squared() <= radius * radius,
             Self::Plane { point, normal } => (x - point).dot(normal) <= 0.0,
             Self::Polygon(p) => p.contains(x[0], x[1], (D > 2).then(|| x[D - 1])),
-            Self::Screen { view, polygon } => {
-                let row = |r: &[f64; 4]| (0..D).map(|a| r[a] * x[a]).sum::<f64>() + r[3];
-                let w = row(&view[3]);
-                w > 0.0 && polygon.contains(row(&view[0]) / w, row(&view[1]) / w, None)
-            }
+            Self::Screen { visible: true, .. } => false,
+            Self::Screen { view, polygon, .. } => on_screen(view, polygon, x),
             Self::All(parts) => parts.iter().all(|r| r.contains_point(x)),
             Self::Not(r) => r.is_geometric() && !r.contains_point(x),
             Self::Indices(_) | Self::Classification(_) => false,
@@ -198,9 +211,18 @@ impl<const D: usize> Region<D> {
             Self::Classification(set) => class.is_some_and(|c| set.contains(&c)),
             Self::All(parts) => parts.iter().all(|r| r.selects(index, x, class)),
             Self::Not(r) => !r.selects(index, x, class),
+            // The samples on the screen; [`crate::solve::Sight`] keeps those it sees.
+            Self::Screen { view, polygon, .. } => on_screen(view, polygon, x),
             _ => self.contains_point(x),
         }
     }
+}
+
+/// Whether `x` lies in front of the camera `view` and projects into `polygon` on its screen.
+fn on_screen<const D: usize>(view: &[[f64; 4]; 4], polygon: &Polygon, x: &Vect<D>) -> bool {
+    let row = |r: &[f64; 4]| (0..D).map(|a| r[a] * x[a]).sum::<f64>() + r[3];
+    let w = row(&view[3]);
+    w > 0.0 && polygon.contains(row(&view[0]) / w, row(&view[1]) / w, None)
 }
 
 /// How a handle moves: `A(x) = R·P·(x − pivot) + pivot + translate`, with `R` a rotation and `P`
@@ -423,7 +445,7 @@ const REGION_KEYS: [&str; 7] = [
     "polygon_file",
 ];
 /// Keys that qualify a selection.
-const SELECTION_KEYS: [&str; 3] = ["z", "invert", "view"];
+const SELECTION_KEYS: [&str; 4] = ["z", "invert", "view", "visible"];
 
 /// Reads and validates the edit spec in `path`.
 pub fn read_spec<const D: usize>(path: &Path) -> Result<EditSpec<D>>
@@ -666,6 +688,12 @@ impl Ctx<'_> {
                 "`view` (a screen's world-to-clip matrix) goes with a `polygon`".into(),
             ));
         }
+        if t.contains_key("visible") && !t.contains_key("view") {
+            return Err(self.error(
+                Some(line),
+                "`visible` (only what a screen's camera sees) goes with a `view`".into(),
+            ));
+        }
         if t.contains_key("z") && !present.iter().any(|k| k.starts_with("polygon")) {
             return Err(self.error(
                 self.at(line, "z"),
@@ -684,6 +712,12 @@ impl Ctx<'_> {
             Some(_) => self.field::<bool>(t, "invert", line)?,
             None => false,
         };
+        if invert && region.visible_from().is_some() {
+            return Err(self.error(
+                Some(line),
+                "`visible = true` and `invert = true` exclude each other".into(),
+            ));
+        }
         Ok(if invert {
             Region::Not(Box::new(region))
         } else {
@@ -806,9 +840,20 @@ impl Ctx<'_> {
                 *o = *v;
             }
         }
+        let visible = match t.get("visible") {
+            Some(_) => self.field::<bool>(t, "visible", line)?,
+            None => false,
+        };
+        if visible && view[2][..3].iter().all(|&v| v == 0.0) {
+            return Err(self.error(
+                Some(line),
+                "`visible` needs the view's depth: its third row is zero".into(),
+            ));
+        }
         Ok(Region::Screen {
             view,
             polygon: Polygon::new(rings, None),
+            visible,
         })
     }
 

@@ -1,6 +1,7 @@
 //! The editor's protocol: the token and the Host/Origin checks, a move answered by motions, a
 //! release by the final transfer on the proxy, and a saved spec that the CLI deforms to the
-//! shape the editor showed.
+//! shape the editor showed; files written only into the editor's folder, under plain names, an
+//! existing file replaced only when confirmed; messages capped; selections of what is visible.
 
 mod common;
 
@@ -15,8 +16,14 @@ use rigidcells::pipeline::DeformParams;
 use serde_json::json;
 use tungstenite::Message;
 
-/// The editor of the 10×1×1 bar (cells of 0.25), served on a free port.
+/// The editor of the 10×1×1 bar (cells of 0.5), served on a free port, writing into the bar's
+/// folder.
 fn serve(dir: &Path) -> (Server, std::path::PathBuf) {
+    serve_into(dir, None)
+}
+
+/// [`serve`], writing into `out_dir`.
+fn serve_into(dir: &Path, out_dir: Option<&Path>) -> (Server, std::path::PathBuf) {
     let input = dir.join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
@@ -24,13 +31,13 @@ fn serve(dir: &Path) -> (Server, std::path::PathBuf) {
     params.build.cell_size = Some(0.5);
     params.transfer = rigidcells::field::Transfer::Pu;
     (
-        Server::bind(Editor::new(scene, params).unwrap(), 0).unwrap(),
+        Server::bind(Editor::new(scene, params).unwrap(), 0, out_dir).unwrap(),
         input,
     )
 }
 
-/// A raw GET with the given Host and Origin; returns the status code and the body.
-fn get(port: u16, target: &str, host: &str, origin: Option<&str>) -> (u16, Vec<u8>) {
+/// A raw GET with the given Host and Origin; returns the status code, the head and the body.
+fn get_head(port: u16, target: &str, host: &str, origin: Option<&str>) -> (u16, String, Vec<u8>) {
     let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
     let origin = origin.map_or(String::new(), |o| format!("Origin: {o}\r\n"));
     write!(s, "GET {target} HTTP/1.1\r\nHost: {host}\r\n{origin}\r\n").unwrap();
@@ -38,7 +45,45 @@ fn get(port: u16, target: &str, host: &str, origin: Option<&str>) -> (u16, Vec<u
     s.read_to_end(&mut out).unwrap();
     let head_end = out.windows(4).position(|w| w == b"\r\n\r\n").unwrap() + 4;
     let status = std::str::from_utf8(&out[9..12]).unwrap().parse().unwrap();
-    (status, out[head_end..].to_vec())
+    let head = String::from_utf8_lossy(&out[..head_end]).into_owned();
+    (status, head, out[head_end..].to_vec())
+}
+
+/// A raw GET with the given Host and Origin; returns the status code and the body.
+fn get(port: u16, target: &str, host: &str, origin: Option<&str>) -> (u16, Vec<u8>) {
+    let (status, _, body) = get_head(port, target, host, origin);
+    (status, body)
+}
+
+/// The page's WebSocket to the server on `port`, as a browser opens it (with an `Origin`).
+fn connect(port: u16, token: &str) -> tungstenite::WebSocket<TcpStream> {
+    connect_with(port, token, Some(&format!("http://127.0.0.1:{port}"))).unwrap()
+}
+
+/// A WebSocket to the server on `port` with the given `Origin` header (none: `None`).
+fn connect_with(
+    port: u16,
+    token: &str,
+    origin: Option<&str>,
+) -> Result<tungstenite::WebSocket<TcpStream>, String> {
+    use tungstenite::client::IntoClientRequest;
+    let stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(60)))
+        .unwrap();
+    let mut request = format!("ws://127.0.0.1:{port}/ws?t={token}")
+        .into_client_request()
+        .unwrap();
+    if let Some(o) = origin {
+        request.headers_mut().insert("Origin", o.parse().unwrap());
+    }
+    tungstenite::client(request, stream)
+        .map(|(ws, _)| ws)
+        .map_err(|e| e.to_string())
+}
+
+fn send(ws: &mut tungstenite::WebSocket<TcpStream>, v: serde_json::Value) {
+    ws.send(Message::text(v.to_string())).unwrap()
 }
 
 /// A view whose screen is the x–y plane of the bar's relative coordinates, x/5 and y/1.
@@ -121,21 +166,102 @@ fn the_token_host_and_origin_are_enforced() {
     assert!(tungstenite::client(format!("ws://{host}/ws"), stream).is_err());
 }
 
+/// A WebSocket needs an `Origin` (a browser always sends one), and this server's; the page is
+/// sent without a referrer and may not be framed.
+#[test]
+fn a_websocket_needs_this_origin_and_the_page_is_not_framed_or_referred() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve(dir.path());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let e = connect_with(port, &token, None).expect_err("no Origin");
+    assert!(e.contains("403"), "{e}");
+    let e = connect_with(port, &token, Some("http://evil.example")).expect_err("foreign");
+    assert!(e.contains("403"), "{e}");
+    let own = format!("http://localhost:{port}");
+    connect_with(port, &token, Some(&own)).expect("this server's origin");
+    let (status, head, _) = get_head(
+        port,
+        &format!("/?t={token}"),
+        &format!("127.0.0.1:{port}"),
+        None,
+    );
+    assert_eq!(status, 200);
+    let head = head.to_ascii_lowercase();
+    assert!(
+        head.contains("\r\nreferrer-policy: no-referrer\r\n"),
+        "{head}"
+    );
+    let csp = head
+        .lines()
+        .find(|l| l.starts_with("content-security-policy:"))
+        .unwrap_or_default();
+    assert!(csp.contains("frame-ancestors 'none'"), "{head}");
+}
+
+/// Messages are capped at [`MAX_MESSAGE`]: a larger one closes the connection unread, one
+/// within it (an edit with the largest lassos the page makes) is answered, and the server goes
+/// on serving.
+#[test]
+fn websocket_messages_are_capped() {
+    use rigidcells::edit::server::MAX_MESSAGE;
+    const { assert!(MAX_MESSAGE <= 4 << 20) };
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve(dir.path());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+
+    // 10 lassos of the page's most vertices (4,096, 6 decimals): within the cap.
+    let lasso: Vec<[f64; 2]> = (0..4096)
+        .map(|k| {
+            let a = k as f64 / 4096.0 * std::f64::consts::TAU;
+            let round = |v: f64| (v * 1e6).round() / 1e6;
+            [
+                round(-0.987654 + 0.01 * a.cos()),
+                round(0.123456 + 0.01 * a.sin()),
+            ]
+        })
+        .collect();
+    let sel = json!({"polygon": lasso, "view": flat_view()});
+    let mut edit = ends([0.0; 3], 0.0);
+    for _ in 0..10 {
+        edit["fixed"].as_array_mut().unwrap().push(sel.clone());
+    }
+    let big = json!({"type": "edit", "seq": 1, "edit": edit}).to_string();
+    assert!(
+        big.len() > MAX_MESSAGE / 2 && big.len() < MAX_MESSAGE,
+        "{}",
+        big.len()
+    );
+    let mut ws = connect(port, &token);
+    ws.send(Message::text(big)).unwrap();
+    let b = next_binary(&mut ws);
+    assert_eq!((u32_at(&b, 0), u32_at(&b, 1)), (1, 1));
+
+    // One byte more than the cap: the connection closes, unread (read, it would be answered
+    // as a bad request).
+    let mut ws = connect(port, &token);
+    let _ = ws.send(Message::text("a".repeat(MAX_MESSAGE + 1)));
+    let closed = loop {
+        match ws.read() {
+            Ok(Message::Close(_)) | Err(_) => break true,
+            Ok(Message::Text(t)) if t.contains("\"error\"") => break false,
+            Ok(_) => {}
+        }
+    };
+    assert!(closed, "a message over the cap was read");
+    let mut ws = connect(port, &token);
+    send(&mut ws, json!({"type": "edit", "seq": 5, "edit": {}}));
+    assert_eq!(u32_at(&next_binary(&mut ws), 1), 5);
+}
+
 #[test]
 fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
     let dir = tempfile::tempdir().unwrap();
     let (server, input) = serve(dir.path());
     let (port, token) = (server.port(), server.token().to_string());
     std::thread::spawn(move || server.run());
-    let stream = TcpStream::connect(("127.0.0.1", port)).unwrap();
-    stream
-        .set_read_timeout(Some(Duration::from_secs(60)))
-        .unwrap();
-    let (mut ws, _) =
-        tungstenite::client(format!("ws://127.0.0.1:{port}/ws?t={token}"), stream).unwrap();
-    let send = |ws: &mut tungstenite::WebSocket<TcpStream>, v: serde_json::Value| {
-        ws.send(Message::text(v.to_string())).unwrap()
-    };
+    let mut ws = connect(port, &token);
 
     // Nothing selected: an empty answer.
     send(&mut ws, json!({"type": "edit", "seq": 1, "edit": {}}));
@@ -187,7 +313,7 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
     let spec = dir.path().join("bar.edit.toml");
     send(
         &mut ws,
-        json!({"type": "save", "path": spec.to_str().unwrap(), "edit": ends([0.0, 0.0, 2.0], 20.0)}),
+        json!({"type": "save", "name": "bar.edit.toml", "edit": ends([0.0, 0.0, 2.0], 20.0)}),
     );
     assert_eq!(next_text(&mut ws)["type"], "saved");
     let text = std::fs::read_to_string(&spec).unwrap();
@@ -215,7 +341,7 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
     let applied = dir.path().join("applied.ply");
     send(
         &mut ws,
-        json!({"type": "apply", "output": applied.to_str().unwrap(), "edit": ends([0.0, 0.0, 2.0], 20.0)}),
+        json!({"type": "apply", "name": "applied.ply", "edit": ends([0.0, 0.0, 2.0], 20.0)}),
     );
     let mut progress = 0;
     let done = loop {
@@ -232,12 +358,20 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
         std::fs::read(&out).unwrap()
     );
 
-    // Never over the input.
+    // Never over the input, even confirmed.
     send(
         &mut ws,
-        json!({"type": "save", "path": input.to_str().unwrap(), "edit": ends([0.0; 3], 0.0)}),
+        json!({"type": "apply", "name": "bar.ply", "overwrite": true, "edit": ends([0.0; 3], 0.0)}),
     );
-    assert_eq!(next_text(&mut ws)["type"], "error");
+    let m = next_text(&mut ws);
+    assert_eq!(m["type"], "error", "{m}");
+    assert!(
+        m["message"]
+            .as_str()
+            .unwrap()
+            .contains("overwrite the input"),
+        "{m}"
+    );
 }
 
 /// A selection by LAS class alone (the page's *Select classes*) and one narrowed by a class: the
@@ -287,7 +421,8 @@ fn a_class_selection_fixes_the_ground() {
 }
 
 /// The `view` key of a screen selection: only with a `polygon`, 4 × 4 finite numbers, no `z`;
-/// a point behind the camera is never selected.
+/// a point behind the camera is never selected. `visible`: only with a `view` that has a depth
+/// row, a boolean, not inverted.
 #[test]
 fn screen_selections_parse_strictly() {
     use rigidcells::spec::parse_spec;
@@ -308,6 +443,19 @@ fn screen_selections_parse_strictly() {
         let e = parse(&bad).expect_err(&bad).to_string();
         assert!(e.contains("view"), "{e}");
     }
+    let deep = "view = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, -1, 0]]";
+    let spec = parse(&format!("[[fixed]]\n{square}\n{deep}\nvisible = true\n")).unwrap();
+    let region = &spec.fixed[0].region;
+    assert!(region.visible_from().is_some() && !region.is_geometric());
+    for bad in [
+        format!("[[fixed]]\n{square}\nvisible = true\n"),
+        format!("[[fixed]]\n{square}\n{deep}\nvisible = 1\n"),
+        format!("[[fixed]]\n{square}\n{deep}\nvisible = true\ninvert = true\n"),
+        format!("[[fixed]]\n{square}\n{view}\nvisible = true\n"),
+    ] {
+        let e = parse(&bad).expect_err(&bad).to_string();
+        assert!(e.contains("visible"), "{e}");
+    }
 }
 
 /// A mesh with more vertices than the proxy holds is streamed every k-th vertex (points, no
@@ -322,4 +470,334 @@ fn a_mesh_larger_than_the_proxy_is_decimated() {
     let few = Scene::load(&input, 500, &rigidcells::progress::Silent).unwrap();
     assert!(few.triangles.is_empty() && few.points.len() <= 500 && few.total == all.total);
     assert_eq!(few.points[1], all.points[few.total.div_ceil(500) as usize]);
+}
+
+/// *Save edit* and *Apply* write a plain file name into the editor's folder: no path, no
+/// hidden name, the right extension (for *Apply*, checked before any work); a file the editor
+/// did not write is replaced only when the message says the user confirmed it, and keeps its
+/// permission bits; a symbolic link or a folder is never replaced.
+#[test]
+fn files_are_written_only_into_the_folder_under_plain_names() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve(dir.path());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let mut ws = connect(port, &token);
+    let edit = ends([0.0, 0.0, 1.0], 0.0);
+    let unique = format!("rigidcells-editor-{}.toml", std::process::id());
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    let elsewhere = tempfile::tempdir().unwrap();
+    let absolute = elsewhere.path().join(&unique);
+    for name in [
+        absolute.to_str().unwrap().to_string(),
+        format!("../{unique}"),
+        format!("sub/{unique}"),
+        format!("sub\\{unique}"),
+        format!(".{unique}"),
+        "..".into(),
+        "notes.txt".into(),
+        "notes".into(),
+        String::new(),
+    ] {
+        send(
+            &mut ws,
+            json!({"type": "save", "name": name, "edit": edit, "overwrite": true}),
+        );
+        let m = next_text(&mut ws);
+        assert_eq!(m["type"], "error", "{name:?}: {m}");
+    }
+    assert!(!absolute.exists() && !dir.path().join("sub").join(&unique).exists());
+    assert!(!dir.path().parent().unwrap().join(&unique).exists());
+
+    // Apply: a format deform does not write for this input is refused before any work.
+    for name in ["bent.las", "bent.toml", "../bent.ply"] {
+        send(
+            &mut ws,
+            json!({"type": "apply", "name": name, "edit": edit}),
+        );
+        let m = next_text(&mut ws);
+        assert_eq!(m["type"], "error", "{name}: the first answer is {m}");
+    }
+    assert!(!dir.path().join("bent.las").exists());
+
+    // A file the editor did not write: `exists`, untouched, until confirmed; then replaced
+    // with its permission bits; once written, saved again without asking.
+    let notes = dir.path().join("notes.toml");
+    std::fs::write(&notes, "mine").unwrap();
+    std::fs::set_permissions(&notes, std::fs::Permissions::from_mode(0o600)).unwrap();
+    send(
+        &mut ws,
+        json!({"type": "save", "name": "notes.toml", "edit": edit}),
+    );
+    let m = next_text(&mut ws);
+    assert_eq!(
+        (m["type"].as_str(), m["name"].as_str()),
+        (Some("exists"), Some("notes.toml")),
+        "{m}"
+    );
+    assert_eq!(std::fs::read_to_string(&notes).unwrap(), "mine");
+    send(
+        &mut ws,
+        json!({"type": "save", "name": "notes.toml", "edit": edit, "overwrite": true}),
+    );
+    assert_eq!(next_text(&mut ws)["type"], "saved");
+    assert!(
+        std::fs::read_to_string(&notes)
+            .unwrap()
+            .starts_with("# rigidcells edit")
+    );
+    let mode = std::fs::metadata(&notes).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o600, "{mode:o}");
+    send(
+        &mut ws,
+        json!({"type": "save", "name": "notes.toml", "edit": edit}),
+    );
+    assert_eq!(next_text(&mut ws)["type"], "saved");
+
+    // Apply likewise, asked before any work.
+    let old = dir.path().join("old.ply");
+    std::fs::write(&old, "x").unwrap();
+    std::fs::set_permissions(&old, std::fs::Permissions::from_mode(0o640)).unwrap();
+    send(
+        &mut ws,
+        json!({"type": "apply", "name": "old.ply", "edit": edit}),
+    );
+    assert_eq!(next_text(&mut ws)["type"], "exists");
+    assert_eq!(std::fs::read(&old).unwrap(), b"x");
+    send(
+        &mut ws,
+        json!({"type": "apply", "name": "old.ply", "edit": edit, "overwrite": true}),
+    );
+    let done = loop {
+        let m = next_text(&mut ws);
+        if m["type"] != "progress" {
+            break m;
+        }
+    };
+    assert_eq!(done["type"], "applied", "{done}");
+    assert!(rigidcells::io::Document::read(&old).is_ok());
+    let mode = std::fs::metadata(&old).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o640, "{mode:o}");
+
+    // A symbolic link, or a folder, is never replaced, even confirmed.
+    let target = dir.path().join("target.toml");
+    std::fs::write(&target, "kept").unwrap();
+    std::os::unix::fs::symlink(&target, dir.path().join("link.toml")).unwrap();
+    std::fs::create_dir(dir.path().join("folder.toml")).unwrap();
+    for name in ["link.toml", "folder.toml"] {
+        send(
+            &mut ws,
+            json!({"type": "save", "name": name, "edit": edit, "overwrite": true}),
+        );
+        let m = next_text(&mut ws);
+        assert_eq!(m["type"], "error", "{name}: {m}");
+    }
+    let link = std::fs::symlink_metadata(dir.path().join("link.toml")).unwrap();
+    assert!(link.file_type().is_symlink());
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "kept");
+}
+
+/// `--out-dir` chooses the folder; one that is missing or not a folder is refused (exit 4).
+#[test]
+fn the_out_dir_takes_the_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    let (server, input) = serve_into(dir.path(), Some(&out));
+    assert_eq!(server.out_dir(), std::fs::canonicalize(&out).unwrap());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let (_, body) = get(
+        port,
+        &format!("/scene.json?t={token}"),
+        &format!("127.0.0.1:{port}"),
+        None,
+    );
+    let scene: serde_json::Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(
+        scene["out_dir"],
+        out.canonicalize().unwrap().to_str().unwrap()
+    );
+    assert_eq!(scene["outputs"], json!(["ply"]));
+    let mut ws = connect(port, &token);
+    send(
+        &mut ws,
+        json!({"type": "save", "name": "s.toml", "edit": ends([0.0; 3], 0.0)}),
+    );
+    assert_eq!(next_text(&mut ws)["type"], "saved");
+    assert!(out.join("s.toml").exists() && !dir.path().join("s.toml").exists());
+
+    let missing = dir.path().join("missing");
+    for bad in [&missing, &input] {
+        let r = common::run(&[
+            "edit",
+            input.to_str().unwrap(),
+            "--out-dir",
+            bad.to_str().unwrap(),
+            "-q",
+        ]);
+        assert_eq!(r.code, 4, "{}", r.stderr);
+        assert_eq!(
+            r.stderr.matches(bad.to_str().unwrap()).count(),
+            1,
+            "{}",
+            r.stderr
+        );
+    }
+}
+
+/// A perspective camera at `eye` looking at `at` with `up` upward, 45° wide, its near and far
+/// planes around `at` as the page places them: the row-major world-to-clip matrix.
+fn camera(eye: [f64; 3], at: [f64; 3], up: [f64; 3]) -> [[f64; 4]; 4] {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let norm = |a: [f64; 3]| {
+        let l = dot(a, a).sqrt();
+        [a[0] / l, a[1] / l, a[2] / l]
+    };
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let dist = dot(sub(eye, at), sub(eye, at)).sqrt();
+    let z = norm(sub(eye, at));
+    let x = norm(cross(up, z));
+    let y = cross(z, x);
+    let row = |a: [f64; 3]| [a[0], a[1], a[2], -dot(a, eye)];
+    let f = 1.0 / (std::f64::consts::PI / 8.0).tan();
+    let (near, far) = (0.05 * dist, 3.0 * dist);
+    let (a, b) = ((far + near) / (near - far), 2.0 * far * near / (near - far));
+    let (rx, ry, rz) = (row(x), row(y), row(z));
+    [
+        rx.map(|v| f * v),
+        ry.map(|v| f * v),
+        [a * rz[0], a * rz[1], a * rz[2], a * rz[3] + b],
+        rz.map(|v| -v),
+    ]
+}
+
+/// A screen square `[-r, r]²` seen by `view`, visible samples only or all (x-ray).
+fn square(view: [[f64; 4]; 4], r: f64, visible: bool) -> rigidcells::edit::Selection {
+    rigidcells::edit::Selection {
+        polygon: Some(vec![[-r, -r], [r, -r], [r, r], [-r, r]]),
+        view: Some(view),
+        visible,
+        ..Default::default()
+    }
+}
+
+/// The bar seen end-on from +x, 4 cells across: a box over its whole cross-section selects
+/// the near end only (two cells deep), or with x-ray the whole bar. As a handle with the far
+/// end fixed, the visible end solves where x-ray conflicts; the saved spec says `visible =
+/// true` and the CLI deforms the bar under it to the shape the editor showed.
+#[test]
+fn a_box_selects_what_is_visible_unless_xray() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let c = scene.center;
+    let x: Vec<f64> = scene.points.iter().map(|p| p[0] - c[0]).collect();
+    let mut params = DeformParams::default();
+    params.build.cell_size = Some(0.25);
+    params.transfer = rigidcells::field::Transfer::Pu;
+    let mut editor = Editor::new(scene, params).unwrap();
+    let end_on = camera([20.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]);
+
+    let all = editor.selected(&square(end_on, 0.3, false)).unwrap();
+    assert!(all.iter().all(|&s| s), "x-ray takes the whole bar");
+    let seen = editor.selected(&square(end_on, 0.3, true)).unwrap();
+    let count = seen.iter().filter(|&&s| s).count();
+    assert!(count > 0 && count < x.len() / 8, "{count} of {}", x.len());
+    for (i, &s) in seen.iter().enumerate() {
+        assert!(!s || x[i] > 4.2, "sample {i} at x = {} selected", x[i]);
+        assert!(
+            s || x[i] < 4.99,
+            "sample {i} on the end face at x = {} missed",
+            x[i]
+        );
+    }
+
+    let edit = |visible: bool| rigidcells::edit::Edit {
+        fixed: vec![rigidcells::edit::Selection {
+            polygon: Some(vec![[-1.1, -1.1], [-0.9, -1.1], [-0.9, 1.1], [-1.1, 1.1]]),
+            view: Some([
+                [0.2, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 0.1, 0.0],
+                [0.0, 0.0, 0.0, 1.0],
+            ]),
+            ..Default::default()
+        }],
+        handles: vec![rigidcells::edit::HandleEdit {
+            selections: vec![square(end_on, 0.3, visible)],
+            translate: [0.0, 0.0, 1.0],
+            axis: [0.0, 0.0, 1.0],
+            degrees: 0.0,
+            pivot: [5.0, 0.0, 0.0],
+        }],
+        pins: Vec::new(),
+    };
+    let e = editor
+        .solve(&edit(false))
+        .expect_err("a conflict")
+        .to_string();
+    assert!(e.contains("fixed #1") && e.contains("handle #1"), "{e}");
+    editor.solve(&edit(true)).unwrap().expect("motions");
+    let shown = editor.release().unwrap().positions;
+    let text = editor.spec_text(&edit(true));
+    assert_eq!(text.matches("visible = true").count(), 1, "{text}");
+    let spec = dir.path().join("end.edit.toml");
+    std::fs::write(&spec, &text).unwrap();
+    let out = dir.path().join("bent.ply");
+    let r = common::deform(&input, &out, &spec, &["--cell-size", "0.25"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let doc = rigidcells::io::Document::read(&out).unwrap();
+    let mut worst = 0f64;
+    for (i, p) in doc.positions().iter().enumerate() {
+        for a in 0..3 {
+            worst = worst.max((p[a] - c[a] - shown[3 * i + a] as f64).abs());
+        }
+    }
+    assert!(worst < 1e-4, "the CLI's shape is {worst} from the editor's");
+}
+
+/// The horse seen from the front, a box over its head: the visible head only, where x-ray
+/// takes the body behind it too.
+#[test]
+fn a_box_over_the_horse_head_takes_the_head_alone() {
+    let input = common::shared("meshes/horse.ply");
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let c = scene.center;
+    // The horse faces +y, z up; its head is at y > 0.03.
+    let y: Vec<f64> = scene.points.iter().map(|p| p[1] - c[1]).collect();
+    let mut params = DeformParams::default();
+    params.build.target_cells = Some(4000);
+    let editor = Editor::new(scene, params).unwrap();
+    let front = camera([0.0, 1.0, 0.04], [0.0, 0.0, 0.04], [0.0, 0.0, 1.0]);
+    let head = rigidcells::edit::Selection {
+        polygon: Some(vec![
+            [-0.06, -0.02],
+            [0.06, -0.02],
+            [0.06, 0.12],
+            [-0.06, 0.12],
+        ]),
+        ..square(front, 0.0, true)
+    };
+    let behind = |mask: &[bool]| (0..y.len()).filter(|&i| mask[i] && y[i] < 0.0).count();
+    let xray = editor
+        .selected(&rigidcells::edit::Selection {
+            visible: false,
+            ..head.clone()
+        })
+        .unwrap();
+    assert!(behind(&xray) > 100, "x-ray: {} behind", behind(&xray));
+    let seen = editor.selected(&head).unwrap();
+    let count = seen.iter().filter(|&&s| s).count();
+    assert!(count > 100, "{count} seen");
+    assert_eq!(behind(&seen), 0, "the body behind the head selected");
 }

@@ -427,11 +427,12 @@ pub(super) fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `edit`: load the proxy, build the cells, serve the page until interrupted.
+/// `edit`: load the proxy, build the cells, serve the page until interrupted; the page's files
+/// go into `out_dir` (default: the input's folder), checked before any work.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run_edit(
     input: &Path,
-    port: u16,
+    (port, out_dir): (u16, Option<&Path>),
     open: bool,
     proxy: usize,
     transfer: Transfer,
@@ -441,10 +442,13 @@ pub(super) fn run_edit(
     if proxy == 0 {
         return Err(Error::Param("--proxy 0: the page needs samples to show".into()).into());
     }
+    if let Some(dir) = out_dir {
+        rigidcells::edit::server::Outputs::new(input, Some(dir))?;
+    }
     let params = cells.deform_params(transfer)?;
     let scene = rigidcells::edit::Scene::load(input, proxy, &Bar::new(quiet))?;
     let editor = rigidcells::edit::Editor::new(scene, params)?;
-    let server = rigidcells::edit::server::Server::bind(editor, port)?;
+    let server = rigidcells::edit::server::Server::bind(editor, port, out_dir)?;
     println!("{}", server.url());
     if open {
         let _ = std::process::Command::new("xdg-open")

@@ -153,6 +153,10 @@ enum Command {
         /// Port to listen on (0: any free one).
         #[arg(long, default_value_t = 0)]
         port: u16,
+        /// The folder the page's Save edit and Apply write into, under plain file names
+        /// (default: the input's folder).
+        #[arg(long)]
+        out_dir: Option<PathBuf>,
         /// Open the page in the system's browser.
         #[arg(long)]
         open: bool,
@@ -585,12 +589,21 @@ pub(crate) fn main() -> ExitCode {
         Command::Edit {
             input,
             port,
+            out_dir,
             open,
             proxy,
             transfer,
             cells,
             quiet,
-        } => run_edit(&input, port, open, proxy, transfer.into(), &cells, quiet),
+        } => run_edit(
+            &input,
+            (port, out_dir.as_deref()),
+            open,
+            proxy,
+            transfer.into(),
+            &cells,
+            quiet,
+        ),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -17,6 +17,15 @@
 //! release, [`Editor::release`] runs the chosen transfer on the proxy with the exact
 //! constraints, and counts fold-overs as `deform` does.
 //!
+//! Which samples a selection holds is decided here, never by the page ([`Editor::selected`]):
+//! the selection is written as the spec region the CLI reads and evaluated as the solve
+//! evaluates it. A box or lasso is a `polygon` + `view` region; drawn with the page's default,
+//! it selects only what is visible (`visible = true`): the samples on the polygon whose cell
+//! the camera sees — the line from the cell's center toward the camera meets no cell of the
+//! shape that does not touch it ([`crate::solve::Sight`]), so the front surface is taken
+//! through about one cell of depth, and neither the far side nor what lies behind it. With the
+//! page's x-ray, everything that projects into the polygon.
+//!
 //! Coordinates on the wire are relative to the proxy's center ([`Scene::center`]) in `f32`, so
 //! georeferenced scans keep their detail on the GPU; the spec is written in the input's own
 //! coordinates in `f64`.
@@ -133,6 +142,10 @@ pub struct Selection {
     /// [`Scene::center`].
     #[serde(default)]
     pub view: Option<[[f64; 4]; 4]>,
+    /// Only what the view sees of the polygon ([`crate::solve::Sight`]; the page's default),
+    /// else everything that projects into it (x-ray).
+    #[serde(default)]
+    pub visible: bool,
     /// LAS classes.
     #[serde(default)]
     pub classification: Option<Vec<u8>>,
@@ -450,6 +463,53 @@ impl Editor {
         })
     }
 
+    /// Which proxy samples `selection` holds, as the spec the editor writes for it selects them
+    /// (through the same text the CLI reads): on the screen polygon, of the classes, and with
+    /// `visible` in a cell the camera sees ([`crate::solve::Sight`]).
+    pub fn selected(&self, selection: &Selection) -> Result<Vec<bool>> {
+        use rayon::prelude::*;
+        let edit = Edit {
+            fixed: vec![selection.clone()],
+            ..Default::default()
+        };
+        let text = spec_text(&edit, &self.scene, "");
+        let name = self.scene.input.with_extension("edit.toml");
+        let base = name.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let spec = crate::spec::parse_spec::<3>(&text, &base, &name)?;
+        let region = &spec.fixed[0].region;
+        let classes = &self.scene.classes;
+        if classes.is_empty() && region.uses_classes() {
+            return Err(Error::Param(
+                "a `classification` region needs an input with LAS classes".into(),
+            ));
+        }
+        let class = |i: usize| classes.get(i).copied();
+        let mut out: Vec<bool> = self
+            .scene
+            .points
+            .par_iter()
+            .enumerate()
+            .map(|(i, p)| region.selects(i as u64, p, class(i)))
+            .collect();
+        if let Some(view) = region.visible_from() {
+            let cells: Vec<Option<usize>> = self
+                .scene
+                .points
+                .par_iter()
+                .zip(&out)
+                .map(|(p, &on)| on.then(|| solve::sample_cell(&self.complex, p)).flatten())
+                .collect();
+            let mut candidates: Vec<usize> = cells.iter().flatten().copied().collect();
+            candidates.sort_unstable();
+            candidates.dedup();
+            let seen = solve::seen(&self.complex, view, &candidates);
+            for (o, c) in out.iter_mut().zip(&cells) {
+                *o = c.is_some_and(|c| seen[c]);
+            }
+        }
+        Ok(out)
+    }
+
     /// The spec of the last [`Editor::solve`] (its TOML text).
     pub fn last_spec(&self) -> Option<&str> {
         self.spec.as_ref().map(|(_, t, _)| t.as_str())
@@ -519,6 +579,9 @@ fn region_keys(s: &Selection, center: &Vect<3>) -> String {
                 })
                 .collect();
             keys += &format!("view = [{}]\n", rows.join(", "));
+            if s.visible {
+                keys += "visible = true\n";
+            }
         }
     }
     if let Some(classes) = &s.classification {

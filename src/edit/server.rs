@@ -8,9 +8,22 @@
 //! Safety: the listener binds 127.0.0.1 only. Every request must carry the session's random
 //! token (`?t=…`, 128 bits from the system's generator) and a `Host` naming this server
 //! (`127.0.0.1:PORT` or `localhost:PORT`; a DNS-rebinding page carries its own host name), and
-//! any `Origin` must be this server's; otherwise 403 and nothing else. Only GET is served, and
-//! only the page and the scene's data. Files are written only where the page's user names
-//! them (*Save edit*, *Apply*), never over the input.
+//! any `Origin` must be this server's; a WebSocket upgrade must carry an `Origin` (a browser
+//! always sends one; without it nothing says which page asks); otherwise 403 and nothing else.
+//! Only GET is served, and only the page and the scene's data; the page is sent with
+//! `Referrer-Policy: no-referrer` (the token is in its address) and `frame-ancestors 'none'`
+//! (no other page may frame it). A WebSocket message or frame is at most [`MAX_MESSAGE`]
+//! bytes.
+//!
+//! Files: the token lives in the browser's history, so the server is no general file writer.
+//! *Save edit* and *Apply* write into one folder chosen when the editor starts ([`Outputs`]:
+//! the input's folder, or `--out-dir`), under a plain file name ([`check_name`]) with the
+//! extension of what is written (`.toml` for a spec; for *Apply* the formats `deform` writes
+//! for this input, checked before any work). A file there that this editor did not write is
+//! replaced only when the page says its user confirmed it (`"overwrite": true`; otherwise the
+//! answer is `exists` and the page asks); a symbolic link or anything but a regular file is
+//! never replaced, nor the input. Writes go to a temporary file renamed over the target, which
+//! keeps the replaced file's permission bits.
 //!
 //! The solver runs on its own thread and takes commands in order; of several pose updates
 //! waiting, only the newest is solved (a drag sends one per frame; the solver answers as fast
@@ -19,12 +32,18 @@
 //!
 //! ## Wire format
 //! Page → server: text JSON `{"type": "edit", "seq": n, "edit": Edit}`, `{"type": "release",
-//! "seq": n}`, `{"type": "save", "path": p, "edit": Edit}`, `{"type": "apply", "output": p,
-//! "edit": Edit}`. Server → page: binary messages, little-endian, starting with a `u32` kind —
-//! 1 motions `[1, seq, cells, iterations, seconds: f32, maps: 12·cells f32, strain: cells f32]`,
-//! 2 released `[2, seq, samples, folded, checked, positions: 3·samples f32]` — and text JSON
-//! for `saved`, `progress`, `applied`, `warning` and `error`.
+//! "seq": n}`, `{"type": "select", "seq": n, "selection": Selection}`, `{"type": "save",
+//! "name": f, "edit": Edit, "overwrite": false}`, `{"type": "apply", "name": f, "edit": Edit,
+//! "overwrite": false}`. Server → page: binary messages, little-endian, starting with a `u32`
+//! kind — 1 motions `[1, seq, cells, iterations, seconds: f32, maps: 12·cells f32, strain:
+//! cells f32]`, 2 released `[2, seq, samples, folded, checked, positions: 3·samples f32]`, 3
+//! selected `[3, seq, samples, count, bits: one per sample, bit i % 8 of byte i / 8]` (which
+//! proxy samples a selection holds, as the library selects them: [`Editor::selected`]) — and
+//! text JSON for `saved`, `exists` (`name`, `action`: the file is there and was not written by
+//! this editor; ask, and send again with `"overwrite": true`), `progress`, `applied`, `warning`
+//! and `error` (with `select: seq` when it answers a selection).
 
+use std::collections::HashSet;
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
@@ -34,12 +53,24 @@ use std::time::{Duration, Instant};
 
 use serde::Deserialize;
 use tungstenite::Message;
+use tungstenite::protocol::WebSocketConfig;
 
-use super::{Edit, Editor};
+use super::{Edit, Editor, Selection};
 use crate::error::{Error, Result};
 
 /// The page, with its script and styles, built into the binary.
 const PAGE: &str = include_str!("page.html");
+
+/// The largest WebSocket message (and frame) the server reads, in bytes: 1 MiB. The largest
+/// message is an edit (`edit`, `save`, `apply`), its selections' polygons most of it. The page
+/// keeps a lasso's vertices at least 3 pixels apart and at most 4,096, in normalized
+/// coordinates of 6 decimals: at most 22 bytes of JSON a vertex, 91 kB a lasso with its view
+/// (a lasso around a whole 4K screen at 3 pixels is 4,000 vertices; one around an object on it
+/// a few hundred). 1 MiB holds 11 such lassos and a handful of regions many times over (a box
+/// is 4 vertices, 0.5 kB with its view); the page refuses a selection that would make its
+/// messages larger. An edit at the cap raises the server's peak memory by about 55 MB (its
+/// spec's text, written and parsed as the CLI reads it), a fixed bound.
+pub const MAX_MESSAGE: usize = 1 << 20;
 
 /// The scene's data as served: computed once.
 struct Assets {
@@ -52,22 +83,155 @@ struct Assets {
     blend: Vec<u8>,
 }
 
-/// A command for the solver thread, with where to answer.
+/// What the page sends; the solver thread takes each with where to answer.
+#[derive(Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 enum Command {
-    Edit { seq: u32, edit: Edit },
-    Release { seq: u32 },
-    Save { path: PathBuf, edit: Edit },
-    Apply { output: PathBuf, edit: Edit },
+    Edit {
+        seq: u32,
+        edit: Edit,
+    },
+    Release {
+        seq: u32,
+    },
+    Select {
+        seq: u32,
+        selection: Selection,
+    },
+    Save {
+        name: String,
+        edit: Edit,
+        #[serde(default)]
+        overwrite: bool,
+    },
+    Apply {
+        name: String,
+        edit: Edit,
+        #[serde(default)]
+        overwrite: bool,
+    },
 }
 
-/// What the page sends.
-#[derive(Deserialize)]
-#[serde(tag = "type", rename_all = "lowercase")]
-enum Request {
-    Edit { seq: u32, edit: Edit },
-    Release { seq: u32 },
-    Save { path: String, edit: Edit },
-    Apply { output: String, edit: Edit },
+/// The one folder the editor writes into, and the names it wrote there.
+#[derive(Debug)]
+pub struct Outputs {
+    dir: PathBuf,
+    input: PathBuf,
+    written: Mutex<HashSet<String>>,
+}
+
+/// Why a file is not written.
+#[derive(Debug)]
+enum Refusal {
+    /// The file exists, this editor did not write it, and the page did not say its user
+    /// confirmed replacing it.
+    Exists(PathBuf),
+    /// Never written (a bad name, a link, the input…).
+    Error(Error),
+}
+
+impl From<Error> for Refusal {
+    fn from(e: Error) -> Self {
+        Self::Error(e)
+    }
+}
+
+impl Outputs {
+    /// Writes into `dir` (`None`: the folder of `input`), which must be a folder.
+    pub fn new(input: &Path, dir: Option<&Path>) -> Result<Self> {
+        let (dir, named) = match dir {
+            Some(d) => (d.to_path_buf(), true),
+            None => match input.parent() {
+                Some(p) if !p.as_os_str().is_empty() => (p.to_path_buf(), false),
+                _ => (PathBuf::from("."), false),
+            },
+        };
+        let shown = if named {
+            format!("--out-dir {}", dir.display())
+        } else {
+            dir.display().to_string()
+        };
+        let canonical = std::fs::canonicalize(&dir)
+            .map_err(|e| Error::Param(format!("{shown}: not a folder to write into: {e}")))?;
+        if !canonical.is_dir() {
+            return Err(Error::Param(format!("{shown}: not a folder to write into")));
+        }
+        Ok(Self {
+            dir: canonical,
+            input: input.to_path_buf(),
+            written: Mutex::new(HashSet::new()),
+        })
+    }
+
+    /// The folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Where `name` is written, when it may be: a plain name with one of the extensions
+    /// `extensions` ([`check_name`]), not the input, not a link or anything but a regular file,
+    /// and not a file this editor did not write unless `overwrite` (the user confirmed).
+    fn target(&self, name: &str, extensions: &[&str], overwrite: bool) -> Result<PathBuf, Refusal> {
+        check_name(name, extensions)?;
+        let path = self.dir.join(name);
+        crate::io::refuse_overwrite(&self.input, &path)?;
+        match std::fs::symlink_metadata(&path) {
+            Ok(m) if m.file_type().is_symlink() => Err(Error::Param(format!(
+                "{}: a symbolic link; the editor does not replace links, choose another name",
+                path.display()
+            ))
+            .into()),
+            Ok(m) if !m.is_file() => Err(Error::Param(format!(
+                "{}: not a regular file; choose another name",
+                path.display()
+            ))
+            .into()),
+            Ok(_) if !overwrite && !self.wrote(name) => Err(Refusal::Exists(path)),
+            Ok(_) => Ok(path),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(path),
+            Err(e) => Err(Error::write(&path, e).into()),
+        }
+    }
+
+    fn wrote(&self, name: &str) -> bool {
+        self.written.lock().expect("not poisoned").contains(name)
+    }
+
+    fn record(&self, name: &str) {
+        self.written
+            .lock()
+            .expect("not poisoned")
+            .insert(name.to_string());
+    }
+}
+
+/// Checks that `name` is a plain file name with one of `extensions` (lowercase, compared
+/// without case): not empty, at most 255 bytes, no `/` or `\\` (no folder), no leading `.`
+/// (no hidden file, no `.` or `..`; the editor's temporary files start with one), no control
+/// character.
+pub fn check_name(name: &str, extensions: &[&str]) -> Result<()> {
+    let bad = |why: &str| Err(Error::Param(format!("{name:?}: {why}")));
+    if name.is_empty() {
+        return Err(Error::Param("a file name is needed".into()));
+    }
+    if name.len() > 255 {
+        return bad("a file name of at most 255 bytes is needed");
+    }
+    if name.contains(['/', '\\']) {
+        return bad("a plain file name is needed, without a folder");
+    }
+    if name.starts_with('.') {
+        return bad("a name starting with '.' is not written");
+    }
+    if name.chars().any(char::is_control) {
+        return bad("a file name without control characters is needed");
+    }
+    let ext = crate::io::extension(Path::new(name));
+    if !ext.is_some_and(|e| extensions.contains(&e.as_str())) {
+        let list: Vec<String> = extensions.iter().map(|e| format!(".{e}")).collect();
+        return bad(&format!("the file must be {}", list.join(" or ")));
+    }
+    Ok(())
 }
 
 /// The editor's server, bound and ready.
@@ -77,27 +241,38 @@ pub struct Server {
     port: u16,
     assets: Arc<Assets>,
     commands: Sender<(Command, Sender<Message>)>,
+    out_dir: PathBuf,
 }
 
 impl Server {
-    /// Binds 127.0.0.1:`port` (0: any free port) and starts the solver thread over `editor`.
-    pub fn bind(editor: Editor, port: u16) -> Result<Self> {
+    /// Binds 127.0.0.1:`port` (0: any free port) and starts the solver thread over `editor`;
+    /// *Save edit* and *Apply* write into `out_dir` (`None`: the input's folder), which must be
+    /// a folder.
+    pub fn bind(editor: Editor, port: u16, out_dir: Option<&Path>) -> Result<Self> {
+        let outputs = Arc::new(Outputs::new(&editor.scene().input, out_dir)?);
         let listener = TcpListener::bind(("127.0.0.1", port))
             .map_err(|e| Error::Param(format!("--port {port}: cannot listen on it: {e}")))?;
         let port = listener
             .local_addr()
             .map_err(|e| Error::Solver(format!("the listener's address: {e}")))?
             .port();
-        let assets = Arc::new(assets(&editor)?);
+        let assets = Arc::new(assets(&editor, &outputs)?);
         let (commands, queue) = mpsc::channel();
-        std::thread::spawn(move || solver(editor, queue));
+        let out_dir = outputs.dir().to_path_buf();
+        std::thread::spawn(move || solver(editor, outputs, queue));
         Ok(Self {
             listener,
             token: token()?,
             port,
             assets,
             commands,
+            out_dir,
         })
+    }
+
+    /// The folder *Save edit* and *Apply* write into.
+    pub fn out_dir(&self) -> &Path {
+        &self.out_dir
     }
 
     /// The port it listens on.
@@ -150,7 +325,7 @@ fn u32_bytes(v: &[u32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
-fn assets(editor: &Editor) -> Result<Assets> {
+fn assets(editor: &Editor, outputs: &Outputs) -> Result<Assets> {
     let scene = editor.scene();
     let (lo, hi) = scene.bounds;
     let c = scene.center;
@@ -175,6 +350,9 @@ fn assets(editor: &Editor) -> Result<Assets> {
         "cells": editor.complex().len(),
         "up": scene.up,
         "transfer": format!("{:?}", editor.params().transfer),
+        "out_dir": outputs.dir().display().to_string(),
+        "outputs": crate::io::output_extensions(&scene.input),
+        "max_message": MAX_MESSAGE,
     })
     .to_string();
     let (cells, weights) = editor.blend()?;
@@ -271,7 +449,12 @@ fn connection(
     let upgrade = request.headers.iter().any(|h| {
         h.name.eq_ignore_ascii_case("upgrade") && h.value.eq_ignore_ascii_case(b"websocket")
     });
-    if admitted && upgrade && path == "/ws" && request.method == Some("GET") {
+    // A browser sends an Origin with every WebSocket; one without says nothing of its page.
+    let origin = request
+        .headers
+        .iter()
+        .any(|h| h.name.eq_ignore_ascii_case("origin"));
+    if admitted && origin && upgrade && path == "/ws" && request.method == Some("GET") {
         return websocket(stream, commands);
     }
     // Consume the request before answering it (unread bytes would reset the connection).
@@ -280,7 +463,7 @@ fn connection(
     if request.method != Some("GET") {
         return respond(&mut stream, 405, "text/plain", b"only GET");
     }
-    if !admitted {
+    if !admitted || upgrade {
         return respond(
             &mut stream,
             403,
@@ -315,7 +498,8 @@ fn respond(stream: &mut TcpStream, status: u16, kind: &str, body: &[u8]) -> std:
         stream,
         "HTTP/1.1 {status} {reason}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\n\
          Cache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\n\
-         Content-Security-Policy: default-src 'self' 'unsafe-inline'; connect-src 'self' ws://127.0.0.1:* ws://localhost:*\r\n\
+         Referrer-Policy: no-referrer\r\n\
+         Content-Security-Policy: default-src 'self' 'unsafe-inline'; connect-src 'self' ws://127.0.0.1:* ws://localhost:*; frame-ancestors 'none'\r\n\
          Connection: close\r\n\r\n",
         body.len()
     )?;
@@ -328,7 +512,10 @@ fn websocket(
     stream: TcpStream,
     commands: &Sender<(Command, Sender<Message>)>,
 ) -> std::io::Result<()> {
-    let mut ws = match tungstenite::accept(stream) {
+    let config = WebSocketConfig::default()
+        .max_message_size(Some(MAX_MESSAGE))
+        .max_frame_size(Some(MAX_MESSAGE));
+    let mut ws = match tungstenite::accept_with_config(stream, Some(config)) {
         Ok(ws) => ws,
         Err(_) => return Ok(()),
     };
@@ -338,8 +525,8 @@ fn websocket(
     loop {
         match ws.read() {
             Ok(Message::Text(text)) => {
-                let command = match serde_json::from_str::<Request>(text.as_str()) {
-                    Ok(r) => command(r),
+                let command = match serde_json::from_str::<Command>(text.as_str()) {
+                    Ok(c) => c,
                     Err(e) => {
                         let _ = ws.send(error(&format!("bad request: {e}")));
                         continue;
@@ -366,21 +553,6 @@ fn websocket(
     }
 }
 
-fn command(r: Request) -> Command {
-    match r {
-        Request::Edit { seq, edit } => Command::Edit { seq, edit },
-        Request::Release { seq } => Command::Release { seq },
-        Request::Save { path, edit } => Command::Save {
-            path: PathBuf::from(path),
-            edit,
-        },
-        Request::Apply { output, edit } => Command::Apply {
-            output: PathBuf::from(output),
-            edit,
-        },
-    }
-}
-
 fn error(text: &str) -> Message {
     Message::text(serde_json::json!({"type": "error", "message": text}).to_string())
 }
@@ -390,7 +562,7 @@ fn text(value: serde_json::Value) -> Message {
 }
 
 /// The solver thread: commands in order; of consecutive edits only the newest is solved.
-fn solver(mut editor: Editor, queue: Receiver<(Command, Sender<Message>)>) {
+fn solver(mut editor: Editor, outputs: Arc<Outputs>, queue: Receiver<(Command, Sender<Message>)>) {
     let editor_input = editor.scene().input.clone();
     let params = *editor.params();
     let applying = Arc::new(Mutex::new(false));
@@ -446,18 +618,38 @@ fn solver(mut editor: Editor, queue: Receiver<(Command, Sender<Message>)>) {
                     Ok(r) => released_message(seq, r),
                     Err(e) => vec![error(&e.to_string())],
                 },
-                Command::Save { path, edit } => vec![save(&editor, &path, &edit)],
-                Command::Apply { output, edit } => {
-                    let text = editor.spec_text(&edit);
-                    apply(
-                        editor_input.clone(),
-                        output,
-                        text,
-                        params,
-                        reply.clone(),
-                        applying.clone(),
-                    );
-                    Vec::new()
+                Command::Select { seq, selection } => match editor.selected(&selection) {
+                    Ok(mask) => vec![selected_message(seq, &mask)],
+                    Err(e) => vec![text(serde_json::json!({
+                        "type": "error", "message": e.to_string(), "select": seq
+                    }))],
+                },
+                Command::Save {
+                    name,
+                    edit,
+                    overwrite,
+                } => vec![save(&editor, &outputs, &name, &edit, overwrite)],
+                Command::Apply {
+                    name,
+                    edit,
+                    overwrite,
+                } => {
+                    let extensions = crate::io::output_extensions(&editor_input);
+                    match outputs.target(&name, extensions, overwrite) {
+                        Ok(output) => {
+                            let text = editor.spec_text(&edit);
+                            apply(
+                                editor_input.clone(),
+                                (output, name),
+                                text,
+                                params,
+                                (reply.clone(), outputs.clone()),
+                                applying.clone(),
+                            );
+                            Vec::new()
+                        }
+                        Err(r) => vec![refused(r, &name, "apply")],
+                    }
                 }
             };
             for m in answer {
@@ -485,6 +677,30 @@ fn motions_message(seq: u32, m: Option<super::Motions>) -> Vec<Message> {
     out
 }
 
+/// Which samples a selection holds, one bit each.
+fn selected_message(seq: u32, mask: &[bool]) -> Message {
+    let count = mask.iter().filter(|&&m| m).count() as u32;
+    let mut bytes = u32_bytes(&[3, seq, mask.len() as u32, count]);
+    bytes.extend(mask.chunks(8).map(|bits| {
+        bits.iter()
+            .enumerate()
+            .fold(0u8, |byte, (i, &b)| byte | (u8::from(b) << i))
+    }));
+    Message::binary(bytes)
+}
+
+/// The answer to a save or apply that was not done: `exists` (the page asks its user) or an
+/// error.
+fn refused(r: Refusal, name: &str, action: &str) -> Message {
+    match r {
+        Refusal::Exists(path) => text(serde_json::json!({
+            "type": "exists", "name": name, "action": action,
+            "path": path.display().to_string(),
+        })),
+        Refusal::Error(e) => error(&e.to_string()),
+    }
+}
+
 fn released_message(seq: u32, r: super::Released) -> Vec<Message> {
     let n = (r.positions.len() / 3) as u32;
     let mut bytes = u32_bytes(&[2, seq, n, r.foldovers.1 as u32, r.foldovers.0 as u32]);
@@ -496,13 +712,21 @@ fn released_message(seq: u32, r: super::Released) -> Vec<Message> {
     out
 }
 
-/// *Save edit*: the spec of `edit` to `path` (atomically; never over the input).
-fn save(editor: &Editor, path: &Path, edit: &Edit) -> Message {
-    let result = crate::io::refuse_overwrite(&editor.scene().input, path)
-        .and_then(|_| crate::io::write_atomic(path, editor.spec_text(edit).as_bytes()));
+/// *Save edit*: the spec of `edit` as `name` in the editor's folder ([`Outputs::target`];
+/// atomically).
+fn save(editor: &Editor, outputs: &Outputs, name: &str, edit: &Edit, overwrite: bool) -> Message {
+    let result = outputs.target(name, &["toml"], overwrite).and_then(|path| {
+        crate::io::write_atomic(&path, editor.spec_text(edit).as_bytes())?;
+        Ok(path)
+    });
     match result {
-        Ok(()) => text(serde_json::json!({"type": "saved", "path": path.display().to_string()})),
-        Err(e) => error(&e.to_string()),
+        Ok(path) => {
+            outputs.record(name);
+            text(serde_json::json!({
+                "type": "saved", "name": name, "path": path.display().to_string()
+            }))
+        }
+        Err(r) => refused(r, name, "save"),
     }
 }
 
@@ -556,13 +780,14 @@ impl Progress {
     }
 }
 
-/// *Apply*: `deform` of the whole input under the spec `text`, on a thread of its own.
+/// *Apply*: `deform` of the whole input under the spec `text` into `output` (named `name` in
+/// the editor's folder, checked), on a thread of its own.
 fn apply(
     input: PathBuf,
-    output: PathBuf,
+    (output, name): (PathBuf, String),
     spec_text: String,
     params: crate::pipeline::DeformParams,
-    reply: Sender<Message>,
+    (reply, outputs): (Sender<Message>, Arc<Outputs>),
     applying: Arc<Mutex<bool>>,
 ) {
     {
@@ -597,13 +822,16 @@ fn apply(
             )
         });
         let message = match result {
-            Ok((_, info)) => text(serde_json::json!({
+            Ok((_, info)) => {
+                outputs.record(&name);
+                text(serde_json::json!({
                 "type": "applied",
                 "output": output.display().to_string(),
                 "samples": info.samples,
                 "seconds": start.elapsed().as_secs_f64(),
                 "warnings": info.deform.warnings,
-            })),
+                }))
+            }
             Err(e) => error(&e.to_string()),
         };
         let _ = reply.send(message);

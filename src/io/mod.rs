@@ -56,6 +56,18 @@ pub(crate) fn require_extension(path: &Path, want: &str) -> Result<()> {
     Ok(())
 }
 
+/// The extensions of the outputs `deform` writes for `input` (as its sinks take them): LAS and
+/// LAZ into each other, PLY, OBJ and XYZ (`.txt` too) into their own; none for other formats.
+pub fn output_extensions(input: &Path) -> &'static [&'static str] {
+    match extension(input).as_deref() {
+        Some("las") | Some("laz") => &["las", "laz"],
+        Some("ply") => &["ply"],
+        Some("obj") => &["obj"],
+        Some("xyz") | Some("txt") => &["xyz", "txt"],
+        _ => &[],
+    }
+}
+
 /// A [`Document`] held in memory, served as a [`Source`].
 pub struct DocumentSource {
     path: PathBuf,

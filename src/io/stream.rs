@@ -136,7 +136,8 @@ pub trait Sink: Send {
 }
 
 /// A temporary file beside a target, renamed over it by [`TempFile::commit`] and removed when
-/// dropped uncommitted.
+/// dropped uncommitted. A target that is a regular file keeps its permission bits: the
+/// temporary file takes them before the rename (a private file stays private).
 #[derive(Debug)]
 pub struct TempFile {
     tmp: PathBuf,
@@ -188,11 +189,20 @@ impl TempFile {
         self.commit()
     }
 
-    /// Syncs the temporary file and renames it over the target.
+    /// Syncs the temporary file and renames it over the target, with the target's permission
+    /// bits when it is a regular file already.
     pub fn commit(mut self) -> Result<()> {
         let sync = File::open(&self.tmp).and_then(|f| f.sync_all());
-        sync.and_then(|_| std::fs::rename(&self.tmp, &self.target))
-            .map_err(|e| Error::write(&self.target, e))?;
+        let mode = match std::fs::symlink_metadata(&self.target) {
+            Ok(m) if m.is_file() => Some(m.permissions()),
+            _ => None,
+        };
+        sync.and_then(|_| match mode {
+            Some(p) => std::fs::set_permissions(&self.tmp, p),
+            None => Ok(()),
+        })
+        .and_then(|_| std::fs::rename(&self.tmp, &self.target))
+        .map_err(|e| Error::write(&self.target, e))?;
         self.committed = true;
         crate::interrupt::forget(&self.tmp);
         crate::interrupt::committed(&self.target);

@@ -4,6 +4,8 @@
 //! A cell gets a region's constraint when it holds a sample the region selects or, for the
 //! geometric regions (box, sphere, half-space), when its center lies in the region — so that a
 //! box around the end of a solid fixes the interior cells there too, not only the surface layer.
+//! A screen selection of the visible samples (`visible = true`) is a selection of samples: a
+//! cell gets it when it holds a selected sample and the camera sees it ([`Sight`]).
 //!
 //! - `fixed` and `handle` cells are prescribed (0 DoF); a cell claimed by two different hard
 //!   constraints is an error that names both and the cell.
@@ -20,12 +22,14 @@
 //!
 //! Everything here is in the local frame of the complex.
 
-use rustc_hash::FxHashSet as HashSet;
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 
 use crate::cells::{CellComplex, CellKey, Grid};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Rigid, Vect};
 use crate::spec::{EditSpec, HandleMotion, Region};
+
+use super::Sight;
 
 /// What constrains a cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -313,6 +317,9 @@ struct RegionSamples<const D: usize> {
     cells: HashSet<[i64; D]>,
     sum: Vect<D>,
     count: u64,
+    /// For a region of the visible samples ([`Region::visible_from`]): the sum and count per
+    /// finest grid cell, so that those of the cells the camera does not see can be left out.
+    per_cell: Option<HashMap<[i64; D], (Vect<D>, u64)>>,
 }
 
 impl<const D: usize> Selections<D> {
@@ -328,10 +335,11 @@ impl<const D: usize> Selections<D> {
         Ok(Self {
             regions: regions
                 .iter()
-                .map(|_| RegionSamples {
+                .map(|r| RegionSamples {
                     cells: HashSet::default(),
                     sum: Vect::<D>::zeros(),
                     count: 0,
+                    per_cell: r.visible_from().map(|_| HashMap::default()),
                 })
                 .collect(),
             snaps: Snaps::new(spec),
@@ -356,7 +364,13 @@ impl<const D: usize> Selections<D> {
                 if region.selects(first + i as u64, p, classes.map(|c| c[i])) {
                     acc.sum += p;
                     acc.count += 1;
-                    if let Some(k) = grid.locate(&(p - grid.origin), grid.max_level)
+                    let key = grid.locate(&(p - grid.origin), grid.max_level);
+                    if let (Some(k), Some(per_cell)) = (key, acc.per_cell.as_mut()) {
+                        let e = per_cell.entry(k.coord).or_insert((Vect::<D>::zeros(), 0));
+                        e.0 += p;
+                        e.1 += 1;
+                    }
+                    if let Some(k) = key
                         && last != Some(k.coord)
                     {
                         acc.cells.insert(k.coord);
@@ -366,6 +380,53 @@ impl<const D: usize> Selections<D> {
             }
         }
     }
+}
+
+/// The cell of the complex holding the finest grid cell `coord`.
+fn finest_cell<const D: usize>(complex: &CellComplex<D>, coord: &[i64; D]) -> Option<usize> {
+    let key = CellKey {
+        level: complex.grid.max_level,
+        coord: *coord,
+    };
+    complex.locate(&complex.grid.center(&key))
+}
+
+/// The cell of the complex that takes the constraints of a sample at `x` (input coordinates):
+/// the one holding its finest grid cell, as [`resolve_selected`] maps selected samples.
+pub fn sample_cell<const D: usize>(complex: &CellComplex<D>, x: &Vect<D>) -> Option<usize> {
+    let grid = &complex.grid;
+    let key = grid.locate(&(x - grid.origin), grid.max_level)?;
+    finest_cell(complex, &key.coord)
+}
+
+/// Per cell of `complex`, whether it holds one of the finest grid cells `coords` and the camera
+/// `view` sees it ([`Sight`]).
+fn seen_cells<'a, const D: usize>(
+    complex: &CellComplex<D>,
+    view: &[[f64; 4]; 4],
+    coords: impl Iterator<Item = &'a [i64; D]>,
+) -> Vec<bool> {
+    let mut cells: Vec<usize> = coords.filter_map(|k| finest_cell(complex, k)).collect();
+    cells.sort_unstable();
+    cells.dedup();
+    seen(complex, view, &cells)
+}
+
+/// Per cell of `complex`, whether the camera `view` sees it, for the `cells` given (the others
+/// are false): [`Sight`] over several cells at once.
+pub fn seen<const D: usize>(
+    complex: &CellComplex<D>,
+    view: &[[f64; 4]; 4],
+    cells: &[usize],
+) -> Vec<bool> {
+    use rayon::prelude::*;
+    let sight = Sight::new(complex, view);
+    let mut out = vec![false; complex.len()];
+    let seen: Vec<bool> = cells.par_iter().map(|&c| sight.sees(c)).collect();
+    for (&c, s) in cells.iter().zip(seen) {
+        out[c] = s;
+    }
+    out
 }
 
 /// The sample-selecting regions of `spec`, in the order of [`Selections`].
@@ -408,16 +469,27 @@ where
     let mut stiffness = vec![1.0f64; n];
     let mut warnings = Vec::new();
 
-    // Cells selected by a region: through samples, or by center for geometric regions.
+    // Cells selected by a region: through samples, or by center for geometric regions; of
+    // the visible samples, those in the cells the camera sees.
     let select = |k: usize, region: &Region<D>| -> (Vec<bool>, Vect<D>, u64) {
         let acc = &selections.regions[k];
         let mut hit = vec![false; n];
+        if let (Some(view), Some(per_cell)) = (region.visible_from(), &acc.per_cell) {
+            let seen = seen_cells(complex, view, per_cell.keys());
+            let (mut sum, mut count) = (Vect::<D>::zeros(), 0);
+            for (coord, (s, m)) in per_cell {
+                if let Some(c) = finest_cell(complex, coord)
+                    && seen[c]
+                {
+                    hit[c] = true;
+                    sum += s;
+                    count += m;
+                }
+            }
+            return (hit, sum, count);
+        }
         for coord in &acc.cells {
-            let key = CellKey {
-                level: complex.grid.max_level,
-                coord: *coord,
-            };
-            if let Some(c) = complex.locate(&complex.grid.center(&key)) {
+            if let Some(c) = finest_cell(complex, coord) {
                 hit[c] = true;
             }
         }

@@ -64,6 +64,7 @@ pub mod constraints;
 pub mod energy;
 mod multilevel;
 mod positions;
+mod sight;
 mod system;
 pub mod turns;
 
@@ -71,8 +72,10 @@ use std::time::Instant;
 
 pub use constraints::{
     Constraints, Role, Selections, carry_loose, coarsen, inherit, resolve, resolve_selected,
+    sample_cell, seen,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
+pub use sight::Sight;
 
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};

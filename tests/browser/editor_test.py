@@ -5,6 +5,9 @@ Loads the page on the demo bar, selects the ends with box drags, drags the handl
 pointer events, and checks by screenshot that the handle moved on screen; then saves the edit,
 deforms the bar with the CLI under the saved spec and checks that it gives the shape the page
 showed. Also measures the page while dragging (frame times, solver updates, round trips).
+Then: a box over the bar seen end-on takes only its near end (the visible surface, the page's
+default, said in the toolbar) and with X-ray on the whole bar; saving over a file the editor
+did not write asks first (declined: the file is kept; accepted: replaced, its mode kept).
 
 Standard library only (WebDriver is JSON over HTTP; the screenshots are PNGs decoded here).
 
@@ -22,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import urllib.error
 import urllib.request
 import zlib
 
@@ -102,6 +106,16 @@ class Driver:
         self.s("POST", "/actions", {"actions": [
             {"type": "pointer", "id": "mouse", "parameters": {"pointerType": "mouse"}, "actions": actions}]})
         self.s("DELETE", "/actions")
+
+    def alert_text(self, timeout=30):
+        """The text of the open alert or confirm dialog, waiting for one."""
+        end = time.time() + timeout
+        while time.time() < end:
+            try:
+                return self.s("GET", "/alert/text")
+            except urllib.error.HTTPError:
+                time.sleep(0.05)
+        raise AssertionError("no dialog opened")
 
     def screenshot(self):
         return base64.b64decode(self.s("GET", "/screenshot"))
@@ -302,11 +316,13 @@ def main():
         assert lo_after < lo_before - 40, f"the handle's top went from row {lo_before} to {lo_after}"
         assert top_of_shape(before, *left, 60, 780) == top_of_shape(after, *left, 60, 780)
 
-        # Saved, and the CLI deforms the bar to what the page showed.
+        # Saved (a plain name, into the bar's folder), and the CLI deforms the bar to what the
+        # page showed: the selections are of the visible surface, as the page's default.
         spec = os.path.join(work, "bar.edit.toml")
-        driver.type_into("spec-path", spec)
+        driver.type_into("spec-path", "bar.edit.toml")
         driver.click("save")
         driver.wait("return rc.messages.some((m) => m.type === 'saved')")
+        assert open(spec).read().count("visible = true") == 2, open(spec).read()
         shown = driver.js("return Array.from(rc.final)")
         out = os.path.join(work, "bent.ply")
         subprocess.run([binary, "deform", bar, "-o", out, "--edit", spec, "--cell-size", "0.5", "-q"],
@@ -324,6 +340,50 @@ def main():
 
         figures["cli_vs_page_max"] = worst
         figures["handle_top_rows"] = [lo_before, lo_after]
+
+        # Visible by default, x-ray on demand: the bar end-on from +x, a box over all of it.
+        assert driver.js("return rc.xray()") is False
+        assert "visible" in driver.js("return document.getElementById('select-mode').textContent")
+        n = driver.js("return rc.state().N")
+        driver.click("clear")
+        driver.js("document.getElementById('role').value = 'fixed'")
+        driver.js("rc.look(0, 0)")
+        time.sleep(0.3)
+        driver.click("m-box")
+
+        def box_count():
+            (x0, y0), (x1, y1) = box_around([-5.3, -0.8, -0.8], [5.3, 0.8, 0.8])
+            driver.drag([(x0 - 5, y0 - 5), (x1 + 5, y0), (x1 + 5, y1 + 5)])
+            driver.wait("return rc.state().edit.fixed.length === 1")
+            return driver.wait("const c = rc.selectedCounts(); return c && c.fixed > 0 && c")["fixed"]
+
+        visible = box_count()
+        assert driver.js("return rc.state().edit.fixed[0].visible") is True
+        assert visible < n / 4, f"the visible near end is {visible} of {n} samples"
+        driver.click("clear")
+        driver.click("xray")
+        assert "x-ray" in driver.js("return document.getElementById('select-mode').textContent")
+        through = box_count()
+        assert driver.js("return rc.state().edit.fixed[0].visible") is None
+        assert through == n, f"x-ray took {through} of {n} samples"
+        figures["end_on_box_visible_xray"] = [visible, through]
+
+        # Saving over a file this editor did not write asks first.
+        mine = os.path.join(work, "mine.toml")
+        open(mine, "w").write("mine")
+        os.chmod(mine, 0o600)
+        driver.type_into("spec-path", "mine.toml")
+        driver.click("save")
+        assert "mine.toml" in driver.alert_text()
+        driver.s("POST", "/alert/dismiss", {})
+        driver.wait("return document.getElementById('status').textContent.startsWith('not replaced')")
+        assert open(mine).read() == "mine"
+        driver.click("save")
+        driver.alert_text()
+        driver.s("POST", "/alert/accept", {})
+        driver.wait("return rc.messages.some((m) => m.type === 'saved' && m.name === 'mine.toml')")
+        assert open(mine).read().startswith("# rigidcells edit")
+        assert os.stat(mine).st_mode & 0o777 == 0o600, oct(os.stat(mine).st_mode)
         print(json.dumps(figures))
         if args.figures:
             json.dump(figures, open(args.figures, "w"), indent=1)

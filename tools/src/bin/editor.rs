@@ -30,7 +30,7 @@ fn ends(scene: &Scene, lift: f64) -> Edit {
     let strip = |a: f64, b: f64| Selection {
         polygon: Some(vec![[a, -1.1], [b, -1.1], [b, 1.1], [a, 1.1]]),
         view: Some(view),
-        classification: None,
+        ..Default::default()
     };
     Edit {
         fixed: vec![strip(-1.1, -0.8)],
@@ -69,7 +69,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cells_s = t2.elapsed().as_secs_f64();
     let n_cells = editor.complex().len();
     let t3 = Instant::now();
-    let server = Server::bind(editor, 0)?;
+    let server = Server::bind(editor, 0, None)?;
     let serve_s = t3.elapsed().as_secs_f64();
     println!(
         "{}: {total} samples, proxy {samples}, {n_cells} cells; ready in {:.2} s \
@@ -121,7 +121,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::thread::spawn(move || server.run());
     let stream = TcpStream::connect(("127.0.0.1", port))?;
     stream.set_read_timeout(Some(Duration::from_secs(120)))?;
-    let (mut ws, _) = tungstenite::client(format!("ws://127.0.0.1:{port}/ws?t={token}"), stream)?;
+    // The server takes a WebSocket only with an Origin, as a browser sends it.
+    let mut request = tungstenite::client::IntoClientRequest::into_client_request(format!(
+        "ws://127.0.0.1:{port}/ws?t={token}"
+    ))?;
+    request.headers_mut().insert(
+        "Origin",
+        format!("http://127.0.0.1:{port}")
+            .parse()
+            .expect("a header value"),
+    );
+    let (mut ws, _) = tungstenite::client(request, stream)?;
     let mut trips = Vec::new();
     for k in 0..=updates {
         let edit = ends(&scene, 0.005 * extent * k as f64);
