@@ -97,11 +97,33 @@ pub(crate) fn committed(path: &Path) {
     }
 }
 
-/// Notes the temporary file `path`, to be removed if the run is interrupted.
-pub(crate) fn register(path: &Path) {
-    if let Ok(mut t) = TEMPORARIES.lock() {
-        t.push(path.to_path_buf());
+/// Creates the temporary file `path` with `create` and notes it, to be removed if the run is
+/// interrupted: under the registry's lock, so that no interrupt comes between the two.
+pub(crate) fn create_registered<T>(
+    path: &Path,
+    create: impl FnOnce() -> std::io::Result<T>,
+) -> std::io::Result<T> {
+    let mut t = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+    let made = create()?;
+    t.push(path.to_path_buf());
+    Ok(made)
+}
+
+/// Renames the temporary `tmp` over `target` with `rename` and notes `target` as a member of
+/// the open result set, under the registry's lock: an interrupt removes either the temporary
+/// or the output in place, never neither. On an error `tmp` stays noted.
+pub(crate) fn commit_registered(
+    tmp: &Path,
+    target: &Path,
+    rename: impl FnOnce() -> std::io::Result<()>,
+) -> std::io::Result<()> {
+    let mut t = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+    rename()?;
+    if let Some(i) = t.iter().position(|p| p == tmp) {
+        t.swap_remove(i);
     }
+    committed(target);
+    Ok(())
 }
 
 /// Forgets the temporary file `path` (committed or removed).

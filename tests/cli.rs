@@ -188,7 +188,8 @@ fn refuses_to_overwrite_the_input_and_reports_spec_lines() {
     let out = dir.path().join("o.ply");
     let r = deform(&input, &out, &edit, &[]);
     assert_eq!(r.code, 4);
-    assert!(r.stderr.contains("line 4"), "{}", r.stderr);
+    // The line of the bad value, not of its entry.
+    assert!(r.stderr.contains("line 5"), "{}", r.stderr);
 
     // Fixed and handle regions sharing a cell.
     std::fs::write(&edit, "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n[[handle]]\nbox = { min = [0.9, 0.0, 0.0], max = [2.0, 1.0, 1.0] }\ntranslate = [0.0, 0.0, 1.0]\n").unwrap();

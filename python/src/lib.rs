@@ -156,6 +156,15 @@ fn info_dict<'py>(
     d.set_item("converged", info.solver.converged)?;
     d.set_item("foldovers", (info.foldovers.1, info.foldovers.0))?;
     d.set_item("warnings", PyList::new(py, &info.warnings)?)?;
+    let turns = PyList::empty(py);
+    for t in &info.solver.turns {
+        let c = PyDict::new(py);
+        c.set_item("line", t.line)?;
+        c.set_item("turn_asked_degrees", t.asked_degrees)?;
+        c.set_item("turn_taken_degrees", t.taken_degrees)?;
+        turns.append(c)?;
+    }
+    d.set_item("handle_turns", turns)?;
     let points = PyList::empty(py);
     for p in &info.control_points {
         let c = PyDict::new(py);

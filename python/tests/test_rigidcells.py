@@ -239,3 +239,25 @@ def test_triangles_are_whole_indices_never_truncated():
         rigidcells.deform(pts, BEND, triangles=np.array([[0, 1, 2**64 - 1]], dtype=np.uint64))
     with pytest.raises(TypeError):
         rigidcells.deform(pts, BEND, cells=100.5)
+
+
+def test_info_gives_each_turn_and_a_short_part_refuses_a_whole_turn():
+    twist = (
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n"
+        "[[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n"
+        "rotate = { axis = [1.0, 0.0, 0.0], degrees = 360.0 }\npivot = [9.75, 0.5, 0.5]\n"
+    )
+    _, info = rigidcells.deform(bar_points(), twist, cell_size=0.25)
+    (turn,) = info["handle_turns"]
+    assert turn["line"] == 3 and turn["turn_asked_degrees"] == 360.0
+    assert abs(turn["turn_taken_degrees"] - 360.0) < 36.0, turn
+    # A cube as long as it is wide cannot carry a whole turn: refused, not untwisted.
+    g = np.linspace(0.0, 1.0, 11)
+    cube = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    short = (
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [2, 2, 0.1] }\n"
+        "[[handle]]\nbox = { min = [-1, -1, 0.9], max = [2, 2, 2] }\n"
+        "rotate = { axis = [0.0, 0.0, 1.0], degrees = 360.0 }\n"
+    )
+    with pytest.raises(ValueError, match="gives way past"):
+        rigidcells.deform(np.ascontiguousarray(cube), short, cell_size=0.1)

@@ -160,8 +160,8 @@ impl TempFile {
             name.to_string_lossy(),
             std::process::id()
         ));
-        let file = File::create(&tmp).map_err(|e| Error::write(target, e))?;
-        crate::interrupt::register(&tmp);
+        let file = crate::interrupt::create_registered(&tmp, || File::create(&tmp))
+            .map_err(|e| Error::write(target, e))?;
         Ok((
             Self {
                 tmp,
@@ -201,11 +201,13 @@ impl TempFile {
             Some(p) => std::fs::set_permissions(&self.tmp, p),
             None => Ok(()),
         })
-        .and_then(|_| std::fs::rename(&self.tmp, &self.target))
+        .and_then(|_| {
+            crate::interrupt::commit_registered(&self.tmp, &self.target, || {
+                std::fs::rename(&self.tmp, &self.target)
+            })
+        })
         .map_err(|e| Error::write(&self.target, e))?;
         self.committed = true;
-        crate::interrupt::forget(&self.tmp);
-        crate::interrupt::committed(&self.target);
         Ok(())
     }
 }

@@ -515,11 +515,22 @@ fn predict<const D: usize>(
 {
     for (c, role) in constraints.roles.iter().enumerate() {
         if matches!(role, Role::Free | Role::Pin(_)) {
-            let m = &mut motions[c];
+            let m = motions[c];
             let (axis, angle) =
                 <Dim<D> as Rigid<D>>::axis_angle_of(&(m.rot * before[c].rot.transpose()));
-            m.rot = <Dim<D> as Rigid<D>>::axis_angle(&axis, alpha * angle) * m.rot;
-            m.pos += (m.pos - before[c].pos) * alpha;
+            let next = Motion {
+                rot: <Dim<D> as Rigid<D>>::axis_angle(&axis, alpha * angle) * m.rot,
+                pos: m.pos + (m.pos - before[c].pos) * alpha,
+            };
+            // A rotation whose axis rounding loses (a half turn) keeps the cell where it is.
+            if next
+                .rot
+                .iter()
+                .chain(next.pos.iter())
+                .all(|v| v.is_finite())
+            {
+                motions[c] = next;
+            }
         }
     }
 }

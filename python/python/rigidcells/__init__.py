@@ -332,6 +332,12 @@ def deform(
     ``"blend-idw"``. ``cell_size`` or ``cells`` size the cells as ``--cell-size``/``--cells``
     do. ``normals`` ((n, 3), one per point): turned as the map turns the surface, returned
     as ``info["normals"]``.
+
+    ``info["handle_turns"]``: per turning handle, its ``line`` in the spec, the turn asked and
+    the turn the cells carry from the fixed cells to it (``turn_asked_degrees``,
+    ``turn_taken_degrees``); ``info["warnings"]`` says when they differ by more than a tenth.
+    A turn the shape cannot carry (a whole turn of a part as short as it is wide) is a
+    ``ValueError`` rather than a part untwisted the short way round.
     """
     p = _Points(points, scale, offset)
     text, base = _spec(spec)
