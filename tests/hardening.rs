@@ -864,3 +864,99 @@ fn a_laz_with_a_damaged_chunk_table_is_a_format_error() {
         assert!(!out.exists());
     }
 }
+
+/// A constraint sent far past the shape's size is refused at once, naming it (it would tear
+/// the shape apart over a thousand load steps); a shape moved far as a whole is not torn, and
+/// takes one step.
+#[test]
+fn motions_far_past_the_shapes_size_are_refused_unless_the_shape_moves_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out, edit) = common::lifted_bar(dir.path(), 4.0);
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0, 0, 4294967295]\n",
+    )
+    .unwrap();
+    let started = std::time::Instant::now();
+    let r = deform(&input, &out, &edit, &["--cell-size", "0.5"]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("the handle on line 3") && r.stderr.contains("times the shape's size"),
+        "{}",
+        r.stderr
+    );
+    assert!(
+        started.elapsed().as_secs() < 5,
+        "refused after {:?}",
+        started.elapsed()
+    );
+    assert!(!out.exists());
+    std::fs::write(
+        &edit,
+        "[[handle]]\nbox = { min = [-1, -1, -1], max = [11, 2, 2] }\n\
+         translate = [1000000, 0, 0]\n",
+    )
+    .unwrap();
+    let report = dir.path().join("r.json");
+    let r = deform(
+        &input,
+        &out,
+        &edit,
+        &["--cell-size", "0.5", "--report", arg(&report)],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(json["load_steps"], 1, "{json}");
+}
+
+/// The work follows the occupied cells, whatever the extent: four samples 21 × 42 km apart at
+/// 0.3 m cells, and 270 spread over 536 km at 0.5 m, deform in moments (the coarsest level of
+/// the grid is not enumerated whole: 2.45e9 cells for the four).
+#[test]
+fn a_few_samples_over_a_huge_extent_cost_what_they_occupy() {
+    let dir = tempfile::tempdir().unwrap();
+    let four = dir.path().join("four.xyz");
+    std::fs::write(&four, "0 0 0\n21000 0 0\n0 42000 0\n21000 42000 0\n").unwrap();
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [1, 42001, 1] }\n\
+         [[handle]]\nbox = { min = [20999, -1, -1], max = [21001, 42001, 1] }\n\
+         translate = [0, 0, 10]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.xyz");
+    let started = std::time::Instant::now();
+    let r = deform(&four, &out, &edit, &["--cell-size", "0.3"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let spread = dir.path().join("spread.xyz");
+    let text: String = (0..270)
+        .map(|k| {
+            let t = k as f64 / 269.0;
+            format!(
+                "{} {} {}\n",
+                536_000.0 * t,
+                536_000.0 * (t * 7.0).fract(),
+                50.0 * t
+            )
+        })
+        .collect();
+    std::fs::write(&spread, text).unwrap();
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-1, -1, -1], max = [100000, 600000, 100] }\n\
+         [[handle]]\nbox = { min = [400000, -1, -1], max = [600000, 600000, 100] }\n\
+         translate = [0, 0, 10]\n",
+    )
+    .unwrap();
+    let r = deform(&spread, &out, &edit, &["--cell-size", "0.5"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        started.elapsed().as_secs() < 10,
+        "took {:?}",
+        started.elapsed()
+    );
+}

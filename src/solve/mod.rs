@@ -360,7 +360,7 @@ where
 {
     let mut info = SolverInfo {
         cells_initial: complex.len(),
-        load_steps: load_steps(complex, constraints, params),
+        load_steps: load_steps(complex, constraints, params)?,
         ..Default::default()
     };
     check_solver_memory(complex.len(), params, CELLS_ADVICE)?;
@@ -929,12 +929,16 @@ fn prescribe<const D: usize>(
 }
 
 /// The number of load steps: enough that no handle turns by more than `max_step_degrees` and
-/// no handle cell, pin or target moves by more than `max_step_fraction` of the extent per step.
+/// no handle cell, pin or target moves by more than `max_step_fraction` of the extent per step,
+/// relative to the fixed cells (or, without any, to the constraints' common motion: a shape
+/// moved whole needs no steps). A spread of motions past [`MAX_TRAVEL`] extents is refused: it
+/// tears the shape apart and would cost thousands of load steps (a control point sent 4e9 away
+/// from a shape 2 wide, a unit or coordinate mistake).
 fn load_steps<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
     params: &SolveParams,
-) -> usize
+) -> Result<usize>
 where
     Dim<D>: Rigid<D>,
 {
@@ -946,27 +950,69 @@ where
     }
     let extent = (hi - lo).max().max(f64::MIN_POSITIVE);
     let mut turn = 0.0f64;
-    let mut travel = 0.0f64;
+    // Every constrained motion with what it belongs to, for the message.
+    let mut moves: Vec<(Vect<D>, String)> = Vec::new();
     for (k, h) in constraints.handles.iter().enumerate() {
         turn = turn.max(h.motion.turn.1.abs().to_degrees());
         let map = constraints.handle_map(k, 1.0);
         for (c, role) in constraints.roles.iter().enumerate() {
             if *role == Role::Handle(k as u32) {
                 let x = complex.cells[c].center;
-                travel = travel.max((map.apply(&x) - x).norm());
+                moves.push((map.apply(&x) - x, format!("the handle on line {}", h.line)));
             }
         }
     }
-    for p in &constraints.pins {
-        travel = travel.max((p.to - p.point).norm());
+    for (k, p) in constraints.pins.iter().enumerate() {
+        moves.push((p.to - p.point, format!("pin #{}", k + 1)));
     }
-    for t in &constraints.targets {
-        travel = travel.max((t.to - t.from).norm());
+    for (k, t) in constraints.targets.iter().enumerate() {
+        moves.push((t.to - t.from, format!("target #{}", k + 1)));
+    }
+    let fixed = constraints.roles.contains(&Role::Fixed);
+    let (mut dlo, mut dhi) = match fixed {
+        true => (Vect::<D>::zeros(), Vect::<D>::zeros()),
+        false => (Vect::<D>::repeat(f64::MAX), Vect::<D>::repeat(f64::MIN)),
+    };
+    for (d, _) in &moves {
+        dlo = dlo.inf(d);
+        dhi = dhi.sup(d);
+    }
+    let travel = if moves.is_empty() {
+        0.0
+    } else {
+        (dhi - dlo).norm()
+    };
+    if travel > MAX_TRAVEL * extent {
+        let reference = if fixed {
+            Vect::<D>::zeros()
+        } else {
+            (dlo + dhi) * 0.5
+        };
+        let farthest = moves
+            .iter()
+            .max_by(|a, b| {
+                (a.0 - reference)
+                    .norm()
+                    .total_cmp(&(b.0 - reference).norm())
+            })
+            .map_or("a constraint", |m| m.1.as_str());
+        return Err(Error::Param(format!(
+            "{farthest} of the edit spec moves {} relative to the rest of the edit, {:.0} times \
+             the shape's size of {}: more than {MAX_TRAVEL} times is refused (it tears the shape \
+             apart); check the spec's units and coordinates",
+            crate::human::length(travel, extent),
+            travel / extent,
+            crate::human::length(extent, extent),
+        )));
     }
     let by_turn = (turn / params.max_step_degrees.max(1e-3)).ceil();
     let by_travel = (travel / (params.max_step_fraction.max(1e-6) * extent)).ceil();
-    by_turn.max(by_travel).clamp(1.0, 1000.0) as usize
+    Ok(by_turn.max(by_travel).clamp(1.0, 1000.0) as usize)
 }
+
+/// The most the constraints' motions may spread, in extents of the cells (at most 100 load
+/// steps of a quarter extent).
+pub const MAX_TRAVEL: f64 = 25.0;
 
 /// What to change when the cells do not fit the memory budget.
 const CELLS_ADVICE: &str = "use a larger --cell-size (or fewer --cells)";

@@ -34,7 +34,7 @@
 //! |---|---|---|
 //! | success | exit 0, outputs readable and finite | |
 //! | clean error | a documented exit code with a message | |
-//! | hang | not finished within `--timeout` (60 s: a legitimate large request, `--cells 1000000` on the demo's soup, takes up to 40 s with two cases running at once) | yes |
+//! | hang | not finished within `--timeout` (10 s: the largest legitimate requests the cases make, a millimetre `--cell-size` on a terrain tile or a `--min-cell-size` that builds half a million cells, take up to 7 s with two cases running at once; extents and motions are bounded before any work) | yes |
 //! | signal | killed by a signal (an allocation abort is SIGABRT) | yes |
 //! | panic | exit 101, or `panicked` in its stderr | yes |
 //! | changed input | a file it was given differs afterwards | yes |
@@ -92,7 +92,7 @@ fn options() -> Result<Options, Failure> {
         cases: 300,
         seed: 1,
         jobs: std::thread::available_parallelism().map_or(2, |n| n.get()),
-        timeout: Duration::from_secs(60),
+        timeout: Duration::from_secs(10),
         memory_mib: 3072,
         bin: exe.with_file_name("rigidcells"),
         data: PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")),
