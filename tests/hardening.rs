@@ -782,9 +782,9 @@ fn a_layered_laz_chunk_whose_layers_claim_too_much_is_a_format_error() {
     assert!(!out.exists());
 }
 
-/// A handle stretching z by 1e15 (the largest the spec allows) moved a scan to 5.6e18: the
-/// writer's frame (scale 2.3e9, offset 2.8e18) was refused by our own reader. Every output
-/// must read back.
+/// A scan moved whole by 1e15 (the largest the spec allows) lands where the writer needs a
+/// frame of a huge offset and scale, which our own reader once refused: every output must read
+/// back. A handle stretching z by 1e15 against a fixed end tears the scan apart and is refused.
 #[test]
 fn an_extreme_allowed_motion_writes_a_las_that_reads_back() {
     let dir = tempfile::tempdir().unwrap();
@@ -793,9 +793,8 @@ fn an_extreme_allowed_motion_writes_a_las_that_reads_back() {
     let edit = dir.path().join("edit.toml");
     std::fs::write(
         &edit,
-        "[[fixed]]\nbox = { min = [499990, 4999990, 0], max = [500300, 5002010, 1000] }\n\
-         [[handle]]\nbox = { min = [501700, 4999990, 0], max = [502010, 5002010, 1000] }\n\
-         matrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e15, 0], [0, 0, 0, 1]]\n",
+        "[[handle]]\nbox = { min = [499990, 4999990, -1000], max = [502010, 5002010, 1000] }\n\
+         translate = [0, 0, 1e15]\n",
     )
     .unwrap();
     let out = dir.path().join("out.las");
@@ -803,6 +802,17 @@ fn an_extreme_allowed_motion_writes_a_las_that_reads_back() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     let r = run(&["info", arg(&out)]);
     assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stdout.contains("z [1000000000000"), "{}", r.stdout);
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [499990, 4999990, 0], max = [500300, 5002010, 1000] }\n\
+         [[handle]]\nbox = { min = [501700, 4999990, 0], max = [502010, 5002010, 1000] }\n\
+         matrix = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1e15, 0], [0, 0, 0, 1]]\n",
+    )
+    .unwrap();
+    let r = deform(&input, &out, &edit, &["--cells", "300"]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("times the shape's size"), "{}", r.stderr);
 }
 
 /// A tiny `--refine-strain` split every cell round after round (minutes on the tube): the
