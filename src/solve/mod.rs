@@ -22,16 +22,17 @@
 //!
 //! It gives way on short, thick parts, because the glue energy has no twisted minimum there:
 //! like as-rigid-as-possible energies it charges a bounded amount for collapsing a
-//! cross-section, and a collapsed neck untwists for free. Measured on closed cylinders of
-//! diameter 1 with their end tenths fixed and turned, steps of 2° each converged to 1e-9: the
-//! twisted branch ends (its energy stops rising, then the part untwists) at 184° when the
-//! turned span is 0.8 long, 259° at 1.8, 458° at 2.9 and 705° at 4.9 — about 145° per diameter
-//! of length — and at 160°–190° on the span of 0.8 for every cell size from 0.02 to 0.3, so no
-//! cell size holds a whole turn of a part as short as it is wide (a bust's neck, a bunny or a
-//! dragon twisted about its middle give way at 189°–191°). A barrier against face neighbors
-//! coming closer than half their rest distance was tried and not kept: it held every pair
-//! there, and the part still untwisted at 200°. Turning in several runs, each deforming the last
-//! output, does carry the turn (the rest shape then holds the turn so far).
+//! cross-section, and a collapsed neck untwists for free. Measured by `tools/src/bin/twist.rs`
+//! on closed cylinders of diameter 1 with their end tenths fixed and turned by 720°: the turn
+//! gives way past 189° when the turned span is 0.8 diameters long, 315° at 1.8, 510° at 2.8 and
+//! 718° at 4.8, and holds 720° at 7.8 — some 130° to 200° more per diameter of length — and on
+//! the span of 0.8 at 180°–195° for every cell size from 0.3 to 0.05 (solved to convergence in
+//! steps of 2°, 160°–190° down to cells of 0.02). No cell size holds a whole turn of a part as
+//! short as it is wide (a bust's neck, a bunny or a dragon twisted about its middle give way
+//! at 189°–191°). A barrier against face neighbors coming closer than half their rest distance
+//! was tried and not kept: it held every pair there, and the part still untwisted at 200°.
+//! Turning in several runs, each deforming the last output, does carry the turn (the rest shape
+//! then holds the turn so far).
 //!
 //! **Newton's curvature.** The glue energy is not a small-residual problem once a shape is
 //! bent: the pairs' residuals stay large at the minimum, and Gauss-Newton, which leaves out
