@@ -175,10 +175,10 @@ fn lengths_the_cells_decided_print_to_their_precision() {
     let size: f64 = note.rsplit(' ').next().unwrap().parse().unwrap();
     assert!(size > 10.0 && size < 25.0, "{note}");
     // A cell of 10–25 resolves to 0.01–0.025: two decimals at most.
-    assert!(decimals_in(&note).iter().all(|&d| d <= 2), "{note}");
+    assert!(decimals_in(note).iter().all(|&d| d <= 2), "{note}");
     let t = info(&field);
     for label in ["bounds:", "size:", "levels:", "largest cell motion:"] {
         let l = line(&t, label);
-        assert!(decimals_in(&l).iter().all(|&d| d <= 2), "{l}");
+        assert!(decimals_in(l).iter().all(|&d| d <= 2), "{l}");
     }
 }

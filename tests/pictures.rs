@@ -232,14 +232,8 @@ fn preview_colors_follow_the_regions_across_a_triangle() {
     }
     let input = dir.path().join("box.obj");
     std::fs::write(&input, obj).unwrap();
-    let edit = dir.path().join("lift.toml");
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-         translate = [0, 0, 1]\n",
-    )
-    .unwrap();
+    // The bar's lift: its ends hold the box's ends.
+    let (_, _, edit) = common::lifted_bar(dir.path(), 1.0);
     let png = dir.path().join("p.png");
     let r = deform(
         &input,

@@ -701,11 +701,8 @@ mod tests {
 
     use super::*;
 
-    #[test]
-    fn bar_is_closed_and_outward() {
-        let m = bar([10.0, 1.0, 1.0], 4.0);
-        assert!((m.volume() - 10.0).abs() < 1e-9);
-        // Every edge is shared by exactly two triangles, in opposite directions.
+    /// Every edge of `m` is shared by exactly two triangles, in opposite directions.
+    fn assert_welded_and_closed(m: &Mesh) {
         let mut edges = std::collections::HashMap::new();
         for t in &m.triangles {
             for k in 0..3 {
@@ -719,6 +716,13 @@ mod tests {
         );
     }
 
+    #[test]
+    fn bar_is_closed_and_outward() {
+        let m = bar([10.0, 1.0, 1.0], 4.0);
+        assert!((m.volume() - 10.0).abs() < 1e-9);
+        assert_welded_and_closed(&m);
+    }
+
     /// The cylinder is closed, welded and outward oriented: its signed volume is the polygonal
     /// disk's area times its height, and every edge has two triangles in opposite directions.
     #[test]
@@ -727,17 +731,7 @@ mod tests {
         let m = cylinder(r, h, n, 24);
         let disk = 0.5 * n as f64 * r * r * (std::f64::consts::TAU / n as f64).sin();
         assert!((m.volume() - disk * h).abs() < 1e-9, "{}", m.volume());
-        let mut edges = std::collections::HashMap::new();
-        for t in &m.triangles {
-            for k in 0..3 {
-                *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
-            }
-        }
-        assert!(
-            edges
-                .iter()
-                .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1))
-        );
+        assert_welded_and_closed(&m);
     }
 
     #[test]

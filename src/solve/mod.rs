@@ -420,12 +420,7 @@ where
             predict(constraints, motions, before, (to - f) / (f - f0));
             // The free cells' positions are the optimum for the predicted rotations.
             prescribe(complex, constraints, motions, to);
-            let targets_to: Vec<Vect<D>> = constraints
-                .targets
-                .iter()
-                .map(|t| t.from + (t.to - t.from) * to)
-                .collect();
-            system.project_positions(complex, constraints, motions, &targets_to);
+            system.project_positions(complex, constraints, motions, &targets_at(constraints, to));
         }
         let predicted = (!turning.is_empty()).then(|| motions.to_vec());
         // A step before the last only has to bring the motions near the path's minimum, so
@@ -829,11 +824,7 @@ where
                 motions[c].rot * (complex.cells[c].center - pin.point) + pins_to[*k as usize];
         }
     }
-    let targets_to: Vec<Vect<D>> = constraints
-        .targets
-        .iter()
-        .map(|t| t.from + (t.to - t.from) * f)
-        .collect();
+    let targets_to = targets_at(constraints, f);
     let mut energy = total_energy(complex, constraints, motions, &targets_to);
     info.step_starts.push(info.energies.len());
     info.energies.push(energy);
@@ -916,6 +907,15 @@ where
         }
     }
     Ok(iterations)
+}
+
+/// Where the soft targets pull at load fraction `f`.
+fn targets_at<const D: usize>(constraints: &Constraints<D>, f: f64) -> Vec<Vect<D>> {
+    constraints
+        .targets
+        .iter()
+        .map(|t| t.from + (t.to - t.from) * f)
+        .collect()
 }
 
 /// Sets the motions of fixed, rest and handle cells for load fraction `f`.
