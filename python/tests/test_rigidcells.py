@@ -47,7 +47,9 @@ def bar_points() -> np.ndarray:
 def test_deform_gives_the_command_lines_geometry_bit_for_bit(tmp_path):
     pts = bar_points()
     xyz = tmp_path / "bar.xyz"
-    xyz.write_text("".join(f"{float(x)!r} {float(y)!r} {float(z)!r}\n" for x, y, z in pts))
+    # 18 significant digits a number: the CLI writes moved numbers with their column's digits,
+    # and 18 keep every bit of a double.
+    xyz.write_text("".join(f"{x:.17e} {y:.17e} {z:.17e}\n" for x, y, z in pts))
     edit = tmp_path / "bend.toml"
     edit.write_text(BEND)
     out = tmp_path / "out.xyz"
