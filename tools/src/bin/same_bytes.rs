@@ -44,7 +44,11 @@ fn main() {
     println!("| file | exit codes | same |");
     println!("|---|---|---|");
     for input in &files {
-        let name = input.file_name().unwrap_or_default().to_string_lossy().into_owned();
+        let name = input
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned();
         let runs = [&before, &after].map(|bin| run(bin, input, &work.join(&name)));
         let verdict = if runs[0] == runs[1] {
             same += 1;
@@ -99,12 +103,7 @@ fn run(bin: &Path, input: &Path, dir: &Path) -> Outcome {
     let steady = |text: &[u8]| -> String {
         String::from_utf8_lossy(text)
             .lines()
-            .map(|l| match l.find(" s,").or_else(|| l.find(" s (")) {
-                Some(_) if l.contains("solve:") || l.contains("cells ") || l.contains("total") => {
-                    l.split(',').next().unwrap_or("").to_string()
-                }
-                _ => l.to_string(),
-            })
+            .map(steady_line)
             .collect::<Vec<_>>()
             .join("\n")
     };
@@ -118,6 +117,27 @@ fn run(bin: &Path, input: &Path, dir: &Path) -> Outcome {
         stderr: steady(&deform.stderr),
         bytes: std::fs::read(&output).unwrap_or_default(),
     }
+}
+
+/// A line with every duration and memory figure replaced by `#`: a number followed by `s`,
+/// `MB`-like units or `ms/iteration`.
+fn steady_line(line: &str) -> String {
+    const UNITS: [&str; 7] = ["s", "ms", "kB", "KB", "MB", "GB", "TB"];
+    let tokens: Vec<&str> = line.split(' ').collect();
+    let bare = |t: &str| t.trim_matches(|c: char| "(),;:".contains(c)).to_string();
+    let numeric = |t: &str| !bare(t).is_empty() && bare(t).parse::<f64>().is_ok();
+    let mut out = Vec::with_capacity(tokens.len());
+    for (i, t) in tokens.iter().enumerate() {
+        let unit_follows = tokens
+            .get(i + 1)
+            .is_some_and(|n| UNITS.contains(&bare(n).as_str()) || n.starts_with("ms/"));
+        if numeric(t) && unit_follows {
+            out.push("#".to_string());
+        } else {
+            out.push(t.to_string());
+        }
+    }
+    out.join(" ")
 }
 
 /// The edit of a file: its box's west fifth fixed, its east fifth turned by 20° about z and
@@ -151,7 +171,10 @@ fn first_difference(a: &Outcome, b: &Outcome) -> String {
     if a.codes != b.codes {
         return format!("exit codes {} against {}", a.codes, b.codes);
     }
-    for (what, x, y) in [("stdout", &a.stdout, &b.stdout), ("stderr", &a.stderr, &b.stderr)] {
+    for (what, x, y) in [
+        ("stdout", &a.stdout, &b.stdout),
+        ("stderr", &a.stderr, &b.stderr),
+    ] {
         if x != y {
             let line = x
                 .lines()
