@@ -22,8 +22,9 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::field::{Transfer, apply};
+use crate::field::{Outside, Transfer, apply};
 use crate::pipeline::DeformParams;
+use crate::pipeline::stages::Cells;
 use crate::progress::Silent;
 use crate::rigid::Vect;
 use crate::spec::EditSpec;
@@ -154,8 +155,17 @@ pub fn deform_image(
     if samples.is_empty() {
         return Err(Error::Input("the picture has no foreground pixels".into()));
     }
-    let staged = crate::pipeline::stages(&samples, &[], spec, params, &Silent)?;
-    let (solution, field, deformer) = (&staged.solution, &staged.field, &staged.deformer);
+    let cells = Cells::Samples {
+        points: &samples,
+        triangles: &[],
+        classes: None,
+    };
+    let staged = crate::pipeline::stages::run(cells, spec, params, &Silent)?;
+    let solution = &staged.solution;
+    let origin = staged.saved.field.origin;
+    let deformer = staged
+        .saved
+        .deformer(None, params.rbf_tolerance, Outside::Extend)?;
     let mut info = ImageInfo {
         warnings: staged.warnings.clone(),
         cells: solution.complex.len(),
@@ -185,7 +195,7 @@ pub fn deform_image(
         ]);
     }
     let mut moved = rest.clone();
-    apply(deformer, &field.origin, &mut moved);
+    apply(&deformer, &origin, &mut moved);
     crate::pipeline::check_moved(0, &moved)?;
     info.clipped = moved
         .iter()

@@ -37,10 +37,11 @@ use std::time::Instant;
 
 use serde::Deserialize;
 
-use crate::cells::CellComplex;
+use crate::cells::{BuildInfo, CellComplex};
 use crate::error::{Error, Result};
-use crate::field::{Blend, Field, Prescribed, Weights};
+use crate::field::{Blend, Field, Outside, Prescribed, Weights};
 use crate::pipeline::DeformParams;
+use crate::pipeline::stages::{self, Selected};
 use crate::progress::Observer;
 use crate::rigid::{Motion, Vect};
 use crate::solve::{self, Session};
@@ -221,6 +222,8 @@ pub struct Released {
 pub struct Editor {
     scene: Scene,
     complex: CellComplex<3>,
+    /// How the cells were built (for the build's warnings).
+    build: BuildInfo,
     params: DeformParams,
     /// The spec of the last edit, its text, and the text of its selections alone.
     spec: Option<(EditSpec<3>, String, String)>,
@@ -238,10 +241,11 @@ pub const DRAG_ITERATIONS: usize = 1;
 impl Editor {
     /// Builds the cells of `scene` with `params` (cell size or count as `deform` takes them).
     pub fn new(scene: Scene, params: DeformParams) -> Result<Self> {
-        let (complex, _) = crate::cells::build(&scene.points, &scene.triangles, &params.build)?;
+        let (complex, build) = crate::cells::build(&scene.points, &scene.triangles, &params.build)?;
         Ok(Self {
             scene,
             complex,
+            build,
             params,
             spec: None,
             session: None,
@@ -361,15 +365,19 @@ impl Editor {
                 Vec::new(),
             )
         } else {
-            let classes = (!self.scene.classes.is_empty()).then_some(&self.scene.classes[..]);
-            let constraints = solve::resolve(&self.complex, &spec, &self.scene.points, classes)?;
-            let warnings = constraints.warnings.clone();
+            let selected = Selected::Samples {
+                points: &self.scene.points,
+                classes: (!self.scene.classes.is_empty()).then_some(&self.scene.classes[..]),
+            };
+            let constraints = stages::constraints(&self.complex, &spec, selected, &self.params)?;
             let (session, info) = Session::new(
                 self.complex.clone(),
                 constraints,
                 &self.params.solve,
                 &crate::progress::Silent,
             )?;
+            let warnings =
+                stages::warnings(&self.build, &self.complex, session.constraints(), &info);
             self.session = Some(session);
             (info, warnings)
         };
@@ -446,9 +454,11 @@ impl Editor {
             });
         };
         let solution = session.solution(Default::default());
-        let (field, deformer) = crate::pipeline::transfer_of(&solution, &self.params)?;
+        let saved = stages::field(&solution, &self.params, &crate::progress::Silent)?;
+        let origin = saved.field.origin;
+        let deformer = saved.deformer(None, self.params.rbf_tolerance, Outside::Extend)?;
         let mut moved = self.scene.points.clone();
-        crate::field::apply(&deformer, &field.origin, &mut moved);
+        crate::field::apply(&deformer, &origin, &mut moved);
         let mut warnings = Vec::new();
         let foldovers = crate::pipeline::check_foldovers(
             &deformer,

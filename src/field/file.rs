@@ -64,6 +64,13 @@ pub struct SavedField<const D: usize> {
     window: Option<Window<D>>,
 }
 
+/// When the PU transfer fits its patches: all at once, or each when a sample first needs it.
+#[derive(Clone, Copy)]
+enum Fits {
+    All,
+    OnDemand,
+}
+
 /// What [`SavedField::load_window`] keeps besides the window's cells.
 struct Window<const D: usize> {
     frame: Frame<D>,
@@ -98,13 +105,17 @@ where
     /// The map of space for `transfer` (`None`: the field's own): the saved RBF coefficients
     /// (evaluated through the far field within `rbf_tolerance`, when given) or a new blend or
     /// RBF, with the prescribed cells exact and samples beyond the margin handled by `outside`.
+    ///
+    /// Every map of a field is made here or by the two methods below, through one
+    /// constructor ([`SavedField::assemble`]): the in-memory deform, the streamed file, the
+    /// editor's release, a tile's apply and the Python package's fields.
     pub fn deformer(
         self,
         transfer: Option<Transfer>,
         rbf_tolerance: Option<f64>,
         outside: Outside,
     ) -> Result<Constrained<D>> {
-        self.deformer_with(transfer, rbf_tolerance, outside, Deformer::new)
+        self.deformer_with(transfer, rbf_tolerance, outside, Fits::All)
     }
 
     /// As [`SavedField::deformer`], keeping the field (the RBF's coefficients are copied): for
@@ -121,12 +132,20 @@ where
                 "a window of a saved field is applied once, through `deformer`".into(),
             ));
         }
-        let inner = match (transfer.unwrap_or(self.transfer), &self.rbf) {
-            (Transfer::Rbf, Some(r)) => Deformer::Rbf(r.clone()),
-            (t, _) => Deformer::new(&self.field, t)?,
-        }
-        .with_rbf_tolerance(rbf_tolerance)?;
-        Constrained::new(&self.field, inner, outside)
+        let transfer = transfer.unwrap_or(self.transfer);
+        let rbf = self
+            .rbf
+            .as_ref()
+            .filter(|_| transfer == Transfer::Rbf)
+            .cloned();
+        Self::assemble(
+            &self.field,
+            transfer,
+            rbf,
+            Fits::All,
+            rbf_tolerance,
+            outside,
+        )
     }
 
     /// As [`SavedField::deformer`], but the PU transfer fits its patches only where samples
@@ -138,7 +157,7 @@ where
         rbf_tolerance: Option<f64>,
         outside: Outside,
     ) -> Result<Constrained<D>> {
-        self.deformer_with(transfer, rbf_tolerance, outside, Deformer::on_demand)
+        self.deformer_with(transfer, rbf_tolerance, outside, Fits::OnDemand)
     }
 
     fn deformer_with(
@@ -146,7 +165,7 @@ where
         transfer: Option<Transfer>,
         rbf_tolerance: Option<f64>,
         outside: Outside,
-        make: fn(&Field<D>, Transfer) -> Result<Deformer<D>>,
+        fits: Fits,
     ) -> Result<Constrained<D>> {
         let transfer = transfer.unwrap_or(self.transfer);
         if let Some(w) = self.window {
@@ -158,12 +177,37 @@ where
             let inner = Deformer::Pu(Box::new(PuRbf::from_layout(&self.field, w.layout)?));
             return Constrained::in_window(&self.field, inner, outside, &w.frame, w.samples);
         }
-        let inner = match (transfer, self.rbf) {
+        Self::assemble(
+            &self.field,
+            transfer,
+            self.rbf,
+            fits,
+            rbf_tolerance,
+            outside,
+        )
+    }
+
+    /// The one constructor of a field's map: `transfer` over `field` (the factored `rbf` when
+    /// it is given and the transfer is the RBF's, else made here, the PU's patches fitted as
+    /// `fits` says), then the far field's tolerance, then the exact constraints and the policy
+    /// beyond the margin.
+    fn assemble(
+        field: &Field<D>,
+        transfer: Transfer,
+        rbf: Option<Rbf<D>>,
+        fits: Fits,
+        rbf_tolerance: Option<f64>,
+        outside: Outside,
+    ) -> Result<Constrained<D>> {
+        let inner = match (transfer, rbf) {
             (Transfer::Rbf, Some(r)) => Deformer::Rbf(r),
-            (t, _) => make(&self.field, t)?,
+            (t, _) => match fits {
+                Fits::All => Deformer::new(field, t)?,
+                Fits::OnDemand => Deformer::on_demand(field, t)?,
+            },
         }
         .with_rbf_tolerance(rbf_tolerance)?;
-        Constrained::new(&self.field, inner, outside)
+        Constrained::new(field, inner, outside)
     }
 
     /// Writes the field to `path` atomically.

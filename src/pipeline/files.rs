@@ -1,0 +1,424 @@
+//! Files streamed.
+
+use std::path::Path;
+use std::time::Instant;
+
+use crate::cells::{BuildInfo, CellComplex};
+use crate::error::{Error, Result};
+use crate::field::{Deformer, Outside, SavedField, Transfer, apply};
+use crate::io::{self, Source};
+use crate::progress::Observer;
+use crate::solve::{self, Solution};
+use crate::spec::EditSpec;
+
+use super::checks::check_foldovers;
+use super::first_pass::first_pass_cells;
+use super::stages::{self, Cells, Selected, Staged, control_results};
+use super::transfer_pass::transfer_pass;
+use super::{DeformInfo, DeformParams, PROXY_SAMPLES, Proxy};
+
+/// Samples per streamed chunk by default: measured on a 20M-point LAS, 64k-sample chunks ran
+/// 3.8 s against 6.5 s for 1M (the chunk in flight stays in cache) and LAZ was the same either
+/// way, with a peak RSS of 45 MB instead of 370 MB.
+pub const CHUNK: usize = 1 << 16;
+
+/// What [`deform_file`] and [`apply_file`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FileInfo {
+    /// Samples read and written.
+    pub samples: u64,
+    /// Cells, solve and transfer (empty for [`apply_file`]).
+    pub deform: DeformInfo,
+    /// Notes on the output (moved offsets, dropped indices, header fixes).
+    pub notes: Vec<String>,
+    /// Seconds of the first pass (bounds, occupancy, selections).
+    pub seconds_read: f64,
+    /// Seconds of the second pass (transfer and writing).
+    pub seconds_write: f64,
+    /// The preview proxy (empty for [`apply_file`], or when none was asked for).
+    pub proxy: Proxy,
+    /// Samples beyond the field's margin (kept or extended as [`ApplyParams::outside`] says;
+    /// for [`deform_file`], extended, and said in a note).
+    pub outside: u64,
+}
+
+/// Parameters of [`apply_file`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ApplyParams {
+    /// The transfer (`None`: the one the field was saved with).
+    pub transfer: Option<Transfer>,
+    /// With the RBF transfer: the far field's tolerance ([`DeformParams::rbf_tolerance`]).
+    pub rbf_tolerance: Option<f64>,
+    /// What happens to samples beyond the field's margin (default: refused).
+    pub outside: Outside,
+    /// The memory budget in bytes ([`crate::memory`]), for an RBF that must be factored.
+    pub memory_limit: Option<u64>,
+}
+
+/// Deforms the file `input` into `output` in two streaming passes: pass 1 builds
+/// the cells from occupancy and gathers what the spec's regions select, never holding all
+/// samples (meshes excepted: their triangles need the vertices); the solve runs on the cells;
+/// pass 2 streams chunks of `chunk` samples through the field, in file order, into the output.
+/// With `save_field`, the solved field (with its transfer, and the RBF's coefficients when that
+/// is the transfer) is written there too; [`apply_file`] with it writes the same bytes.
+pub fn deform_file(
+    input: &Path,
+    output: &Path,
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: Option<&Path>,
+    observer: &dyn Observer,
+) -> Result<(Solution<3>, FileInfo)> {
+    let mut source = io::open(input)?;
+    let mut info = FileInfo::default();
+    let (
+        Staged {
+            solution,
+            saved,
+            build,
+            mut warnings,
+            transfer_start,
+        },
+        proxy,
+    ) = solve_source(
+        source.as_mut(),
+        spec,
+        params,
+        chunk,
+        save_field,
+        &mut info,
+        observer,
+    )?;
+    // The field is written before the output; should the output fail, the field goes too (a
+    // run that fails leaves no file under any name it was given).
+    let mut saved_guard = RemoveOnDrop(save_field);
+    let origin = saved.field.origin;
+    // Every sample made the cells, so none lies beyond the margin.
+    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    observer.stage("checking", 0);
+    let mut after = proxy.before.clone();
+    apply(&deformer, &origin, &mut after);
+    let triangles = if proxy.stride == 1 && proxy.before.len() as u64 == source.len() {
+        source.triangles().to_vec()
+    } else {
+        Vec::new()
+    };
+    info.proxy = Proxy {
+        after,
+        triangles,
+        ..proxy
+    };
+    let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
+    observer.finish();
+    let controls = control_results(spec, &solution, &deformer, params, observer)?;
+    let t2 = Instant::now();
+    info.notes.extend(transfer_pass(
+        source.as_mut(),
+        output,
+        &deformer,
+        &origin,
+        chunk,
+        observer,
+    )?);
+    // Every sample made the cells; one beyond their margin would be extrapolated, so say so.
+    let outside = deformer.outside().count;
+    if outside > 0 {
+        info.notes.push(format!(
+            "{outside} samples lay beyond the cells' margin ({}) and were moved by the transfer \
+             extended there",
+            crate::human::length(deformer.margin(), deformer.margin())
+        ));
+    }
+    info.outside = outside;
+    info.seconds_write = t2.elapsed().as_secs_f64();
+    info.deform = DeformInfo::of(
+        build,
+        &solution.info,
+        transfer_start,
+        foldovers,
+        controls,
+        warnings,
+    );
+    saved_guard.0 = None;
+    Ok((solution, info))
+}
+
+/// Pass 1 over `source` and the stages after it ([`stages::run`]): the field (with the RBF's
+/// factorization when that is the transfer), saved to `save_field` when given, and the proxy
+/// of pass 1. What [`deform_file`] does before its transfer pass, and all that [`solve_files`]
+/// does. Fills `info`'s samples, notes and read time.
+fn solve_source(
+    source: &mut dyn Source,
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: Option<&Path>,
+    info: &mut FileInfo,
+    observer: &dyn Observer,
+) -> Result<(Staged<3>, Proxy)> {
+    let t0 = Instant::now();
+    info.samples = source.len();
+    let proxy_max = params.proxy_samples.unwrap_or(PROXY_SAMPLES);
+    let (complex, build, selections, proxy) = first_pass_cells(
+        source,
+        spec,
+        &params.build,
+        chunk,
+        proxy_max,
+        &mut info.notes,
+        observer,
+    )?;
+    info.seconds_read = t0.elapsed().as_secs_f64();
+    let cells = Cells::Built {
+        complex,
+        build,
+        selections,
+    };
+    let staged = stages::run(cells, spec, params, observer)?;
+    if let Some(path) = save_field {
+        staged.saved.save(path)?;
+    }
+    Ok((staged, proxy))
+}
+
+/// Solves `spec` over the files `inputs` taken as one (the tiles of a scan; pass 1 reads every
+/// one, [`Tiles`](crate::io::Tiles)) and writes only the field, to `save_field`; `apply` then
+/// deforms each tile on its own. The cells, and so the field, are those [`deform_file`] builds
+/// for the tiles merged in this order: each tile's `apply` writes, record for record, what
+/// `deform` writes for the merged file (with the union of the tiles' header bounds as its own).
+/// `info.deform.control_points` holds the control points as the field moves them.
+pub fn solve_files(
+    inputs: &[std::path::PathBuf],
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: &Path,
+    observer: &dyn Observer,
+) -> Result<(Solution<3>, FileInfo)> {
+    let mut tiles = io::Tiles::open(inputs)?;
+    let mut info = FileInfo::default();
+    let params = DeformParams {
+        proxy_samples: Some(0),
+        ..*params
+    };
+    let (staged, _) = solve_source(
+        &mut tiles,
+        spec,
+        &params,
+        chunk,
+        Some(save_field),
+        &mut info,
+        observer,
+    )?;
+    let mut guard = RemoveOnDrop(Some(save_field));
+    let Staged {
+        solution,
+        saved,
+        build,
+        warnings,
+        transfer_start,
+    } = staged;
+    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    let controls = control_results(spec, &solution, &deformer, &params, observer)?;
+    info.deform = DeformInfo::of(
+        build,
+        &solution.info,
+        transfer_start,
+        (0, 0),
+        controls,
+        warnings,
+    );
+    guard.0 = None;
+    Ok((solution, info))
+}
+
+/// Removes the file it names when dropped, unless disarmed (`.0 = None`).
+struct RemoveOnDrop<'a>(Option<&'a Path>);
+
+impl Drop for RemoveOnDrop<'_> {
+    fn drop(&mut self) {
+        if let Some(path) = self.0 {
+            let _ = std::fs::remove_file(path);
+        }
+    }
+}
+
+/// Applies the field saved in `field` to the file `input`, writing `output` (one streaming
+/// pass). Samples beyond the field's margin are refused by default ([`Error::Outside`], and
+/// nothing is written), or kept or extended as `params.outside` says. With the PU transfer and
+/// an input whose header gives its bounds (LAS/LAZ), only the part of the field those bounds
+/// need is read ([`SavedField::load_window`]; not with `--outside extend`, whose samples beyond
+/// the margin follow the nearest patch of the whole field); should a sample lie outside them,
+/// the pass runs again with the whole field.
+pub fn apply_file(
+    field: &Path,
+    input: &Path,
+    output: &Path,
+    params: &ApplyParams,
+    chunk: usize,
+    observer: &dyn Observer,
+) -> Result<FileInfo> {
+    let mut source = io::open(input)?;
+    // Beyond the margin, `--outside extend` takes the nearest patch of the whole field.
+    let hint = match (params.transfer, params.outside) {
+        (_, Outside::Extend) => None,
+        (None | Some(Transfer::Pu), _) => source.bounds_hint(),
+        _ => None,
+    };
+    let saved = match hint {
+        Some(bounds) => SavedField::<3>::load_window(field, bounds)?,
+        None => SavedField::<3>::load(field)?,
+    };
+    if params.rbf_tolerance.is_some() && params.transfer.unwrap_or(saved.transfer) != Transfer::Rbf
+    {
+        return Err(Error::Param(format!(
+            "--rbf-tolerance applies to the RBF transfer only, and {} was saved for another; \
+             add --transfer rbf",
+            field.display()
+        )));
+    }
+    let windowed = saved.is_window();
+    let info = apply_saved(saved, source.as_mut(), output, params, chunk, observer)?;
+    match info {
+        Applied::Done(info) => Ok(*info),
+        Applied::BeyondWindow(count) => {
+            let whole = SavedField::<3>::load(field)?;
+            debug_assert!(windowed);
+            match apply_saved(whole, source.as_mut(), output, params, chunk, observer)? {
+                Applied::Done(mut info) => {
+                    info.notes.push(format!(
+                        "{count} samples lay outside the bounds in {}'s header; the whole \
+                         field was read",
+                        input.display()
+                    ));
+                    Ok(*info)
+                }
+                Applied::BeyondWindow(_) => Err(Error::Solver(
+                    "a whole field reported samples outside its window".into(),
+                )),
+            }
+        }
+    }
+}
+
+/// What [`apply_saved`] did: applied the field, or met samples outside the window of the
+/// field it was given (how many), whose results are not the whole field's.
+enum Applied {
+    Done(Box<FileInfo>),
+    BeyondWindow(usize),
+}
+
+fn apply_saved(
+    field: SavedField<3>,
+    source: &mut dyn Source,
+    output: &Path,
+    params: &ApplyParams,
+    chunk: usize,
+    observer: &dyn Observer,
+) -> Result<Applied> {
+    let t = Instant::now();
+    let origin = field.field.origin;
+    if params.transfer == Some(Transfer::Rbf) && !field.has_rbf() {
+        crate::memory::check(
+            &format!("the RBF transfer of {} cells", field.field.centers.len()),
+            crate::memory::rbf_bytes(field.field.centers.len(), 3),
+            crate::memory::limit(params.memory_limit),
+            "apply the field with the transfer it was saved with (no --transfer rbf)",
+        )?;
+    }
+    observer.stage("transfer", 0);
+    let deformer = field.tile_deformer(params.transfer, params.rbf_tolerance, params.outside)?;
+    observer.finish();
+    let mut notes = transfer_pass(source, output, &deformer, &origin, chunk, observer)?;
+    if deformer.beyond_window() > 0 {
+        return Ok(Applied::BeyondWindow(deformer.beyond_window()));
+    }
+    if let Deformer::Pu(pu) = deformer.inner() {
+        let (made, all, failed) = pu.fits();
+        notes.push(format!(
+            "the PU transfer fitted {made} of its {all} patches (those the samples reached)"
+        ));
+        if failed > 0 {
+            notes.push(format!(
+                "{failed} of the PU's patch fits failed; the samples there were blended from \
+                 the patches around them"
+            ));
+        }
+    }
+    let outside = deformer.outside().count;
+    let margin = crate::human::length(deformer.margin(), deformer.margin());
+    match params.outside {
+        Outside::Keep if outside > 0 => notes.push(format!(
+            "{outside} samples beyond the field's margin ({margin}) kept their coordinates"
+        )),
+        Outside::Extend if outside > 0 => notes.push(format!(
+            "{outside} samples beyond the field's margin ({margin}) were moved by the \
+             transfer extended there"
+        )),
+        _ => {}
+    }
+    Ok(Applied::Done(Box::new(FileInfo {
+        samples: source.len(),
+        notes,
+        seconds_write: t.elapsed().as_secs_f64(),
+        outside,
+        ..Default::default()
+    })))
+}
+
+/// The cell complex of the file `input` (pass 1 of [`deform_file`]) and, with a `spec`, its
+/// solution: for inspecting the cells (`rigidcells cells`).
+pub fn file_cells(
+    input: &Path,
+    spec: Option<&EditSpec<3>>,
+    params: &DeformParams,
+    chunk: usize,
+    observer: &dyn Observer,
+) -> Result<(CellComplex<3>, BuildInfo, Option<Solution<3>>, Vec<String>)> {
+    let mut source = io::open(input)?;
+    let empty = EditSpec::default();
+    let mut notes = Vec::new();
+    let (complex, info, selections, _) = first_pass_cells(
+        source.as_mut(),
+        spec.unwrap_or(&empty),
+        &params.build,
+        chunk,
+        0,
+        &mut notes,
+        observer,
+    )?;
+    let mut warnings = stages::build_warnings(&info, &complex);
+    warnings.extend(notes);
+    let Some(spec) = spec else {
+        return Ok((complex, info, None, warnings));
+    };
+    let selected = Selected::Gathered(&selections);
+    let constraints = stages::constraints(&complex, spec, selected, params)?;
+    warnings.extend(constraints.warnings.iter().cloned());
+    let solution = solve::solve(complex.clone(), constraints, &params.solve, observer)?;
+    warnings.extend(solution.info.warnings());
+    Ok((complex, info, Some(solution), warnings))
+}
+
+/// Writes the cells of [`file_cells`] as a PLY of boxes ([`crate::cells::write_cells_ply`]):
+/// `complex` at rest, or, with a `solution`, its cells in their solved pose colored by strain,
+/// with their roles; `up` is the vertical axis the header names.
+pub fn write_cells(
+    path: &Path,
+    complex: &CellComplex<3>,
+    solution: Option<&Solution<3>>,
+    up: usize,
+) -> Result<()> {
+    let Some(s) = solution else {
+        return crate::cells::write_cells_ply(path, complex, None, up);
+    };
+    let roles: Vec<u8> = s.constraints.roles.iter().map(|r| r.code()).collect();
+    let strain = solve::cell_strain(&s.complex, &s.motions);
+    let pose = crate::cells::Pose {
+        motions: &s.motions,
+        roles: &roles,
+        strain: &strain,
+    };
+    crate::cells::write_cells_ply(path, &s.complex, Some(pose), up)
+}

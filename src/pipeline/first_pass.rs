@@ -1,0 +1,186 @@
+//! Pass 1 of a streamed file: its bounds, the finest cell size when `--cells N` asks for a
+//! count, and one pass that fills the cells' occupancy, gathers what the spec's regions
+//! select and keeps the preview proxy.
+
+use std::borrow::Cow;
+
+use crate::cells::{BuildInfo, BuildParams, CellComplex, Occupancy};
+use crate::error::{Error, Result};
+use crate::io::{Bounds, Chunk, Source};
+use crate::progress::Observer;
+use crate::rigid::Vect;
+use crate::solve::Selections;
+use crate::spec::EditSpec;
+
+use super::Proxy;
+use super::checks::check_finite;
+
+/// Pass 1 of [`deform_file`]: the cell complex of `source` (rerunning the pass with the
+/// samples' own bounds when they overflow the header's) and what the spec's regions select.
+pub(super) fn first_pass_cells(
+    source: &mut dyn Source,
+    spec: &EditSpec<3>,
+    build: &BuildParams,
+    chunk: usize,
+    proxy_max: usize,
+    notes: &mut Vec<String>,
+    observer: &dyn Observer,
+) -> Result<(CellComplex<3>, BuildInfo, Selections<3>, Proxy)> {
+    let (lo, hi) = match source.bounds_hint() {
+        Some(b) => b,
+        None => scan_bounds(source, chunk)?,
+    };
+    let target = build.target_cells;
+    if target.is_some() {
+        observer.stage("sizing", 0);
+    }
+    let (build, sizing) = crate::cells::sized(build, || size_proxy(source, (lo, hi), chunk))?;
+    if target.is_some() {
+        observer.finish();
+    }
+    notes.extend(sizing);
+    let build = &build;
+    let mut pass = first_pass(source, spec, build, (lo, hi), chunk, proxy_max, observer)?;
+    if pass.outside > 0 {
+        notes.push(format!(
+            "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
+            pass.outside
+        ));
+        let b = pass.bounds;
+        pass = first_pass(source, spec, build, b, chunk, proxy_max, observer)?;
+    }
+    let FirstPass {
+        mut occupancy,
+        selections,
+        positions,
+        proxy,
+        ..
+    } = pass;
+    observer.stage("voxelizing", 0);
+    occupancy.add_triangles(&positions, source.triangles())?;
+    drop(positions);
+    let (complex, build_info) = occupancy.finish()?;
+    observer.finish();
+    notes.extend(crate::cells::shortfall(target, complex.len()));
+    Ok((complex, build_info, selections, proxy))
+}
+
+/// Voxels per longest extent of the decimated proxy that the cell size is searched on.
+const PROXY_RESOLUTION: f64 = 1024.0;
+
+/// The points a cell size for `--cells N` is searched on ([`crate::cells::sized`]), gathered in
+/// one extra pass over `source`: meshes keep their vertices (their triangles need them), point
+/// clouds are decimated to one sample per occupied voxel of 1/1024 of the longest extent.
+#[allow(clippy::type_complexity)]
+fn size_proxy<'a>(
+    source: &'a mut dyn Source,
+    (lo, hi): Bounds,
+    chunk_len: usize,
+) -> Result<(Cow<'a, [Vect<3>]>, &'a [[u32; 3]])> {
+    source.rewind()?;
+    let voxel = (hi - lo).max().max(f64::MIN_POSITIVE) / PROXY_RESOLUTION;
+    let keep_all = !source.triangles().is_empty();
+    let mut proxy = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    let mut chunk = Chunk::default();
+    while source.read_samples(chunk_len, &mut chunk)? > 0 {
+        check_finite(source.path(), &chunk)?;
+        for p in &chunk.positions {
+            let key = ((p - lo) / voxel).map(|v| v.floor() as i64);
+            if keep_all || seen.insert((key[0], key[1], key[2])) {
+                proxy.push(*p);
+            }
+        }
+    }
+    let source: &'a dyn Source = source;
+    Ok((Cow::Owned(proxy), source.triangles()))
+}
+
+struct FirstPass {
+    occupancy: Occupancy<3>,
+    selections: Selections<3>,
+    /// All positions, kept only when the source has triangles.
+    positions: Vec<Vect<3>>,
+    /// The decimated samples (none when its bound is 0).
+    proxy: Proxy,
+    bounds: Bounds,
+    outside: usize,
+}
+
+fn scan_bounds(source: &mut dyn Source, chunk_len: usize) -> Result<Bounds> {
+    source.rewind()?;
+    let mut chunk = Chunk::default();
+    let mut lo = Vect::<3>::repeat(f64::INFINITY);
+    let mut hi = Vect::<3>::repeat(f64::NEG_INFINITY);
+    while source.read_samples(chunk_len, &mut chunk)? > 0 {
+        check_finite(source.path(), &chunk)?;
+        for p in &chunk.positions {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+    }
+    if lo[0] > hi[0] {
+        return Err(Error::format(source.path(), "the file holds no samples"));
+    }
+    Ok((lo, hi))
+}
+
+fn first_pass(
+    source: &mut dyn Source,
+    spec: &EditSpec<3>,
+    build: &BuildParams,
+    (lo, hi): Bounds,
+    chunk_len: usize,
+    proxy_max: usize,
+    observer: &dyn Observer,
+) -> Result<FirstPass> {
+    source.rewind()?;
+    let mut occupancy = Occupancy::new(&lo, &hi, build)?;
+    let mut selections = Selections::new(spec, source.has_classes())?;
+    let keep = !source.triangles().is_empty();
+    let mut positions = Vec::new();
+    let mut proxy = (proxy_max > 0).then(|| Proxy::new(source.len(), proxy_max));
+    let mut bounds = (
+        Vect::<3>::repeat(f64::INFINITY),
+        Vect::<3>::repeat(f64::NEG_INFINITY),
+    );
+    let mut outside = 0;
+    let mut chunk = Chunk::default();
+    observer.stage("reading", source.len());
+    while source.read_samples(chunk_len, &mut chunk)? > 0 {
+        check_finite(source.path(), &chunk)?;
+        for p in &chunk.positions {
+            bounds.0 = bounds.0.inf(p);
+            bounds.1 = bounds.1.sup(p);
+        }
+        outside += if chunk.normals.is_empty() {
+            occupancy.add_points(&chunk.positions)?
+        } else {
+            occupancy.add_oriented_points(&chunk.positions, &chunk.normals)?
+        };
+        let classes = (!chunk.classes.is_empty()).then_some(&chunk.classes[..]);
+        selections.add(
+            spec,
+            occupancy.grid(),
+            chunk.first,
+            &chunk.positions,
+            classes,
+        );
+        if keep {
+            positions.extend_from_slice(&chunk.positions);
+        }
+        if let Some(proxy) = proxy.as_mut() {
+            proxy.gather(&chunk);
+        }
+        observer.advance(chunk.len() as u64);
+    }
+    observer.finish();
+    Ok(FirstPass {
+        occupancy,
+        selections,
+        positions,
+        proxy: proxy.unwrap_or_default(),
+        bounds,
+        outside,
+    })
+}

@@ -1,0 +1,273 @@
+//! The method on samples in memory ([`deform`], [`solve_points`]) and on files streamed in
+//! passes ([`deform_file`], [`apply_file`], [`solve_files`]); every face calls these.
+//!
+//! The stage sequence itself — cells, constraints, solve, field, exact transfer — is written
+//! once, in [`stages`]; the files here differ only in where the samples come from and go.
+
+mod checks;
+mod files;
+mod first_pass;
+pub(crate) mod stages;
+mod transfer_pass;
+
+pub(crate) use checks::check_moved;
+pub use checks::{FOLDOVER_SAMPLES, check_foldovers};
+pub use files::{
+    ApplyParams, CHUNK, FileInfo, apply_file, deform_file, file_cells, solve_files, write_cells,
+};
+
+use std::path::Path;
+use std::time::Instant;
+
+use crate::cells::{BuildInfo, BuildParams};
+use crate::control::ControlPoint;
+use crate::error::{Error, Result};
+use crate::field::{Deformer, Outside, SavedField, Transfer, apply_into};
+use crate::io::{self, Chunk};
+use crate::progress::Observer;
+use crate::rigid::{Dim, Rigid, Vect};
+use crate::solve::{Solution, SolveParams, SolverInfo};
+use crate::spec::EditSpec;
+
+use stages::{Cells, Staged, control_results};
+
+/// Parameters of [`deform`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DeformParams {
+    /// The cell complex.
+    pub build: BuildParams,
+    /// The solver.
+    pub solve: SolveParams,
+    /// The transfer to the samples.
+    pub transfer: Transfer,
+    /// With the RBF transfer: evaluate positions through its far field, each coordinate
+    /// within this length of the exact sum's ([`crate::field::Rbf::with_tolerance`]).
+    pub rbf_tolerance: Option<f64>,
+    /// The most samples in the preview proxy of [`deform_file`] (`None`: [`PROXY_SAMPLES`];
+    /// `Some(0)`: no proxy).
+    pub proxy_samples: Option<usize>,
+    /// Run the control points' leave-one-out check ([`crate::control::leave_one_out`]).
+    pub check_control_points: bool,
+}
+
+/// The default bound on the samples of a [`Proxy`].
+pub const PROXY_SAMPLES: usize = 1 << 20;
+
+/// A decimated copy of a file's samples for previews, gathered in pass 1: every `stride`-th
+/// sample (the stride is the smallest that keeps at most the bound), before and after the
+/// deformation. `after[i]` is what the output holds for sample `i · stride`, before the
+/// output's own rounding (LAS scale, text digits).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Proxy {
+    /// Samples from one to the next.
+    pub stride: u64,
+    /// Rest positions (world coordinates).
+    pub before: Vec<Vect<3>>,
+    /// Deformed positions.
+    pub after: Vec<Vect<3>>,
+    /// The input's triangles, when it has some and the proxy holds every sample.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Proxy {
+    /// An empty proxy for `len` samples keeping at most `max` (`max > 0`).
+    fn new(len: u64, max: usize) -> Self {
+        Self {
+            stride: len.div_ceil(max as u64).max(1),
+            ..Default::default()
+        }
+    }
+
+    /// Keeps the chunk's samples whose index is a multiple of the stride.
+    fn gather(&mut self, chunk: &Chunk) {
+        let skip = (self.stride - chunk.first % self.stride) % self.stride;
+        let kept = chunk.positions.iter().skip(skip as usize);
+        self.before.extend(kept.step_by(self.stride as usize));
+    }
+}
+
+/// What [`deform`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct DeformInfo {
+    /// The cell complex's construction.
+    pub build: BuildInfo,
+    /// The solver.
+    pub solver: SolverInfo,
+    /// Seconds spent in the transfer (building it and applying it).
+    pub seconds_transfer: f64,
+    /// Seconds of the control points' leave-one-out check (not part of `seconds_transfer`).
+    pub seconds_check: f64,
+    /// Samples checked for fold-overs and how many of them the map folds over (Jacobian
+    /// determinant not positive): at most [`FOLDOVER_SAMPLES`], evenly strided over the samples
+    /// of [`deform`] or the proxy of [`deform_file`].
+    pub foldovers: (usize, usize),
+    /// The control points (`[[target]]` entries): where each went, its residual.
+    pub control_points: Vec<ControlPoint>,
+    /// Messages for the user.
+    pub warnings: Vec<String>,
+}
+
+impl DeformInfo {
+    /// What a run did: the cells' construction, the solver, the transfer's seconds since
+    /// `transfer_start` (less those of the control points' check), the fold-overs, the control
+    /// points with the seconds of their check, and the warnings.
+    fn of(
+        build: BuildInfo,
+        solver: &SolverInfo,
+        transfer_start: Instant,
+        foldovers: (usize, usize),
+        (control_points, seconds_check): (Vec<ControlPoint>, f64),
+        warnings: Vec<String>,
+    ) -> Self {
+        Self {
+            build,
+            solver: solver.clone(),
+            seconds_transfer: transfer_start.elapsed().as_secs_f64() - seconds_check,
+            seconds_check,
+            foldovers,
+            control_points,
+            warnings,
+        }
+    }
+}
+
+/// Deforms `points` (with `triangles` over them, or none) under `spec`; returns the moved
+/// points, the solution, and what was done.
+pub fn deform<const D: usize>(
+    points: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    spec: &EditSpec<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(Vec<Vect<D>>, Solution<D>, DeformInfo)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let (moved, _, solution, info) =
+        deform_oriented(points, &[], triangles, spec, params, observer)?;
+    Ok((moved, solution, info))
+}
+
+/// [`deform`] of points with normals (one per point, or none): returns the moved points and
+/// their normals as the map turns them (the transpose of the inverse Jacobian), each
+/// with its length.
+#[allow(clippy::type_complexity)]
+pub fn deform_oriented<const D: usize>(
+    points: &[Vect<D>],
+    normals: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    spec: &EditSpec<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(Vec<Vect<D>>, Vec<Vect<D>>, Solution<D>, DeformInfo)>
+where
+    Dim<D>: Rigid<D>,
+{
+    if !normals.is_empty() && normals.len() != points.len() {
+        return Err(Error::Param(format!(
+            "{} normals for {} points: give one per point, or none",
+            normals.len(),
+            points.len()
+        )));
+    }
+    let samples = Cells::Samples {
+        points,
+        triangles,
+        classes: None,
+    };
+    let Staged {
+        solution,
+        saved,
+        build,
+        mut warnings,
+        transfer_start,
+    } = stages::run(samples, spec, params, observer)?;
+    let origin = saved.field.origin;
+    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    let (mut moved, mut moved_normals) = (Vec::new(), Vec::new());
+    apply_into(
+        &deformer,
+        &origin,
+        points,
+        normals,
+        &mut moved,
+        &mut moved_normals,
+    );
+    check_moved(0, &moved)?;
+    let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
+    let controls = control_results(spec, &solution, &deformer, params, observer)?;
+    let info = DeformInfo::of(
+        build,
+        &solution.info,
+        transfer_start,
+        foldovers,
+        controls,
+        warnings,
+    );
+    Ok((moved, moved_normals, solution, info))
+}
+
+/// `deform` of a 2D point set file (`.xy`, read whole): the points deformed in memory under the
+/// 2D `spec`, written to `output` (which must be `.xy`) with every other byte as read.
+/// Returns the solution, what was done and the number of points.
+pub fn deform_xy_file(
+    input: &Path,
+    output: &Path,
+    spec: &EditSpec<2>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(Solution<2>, DeformInfo, usize)> {
+    if io::extension(output).as_deref() != Some("xy") {
+        return Err(Error::Param(format!(
+            "{}: a .xy point set is written as .xy",
+            output.display()
+        )));
+    }
+    let file = io::XyFile::read(input)?;
+    let (moved, solution, info) = deform(file.points(), &[], spec, params, observer)?;
+    file.write(output, &moved)?;
+    Ok((solution, info, moved.len()))
+}
+
+/// Solves `spec` over samples in memory and returns the field (with its transfer, and the
+/// RBF's coefficients when that is the transfer), to apply to these or other samples, or to
+/// save: the Python package's `solve`. The info's control points are as the field moves them.
+pub fn solve_points(
+    points: &[Vect<3>],
+    triangles: &[[u32; 3]],
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(SavedField<3>, Solution<3>, DeformInfo)> {
+    let samples = Cells::Samples {
+        points,
+        triangles,
+        classes: None,
+    };
+    let Staged {
+        solution,
+        saved,
+        build,
+        warnings,
+        transfer_start,
+    } = stages::run(samples, spec, params, observer)?;
+    // The map applied for the control points is made from the field and then taken apart
+    // again: the RBF it factored is the field's, kept rather than factored twice.
+    let field = saved.field.clone();
+    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    let controls = control_results(spec, &solution, &deformer, params, observer)?;
+    let rbf = match deformer.into_inner() {
+        Deformer::Rbf(r) => Some(r),
+        _ => None,
+    };
+    let saved = SavedField::new(field, params.transfer, rbf);
+    let info = DeformInfo::of(
+        build,
+        &solution.info,
+        transfer_start,
+        (0, 0),
+        controls,
+        warnings,
+    );
+    Ok((saved, solution, info))
+}

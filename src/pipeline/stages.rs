@@ -1,0 +1,231 @@
+//! The method's stage sequence, written once: cells → constraints → solve → field → exact
+//! transfer, with the checks and warnings every face gets.
+//!
+//! [`run`] owns the sequence. Its callers differ only in where the cells come from
+//! ([`Cells`]: samples in memory, or a streaming first pass that built them and gathered what
+//! the spec's regions select) and in what they do with the result: [`super::deform`] warps the
+//! samples, [`super::solve_points`] keeps the field, [`super::deform_file`] streams a file
+//! through it and [`crate::image::deform_image`] warps a picture's pixel corners. The editor
+//! solves warm, one pose at a time, on cells it built once: it calls the same stages one by
+//! one ([`constraints`], then its [`crate::solve::Session`], then [`warnings`] and [`field`]),
+//! so that it refuses and warns as `deform` does.
+//!
+//! The checks live here: the dense RBF's memory before the solve and again after refinement
+//! ([`check_rbf_memory`]), and the warnings of the build, the constraints and the solver, in
+//! that order ([`warnings`]).
+
+use std::time::Instant;
+
+use crate::cells::{BuildInfo, CellComplex, build};
+use crate::control::ControlPoint;
+use crate::error::Result;
+use crate::field::{Field, Rbf, SavedField, Transfer, Warp, apply};
+use crate::progress::Observer;
+use crate::rigid::{Dim, Rigid, Vect};
+use crate::solve::{self, Constraints, Selections, Solution, SolverInfo};
+use crate::spec::EditSpec;
+
+use super::DeformParams;
+
+/// Where a run's cells come from, and what the spec's regions select on them.
+pub(crate) enum Cells<'a, const D: usize> {
+    /// Samples in memory: the cells are built from them (and `triangles`), and the regions are
+    /// evaluated on them (with their LAS classes, when they have some).
+    Samples {
+        points: &'a [Vect<D>],
+        triangles: &'a [[u32; 3]],
+        classes: Option<&'a [u8]>,
+    },
+    /// Cells built by a streaming first pass, with what the regions selected there.
+    Built {
+        complex: CellComplex<D>,
+        build: BuildInfo,
+        selections: Selections<D>,
+    },
+}
+
+/// What [`run`] gives: the solution, its field (with the RBF's factorization when that is the
+/// transfer; [`SavedField::deformer`] makes the map with its exact constraints), the cells'
+/// construction and the warnings so far.
+pub(crate) struct Staged<const D: usize> {
+    pub(crate) solution: Solution<D>,
+    pub(crate) saved: SavedField<D>,
+    pub(crate) build: BuildInfo,
+    pub(crate) warnings: Vec<String>,
+    /// When the field's construction began (after the solve): the start of the transfer's time.
+    pub(crate) transfer_start: Instant,
+}
+
+/// The method's stages in order: the cells ([`Cells`]), the spec resolved onto them
+/// ([`constraints`]), the solve, the warnings ([`warnings`]) and the field with its transfer
+/// ([`field`]).
+pub(crate) fn run<const D: usize>(
+    cells: Cells<'_, D>,
+    spec: &EditSpec<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<Staged<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let (complex, build, constraints) = match cells {
+        Cells::Samples {
+            points,
+            triangles,
+            classes,
+        } => {
+            let (complex, info) = build(points, triangles, &params.build)?;
+            let selected = Selected::Samples { points, classes };
+            let constraints = self::constraints(&complex, spec, selected, params)?;
+            (complex, info, constraints)
+        }
+        Cells::Built {
+            complex,
+            build,
+            selections,
+        } => {
+            let selected = Selected::Gathered(&selections);
+            let constraints = self::constraints(&complex, spec, selected, params)?;
+            (complex, build, constraints)
+        }
+    };
+    let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+    // The solved constraints' warnings: an adaptive solve decides its parts at rest again.
+    let warnings = warnings(
+        &build,
+        &solution.complex,
+        &solution.constraints,
+        &solution.info,
+    );
+    let transfer_start = Instant::now();
+    let saved = field(&solution, params, observer)?;
+    Ok(Staged {
+        solution,
+        saved,
+        build,
+        warnings,
+        transfer_start,
+    })
+}
+
+/// What the spec's regions select: evaluated on samples in memory, or gathered by a pass
+/// over a file.
+pub(crate) enum Selected<'a, const D: usize> {
+    /// Samples in memory, with their LAS classes when they have some.
+    Samples {
+        points: &'a [Vect<D>],
+        classes: Option<&'a [u8]>,
+    },
+    /// Gathered while the cells were built.
+    Gathered(&'a Selections<D>),
+}
+
+/// The spec resolved onto `complex`, after checking that the transfer's memory fits the
+/// budget for these cells (so that no face solves what it then cannot transfer).
+pub(crate) fn constraints<const D: usize>(
+    complex: &CellComplex<D>,
+    spec: &EditSpec<D>,
+    selected: Selected<'_, D>,
+    params: &DeformParams,
+) -> Result<Constraints<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let constraints = match selected {
+        Selected::Samples { points, classes } => solve::resolve(complex, spec, points, classes)?,
+        Selected::Gathered(selections) => solve::resolve_selected(complex, spec, selections)?,
+    };
+    check_rbf_memory::<D>(complex.len(), params)?;
+    Ok(constraints)
+}
+
+/// The field of `solution` for `params.transfer`, with the RBF factored when that is the
+/// transfer (checked against the memory budget again: refinement may have added cells).
+pub(crate) fn field<const D: usize>(
+    solution: &Solution<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<SavedField<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    check_rbf_memory::<D>(solution.complex.len(), params)?;
+    let field = Field::from_solution(solution);
+    observer.stage("factoring", 0);
+    let rbf = match params.transfer {
+        Transfer::Rbf => Some(Rbf::new(&field)?),
+        _ => None,
+    };
+    observer.finish();
+    Ok(SavedField::new(field, params.transfer, rbf))
+}
+
+/// [`crate::memory::check`] of the dense RBF of `cells` cells, when that is the transfer:
+/// checked before the solve, and again after refinement, so that neither ends in an abort.
+pub(crate) fn check_rbf_memory<const D: usize>(cells: usize, params: &DeformParams) -> Result<()> {
+    if params.transfer != Transfer::Rbf {
+        return Ok(());
+    }
+    crate::memory::check(
+        &format!("the RBF transfer of {cells} cells"),
+        crate::memory::rbf_bytes(cells, D),
+        crate::memory::limit(params.build.memory_limit),
+        "use --transfer pu (the default) or blend, or a larger --cell-size (or fewer --cells)",
+    )
+}
+
+/// The warnings of a solve, in order: the cell construction's, the constraints', the solver's.
+pub(crate) fn warnings<const D: usize>(
+    build: &BuildInfo,
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    solver: &SolverInfo,
+) -> Vec<String> {
+    let mut out = build_warnings(build, complex);
+    out.extend_from_slice(&constraints.warnings);
+    out.extend(solver.warnings());
+    out
+}
+
+/// The warnings of the cell construction.
+pub(crate) fn build_warnings<const D: usize>(
+    build: &BuildInfo,
+    complex: &CellComplex<D>,
+) -> Vec<String> {
+    let mut out = Vec::new();
+    if build.glued_cells > 0 {
+        let size = complex.grid.finest_size();
+        let decimals = (5 - size.log10().floor() as i32).max(0) as usize;
+        out.push(format!(
+            "{} cells hold parts of the mesh that are not connected but lie closer than the finest \
+             cell size ({size:.decimals$}): the parts move together there; a smaller --cell-size \
+             keeps them apart",
+            build.glued_cells,
+        ));
+    }
+    out
+}
+
+/// The control points of `spec` in `solution` as `warp` moves them, with the leave-one-out
+/// check when `params` asks for it, and the seconds that check took (a stage of its own: one
+/// solve per control point).
+pub(crate) fn control_results<const D: usize>(
+    spec: &EditSpec<D>,
+    solution: &Solution<D>,
+    warp: &impl Warp<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(Vec<ControlPoint>, f64)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut got = crate::control::from_points(solution);
+    apply(warp, &solution.constraints.origin, &mut got);
+    let mut points = crate::control::control_points(spec, solution, &got);
+    if !params.check_control_points {
+        return Ok((points, 0.0));
+    }
+    let start = Instant::now();
+    crate::control::leave_one_out(spec, solution, &params.solve, &mut points, observer)?;
+    Ok((points, start.elapsed().as_secs_f64()))
+}
