@@ -6,7 +6,7 @@
 //! 2. Occupancy at the finest level: the cell of every sample point, and every cell a triangle
 //!    overlaps (exact test, so large triangles crossing many cells leave no gaps). Each
 //!    triangle visits only the closed cells touching its bounding box, in parallel; a BVH over
-//!    the triangles (issue 4 suggested `obvhs`) would find the same candidate cells and adds
+//!    the triangles would find the same candidate cells and adds
 //!    nothing here: one cell for a small triangle, and a large one must test its box anyway.
 //! 3. Inside/outside of the empty space, tiled by the maximal empty cells of the tree ("blocks":
 //!    every unoccupied cell of level 0, and every unoccupied child of an occupied cell): the
@@ -36,6 +36,8 @@ use std::time::Instant;
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 
+use super::morton::{coords, morton};
+use super::size::{finest, sized};
 use super::winding::Winding;
 use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
 use crate::error::{Error, Result};
@@ -73,7 +75,7 @@ pub struct BuildParams {
     /// Inside classification of empty cells. Default: winding numbers for meshes, flood fill
     /// for point clouds.
     pub inside: Inside,
-    /// About this many cells: the finest cell size is searched for ([`cell_size_for`]),
+    /// About this many cells: the finest cell size is searched for ([`super::cell_size_for`]),
     /// overriding `cell_size`.
     pub target_cells: Option<usize>,
     /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
@@ -137,145 +139,11 @@ pub fn build<const D: usize>(
     params: &BuildParams,
 ) -> Result<(CellComplex<D>, BuildInfo)> {
     let (lo, hi) = bounds(points)?;
-    let sized;
-    let params = match params.target_cells {
-        Some(n) => {
-            sized = BuildParams {
-                cell_size: Some(cell_size_for(points, triangles, params, n)?),
-                target_cells: None,
-                ..*params
-            };
-            &sized
-        }
-        None => params,
-    };
-    let mut occupancy = Occupancy::new(&lo, &hi, params)?;
+    let (params, _) = sized(params, || Ok((points.into(), triangles)))?;
+    let mut occupancy = Occupancy::new(&lo, &hi, &params)?;
     occupancy.add_points(points)?;
     occupancy.add_triangles(points, triangles)?;
     occupancy.finish()
-}
-
-/// The finest cell size for which the complex of `points` (and `triangles`) has about `target`
-/// cells (within 2 %, where the counts allow), between 1/4096 and 1/2 of the longest extent.
-/// Streaming callers pass a decimated proxy of the samples.
-///
-/// Each try is a whole build, so few are made: the count of a surface's cells goes about as
-/// `size⁻²`, so the search steps by the secant of `log count` against `log size` through the
-/// last two tries, kept inside the bracket of sizes known to give too many and too few cells
-/// (and halving it in log space where the secant would leave it). On the dragon this takes 4–6
-/// builds where the former bisection took 20.
-///
-/// Issue 15 proposed counting every candidate level from one pyramid instead. A pyramid counts
-/// the cells at sizes `2^k s₀` only, a factor of about 4 in count apart, while `--cells N` asks
-/// for N: the sizes between levels need the builds anyway. What made `--cells` slow was
-/// building each try from every sample; streaming callers now search on a decimated proxy, and
-/// builds are sparse (memory ∝ cells). Measured (release, 2 cores): a 10M-point terrain with
-/// `--cells 20000`, sizing and voxelizing 0.41 s of a 5.4 s deform (an 11M-point scan took
-/// 92 s of 95 before); the 480k-vertex tube with `--cells 5500`, 0.20 s.
-pub fn cell_size_for<const D: usize>(
-    points: &[Vect<D>],
-    triangles: &[[u32; 3]],
-    params: &BuildParams,
-    target: usize,
-) -> Result<f64> {
-    check_target(target, params.memory_limit)?;
-    let (lo, hi) = bounds(points)?;
-    let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
-    // `small` gives too many cells (or fails), `large` at most `target`.
-    let (mut small, mut large) = (longest / 4096.0, longest / 2.0);
-    // Every try costs what its occupied cells cost, whatever the extent: the count of a
-    // sparse shape (four samples, a scan flattened onto a plane) may never reach the target,
-    // and the search ends at the finest size it tries. The final complex may then have fewer
-    // cells than asked; its count is reported.
-    let count = |size: f64| -> Result<Option<usize>> {
-        let at = BuildParams {
-            cell_size: Some(size),
-            target_cells: None,
-            ..*params
-        };
-        match build(points, triangles, &at) {
-            Ok((complex, _)) => Ok(Some(complex.len())),
-            Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => Ok(None),
-            Err(e) => Err(e),
-        }
-    };
-    let goal = (target.max(1) as f64).ln();
-    let mut last: Option<(f64, f64)> = None; // (ln size, ln count) of the previous try
-    // The try closest to the target (|ln(count / target)|, size): the count need not fall as
-    // the size grows. On a soup the inside cells come and go with the grid's alignment
-    // (0.00946 gave 1.07M cells, 0.00947 gave 653k), and a search that kept narrowing the
-    // bracket to 0.2 % built 12 complexes of a million cells (58 s) to return the worse end.
-    let mut best: Option<(f64, f64)> = None;
-    let mut size = longest / 32.0;
-    // At most 6 builds (24 before): the search reaches 2 % in 4–6 where the count falls
-    // steadily with the size, and where it does not, more builds only cost time (the soup
-    // above: 12 builds, 58 s; now 6, the best of them).
-    for _ in 0..6 {
-        // 1 % in size is about 2 % in count, the tolerance.
-        if large / small < 1.01 {
-            break;
-        }
-        let got = count(size)?;
-        if let Some(c) = got {
-            let miss = (c.max(1) as f64).ln() - goal;
-            if best.is_none_or(|(b, _)| miss.abs() < b) {
-                best = Some((miss.abs(), size));
-            }
-        }
-        let ok = got.is_some_and(|c| c <= target);
-        if ok {
-            large = size
-        } else {
-            small = size
-        }
-        if let Some(c) = got
-            && (c as f64 / target as f64 - 1.0).abs() <= 0.02
-        {
-            return Ok(size);
-        }
-        let now = got.map(|c| (size.ln(), (c.max(1) as f64).ln()));
-        let slope = match (last, now) {
-            (Some((s0, c0)), Some((s1, c1))) if (s1 - s0).abs() > 1e-12 && c1 != c0 => {
-                ((c1 - c0) / (s1 - s0)).min(-0.5)
-            }
-            _ => -2.0,
-        };
-        let next = match now {
-            Some((s1, c1)) => (s1 + (goal - c1) / slope).exp(),
-            None => (small * large).sqrt(),
-        };
-        size = if next > small && next < large {
-            next
-        } else {
-            (small * large).sqrt()
-        };
-        if now.is_some() {
-            last = now;
-        }
-    }
-    Ok(best.map_or(large, |(_, size)| size))
-}
-
-/// Bytes a complex needs per cell while it is built, its adjacency found and its cells written
-/// (550 B measured by `rigidcells cells` at 800k cells, rounded up): the least a `--cells N`
-/// run needs before any solve.
-pub(crate) const BYTES_PER_TARGET_CELL: u64 = 1 << 10;
-
-/// Refuses `--cells 0`, and a `--cells N` whose complex cannot fit the memory budget (checked
-/// before any try is built: a target of 2⁶⁴−1 had the search build ever finer trial grids for
-/// minutes until an allocation failed).
-pub(crate) fn check_target(target: usize, memory_limit: Option<u64>) -> Result<()> {
-    if target == 0 {
-        return Err(Error::Param(
-            "--cells 0 asks for no cells; ask for at least 1".into(),
-        ));
-    }
-    crate::memory::check(
-        &format!("a complex of {target} cells"),
-        target as f64 * BYTES_PER_TARGET_CELL as f64,
-        crate::memory::limit(memory_limit),
-        "ask for fewer --cells (or raise --memory)",
-    )
 }
 
 /// The bounding box of `points`; an error for no points or a coordinate that is not finite.
@@ -584,19 +452,7 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     let extent = hi - lo;
     let longest = extent.max();
     let shortest = extent.min();
-    let size = match params.cell_size {
-        // Past 1e15 the cells' corners leave f64 no digits for the shape (a fuzzed
-        // `--min-cell-size 1e300` ended in an indefinite Gauss-Newton system).
-        Some(s) if s.is_finite() && s > 0.0 && s <= crate::spec::LARGEST => s,
-        Some(s) => {
-            return Err(Error::Param(format!(
-                "cell size {s:?} must be positive and at most {:e}",
-                crate::spec::LARGEST
-            )));
-        }
-        None if longest > 0.0 => longest / 32.0,
-        None => 1.0,
-    };
+    let size = finest(params.cell_size, longest)?;
     let levels = match params.max_level {
         Some(l) if l <= 20 => l,
         Some(l) => return Err(Error::Param(format!("max level {l} is above 20"))),
@@ -905,96 +761,9 @@ fn classify_flood<const D: usize>(
         .collect()
 }
 
-/// The Morton code of a cell's coordinates: their bits interleaved (axis 0 lowest), so that a
-/// parent's code is its child's shifted right by `D` bits.
-#[inline]
-fn morton<const D: usize>(c: &[i64; D]) -> u64 {
-    let masks = spread_of::<D>();
-    c.iter()
-        .enumerate()
-        .fold(0, |code, (a, &v)| code | spread(v as u64, masks) << a)
-}
-
-/// The coordinates of a Morton code ([`morton`]).
-#[inline]
-fn coords<const D: usize>(code: u64) -> [i64; D] {
-    let masks = spread_of::<D>();
-    std::array::from_fn(|a| compact(code >> a, masks) as i64)
-}
-
-/// The spreading masks of dimension `D`.
-#[inline]
-fn spread_of<const D: usize>() -> &'static Spread {
-    if D == 3 { &SPREAD3 } else { &SPREAD2 }
-}
-
-/// The masks spreading a coordinate's bits apart: the mask of the coordinate's own bits, then
-/// each step's shift and the mask after it (3D: 21 bits to every third bit; 2D: 32 bits to
-/// every other bit).
-type Spread = (u64, [(u32, u64); 5]);
-const SPREAD3: Spread = (
-    0x1f_ffff,
-    [
-        (32, 0x001f_0000_0000_ffff),
-        (16, 0x001f_0000_ff00_00ff),
-        (8, 0x100f_00f0_0f00_f00f),
-        (4, 0x10c3_0c30_c30c_30c3),
-        (2, 0x1249_2492_4924_9249),
-    ],
-);
-const SPREAD2: Spread = (
-    0xffff_ffff,
-    [
-        (16, 0x0000_ffff_0000_ffff),
-        (8, 0x00ff_00ff_00ff_00ff),
-        (4, 0x0f0f_0f0f_0f0f_0f0f),
-        (2, 0x3333_3333_3333_3333),
-        (1, 0x5555_5555_5555_5555),
-    ],
-);
-
-/// The low bits of `x` spread apart by `masks`.
-#[inline]
-fn spread(x: u64, (own, steps): &Spread) -> u64 {
-    steps
-        .iter()
-        .fold(x & own, |x, &(shift, mask)| (x | x << shift) & mask)
-}
-
-/// The inverse of [`spread`]: the steps undone in reverse.
-#[inline]
-fn compact(x: u64, (own, steps): &Spread) -> u64 {
-    let mut x = x & steps[steps.len() - 1].1;
-    for i in (0..steps.len()).rev() {
-        let mask = if i == 0 { *own } else { steps[i - 1].1 };
-        x = (x | x >> steps[i].0) & mask;
-    }
-    x
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn morton_codes_round_trip_and_nest() {
-        for c in [
-            [0i64, 0, 0],
-            [1, 2, 3],
-            [(1 << 21) - 1, 5, (1 << 20) + 7],
-            [9, 0, 1 << 20],
-        ] {
-            let code = morton(&c);
-            assert_eq!(coords::<3>(code), c);
-            let parent = c.map(|v| v >> 1);
-            assert_eq!(code >> 3, morton(&parent));
-        }
-        for c in [[0i64, 0], [(1 << 31) - 1, 12345], [7, (1 << 30) + 3]] {
-            let code = morton(&c);
-            assert_eq!(coords::<2>(code), c);
-            assert_eq!(code >> 2, morton(&c.map(|v| v >> 1)));
-        }
-    }
 
     /// The flood fill over maximal empty blocks classifies every finest cell as a flood over a
     /// dense grid would: random walls with holes and enclosed pockets, in 2D and 3D.

@@ -1,5 +1,5 @@
 //! The cell complex: an adaptive octree (quadtree in 2D) of rigid cells embedding the shape
-//! (paper §5, DESIGN §2).
+//! (paper §5; docs/ARCHITECTURE.md, *Cells*).
 //!
 //! - A cell is a [`CellKey`] `(level, integer coordinates)` on a [`Grid`]: level 0 is a coarse
 //!   regular grid of cells of size `cell_size · 2^max_level`; level `max_level` cells have the
@@ -19,14 +19,17 @@
 mod adjacency;
 mod build;
 mod export;
+mod morton;
+mod size;
 #[cfg(test)]
 pub(crate) use export::BOX_QUADS;
 mod tri_box;
 mod winding;
 
-pub(crate) use build::check_target;
-pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build, cell_size_for};
+pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build};
 pub use export::{Pose, write_cells_ply};
+pub use size::{DEFAULT_DIVISIONS, cell_size_for};
+pub(crate) use size::{check_size, shortfall, sized};
 pub use tri_box::triangle_box_overlap;
 pub use winding::Winding;
 

@@ -12,7 +12,7 @@
 //! area-weighted centroid `p̃` and the radius `r` of the ball around `p̃` holding its triangles.
 //! Seen from `q` with `|q − p̃| > β r`, the node's triangles contribute the dipole term
 //! `N · (p̃ − q) / (4π |p̃ − q|³)`; nearer nodes are opened and leaves are summed exactly. With
-//! β = 2 the error is a few hundredths at worst (CRATES.md §5 measured 0.094 on a 1M-triangle
+//! β = 2 the error is a few hundredths at worst (0.094 measured on a 1M-triangle
 //! sphere), far from the ½ threshold for points more than a cell away from the surface, which
 //! is where [`super::build`] asks.
 //!

@@ -1,4 +1,4 @@
-//! Maps the edit spec onto the cells (DESIGN §4): "surface constraints mapped to the cells that
+//! Maps the edit spec onto the cells (paper §4): "surface constraints mapped to the cells that
 //! intersect them".
 //!
 //! A cell gets a region's constraint when it holds a sample the region selects or, for the

@@ -1,4 +1,4 @@
-//! The elastic glue energy between rigid cells (paper eq. 1–2, DESIGN §3).
+//! The elastic glue energy between rigid cells (paper eq. 1–2).
 //!
 //! For face neighbors `i, j` with rigid motions `T_i(x) = R_i (x − c_i) + p_i`:
 //!
@@ -85,7 +85,7 @@ pub fn glue_energy<const D: usize>(
     parts.iter().sum()
 }
 
-/// The strain of every cell (DESIGN §5): `max_j sqrt(E_ij) / (h_i + h_j)` over its face
+/// The strain of every cell (the paper's refinement criterion, §5): `max_j sqrt(E_ij) / (h_i + h_j)` over its face
 /// neighbors `j`; dimensionless, zero for a rigid motion of the whole complex.
 pub fn cell_strain<const D: usize>(complex: &CellComplex<D>, motions: &[Motion<D>]) -> Vec<f64> {
     let mut strain = vec![0.0f64; complex.len()];

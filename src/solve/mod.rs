@@ -1,4 +1,4 @@
-//! Minimizing the glue energy under the user's constraints (paper §4–5, DESIGN §5).
+//! Minimizing the glue energy under the user's constraints (paper §4–5).
 //!
 //! [`solve`] runs load steps: each handle's transform (and each pin's and target's destination)
 //! is interpolated from the identity in steps of at most [`SolveParams::max_step_degrees`] of
@@ -62,10 +62,12 @@
 //! decrease the energy ends the load step. With `refine_strain`, cells whose strain exceeds the threshold are split after the last
 //! load step (children inherit motion and constraint) and the solve continues.
 
+mod blocks;
 pub mod constraints;
 pub mod energy;
 mod multilevel;
 mod positions;
+mod session;
 mod sight;
 mod system;
 pub mod turns;
@@ -77,6 +79,7 @@ pub use constraints::{
     sample_cell, seen,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
+pub use session::Session;
 pub use sight::Sight;
 
 use crate::cells::CellComplex;
@@ -161,7 +164,8 @@ impl Default for SolveParams {
 }
 
 /// Refinement stops before the complex grows past this many times the cells it started from
-/// (issue 16: a tiny `--refine-strain` split every cell, round after round, for minutes).
+/// (without a bound, a tiny `--refine-strain` splits every cell, round after round, for
+/// minutes).
 pub const REFINE_GROWTH: usize = 8;
 
 /// What [`solve`] did.
@@ -547,8 +551,8 @@ pub const ADAPTIVE_LEVELS: u8 = 3;
 /// An adaptive solve splits the cells whose strain exceeds this fraction of the largest.
 pub const ADAPTIVE_FRACTION: f64 = 0.25;
 
-/// The parameters of an adaptive solve down to cells of `min_cell_size` (issue 15 item 4, the
-/// paper's §5 at scale). The complex is built at `min_cell_size` and the constraints resolved
+/// The parameters of an adaptive solve down to cells of `min_cell_size` (the paper's §5 at
+/// scale). The complex is built at `min_cell_size` and the constraints resolved
 /// there, so every region ends where it ends on uniform cells of that size; then sibling cells
 /// of one role are merged up to [`ADAPTIVE_LEVELS`] times ([`coarsen`]: cells along a
 /// region's border stay small), the coarse complex is solved, and the cells whose strain
@@ -560,13 +564,7 @@ pub fn adaptive(
     build: &crate::cells::BuildParams,
     solve: &SolveParams,
 ) -> Result<(crate::cells::BuildParams, SolveParams)> {
-    if !(min_cell_size.is_finite() && min_cell_size > 0.0 && min_cell_size <= crate::spec::LARGEST)
-    {
-        return Err(Error::Param(format!(
-            "minimum cell size {min_cell_size:?} must be positive and at most {:e}",
-            crate::spec::LARGEST
-        )));
-    }
+    crate::cells::check_size(min_cell_size, "minimum cell size")?;
     let build = crate::cells::BuildParams {
         cell_size: Some(min_cell_size),
         target_cells: None,
@@ -586,138 +584,6 @@ pub fn adaptive(
 const INTERMEDIATE_TOLERANCE: f64 = 1e-3;
 /// Iterations at most of a load step before the last.
 const INTERMEDIATE_ITERATIONS: usize = 3;
-
-/// An editing session on fixed cells: the paper's interactive case. The first solve runs from
-/// rest with load steps, as [`solve`] does (without refinement); each [`Session::update`] then
-/// starts Gauss-Newton from the current motions, without load steps, and reuses the sparse
-/// system's symbolic factorization when only the handles, pins and targets moved. A handle
-/// dragged a little converges in a few iterations instead of a solve from rest.
-pub struct Session<const D: usize> {
-    complex: CellComplex<D>,
-    constraints: Constraints<D>,
-    system: System<D>,
-    motions: Vec<Motion<D>>,
-    params: SolveParams,
-}
-
-impl<const D: usize> Session<D>
-where
-    Dim<D>: Rigid<D>,
-{
-    /// Solves `constraints` on `complex` from rest (`params.refine_strain` is not used: a
-    /// session's cells stay those of `complex`).
-    pub fn new(
-        complex: CellComplex<D>,
-        constraints: Constraints<D>,
-        params: &SolveParams,
-        observer: &dyn Observer,
-    ) -> Result<(Self, SolverInfo)> {
-        let start = Instant::now();
-        let (system, motions, mut info) = from_rest(&complex, &constraints, params, observer)?;
-        observer.finish();
-        info.turns = TurnGauge::new(&complex).turns(&constraints, &motions);
-        let session = Self {
-            complex,
-            constraints,
-            system,
-            motions,
-            params: *params,
-        };
-        let info = session.finished(info, start);
-        Ok((session, info))
-    }
-
-    /// Moves to `constraints` — the same edit with its handles, pins or targets moved, resolved
-    /// on this session's cells — starting from the current motions. The symbolic factorization
-    /// is kept unless the cells' roles, stiffness or targets' cells and weights changed.
-    pub fn update(&mut self, constraints: Constraints<D>) -> Result<SolverInfo> {
-        self.update_with(constraints, self.params.max_iterations)
-    }
-
-    /// [`Session::update`] with at most `max_iterations` Gauss-Newton iterations: a drag takes
-    /// one per pose and goes on from there with the next (the info says whether it converged).
-    pub fn update_with(
-        &mut self,
-        constraints: Constraints<D>,
-        max_iterations: usize,
-    ) -> Result<SolverInfo> {
-        if constraints.roles.len() != self.complex.len() {
-            return Err(Error::Solver(format!(
-                "the constraints are for {} cells, the session has {}",
-                constraints.roles.len(),
-                self.complex.len()
-            )));
-        }
-        let start = Instant::now();
-        let mut info = SolverInfo {
-            cells_initial: self.complex.len(),
-            load_steps: 1,
-            ..Default::default()
-        };
-        let same_structure = constraints.roles == self.constraints.roles
-            && constraints.stiffness == self.constraints.stiffness
-            && constraints.targets.len() == self.constraints.targets.len()
-            && constraints
-                .targets
-                .iter()
-                .zip(&self.constraints.targets)
-                .all(|(a, b)| a.cell == b.cell && a.weight == b.weight && a.mask == b.mask);
-        if !same_structure {
-            self.system = timed(&mut info.seconds_symbolic, || {
-                System::new(&self.complex, &constraints, &self.params, CELLS_ADVICE)
-            })?;
-        }
-        self.constraints = constraints;
-        let params = SolveParams {
-            max_iterations,
-            ..self.params
-        };
-        let it = minimize_with(
-            &mut self.system,
-            &self.complex,
-            &self.constraints,
-            &mut self.motions,
-            1.0,
-            &params,
-            &mut info,
-            &crate::progress::Silent,
-        )?;
-        info.iterations_per_step.push(it);
-        Ok(self.finished(info, start))
-    }
-
-    fn finished(&self, mut info: SolverInfo, start: Instant) -> SolverInfo {
-        info.cells_final = self.complex.len();
-        info.unknowns = self.system.unknowns();
-        info.seconds = start.elapsed().as_secs_f64();
-        info
-    }
-
-    /// The cells.
-    pub fn complex(&self) -> &CellComplex<D> {
-        &self.complex
-    }
-
-    /// The constraints of the last solve.
-    pub fn constraints(&self) -> &Constraints<D> {
-        &self.constraints
-    }
-
-    /// The current motions, one per cell (local frame).
-    pub fn motions(&self) -> &[Motion<D>] {
-        &self.motions
-    }
-
-    /// The session's state as a [`Solution`] with `info`.
-    pub fn solution(&self, info: SolverInfo) -> Solution<D> {
-        Solution {
-            complex: self.complex.clone(),
-            motions: self.motions.clone(),
-            constraints: self.constraints.clone(),
-            info,
-        }
-    }
-}
 
 /// Runs Gauss-Newton at load fraction `f` from the given `motions` (prescribed cells are set to
 /// their prescribed motions first). Returns the accepted iterations. This is the whole solver

@@ -1,4 +1,4 @@
-//! The Gauss-Newton normal equations on rigid motions (paper §4, DESIGN §5).
+//! The Gauss-Newton normal equations on rigid motions (paper §4).
 //!
 //! Each cell with freedom is linearized by a linear velocity `v_i` and an angular velocity `ω_i`
 //! about its rotation center `z_i` (its rest center `c_i` when free, the pinned point when pinned):
@@ -36,9 +36,10 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
+use super::blocks::BlockMatrix;
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
-use super::multilevel::{BlockMatrix, Hierarchy, Nodes};
+use super::multilevel::{Hierarchy, Nodes};
 use super::positions::Positions;
 use super::{Method, SolveParams};
 use crate::cells::CellComplex;
