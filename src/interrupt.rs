@@ -1,4 +1,4 @@
-//! Interruption and faults (issue 16). A dependency that panics on hostile bytes is called
+//! Interruption and faults. A dependency that panics on hostile bytes is called
 //! through [`guarded`]: its panic becomes a format error naming the file, and the panic hook
 //! installed by [`remove_temporaries_on_signals`] stays quiet about it. A closed pipe on
 //! standard output (`rigidcells info f.las | head`) ends the process as it ends other Unix

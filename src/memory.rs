@@ -1,7 +1,6 @@
 //! The memory budget: everything that grows with the cells, the extent or the samples is
 //! estimated before it is allocated, and a run whose estimate exceeds the budget stops with
-//! [`Error::Memory`], naming the parameter to change, instead of ending in an allocation abort
-//! (issue 15).
+//! [`Error::Memory`], naming the parameter to change, instead of ending in an allocation abort.
 //!
 //! The budget is `--memory-limit` (library: the `memory_limit` of the parameters), by default
 //! three quarters of the machine's physical memory, or of the control group's limit where that

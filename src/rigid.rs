@@ -253,7 +253,7 @@ impl<const D: usize> Affine<D> {
         self.linear * x + self.translation
     }
 
-    /// The rigid motion a cell with rest center `center` follows under this map (DESIGN §4):
+    /// The rigid motion a cell with rest center `center` follows under this map (paper §4):
     /// its center goes to `A(c)` and it turns by the rotation nearest to `L`.
     pub fn cell_motion(&self, center: &Vect<D>) -> Motion<D>
     where

@@ -1,4 +1,4 @@
-//! Control points a surveyor can use (issue 17): CSV/TXT formats, errors that name the CSV's
+//! Control points a surveyor can use: CSV/TXT formats, errors that name the CSV's
 //! line and column, 2D points, snapping, the per-point table, RMSE and the leave-one-out check —
 //! run through the CLI on a real airborne scan.
 

@@ -1,4 +1,4 @@
-//! COPC out (issue 17): `-o out.copc.laz` writes a valid COPC — LAS 1.4, the info VLR first,
+//! COPC out: `-o out.copc.laz` writes a valid COPC — LAS 1.4, the info VLR first,
 //! the hierarchy EVLR, one LAZ chunk per octree node, the CRS kept — holding exactly the
 //! records of the plain LAZ output, read back by our reader and by laspy's `CopcReader`.
 

@@ -1,4 +1,4 @@
-//! Right answers (issue 14): fixed samples keep their bytes and handle samples follow their
+//! Right answers: fixed samples keep their bytes and handle samples follow their
 //! handle with every transfer, whole turns turn, a field refuses samples it does not reach, and
 //! a saved field remembers its transfer.
 

@@ -405,7 +405,7 @@ fn saved_field_applied_to_tiles_equals_deform_of_the_whole() {
     assert!(mean > 10.0, "east end rose by {mean}");
 }
 
-/// Issue 18 item 2: `solve` over four tiles cut from one scan builds the field `deform` builds
+/// `solve` over four tiles cut from one scan builds the field `deform` builds
 /// for the merged file; `apply` of it to each tile gives, record for record, what `deform`
 /// gives on the merged file.
 #[test]

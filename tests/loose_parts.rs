@@ -1,4 +1,4 @@
-//! Loose parts ride along (issue 17): the demo soup's spikes, which no constraint reaches,
+//! Loose parts ride along: the demo soup's spikes, which no constraint reaches,
 //! follow the bar rigidly instead of floating where it was; `--loose-parts rest` keeps them.
 
 mod common;

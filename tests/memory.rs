@@ -1,4 +1,4 @@
-//! The memory budget (issue 15): what would not fit is refused before it is allocated, with an
+//! The memory budget: what would not fit is refused before it is allocated, with an
 //! error naming the parameter to change, never an allocation abort.
 
 mod common;
@@ -65,7 +65,7 @@ fn a_tiny_cell_size_on_a_long_thin_input_is_refused_at_once() {
     );
 }
 
-/// Issue 15: the cells' memory goes with the occupied cells, not with the bounding box: the
+/// The cells' memory goes with the occupied cells, not with the bounding box: the
 /// line at 0.5 (a dense grid of 1024³ finest cells before) and at 0.01 runs in a 64 MB budget.
 #[test]
 fn a_long_thin_input_costs_memory_by_its_cells() {

@@ -1,4 +1,4 @@
-//! Pictures that show the result (issue 17): the vertical axis from the file, zoom, the axis
+//! Pictures that show the result: the vertical axis from the file, zoom, the axis
 //! triad and scale bar, previews of meshes as triangles with pins, targets and a strain legend
 //! in one framing, and `render` in a `cells` PLY's colors.
 

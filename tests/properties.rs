@@ -1,4 +1,4 @@
-//! Issue 16: property tests of the two parsers that read what a user (or an attacker) hands
+//! Property tests of the two parsers that read what a user (or an attacker) hands
 //! over whole: the edit-spec parser and the field-file loader. Neither may panic; the spec
 //! parser's errors are the spec's (exit 4) and what it accepts is finite; the loader's errors
 //! are format errors naming the file (exit 3), and what it accepts builds a deformer.

@@ -1,4 +1,4 @@
-//! The partition-of-unity RBF (issue 15): it interpolates the centers, reproduces one rigid
+//! The partition-of-unity RBF: it interpolates the centers, reproduces one rigid
 //! motion exactly, agrees with the dense RBF where that is feasible, and is smooth across the
 //! borders of its patches.
 
@@ -182,7 +182,7 @@ fn sparse_cells_far_apart_are_fitted() {
     assert!(worst < 1e-8, "a center is {worst} off");
 }
 
-/// Issue 15: fitted on demand, the PU fits only the patches that samples reach (a tile of the
+/// Fitted on demand, the PU fits only the patches that samples reach (a tile of the
 /// field), with the bits of the PU fitted whole.
 #[test]
 fn fits_on_demand_only_the_patches_a_tile_reaches() {

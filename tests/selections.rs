@@ -1,4 +1,4 @@
-//! Selections that combine (issue 17): classification AND a polygon, polygons from GeoJSON,
+//! Selections that combine: classification AND a polygon, polygons from GeoJSON,
 //! `invert` — run through the CLI on a real airborne scan, checked sample by sample.
 
 mod common;

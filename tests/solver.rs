@@ -334,7 +334,7 @@ translate = [0.0, 0.0, {lift}]
     assert!(worst < 0.01, "cells differ by {worst}");
 }
 
-/// Issue 15: the multilevel path (conjugate gradients with the rigid-motion multigrid) reaches
+/// The multilevel path (conjugate gradients with the rigid-motion multigrid) reaches
 /// the direct factorization's minimum, on a bent bar with a pin (3D) and on a 2D disk with a
 /// turned handle, both large enough for a coarse level.
 #[test]
@@ -389,7 +389,7 @@ where
     );
 }
 
-/// Issue 15: Newton's curvature term (the default) reaches Gauss-Newton's minimum, or a lower
+/// Newton's curvature term (the default) reaches Gauss-Newton's minimum, or a lower
 /// one, in fewer iterations on a bar bent by 90°, where the residuals at the minimum are large
 /// and Gauss-Newton converges only linearly.
 #[test]
@@ -431,7 +431,7 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
     );
 }
 
-/// Issue 15 item 4: merging sibling cells of one role keeps every fine cell's role (a region
+/// Merging sibling cells of one role keeps every fine cell's role (a region
 /// ends where it ended), and the adaptive solve splits the strained cells again, meeting the
 /// handle exactly with fewer cells than the uniform complex.
 #[test]

@@ -341,7 +341,7 @@ pub fn end_lift_spec(lo: [f64; 3], hi: [f64; 3], end: f64, lift: f64, degrees: f
 }
 
 /// A closed thick-walled tube along x: length `length`, outer radius `outer`, inner radius
-/// `inner`, `around` vertices per ring and `along` segments, outward oriented (the issue 15
+/// `inner`, `around` vertices per ring and `along` segments, outward oriented (the
 /// benchmark's 480k-vertex tube is `tube(10.0, 1.0, 0.8, 400, 599)`).
 pub fn tube(length: f64, outer: f64, inner: f64, around: usize, along: usize) -> Mesh {
     let (n, m) = (around.max(3), along.max(1));
@@ -493,7 +493,7 @@ impl Terrain {
         Self::over(n, [2000.0, 2000.0], |x, y, _| terrain_height(x, y))
     }
 
-    /// The 1 km × 200 m road corridor of [`corridor_height`], `n` samples (issue 15's scan).
+    /// The 1 km × 200 m road corridor of [`corridor_height`], `n` samples (the scale benchmark's scan).
     pub fn corridor(n: u64) -> Self {
         Self::over(n, [1000.0, 200.0], corridor_height)
     }

@@ -1,4 +1,4 @@
-//! Exact constraints and the field's domain (DESIGN §6): the layer every transfer is applied
+//! Exact constraints and the field's domain (docs/ARCHITECTURE.md, *Invariants*): the layer every transfer is applied
 //! through.
 //!
 //! **Constraints are exact, and the map stays smooth.** The blend and the RBF interpolate the

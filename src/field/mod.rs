@@ -1,4 +1,4 @@
-//! Transfer of the cells' rigid motions to the samples (paper §6, DESIGN §6).
+//! Transfer of the cells' rigid motions to the samples (paper §6; docs/ARCHITECTURE.md, *Transfer*).
 //!
 //! A [`Field`] is the solved state that defines the space warp: the cells' rest centers and
 //! rigid motions in the local frame. Two transfers turn it into a map of space:
@@ -115,7 +115,7 @@ pub trait Warp<const D: usize>: Sync {
     /// Where the local point `x` goes.
     fn warp(&self, x: &Vect<D>) -> Vect<D>;
 
-    /// The normal `n` at the local point `x` after the warp (DESIGN §6), with `n`'s length.
+    /// The normal `n` at the local point `x` after the warp (the transpose of its inverse Jacobian), with `n`'s length.
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D>;
 
     /// Both [`Warp::warp`] and [`Warp::warp_normal`] at `x`; transfers that find neighbors

@@ -1,7 +1,7 @@
 //! Exact nearest cell centers for the blend, through tiles.
 //!
-//! A generic kd-tree k-nearest query measured only 1.1–1.4 million queries/s on 2 cores here
-//! (issue 5), which made the blend, not the file I/O, the bottleneck of streaming. The cells lie
+//! A generic kd-tree k-nearest query measured only 1.1–1.4 million queries/s on 2 cores here,
+//! which would make the blend, not the file I/O, the bottleneck of streaming. The cells lie
 //! on an octree, so space is cut into a regular grid of **tiles** (edge: the smallest cell's,
 //! doubled until the grid has at most [`MAX_TILES`] tiles), and each tile gets, once, the short
 //! list of the only centers that can be among the [`NEAR`] nearest of any point inside it. A

@@ -1,4 +1,4 @@
-//! The partition-of-unity RBF (issue 15): the triharmonic RBF of [`super::Rbf`] fitted on small
+//! The partition-of-unity RBF: the triharmonic RBF of [`super::Rbf`] fitted on small
 //! overlapping patches and blended by C² weights, so that its fit is O(n) and its evaluation
 //! O(patch size) per sample, whatever the number of cells.
 //!

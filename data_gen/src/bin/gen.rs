@@ -1,8 +1,8 @@
 //! `cargo run --release -p data_gen --bin gen -- terrain N OUT.las|OUT.laz|OUT.ply`: a synthetic
 //! scan of N points (terrain, buildings, a bridge) for benchmarks and memory checks.
 //! `gen corridor N OUT.las|OUT.laz`: N points of a 1 km × 200 m road corridor, z over ~50 m
-//! (issue 15's large-extent scan).
-//! `gen tube OUT.ply`: the closed 480k-vertex tube of issue 15's `--cells 5500` benchmark
+//! (the scale benchmark's large-extent scan).
+//! `gen tube OUT.ply`: the closed 480k-vertex tube of the `--cells 5500` benchmark
 //! (10 × 2 × 2, wall 0.2; binary PLY).
 
 fn main() {

@@ -1,4 +1,4 @@
-//! The editor's figures (issue 19): how long `rigidcells edit` takes to be ready on a file
+//! The editor's figures: how long `rigidcells edit` takes to be ready on a file
 //! (proxy, cells, blend weights, served data), how many warm solver updates per second a drag
 //! gets, and the round trip of one pose through the server's WebSocket to the motions back.
 //! The page's own frame time is measured in the browser (`tests/browser/editor_test.py`).

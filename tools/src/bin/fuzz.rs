@@ -1,4 +1,4 @@
-//! A mutation fuzzer for the command line (issue 16): no file, edit spec or parameter may make
+//! A mutation fuzzer for the command line: no file, edit spec or parameter may make
 //! `rigidcells` panic, abort, hang, leave a file behind, change its input, write NaN or exit
 //! with a code other than the documented one.
 //!

@@ -1,4 +1,4 @@
-//! The deformation at scale (issue 15): one large-extent scan, deformed whole at cell counts
+//! The deformation at scale: one large-extent scan, deformed whole at cell counts
 //! from 6k to 1M, each run a separate `rigidcells deform` process so that its peak memory is
 //! its own. Prints voxelize, solve, transfer (fit and evaluation of every point) and total
 //! seconds and the peak RSS from each run's `--report`; a run the memory budget refuses says so.
