@@ -22,7 +22,7 @@ pub(super) fn check_evlrs(path: &Path, header: &LasHeader) -> Result<()> {
     }
     let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
     let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    // A file with EVLRs is LAS 1.4, whose header `header` holds all of.
+    // Only LAS 1.4 has EVLRs, and the parsed header checked that its 375 bytes are all there.
     let mut bytes = [0u8; HEADER_1_4];
     file.read_exact(&mut bytes)
         .map_err(|e| Error::io(path, e))?;
