@@ -1,11 +1,10 @@
 //! Reading and writing shapes; the format follows the file extension.
 //!
 //! Every reader keeps the input's bytes and knows where the coordinates live, so the writer
-//! changes the coordinates and nothing else (DESIGN §7). Output goes to a temporary file in the
+//! changes the coordinates and nothing else. Output goes to a temporary file in the
 //! output's folder that is renamed over the target at the end: a failure never leaves a partial
 //! file under the output's name, and the input is never opened for writing.
 
-pub mod copc;
 mod las;
 pub(crate) mod mapped;
 mod obj;
@@ -18,7 +17,7 @@ mod xy;
 mod xyz;
 
 pub use las::{
-    Encoded, LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord, decode_coordinates,
+    Encoded, LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord, copc, decode_coordinates,
     encode_coordinates, frame_error,
 };
 pub use obj::ObjFile;

@@ -11,9 +11,25 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use super::text::Span;
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
+
+/// Where a token lives in a file: bytes `start..end`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Span {
+    pub start: usize,
+    pub end: usize,
+}
+
+impl Span {
+    /// The span `by` bytes earlier (relative to a slice starting at `by`).
+    pub(crate) fn before(self, by: usize) -> Self {
+        Self {
+            start: self.start - by,
+            end: self.end - by,
+        }
+    }
+}
 
 /// A batch of consecutive samples.
 #[derive(Debug, Default, Clone)]

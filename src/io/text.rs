@@ -20,25 +20,10 @@ use std::path::{Path, PathBuf};
 
 use super::require_extension;
 use super::stream::{Accepted, Chunk, Sink, TempFile};
+// The readers of text formats take `Span` from here, with the `Edit`s made of it.
+pub(crate) use super::stream::Span;
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
-
-/// Where a token lives in a file: bytes `start..end`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub(crate) struct Span {
-    pub start: usize,
-    pub end: usize,
-}
-
-impl Span {
-    /// The span `by` bytes earlier (relative to a slice starting at `by`).
-    pub(crate) fn before(self, by: usize) -> Self {
-        Self {
-            start: self.start - by,
-            end: self.end - by,
-        }
-    }
-}
 
 /// A number to write over a [`Span`]: as f64 or, for single-precision properties, as f32; in
 /// text, with the precision of its column ([`Precision`]).

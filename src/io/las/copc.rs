@@ -33,9 +33,11 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use super::las::{Frame, LasHeader, SOFTWARE, VlrRecord, encode, text_field};
-use super::stream::{Accepted, Chunk, Sink, TempFile};
+use super::coords::{Frame, encode};
+use super::header::{LasHeader, SOFTWARE, VlrRecord, standard_record_len};
+use super::raw::{EVLR_HEADER, HEADER_1_4, RawHeader, RawVlrHeader, VLR_HEADER, text_field};
 use crate::error::{Error, Result};
+use crate::io::stream::{Accepted, Chunk, Sink, TempFile};
 use crate::rigid::Vect;
 
 /// The deepest octree level; points declined by every level down to it go to its nodes.
@@ -53,7 +55,7 @@ pub fn is_copc(path: &Path) -> bool {
 }
 
 /// The sink of a COPC output; see the module docs.
-pub(crate) struct CopcSink {
+pub(super) struct CopcSink {
     output: PathBuf,
     input: LasHeader,
     /// Output point format (6, 7 or 8) and record length (with the input's extra bytes).
@@ -76,13 +78,8 @@ pub(crate) struct CopcSink {
     notes: Vec<String>,
 }
 
-/// The standard length of point format `f`'s records.
-fn standard_len(f: u8) -> usize {
-    [20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67][f as usize]
-}
-
 impl CopcSink {
-    pub(crate) fn new(
+    pub(super) fn new(
         output: &Path,
         input: LasHeader,
         records: Vec<VlrRecord>,
@@ -120,7 +117,7 @@ impl CopcSink {
                 )),
             }
         }
-        let extra = (input.record_len as usize).saturating_sub(standard_len(input.format));
+        let extra = (input.record_len as usize).saturating_sub(standard_record_len(input.format));
         let keep = |r: &VlrRecord| !(r.user_id == "copc" || r.is("laszip encoded", 22204));
         let (evlrs, vlrs) = records.into_iter().filter(keep).partition(|r| r.extended);
         let spill_name = output.with_file_name(format!(
@@ -130,7 +127,7 @@ impl CopcSink {
         Ok(Self {
             output: output.to_path_buf(),
             format,
-            record_len: standard_len(format) + extra,
+            record_len: standard_record_len(format) + extra,
             extra,
             frame,
             vlrs,
@@ -472,8 +469,13 @@ fn write_copc(
         record("laszip encoded", 22204, "LASzip", laz_bytes),
     ];
     vlrs.extend(sink.vlrs.iter().cloned());
-    let point_offset = 375 + vlrs.iter().map(|v| 54 + v.data.len()).sum::<usize>();
-    out.write_all(&[0u8; 375]).map_err(werr)?;
+    let point_offset = HEADER_1_4
+        + vlrs
+            .iter()
+            .map(|v| VLR_HEADER + v.data.len())
+            .sum::<usize>();
+    // The header, written last, when its counts and offsets are known.
+    out.write_all(&[0u8; HEADER_1_4]).map_err(werr)?;
     for v in &vlrs {
         write_vlr(&mut out, v, false).map_err(werr)?;
     }
@@ -572,7 +574,7 @@ fn write_copc(
     ] {
         info.extend_from_slice(&v.to_le_bytes());
     }
-    info.extend_from_slice(&(evlr_start + 60).to_le_bytes());
+    info.extend_from_slice(&(evlr_start + EVLR_HEADER as u64).to_le_bytes());
     info.extend_from_slice(&page_len.to_le_bytes());
     let gps = if sink.gps.0 <= sink.gps.1 {
         sink.gps
@@ -582,9 +584,11 @@ fn write_copc(
     info.extend_from_slice(&gps.0.to_le_bytes());
     info.extend_from_slice(&gps.1.to_le_bytes());
     info.resize(160, 0);
-    out.seek(SeekFrom::Start(375 + 54)).map_err(werr)?;
+    // The COPC info VLR comes first, right after the header.
+    out.seek(SeekFrom::Start((HEADER_1_4 + VLR_HEADER) as u64))
+        .map_err(werr)?;
     out.write_all(&info).map_err(werr)?;
-    let header = header_bytes(
+    let header = header(
         sink,
         point_offset as u32,
         vlrs.len() as u32,
@@ -593,7 +597,7 @@ fn write_copc(
         (lo, hi),
     );
     out.seek(SeekFrom::Start(0)).map_err(werr)?;
-    out.write_all(&header).map_err(werr)?;
+    out.write_all(&header.to_bytes()).map_err(werr)?;
     out.flush().map_err(werr)?;
     Ok(())
 }
@@ -628,70 +632,61 @@ fn node_key(level: u32, prefix: u64) -> [i32; 4] {
 
 /// Writes `v` as a VLR (54-byte header) or, with `extended`, an EVLR (60-byte header).
 fn write_vlr(out: &mut impl Write, v: &VlrRecord, extended: bool) -> std::io::Result<()> {
-    let mut h = Vec::with_capacity(60);
-    h.extend_from_slice(&0u16.to_le_bytes());
-    h.extend_from_slice(&text_field::<16>(&v.user_id));
-    h.extend_from_slice(&v.record_id.to_le_bytes());
-    if extended {
-        h.extend_from_slice(&(v.data.len() as u64).to_le_bytes());
-    } else {
-        h.extend_from_slice(&(v.data.len().min(u16::MAX as usize) as u16).to_le_bytes());
-    }
-    h.extend_from_slice(&text_field::<32>(&v.description));
-    out.write_all(&h)?;
+    let header = RawVlrHeader {
+        reserved: 0,
+        user_id: text_field(&v.user_id),
+        record_id: v.record_id,
+        len: v.data.len() as u64,
+        description: text_field(&v.description),
+    };
+    out.write_all(&header.to_bytes(extended))?;
     out.write_all(&v.data)
 }
 
 /// The LAS 1.4 header of the COPC output.
-fn header_bytes(
+fn header(
     sink: &CopcSink,
     point_offset: u32,
     vlr_count: u32,
     evlr_start: u64,
     evlr_count: u32,
     (lo, hi): ([f64; 3], [f64; 3]),
-) -> Vec<u8> {
+) -> RawHeader {
     let h = &sink.input;
-    let mut b = Vec::with_capacity(375);
-    b.extend_from_slice(b"LASF");
-    b.extend_from_slice(&h.file_source_id.to_le_bytes());
     // Global encoding: GPS time as the input's; the CRS is WKT (bit 4) for formats 6+.
     let wkt = sink
         .vlrs
         .iter()
         .chain(&sink.evlrs)
         .any(|v| v.is("LASF_Projection", 2112));
-    b.extend_from_slice(&((h.global_encoding & 0x1) | if wkt { 0x10 } else { 0 }).to_le_bytes());
-    b.extend_from_slice(&h.guid);
-    b.extend_from_slice(&[1, 4]);
-    b.extend_from_slice(&text_field::<32>(&h.system));
-    b.extend_from_slice(&text_field::<32>(SOFTWARE));
-    b.extend_from_slice(&h.creation.0.to_le_bytes());
-    b.extend_from_slice(&h.creation.1.to_le_bytes());
-    b.extend_from_slice(&375u16.to_le_bytes());
-    b.extend_from_slice(&point_offset.to_le_bytes());
-    b.extend_from_slice(&vlr_count.to_le_bytes());
-    b.push(sink.format | 0x80);
-    b.extend_from_slice(&(sink.record_len as u16).to_le_bytes());
-    b.extend_from_slice(&0u32.to_le_bytes());
-    b.extend_from_slice(&[0u8; 20]);
     let (scale, offset) = sink.frame;
-    for v in scale.iter().chain(&offset) {
-        b.extend_from_slice(&v.to_le_bytes());
+    RawHeader {
+        file_signature: *b"LASF",
+        file_source_id: h.file_source_id,
+        global_encoding: (h.global_encoding & 0x1) | if wkt { 0x10 } else { 0 },
+        guid: h.guid,
+        version: (1, 4),
+        system_identifier: text_field(&h.system),
+        generating_software: text_field(SOFTWARE),
+        creation_day: h.creation.0,
+        creation_year: h.creation.1,
+        header_size: HEADER_1_4 as u16,
+        point_offset,
+        vlr_count,
+        point_format: sink.format | 0x80,
+        record_len: sink.record_len as u16,
+        legacy_count: 0,
+        legacy_by_return: [0; 5],
+        scale,
+        offset,
+        max: hi,
+        min: lo,
+        waveform_start: 0,
+        evlr_start,
+        evlr_count,
+        count: sink.count,
+        by_return: sink.by_return,
     }
-    for a in 0..3 {
-        b.extend_from_slice(&hi[a].to_le_bytes());
-        b.extend_from_slice(&lo[a].to_le_bytes());
-    }
-    b.extend_from_slice(&0u64.to_le_bytes());
-    b.extend_from_slice(&evlr_start.to_le_bytes());
-    b.extend_from_slice(&evlr_count.to_le_bytes());
-    b.extend_from_slice(&sink.count.to_le_bytes());
-    for n in sink.by_return {
-        b.extend_from_slice(&n.to_le_bytes());
-    }
-    debug_assert_eq!(b.len(), 375);
-    b
 }
 
 #[cfg(test)]
