@@ -6,7 +6,7 @@
 //! chain of cells between the fixed cells and the handle: neighbors turn by little relative to
 //! each other, so the turn about the handle's axis can be summed pair by pair without
 //! ambiguity, and the sum is the turn the shape carries from its fixed cells to its handle.
-//! [`TurnGauge::taken`] sums it over a breadth-first tree from the fixed cells (each pair adds
+//! `TurnGauge::taken` sums it over a breadth-first tree from the fixed cells (each pair adds
 //! the twist about the axis of `R_j R_iᵀ`, which lies in (−180°, 180°]) and gives the median
 //! over the handle's cells. On the asked branch it equals the handle's turn (up to the
 //! difference between summed twists and a composed rotation, a fraction of a degree on a
