@@ -59,6 +59,7 @@ pub mod info;
 pub mod interrupt;
 pub mod io;
 pub mod memory;
+pub mod names;
 pub mod pipeline;
 pub mod preview;
 pub mod progress;

@@ -17,6 +17,7 @@ use rigidcells::Error;
 use rigidcells::cells::BuildParams;
 use rigidcells::field::{Outside, SavedField, Transfer};
 use rigidcells::io;
+use rigidcells::names::{Named, UnknownName};
 use rigidcells::pipeline::{self, DeformInfo, DeformParams};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
@@ -88,17 +89,21 @@ fn spec(text: &str, base: &str) -> PyResult<EditSpec<3>> {
     parse_spec(text, Path::new(base), Path::new("spec")).map_err(py_err)
 }
 
+/// The transfer named `name` (default: the command line's, `pu`).
 fn transfer(name: Option<&str>) -> PyResult<Transfer> {
-    Ok(match name.unwrap_or("pu") {
-        "pu" => Transfer::Pu,
-        "rbf" => Transfer::Rbf,
-        "blend" => Transfer::Blend,
-        "blend-idw" => Transfer::BlendIdw,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "transfer `{other}`: expected pu, rbf, blend or blend-idw"
-            )));
-        }
+    let Some(name) = name else {
+        return Ok(Transfer::Pu);
+    };
+    name.parse().map_err(|e: UnknownName| {
+        // The default first, as the package's documentation lists them.
+        let order = [
+            Transfer::Pu,
+            Transfer::Rbf,
+            Transfer::Blend,
+            Transfer::BlendIdw,
+        ];
+        let expected = order.map(Named::name).to_vec();
+        PyValueError::new_err(UnknownName { expected, ..e }.to_string())
     })
 }
 
@@ -364,15 +369,11 @@ fn apply_file<'py>(
     output: PathBuf,
     outside: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let outside = match outside.unwrap_or("refuse") {
-        "refuse" => Outside::Refuse,
-        "keep" => Outside::Keep,
-        "extend" => Outside::Extend,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "outside `{other}`: expected refuse, keep or extend"
-            )));
-        }
+    let outside = match outside {
+        Some(name) => name
+            .parse::<Outside>()
+            .map_err(|e| PyValueError::new_err(e.to_string()))?,
+        None => Outside::Refuse,
     };
     let params = pipeline::ApplyParams {
         outside,

@@ -108,17 +108,6 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     )
 }
 
-impl From<TransferArg> for Transfer {
-    fn from(t: TransferArg) -> Self {
-        match t {
-            TransferArg::Blend => Transfer::Blend,
-            TransferArg::BlendIdw => Transfer::BlendIdw,
-            TransferArg::Rbf => Transfer::Rbf,
-            TransferArg::Pu => Transfer::Pu,
-        }
-    }
-}
-
 #[allow(clippy::too_many_arguments)]
 pub(super) fn deform_file(
     input: &Path,

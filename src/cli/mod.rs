@@ -2,6 +2,7 @@
 //! (`commands.rs`) call the library and print what it returns; the progress bar is
 //! `progress.rs`.
 
+mod choice;
 mod commands;
 mod progress;
 
@@ -16,6 +17,7 @@ use rigidcells::pipeline::{self, CHUNK, DeformParams};
 use rigidcells::render::{self, View};
 use rigidcells::solve::{Method, SolveParams};
 
+use choice::choice;
 use commands::*;
 
 #[derive(Parser)]
@@ -45,16 +47,16 @@ enum Command {
         output: PathBuf,
         /// Transfer of the cells' motions to the samples [default: the one the field was
         /// saved with by `deform --transfer`].
-        #[arg(long, value_enum)]
-        transfer: Option<TransferArg>,
+        #[arg(long, value_parser = choice::<Transfer>())]
+        transfer: Option<Transfer>,
         #[command(flatten)]
         tolerance: ToleranceArg,
         /// Samples farther outside the field's cells than its margin (the size of the cells on
         /// its boundary): refuse (exit 4, nothing written), keep (they keep their coordinates;
         /// the shape tears at the margin), or extend (the transfer is extrapolated: the RBF's
         /// linear part grows with the distance, the blend follows the nearest cells).
-        #[arg(long, value_enum, default_value_t = OutsideArg::Refuse)]
-        outside: OutsideArg,
+        #[arg(long, value_parser = choice::<Outside>(), default_value_t = Outside::Refuse)]
+        outside: Outside,
         #[command(flatten)]
         memory: MemoryArg,
         /// Print nothing but errors.
@@ -104,8 +106,8 @@ enum Command {
         #[arg(long)]
         background: Option<String>,
         /// Transfer of the cells' motions to the pixels (the blend keeps fixed pixels exact).
-        #[arg(long, value_enum, default_value_t = TransferArg::Blend)]
-        transfer: TransferArg,
+        #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Blend)]
+        transfer: Transfer,
         #[command(flatten)]
         cells: CellArgs,
         /// Print nothing but errors.
@@ -128,8 +130,8 @@ enum Command {
         #[command(flatten)]
         cells: CellArgs,
         /// The transfer `apply` will use (and the field is made for).
-        #[arg(long, value_enum, default_value_t = TransferArg::Pu)]
-        transfer: TransferArg,
+        #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Pu)]
+        transfer: Transfer,
         /// Samples per streamed chunk.
         #[arg(long, default_value_t = CHUNK)]
         chunk: usize,
@@ -164,8 +166,8 @@ enum Command {
         #[arg(long, default_value_t = pipeline::PROXY_SAMPLES)]
         proxy: usize,
         /// Transfer of the cells' motions to the samples on release and on Apply.
-        #[arg(long, value_enum, default_value_t = TransferArg::Pu)]
-        transfer: TransferArg,
+        #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Pu)]
+        transfer: Transfer,
         #[command(flatten)]
         cells: CellArgs,
         /// Print nothing but the address and errors.
@@ -197,8 +199,8 @@ struct DeformArgs {
     #[command(flatten)]
     cells: CellArgs,
     /// Transfer of the cells' motions to the samples.
-    #[arg(long, value_enum, default_value_t = TransferArg::Pu)]
-    transfer: TransferArg,
+    #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Pu)]
+    transfer: Transfer,
     #[command(flatten)]
     tolerance: ToleranceArg,
     /// Split cells whose strain exceeds this threshold, and solve again.
@@ -243,7 +245,7 @@ impl DeformArgs {
                 refine_strain: self.refine_strain,
                 ..solve
             },
-            transfer: self.transfer.into(),
+            transfer: self.transfer,
             rbf_tolerance: self.tolerance.rbf_tolerance,
             proxy_samples,
             check_control_points: self.check_gcp,
@@ -265,9 +267,9 @@ struct ToleranceArg {
 
 impl ToleranceArg {
     /// Refuses a tolerance given with a transfer other than the RBF, or not a length.
-    fn check(&self, transfer: TransferArg) -> anyhow::Result<()> {
+    fn check(&self, transfer: Transfer) -> anyhow::Result<()> {
         match self.rbf_tolerance {
-            Some(_) if !matches!(transfer, TransferArg::Rbf) => {
+            Some(_) if transfer != Transfer::Rbf => {
                 Err(Error::Param("--rbf-tolerance applies to --transfer rbf only".into()).into())
             }
             Some(t) => Ok(rigidcells::field::Rbf::<3>::check_tolerance(t)?),
@@ -371,13 +373,13 @@ struct CellArgs {
     shell: bool,
     /// Inside classification of empty cells: winding numbers for meshes, soups and point
     /// clouds with normals, exterior flood fill for point clouds without (auto), or as named.
-    #[arg(long, value_enum, default_value_t = InsideArg::Auto)]
-    inside: InsideArg,
+    #[arg(long, value_parser = choice::<Inside>(), default_value_t = Inside::Auto)]
+    inside: Inside,
     /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
     /// conjugate gradients with a rigid-motion multigrid (the same minimum, memory linear in
     /// the cells; BENCHMARKS.md says which is faster where).
-    #[arg(long, value_enum, default_value_t = SolverArg::Auto)]
-    solver: SolverArg,
+    #[arg(long, value_parser = choice::<Method>(), default_value_t = Method::Auto)]
+    solver: Method,
     /// Parts of the shape that no constraint reaches (leaves, fittings, a loose piece of a
     /// soup): carried rigidly by the nearest constrained part, or kept where they were.
     #[arg(long, value_enum, default_value_t = LooseArg::Carry)]
@@ -392,17 +394,6 @@ enum LooseArg {
     Carry,
     /// Each keeps its rest pose.
     Rest,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum SolverArg {
-    /// Multilevel for cells of one size past 100,000 free cells; else the factorization where it
-    /// fits the memory budget, else multilevel.
-    Auto,
-    /// Sparse Cholesky factorization (fill-in: memory grows faster than the cells).
-    Direct,
-    /// Conjugate gradients with a rigid-motion multigrid (memory linear in the cells).
-    Multilevel,
 }
 
 /// The memory budget.
@@ -424,11 +415,7 @@ impl CellArgs {
     fn solve_params(&self) -> SolveParams {
         SolveParams {
             memory_limit: self.memory.memory_limit,
-            method: match self.solver {
-                SolverArg::Auto => Method::Auto,
-                SolverArg::Direct => Method::Direct,
-                SolverArg::Multilevel => Method::Multilevel,
-            },
+            method: self.solver,
             carry_loose: self.loose_parts == LooseArg::Carry,
             ..Default::default()
         }
@@ -461,49 +448,13 @@ impl CellArgs {
             target_cells: self.cells,
             memory_limit: self.memory.memory_limit,
             max_level: self.max_level,
-            inside: match (self.shell, self.inside) {
-                (true, _) | (_, InsideArg::None) => Inside::None,
-                (_, InsideArg::Auto) => Inside::Auto,
-                (_, InsideArg::Winding) => Inside::Winding,
-                (_, InsideArg::Flood) => Inside::Flood,
+            inside: if self.shell {
+                Inside::None
+            } else {
+                self.inside
             },
         }
     }
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum InsideArg {
-    /// Winding numbers when the input has triangles or normals, flood fill otherwise.
-    Auto,
-    /// Generalized winding number of the triangles or oriented points.
-    Winding,
-    /// Exterior flood fill on the finest grid.
-    Flood,
-    /// No interior cells (a shell).
-    None,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum OutsideArg {
-    /// Fail with exit code 4, naming how many samples and how far; write nothing.
-    Refuse,
-    /// Samples beyond the margin keep their coordinates bit for bit.
-    Keep,
-    /// The transfer is evaluated beyond the margin as anywhere.
-    Extend,
-}
-
-#[derive(Clone, Copy, ValueEnum)]
-enum TransferArg {
-    /// Continuous blend of the 4 nearest cells (fast preview).
-    Blend,
-    /// The paper's inverse-distance blend of the 4 nearest cells (seams where the set changes).
-    BlendIdw,
-    /// Triharmonic RBF interpolation (smooth, final).
-    Rbf,
-    /// Partition-of-unity RBF: triharmonic fits on overlapping patches blended smoothly (C²),
-    /// for any number of cells.
-    Pu,
 }
 
 /// Parses the command line, runs the command, prints an error and gives the exit code.
@@ -522,16 +473,12 @@ pub(crate) fn main() -> ExitCode {
             memory,
             quiet,
         } => tolerance
-            .check(transfer.unwrap_or(TransferArg::Rbf))
+            .check(transfer.unwrap_or(Transfer::Rbf))
             .and_then(|()| {
                 let params = pipeline::ApplyParams {
-                    transfer: transfer.map(Into::into),
+                    transfer,
                     rbf_tolerance: tolerance.rbf_tolerance,
-                    outside: match outside {
-                        OutsideArg::Refuse => Outside::Refuse,
-                        OutsideArg::Keep => Outside::Keep,
-                        OutsideArg::Extend => Outside::Extend,
-                    },
+                    outside,
                     memory_limit: memory.memory_limit,
                 };
                 run_apply(&field, &input, &output, &params, quiet)
@@ -550,7 +497,7 @@ pub(crate) fn main() -> ExitCode {
             &edit,
             &save_field,
             &cells,
-            transfer.into(),
+            transfer,
             chunk.clamp(1, MAX_CHUNK),
             quiet,
         ),
@@ -567,7 +514,7 @@ pub(crate) fn main() -> ExitCode {
             &edit,
             &output,
             background.as_deref(),
-            transfer.into(),
+            transfer,
             &cells,
             quiet,
         ),
@@ -600,7 +547,7 @@ pub(crate) fn main() -> ExitCode {
             (port, out_dir.as_deref()),
             open,
             proxy,
-            transfer.into(),
+            transfer,
             &cells,
             quiet,
         ),

@@ -322,16 +322,10 @@ impl Editor {
 
     /// The `deform` options that build these cells and this transfer.
     pub fn flags(&self) -> String {
-        use crate::field::Transfer;
-        let transfer = match self.params.transfer {
-            Transfer::Blend => "blend",
-            Transfer::BlendIdw => "blend-idw",
-            Transfer::Rbf => "rbf",
-            Transfer::Pu => "pu",
-        };
         format!(
-            "--cell-size {:?} --transfer {transfer}",
-            self.complex.grid.finest_size()
+            "--cell-size {:?} --transfer {}",
+            self.complex.grid.finest_size(),
+            self.params.transfer
         )
     }
 

@@ -1,0 +1,168 @@
+//! The entries of an edit spec once parsed and validated: fixed regions, handles with their
+//! motion, pins, soft targets (control points) and stiffness regions, gathered in
+//! [`EditSpec`].
+
+use super::region::Region;
+use crate::rigid::{Dim, Mat, Rigid, Vect};
+
+/// How a handle moves: `A(x) = R·P·(x − pivot) + pivot + translate`, with `R` a rotation and `P`
+/// a stretch (`S·I` for a uniform scale). A general affine matrix is stored in this form by polar
+/// decomposition, so that load steps can interpolate it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HandleMotion<const D: usize> {
+    /// The center of rotation and scaling (input coordinates); `None`: the centroid of the
+    /// handle's selected samples.
+    pub pivot: Option<Vect<D>>,
+    /// The rotation `R`.
+    pub rotation: Mat<D>,
+    /// The rotation as written: its axis (unused in 2D) and signed angle in radians, of any
+    /// size (720° is two whole turns). Load steps interpolate this angle, so a whole turn is
+    /// not the identity. For a `matrix` it is the angle of `R` in `[0, π]`: a matrix cannot
+    /// say how many turns it makes.
+    pub turn: (Vect<D>, f64),
+    /// The stretch `P`.
+    pub stretch: Mat<D>,
+    /// The translation.
+    pub translate: Vect<D>,
+    /// Whether the motion came from a `matrix`: then it is `A(x) = R·P·x + translate` exactly,
+    /// whatever the pivot, and the pivot only centers the load-step interpolation.
+    pub from_matrix: bool,
+}
+
+impl<const D: usize> HandleMotion<D> {
+    /// The affine map at load fraction `f ∈ [0, 1]` about the pivot `pivot` (used when the
+    /// motion has none of its own): rotation angle, stretch and translation grow linearly from
+    /// the identity, so `f = 1` gives the full motion.
+    pub fn at(&self, f: f64, pivot: &Vect<D>) -> crate::rigid::Affine<D>
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let c = if self.from_matrix {
+            *pivot
+        } else {
+            self.pivot.unwrap_or(*pivot)
+        };
+        let linear_full = self.rotation * self.stretch;
+        // The translation that makes the motion about `c` equal to the specified map.
+        let t_full = if self.from_matrix {
+            linear_full * c + self.translate - c
+        } else {
+            self.translate
+        };
+        let (axis, angle) = self.turn;
+        let rot = if f == 1.0 {
+            self.rotation
+        } else {
+            <Dim<D> as Rigid<D>>::axis_angle(&axis, f * angle)
+        };
+        let stretch = Mat::<D>::identity() + (self.stretch - Mat::<D>::identity()) * f;
+        let linear = rot * stretch;
+        crate::rigid::Affine {
+            linear,
+            translation: c - linear * c + t_full * f,
+        }
+    }
+}
+
+/// One `[[fixed]]` or `[[stiffness]]` entry, or the region of a handle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Entry<const D: usize, T> {
+    /// The region.
+    pub region: Region<D>,
+    /// What the entry does.
+    pub value: T,
+    /// The line of the entry in the spec (1-based).
+    pub line: usize,
+}
+
+/// A pin: the point `point` goes to `to`; its cell may rotate about it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pin<const D: usize> {
+    /// The point (input coordinates).
+    pub point: Vect<D>,
+    /// Where it goes.
+    pub to: Vect<D>,
+    /// The line of the entry (1-based).
+    pub line: usize,
+}
+
+/// A soft target (a control point): the point `from` should land on `to`, with weight `weight`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Target<const D: usize> {
+    /// The point (input coordinates). For a [`Target::horizontal`] point its height is not
+    /// known until it is snapped to the samples.
+    pub from: Vect<D>,
+    /// Where it should go.
+    pub to: Vect<D>,
+    /// Weight, relative to the glue between two finest cells.
+    pub weight: f64,
+    /// The line of the `[[target]]` entry in the spec (1-based).
+    pub line: usize,
+    /// The point's name: the file's ID column, else `#k` (the k-th target of the spec).
+    pub id: String,
+    /// Where the point was given, for messages: `gcp.csv line 9` or `edit.toml line 12`.
+    pub place: String,
+    /// A 2D control point (3D inputs only): it pulls horizontally and leaves the height free;
+    /// its height is the nearest sample's horizontally (within [`Target::snap`] or
+    /// [`HORIZONTAL_SNAP`] finest cells).
+    pub horizontal: bool,
+    /// Move `from` to the nearest sample within this distance before solving (`None`: keep
+    /// it where it was given).
+    pub snap: Option<f64>,
+}
+
+/// The pull on a horizontal control point's height, relative to its horizontal pull
+/// ([`Target::mask`]); its weight in the energy is the square, 1 %.
+pub const HEIGHT_HOLD: f64 = 0.1;
+
+/// How far, in finest cells, a 2D control point without `snap` looks for its height.
+pub const HORIZONTAL_SNAP: f64 = 2.0;
+
+impl<const D: usize> Target<D> {
+    /// Per axis, how hard the target pulls: 1, except the height of a horizontal control
+    /// point, [`HEIGHT_HOLD`]: the point prescribes no height, but its height is held lightly
+    /// at the surface's. With a height entirely free, a scan pulled only sideways buckles —
+    /// its cells tilt so that horizontal distances change cheaply (autzen_trim with three 2D
+    /// points: heights off by 24 m at 1e-3; within 2 cm at 0.1, with the same horizontal
+    /// residuals as at 1).
+    pub fn mask(&self) -> Vect<D> {
+        let mut m = Vect::<D>::repeat(1.0);
+        if self.horizontal {
+            m[D - 1] = HEIGHT_HOLD;
+        }
+        m
+    }
+
+    /// `x` along the axes the target constrains: all of them, or the horizontal ones.
+    pub fn pulled(&self, mut x: Vect<D>) -> Vect<D> {
+        if self.horizontal {
+            x[D - 1] = 0.0;
+        }
+        x
+    }
+}
+
+/// A parsed and validated edit spec.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EditSpec<const D: usize> {
+    /// Fixed regions.
+    pub fixed: Vec<Entry<D, ()>>,
+    /// Handles.
+    pub handles: Vec<Entry<D, HandleMotion<D>>>,
+    /// Pins.
+    pub pins: Vec<Pin<D>>,
+    /// Soft targets.
+    pub targets: Vec<Target<D>>,
+    /// Stiffness regions with their scale.
+    pub stiffness: Vec<Entry<D, f64>>,
+}
+
+impl<const D: usize> EditSpec<D> {
+    /// Whether the spec constrains anything (stiffness regions alone do not).
+    pub fn has_constraints(&self) -> bool {
+        !(self.fixed.is_empty()
+            && self.handles.is_empty()
+            && self.pins.is_empty()
+            && self.targets.is_empty())
+    }
+}

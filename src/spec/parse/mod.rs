@@ -1,0 +1,441 @@
+//! The edit spec's TOML read into [`EditSpec`]: the sections and their keys checked (unknown
+//! keys are errors), every value validated, and every error naming the line of the value at
+//! fault. The entry's parts are read by the children: `region` (what it selects), `motion` (a
+//! handle's transform) and `target` (soft targets and control-point files).
+
+mod motion;
+mod region;
+mod target;
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::entries::{EditSpec, Entry, Pin};
+use crate::error::{Error, Result};
+use crate::rigid::{Dim, Rigid, Vect};
+
+pub use motion::MAX_TURN_DEGREES;
+
+#[derive(Deserialize)]
+struct RawSpec {
+    #[serde(default)]
+    fixed: Vec<Spanned<toml::Table>>,
+    #[serde(default)]
+    handle: Vec<Spanned<toml::Table>>,
+    #[serde(default)]
+    pin: Vec<Spanned<toml::Table>>,
+    #[serde(default)]
+    target: Vec<Spanned<toml::Table>>,
+    #[serde(default)]
+    stiffness: Vec<Spanned<toml::Table>>,
+}
+
+/// The largest magnitude of a motion's numbers (translations, pivots, pins, targets, scales,
+/// matrix entries): f64 keeps 15–16 significant digits, so a shape moved to 1e15 keeps none
+/// below the unit, and past about 1e50 the solver's squared residuals overflow (a fuzzed
+/// `translate = [1e308, …]` ended in an indefinite Gauss-Newton system, exit 1). Regions are
+/// not bounded: a box to ±1e308 is a way of saying "everything".
+pub const LARGEST: f64 = 1e15;
+
+/// The keys that select: one or more in an entry, combined (all must hold).
+const REGION_KEYS: [&str; 7] = [
+    "box",
+    "sphere",
+    "plane",
+    "indices",
+    "classification",
+    "polygon",
+    "polygon_file",
+];
+/// Keys that qualify a selection.
+const SELECTION_KEYS: [&str; 4] = ["z", "invert", "view", "visible"];
+
+/// Reads and validates the edit spec in `path`.
+pub fn read_spec<const D: usize>(path: &Path) -> Result<EditSpec<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let text = std::fs::read_to_string(path).map_err(|e| Error::spec_file(path, e))?;
+    parse_spec(&text, path.parent().unwrap_or(Path::new(".")), path)
+}
+
+/// Parses an edit spec. `base` is the folder that relative file names (`indices`, `file`) are
+/// resolved against; `name` names the spec in errors.
+pub fn parse_spec<const D: usize>(text: &str, base: &Path, name: &Path) -> Result<EditSpec<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    let ctx = Ctx { text, base, name };
+    let raw: RawSpec = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
+    let top: toml::Table = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
+    if let Some(k) = top
+        .keys()
+        .find(|k| !["fixed", "handle", "pin", "target", "stiffness"].contains(&k.as_str()))
+    {
+        return Err(ctx.error(
+            None,
+            format!("unknown section `{k}` (expected fixed, handle, pin, target or stiffness)"),
+        ));
+    }
+    let mut spec = EditSpec::default();
+    for t in &raw.fixed {
+        let line = ctx.line(t);
+        ctx.allow(t.get_ref(), &[], line)?;
+        spec.fixed.push(Entry {
+            region: ctx.region(t.get_ref(), line)?,
+            value: (),
+            line,
+        });
+    }
+    for t in &raw.handle {
+        let line = ctx.line(t);
+        ctx.allow(
+            t.get_ref(),
+            &["translate", "rotate", "scale", "pivot", "matrix"],
+            line,
+        )?;
+        spec.handles.push(Entry {
+            region: ctx.region(t.get_ref(), line)?,
+            value: ctx.handle_motion(t.get_ref(), line)?,
+            line,
+        });
+    }
+    for t in &raw.pin {
+        let line = ctx.line(t);
+        ctx.allow_only(t.get_ref(), &["point", "to"], line)?;
+        spec.pins.push(Pin {
+            point: ctx.motion_vector(t.get_ref(), "point", line)?,
+            to: ctx.motion_vector(t.get_ref(), "to", line)?,
+            line,
+        });
+    }
+    for t in &raw.target {
+        let line = ctx.line(t);
+        ctx.allow_only(t.get_ref(), &["from", "to", "weight", "file", "snap"], line)?;
+        let first = spec.targets.len();
+        spec.targets.extend(ctx.targets(t.get_ref(), line, first)?);
+    }
+    for t in &raw.stiffness {
+        let line = ctx.line(t);
+        ctx.allow(t.get_ref(), &["scale"], line)?;
+        let scale: f64 = ctx.field(t.get_ref(), "scale", line)?;
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(ctx.error(
+                ctx.at(line, "scale"),
+                format!("stiffness scale {scale} must be positive"),
+            ));
+        }
+        spec.stiffness.push(Entry {
+            region: ctx.region(t.get_ref(), line)?,
+            value: scale,
+            line,
+        });
+    }
+    if !spec.has_constraints() {
+        return Err(Error::NoConstraints);
+    }
+    Ok(spec)
+}
+
+struct Ctx<'a> {
+    text: &'a str,
+    base: &'a Path,
+    name: &'a Path,
+}
+
+impl Ctx<'_> {
+    fn error(&self, line: Option<usize>, message: String) -> Error {
+        let message = match line {
+            Some(l) => format!("line {l}: {message}"),
+            None => message,
+        };
+        Error::Spec {
+            path: self.name.to_path_buf(),
+            message,
+        }
+    }
+
+    /// The line of `key` (its first part, for `box.min`) in the entry that starts on line
+    /// `entry`: where a value's error is reported. The entry's own line when the key is not
+    /// written on a line of its own (a dotted key, a key of an inline table).
+    fn at(&self, entry: usize, key: &str) -> Option<usize> {
+        let root = key.split('.').next().unwrap_or(key);
+        for (i, text) in self.text.lines().enumerate().skip(entry) {
+            let t = text.trim_start();
+            // The next table header ends the entry; a multi-line array's rows start with `[`
+            // and a number or another `[`.
+            let header = t.trim_start_matches('[').trim_start();
+            if t.starts_with('[') && header.starts_with(|c: char| c.is_alphabetic() || c == '"') {
+                break;
+            }
+            let unquoted = t
+                .strip_prefix('"')
+                .and_then(|r| r.strip_prefix(root)?.strip_prefix('"'))
+                .or_else(|| t.strip_prefix(root));
+            if let Some(rest) = unquoted.map(str::trim_start)
+                && (rest.starts_with('=') || rest.starts_with('.'))
+            {
+                return Some(i + 1);
+            }
+        }
+        Some(entry)
+    }
+
+    fn line<T>(&self, s: &Spanned<T>) -> usize {
+        let start = s.span().start.min(self.text.len());
+        self.text[..start].matches('\n').count() + 1
+    }
+
+    fn allow(&self, t: &toml::Table, extra: &[&str], line: usize) -> Result<()> {
+        let keys: Vec<&str> = REGION_KEYS
+            .iter()
+            .chain(&SELECTION_KEYS)
+            .chain(extra)
+            .copied()
+            .collect();
+        self.allow_only(t, &keys, line)
+    }
+
+    fn allow_only(&self, t: &toml::Table, keys: &[&str], line: usize) -> Result<()> {
+        match t.keys().find(|k| !keys.contains(&k.as_str())) {
+            Some(k) => Err(self.error(
+                self.at(line, k),
+                format!("unknown key `{k}` (expected one of {})", keys.join(", ")),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    fn field<T: serde::de::DeserializeOwned>(
+        &self,
+        t: &toml::Table,
+        key: &str,
+        line: usize,
+    ) -> Result<T> {
+        let v = t
+            .get(key)
+            .ok_or_else(|| self.error(self.at(line, key), format!("missing `{key}`")))?;
+        v.clone()
+            .try_into()
+            .map_err(|e| self.error(self.at(line, key), format!("`{key}`: {e}")))
+    }
+
+    fn vector<const D: usize>(&self, t: &toml::Table, key: &str, line: usize) -> Result<Vect<D>> {
+        let v: Vec<f64> = self.field(t, key, line)?;
+        self.to_vect(&v, key, line)
+    }
+
+    /// A vector that places or moves samples (a translation, a pivot, a pin, a target): finite
+    /// and at most [`LARGEST`] in magnitude.
+    fn motion_vector<const D: usize>(
+        &self,
+        t: &toml::Table,
+        key: &str,
+        line: usize,
+    ) -> Result<Vect<D>> {
+        let v: Vect<D> = self.vector(t, key, line)?;
+        self.within_range(v.amax(), key, line)?;
+        Ok(v)
+    }
+
+    fn within_range(&self, magnitude: f64, key: &str, line: usize) -> Result<()> {
+        if magnitude <= LARGEST {
+            Ok(())
+        } else {
+            Err(self.error(
+                self.at(line, key),
+                format!(
+                    "`{key}` reaches {magnitude:e}, beyond {LARGEST:e}: a shape moved or \
+                     scaled that far keeps no detail in 64-bit floats, and the solve fails"
+                ),
+            ))
+        }
+    }
+
+    fn to_vect<const D: usize>(&self, v: &[f64], key: &str, line: usize) -> Result<Vect<D>> {
+        if v.len() != D || !v.iter().all(|x| x.is_finite()) {
+            return Err(self.error(
+                self.at(line, key),
+                format!("`{key}` must be {D} finite numbers, got {v:?}"),
+            ));
+        }
+        Ok(Vect::<D>::from_column_slice(v))
+    }
+
+    fn resolve(&self, file: &str) -> PathBuf {
+        self.base.join(file)
+    }
+}
+
+/// The file name of `path` for messages.
+fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into(),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rigid::Mat;
+    use crate::spec::region::Polygon;
+
+    fn parse(text: &str) -> Result<EditSpec<3>> {
+        parse_spec(text, Path::new("."), Path::new("edit.toml"))
+    }
+
+    #[test]
+    fn parses_the_design_example() {
+        let spec = parse(
+            r#"
+[[fixed]]
+box = { min = [0.0, 0.0, 0.0], max = [1.0, 10.0, 10.0] }
+
+[[handle]]
+sphere = { center = [9.0, 5.0, 5.0], radius = 1.0 }
+translate = [0.0, 0.0, 4.0]
+rotate = { axis = [0.0, 1.0, 0.0], degrees = 90.0 }
+
+[[pin]]
+point = [5.0, 5.0, 9.0]
+to = [5.0, 5.0, 11.0]
+
+[[target]]
+from = [1.0, 2.0, 3.0]
+to = [1.1, 2.0, 3.2]
+weight = 1.0
+
+[[stiffness]]
+plane = { point = [5.0, 0.0, 0.0], normal = [1.0, 0.0, 0.0] }
+scale = 0.2
+"#,
+        )
+        .unwrap();
+        assert_eq!(spec.fixed.len(), 1);
+        assert_eq!(spec.handles[0].line, 5);
+        let h = spec.handles[0].value;
+        let x = h.rotation * Vect::<3>::new(1.0, 0.0, 0.0);
+        assert!((x - Vect::<3>::new(0.0, 0.0, -1.0)).norm() < 1e-12);
+        assert_eq!(spec.pins.len(), 1);
+        assert_eq!(spec.targets[0].weight, 1.0);
+        assert!(
+            spec.stiffness[0]
+                .region
+                .contains_point(&Vect::<3>::new(4.0, 9.0, 9.0))
+        );
+    }
+
+    /// An error in a value names the value's line, not its entry's; an error of the entry as
+    /// a whole names the entry's line.
+    #[test]
+    fn errors_name_the_line_of_the_bad_value() {
+        let line_of = |text: &str| {
+            let e = parse(text).unwrap_err().to_string();
+            let n = e
+                .split("line ")
+                .nth(1)
+                .expect("a line")
+                .split(':')
+                .next()
+                .unwrap();
+            (n.parse::<usize>().unwrap(), e)
+        };
+        let fixed = "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n";
+        let (n, e) = line_of(&format!(
+            "{fixed}[[handle]]\nsphere = {{ center = [5.0, 0.0, 0.0], radius = 1.0 }}\n\
+             translate = [0, 0, \"a\"]\n"
+        ));
+        assert_eq!(n, 5, "{e}");
+        let (n, e) = line_of(&format!(
+            "{fixed}[[handle]]\n# a turn\nsphere = {{ center = [5.0, 0.0, 0.0], radius = 1.0 }}\n\
+             rotate = {{ axis = [1, 0, 0], degrees = 5000 }}\n"
+        ));
+        assert_eq!(n, 6, "{e}");
+        let (n, e) =
+            line_of("[[fixed]]\n\nbox = { min = [2.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n");
+        assert_eq!(n, 3, "{e}");
+        let (n, e) = line_of(&format!(
+            "{fixed}[[handle]]\npolygon = [\n  [0.0, 0.0],\n  [1.0, 0.0],\n  [0.0, 1.0],\n]\n\
+             z = [2.0, 1.0]\ntranslate = [0, 0, 1]\n"
+        ));
+        assert_eq!(n, 9, "{e}");
+        // The next entry's keys are not this one's: a missing `to` names the pin's line.
+        let (n, e) = line_of(&format!(
+            "{fixed}[[pin]]\npoint = [0, 0, 0]\n[[pin]]\nto = [1, 1, 1]\n"
+        ));
+        assert_eq!(n, 3, "{e}");
+    }
+
+    #[test]
+    fn errors_name_the_line() {
+        let e = parse("[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n\n[[handle]]\nsphere = { center = [0.0, 0.0], radius = 1.0 }\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 5") && e.contains("3 finite numbers"),
+            "{e}"
+        );
+        let e = parse(
+            "[[fixed]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nradius = 3\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("line 3") && e.contains("unknown key `radius`"),
+            "{e}"
+        );
+        let e = parse("[[fixed]\n").unwrap_err().to_string();
+        assert!(e.contains("line 1"), "{e}");
+        let e = parse("[[handle]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nmatrix = [[1.0,0.0,0.0,0.0],[0.0,1.0,0.0,0.0],[0.0,0.0,1.0,0.0],[0.0,0.0,0.0,1.0]]\nscale = 2.0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("cannot be combined"), "{e}");
+    }
+
+    #[test]
+    fn no_constraint_is_an_error() {
+        assert!(matches!(parse(""), Err(Error::NoConstraints)));
+        assert!(matches!(
+            parse(
+                "[[stiffness]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nscale = 2.0\n"
+            ),
+            Err(Error::NoConstraints)
+        ));
+    }
+
+    #[test]
+    fn regions_combine_invert_and_polygons_have_holes() {
+        let spec = parse(
+            "[[fixed]]\nclassification = [2, 6]\npolygon = [[0, 0], [10, 0], [10, 10], [0, 10]]\n\
+             z = [0, 5]\n[[stiffness]]\nsphere = { center = [0, 0, 0], radius = 1 }\n\
+             invert = true\nscale = 2\n",
+        )
+        .unwrap();
+        let r = &spec.fixed[0].region;
+        let p = Vect::<3>::new(5.0, 5.0, 1.0);
+        assert!(r.selects(0, &p, Some(2)) && !r.selects(0, &p, Some(3)));
+        assert!(!r.selects(0, &Vect::<3>::new(5.0, 5.0, 6.0), Some(2)));
+        assert!(!r.selects(0, &Vect::<3>::new(11.0, 5.0, 1.0), Some(6)));
+        assert!(!r.is_geometric() && r.uses_classes());
+        let s = &spec.stiffness[0].region;
+        assert!(s.is_geometric() && !s.contains_point(&Vect::<3>::zeros()));
+        assert!(s.contains_point(&Vect::<3>::new(2.0, 0.0, 0.0)));
+        // Even–odd: a ring inside another is a hole.
+        let square = |a: f64, b: f64| vec![[a, a], [b, a], [b, b], [a, b]];
+        let holed = Polygon::new(vec![square(0.0, 10.0), square(4.0, 6.0)], None);
+        assert!(holed.contains(1.0, 1.0, None) && !holed.contains(5.0, 5.0, None));
+        assert!(!holed.contains(11.0, 5.0, None));
+    }
+
+    #[test]
+    fn matrix_is_split_into_rotation_and_stretch() {
+        let spec = parse("[[handle]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\nmatrix = [[0.0,-2.0,0.0,1.0],[2.0,0.0,0.0,0.0],[0.0,0.0,2.0,0.0],[0.0,0.0,0.0,1.0]]\n").unwrap();
+        let h = spec.handles[0].value;
+        let l = h.rotation * h.stretch;
+        assert!((l - Mat::<3>::new(0.0, -2.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 2.0)).norm() < 1e-12);
+        assert_eq!(h.translate, Vect::<3>::new(1.0, 0.0, 0.0));
+    }
+}
