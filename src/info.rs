@@ -594,7 +594,7 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
     ));
     info.details.push((
         "transfer".into(),
-        format!("{:?}", saved.transfer).to_lowercase(),
+        saved.transfer.to_string(),
     ));
     let moved = f
         .motions

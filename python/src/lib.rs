@@ -282,7 +282,7 @@ impl Field {
 
     fn __repr__(&self) -> String {
         format!(
-            "rigidcells.Field({} cells, transfer {:?})",
+            "rigidcells.Field({} cells, transfer {})",
             self.cells(),
             self.saved.transfer
         )

@@ -349,7 +349,7 @@ fn assets(editor: &Editor, outputs: &Outputs) -> Result<Assets> {
         "classes": classes,
         "cells": editor.complex().len(),
         "up": scene.up,
-        "transfer": format!("{:?}", editor.params().transfer),
+        "transfer": editor.params().transfer.to_string(),
         "out_dir": outputs.dir().display().to_string(),
         "outputs": crate::io::output_extensions(&scene.input),
         "max_message": MAX_MESSAGE,
