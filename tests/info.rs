@@ -1,6 +1,6 @@
-//! `rigidcells info` for every format (issue 17): counts, bounds and centroid, coordinates to
-//! the file's precision, the CRS by name and EPSG code, record fields, a field's cells and
-//! levels, a picture's foreground.
+//! `rigidcells info` for every format: counts, bounds and centroid, coordinates to the file's
+//! precision, the CRS by name and EPSG code, record fields, the software that wrote a LAS file,
+//! a field's cells and levels, a picture's foreground.
 
 mod common;
 
@@ -82,10 +82,16 @@ fn meshes_and_point_sets_have_bounds_and_centroids() {
         line(&t, "bounds:").contains("x [-0.0946899, 0.0610091]"),
         "{t}"
     );
-    assert!(
-        line(&t, "centroid:").starts_with("  centroid: [-0.02"),
-        "{t}"
+    // The mean of the vertices, to the bounds' seven decimals; checked against a mean taken
+    // here from the file's text.
+    assert_eq!(
+        line(&t, "centroid:"),
+        "  centroid: [-0.0267599, 0.0952161, 0.0089471]"
     );
+    let mean = ascii_ply_vertex_mean(&shared("meshes/bun_zipper.ply"));
+    for (printed, mean) in [-0.0267599, 0.0952161, 0.0089471].iter().zip(mean) {
+        assert!((printed - mean).abs() <= 0.5e-7, "{printed} against {mean}");
+    }
     assert!(line(&t, "elements:").contains("vertex 35947 (x, y, z, confidence, intensity)"));
     let t = info(&shared("meshes/spot.obj"));
     assert!(
@@ -99,7 +105,8 @@ fn meshes_and_point_sets_have_bounds_and_centroids() {
     let t = info(&xy);
     assert!(line(&t, "points:").contains('2'), "{t}");
     assert!(line(&t, "bounds:").contains("x [1, 3]  y [2, 4.5]"), "{t}");
-    assert!(line(&t, "centroid:").contains("[2, 3.2]"), "{t}");
+    // (2, 3.25) to the bounds' decimals: none for x, one for y (3.25 is a tie, printed even).
+    assert_eq!(line(&t, "centroid:"), "  centroid: [2, 3.2]");
     let xyz = dir.path().join("p.xyz");
     std::fs::write(&xyz, "1 2 3\n3 4.5 5\n").unwrap();
     let t = info(&xyz);
@@ -135,7 +142,91 @@ fn fields_and_pictures() {
         line(&t, "foreground pixels:"),
         format!("  foreground pixels: {opaque}")
     );
-    assert!(line(&t, "centroid:").contains('['), "{t}");
+    // The mean of the foreground pixels' centers, to the bounds' one decimal.
+    let w = raster.width as usize;
+    let (mut sum, mut n) = ([0.0f64; 2], 0usize);
+    for (i, _) in raster
+        .rgba
+        .chunks_exact(4)
+        .enumerate()
+        .filter(|(_, p)| p[3] > 0)
+    {
+        sum[0] += (i % w) as f64 + 0.5;
+        sum[1] += (i / w) as f64 + 0.5;
+        n += 1;
+    }
+    let (cx, cy) = (sum[0] / n as f64, sum[1] / n as f64);
+    assert_eq!(
+        line(&t, "centroid:"),
+        format!("  centroid: [{cx:.1}, {cy:.1}]")
+    );
+    assert_eq!(line(&t, "centroid:"), "  centroid: [120.0, 114.8]");
+}
+
+/// The mean of the first three numbers of each vertex line of an ASCII PLY whose first element
+/// is `vertex`.
+fn ascii_ply_vertex_mean(path: &std::path::Path) -> [f64; 3] {
+    let text = std::fs::read_to_string(path).unwrap();
+    let (header, body) = text.split_once("end_header\n").unwrap();
+    let count: usize = header
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .unwrap()
+        .trim()
+        .parse()
+        .unwrap();
+    let mut sum = [0.0f64; 3];
+    for l in body.lines().take(count) {
+        for (s, w) in sum.iter_mut().zip(l.split_whitespace()) {
+            *s += w.parse::<f64>().unwrap();
+        }
+    }
+    sum.map(|s| s / count as f64)
+}
+
+/// A LAS file rigidcells wrote names it, with this crate's version exactly, after the system
+/// that made the input; its format line gives the LAS version and record layout of the input.
+#[test]
+fn a_written_las_names_rigidcells_and_its_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("lift.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
+         translate = [0, 0, 5]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("o.laz");
+    let r = common::deform(
+        &shared("las/autzen_trim.laz"),
+        &out,
+        &edit,
+        &["--cell-size", "20"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let t = info(&out);
+    assert_eq!(
+        line(&t, "format:"),
+        "  format: LAZ 1.2, point data record format 3, 34 bytes per record"
+    );
+    assert_eq!(
+        line(&t, "software:"),
+        format!(
+            "  software: PDAL / rigidcells {}",
+            env!("CARGO_PKG_VERSION")
+        )
+    );
+    assert_eq!(
+        line(&info(&shared("las/autzen_trim.laz")), "software:"),
+        "  software: PDAL / PDAL 1.0.0 (9e8465)"
+    );
+    let r = run(&["--version"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(
+        r.stdout,
+        format!("rigidcells {}\n", env!("CARGO_PKG_VERSION"))
+    );
 }
 
 /// The decimals of every number in `text`.
