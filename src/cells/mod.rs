@@ -1,5 +1,5 @@
 //! The cell complex: an adaptive octree (quadtree in 2D) of rigid cells embedding the shape
-//! (paper §5; docs/ARCHITECTURE.md, *Cells*).
+//! (paper §5; docs/ARCHITECTURE.md, its code map).
 //!
 //! - A cell is a [`CellKey`] `(level, integer coordinates)` on a [`Grid`]: level 0 is a coarse
 //!   regular grid of cells of size `cell_size · 2^max_level`; level `max_level` cells have the

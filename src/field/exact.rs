@@ -1,5 +1,5 @@
-//! Exact constraints and the field's domain (docs/ARCHITECTURE.md, *Invariants*): the layer every transfer is applied
-//! through.
+//! Exact constraints and the field's domain (docs/ARCHITECTURE.md, the invariants): the layer
+//! every transfer is applied through.
 //!
 //! **Constraints are exact, and the map stays smooth.** The blend and the RBF interpolate the
 //! cells' motions between their centers, so a sample inside a fixed region but near its border

@@ -1,4 +1,5 @@
-//! Transfer of the cells' rigid motions to the samples (paper §6; docs/ARCHITECTURE.md, *Transfer*).
+//! Transfer of the cells' rigid motions to the samples (paper §6; docs/ARCHITECTURE.md, the
+//! stages).
 //!
 //! A [`Field`] is the solved state that defines the space warp: the cells' rest centers and
 //! rigid motions in the local frame. Two transfers turn it into a map of space:
