@@ -37,6 +37,9 @@ pub use xyz::XyzStream;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
+
 /// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ, PLY
 /// and XYZ stream from the file; OBJ is read whole and served in chunks.
 pub fn open(path: &Path) -> Result<Box<dyn Source>> {
@@ -74,9 +77,6 @@ pub fn output_extensions(input: &Path) -> &'static [&'static str] {
         _ => &[],
     }
 }
-
-use crate::error::{Error, Result};
-use crate::rigid::Vect;
 
 /// What a source checks as it opens.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,9 +128,8 @@ impl Document {
     pub fn drain(source: &mut dyn Source) -> Result<Self> {
         source.rewind()?;
         let mut doc = Self {
-            positions: Vec::with_capacity(source.len() as usize),
-            normals: None,
             triangles: source.triangles().to_vec(),
+            ..Self::default()
         };
         let mut chunk = Chunk::default();
         while source.read_samples(DRAIN_CHUNK, &mut chunk)? > 0 {
