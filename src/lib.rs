@@ -46,9 +46,17 @@
 //! assert!((moved[b] - points[b]).norm() < 0.02);
 //! # Ok::<(), rigidcells::Error>(())
 //! ```
+//!
+//! ## Features
+//!
+//! The library itself needs none of them (`default-features = false`). `cli` brings the
+//! command line's parser and progress bars, `editor` the editor's local web server
+//! ([`edit`]'s `server`), `demo` the generated inputs of `rigidcells demo` (`demo`). All three
+//! are on by default, and the `rigidcells` binary requires them.
 
 pub mod cells;
 pub mod control;
+#[cfg(feature = "demo")]
 pub mod demo;
 pub mod edit;
 pub mod error;

@@ -743,9 +743,10 @@ pub fn render_annotated(
 /// Samples [`render_file`] draws of a streamed file at most (every k-th sample).
 pub const RENDER_POINTS: usize = 2_000_000;
 
-/// What `rigidcells render` draws of the file `input`: a mesh's triangles (or a PLY's points)
-/// in its vertex or face colors, else gray; a streamed point file (LAS/LAZ, XYZ, large PLY)
-/// decimated to [`RENDER_POINTS`], in its LAS RGB or intensity; with the triad and scale bar.
+/// What `rigidcells render` draws of the file `input`: a PLY, OBJ or XYZ file read whole
+/// ([`crate::io::Document`]), its triangles or points in a PLY's vertex or face colors, else
+/// gray; a LAS/LAZ scan streamed and decimated to [`RENDER_POINTS`], in its RGB or intensity;
+/// with the triad and scale bar.
 pub fn render_file(input: &Path, view: &View) -> Result<Image> {
     use crate::io::Colors;
     match crate::io::Document::read(input) {

@@ -473,11 +473,33 @@ fn solve_over_tiles_then_apply_equals_deform_of_the_merged_file() {
     assert!(r.stderr.contains("bar.ply"), "{}", r.stderr);
 }
 
-/// Every PLY streams (binary by the record layout, ASCII by walking tokens): the memory-mapped
-/// source decodes the same positions and triangles as the whole-file reader, and its sink, fed
-/// in small chunks, writes the same bytes as the whole-file encoder.
+/// Translates every sample of `source` by `T` into `out`, `chunk` samples at a time; returns
+/// the positions read and the bytes written.
+fn translate_stream(
+    mut source: Box<dyn Source>,
+    chunk: usize,
+    out: &Path,
+) -> (Vec<Vect<3>>, Vec<u8>) {
+    let shift = Vect::<3>::from(T);
+    let mut sink = source.sink(out, None).unwrap();
+    let mut buffer = Chunk::default();
+    let mut positions = Vec::new();
+    while source.read(chunk, &mut buffer).unwrap() > 0 {
+        let moved: Vec<Vect<3>> = buffer.positions.iter().map(|p| p + shift).collect();
+        positions.extend_from_slice(&buffer.positions);
+        let accepted = sink.write(&buffer, &moved, &buffer.normals).unwrap();
+        assert_eq!(accepted, Accepted::Yes);
+    }
+    sink.finish().unwrap();
+    (positions, std::fs::read(out).unwrap())
+}
+
+/// Every PLY streams (binary with fixed-size vertex records from the map, any PLY by walking
+/// its records): each stream decodes the positions and triangles of the file read whole, and
+/// its sink, fed in small chunks, writes the bytes the record walker's sink writes when fed
+/// the whole file as one chunk.
 #[test]
-fn ply_streams_like_the_whole_file_reader() {
+fn ply_streams_agree_with_the_whole_file() {
     let dir = tempfile::tempdir().unwrap();
     let mut inputs: Vec<PathBuf> = files("meshes");
     for big in [false, true] {
@@ -490,41 +512,31 @@ fn ply_streams_like_the_whole_file_reader() {
         if input.extension().is_none_or(|e| e != "ply") {
             continue;
         }
-        let mut stream: Box<dyn Source> = match PlyStream::open(&input) {
-            Ok(Some(binary)) => Box::new(binary),
-            Ok(None) => match PlyRecordStream::open(&input) {
-                Ok(walked) => {
-                    // The generated files are the binary ones with vertex lists.
-                    walked_binary += usize::from(input.starts_with(dir.path()));
-                    Box::new(walked)
-                }
-                Err(_) => continue,
-            },
-            Err(_) => continue,
-        };
         let name = input.file_name().unwrap().to_string_lossy().to_string();
-        let Ok(Document::Ply(whole)) = Document::read(&input) else {
-            panic!("{name}: the whole-file reader fails where the stream does not");
+        let Ok(fixed) = PlyStream::open(&input) else {
+            continue;
         };
-        assert_eq!(stream.triangles(), whole.triangles(), "{name}");
-        let shift = Vect::<3>::from(T);
-        let out = dir.path().join(format!("s_{name}"));
-        let mut sink = stream.sink(&out, None).unwrap();
-        let mut chunk = Chunk::default();
-        let mut positions = Vec::new();
-        while stream.read(1000, &mut chunk).unwrap() > 0 {
-            let moved: Vec<Vect<3>> = chunk.positions.iter().map(|p| p + shift).collect();
-            positions.extend_from_slice(&chunk.positions);
-            assert_eq!(
-                sink.write(&chunk, &moved, &chunk.normals).unwrap(),
-                Accepted::Yes
+        let Ok(walked) = PlyRecordStream::open(&input) else {
+            assert!(
+                fixed.is_none(),
+                "{name}: the walker fails where the map does not"
             );
+            continue;
+        };
+        // The generated files are the binary ones with vertex lists.
+        walked_binary += usize::from(fixed.is_none() && input.starts_with(dir.path()));
+        let whole = Document::read(&input).unwrap();
+        let one = Box::new(PlyRecordStream::open(&input).unwrap());
+        let (_, want) = translate_stream(one, usize::MAX, &dir.path().join(format!("w_{name}")));
+        let mut streams: Vec<Box<dyn Source>> = vec![Box::new(walked)];
+        streams.extend(fixed.map(|s| Box::new(s) as Box<dyn Source>));
+        for (k, stream) in streams.into_iter().enumerate() {
+            assert_eq!(stream.triangles(), whole.triangles(), "{name}");
+            let out = dir.path().join(format!("s{k}_{name}"));
+            let (positions, bytes) = translate_stream(stream, 1000, &out);
+            assert_eq!(positions, whole.positions(), "{name}");
+            assert!(bytes == want, "{name}: bytes differ");
         }
-        sink.finish().unwrap();
-        assert_eq!(positions, whole.positions(), "{name}");
-        let moved: Vec<Vect<3>> = positions.iter().map(|p| p + shift).collect();
-        let want = whole.encode(&moved, whole.normals()).unwrap();
-        assert!(std::fs::read(&out).unwrap() == want, "{name}: bytes differ");
         streamed += 1;
     }
     assert!(streamed >= 22, "only {streamed} PLY files streamed");
@@ -593,10 +605,11 @@ fn binary_ply_with_vertex_lists(big: bool) -> Vec<u8> {
 }
 
 /// An XYZ file with a header comment, `//` comments, blank lines, CRLF line ends, commas,
-/// extra columns and no newline at the end streams in chunks of 7 points to the same bytes as
-/// the whole-file encoder; through the CLI, every line but the numbers is kept.
+/// extra columns and no newline at the end streams in chunks of 7 points the positions of the
+/// file read whole, and to the same bytes as one chunk of all of them; through the CLI, every
+/// line but the numbers is kept.
 #[test]
-fn xyz_streams_like_the_whole_file_reader() {
+fn xyz_streams_like_the_whole_file() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("cloud.xyz");
     let mut text = String::from("# x y z r g b\n\n");
@@ -611,23 +624,16 @@ fn xyz_streams_like_the_whole_file_reader() {
     }
     text += "1 2 3 end";
     std::fs::write(&input, &text).unwrap();
-    let whole = rigidcells::io::XyzFile::read(&input).unwrap();
-    let mut stream = XyzStream::open(&input).unwrap();
+    let whole = Document::read(&input).unwrap();
+    let stream = XyzStream::open(&input).unwrap();
     assert_eq!(stream.len(), 101);
-    let shift = Vect::<3>::from(T);
     let out = dir.path().join("streamed.xyz");
-    let mut sink = stream.sink(&out, None).unwrap();
-    let mut chunk = Chunk::default();
-    let mut positions = Vec::new();
-    while stream.read(7, &mut chunk).unwrap() > 0 {
-        let moved: Vec<Vect<3>> = chunk.positions.iter().map(|p| p + shift).collect();
-        positions.extend_from_slice(&chunk.positions);
-        assert_eq!(sink.write(&chunk, &moved, &[]).unwrap(), Accepted::Yes);
-    }
-    sink.finish().unwrap();
+    let (positions, bytes) = translate_stream(Box::new(stream), 7, &out);
     assert_eq!(positions, whole.positions());
-    let moved: Vec<Vect<3>> = positions.iter().map(|p| p + shift).collect();
-    assert!(std::fs::read(&out).unwrap() == whole.encode(&moved).unwrap());
+    let one = Box::new(XyzStream::open(&input).unwrap());
+    let (_, want) = translate_stream(one, usize::MAX, &dir.path().join("one.xyz"));
+    assert!(bytes == want);
+    let shift = Vect::<3>::from(T);
 
     let spec = translate_spec(dir.path());
     let (_, output) = translate(dir.path(), &spec, &input, &[]).unwrap();
@@ -648,7 +654,7 @@ fn xyz_streams_like_the_whole_file_reader() {
             assert_eq!(words(before), words(after), "{before:?} -> {after:?}");
         }
     }
-    let moved_cli = rigidcells::io::XyzFile::read(&output).unwrap();
+    let moved_cli = Document::read(&output).unwrap();
     for (p, q) in whole.positions().iter().zip(moved_cli.positions()) {
         assert!((q - p - shift).norm() < 1e-9, "{p:?} -> {q:?}");
     }
@@ -1193,9 +1199,7 @@ fn normals_keep_their_length() {
         let output = dir.path().join(format!("{transfer}.ply"));
         let r = deform(&input, &output, &spec, &["--transfer", transfer]);
         assert_eq!(r.code, 0, "{transfer}: {}", r.stderr);
-        let Document::Ply(out) = Document::read(&output).unwrap() else {
-            panic!("a PLY")
-        };
+        let out = Document::read(&output).unwrap();
         let (mut turned, mut free) = (0, 0);
         for ((p, n), m) in points.iter().zip(&normals).zip(out.normals().unwrap()) {
             let at = format!("{transfer}: {n:?} at {p:?} -> {m:?}");

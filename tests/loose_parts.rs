@@ -4,7 +4,7 @@
 mod common;
 
 use common::{arg, deform_verbose, run};
-use rigidcells::io::PlyFile;
+use rigidcells::io::Document;
 use rigidcells::rigid::Vect;
 
 /// The distance from `p` to the nearest of `points`.
@@ -21,7 +21,7 @@ fn the_soups_spikes_ride_along_with_the_bar() {
     let r = run(&["demo", "--out", arg(dir.path()), "-q"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let (input, edit) = (dir.path().join("soup.ply"), dir.path().join("bend.toml"));
-    let ply = PlyFile::read(&input).unwrap();
+    let ply = Document::read(&input).unwrap();
     let (before, triangles) = (ply.positions().to_vec(), ply.triangles().to_vec());
     // The spikes: the triangles standing above the bar's top face (z = 1).
     let spikes: Vec<[usize; 3]> = triangles
@@ -42,7 +42,7 @@ fn the_soups_spikes_ride_along_with_the_bar() {
         "{}",
         r.stderr
     );
-    let after = PlyFile::read(&carried).unwrap().positions().to_vec();
+    let after = Document::read(&carried).unwrap().positions().to_vec();
     let bar_before: Vec<Vect<3>> = bar.iter().map(|&i| before[i]).collect();
     let bar_after: Vec<Vect<3>> = bar.iter().map(|&i| after[i]).collect();
     // The spikes that share cells with the bar bend with its top face (their sides change by
@@ -74,7 +74,7 @@ fn the_soups_spikes_ride_along_with_the_bar() {
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(r.stderr.contains("keep their rest pose"), "{}", r.stderr);
-    let after = PlyFile::read(&rest).unwrap().positions().to_vec();
+    let after = Document::read(&rest).unwrap().positions().to_vec();
     let bar_after: Vec<Vect<3>> = bar.iter().map(|&i| after[i]).collect();
     let mut far = 0;
     for s in &spikes {

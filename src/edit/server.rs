@@ -43,6 +43,8 @@
 //! this editor; ask, and send again with `"overwrite": true`), `progress`, `applied`, `warning`
 //! and `error` (with `select: seq` when it answers a selection).
 
+#![cfg(feature = "editor")]
+
 use std::collections::HashSet;
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};

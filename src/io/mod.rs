@@ -1,9 +1,14 @@
 //! Reading and writing shapes; the format follows the file extension.
 //!
+//! Every format has one reader, a streaming [`Source`] ([`open`]): LAS/LAZ and COPC, PLY
+//! ([`PlyStream`] for binary files with fixed-size vertex records, [`PlyRecordStream`] for the
+//! others), XYZ ([`XyzStream`]) and OBJ ([`ObjSource`], read whole and served in chunks). A
+//! caller that needs every sample at once drains the source into a [`Document`].
+//!
 //! Every reader keeps the input's bytes and knows where the coordinates live, so the writer
-//! changes the coordinates and nothing else. Output goes to a temporary file in the
-//! output's folder that is renamed over the target at the end: a failure never leaves a partial
-//! file under the output's name, and the input is never opened for writing.
+//! changes the coordinates and nothing else. Output goes to a temporary file in the output's
+//! folder that is renamed over the target at the end: a failure never leaves a partial file
+//! under the output's name, and the input is never opened for writing.
 
 mod las;
 pub(crate) mod mapped;
@@ -20,17 +25,19 @@ pub use las::{
     Encoded, LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord, copc, decode_coordinates,
     encode_coordinates, frame_error,
 };
-pub use obj::ObjFile;
-pub use ply::{Colors, PlyFile, colors};
+pub use obj::{ObjFile, ObjSource};
+pub use ply::{Colors, colors};
 pub use ply_stream::{PlyRecordStream, PlyStream};
 pub use stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
 pub use tiles::Tiles;
 pub use xy::XyFile;
-pub use xyz::{XyzFile, XyzStream};
+pub use xyz::XyzStream;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+
+use crate::error::{Error, Result};
+use crate::rigid::Vect;
 
 /// Opens `path` as a streaming [`Source`], choosing the format by its extension: LAS/LAZ, PLY
 /// and XYZ stream from the file; OBJ is read whole and served in chunks.
@@ -39,7 +46,10 @@ pub fn open(path: &Path) -> Result<Box<dyn Source>> {
         Some("las") | Some("laz") => Ok(Box::new(LasSource::open(path)?)),
         Some("ply") => ply_stream::open(path),
         Some("xyz") | Some("txt") => Ok(Box::new(XyzStream::open(path)?)),
-        _ => Ok(Box::new(DocumentSource::new(path, Document::read(path)?)?)),
+        Some("obj") => Ok(Box::new(ObjSource::open_as(path, Opening::Stream)?)),
+        _ => Err(Error::UnsupportedFormat {
+            path: path.to_path_buf(),
+        }),
     }
 }
 
@@ -67,190 +77,97 @@ pub fn output_extensions(input: &Path) -> &'static [&'static str] {
     }
 }
 
-/// A [`Document`] held in memory, served as a [`Source`].
-pub struct DocumentSource {
-    path: PathBuf,
-    doc: Arc<Document>,
-    next: usize,
+/// What a source checks as it opens.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Opening {
+    /// For passes over the samples ([`open`]): a file without samples is refused, and what a
+    /// chunk decodes (a binary PLY's fixed-size records, an XYZ's numbers) is checked when the
+    /// chunk is read.
+    Stream,
+    /// For reading a file whole ([`Document::read`]): every record is decoded and checked as
+    /// the source opens, in file order, so the first defect of the file is the one reported;
+    /// a file without samples is a document without samples.
+    Whole,
 }
 
-impl DocumentSource {
-    /// Serves `doc`, read from `path`.
-    pub fn new(path: &Path, doc: Document) -> Result<Self> {
-        if doc.positions().is_empty() {
-            return Err(Error::format(path, "the file holds no vertices or points"));
-        }
-        Ok(Self {
-            path: path.to_path_buf(),
-            doc: Arc::new(doc),
-            next: 0,
-        })
-    }
-}
-
-impl Source for DocumentSource {
-    fn path(&self) -> &Path {
-        &self.path
-    }
-
-    fn len(&self) -> u64 {
-        self.doc.positions().len() as u64
-    }
-
-    fn triangles(&self) -> &[[u32; 3]] {
-        self.doc.triangles()
-    }
-
-    fn loose_normals(&self) -> Vec<(Vect<3>, Vect<3>)> {
-        match &*self.doc {
-            Document::Obj(o) => o.loose_normals(),
-            _ => Vec::new(),
-        }
-    }
-
-    fn rewind(&mut self) -> Result<()> {
-        self.next = 0;
-        Ok(())
-    }
-
-    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
-        let all = self.doc.positions();
-        let end = self.next.saturating_add(max).min(all.len());
-        chunk.clear(self.next as u64);
-        chunk.positions.extend_from_slice(&all[self.next..end]);
-        if let Some(normals) = self.doc.normals() {
-            chunk.normals.extend_from_slice(&normals[self.next..end]);
-        }
-        let n = end - self.next;
-        self.next = end;
-        Ok(n)
-    }
-
-    fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        self.doc.check_output(output)?;
-        Ok(Box::new(DocumentSink {
-            doc: self.doc.clone(),
-            output: output.to_path_buf(),
-            positions: Vec::with_capacity(self.doc.positions().len()),
-            normals: Vec::new(),
-            loose: Vec::new(),
-        }))
-    }
-}
-
-/// Collects the moved samples of a [`DocumentSource`] and writes the document at the end.
-struct DocumentSink {
-    doc: Arc<Document>,
-    output: PathBuf,
+/// A shape read whole: the samples of a PLY, XYZ or OBJ file, drained from its [`Source`]
+/// into memory, for the callers that need them all at once (pictures, the editor's proxy,
+/// tools and tests). Writing goes through the source's sink.
+#[derive(Debug, Clone, Default)]
+pub struct Document {
     positions: Vec<Vect<3>>,
-    normals: Vec<Vect<3>>,
-    loose: Vec<Vect<3>>,
-}
-
-impl Sink for DocumentSink {
-    fn write(
-        &mut self,
-        _chunk: &Chunk,
-        moved: &[Vect<3>],
-        normals: &[Vect<3>],
-    ) -> Result<Accepted> {
-        self.positions.extend_from_slice(moved);
-        self.normals.extend_from_slice(normals);
-        Ok(Accepted::Yes)
-    }
-
-    fn loose_normals(&mut self, normals: Vec<Vect<3>>) {
-        self.loose = normals;
-    }
-
-    fn finish(self: Box<Self>) -> Result<Vec<String>> {
-        let normals = (!self.normals.is_empty()).then_some(&self.normals[..]);
-        self.doc
-            .write(&self.positions, normals, &self.loose, &self.output)?;
-        Ok(Vec::new())
-    }
-}
-
-use crate::error::{Error, Result};
-use crate::rigid::Vect;
-
-/// A shape read from a file.
-#[derive(Debug)]
-pub enum Document {
-    /// A PLY mesh or point cloud.
-    Ply(PlyFile),
-    /// A text point cloud.
-    Xyz(XyzFile),
-    /// A Wavefront OBJ mesh.
-    Obj(ObjFile),
+    normals: Option<Vec<Vect<3>>>,
+    triangles: Vec<[u32; 3]>,
 }
 
 impl Document {
-    /// Reads `path`, choosing the format by its extension.
+    /// Reads `path`, choosing the format by its extension: PLY, XYZ (`.txt` too) or OBJ; other
+    /// formats are [`Error::UnsupportedFormat`] (stream them through [`open`]).
     pub fn read(path: &Path) -> Result<Self> {
-        match extension(path).as_deref() {
-            Some("ply") => Ok(Self::Ply(PlyFile::read(path)?)),
-            Some("xyz") | Some("txt") => Ok(Self::Xyz(XyzFile::read(path)?)),
-            Some("obj") => Ok(Self::Obj(ObjFile::read(path)?)),
-            _ => Err(Error::UnsupportedFormat {
-                path: path.to_path_buf(),
-            }),
+        let mut source: Box<dyn Source> = match extension(path).as_deref() {
+            Some("ply") => {
+                refuse_folder(path)?;
+                Box::new(PlyRecordStream::open_as(path, Opening::Whole)?)
+            }
+            Some("xyz") | Some("txt") => {
+                refuse_folder(path)?;
+                Box::new(XyzStream::open_as(path, Opening::Whole)?)
+            }
+            Some("obj") => Box::new(ObjSource::open_as(path, Opening::Whole)?),
+            _ => {
+                return Err(Error::UnsupportedFormat {
+                    path: path.to_path_buf(),
+                });
+            }
+        };
+        Self::drain(source.as_mut())
+    }
+
+    /// All the samples of `source` from its first, with its triangles.
+    pub fn drain(source: &mut dyn Source) -> Result<Self> {
+        source.rewind()?;
+        let mut doc = Self {
+            triangles: source.triangles().to_vec(),
+            ..Self::default()
+        };
+        let mut chunk = Chunk::default();
+        while source.read_samples(DRAIN_CHUNK, &mut chunk)? > 0 {
+            doc.positions.extend_from_slice(&chunk.positions);
+            if !chunk.normals.is_empty() {
+                doc.normals
+                    .get_or_insert_with(Vec::new)
+                    .extend_from_slice(&chunk.normals);
+            }
         }
+        Ok(doc)
     }
 
     /// The sample positions (input coordinates).
     pub fn positions(&self) -> &[Vect<3>] {
-        match self {
-            Self::Ply(p) => p.positions(),
-            Self::Xyz(x) => x.positions(),
-            Self::Obj(o) => o.positions(),
-        }
+        &self.positions
     }
 
-    /// Per-vertex normals, when the file has them.
+    /// Per-vertex normals, when the file has them (PLY `nx ny nz`).
     pub fn normals(&self) -> Option<&[Vect<3>]> {
-        match self {
-            Self::Ply(p) => p.normals(),
-            Self::Xyz(_) | Self::Obj(_) => None,
-        }
-    }
-
-    /// Fails unless `path` names this document's format.
-    pub fn check_output(&self, path: &Path) -> Result<()> {
-        let want = match self {
-            Self::Ply(_) => "ply",
-            Self::Xyz(_) => "xyz",
-            Self::Obj(_) => "obj",
-        };
-        require_extension(path, want)
+        self.normals.as_deref()
     }
 
     /// Triangles over the positions (empty for point clouds).
     pub fn triangles(&self) -> &[[u32; 3]] {
-        match self {
-            Self::Ply(p) => p.triangles(),
-            Self::Xyz(_) => &[],
-            Self::Obj(o) => o.triangles(),
-        }
+        &self.triangles
     }
+}
 
-    /// Writes the document with its positions (and normals, when given) replaced to `path`,
-    /// atomically. The output format must be the input's.
-    pub fn write(
-        &self,
-        positions: &[Vect<3>],
-        normals: Option<&[Vect<3>]>,
-        loose_normals: &[Vect<3>],
-        path: &Path,
-    ) -> Result<()> {
-        self.check_output(path)?;
-        let bytes = match self {
-            Self::Ply(p) => p.encode(positions, normals)?,
-            Self::Xyz(x) => x.encode(positions)?,
-            Self::Obj(o) => o.encode(positions, loose_normals)?,
-        };
-        write_atomic(path, &bytes)
+/// Samples per chunk when a source is drained into a [`Document`].
+const DRAIN_CHUNK: usize = 1 << 16;
+
+/// Fails as reading a folder fails ("Is a directory") where it would be mapped: mapping a
+/// folder fails with the less telling "No such device".
+fn refuse_folder(path: &Path) -> Result<()> {
+    if path.is_dir() {
+        std::fs::read(path).map_err(|e| Error::io(path, e))?;
     }
+    Ok(())
 }
 
 /// The lowercase extension of `path` (`None` without one).

@@ -5,10 +5,17 @@
 //! at the vertex of its first face corner; normals no face refers to are kept as they are.
 //! Writing replaces the number tokens of `v` and `vn` lines (with the precision of their columns
 //! in the input, [`super::text`]) and copies everything else.
+//!
+//! An OBJ file is read whole ([`ObjFile`]: its faces refer to vertices anywhere in the file,
+//! and its normals are found through them) and served in chunks by [`ObjSource`], whose sink
+//! collects the moved samples and writes the file at the end.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
+use super::stream::{Accepted, Bounds, Chunk, Sink, Source};
 use super::text::{Edit, Precision, Span, check_count, edits3, splice};
+use super::{Opening, require_extension, write_atomic};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -190,5 +197,106 @@ impl ObjFile {
             edits.extend(edits3(spans, n, old, [false; 3], 3));
         }
         Ok(splice(&self.bytes, edits, &self.precision))
+    }
+}
+
+/// An OBJ file read whole ([`ObjFile`]), served as a [`Source`].
+pub struct ObjSource {
+    path: PathBuf,
+    file: Arc<ObjFile>,
+    next: usize,
+}
+
+impl ObjSource {
+    /// Reads `path` for streaming; a file without vertices is refused.
+    pub fn open(path: &Path) -> Result<Self> {
+        Self::open_as(path, Opening::Stream)
+    }
+
+    /// Reads `path`, checking what `opening` asks.
+    pub(super) fn open_as(path: &Path, opening: Opening) -> Result<Self> {
+        let file = ObjFile::read(path)?;
+        if opening == Opening::Stream && file.positions.is_empty() {
+            return Err(Error::format(path, "the file holds no vertices or points"));
+        }
+        Ok(Self {
+            path: path.to_path_buf(),
+            file: Arc::new(file),
+            next: 0,
+        })
+    }
+}
+
+impl Source for ObjSource {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn len(&self) -> u64 {
+        self.file.positions.len() as u64
+    }
+
+    fn triangles(&self) -> &[[u32; 3]] {
+        &self.file.triangles
+    }
+
+    fn loose_normals(&self) -> Vec<(Vect<3>, Vect<3>)> {
+        self.file.loose_normals()
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        self.next = 0;
+        Ok(())
+    }
+
+    fn read(&mut self, max: usize, chunk: &mut Chunk) -> Result<usize> {
+        let all = &self.file.positions;
+        let end = self.next.saturating_add(max).min(all.len());
+        chunk.clear(self.next as u64);
+        chunk.positions.extend_from_slice(&all[self.next..end]);
+        let n = end - self.next;
+        self.next = end;
+        Ok(n)
+    }
+
+    fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
+        require_extension(output, "obj")?;
+        Ok(Box::new(ObjSink {
+            file: self.file.clone(),
+            output: output.to_path_buf(),
+            positions: Vec::with_capacity(self.file.positions.len()),
+            loose: Vec::new(),
+        }))
+    }
+}
+
+/// Collects the moved samples of an [`ObjSource`] and writes the file at the end.
+struct ObjSink {
+    file: Arc<ObjFile>,
+    output: PathBuf,
+    positions: Vec<Vect<3>>,
+    loose: Vec<Vect<3>>,
+}
+
+impl Sink for ObjSink {
+    fn write(
+        &mut self,
+        _chunk: &Chunk,
+        moved: &[Vect<3>],
+        _normals: &[Vect<3>],
+    ) -> Result<Accepted> {
+        self.positions.extend_from_slice(moved);
+        Ok(Accepted::Yes)
+    }
+
+    fn loose_normals(&mut self, normals: Vec<Vect<3>>) {
+        self.loose = normals;
+    }
+
+    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+        require_extension(&self.output, "obj")?;
+        let bytes = self.file.encode(&self.positions, &self.loose)?;
+        write_atomic(&self.output, &bytes)?;
+        Ok(Vec::new())
     }
 }

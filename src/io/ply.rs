@@ -1,163 +1,23 @@
-//! PLY: ASCII, binary little- and big-endian; every scalar and list type; any element order.
+//! PLY's raw layer: ASCII, binary little- and big-endian; every scalar and list type; any
+//! element order. The sources of [`super::ply_stream`] are built on it.
 //!
-//! The header is parsed by `ply-rs-bw` and kept verbatim. The body is walked once, record by
-//! record, to find where the vertices' `x y z` live (byte offsets in binary, token spans in
-//! ASCII) and to decode faces (`vertex_indices`/`vertex_index` lists, fan-triangulated) and
-//! triangle strips (`tristrips`, `-1` restarts). Writing copies the input and replaces only those
-//! coordinates, so faces, other elements, every other property and the header's comments and
-//! obj_info come out byte for byte.
+//! The header is parsed by `ply-rs-bw` (with the tolerance [`parse_header`] describes) and kept
+//! verbatim. The body is walked record by record ([`walk_element`]) to find where the vertices'
+//! `x y z` live (byte offsets in binary, token spans in ASCII) and to decode faces
+//! (`vertex_indices`/`vertex_index` lists, fan-triangulated) and triangle strips (`tristrips`,
+//! `-1` restarts). Writers copy the input and replace only those coordinates, so faces, other
+//! elements, every other property and the header's comments and obj_info come out byte for
+//! byte.
 
 use std::io::Cursor;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{DefaultElement, ElementDef, Encoding, Header, PropertyType, ScalarType};
 
-use super::text::{Edit, Numbers, Precision, Span, check_count, edits3, fit_singles, rewrite};
+use super::text::{Numbers, Precision, Span};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
-
-/// A PLY file held in memory with the locations of its vertex coordinates.
-#[derive(Debug)]
-pub struct PlyFile {
-    path: PathBuf,
-    bytes: Vec<u8>,
-    encoding: Encoding,
-    /// Whether x, y, z are doubles (else floats).
-    doubles: [bool; 3],
-    coords: Vec<[Span; 3]>,
-    positions: Vec<Vect<3>>,
-    /// Whether nx, ny, nz are doubles, when the vertices have normals.
-    normal_doubles: Option<[bool; 3]>,
-    normal_spans: Vec<[Span; 3]>,
-    normals: Vec<Vect<3>>,
-    triangles: Vec<[u32; 3]>,
-    /// The precision of the coordinate and normal columns of an ASCII body.
-    precision: Precision,
-}
-
-impl PlyFile {
-    /// Reads and indexes `path`.
-    pub fn read(path: &Path) -> Result<Self> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        Self::parse(path, bytes)
-    }
-
-    /// Indexes the PLY file `bytes` (named `path` in errors).
-    pub fn parse(path: &Path, bytes: Vec<u8>) -> Result<Self> {
-        let err = |m: String| Error::format(path, m);
-        if !bytes.starts_with(b"ply") {
-            return Err(err("not a PLY file (no `ply` magic line)".into()));
-        }
-        let (header, body) = parse_header(&bytes).map_err(err)?;
-        let (doubles, normal_doubles) = vertex_layout(&header).map_err(err)?;
-        let mut normal_spans = Vec::new();
-        let mut normals = Vec::new();
-        let mut walker = Walker::new(&bytes, body, header.encoding, path);
-        let mut coords = Vec::new();
-        let mut positions = Vec::new();
-        let mut triangles = Vec::new();
-        let mut precision = Precision::default();
-        let ascii = header.encoding == Encoding::Ascii;
-        for (name, element) in header.elements.iter() {
-            if name != "vertex" {
-                let records = 0..element.count;
-                walk_element(&mut walker, name, element, records, &mut triangles, |_| {
-                    Ok(())
-                })?;
-                continue;
-            }
-            coords.reserve(element.count);
-            positions.reserve(element.count);
-            let mut fields = VertexFields::default();
-            let records = 0..element.count;
-            walk_element(
-                &mut walker,
-                name,
-                element,
-                records,
-                &mut triangles,
-                |visit| {
-                    let Some(record) = fields.take(visit) else {
-                        return Ok(());
-                    };
-                    let (spans, xyz, nspans, nxyz) = fields.checked(path, record)?;
-                    if ascii {
-                        precision.see3(0, &bytes, &spans);
-                    }
-                    coords.push(spans);
-                    positions.push(xyz);
-                    if normal_doubles.is_some() {
-                        if ascii {
-                            precision.see3(3, &bytes, &nspans);
-                        }
-                        normal_spans.push(nspans);
-                        normals.push(nxyz);
-                    }
-                    Ok(())
-                },
-            )?;
-        }
-        if header.encoding == Encoding::Ascii
-            && bytes[walker.pos..].iter().any(|b| !b.is_ascii_whitespace())
-        {
-            return Err(err(
-                "data after the last element: the header's counts are smaller than the body".into(),
-            ));
-        }
-        check_triangles(path, &triangles, positions.len())?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            bytes,
-            encoding: header.encoding,
-            doubles,
-            coords,
-            positions,
-            normal_doubles,
-            normal_spans,
-            normals,
-            triangles,
-            precision,
-        })
-    }
-
-    /// Vertex positions.
-    pub fn positions(&self) -> &[Vect<3>] {
-        &self.positions
-    }
-
-    /// Vertex normals (`nx ny nz`), when the vertices have them.
-    pub fn normals(&self) -> Option<&[Vect<3>]> {
-        self.normal_doubles.map(|_| &self.normals[..])
-    }
-
-    /// Triangles of the faces and strips.
-    pub fn triangles(&self) -> &[[u32; 3]] {
-        &self.triangles
-    }
-
-    /// The file's bytes with the vertex positions replaced by `positions` and, when given and
-    /// the vertices have normals, the normals by `normals`.
-    pub fn encode(&self, positions: &[Vect<3>], normals: Option<&[Vect<3>]>) -> Result<Vec<u8>> {
-        check_count(&self.path, positions.len(), self.coords.len())?;
-        if let Some(n) = normals {
-            check_count(&self.path, n.len(), self.coords.len())?;
-        }
-        let mut edits: Vec<Edit> = Vec::with_capacity(6 * positions.len());
-        let singles = self.doubles.map(|d| !d);
-        for ((spans, p), old) in self.coords.iter().zip(positions).zip(&self.positions) {
-            edits.extend(edits3(spans, p, old, singles, 0));
-        }
-        if let (Some(normals), Some(doubles)) = (normals, self.normal_doubles) {
-            let singles = doubles.map(|d| !d);
-            for ((spans, n), old) in self.normal_spans.iter().zip(normals).zip(&self.normals) {
-                edits.extend(edits3(spans, &fit_singles(n, singles), old, singles, 3));
-            }
-        }
-        let numbers = numbers(self.encoding, self.precision);
-        Ok(rewrite(&self.bytes, edits, numbers))
-    }
-}
 
 /// How numbers are written in a body of `encoding` (text: with `precision`).
 pub(super) fn numbers(encoding: Encoding, precision: Precision) -> Numbers {

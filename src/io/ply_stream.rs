@@ -1,6 +1,7 @@
-//! Binary PLY streamed from a memory map: the path for PLY files of any size.
+//! The sources of PLY files, streamed from a memory map: the one reader of PLY, for files of
+//! any size.
 //!
-//! When the body is binary and every property of the vertex element is a scalar, all vertex
+//! [`PlyStream`]: when the body is binary and every property of the vertex element is a scalar, all vertex
 //! records have one size and record `i` starts at `start + i · record`. The header is parsed by
 //! `ply-rs-bw` (with the tolerance of [`super::ply`]); the other elements, before and after the
 //! vertices, are walked once to collect the triangles of faces and strips and to find where the
@@ -9,8 +10,10 @@
 //! the body is held in memory but the chunk in flight (and, for meshes, the triangles).
 //!
 //! `tools/src/bin/ply.rs` measures this against reading the same file with `ply-rs-bw`.
-//! ASCII PLY, and binary PLY whose vertices have list properties, stream through
-//! [`PlyRecordStream`], which walks the vertex records.
+//!
+//! [`PlyRecordStream`] walks the vertex records one by one: ASCII PLY, binary PLY whose
+//! vertices have list properties, and any PLY read whole ([`super::Document::read`]), whose
+//! every record it checks, in file order, as it opens.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -25,9 +28,9 @@ use super::ply::numbers;
 use super::ply::{
     VertexFields, Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element,
 };
-use super::require_extension;
 use super::stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
 use super::text::{Precision, SpanSink, fit_singles};
+use super::{Opening, require_extension};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -125,7 +128,11 @@ pub(super) fn open(path: &Path) -> Result<Box<dyn Source>> {
     if mapped_vertices(&opened.header) {
         Ok(Box::new(PlyStream::from_opened(path, opened)?))
     } else {
-        Ok(Box::new(PlyRecordStream::from_opened(path, opened)?))
+        Ok(Box::new(PlyRecordStream::from_opened(
+            path,
+            opened,
+            Opening::Stream,
+        )?))
     }
 }
 
@@ -231,15 +238,6 @@ impl PlyStream {
             triangles,
             next: 0,
         })
-    }
-
-    /// All vertex positions (for tools and tests; streaming callers use [`Source::read`]).
-    pub fn positions(&self) -> Vec<Vect<3>> {
-        let l = &self.layout;
-        self.map[l.span(0, l.count)]
-            .chunks_exact(l.record)
-            .map(|rec| l.vector(rec, &l.xyz))
-            .collect()
     }
 }
 
@@ -362,9 +360,9 @@ impl Sink for PlySink {
 }
 
 /// A PLY file whose vertex records are walked one by one, streamed from a memory map: ASCII, or
-/// binary with list properties on its vertices (records of varying size). `open` walks the
-/// whole body once to validate it (with the messages of [`super::PlyFile`]) and to collect
-/// faces; a chunk then walks its vertex records from where the previous one stopped and carries
+/// binary with list properties on its vertices (records of varying size); and any PLY read
+/// whole ([`super::Document::read`]). `open` walks the whole body once to validate it (every
+/// record, in file order) and to collect faces; a chunk then walks its vertex records from where the previous one stopped and carries
 /// the bytes from there through its last record (from the file's start for the first chunk, to
 /// its end for the last) with the spans of their numbers, so the chunks' bytes partition the
 /// file and the `SpanSink` writes the new numbers over them (as text,
@@ -392,10 +390,16 @@ impl PlyRecordStream {
     /// Opens `path` for streaming, whatever its encoding (binary files with fixed-size vertex
     /// records stream faster through [`PlyStream`]).
     pub fn open(path: &Path) -> Result<Self> {
-        Self::from_opened(path, Opened::new(path)?)
+        Self::open_as(path, Opening::Stream)
     }
 
-    fn from_opened(path: &Path, opened: Opened) -> Result<Self> {
+    /// Opens `path` as [`PlyRecordStream::open`] does; to be read whole (`opening`), a file
+    /// without vertices opens.
+    pub(super) fn open_as(path: &Path, opening: Opening) -> Result<Self> {
+        Self::from_opened(path, Opened::new(path)?, opening)
+    }
+
+    fn from_opened(path: &Path, opened: Opened, opening: Opening) -> Result<Self> {
         let Opened {
             map,
             header,
@@ -449,7 +453,7 @@ impl PlyRecordStream {
             ));
         }
         let vertex = header.elements["vertex"].clone();
-        if vertex.count == 0 {
+        if vertex.count == 0 && opening == Opening::Stream {
             return Err(err("the file holds no vertices or points".into()));
         }
         check_triangles(path, &triangles, vertex.count)?;

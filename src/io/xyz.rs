@@ -6,17 +6,17 @@
 //! lines (from the end of the previous chunk through its last point's line, and to the end of
 //! the file for the last one) and where its numbers lie in them, and the
 //! [`SpanSink`](super::text::SpanSink) writes them back with those numbers replaced, so the
-//! chunks' bytes partition the file. [`XyzFile`] holds a file in
-//! memory for the in-memory API. Both read lines through [`PointLines`].
+//! chunks' bytes partition the file. Lines are read through [`PointLines`].
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use memmap2::Mmap;
 
+use super::Opening;
 use super::mapped::map;
 use super::stream::{Bounds, Chunk, Sink, Source};
-use super::text::{Numbers, Precision, Span, SpanSink, check_count, edits3, splice};
+use super::text::{Numbers, Precision, Span, SpanSink};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -106,59 +106,6 @@ impl PointLines<'_> {
     }
 }
 
-/// An XYZ file held in memory with the locations of its coordinates.
-#[derive(Debug)]
-pub struct XyzFile {
-    path: PathBuf,
-    text: Vec<u8>,
-    /// Byte spans of the three coordinate tokens of every point.
-    spans: Vec<[Span; 3]>,
-    positions: Vec<Vect<3>>,
-    /// The precision of the coordinate columns.
-    precision: Precision,
-}
-
-impl XyzFile {
-    /// Reads and indexes `path`.
-    pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-        let mut spans = Vec::new();
-        let mut positions = Vec::new();
-        let mut precision = Precision::default();
-        for point in PointLines::new(&text, 0, 0, path, true) {
-            let (s, p, _) = point?;
-            precision.see3(0, &text, &s);
-            spans.push(s);
-            positions.push(Vect::<3>::from(p));
-        }
-        Ok(Self {
-            path: path.to_path_buf(),
-            text,
-            spans,
-            positions,
-            precision,
-        })
-    }
-
-    /// Point positions.
-    pub fn positions(&self) -> &[Vect<3>] {
-        &self.positions
-    }
-
-    /// The file's text with the points replaced by `positions`.
-    pub fn encode(&self, positions: &[Vect<3>]) -> Result<Vec<u8>> {
-        check_count(&self.path, positions.len(), self.spans.len())?;
-        let edits = self
-            .spans
-            .iter()
-            .zip(positions)
-            .zip(&self.positions)
-            .flat_map(|((s, p), old)| edits3(s, p, old, [false; 3], 0))
-            .collect();
-        Ok(splice(&self.text, edits, &self.precision))
-    }
-}
-
 /// An XYZ file streamed from a memory map.
 pub struct XyzStream {
     path: PathBuf,
@@ -174,16 +121,24 @@ pub struct XyzStream {
 
 impl XyzStream {
     /// Opens `path`, counting its point lines and gathering the precision of their coordinates
-    /// (the numbers are parsed chunk by chunk).
+    /// (the numbers are parsed chunk by chunk); a file without points is refused.
     pub fn open(path: &Path) -> Result<Self> {
+        Self::open_as(path, Opening::Stream)
+    }
+
+    /// Opens `path` as [`XyzStream::open`] does, checking what `opening` asks: to be read
+    /// whole, every number is parsed as the lines are counted (so the first bad line is the
+    /// one reported), and a file without points opens.
+    pub(super) fn open_as(path: &Path, opening: Opening) -> Result<Self> {
         let map = map(path)?;
         let mut count = 0;
         let mut precision = Precision::default();
-        for point in PointLines::new(&map, 0, 0, path, false) {
+        let parse = opening == Opening::Whole;
+        for point in PointLines::new(&map, 0, 0, path, parse) {
             precision.see3(0, &map, &point?.0);
             count += 1;
         }
-        if count == 0 {
+        if count == 0 && opening == Opening::Stream {
             return Err(Error::format(path, "the file holds no points"));
         }
         Ok(Self {

@@ -1,6 +1,7 @@
 //! Reading a binary PLY point cloud: `ply-rs-bw` against our header parse plus memory-mapped
-//! fast path (`rigidcells::io::PlyStream`) and our whole-file walker (`PlyFile`), on the same
-//! file in the same run.
+//! fast path (`rigidcells::io::PlyStream`) and our record walker (`PlyRecordStream`, which
+//! checks every record as it opens, as when the file is read whole), on the same file in the
+//! same run.
 //!
 //! `cargo run --release -p rigidcells-tools --bin ply [N]` writes a synthetic terrain of `N`
 //! points (default 2 000 000; `ply-rs-bw` builds a hash map per vertex, so keep N moderate) as
@@ -11,7 +12,7 @@ use std::time::Instant;
 
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{DefaultElement, Property};
-use rigidcells::io::{Chunk, PlyFile, PlyStream, Source};
+use rigidcells::io::{Chunk, Document, PlyRecordStream, PlyStream, Source};
 use rigidcells::rigid::Vect;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -48,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t_stream = t.elapsed().as_secs_f64();
 
     let t = Instant::now();
-    let whole = PlyFile::read(&path)?;
+    let whole = Document::drain(&mut PlyRecordStream::open(&path)?)?;
     let t_whole = t.elapsed().as_secs_f64();
 
     let agree = by_crate == streamed && whole.positions() == &streamed[..];
@@ -58,7 +59,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (name, s) in [
         ("ply-rs-bw read_ply", t_crate),
         ("PlyStream (header + mmap fast path)", t_stream),
-        ("PlyFile (whole file, record walker)", t_whole),
+        ("PlyRecordStream (record walker)", t_whole),
     ] {
         println!(
             "| {name} | {s:.3} | {:.2e} | {:.1}× |",
