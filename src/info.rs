@@ -592,10 +592,8 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
                 .join(", ")
         ),
     ));
-    info.details.push((
-        "transfer".into(),
-        saved.transfer.to_string(),
-    ));
+    info.details
+        .push(("transfer".into(), saved.transfer.to_string()));
     let moved = f
         .motions
         .iter()
