@@ -26,7 +26,7 @@ pub(crate) use export::BOX_QUADS;
 mod tri_box;
 mod winding;
 
-pub use build::{BuildInfo, BuildParams, Inside, Occupancy, bounds, build};
+pub use build::Occupancy;
 pub use export::{Pose, write_cells_ply};
 pub use size::{DEFAULT_DIVISIONS, cell_size_for};
 pub(crate) use size::{check_size, shortfall, sized};
@@ -35,7 +35,115 @@ pub use winding::Winding;
 
 use std::collections::HashMap;
 
+use crate::error::{Error, Result};
 use crate::rigid::Vect;
+
+/// How empty cells are classified.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Inside {
+    /// [`Inside::Winding`] for meshes, soups and point clouds with normals, [`Inside::Flood`]
+    /// for point clouds without.
+    #[default]
+    Auto,
+    /// Generalized winding number, `|w| ≥ ½` (see `cells::winding`): of the triangles, or of
+    /// the oriented samples (one dipole per occupied finest cell); robust to holes, soups,
+    /// non-manifold edges and self-intersections. Without triangles or normals it falls back
+    /// to the flood fill.
+    Winding,
+    /// Exterior flood fill on the finest grid: an empty cell is inside when no path of empty
+    /// face-adjacent cells leads from it to the grid's border.
+    Flood,
+    /// Keep occupied cells only (a shell; paper Fig. 10 right).
+    None,
+}
+
+/// Parameters of [`build`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BuildParams {
+    /// Edge length of the finest cells, in input units. Default (`None`): the longest extent of
+    /// the input's bounding box / 32.
+    pub cell_size: Option<f64>,
+    /// Levels of the tree above the finest cells. Default (`None`): enough for a level-0 cell
+    /// to span the shortest extent (no interior cell can be larger), at least one.
+    pub max_level: Option<u8>,
+    /// Inside classification of empty cells. Default: winding numbers for meshes, flood fill
+    /// for point clouds.
+    pub inside: Inside,
+    /// About this many cells: the finest cell size is searched for ([`super::cell_size_for`]),
+    /// overriding `cell_size`.
+    pub target_cells: Option<usize>,
+    /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
+    /// machine's memory).
+    pub memory_limit: Option<u64>,
+}
+
+impl Default for BuildParams {
+    fn default() -> Self {
+        Self {
+            cell_size: None,
+            max_level: None,
+            inside: Inside::Auto,
+            target_cells: None,
+            memory_limit: None,
+        }
+    }
+}
+
+/// What [`build`] did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BuildInfo {
+    /// Finest cells along each axis.
+    pub finest_dims: Vec<i64>,
+    /// Occupied finest cells.
+    pub occupied: usize,
+    /// Boundary leaves.
+    pub boundary_cells: usize,
+    /// Interior leaves (at any level).
+    pub interior_cells: usize,
+    /// The classification used ([`Inside::Auto`] resolved).
+    pub inside: Inside,
+    /// Winding-number evaluations (one per empty block: see [`Occupancy::finish`]).
+    pub winding_queries: usize,
+    /// Finest cells holding vertices of two or more parts of a mesh that are not connected
+    /// (sharing no vertex position): such parts are glued there, up to the finest cell size.
+    pub glued_cells: usize,
+    /// Seconds spent.
+    pub seconds: f64,
+}
+
+/// Builds the cell complex of a shape given by `points` (world coordinates) and, in 3D,
+/// `triangles` (indices into `points`; pass `&[]` for a point cloud).
+pub fn build<const D: usize>(
+    points: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    params: &BuildParams,
+) -> Result<(CellComplex<D>, BuildInfo)> {
+    let (lo, hi) = bounds(points)?;
+    let (params, _) = sized(params, || Ok((points.into(), triangles)))?;
+    let mut occupancy = Occupancy::new(&lo, &hi, &params)?;
+    occupancy.add_points(points)?;
+    occupancy.add_triangles(points, triangles)?;
+    occupancy.finish()
+}
+
+/// The bounding box of `points`; an error for no points or a coordinate that is not finite.
+pub fn bounds<const D: usize>(points: &[Vect<D>]) -> Result<(Vect<D>, Vect<D>)> {
+    if points.is_empty() {
+        return Err(Error::Input("the input has no points".into()));
+    }
+    if let Some(i) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+        return Err(Error::Input(format!(
+            "point {i} has a coordinate that is not a finite number"
+        )));
+    }
+    let mut lo = points[0];
+    let mut hi = points[0];
+    for p in points {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    Ok((lo, hi))
+}
 
 /// The key of a cell: its level and its integer coordinates at that level.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]

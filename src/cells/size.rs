@@ -8,7 +8,7 @@
 
 use std::borrow::Cow;
 
-use super::build::{BuildParams, bounds, build};
+use super::{BuildParams, bounds, build};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
