@@ -155,11 +155,7 @@ pub fn deform_image(
     if samples.is_empty() {
         return Err(Error::Input("the picture has no foreground pixels".into()));
     }
-    let cells = Cells::Samples {
-        points: &samples,
-        triangles: &[],
-        classes: None,
-    };
+    let cells = Cells::samples(&samples, &[]);
     let staged = crate::pipeline::stages::run(cells, spec, params, &Silent)?;
     let solution = &staged.solution;
     let origin = staged.saved.field.origin;

@@ -189,14 +189,7 @@ fn ascii_ply_vertex_mean(path: &std::path::Path) -> [f64; 3] {
 #[test]
 fn a_written_las_names_rigidcells_and_its_version() {
     let dir = tempfile::tempdir().unwrap();
-    let edit = dir.path().join("lift.toml");
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
-         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
-         translate = [0, 0, 5]\n",
-    )
-    .unwrap();
+    let edit = autzen_lift(dir.path());
     let out = dir.path().join("o.laz");
     let r = common::deform(
         &shared("las/autzen_trim.laz"),
@@ -229,6 +222,19 @@ fn a_written_las_names_rigidcells_and_its_version() {
     );
 }
 
+/// An edit of autzen written in `dir`: the west edge fixed, the east edge lifted by 5 m.
+fn autzen_lift(dir: &std::path::Path) -> std::path::PathBuf {
+    let edit = dir.join("lift.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
+         translate = [0, 0, 5]\n",
+    )
+    .unwrap();
+    edit
+}
+
 /// The decimals of every number in `text`.
 fn decimals_in(text: &str) -> Vec<usize> {
     text.split(|c: char| !(c.is_ascii_digit() || c == '.'))
@@ -242,14 +248,7 @@ fn decimals_in(text: &str) -> Vec<usize> {
 #[test]
 fn lengths_the_cells_decided_print_to_their_precision() {
     let dir = tempfile::tempdir().unwrap();
-    let edit = dir.path().join("lift.toml");
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
-         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
-         translate = [0, 0, 5]\n",
-    )
-    .unwrap();
+    let edit = autzen_lift(dir.path());
     let field = dir.path().join("lift.field");
     let r = common::deform_verbose(
         &shared("las/autzen_trim.las"),

@@ -170,11 +170,7 @@ where
             points.len()
         )));
     }
-    let samples = Cells::Samples {
-        points,
-        triangles,
-        classes: None,
-    };
+    let samples = Cells::samples(points, triangles);
     let Staged {
         solution,
         saved,
@@ -239,11 +235,7 @@ pub fn solve_points(
     params: &DeformParams,
     observer: &dyn Observer,
 ) -> Result<(SavedField<3>, Solution<3>, DeformInfo)> {
-    let samples = Cells::Samples {
-        points,
-        triangles,
-        classes: None,
-    };
+    let samples = Cells::samples(points, triangles);
     let Staged {
         solution,
         saved,

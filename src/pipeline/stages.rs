@@ -44,6 +44,17 @@ pub(crate) enum Cells<'a, const D: usize> {
     },
 }
 
+impl<'a, const D: usize> Cells<'a, D> {
+    /// Samples in memory, without classes.
+    pub(crate) fn samples(points: &'a [Vect<D>], triangles: &'a [[u32; 3]]) -> Self {
+        Cells::Samples {
+            points,
+            triangles,
+            classes: None,
+        }
+    }
+}
+
 /// What [`run`] gives: the solution, its field (with the RBF's factorization when that is the
 /// transfer; [`SavedField::deformer`] makes the map with its exact constraints), the cells'
 /// construction and the warnings so far.
