@@ -27,7 +27,9 @@ use crate::spec::EditSpec;
 
 use super::DeformParams;
 
-/// Where a run's cells come from, and what the spec's regions select on them.
+/// Where a run's cells come from, and what the spec's regions select on them. (Made once
+/// per run and moved straight into [`run`]: its size does not matter.)
+#[allow(clippy::large_enum_variant)]
 pub(crate) enum Cells<'a, const D: usize> {
     /// Samples in memory: the cells are built from them (and `triangles`), and the regions are
     /// evaluated on them (with their LAS classes, when they have some).
