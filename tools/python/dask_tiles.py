@@ -1,4 +1,4 @@
-"""Issue 18 item 4's figures: apply a field to tiles in one process (one apply_file after
+"""The tiles' figures: apply a field to tiles in one process (one apply_file after
 another; each already uses every core through rayon) and on a Dask LocalCluster of worker
 processes, and report the speed-up and the throughput.
 
