@@ -420,6 +420,32 @@ fn a_class_selection_fixes_the_ground() {
     );
 }
 
+/// The editor runs the stages `deform` runs, with their checks: an RBF transfer whose dense
+/// system does not fit the memory budget is refused before the solve, as `deform` refuses it.
+#[test]
+fn the_editor_refuses_an_rbf_beyond_the_budget_as_deform_does() {
+    let input = common::shared("las/autzen_trim.las");
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let limit = 2u64 << 20;
+    let mut params = DeformParams::default();
+    params.build.target_cells = Some(800);
+    params.build.memory_limit = Some(limit);
+    params.transfer = rigidcells::field::Transfer::Rbf;
+    let mut editor = Editor::new(scene, params).unwrap();
+    let cells = editor.complex().len();
+    assert!(
+        rigidcells::memory::rbf_bytes(cells, 3) > limit as f64,
+        "{cells} cells"
+    );
+    let edit: rigidcells::edit::Edit =
+        serde_json::from_value(json!({"fixed": [{"classification": [2]}]})).unwrap();
+    let e = editor.solve(&edit).expect_err("refused").to_string();
+    assert!(
+        e.contains(&format!("the RBF transfer of {cells} cells")) && e.contains("--transfer pu"),
+        "{e}"
+    );
+}
+
 /// The `view` key of a screen selection: only with a `polygon`, 4 × 4 finite numbers, no `z`;
 /// a point behind the camera is never selected. `visible`: only with a `view` that has a depth
 /// row, a boolean, not inverted.
