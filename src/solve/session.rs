@@ -53,8 +53,9 @@ where
     }
 
     /// Moves to `constraints` — the same edit with its handles, pins or targets moved, resolved
-    /// on this session's cells — starting from the current motions. The symbolic factorization
-    /// is kept unless the cells' roles, stiffness or targets' cells and weights changed.
+    /// on the cells the session holds — starting from the current motions. The symbolic
+    /// factorization is kept unless the cells' roles, stiffness or targets' cells and weights
+    /// changed.
     pub fn update(&mut self, constraints: Constraints<D>) -> Result<SolverInfo> {
         self.update_with(constraints, self.params.max_iterations)
     }
