@@ -493,7 +493,8 @@ impl Terrain {
         Self::over(n, [2000.0, 2000.0], |x, y, _| terrain_height(x, y))
     }
 
-    /// The 1 km × 200 m road corridor of [`corridor_height`], `n` samples (the scale benchmark's scan).
+    /// The 1 km × 200 m road corridor of [`corridor_height`], `n` samples (the scale
+    /// benchmark's scan).
     pub fn corridor(n: u64) -> Self {
         Self::over(n, [1000.0, 200.0], corridor_height)
     }

@@ -26,10 +26,11 @@
 //! occupied cell plus, at the coarsest level, the empty cells beside occupied ones (the others
 //! are outside: see `empty_blocks`). Four samples 21 × 42 km apart at 0.3 m cells make four
 //! cells and a few hundred blocks. Memory is checked against the budget as the codes grow
-//! ([`BYTES_PER_OCCUPIED`]), and the triangles' candidate cells before they are enumerated. A dense byte grid held the finest level before: a 257-point diagonal
-//! line 256 units long at 0.5 cells needed 1024³ of them (3.4 GB at the peak) for 257 occupied
-//! ones. The 64-bit codes bound the finest cells along an axis to 2²¹ in 3D (2³¹ in 2D), which
-//! [`build`] checks up front ([`Error::GridTooLarge`]).
+//! ([`BYTES_PER_OCCUPIED`]), and the triangles' candidate cells before they are enumerated. A
+//! dense byte grid of the finest level would need 1024³ bytes (3.4 GB at the peak) for a
+//! 257-point diagonal line 256 units long at 0.5 cells, of which 257 are occupied. The 64-bit
+//! codes bound the finest cells along an axis to 2²¹ in 3D (2³¹ in 2D), which
+//! [`crate::cells::build`] checks up front ([`Error::GridTooLarge`]).
 
 use std::time::Instant;
 

@@ -69,7 +69,7 @@ pub struct BuildParams {
     /// Inside classification of empty cells. Default: winding numbers for meshes, flood fill
     /// for point clouds.
     pub inside: Inside,
-    /// About this many cells: the finest cell size is searched for ([`super::cell_size_for`]),
+    /// About this many cells: the finest cell size is searched for ([`cell_size_for`]),
     /// overriding `cell_size`.
     pub target_cells: Option<usize>,
     /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the

@@ -79,7 +79,7 @@ pub(crate) fn shortfall(target: Option<usize>, cells: usize) -> Option<String> {
 
 /// The finest cell size for which the complex of `points` (and `triangles`) has about `target`
 /// cells (within 2 %, where the counts allow), between 1/4096 and 1/2 of the longest extent.
-/// Streaming callers pass a decimated proxy of the samples ([`sized`]).
+/// Streaming callers pass a decimated proxy of the samples (`sized`).
 ///
 /// Each try is a whole build, so few are made: the count of a surface's cells goes about as
 /// `size⁻²`, so the search steps by the secant of `log count` against `log size` through the

@@ -107,7 +107,7 @@ where
     /// RBF, with the prescribed cells exact and samples beyond the margin handled by `outside`.
     ///
     /// Every map of a field is made here or by the two methods below, through one
-    /// constructor ([`SavedField::assemble`]): the in-memory deform, the streamed file, the
+    /// constructor (`SavedField::assemble`): the in-memory deform, the streamed file, the
     /// editor's release, a tile's apply and the Python package's fields.
     pub fn deformer(
         self,

@@ -2,7 +2,7 @@
 //! passes ([`deform_file`], [`apply_file`], [`solve_files`]); every face calls these.
 //!
 //! The stage sequence itself — cells, constraints, solve, field, exact transfer — is written
-//! once, in [`stages`]; the files here differ only in where the samples come from and go.
+//! once, in `stages`; the files here differ only in where the samples come from and go.
 
 mod checks;
 mod files;

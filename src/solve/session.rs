@@ -13,7 +13,7 @@ use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid};
 
 /// An editing session on fixed cells: the paper's interactive case. The first solve runs from
-/// rest with load steps, as [`solve`] does (without refinement); each [`Session::update`] then
+/// rest with load steps, as [`super::solve`] does (without refinement); each [`Session::update`] then
 /// starts Gauss-Newton from the current motions, without load steps, and reuses the sparse
 /// system's symbolic factorization when only the handles, pins and targets moved. A handle
 /// dragged a little converges in a few iterations instead of a solve from rest.
