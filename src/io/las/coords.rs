@@ -81,8 +81,8 @@ fn round_to_i32(r: f64) -> Option<i32> {
     }
     let t = r as i64;
     let frac = r - t as f64;
-    // Branch-free: the fraction of a moved coordinate is random, and a branch on it missed
-    // half the time (a fifth of pass 2 before).
+    // Branch-free: the fraction of a moved coordinate is random, and a branch on it would miss
+    // half the time (a fifth of pass 2, measured).
     let v = t + i64::from(frac >= 0.5) - i64::from(frac <= -0.5);
     i32::try_from(v).ok()
 }
