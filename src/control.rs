@@ -100,11 +100,12 @@ fn rms(values: impl Iterator<Item = f64>) -> Option<f64> {
 }
 
 /// Fills in each control point's leave-one-out prediction error (module docs). The cells are
-/// those of `solution`; each solve starts from its motions.
+/// those of `solution`; each solve starts from its motions and stays within the memory `budget`.
 pub fn leave_one_out<const D: usize>(
     spec: &EditSpec<D>,
     solution: &Solution<D>,
     params: &SolveParams,
+    budget: crate::memory::Budget,
     points: &mut [ControlPoint],
     observer: &dyn crate::progress::Observer,
 ) -> Result<()>
@@ -122,7 +123,8 @@ where
     observer.stage("leave-one-out", points.len() as u64);
     for (i, point) in points.iter_mut().enumerate() {
         if let Some(without) = constraints.without_target(complex, i) {
-            let motions = solve::minimize_from(complex, &without, &solution.motions, &params)?;
+            let motions =
+                solve::minimize_from(complex, &without, &solution.motions, &params, budget)?;
             let t = &constraints.targets[i];
             let c = t.cell as usize;
             let predicted = motions[c].apply(&complex.cells[c].center, &t.from);

@@ -63,10 +63,9 @@ impl Raster {
         // The header's dimensions are checked before they size an allocation: a damaged or
         // hostile header can claim 2³¹ rows of a few bytes of data.
         let (w, h) = (reader.info().width, reader.info().height);
-        crate::memory::check(
+        crate::memory::Budget::default().check(
             &format!("{}: the {w} × {h} picture", path.display()),
             size as f64 + 4.0 * w as f64 * h as f64,
-            crate::memory::limit(None),
             "use a smaller picture",
         )?;
         let mut buf = vec![0; size];

@@ -2,10 +2,10 @@
 //! estimated before it is allocated, and a run whose estimate exceeds the budget stops with
 //! [`Error::Memory`], naming the parameter to change, instead of ending in an allocation abort.
 //!
-//! The budget is `--memory-limit` (library: the `memory_limit` of the parameters), by default
-//! three quarters of the machine's physical memory, or of the control group's limit where that
-//! is lower, and at most half the address-space limit ([`default_limit`]). The estimates are
-//! of the large buffers only:
+//! The budget is `--memory-limit` (library: a [`Budget`], the `memory` of a run's
+//! parameters), by default three quarters of the machine's physical memory, or of the control
+//! group's limit where that is lower, and at most half the address-space limit
+//! ([`default_limit`]). The estimates are of the large buffers only:
 //!
 //! - the cell construction (`cells::build`): 1 KiB per occupied finest cell (its code, the
 //!   coarser levels, the empty blocks and the flood fill's maps, the leaves, the complex's
@@ -86,9 +86,33 @@ fn address_space_limit() -> Option<u64> {
     None
 }
 
-/// The limit of `given`, or [`default_limit`].
-pub fn limit(given: Option<u64>) -> u64 {
-    given.unwrap_or_else(default_limit)
+/// The memory budget of a run: one value for all its stages (the cells, the solver, the RBF),
+/// held once in the run's parameters ([`crate::pipeline::DeformParams::memory`],
+/// [`crate::pipeline::ApplyParams::memory`]) and handed to each stage that allocates.
+/// [`Budget::default`] is the machine's share ([`default_limit`]), read when a stage asks.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Budget(Option<u64>);
+
+impl Budget {
+    /// A budget of `bytes`.
+    pub fn bytes(bytes: u64) -> Self {
+        Self(Some(bytes))
+    }
+
+    /// The budget given (`--memory-limit`), or the machine's share where none was.
+    pub fn given(bytes: Option<u64>) -> Self {
+        Self(bytes)
+    }
+
+    /// The budget in bytes.
+    pub fn limit(self) -> u64 {
+        self.0.unwrap_or_else(default_limit)
+    }
+
+    /// [`check`] against this budget.
+    pub fn check(self, what: &str, bytes: f64, advice: &str) -> Result<()> {
+        check(what, bytes, self.limit(), advice)
+    }
 }
 
 /// [`Error::Memory`] when `bytes` exceed `limit`; `what` names the allocation, `advice` the

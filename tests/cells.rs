@@ -7,6 +7,7 @@ use common::shared;
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use rigidcells::cells::{BuildParams, Inside, Winding, build};
 use rigidcells::io::Document;
+use rigidcells::memory::Budget;
 use rigidcells::rigid::Vect;
 
 /// The mesh of `file` in `../shared/data/meshes`.
@@ -84,15 +85,39 @@ fn soup_and_mesh_give_the_same_cells_and_holes_do_not_leak() {
     };
     let (dragon, tris) = mesh("dragon_11k_binary.ply");
     let (soup, soup_tris) = unweld(&dragon, &tris);
-    let (a, ia) = build(&dragon, &tris, &params(&dragon, Inside::Auto)).unwrap();
-    let (b, _) = build(&soup, &soup_tris, &params(&dragon, Inside::Auto)).unwrap();
+    let (a, ia) = build(
+        &dragon,
+        &tris,
+        &params(&dragon, Inside::Auto),
+        Budget::default(),
+    )
+    .unwrap();
+    let (b, _) = build(
+        &soup,
+        &soup_tris,
+        &params(&dragon, Inside::Auto),
+        Budget::default(),
+    )
+    .unwrap();
     assert_eq!(ia.inside, Inside::Winding);
     assert!(ia.interior_cells > 0);
     assert_eq!(a.cells, b.cells);
 
     let (bunny, bunny_tris) = mesh("bun_zipper.ply");
-    let (_, flood) = build(&bunny, &bunny_tris, &params(&bunny, Inside::Flood)).unwrap();
-    let (_, winding) = build(&bunny, &bunny_tris, &params(&bunny, Inside::Winding)).unwrap();
+    let (_, flood) = build(
+        &bunny,
+        &bunny_tris,
+        &params(&bunny, Inside::Flood),
+        Budget::default(),
+    )
+    .unwrap();
+    let (_, winding) = build(
+        &bunny,
+        &bunny_tris,
+        &params(&bunny, Inside::Winding),
+        Budget::default(),
+    )
+    .unwrap();
     assert!(
         winding.interior_cells > 20 * flood.interior_cells.max(1),
         "winding {} vs flood {} interior cells",
@@ -268,8 +293,8 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
         transfer: rigidcells::field::Transfer::Rbf,
         ..Default::default()
     };
-    let (m, _) = build(&dragon, &tris, &params.build).unwrap();
-    let (p, pi) = build(&cloud, &[], &params.build).unwrap();
+    let (m, _) = build(&dragon, &tris, &params.build, Budget::default()).unwrap();
+    let (p, pi) = build(&cloud, &[], &params.build, Budget::default()).unwrap();
     assert_eq!(pi.inside, Inside::Flood);
     // Every interior cell of one lies within one finest cell of the other's cells.
     let covered = |a: &rigidcells::cells::CellComplex<3>, b: &rigidcells::cells::CellComplex<3>| {

@@ -429,7 +429,7 @@ fn the_editor_refuses_an_rbf_beyond_the_budget_as_deform_does() {
     let limit = 2u64 << 20;
     let mut params = DeformParams::default();
     params.build.target_cells = Some(800);
-    params.build.memory_limit = Some(limit);
+    params.memory = rigidcells::memory::Budget::bytes(limit);
     params.transfer = rigidcells::field::Transfer::Rbf;
     let mut editor = Editor::new(scene, params).unwrap();
     let cells = editor.complex().len();

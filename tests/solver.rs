@@ -3,6 +3,7 @@
 
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use rigidcells::cells::{BuildParams, CellComplex, build};
+use rigidcells::memory::Budget;
 use rigidcells::progress::Silent;
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
 use rigidcells::solve::{self, Role, SolveParams, SolverInfo};
@@ -33,7 +34,7 @@ fn cells<const D: usize>(pts: &[Vect<D>], triangles: &[[u32; 3]], cell: f64) -> 
         cell_size: Some(cell),
         ..Default::default()
     };
-    build(pts, triangles, &params).unwrap().0
+    build(pts, triangles, &params, Budget::default()).unwrap().0
 }
 
 /// The vertices and triangles of `data_gen::bar(size, density)`.
@@ -179,7 +180,14 @@ fn rigid_edit<const D: usize>(
     let pts = blob(radii, 20_000);
     let complex = cells(&pts, &[], 0.2);
     let constraints = resolved(&complex, &pts, spec);
-    let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent).unwrap();
+    let sol = solve::solve(
+        complex,
+        constraints,
+        &SolveParams::default(),
+        Budget::default(),
+        &Silent,
+    )
+    .unwrap();
     monotone(&sol.info);
     let origin = sol.complex.grid.origin;
     let extent = 2.0 * radii.iter().cloned().fold(0.0, f64::max);
@@ -249,6 +257,7 @@ fn refinement_splits_strained_cells_and_continues() {
         complex.clone(),
         constraints.clone(),
         &SolveParams::default(),
+        Budget::default(),
         &Silent,
     )
     .unwrap();
@@ -258,7 +267,7 @@ fn refinement_splits_strained_cells_and_continues() {
         refine_strain: Some(tau),
         ..Default::default()
     };
-    let refined = solve::solve(complex, constraints, &params, &Silent).unwrap();
+    let refined = solve::solve(complex, constraints, &params, Budget::default(), &Silent).unwrap();
     let info = &refined.info;
     assert!(!info.refinements.is_empty());
     assert!(info.cells_final > info.cells_initial);
@@ -301,15 +310,28 @@ translate = [0.0, 0.0, {lift}]
         resolved(&complex, &pts, &text)
     };
     let solve_params = SolveParams::default();
-    let (mut session, first) =
-        solve::Session::new(complex.clone(), spec(0.8), &solve_params, &Silent).unwrap();
+    let (mut session, first) = solve::Session::new(
+        complex.clone(),
+        spec(0.8),
+        &solve_params,
+        Budget::default(),
+        &Silent,
+    )
+    .unwrap();
     assert!(first.iterations > 0);
     let warm = session.update(spec(0.9)).unwrap();
     assert_eq!(
         warm.seconds_symbolic, 0.0,
         "the symbolic factorization is kept"
     );
-    let cold = solve::solve(complex.clone(), spec(0.9), &solve_params, &Silent).unwrap();
+    let cold = solve::solve(
+        complex.clone(),
+        spec(0.9),
+        &solve_params,
+        Budget::default(),
+        &Silent,
+    )
+    .unwrap();
     monotone(&warm);
     assert!(
         warm.iterations < cold.info.iterations,
@@ -373,7 +395,14 @@ where
             method,
             ..Default::default()
         };
-        let s = solve::solve(complex.clone(), constraints.clone(), &params, &Silent).unwrap();
+        let s = solve::solve(
+            complex.clone(),
+            constraints.clone(),
+            &params,
+            Budget::default(),
+            &Silent,
+        )
+        .unwrap();
         monotone(&s.info);
         (*s.info.energies.last().unwrap(), s.info)
     };
@@ -408,7 +437,14 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
             newton,
             ..Default::default()
         };
-        let s = solve::solve(complex.clone(), constraints.clone(), &params, &Silent).unwrap();
+        let s = solve::solve(
+            complex.clone(),
+            constraints.clone(),
+            &params,
+            Budget::default(),
+            &Silent,
+        )
+        .unwrap();
         monotone(&s.info);
         assert!(s.info.converged, "newton {newton}: {:?}", s.info);
         s.info
@@ -460,7 +496,14 @@ fn coarsened_cells_keep_their_roles_and_adaptive_refines_where_it_bends() {
         &SolveParams::default(),
     )
     .unwrap();
-    let s = solve::solve(fine.clone(), constraints.clone(), &params, &Silent).unwrap();
+    let s = solve::solve(
+        fine.clone(),
+        constraints.clone(),
+        &params,
+        Budget::default(),
+        &Silent,
+    )
+    .unwrap();
     let (start, _) = solve::coarsen(&fine, &constraints, solve::ADAPTIVE_LEVELS);
     assert_eq!(s.info.cells_initial, start.len());
     assert!(

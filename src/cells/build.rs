@@ -44,6 +44,7 @@ use super::{BuildInfo, BuildParams, Inside};
 use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
 use crate::error::{Error, Result};
 use crate::field::floor;
+use crate::memory::Budget;
 use crate::rigid::Vect;
 
 /// Finest cells along an axis at most: the coordinates' bits of a 64-bit Morton code (21 in 3D,
@@ -86,8 +87,9 @@ pub struct Occupancy<const D: usize> {
 }
 
 impl<const D: usize> Occupancy<D> {
-    /// An empty grid over the box `lo..hi` (world coordinates) under `params`.
-    pub fn new(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Result<Self> {
+    /// An empty grid over the box `lo..hi` (world coordinates) under `params`, within the
+    /// memory `budget`.
+    pub fn new(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams, budget: Budget) -> Result<Self> {
         let grid = frame(lo, hi, params)?;
         let dims = grid.dims(grid.max_level);
         Ok(Self {
@@ -95,7 +97,7 @@ impl<const D: usize> Occupancy<D> {
             dims,
             occupied: Vec::new(),
             sorted: 0,
-            limit: crate::memory::limit(params.memory_limit),
+            limit: budget.limit(),
             inside: params.inside,
             winding: None,
             oriented: FxHashMap::default(),
@@ -709,7 +711,7 @@ mod tests {
                 inside: Inside::Flood,
                 ..Default::default()
             };
-            let (complex, info) = build(&points, &[], &params).unwrap();
+            let (complex, info) = build(&points, &[], &params, Budget::default()).unwrap();
             complex.validate().unwrap();
             // The dense reference on the same finest grid.
             let g = complex.grid;
@@ -808,7 +810,7 @@ mod tests {
             cell_size: Some(0.25),
             ..Default::default()
         };
-        let (complex, info) = build(&pts, &[], &params).unwrap();
+        let (complex, info) = build(&pts, &[], &params, Budget::default()).unwrap();
         complex.validate().unwrap();
         assert!(info.interior_cells > 0);
         // Interior cells are coarse: fewer than the finest interior count.
@@ -837,22 +839,22 @@ mod tests {
             inside: Inside::None,
             ..Default::default()
         };
-        let (_, info) = build(&pts, &[], &params).unwrap();
+        let (_, info) = build(&pts, &[], &params, Budget::default()).unwrap();
         assert_eq!(info.interior_cells, 0);
     }
 
     #[test]
     fn rejects_bad_input() {
-        assert!(build::<3>(&[], &[], &BuildParams::default()).is_err());
+        assert!(build::<3>(&[], &[], &BuildParams::default(), Budget::default()).is_err());
         let nan = [Vect::<3>::new(f64::NAN, 0.0, 0.0)];
-        assert!(build(&nan, &[], &BuildParams::default()).is_err());
+        assert!(build(&nan, &[], &BuildParams::default(), Budget::default()).is_err());
         let tiny = BuildParams {
             cell_size: Some(1e-9),
             ..Default::default()
         };
         let pts = [Vect::<3>::zeros(), Vect::<3>::new(1.0, 1.0, 1.0)];
         assert!(matches!(
-            build(&pts, &[], &tiny),
+            build(&pts, &[], &tiny, Budget::default()),
             Err(Error::GridTooLarge { .. })
         ));
     }
@@ -869,7 +871,7 @@ mod tests {
             cell_size: Some(0.2),
             ..Default::default()
         };
-        let (complex, _) = build(&pts, &[], &params).unwrap();
+        let (complex, _) = build(&pts, &[], &params, Budget::default()).unwrap();
         assert_eq!(complex.components().1, 2);
     }
 }

@@ -36,6 +36,7 @@ pub use winding::Winding;
 use std::collections::HashMap;
 
 use crate::error::{Error, Result};
+use crate::memory::Budget;
 use crate::rigid::Vect;
 
 /// How empty cells are classified.
@@ -72,9 +73,6 @@ pub struct BuildParams {
     /// About this many cells: the finest cell size is searched for ([`cell_size_for`]),
     /// overriding `cell_size`.
     pub target_cells: Option<usize>,
-    /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
-    /// machine's memory).
-    pub memory_limit: Option<u64>,
 }
 
 impl Default for BuildParams {
@@ -84,7 +82,6 @@ impl Default for BuildParams {
             max_level: None,
             inside: Inside::Auto,
             target_cells: None,
-            memory_limit: None,
         }
     }
 }
@@ -112,15 +109,17 @@ pub struct BuildInfo {
 }
 
 /// Builds the cell complex of a shape given by `points` (world coordinates) and, in 3D,
-/// `triangles` (indices into `points`; pass `&[]` for a point cloud).
+/// `triangles` (indices into `points`; pass `&[]` for a point cloud), within the memory
+/// `budget`.
 pub fn build<const D: usize>(
     points: &[Vect<D>],
     triangles: &[[u32; 3]],
     params: &BuildParams,
+    budget: Budget,
 ) -> Result<(CellComplex<D>, BuildInfo)> {
     let (lo, hi) = bounds(points)?;
-    let (params, _) = sized(params, || Ok((points.into(), triangles)))?;
-    let mut occupancy = Occupancy::new(&lo, &hi, &params)?;
+    let (params, _) = sized(params, budget, || Ok((points.into(), triangles)))?;
+    let mut occupancy = Occupancy::new(&lo, &hi, &params, budget)?;
     occupancy.add_points(points)?;
     occupancy.add_triangles(points, triangles)?;
     occupancy.finish()

@@ -10,6 +10,7 @@ use std::borrow::Cow;
 
 use super::{BuildParams, bounds, build};
 use crate::error::{Error, Result};
+use crate::memory::Budget;
 use crate::rigid::Vect;
 
 /// The default finest cell size is the longest extent of the input's box over this.
@@ -45,14 +46,15 @@ pub(crate) fn check_size(size: f64, what: &str) -> Result<f64> {
 #[allow(clippy::type_complexity)]
 pub(crate) fn sized<'a, const D: usize>(
     params: &BuildParams,
+    budget: Budget,
     proxy: impl FnOnce() -> Result<(Cow<'a, [Vect<D>]>, &'a [[u32; 3]])>,
 ) -> Result<(BuildParams, Option<String>)> {
     let Some(n) = params.target_cells else {
         return Ok((*params, None));
     };
-    check_target(n, params.memory_limit)?;
+    check_target(n, budget)?;
     let (points, triangles) = proxy()?;
-    let size = search(&points, triangles, params, n)?;
+    let size = search(&points, triangles, params, n, budget)?;
     let note = format!(
         "--cells {n}: finest cell size {}",
         crate::human::length(size, size)
@@ -98,9 +100,10 @@ pub fn cell_size_for<const D: usize>(
     triangles: &[[u32; 3]],
     params: &BuildParams,
     target: usize,
+    budget: Budget,
 ) -> Result<f64> {
-    check_target(target, params.memory_limit)?;
-    search(points, triangles, params, target)
+    check_target(target, budget)?;
+    search(points, triangles, params, target, budget)
 }
 
 /// [`cell_size_for`] once the target is known to fit the budget.
@@ -109,6 +112,7 @@ fn search<const D: usize>(
     triangles: &[[u32; 3]],
     params: &BuildParams,
     target: usize,
+    budget: Budget,
 ) -> Result<f64> {
     let (lo, hi) = bounds(points)?;
     let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
@@ -124,7 +128,7 @@ fn search<const D: usize>(
             target_cells: None,
             ..*params
         };
-        match build(points, triangles, &at) {
+        match build(points, triangles, &at, budget) {
             Ok((complex, _)) => Ok(Some(complex.len())),
             Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => Ok(None),
             Err(e) => Err(e),
@@ -195,16 +199,15 @@ pub(crate) const BYTES_PER_TARGET_CELL: u64 = 1 << 10;
 /// Refuses `--cells 0`, and a `--cells N` whose complex cannot fit the memory budget, before
 /// any try is built (a target of 2⁶⁴−1 would have the search build ever finer trial grids
 /// until an allocation failed).
-pub(crate) fn check_target(target: usize, memory_limit: Option<u64>) -> Result<()> {
+pub(crate) fn check_target(target: usize, budget: Budget) -> Result<()> {
     if target == 0 {
         return Err(Error::Param(
             "--cells 0 asks for no cells; ask for at least 1".into(),
         ));
     }
-    crate::memory::check(
+    budget.check(
         &format!("a complex of {target} cells"),
         target as f64 * BYTES_PER_TARGET_CELL as f64,
-        crate::memory::limit(memory_limit),
-        "ask for fewer --cells (or raise --memory)",
+        "ask for fewer --cells",
     )
 }

@@ -13,6 +13,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, Inside};
 use rigidcells::field::{Outside, Transfer};
+use rigidcells::memory::Budget;
 use rigidcells::pipeline::{self, CHUNK, DeformParams};
 use rigidcells::render::{self, View};
 use rigidcells::solve::{Method, SolveParams};
@@ -238,17 +239,16 @@ struct DeformArgs {
 impl DeformArgs {
     /// The library's parameters for these arguments, keeping a proxy of `proxy_samples`.
     fn params(&self, proxy_samples: Option<usize>) -> Result<DeformParams, Error> {
-        let (build, solve) = self.cells.params()?;
+        let params = self.cells.deform_params(self.transfer)?;
         Ok(DeformParams {
-            build,
             solve: SolveParams {
                 refine_strain: self.refine_strain,
-                ..solve
+                ..params.solve
             },
-            transfer: self.transfer,
             rbf_tolerance: self.tolerance.rbf_tolerance,
             proxy_samples,
             check_control_points: self.check_gcp,
+            ..params
         })
     }
 }
@@ -406,23 +406,26 @@ struct MemoryArg {
     memory_limit: Option<u64>,
 }
 
+impl MemoryArg {
+    fn budget(self) -> Budget {
+        Budget::given(self.memory_limit)
+    }
+}
+
 fn parse_memory(text: &str) -> Result<u64, String> {
     rigidcells::memory::parse_size(text)
 }
 
 impl CellArgs {
-    /// The solver's parameters: the defaults, with the memory budget.
+    /// The solver's parameters: the defaults, with the method and the loose parts' rule.
     fn solve_params(&self) -> SolveParams {
         SolveParams {
-            memory_limit: self.memory.memory_limit,
             method: self.solver,
             carry_loose: self.loose_parts == LooseArg::Carry,
             ..Default::default()
         }
     }
 
-    /// The build's and the solver's parameters; with `--min-cell-size`, those of an adaptive
-    /// solve ([`rigidcells::solve::adaptive`]).
     /// The parameters of a command that takes only the cells' options and a transfer.
     fn deform_params(&self, transfer: Transfer) -> Result<DeformParams, Error> {
         let (build, solve) = self.params()?;
@@ -430,10 +433,13 @@ impl CellArgs {
             build,
             solve,
             transfer,
+            memory: self.memory.budget(),
             ..Default::default()
         })
     }
 
+    /// The build's and the solver's parameters; with `--min-cell-size`, those of an adaptive
+    /// solve ([`rigidcells::solve::adaptive`]).
     fn params(&self) -> Result<(BuildParams, SolveParams), Error> {
         let (build, solve) = (self.build_params(), self.solve_params());
         match self.min_cell_size {
@@ -446,7 +452,6 @@ impl CellArgs {
         BuildParams {
             cell_size: self.cell_size,
             target_cells: self.cells,
-            memory_limit: self.memory.memory_limit,
             max_level: self.max_level,
             inside: if self.shell {
                 Inside::None
@@ -479,7 +484,7 @@ pub(crate) fn main() -> ExitCode {
                     transfer,
                     rbf_tolerance: tolerance.rbf_tolerance,
                     outside,
-                    memory_limit: memory.memory_limit,
+                    memory: memory.budget(),
                 };
                 run_apply(&field, &input, &output, &params, quiet)
             }),

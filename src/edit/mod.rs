@@ -241,7 +241,12 @@ pub const DRAG_ITERATIONS: usize = 1;
 impl Editor {
     /// Builds the cells of `scene` with `params` (cell size or count as `deform` takes them).
     pub fn new(scene: Scene, params: DeformParams) -> Result<Self> {
-        let (complex, build) = crate::cells::build(&scene.points, &scene.triangles, &params.build)?;
+        let (complex, build) = crate::cells::build(
+            &scene.points,
+            &scene.triangles,
+            &params.build,
+            params.memory,
+        )?;
         Ok(Self {
             scene,
             complex,
@@ -368,6 +373,7 @@ impl Editor {
                 self.complex.clone(),
                 constraints,
                 &self.params.solve,
+                self.params.memory,
                 &crate::progress::Silent,
             )?;
             let warnings =

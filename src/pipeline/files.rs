@@ -7,6 +7,7 @@ use crate::cells::{BuildInfo, CellComplex};
 use crate::error::{Error, Result};
 use crate::field::{Deformer, Outside, SavedField, Transfer, apply};
 use crate::io::{self, Source};
+use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::solve::{self, Solution};
 use crate::spec::EditSpec;
@@ -51,8 +52,8 @@ pub struct ApplyParams {
     pub rbf_tolerance: Option<f64>,
     /// What happens to samples beyond the field's margin (default: refused).
     pub outside: Outside,
-    /// The memory budget in bytes ([`crate::memory`]), for an RBF that must be factored.
-    pub memory_limit: Option<u64>,
+    /// The memory budget, for an RBF that must be factored.
+    pub memory: Budget,
 }
 
 /// Deforms the file `input` into `output` in two streaming passes: pass 1 builds
@@ -163,7 +164,7 @@ fn solve_source(
     let (complex, build, selections, proxy) = first_pass_cells(
         source,
         spec,
-        &params.build,
+        params,
         chunk,
         proxy_max,
         &mut info.notes,
@@ -320,10 +321,9 @@ fn apply_saved(
     let t = Instant::now();
     let origin = field.field.origin;
     if params.transfer == Some(Transfer::Rbf) && !field.has_rbf() {
-        crate::memory::check(
+        params.memory.check(
             &format!("the RBF transfer of {} cells", field.field.centers.len()),
             crate::memory::rbf_bytes(field.field.centers.len(), 3),
-            crate::memory::limit(params.memory_limit),
             "apply the field with the transfer it was saved with (no --transfer rbf)",
         )?;
     }
@@ -382,7 +382,7 @@ pub fn file_cells(
     let (complex, info, selections, _) = first_pass_cells(
         source.as_mut(),
         spec.unwrap_or(&empty),
-        &params.build,
+        params,
         chunk,
         0,
         &mut notes,
@@ -396,7 +396,13 @@ pub fn file_cells(
     let selected = Selected::Gathered(&selections);
     let constraints = stages::constraints(&complex, spec, selected, params)?;
     warnings.extend(constraints.warnings.iter().cloned());
-    let solution = solve::solve(complex.clone(), constraints, &params.solve, observer)?;
+    let solution = solve::solve(
+        complex.clone(),
+        constraints,
+        &params.solve,
+        params.memory,
+        observer,
+    )?;
     warnings.extend(solution.info.warnings());
     Ok((complex, info, Some(solution), warnings))
 }

@@ -4,7 +4,7 @@
 
 use std::borrow::Cow;
 
-use crate::cells::{BuildInfo, BuildParams, CellComplex, Occupancy};
+use crate::cells::{BuildInfo, CellComplex, Occupancy};
 use crate::error::{Error, Result};
 use crate::io::{Bounds, Chunk, Source};
 use crate::progress::Observer;
@@ -12,15 +12,15 @@ use crate::rigid::Vect;
 use crate::solve::Selections;
 use crate::spec::EditSpec;
 
-use super::Proxy;
 use super::checks::check_finite;
+use super::{DeformParams, Proxy};
 
 /// Pass 1 of [`deform_file`]: the cell complex of `source` (rerunning the pass with the
 /// samples' own bounds when they overflow the header's) and what the spec's regions select.
 pub(super) fn first_pass_cells(
     source: &mut dyn Source,
     spec: &EditSpec<3>,
-    build: &BuildParams,
+    params: &DeformParams,
     chunk: usize,
     proxy_max: usize,
     notes: &mut Vec<String>,
@@ -30,24 +30,26 @@ pub(super) fn first_pass_cells(
         Some(b) => b,
         None => scan_bounds(source, chunk)?,
     };
-    let target = build.target_cells;
+    let target = params.build.target_cells;
     if target.is_some() {
         observer.stage("sizing", 0);
     }
-    let (build, sizing) = crate::cells::sized(build, || size_proxy(source, (lo, hi), chunk))?;
+    let (build, sizing) = crate::cells::sized(&params.build, params.memory, || {
+        size_proxy(source, (lo, hi), chunk)
+    })?;
     if target.is_some() {
         observer.finish();
     }
     notes.extend(sizing);
-    let build = &build;
-    let mut pass = first_pass(source, spec, build, (lo, hi), chunk, proxy_max, observer)?;
+    let sized = &DeformParams { build, ..*params };
+    let mut pass = first_pass(source, spec, sized, (lo, hi), chunk, proxy_max, observer)?;
     if pass.outside > 0 {
         notes.push(format!(
             "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
             pass.outside
         ));
         let b = pass.bounds;
-        pass = first_pass(source, spec, build, b, chunk, proxy_max, observer)?;
+        pass = first_pass(source, spec, sized, b, chunk, proxy_max, observer)?;
     }
     let FirstPass {
         mut occupancy,
@@ -128,14 +130,14 @@ fn scan_bounds(source: &mut dyn Source, chunk_len: usize) -> Result<Bounds> {
 fn first_pass(
     source: &mut dyn Source,
     spec: &EditSpec<3>,
-    build: &BuildParams,
+    params: &DeformParams,
     (lo, hi): Bounds,
     chunk_len: usize,
     proxy_max: usize,
     observer: &dyn Observer,
 ) -> Result<FirstPass> {
     source.rewind()?;
-    let mut occupancy = Occupancy::new(&lo, &hi, build)?;
+    let mut occupancy = Occupancy::new(&lo, &hi, &params.build, params.memory)?;
     let mut selections = Selections::new(spec, source.has_classes())?;
     let keep = !source.triangles().is_empty();
     let mut positions = Vec::new();

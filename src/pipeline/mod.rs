@@ -24,6 +24,7 @@ use crate::control::ControlPoint;
 use crate::error::{Error, Result};
 use crate::field::{Deformer, Outside, SavedField, Transfer, apply_into};
 use crate::io::{self, Chunk};
+use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
 use crate::solve::{Solution, SolveParams, SolverInfo};
@@ -48,6 +49,8 @@ pub struct DeformParams {
     pub proxy_samples: Option<usize>,
     /// Run the control points' leave-one-out check ([`crate::control::leave_one_out`]).
     pub check_control_points: bool,
+    /// The memory budget of every stage: the cells, the solver, the RBF.
+    pub memory: Budget,
 }
 
 /// The default bound on the samples of a [`Proxy`].

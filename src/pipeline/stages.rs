@@ -87,7 +87,7 @@ where
             triangles,
             classes,
         } => {
-            let (complex, info) = build(points, triangles, &params.build)?;
+            let (complex, info) = build(points, triangles, &params.build, params.memory)?;
             let selected = Selected::Samples { points, classes };
             let constraints = self::constraints(&complex, spec, selected, params)?;
             (complex, info, constraints)
@@ -102,7 +102,7 @@ where
             (complex, build, constraints)
         }
     };
-    let solution = solve::solve(complex, constraints, &params.solve, observer)?;
+    let solution = solve::solve(complex, constraints, &params.solve, params.memory, observer)?;
     // The solved constraints' warnings: an adaptive solve decides its parts at rest again.
     let warnings = warnings(
         &build,
@@ -173,16 +173,15 @@ where
     Ok(SavedField::new(field, params.transfer, rbf))
 }
 
-/// [`crate::memory::check`] of the dense RBF of `cells` cells, when that is the transfer:
+/// The dense RBF of `cells` cells, when that is the transfer, checked against the budget:
 /// checked before the solve, and again after refinement, so that neither ends in an abort.
 pub(crate) fn check_rbf_memory<const D: usize>(cells: usize, params: &DeformParams) -> Result<()> {
     if params.transfer != Transfer::Rbf {
         return Ok(());
     }
-    crate::memory::check(
+    params.memory.check(
         &format!("the RBF transfer of {cells} cells"),
         crate::memory::rbf_bytes(cells, D),
-        crate::memory::limit(params.build.memory_limit),
         "use --transfer pu (the default) or blend, or a larger --cell-size (or fewer --cells)",
     )
 }
@@ -239,6 +238,13 @@ where
         return Ok((points, 0.0));
     }
     let start = Instant::now();
-    crate::control::leave_one_out(spec, solution, &params.solve, &mut points, observer)?;
+    crate::control::leave_one_out(
+        spec,
+        solution,
+        &params.solve,
+        params.memory,
+        &mut points,
+        observer,
+    )?;
     Ok((points, start.elapsed().as_secs_f64()))
 }

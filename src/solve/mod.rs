@@ -84,6 +84,7 @@ pub use sight::Sight;
 
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
+use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid, Vect};
 use system::System;
@@ -115,9 +116,6 @@ pub struct SolveParams {
     pub refine_levels: u8,
     /// Rounds of refinement at most. Default 4.
     pub max_refinements: usize,
-    /// The memory budget in bytes ([`crate::memory`]; `None`: the default share of the
-    /// machine's memory).
-    pub memory_limit: Option<u64>,
     /// How each Gauss-Newton system is solved. Default [`Method::Auto`].
     pub method: Method,
     /// Parts of the shape without any constraint ride along rigidly with the nearest cell of
@@ -155,7 +153,6 @@ impl Default for SolveParams {
             coarsen_levels: 0,
             refine_levels: 2,
             max_refinements: 4,
-            memory_limit: None,
             method: Method::Auto,
             newton: true,
             carry_loose: true,
@@ -253,11 +250,12 @@ impl<const D: usize> Solution<D> {
 }
 
 /// Solves for the rigid motions of `complex` under `constraints`, with load steps and optional
-/// refinement.
+/// refinement, within the memory `budget`.
 pub fn solve<const D: usize>(
     complex: CellComplex<D>,
     constraints: Constraints<D>,
     params: &SolveParams,
+    budget: Budget,
     observer: &dyn Observer,
 ) -> Result<Solution<D>>
 where
@@ -268,7 +266,8 @@ where
         0 => (complex, constraints),
         levels => coarsen(&complex, &constraints, levels),
     };
-    let (mut system, mut motions, mut info) = from_rest(&complex, &constraints, params, observer)?;
+    let (mut system, mut motions, mut info) =
+        from_rest(&complex, &constraints, params, budget, observer)?;
     let mut complex = complex;
     let mut constraints = constraints;
     if params.refine_strain.is_some() || params.refine_fraction.is_some() {
@@ -302,7 +301,7 @@ where
                 ));
                 break;
             }
-            check_solver_memory(complex.len() + more, params, REFINE_ADVICE)?;
+            check_solver_memory(complex.len() + more, params.method, budget, REFINE_ADVICE)?;
             let (fine, parent) = complex.split(&split);
             motions = fine
                 .cells
@@ -321,7 +320,7 @@ where
             complex = fine;
             info.refinements.push(complex.len());
             system = timed(&mut info.seconds_symbolic, || {
-                System::new(&complex, &constraints, params, REFINE_ADVICE)
+                System::new(&complex, &constraints, params.method, budget, REFINE_ADVICE)
             })?;
             let it = minimize_with(
                 &mut system,
@@ -359,6 +358,7 @@ fn from_rest<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
     params: &SolveParams,
+    budget: Budget,
     observer: &dyn Observer,
 ) -> Result<(System<D>, Vec<Motion<D>>, SolverInfo)>
 where
@@ -369,14 +369,14 @@ where
         load_steps: load_steps(complex, constraints, params)?,
         ..Default::default()
     };
-    check_solver_memory(complex.len(), params, CELLS_ADVICE)?;
+    check_solver_memory(complex.len(), params.method, budget, CELLS_ADVICE)?;
     let mut motions: Vec<Motion<D>> = complex
         .cells
         .iter()
         .map(|c| Motion::rest(&c.center))
         .collect();
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params, CELLS_ADVICE)
+        System::new(complex, constraints, params.method, budget, CELLS_ADVICE)
     })?;
     load_stepped(
         &mut system,
@@ -600,7 +600,13 @@ where
     Dim<D>: Rigid<D>,
 {
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params, CELLS_ADVICE)
+        System::new(
+            complex,
+            constraints,
+            params.method,
+            Budget::default(),
+            CELLS_ADVICE,
+        )
     })?;
     minimize_with(
         &mut system,
@@ -622,11 +628,12 @@ pub fn minimize_from<const D: usize>(
     constraints: &Constraints<D>,
     motions: &[Motion<D>],
     params: &SolveParams,
+    budget: Budget,
 ) -> Result<Vec<Motion<D>>>
 where
     Dim<D>: Rigid<D>,
 {
-    let mut system = System::new(complex, constraints, params, CELLS_ADVICE)?;
+    let mut system = System::new(complex, constraints, params.method, budget, CELLS_ADVICE)?;
     let mut motions = motions.to_vec();
     let mut info = SolverInfo::default();
     minimize_with(
@@ -892,19 +899,18 @@ const CELLS_ADVICE: &str = "use a larger --cell-size (or fewer --cells)";
 /// What to change when refined cells would not fit it.
 const REFINE_ADVICE: &str = "use a larger --refine-strain threshold";
 
-/// [`crate::memory::check`] of the solver's estimate for `cells` cells.
-fn check_solver_memory(cells: usize, params: &SolveParams, advice: &str) -> Result<()> {
-    let (per_cell, by) = match params.method {
+/// The solver's estimate for `cells` cells by `method`, checked against `budget`.
+fn check_solver_memory(cells: usize, method: Method, budget: Budget, advice: &str) -> Result<()> {
+    let (per_cell, by) = match method {
         Method::Multilevel => (
             crate::memory::MULTILEVEL_BYTES_PER_CELL,
             " by the multilevel solver",
         ),
         _ => (crate::memory::SOLVER_BYTES_PER_CELL, ""),
     };
-    crate::memory::check(
+    budget.check(
         &format!("solving {cells} cells{by}"),
         cells as f64 * per_cell as f64,
-        crate::memory::limit(params.memory_limit),
         advice,
     )
 }

@@ -170,6 +170,7 @@ fn pair_weight<const D: usize>(
 mod tests {
     use super::*;
     use crate::cells::{BuildParams, build};
+    use crate::memory::Budget;
     use crate::rigid::{Dim, Rigid};
     use crate::solve::constraints::TargetLocal;
     use crate::solve::total_energy;
@@ -190,7 +191,7 @@ mod tests {
             cell_size: Some(0.25),
             ..Default::default()
         };
-        let complex = build(&pts, &[], &params).unwrap().0;
+        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
         assert!(
             complex
                 .cells

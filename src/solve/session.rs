@@ -9,6 +9,7 @@ use super::{
 };
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
+use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid};
 
@@ -23,6 +24,7 @@ pub struct Session<const D: usize> {
     system: System<D>,
     motions: Vec<Motion<D>>,
     params: SolveParams,
+    budget: Budget,
 }
 
 impl<const D: usize> Session<D>
@@ -35,10 +37,12 @@ where
         complex: CellComplex<D>,
         constraints: Constraints<D>,
         params: &SolveParams,
+        budget: Budget,
         observer: &dyn Observer,
     ) -> Result<(Self, SolverInfo)> {
         let start = Instant::now();
-        let (system, motions, mut info) = from_rest(&complex, &constraints, params, observer)?;
+        let (system, motions, mut info) =
+            from_rest(&complex, &constraints, params, budget, observer)?;
         observer.finish();
         info.turns = TurnGauge::new(&complex).turns(&constraints, &motions);
         let session = Self {
@@ -47,6 +51,7 @@ where
             system,
             motions,
             params: *params,
+            budget,
         };
         let info = session.finished(info, start);
         Ok((session, info))
@@ -90,7 +95,13 @@ where
                 .all(|(a, b)| a.cell == b.cell && a.weight == b.weight && a.mask == b.mask);
         if !same_structure {
             self.system = timed(&mut info.seconds_symbolic, || {
-                System::new(&self.complex, &constraints, &self.params, CELLS_ADVICE)
+                System::new(
+                    &self.complex,
+                    &constraints,
+                    self.params.method,
+                    self.budget,
+                    CELLS_ADVICE,
+                )
             })?;
         }
         self.constraints = constraints;

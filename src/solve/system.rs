@@ -36,14 +36,15 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
+use super::Method;
 use super::blocks::BlockMatrix;
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
 use super::multilevel::{Hierarchy, Nodes};
 use super::positions::Positions;
-use super::{Method, SolveParams};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
+use crate::memory::Budget;
 use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -131,11 +132,13 @@ where
     const CELL_SLOT: usize = tri(Self::DOF);
     const PAIR_SLOT: usize = 2 * tri(Self::DOF) + Self::DOF * Self::DOF;
 
-    /// The layout and symbolic factorization for `complex` under `constraints`.
+    /// The layout and symbolic factorization for `complex` under `constraints`, solved by
+    /// `method` within the memory `budget`.
     pub fn new(
         complex: &CellComplex<D>,
         constraints: &Constraints<D>,
-        params: &SolveParams,
+        method: Method,
+        budget: Budget,
         advice: &str,
     ) -> Result<Self> {
         let mut n = 0;
@@ -188,9 +191,9 @@ where
             positions: Positions::new(complex, constraints),
         };
         if n > 0 {
-            match params.method {
+            match method {
                 Method::Multilevel => system.set_up_multilevel(complex),
-                Method::Direct => system.set_up_direct(complex, params, advice)?,
+                Method::Direct => system.set_up_direct(complex, budget, advice)?,
                 // Cells of one size (a scan, a shell) past `MULTILEVEL_FROM` free cells: the
                 // multilevel path (BENCHMARKS.md, "Which solver `auto` takes": faster from
                 // there, in half the memory). Otherwise the factorization where it fits, else
@@ -198,18 +201,24 @@ where
                 Method::Auto => {
                     let level = complex.cells.first().map(|c| c.key.level);
                     let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);
-                    let multilevel = SolveParams {
-                        method: Method::Multilevel,
-                        ..*params
-                    };
                     if uniform && system.free_cells.len() > MULTILEVEL_FROM {
-                        super::check_solver_memory(complex.len(), &multilevel, advice)?;
+                        super::check_solver_memory(
+                            complex.len(),
+                            Method::Multilevel,
+                            budget,
+                            advice,
+                        )?;
                         system.set_up_multilevel(complex);
                     } else {
-                        match system.set_up_direct(complex, params, advice) {
+                        match system.set_up_direct(complex, budget, advice) {
                             Ok(()) => {}
                             Err(Error::Memory { .. } | Error::Solver(_)) => {
-                                super::check_solver_memory(complex.len(), &multilevel, advice)?;
+                                super::check_solver_memory(
+                                    complex.len(),
+                                    Method::Multilevel,
+                                    budget,
+                                    advice,
+                                )?;
                                 system.buffers = Buffers::default();
                                 system.set_up_multilevel(complex);
                             }
@@ -234,11 +243,11 @@ where
     fn set_up_direct(
         &mut self,
         complex: &CellComplex<D>,
-        params: &SolveParams,
+        budget: Budget,
         advice: &str,
     ) -> Result<()> {
         let n = self.n;
-        let limit = crate::memory::limit(params.memory_limit);
+        let limit = budget.limit();
         let entries = self.free_cells.len() * Self::CELL_SLOT + self.pairs.len() * Self::PAIR_SLOT;
         // The pattern's (row, column) pairs, faer's sorted copy and argsort, the values.
         crate::memory::check(

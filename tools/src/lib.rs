@@ -7,6 +7,7 @@ use data_gen::{Mesh, decimate, split_to, subdivide};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use rigidcells::Error;
 use rigidcells::cells::{BuildParams, CellComplex, build};
+use rigidcells::memory::Budget;
 use rigidcells::rigid::Vect;
 use rigidcells::spec::{EditSpec, parse_spec};
 
@@ -101,12 +102,18 @@ pub fn build_at(points: &[Vect<3>], tris: &[[u32; 3]], size: f64) -> Result<Cell
         cell_size: Some(size),
         ..Default::default()
     };
-    Ok(build(points, tris, &params)?.0)
+    Ok(build(points, tris, &params, Budget::default())?.0)
 }
 
 /// The finest cell size that gives about `target` cells (the library's bisection).
 pub fn cell_size_for(points: &[Vect<3>], tris: &[[u32; 3]], target: usize) -> Result<f64, Error> {
-    rigidcells::cells::cell_size_for(points, tris, &BuildParams::default(), target)
+    rigidcells::cells::cell_size_for(
+        points,
+        tris,
+        &BuildParams::default(),
+        target,
+        Budget::default(),
+    )
 }
 
 /// `n` random points on the triangles (uniform per triangle, triangles chosen uniformly).

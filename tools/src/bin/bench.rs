@@ -10,6 +10,7 @@ use std::time::Instant;
 
 use rigidcells::field::{Deformer, Field, Transfer, apply};
 use rigidcells::io::Document;
+use rigidcells::memory::Budget;
 use rigidcells::progress::Silent;
 use rigidcells::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
@@ -41,7 +42,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t_build = t.elapsed().as_secs_f64();
         let cells = complex.len();
         let constraints = solve::resolve(&complex, &spec, points, None)?;
-        let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent)?;
+        let sol = solve::solve(
+            complex,
+            constraints,
+            &SolveParams::default(),
+            Budget::default(),
+            &Silent,
+        )?;
         let field = Field::from_solution(&sol);
         let t = Instant::now();
         let blend = Deformer::new(&field, Transfer::Blend)?;

@@ -10,6 +10,7 @@ use std::time::Instant;
 
 use rigidcells::field::{Constrained, Deformer, Field, Outside, Transfer, Warp, apply};
 use rigidcells::io::Document;
+use rigidcells::memory::Budget;
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
 use rigidcells::solve::{self, SolveParams};
@@ -36,7 +37,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let size = cell_size_for(points, tris, 5500)?;
     let complex = build_at(points, tris, size)?;
     let constraints = solve::resolve(&complex, &spec, points, None)?;
-    let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent)?;
+    let sol = solve::solve(
+        complex,
+        constraints,
+        &SolveParams::default(),
+        Budget::default(),
+        &Silent,
+    )?;
     let field = Field::from_solution(&sol);
     let exact = field
         .prescribed

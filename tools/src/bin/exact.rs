@@ -28,6 +28,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 use rigidcells::field::{Deformer, Field, Rbf, Transfer, apply};
+use rigidcells::memory::Budget;
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
 use rigidcells::solve::{self, SolveParams};
@@ -46,7 +47,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let size = cell_size_for(&points, &mesh.triangles, CELLS)?;
     let complex = build_at(&points, &mesh.triangles, size)?;
     let constraints = solve::resolve(&complex, &spec, &points, None)?;
-    let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent)?;
+    let sol = solve::solve(
+        complex,
+        constraints,
+        &SolveParams::default(),
+        Budget::default(),
+        &Silent,
+    )?;
     let field = Field::from_solution(&sol);
     let (lo, hi) = points
         .iter()

@@ -13,6 +13,7 @@ use std::time::Instant;
 
 use rigidcells::field::{Deformer, Field, PuRbf, Rbf, Warp, apply};
 use rigidcells::io::Document;
+use rigidcells::memory::Budget;
 use rigidcells::progress::Silent;
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
 use rigidcells::solve::{self, SolveParams};
@@ -41,7 +42,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let size = cell_size_for(points, tris, target)?;
         let complex = build_at(points, tris, size)?;
         let constraints = solve::resolve(&complex, &spec, points, None)?;
-        let sol = solve::solve(complex, constraints, &SolveParams::default(), &Silent)?;
+        let sol = solve::solve(
+            complex,
+            constraints,
+            &SolveParams::default(),
+            Budget::default(),
+            &Silent,
+        )?;
         let field = Field::from_solution(&sol);
         let t = Instant::now();
         let dense = Deformer::Rbf(Rbf::new(&field)?);

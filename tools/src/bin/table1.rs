@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use rigidcells::cells::{BuildParams, build};
 use rigidcells::field::{Deformer, Field, Transfer, apply};
+use rigidcells::memory::Budget;
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
 use rigidcells::solve::{self, SolveParams};
@@ -49,7 +50,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // Medians of three runs: this machine's timings vary by ±20 % from run to run.
         let (complex, voxel) = median_of_3(|| {
             let t = Instant::now();
-            let complex = build(&points, &mesh.triangles, &params)?.0;
+            let complex = build(&points, &mesh.triangles, &params, Budget::default())?.0;
             Ok::<_, rigidcells::Error>((complex, t.elapsed().as_secs_f64()))
         })?;
         let got_cells = complex.len();
@@ -59,6 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 complex.clone(),
                 constraints,
                 &SolveParams::default(),
+                Budget::default(),
                 &Silent,
             )?;
             let iteration = sol.info.seconds_per_iteration();

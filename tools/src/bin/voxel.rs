@@ -10,6 +10,7 @@
 use std::time::Instant;
 
 use rigidcells::cells::{BuildParams, build};
+use rigidcells::memory::Budget;
 use rigidcells::rigid::Vect;
 use rigidcells_tools::{cell_size_for, load_scan, resampled};
 
@@ -41,7 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut info = None;
         for _ in 0..3 {
             let t = Instant::now();
-            let (complex, i) = build(&points, &mesh.triangles, &params)?;
+            let (complex, i) = build(&points, &mesh.triangles, &params, Budget::default())?;
             times.push(t.elapsed().as_secs_f64());
             info = Some((complex.len(), i.interior_cells));
         }
