@@ -563,12 +563,70 @@ pub fn write_las_terrain(path: &Path, n: u64, compressed: bool) -> Result<(), la
     write_las(path, Terrain::new(n), n, compressed)
 }
 
+/// The order of a generated scan's records.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Order {
+    /// As scanned: row after row of the jittered grid.
+    Scan,
+    /// A random permutation of the records (merged flight lines, time order, other tools'
+    /// output: no spatial order at all).
+    Shuffled,
+    /// Sorted into strips 1 m wide along y, by x within a strip (what a tiling tool writes).
+    Strips,
+}
+
+impl std::str::FromStr for Order {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "scan" => Ok(Self::Scan),
+            "shuffled" => Ok(Self::Shuffled),
+            "strips" => Ok(Self::Strips),
+            _ => Err(format!("`{s}`: the order is scan, shuffled or strips")),
+        }
+    }
+}
+
 /// Writes `n` samples of `terrain` as [`write_las_terrain`] does.
 pub fn write_las(
+    path: &Path,
+    terrain: Terrain,
+    n: u64,
+    compressed: bool,
+) -> Result<(), las::Error> {
+    write_las_ordered(path, terrain, n, compressed, Order::Scan)
+}
+
+/// Bytes of a point format 3 record.
+const RECORD: usize = 34;
+
+/// The format 3 record of sample `k` at local `x y z` with `class`.
+fn record(bytes: &mut Vec<u8>, k: u64, (x, y, z, class): (f64, f64, f64, u8)) {
+    let raw = |v: f64| (v / 0.001).round() as i32;
+    bytes.extend_from_slice(&raw(x).to_le_bytes());
+    bytes.extend_from_slice(&raw(y).to_le_bytes());
+    bytes.extend_from_slice(&raw(z).to_le_bytes());
+    bytes.extend_from_slice(&((z * 100.0) as u16).to_le_bytes()); // intensity
+    bytes.push(0b0000_1001); // return 1 of 1
+    bytes.push(class);
+    bytes.push(0); // scan angle
+    bytes.push((k % 251) as u8); // user data
+    bytes.extend_from_slice(&((k / 100_000) as u16).to_le_bytes()); // point source
+    bytes.extend_from_slice(&(k as f64 * 1e-5).to_le_bytes()); // GPS time
+    let c = (class as u16 % 16) * 4000;
+    for v in [c, (z * 300.0) as u16, 65535 - c] {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// Writes `n` samples of `terrain` as [`write_las_terrain`] does, the records in `order`
+/// (other than [`Order::Scan`], every record is held in memory first: 34 bytes a sample).
+pub fn write_las_ordered(
     path: &Path,
     mut terrain: Terrain,
     n: u64,
     compressed: bool,
+    order: Order,
 ) -> Result<(), las::Error> {
     use las::{Builder, LazParallelism, PointDataBuilder, Transform, Vector, WriterOptions};
     let mut b = Builder::from((1, 2));
@@ -594,34 +652,55 @@ pub fn write_las(
         WriterOptions::default().with_laz_parallelism(LazParallelism::Yes),
     )?;
     let chunk = 1u64 << 20;
-    let mut i = 0u64;
-    while i < n {
-        let m = chunk.min(n - i);
-        let mut bytes = Vec::with_capacity(m as usize * 34);
-        for k in i..i + m {
-            let (x, y, z, class) = terrain.sample(k);
-            let raw = |v: f64| (v / 0.001).round() as i32;
-            bytes.extend_from_slice(&raw(x).to_le_bytes());
-            bytes.extend_from_slice(&raw(y).to_le_bytes());
-            bytes.extend_from_slice(&raw(z).to_le_bytes());
-            bytes.extend_from_slice(&((z * 100.0) as u16).to_le_bytes()); // intensity
-            bytes.push(0b0000_1001); // return 1 of 1
-            bytes.push(class);
-            bytes.push(0); // scan angle
-            bytes.push((k % 251) as u8); // user data
-            bytes.extend_from_slice(&((k / 100_000) as u16).to_le_bytes()); // point source
-            bytes.extend_from_slice(&(k as f64 * 1e-5).to_le_bytes()); // GPS time
-            let c = (class as u16 % 16) * 4000;
-            for v in [c, (z * 300.0) as u16, 65535 - c] {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
-        }
+    let mut write = |bytes: Vec<u8>| -> Result<(), las::Error> {
         let pd = PointDataBuilder::new()
             .with_format(format)
             .with_transforms(transforms)
             .build_from_bytes(bytes)?;
-        w.write_points(&pd)?;
-        i += m;
+        w.write_points(&pd)
+    };
+    if order == Order::Scan {
+        let mut i = 0u64;
+        while i < n {
+            let m = chunk.min(n - i);
+            let mut bytes = Vec::with_capacity(m as usize * RECORD);
+            for k in i..i + m {
+                record(&mut bytes, k, terrain.sample(k));
+            }
+            write(bytes)?;
+            i += m;
+        }
+    } else {
+        let mut all = Vec::with_capacity(n as usize * RECORD);
+        let mut keys = Vec::with_capacity(n as usize);
+        for k in 0..n {
+            let sample = terrain.sample(k);
+            keys.push((sample.1.floor() as i64, sample.0, k));
+            record(&mut all, k, sample);
+        }
+        let mut by: Vec<u64> = match order {
+            Order::Strips => {
+                keys.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+                keys.iter().map(|k| k.2).collect()
+            }
+            _ => {
+                let mut by: Vec<u64> = (0..n).collect();
+                for i in (1..by.len()).rev() {
+                    let j = (terrain.rand() * (i + 1) as f64) as usize;
+                    by.swap(i, j.min(i));
+                }
+                by
+            }
+        };
+        drop(keys);
+        for run in by.chunks_mut(chunk as usize) {
+            let mut bytes = Vec::with_capacity(run.len() * RECORD);
+            for &mut k in run {
+                let k = k as usize * RECORD;
+                bytes.extend_from_slice(&all[k..k + RECORD]);
+            }
+            write(bytes)?;
+        }
     }
     w.close()
 }

@@ -20,6 +20,7 @@ mod file;
 mod leaves;
 pub(crate) use leaves::floor;
 mod nearest;
+mod order;
 mod pu;
 mod rbf;
 mod simd;
@@ -28,6 +29,7 @@ pub use blend::{Blend, Weights};
 pub use exact::{Constrained, FREE, Frame, Outside, OutsideTally, Prescribed};
 pub use file::SavedField;
 pub use nearest::{Anchor, NEAR, Nearest, Neighbors};
+pub use order::Order;
 pub use pu::{Layout, PuRbf};
 pub use rbf::Rbf;
 
@@ -312,8 +314,7 @@ pub(crate) fn test_numbers(seed: u64) -> impl FnMut() -> f64 {
 const CHUNK: usize = 4096;
 
 /// Moves world-coordinate `points` and their `normals` (empty, or one per point) by `warp`
-/// into `moved` and `moved_normals`. Parallel over chunks; each sample's result depends on that
-/// sample alone, so any chunking gives the same bits.
+/// into `moved` and `moved_normals`, in their coherent [`Order`] ([`apply_in_order`]).
 pub fn apply_into<const D: usize>(
     warp: &impl Warp<D>,
     origin: &Vect<D>,
@@ -322,23 +323,53 @@ pub fn apply_into<const D: usize>(
     moved: &mut Vec<Vect<D>>,
     moved_normals: &mut Vec<Vect<D>>,
 ) {
-    moved.resize(points.len(), Vect::<D>::zeros());
+    let order = Order::of(points);
+    apply_in_order(warp, origin, points, normals, &order, moved, moved_normals);
+}
+
+/// Moves world-coordinate `points` and their `normals` (empty, or one per point) by `warp`
+/// into `moved` and `moved_normals`, evaluating them in `order` (the [`Order`] of `points`),
+/// in parallel over pieces of it, and gathering the results back into the order of `points`:
+/// each sample's result depends on that sample alone, so neither the order nor the pieces
+/// change a bit, and samples in any order cost what samples in scan order cost.
+pub fn apply_in_order<const D: usize>(
+    warp: &impl Warp<D>,
+    origin: &Vect<D>,
+    points: &[Vect<D>],
+    normals: &[Vect<D>],
+    order: &Order,
+    moved: &mut Vec<Vect<D>>,
+    moved_normals: &mut Vec<Vect<D>>,
+) {
+    let gather = |from: &[Vect<D>]| -> Vec<Vect<D>> {
+        order.order.par_iter().map(|&i| from[i as usize]).collect()
+    };
+    let scatter = |from: &[Vect<D>], to: &mut Vec<Vect<D>>| {
+        to.resize(from.len(), Vect::<D>::zeros());
+        to.par_iter_mut()
+            .zip(&order.place)
+            .for_each(|(v, &k)| *v = from[k as usize]);
+    };
+    let xs = gather(points);
+    let mut ys = vec![Vect::<D>::zeros(); xs.len()];
     if normals.is_empty() {
         moved_normals.clear();
-        moved
-            .par_chunks_mut(CHUNK)
-            .zip(points.par_chunks(CHUNK))
+        ys.par_chunks_mut(CHUNK)
+            .zip(xs.par_chunks(CHUNK))
             .for_each(|(out, inp)| warp.warp_run(origin, inp, out));
+        scatter(&ys, moved);
         return;
     }
-    moved_normals.resize(normals.len(), Vect::<D>::zeros());
-    moved
-        .par_chunks_mut(CHUNK)
-        .zip(moved_normals.par_chunks_mut(CHUNK))
-        .zip(points.par_chunks(CHUNK).zip(normals.par_chunks(CHUNK)))
+    let ns = gather(normals);
+    let mut ms = vec![Vect::<D>::zeros(); ns.len()];
+    ys.par_chunks_mut(CHUNK)
+        .zip(ms.par_chunks_mut(CHUNK))
+        .zip(xs.par_chunks(CHUNK).zip(ns.par_chunks(CHUNK)))
         .for_each(|((out, out_n), (ps, ns))| {
             warp.warp_run_with_normals(origin, ps, ns, out, out_n)
         });
+    scatter(&ys, moved);
+    scatter(&ms, moved_normals);
 }
 
 /// How many of the world-coordinate `points` the map folds over: where the Jacobian

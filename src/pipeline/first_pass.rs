@@ -83,13 +83,17 @@ fn size_proxy<'a>(
     let voxel = (hi - lo).max().max(f64::MIN_POSITIVE) / PROXY_RESOLUTION;
     let keep_all = !source.triangles().is_empty();
     let mut proxy = Vec::new();
-    let mut seen = std::collections::HashSet::new();
+    let mut seen = rustc_hash::FxHashSet::default();
+    let mut last = None;
     let mut chunk = Chunk::default();
     while source.read_samples(chunk_len, &mut chunk)? > 0 {
         check_finite(source.path(), &chunk)?;
         for p in &chunk.positions {
             let key = ((p - lo) / voxel).map(|v| v.floor() as i64);
-            if keep_all || seen.insert((key[0], key[1], key[2])) {
+            // A scan's next sample is mostly in the voxel of the last: no lookup then.
+            let new = last != Some(key) && seen.insert([key[0], key[1], key[2]]);
+            last = Some(key);
+            if keep_all || new {
                 proxy.push(*p);
             }
         }

@@ -1,12 +1,14 @@
-//! Pass 2 of a streamed file: chunks read and warped on one thread while a second writes the
-//! previous ones, and the restarts a sink asks for (an output encoding that overflows, a
+//! Pass 2 of a streamed file: chunks read, warped and written by three threads at once, and
+//! the restarts a sink asks for (an output encoding that overflows, a
 //! header that must be made from the records).
 
 use std::path::Path;
 use std::sync::mpsc;
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
-use crate::field::{Constrained, Warp, apply_into};
+use crate::field::{Constrained, Order, Warp, apply_in_order};
 use crate::io::{Accepted, Bounds, Chunk, Sink, Source};
 use crate::progress::Observer;
 use crate::rigid::Vect;
@@ -17,12 +19,15 @@ use super::checks::{check_moved, refuse_outside};
 #[derive(Default)]
 struct Job {
     chunk: Chunk,
+    /// The order the chunk's samples are warped in, made by the reader.
+    order: Order,
     moved: Vec<Vect<3>>,
     normals: Vec<Vect<3>>,
 }
 
-/// Chunks in flight in pass 2: one being read and warped, one queued, one being written.
-const IN_FLIGHT: usize = 3;
+/// Chunks in flight in pass 2: one being read, one warped, one written, and one queued
+/// between each two stages.
+const IN_FLIGHT: usize = 5;
 
 /// Pass 2: streams the source through `warp` into `output`. A sink that refuses a chunk
 /// ([`Accepted`]) is dropped, with its temporary file, and the pass runs again with a sink made
@@ -86,10 +91,11 @@ enum Pass {
     Refused(Accepted),
 }
 
-/// Reads and warps chunks on this thread while a second thread writes the previous ones, so
-/// the sink's encoding, compression and system calls overlap the transfer. Returns how the
-/// sink took the chunks and the moved bounds: of every sample, also after an overflow (the
-/// reader goes on), but not after a [`Accepted::Restart`] (the reader stops).
+/// Three stages over chunks in flight, so that no core waits on another stage: this thread
+/// reads (decodes) chunks and puts each in its evaluation [`Order`], a second warps them (in
+/// parallel, [`apply_in_order`]), a third writes them (the sink's encoding, compression and system calls). Returns how the sink took the
+/// chunks and the moved bounds: of every sample, also after an overflow (the reader goes on),
+/// but not after a [`Accepted::Restart`] (the reader stops).
 fn pipelined_pass(
     source: &mut dyn Source,
     sink: Box<dyn Sink>,
@@ -98,70 +104,106 @@ fn pipelined_pass(
     chunk_len: usize,
     observer: &dyn Observer,
 ) -> Result<(Pass, Bounds)> {
-    let mut moved_bounds = (
-        Vect::<3>::repeat(f64::INFINITY),
-        Vect::<3>::repeat(f64::NEG_INFINITY),
-    );
     observer.stage("writing", source.len());
     let raw = sink.needs_raw();
-    let pass = std::thread::scope(|scope| -> Result<Pass> {
-        let (full, queued) = mpsc::sync_channel::<Job>(1);
+    let (pass, moved_bounds) = std::thread::scope(|scope| -> Result<(Pass, Bounds)> {
+        let (read, to_warp) = mpsc::sync_channel::<Job>(1);
+        let (warped, to_write) = mpsc::sync_channel::<Job>(1);
         let (done, empty) = mpsc::channel::<Job>();
         for _ in 0..IN_FLIGHT {
             done.send(Job::default()).expect("the receiver is alive");
         }
         let writer = scope.spawn(move || -> Result<Pass> {
             let mut pass = Pass::Written(sink);
-            for job in queued {
+            for job in to_write {
                 if let Pass::Written(s) = &mut pass {
                     match s.write(&job.chunk, &job.moved, &job.normals)? {
                         Accepted::Yes => {}
-                        // Dropping the receiver stops the reader.
+                        // Dropping the receiver stops the warper, and so the reader.
                         Accepted::Restart => return Ok(Pass::Refused(Accepted::Restart)),
                         Accepted::Overflow => pass = Pass::Refused(Accepted::Overflow),
                     }
                 }
+                observer.advance(job.chunk.len() as u64);
                 // The reader may have stopped early on an error of its own.
                 let _ = done.send(job);
             }
             Ok(pass)
         });
-        // `recv` fails only when the writer stopped on an error, which `join` returns.
-        while let Ok(mut job) = empty.recv() {
-            let read = if raw {
-                source.read(chunk_len, &mut job.chunk)?
-            } else {
-                source.read_samples(chunk_len, &mut job.chunk)?
-            };
-            if read == 0 {
-                break;
-            }
-            let Job {
-                chunk,
-                moved,
-                normals,
-            } = &mut job;
-            apply_into(
-                warp,
-                origin,
-                &chunk.positions,
-                &chunk.normals,
-                moved,
-                normals,
+        let warper = scope.spawn(move || -> Result<Bounds> {
+            let mut bounds = (
+                Vect::<3>::repeat(f64::INFINITY),
+                Vect::<3>::repeat(f64::NEG_INFINITY),
             );
-            check_moved(chunk.first, moved)?;
-            for p in moved.iter() {
-                moved_bounds.0 = moved_bounds.0.inf(p);
-                moved_bounds.1 = moved_bounds.1.sup(p);
+            for mut job in to_warp {
+                let Job {
+                    chunk,
+                    order,
+                    moved,
+                    normals,
+                } = &mut job;
+                apply_in_order(
+                    warp,
+                    origin,
+                    &chunk.positions,
+                    &chunk.normals,
+                    order,
+                    moved,
+                    normals,
+                );
+                check_moved(chunk.first, moved)?;
+                let (lo, hi) = moved_bounds(moved);
+                bounds = (bounds.0.inf(&lo), bounds.1.sup(&hi));
+                if warped.send(job).is_err() {
+                    break;
+                }
             }
-            observer.advance(chunk.len() as u64);
-            if full.send(job).is_err() {
+            Ok(bounds)
+        });
+        // `recv` fails only when the writer stopped, and `send` only when the warper did: on
+        // an error, which `join` returns, or on a refusal.
+        let mut reading = Ok(());
+        while let Ok(mut job) = empty.recv() {
+            let got = if raw {
+                source.read(chunk_len, &mut job.chunk)
+            } else {
+                source.read_samples(chunk_len, &mut job.chunk)
+            };
+            match got {
+                Ok(0) => break,
+                Ok(_) => job.order.compute(&job.chunk.positions),
+                Err(e) => {
+                    reading = Err(e);
+                    break;
+                }
+            }
+            if read.send(job).is_err() {
                 break;
             }
         }
-        drop(full);
-        writer.join().expect("the writer thread does not panic")
+        drop(read);
+        let bounds = warper.join().expect("the warping thread does not panic");
+        let pass = writer.join().expect("the writer thread does not panic");
+        reading?;
+        Ok((pass?, bounds?))
     })?;
     observer.finish();
     Ok((pass, moved_bounds))
+}
+
+/// The bounds of `points`, in parallel.
+fn moved_bounds(points: &[Vect<3>]) -> Bounds {
+    let empty = || {
+        (
+            Vect::<3>::repeat(f64::INFINITY),
+            Vect::<3>::repeat(f64::NEG_INFINITY),
+        )
+    };
+    points
+        .par_chunks(1 << 12)
+        .map(|run| {
+            run.iter()
+                .fold(empty(), |(lo, hi), p| (lo.inf(p), hi.sup(p)))
+        })
+        .reduce(empty, |a, b| (a.0.inf(&b.0), a.1.sup(&b.1)))
 }

@@ -1,5 +1,6 @@
-//! `cargo run --release -p data_gen --bin gen -- terrain N OUT.las|OUT.laz|OUT.ply`: a synthetic
-//! scan of N points (terrain, buildings, a bridge) for benchmarks and memory checks.
+//! `cargo run --release -p data_gen --bin gen -- terrain N OUT.las|OUT.laz|OUT.ply [ORDER]`: a
+//! synthetic scan of N points (terrain, buildings, a bridge) for benchmarks and memory checks;
+//! a LAS or LAZ scan's records `scan` (default), `shuffled` or sorted into 1 m `strips`.
 //! `gen corridor N OUT.las|OUT.laz`: N points of a 1 km × 200 m road corridor, z over ~50 m
 //! (the scale benchmark's large-extent scan).
 //! `gen tube OUT.ply`: the closed 480k-vertex tube of the `--cells 5500` benchmark
@@ -8,9 +9,13 @@
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
-        Some(scene @ ("terrain" | "corridor")) if args.len() == 4 => {
+        Some(scene @ ("terrain" | "corridor")) if args.len() == 4 || args.len() == 5 => {
             let n: u64 = args[2].parse().expect("N is a point count");
             let out = std::path::Path::new(&args[3]);
+            let order: data_gen::Order = match args.get(4) {
+                Some(o) => o.parse().unwrap_or_else(|e| panic!("{e}")),
+                None => data_gen::Order::Scan,
+            };
             let ext = out
                 .extension()
                 .map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -25,7 +30,7 @@ fn main() {
                         "corridor" => data_gen::Terrain::corridor(n),
                         _ => data_gen::Terrain::new(n),
                     };
-                    data_gen::write_las(out, terrain, n, ext == Some("laz"))
+                    data_gen::write_las_ordered(out, terrain, n, ext == Some("laz"), order)
                         .expect("writing the scan")
                 }
             }
@@ -43,8 +48,8 @@ fn main() {
         }
         _ => {
             eprintln!(
-                "usage: gen terrain N OUT.las|OUT.laz|OUT.ply | gen corridor N OUT.las|OUT.laz | \
-                 gen tube OUT.ply"
+                "usage: gen terrain N OUT.las|OUT.laz|OUT.ply [scan|shuffled|strips] | \
+                 gen corridor N OUT.las|OUT.laz [ORDER] | gen tube OUT.ply"
             );
             std::process::exit(2);
         }

@@ -2,6 +2,8 @@
 //! scale and an offset per axis) and back, rounded exactly as every writer here writes them,
 //! and the re-framing of an axis whose moved coordinates do not fit 32-bit integers.
 
+use rayon::prelude::*;
+
 use crate::error::{Error, Result};
 use crate::io::stream::{Accepted, Bounds};
 use crate::rigid::Vect;
@@ -47,28 +49,54 @@ pub(super) fn reframe(
 /// A scale and an offset per axis.
 pub(super) type Frame = ([f64; 3], [f64; 3]);
 
+/// Records encoded per parallel task.
+const ENCODE_RUN: usize = 8192;
+
 /// Writes the moved coordinates into the first 12 bytes of each record of `raw`, tracking
-/// the bounds of the encoded values; [`Accepted::Overflow`] (the records half written) when
-/// one does not fit `frame`.
+/// the bounds of the encoded values; [`Accepted::Overflow`] (the records partly written) when
+/// one does not fit `frame`. Parallel over runs of records.
 pub(super) fn encode(
     raw: &mut [u8],
     record_len: usize,
     moved: &[Vect<3>],
-    (scale, offset): &Frame,
+    frame: &Frame,
     (lo, hi): (&mut [f64; 3], &mut [f64; 3]),
 ) -> Accepted {
+    let runs: Vec<Option<([f64; 3], [f64; 3])>> = raw
+        .par_chunks_mut(record_len * ENCODE_RUN)
+        .zip(moved.par_chunks(ENCODE_RUN))
+        .map(|(raw, moved)| encode_run(raw, record_len, moved, frame))
+        .collect();
+    for run in runs {
+        let Some((l, h)) = run else {
+            return Accepted::Overflow;
+        };
+        for a in 0..3 {
+            lo[a] = lo[a].min(l[a]);
+            hi[a] = hi[a].max(h[a]);
+        }
+    }
+    Accepted::Yes
+}
+
+/// [`encode`] of one run: the bounds of its encoded values, or `None` when one does not fit.
+fn encode_run(
+    raw: &mut [u8],
+    record_len: usize,
+    moved: &[Vect<3>],
+    (scale, offset): &Frame,
+) -> Option<([f64; 3], [f64; 3])> {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
     for (rec, p) in raw.chunks_exact_mut(record_len).zip(moved) {
         for a in 0..3 {
-            let Some(v) = round_to_i32((p[a] - offset[a]) / scale[a]) else {
-                return Accepted::Overflow;
-            };
+            let v = round_to_i32((p[a] - offset[a]) / scale[a])?;
             rec[4 * a..4 * a + 4].copy_from_slice(&v.to_le_bytes());
             let x = v as f64 * scale[a] + offset[a];
             lo[a] = lo[a].min(x);
             hi[a] = hi[a].max(x);
         }
     }
-    Accepted::Yes
+    Some((lo, hi))
 }
 
 /// `r` rounded half away from zero (as `f64::round`), if it fits an `i32`. `f64::round` is a
