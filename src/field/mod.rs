@@ -417,10 +417,9 @@ pub(crate) fn determinant<const D: usize>(m: &nalgebra::SMatrix<f64, D, D>) -> f
 }
 
 /// Moves world-coordinate `points` in place by `warp`, whose local frame has its origin at
-/// `origin`. Parallel over chunks; the result of each sample depends on that sample alone.
+/// `origin` ([`apply_into`]).
 pub fn apply<const D: usize>(warp: &impl Warp<D>, origin: &Vect<D>, points: &mut [Vect<D>]) {
-    points.par_chunks_mut(CHUNK).for_each(|chunk| {
-        let inp = chunk.to_vec();
-        warp.warp_run(origin, &inp, chunk);
-    });
+    let mut moved = Vec::new();
+    apply_into(warp, origin, points, &[], &mut moved, &mut Vec::new());
+    points.copy_from_slice(&moved);
 }
