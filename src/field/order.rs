@@ -26,7 +26,7 @@ pub struct Order {
 }
 
 impl Order {
-    /// The coherent order of `points` ([`coherent_order`]), in the buffers of `self`.
+    /// The coherent order of `points` (`coherent_order`), in the buffers of `self`.
     pub fn compute<const D: usize>(&mut self, points: &[Vect<D>]) {
         coherent_order(points, &mut self.order);
         self.place.clear();

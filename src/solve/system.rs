@@ -201,26 +201,20 @@ where
                 Method::Auto => {
                     let level = complex.cells.first().map(|c| c.key.level);
                     let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);
-                    if uniform && system.free_cells.len() > MULTILEVEL_FROM {
-                        super::check_solver_memory(
-                            complex.len(),
-                            Method::Multilevel,
-                            budget,
-                            advice,
-                        )?;
+                    let multilevel = |system: &mut Self| {
+                        let cells = complex.len();
+                        super::check_solver_memory(cells, Method::Multilevel, budget, advice)?;
+                        system.buffers = Buffers::default();
                         system.set_up_multilevel(complex);
+                        Ok::<_, Error>(())
+                    };
+                    if uniform && system.free_cells.len() > MULTILEVEL_FROM {
+                        multilevel(&mut system)?;
                     } else {
                         match system.set_up_direct(complex, budget, advice) {
                             Ok(()) => {}
                             Err(Error::Memory { .. } | Error::Solver(_)) => {
-                                super::check_solver_memory(
-                                    complex.len(),
-                                    Method::Multilevel,
-                                    budget,
-                                    advice,
-                                )?;
-                                system.buffers = Buffers::default();
-                                system.set_up_multilevel(complex);
+                                multilevel(&mut system)?
                             }
                             Err(e) => return Err(e),
                         }
