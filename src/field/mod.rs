@@ -328,8 +328,9 @@ pub fn apply_into<const D: usize>(
 }
 
 /// Moves world-coordinate `points` and their `normals` (empty, or one per point) by `warp`
-/// into `moved` and `moved_normals`, evaluating them in `order` (the [`Order`] of `points`),
-/// in parallel over pieces of it, and gathering the results back into the order of `points`:
+/// into `moved` and `moved_normals`, evaluating them in `order` (the [`Order`] of `points`; in
+/// their own order where it is empty), in parallel over pieces of it, and gathering the results
+/// back into the order of `points`:
 /// each sample's result depends on that sample alone, so neither the order nor the pieces
 /// change a bit, and samples in any order cost what samples in scan order cost.
 pub fn apply_in_order<const D: usize>(
@@ -341,6 +342,9 @@ pub fn apply_in_order<const D: usize>(
     moved: &mut Vec<Vect<D>>,
     moved_normals: &mut Vec<Vect<D>>,
 ) {
+    if order.order.is_empty() {
+        return apply_in_place_order(warp, origin, points, normals, moved, moved_normals);
+    }
     let gather = |from: &[Vect<D>]| -> Vec<Vect<D>> {
         order.order.par_iter().map(|&i| from[i as usize]).collect()
     };
@@ -370,6 +374,34 @@ pub fn apply_in_order<const D: usize>(
         });
     scatter(&ys, moved);
     scatter(&ms, moved_normals);
+}
+
+/// [`apply_in_order`] in the samples' own order.
+fn apply_in_place_order<const D: usize>(
+    warp: &impl Warp<D>,
+    origin: &Vect<D>,
+    points: &[Vect<D>],
+    normals: &[Vect<D>],
+    moved: &mut Vec<Vect<D>>,
+    moved_normals: &mut Vec<Vect<D>>,
+) {
+    moved.resize(points.len(), Vect::<D>::zeros());
+    if normals.is_empty() {
+        moved_normals.clear();
+        moved
+            .par_chunks_mut(CHUNK)
+            .zip(points.par_chunks(CHUNK))
+            .for_each(|(out, inp)| warp.warp_run(origin, inp, out));
+        return;
+    }
+    moved_normals.resize(normals.len(), Vect::<D>::zeros());
+    moved
+        .par_chunks_mut(CHUNK)
+        .zip(moved_normals.par_chunks_mut(CHUNK))
+        .zip(points.par_chunks(CHUNK).zip(normals.par_chunks(CHUNK)))
+        .for_each(|((out, out_n), (ps, ns))| {
+            warp.warp_run_with_normals(origin, ps, ns, out, out_n)
+        });
 }
 
 /// How many of the world-coordinate `points` the map folds over: where the Jacobian

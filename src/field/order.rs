@@ -5,7 +5,7 @@
 //! all the samples of a run it weighs, and the exact regions hand the transfer whole runs of
 //! free samples. A file's records come in any order (flight lines, time, merged tiles, other
 //! tools' output), so [`apply_into`](super::apply_into) evaluates each run in the order of
-//! [`Order`] and scatters the results back into the records' order: every result
+//! [`Order`] (a Morton order, unless the samples' own is coherent already) and scatters the results back into the records' order: every result
 //! depends on its own sample alone, so the order changes no bit, only the time.
 
 use crate::rigid::Vect;
@@ -16,7 +16,8 @@ const BITS: u32 = 30;
 /// Bits sorted per pass of the radix sort.
 const DIGIT: u32 = 15;
 
-/// An evaluation order of a run of samples and its inverse.
+/// An evaluation order of a run of samples and its inverse; both empty where the samples'
+/// own order is coherent already.
 #[derive(Debug, Clone, Default)]
 pub struct Order {
     /// The samples' indices in the order they are evaluated.
@@ -26,10 +27,26 @@ pub struct Order {
 }
 
 impl Order {
-    /// The coherent order of `points` (`coherent_order`), in the buffers of `self`.
+    /// The coherent order of `points`, in the buffers of `self`: their Morton keys
+    /// (`morton_keys`) sorted by two passes of a radix sort, samples of one cube in their own
+    /// order; or none (their own order) where at most one in 8 (`KEEP`) consecutive samples
+    /// crosses into another cube of a 64-step grid: a scan, or a file sorted into strips, costs
+    /// nothing to sort then.
     pub fn compute<const D: usize>(&mut self, points: &[Vect<D>]) {
-        coherent_order(points, &mut self.order);
+        self.order.clear();
         self.place.clear();
+        let keys = morton_keys(points);
+        let coarse = |k: u32| k >> (D as u32 * (BITS / D as u32 - 6));
+        let crossings = keys
+            .windows(2)
+            .filter(|w| coarse(w[0]) != coarse(w[1]))
+            .count();
+        if crossings * KEEP <= keys.len() {
+            return;
+        }
+        let mut by_low = Vec::new();
+        counting_sort(0..keys.len() as u32, &keys, 0, &mut by_low);
+        counting_sort(by_low.into_iter(), &keys, DIGIT, &mut self.order);
         self.place.resize(self.order.len(), 0);
         for (k, &i) in self.order.iter().enumerate() {
             self.place[i as usize] = k as u32;
@@ -44,10 +61,13 @@ impl Order {
     }
 }
 
-/// The indices of `points` in the Morton order of a grid over their bounding box (`2^(30 / D)`
-/// cubes along its longest extent), samples of one cube in their own order: a radix sort of
-/// two passes. Samples with a coordinate that is not finite come first.
-fn coherent_order<const D: usize>(points: &[Vect<D>], order: &mut Vec<u32>) {
+/// Samples in their own order are coherent when at most one in this many crosses into another
+/// cube of the coarse grid.
+const KEEP: usize = 8;
+
+/// The Morton keys of `points` on a grid over their bounding box (`2^(30 / D)` cubes along its
+/// longest extent). Samples with a coordinate that is not finite have key 0.
+fn morton_keys<const D: usize>(points: &[Vect<D>]) -> Vec<u32> {
     let bits = BITS / D as u32;
     let side = 1u32 << bits;
     let mut lo = Vect::<D>::repeat(f64::INFINITY);
@@ -66,7 +86,7 @@ fn coherent_order<const D: usize>(points: &[Vect<D>], order: &mut Vec<u32>) {
     let spread: Vec<u32> = (0..side)
         .map(|q| (0..bits).map(|b| ((q >> b) & 1) << (b * D as u32)).sum())
         .collect();
-    let keys: Vec<u32> = points
+    points
         .iter()
         .map(|p| {
             let mut key = 0;
@@ -77,10 +97,7 @@ fn coherent_order<const D: usize>(points: &[Vect<D>], order: &mut Vec<u32>) {
             }
             key
         })
-        .collect();
-    let mut by_low = Vec::new();
-    counting_sort(0..points.len() as u32, &keys, 0, &mut by_low);
-    counting_sort(by_low.into_iter(), &keys, DIGIT, order);
+        .collect()
 }
 
 /// `indices` stably sorted by the digit of `keys` at `shift`, into `out`.
@@ -119,8 +136,7 @@ mod tests {
             .collect();
         points.push(Vect::<3>::new(f64::NAN, 0.0, 0.0));
         points.push(Vect::<3>::new(f64::INFINITY, 0.0, 0.0));
-        let mut order = Vec::new();
-        coherent_order(&points, &mut order);
+        let order = Order::of(&points).order;
         let mut seen = order.clone();
         seen.sort_unstable();
         assert_eq!(seen, (0..points.len() as u32).collect::<Vec<_>>());
@@ -135,5 +151,10 @@ mod tests {
         let before = step(&mut (0..points.len()));
         let after = step(&mut order.iter().map(|&i| i as usize));
         assert!(after < before / 10.0, "{after} vs {before}");
+        // A scan, row after row, keeps its own order.
+        let scan: Vec<Vect<3>> = (0..5000)
+            .map(|i| Vect::<3>::new((i % 1000) as f64 * 0.1, (i / 1000) as f64 * 0.1, 0.0))
+            .collect();
+        assert!(Order::of(&scan).order.is_empty());
     }
 }
