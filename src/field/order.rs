@@ -5,8 +5,9 @@
 //! all the samples of a run it weighs, and the exact regions hand the transfer whole runs of
 //! free samples. A file's records come in any order (flight lines, time, merged tiles, other
 //! tools' output), so [`apply_into`](super::apply_into) evaluates each run in the order of
-//! [`Order`] (a Morton order, unless the samples' own is coherent already) and scatters the results back into the records' order: every result
-//! depends on its own sample alone, so the order changes no bit, only the time.
+//! [`Order`] (a Morton order, unless the samples' own is coherent already) and scatters the
+//! results back into the records' order: every result depends on its own sample alone, so the
+//! order changes no bit, only the time.
 
 use crate::rigid::Vect;
 

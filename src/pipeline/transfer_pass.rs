@@ -93,9 +93,10 @@ enum Pass {
 
 /// Three stages over chunks in flight, so that no core waits on another stage: this thread
 /// reads (decodes) chunks and puts each in its evaluation [`Order`], a second warps them (in
-/// parallel, [`apply_in_order`]), a third writes them (the sink's encoding, compression and system calls). Returns how the sink took the
-/// chunks and the moved bounds: of every sample, also after an overflow (the reader goes on),
-/// but not after a [`Accepted::Restart`] (the reader stops).
+/// parallel, [`apply_in_order`]), a third writes them (the sink's encoding, compression and
+/// system calls). Returns how the sink took the chunks and the moved bounds: of every sample,
+/// also after an overflow (the reader goes on), but not after a [`Accepted::Restart`] (the
+/// reader stops).
 fn pipelined_pass(
     source: &mut dyn Source,
     sink: Box<dyn Sink>,

@@ -9,8 +9,9 @@
 //! lifted and turned, `--cells 6500`), then alternating runs of each command; medians are
 //! printed, with CPU / wall and the peak anonymous memory (`RssAnon`, polled) of the run. Pass
 //! a file in no spatial order first and the same records sorted second: the last column gives
-//! the first file's `apply` time over each file's (how much slower the first order is). laspy runs in `$RIGIDCELLS_PYTHON`, else
-//! `target/ci-venv/bin/python` where it exists, else `python3`; it needs `laspy` and `lazrs`.
+//! the first file's `apply` time over each file's (how much slower the first order is). laspy
+//! runs in `$RIGIDCELLS_PYTHON`, else `target/ci-venv/bin/python` where it exists, else
+//! `python3`; it needs `laspy` and `lazrs`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
