@@ -330,9 +330,9 @@ pub fn apply_into<const D: usize>(
 /// Moves world-coordinate `points` and their `normals` (empty, or one per point) by `warp`
 /// into `moved` and `moved_normals`, evaluating them in `order` (the [`Order`] of `points`; in
 /// their own order where it is empty), in parallel over pieces of it, and gathering the results
-/// back into the order of `points`:
-/// each sample's result depends on that sample alone, so neither the order nor the pieces
-/// change a bit, and samples in any order cost what samples in scan order cost.
+/// back into the order of `points`: each sample's result depends on that sample alone, so
+/// neither the order nor the pieces change a bit, and samples in any order cost what samples
+/// in scan order cost.
 pub fn apply_in_order<const D: usize>(
     warp: &impl Warp<D>,
     origin: &Vect<D>,
@@ -343,9 +343,15 @@ pub fn apply_in_order<const D: usize>(
     moved_normals: &mut Vec<Vect<D>>,
 ) {
     if order.order.is_empty() {
-        return apply_in_place_order(warp, origin, points, normals, moved, moved_normals);
+        moved.resize(points.len(), Vect::<D>::zeros());
+        moved_normals.resize(normals.len(), Vect::<D>::zeros());
+        warp_pieces(warp, origin, points, normals, moved, moved_normals);
+        return;
     }
     let gather = |from: &[Vect<D>]| -> Vec<Vect<D>> {
+        if from.is_empty() {
+            return Vec::new();
+        }
         order.order.par_iter().map(|&i| from[i as usize]).collect()
     };
     let scatter = |from: &[Vect<D>], to: &mut Vec<Vect<D>>| {
@@ -354,50 +360,32 @@ pub fn apply_in_order<const D: usize>(
             .zip(&order.place)
             .for_each(|(v, &k)| *v = from[k as usize]);
     };
-    let xs = gather(points);
+    let (xs, ns) = (gather(points), gather(normals));
     let mut ys = vec![Vect::<D>::zeros(); xs.len()];
-    if normals.is_empty() {
-        moved_normals.clear();
-        ys.par_chunks_mut(CHUNK)
-            .zip(xs.par_chunks(CHUNK))
-            .for_each(|(out, inp)| warp.warp_run(origin, inp, out));
-        scatter(&ys, moved);
-        return;
-    }
-    let ns = gather(normals);
     let mut ms = vec![Vect::<D>::zeros(); ns.len()];
-    ys.par_chunks_mut(CHUNK)
-        .zip(ms.par_chunks_mut(CHUNK))
-        .zip(xs.par_chunks(CHUNK).zip(ns.par_chunks(CHUNK)))
-        .for_each(|((out, out_n), (ps, ns))| {
-            warp.warp_run_with_normals(origin, ps, ns, out, out_n)
-        });
+    warp_pieces(warp, origin, &xs, &ns, &mut ys, &mut ms);
     scatter(&ys, moved);
     scatter(&ms, moved_normals);
 }
 
-/// [`apply_in_order`] in the samples' own order.
-fn apply_in_place_order<const D: usize>(
+/// `points` and `normals` (empty, or one per point) warped into `out` and `out_normals` (of
+/// their lengths), in parallel over pieces of [`CHUNK`] samples.
+fn warp_pieces<const D: usize>(
     warp: &impl Warp<D>,
     origin: &Vect<D>,
     points: &[Vect<D>],
     normals: &[Vect<D>],
-    moved: &mut Vec<Vect<D>>,
-    moved_normals: &mut Vec<Vect<D>>,
+    out: &mut [Vect<D>],
+    out_normals: &mut [Vect<D>],
 ) {
-    moved.resize(points.len(), Vect::<D>::zeros());
     if normals.is_empty() {
-        moved_normals.clear();
-        moved
-            .par_chunks_mut(CHUNK)
+        out.par_chunks_mut(CHUNK)
             .zip(points.par_chunks(CHUNK))
             .for_each(|(out, inp)| warp.warp_run(origin, inp, out));
         return;
     }
-    moved_normals.resize(normals.len(), Vect::<D>::zeros());
-    moved
-        .par_chunks_mut(CHUNK)
-        .zip(moved_normals.par_chunks_mut(CHUNK))
+    out.par_chunks_mut(CHUNK)
+        .zip(out_normals.par_chunks_mut(CHUNK))
         .zip(points.par_chunks(CHUNK).zip(normals.par_chunks(CHUNK)))
         .for_each(|((out, out_n), (ps, ns))| {
             warp.warp_run_with_normals(origin, ps, ns, out, out_n)

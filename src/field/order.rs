@@ -36,6 +36,10 @@ impl Order {
     pub fn compute<const D: usize>(&mut self, points: &[Vect<D>]) {
         self.order.clear();
         self.place.clear();
+        // The indices are 32-bit: a run longer than that keeps its own order.
+        if u32::try_from(points.len()).is_err() {
+            return;
+        }
         let keys = morton_keys(points);
         let coarse = |k: u32| k >> (D as u32 * (BITS / D as u32 - 6));
         let crossings = keys

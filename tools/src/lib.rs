@@ -116,6 +116,23 @@ pub fn cell_size_for(points: &[Vect<3>], tris: &[[u32; 3]], target: usize) -> Re
     )
 }
 
+/// The solve of `spec` on `complex` with the default parameters and budget, the constraints
+/// resolved on `points`.
+pub fn solve_default(
+    complex: CellComplex<3>,
+    spec: &EditSpec<3>,
+    points: &[Vect<3>],
+) -> Result<rigidcells::solve::Solution<3>, Error> {
+    let constraints = rigidcells::solve::resolve(&complex, spec, points, None)?;
+    rigidcells::solve::solve(
+        complex,
+        constraints,
+        &rigidcells::solve::SolveParams::default(),
+        Budget::default(),
+        &rigidcells::progress::Silent,
+    )
+}
+
 /// `n` random points on the triangles (uniform per triangle, triangles chosen uniformly).
 pub fn surface_samples(points: &[Vect<3>], tris: &[[u32; 3]], n: usize, seed: u64) -> Vec<Vect<3>> {
     let mut rng = StdRng::seed_from_u64(seed);

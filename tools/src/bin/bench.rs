@@ -10,9 +10,6 @@ use std::time::Instant;
 
 use rigidcells::field::{Deformer, Field, Transfer, apply};
 use rigidcells::io::Document;
-use rigidcells::memory::Budget;
-use rigidcells::progress::Silent;
-use rigidcells::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -41,14 +38,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let complex = build_at(points, tris, size)?;
         let t_build = t.elapsed().as_secs_f64();
         let cells = complex.len();
-        let constraints = solve::resolve(&complex, &spec, points, None)?;
-        let sol = solve::solve(
-            complex,
-            constraints,
-            &SolveParams::default(),
-            Budget::default(),
-            &Silent,
-        )?;
+        let sol = rigidcells_tools::solve_default(complex, &spec, points)?;
         let field = Field::from_solution(&sol);
         let t = Instant::now();
         let blend = Deformer::new(&field, Transfer::Blend)?;

@@ -10,10 +10,7 @@ use std::time::Instant;
 
 use rigidcells::field::{Constrained, Deformer, Field, Outside, Transfer, Warp, apply};
 use rigidcells::io::Document;
-use rigidcells::memory::Budget;
-use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
-use rigidcells::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn seconds(warp: &impl Warp<3>, origin: &Vect<3>, samples: &[Vect<3>]) -> f64 {
@@ -36,14 +33,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let samples = surface_samples(points, tris, 480_000, 7);
     let size = cell_size_for(points, tris, 5500)?;
     let complex = build_at(points, tris, size)?;
-    let constraints = solve::resolve(&complex, &spec, points, None)?;
-    let sol = solve::solve(
-        complex,
-        constraints,
-        &SolveParams::default(),
-        Budget::default(),
-        &Silent,
-    )?;
+    let sol = rigidcells_tools::solve_default(complex, &spec, points)?;
     let field = Field::from_solution(&sol);
     let exact = field
         .prescribed

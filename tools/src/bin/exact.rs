@@ -28,10 +28,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 use rigidcells::field::{Deformer, Field, Rbf, Transfer, apply};
-use rigidcells::memory::Budget;
-use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
-use rigidcells::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, load_scan, resampled};
 
 const VERTICES: usize = 480_000;
@@ -46,14 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let spec = bend_spec(&points)?;
     let size = cell_size_for(&points, &mesh.triangles, CELLS)?;
     let complex = build_at(&points, &mesh.triangles, size)?;
-    let constraints = solve::resolve(&complex, &spec, &points, None)?;
-    let sol = solve::solve(
-        complex,
-        constraints,
-        &SolveParams::default(),
-        Budget::default(),
-        &Silent,
-    )?;
+    let sol = rigidcells_tools::solve_default(complex, &spec, &points)?;
     let field = Field::from_solution(&sol);
     let (lo, hi) = points
         .iter()

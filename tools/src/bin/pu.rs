@@ -13,10 +13,7 @@ use std::time::Instant;
 
 use rigidcells::field::{Deformer, Field, PuRbf, Rbf, Warp, apply};
 use rigidcells::io::Document;
-use rigidcells::memory::Budget;
-use rigidcells::progress::Silent;
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
-use rigidcells::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -41,14 +38,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for target in [1200usize, 5500] {
         let size = cell_size_for(points, tris, target)?;
         let complex = build_at(points, tris, size)?;
-        let constraints = solve::resolve(&complex, &spec, points, None)?;
-        let sol = solve::solve(
-            complex,
-            constraints,
-            &SolveParams::default(),
-            Budget::default(),
-            &Silent,
-        )?;
+        let sol = rigidcells_tools::solve_default(complex, &spec, points)?;
         let field = Field::from_solution(&sol);
         let t = Instant::now();
         let dense = Deformer::Rbf(Rbf::new(&field)?);
