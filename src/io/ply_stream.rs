@@ -15,7 +15,6 @@
 //! vertices have list properties, and any PLY read whole ([`super::Document::read`]), whose
 //! every record it checks, in file order, as it opens.
 
-use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -292,7 +291,7 @@ struct PlySink {
     map: Arc<Mmap>,
     layout: Layout,
     file: TempFile,
-    out: BufWriter<File>,
+    out: BufWriter<crate::io::stream::OutFile>,
     buf: Vec<u8>,
     /// Records written so far.
     next: usize,

@@ -8,7 +8,7 @@
 //! renames it over the target, and a sink dropped before that removes it.
 
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
@@ -151,6 +151,90 @@ pub trait Sink: Send {
     fn finish(self: Box<Self>) -> Result<Vec<String>>;
 }
 
+/// A file being written that hands each [`WRITEBACK`] bytes written to the disk as it goes
+/// (Linux: `sync_file_range`, which starts the writing and does not wait for it), so that the
+/// sync before [`TempFile::commit`]'s rename waits for the last window only: the output's
+/// gigabyte reaches the disk while later chunks are still computed, instead of after them.
+#[derive(Debug)]
+pub struct OutFile {
+    file: File,
+    /// Where the next write goes.
+    at: u64,
+    /// Everything before this was handed to the disk.
+    handed: u64,
+}
+
+/// The window [`OutFile`] hands to the disk at once.
+const WRITEBACK: u64 = 32 << 20;
+
+impl OutFile {
+    fn new(file: File) -> Self {
+        Self {
+            file,
+            at: 0,
+            handed: 0,
+        }
+    }
+
+    /// Starts writing bytes `handed..at` to the disk once they are a window.
+    fn hand_over(&mut self) {
+        if self.at < self.handed + WRITEBACK {
+            return;
+        }
+        start_writeback(&self.file, self.handed, self.at - self.handed);
+        self.handed = self.at;
+    }
+
+    /// Waits until the file is on the disk.
+    pub fn sync_all(&self) -> std::io::Result<()> {
+        self.file.sync_all()
+    }
+}
+
+/// Starts writing `len` bytes of `file` from `from` to the disk, without waiting for it. A
+/// failure costs only the early start, so it is not reported.
+#[cfg(target_os = "linux")]
+#[allow(unsafe_code)]
+fn start_writeback(file: &File, from: u64, len: u64) {
+    use std::os::fd::AsRawFd;
+    // SAFETY: a system call on a descriptor `file` owns while borrowed; it reads no memory of
+    // this process.
+    unsafe {
+        libc::sync_file_range(
+            file.as_raw_fd(),
+            from as libc::off64_t,
+            len as libc::off64_t,
+            libc::SYNC_FILE_RANGE_WRITE,
+        );
+    }
+}
+
+/// Elsewhere the system writes the file back on its own schedule.
+#[cfg(not(target_os = "linux"))]
+fn start_writeback(_file: &File, _from: u64, _len: u64) {}
+
+impl Write for OutFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.at += n as u64;
+        self.hand_over();
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl Seek for OutFile {
+    fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
+        self.at = self.file.seek(to)?;
+        // A write behind the windows handed over (a header rewritten) waits for the sync.
+        self.handed = self.handed.max(self.at);
+        Ok(self.at)
+    }
+}
+
 /// A temporary file beside a target, renamed over it by [`TempFile::commit`] and removed when
 /// dropped uncommitted. A target that is a regular file keeps its permission bits: the
 /// temporary file takes them before the rename (a private file stays private).
@@ -163,7 +247,7 @@ pub struct TempFile {
 
 impl TempFile {
     /// Creates the temporary file for `target`.
-    pub fn create(target: &Path) -> Result<(Self, BufWriter<File>)> {
+    pub fn create(target: &Path) -> Result<(Self, BufWriter<OutFile>)> {
         let dir = match target.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
@@ -184,7 +268,7 @@ impl TempFile {
                 target: target.to_path_buf(),
                 committed: false,
             },
-            BufWriter::with_capacity(1 << 20, file),
+            BufWriter::with_capacity(1 << 20, OutFile::new(file)),
         ))
     }
 
@@ -199,7 +283,7 @@ impl TempFile {
     }
 
     /// Flushes `out` (the writer [`TempFile::create`] gave), then commits.
-    pub fn commit_writer(self, out: BufWriter<File>) -> Result<()> {
+    pub fn commit_writer(self, out: BufWriter<OutFile>) -> Result<()> {
         out.into_inner()
             .map_err(|e| Error::write(&self.target, e.into_error()))?;
         self.commit()

@@ -14,7 +14,6 @@
 //! written as the shortest text that reads back as the computed value, as are numbers whose
 //! column has more than 17 decimals, past which a double holds no digit.
 
-use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
@@ -233,7 +232,7 @@ pub(crate) fn splice(bytes: &[u8], mut edits: Vec<Edit>, precision: &Precision) 
 pub(crate) struct SpanSink {
     input: PathBuf,
     file: TempFile,
-    out: BufWriter<File>,
+    out: BufWriter<crate::io::stream::OutFile>,
     numbers: Numbers,
     singles: [bool; 3],
     normal_singles: Option<[bool; 3]>,

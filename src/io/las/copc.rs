@@ -65,7 +65,7 @@ pub(super) struct CopcSink {
     frame: Frame,
     vlrs: Vec<VlrRecord>,
     evlrs: Vec<VlrRecord>,
-    spill: Option<(TempFile, BufWriter<File>)>,
+    spill: Option<(TempFile, BufWriter<crate::io::stream::OutFile>)>,
     count: u64,
     lo: [f64; 3],
     hi: [f64; 3],
@@ -329,7 +329,7 @@ impl Run {
 fn write_copc(
     sink: &CopcSink,
     spill: &Path,
-    mut out: BufWriter<File>,
+    mut out: BufWriter<crate::io::stream::OutFile>,
     target: &Path,
 ) -> Result<()> {
     let rl = sink.record_len;
@@ -404,7 +404,7 @@ fn write_copc(
         .map(|(i, r)| std::cmp::Reverse((r.key, i)))
         .collect();
     let levels = MAX_LEVEL as usize + 1;
-    let mut level_files: Vec<Option<(TempFile, BufWriter<File>)>> =
+    let mut level_files: Vec<Option<(TempFile, BufWriter<crate::io::stream::OutFile>)>> =
         (0..levels).map(|_| None).collect();
     let mut level_counts = vec![0u64; levels];
     // Per level: the sampling cell of the last point seen, and whether a point took it.
@@ -503,7 +503,7 @@ fn write_copc(
         let mut finish = |node: u64,
                           points: u64,
                           start: &mut u64,
-                          c: &mut laz::LasZipCompressor<BufWriter<File>>|
+                          c: &mut laz::LasZipCompressor<BufWriter<crate::io::stream::OutFile>>|
          -> Result<()> {
             c.finish_current_chunk().map_err(werr)?;
             let end = c.get_mut().stream_position().map_err(werr)?;

@@ -4,7 +4,7 @@
 //! file is no longer COPC-ordered); the global encoding word, which the crate reduces, is
 //! restored after writing.
 
-use std::fs::{File, OpenOptions};
+use std::fs::OpenOptions;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
@@ -21,7 +21,7 @@ use crate::rigid::Vect;
 /// LAZ in or out, through the `las` crate's raw slab path.
 pub(super) struct CrateSink {
     tmp: Option<TempFile>,
-    writer: Option<las::Writer<BufWriter<File>>>,
+    writer: Option<las::Writer<BufWriter<crate::io::stream::OutFile>>>,
     /// Records waiting to be written, [`LAZ_BATCH`] at a time.
     pending: Vec<u8>,
     record_len: usize,

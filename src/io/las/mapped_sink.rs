@@ -2,7 +2,6 @@
 //! its memory map with new coordinates, and every byte after the points (internal waveform
 //! data, EVLRs) as they were. Only the header's generating software, frame and bounds change.
 
-use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::Path;
 use std::sync::Arc;
@@ -19,7 +18,7 @@ use crate::rigid::Vect;
 /// LAS → LAS without the `las` crate: header, VLRs and trailing bytes copied verbatim.
 pub(super) struct MappedSink {
     tmp: TempFile,
-    out: BufWriter<File>,
+    out: BufWriter<crate::io::stream::OutFile>,
     input: Arc<Mmap>,
     header: LasHeader,
     /// The output's header: the input's, with this writer's software, frame and bounds.
