@@ -62,6 +62,12 @@ pub struct Report {
     pub energy: Vec<f64>,
     /// Whether the last load step met the tolerance.
     pub converged: bool,
+    /// Every Gauss-Newton iteration: its `load_step`, `energy`, the two stopping figures (the
+    /// energy's relative `decrease` and the `largest_move` of a cell corner in finest cell
+    /// sizes), the line search's `step_length`, its `linear_iterations` (conjugate gradients),
+    /// and its `seconds_assembly`, `seconds_setup` (factor or hierarchy), `seconds_linear`
+    /// (the linear solve) and `seconds_line_search`.
+    pub iteration_log: Vec<crate::solve::IterationLog>,
     /// The largest distance of a fixed or handle sample of the proxy from where it was sent.
     pub residual_max: f64,
     /// The largest distance of a fixed sample of the proxy from its rest position.
@@ -192,6 +198,7 @@ impl Report {
             levels: s.levels,
             energy: s.energies.clone(),
             converged: s.converged,
+            iteration_log: s.log.clone(),
             residual_max: residual_fixed_max.max(residual_handle_max),
             residual_fixed_max,
             residual_handle_max,

@@ -261,6 +261,22 @@ fn deform_writes_a_report_with_the_stable_keys() {
         .collect();
     assert!(iterations > 0 && energy.len() > iterations);
     assert!(energy.last().unwrap() < &energy[1]);
+    // One log entry per iteration, ending on one of the two stopping tests.
+    let log = json["iteration_log"].as_array().unwrap();
+    assert_eq!(log.len(), iterations);
+    let last = log.last().unwrap();
+    let figure = |k: &str| {
+        last[k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("iteration_log.{k}"))
+    };
+    assert_eq!(figure("energy"), *energy.last().unwrap());
+    assert!(
+        figure("decrease") <= 1e-6
+            || (figure("step_length") >= 1.0 && figure("largest_move") <= 1e-3),
+        "{last}"
+    );
+    assert!(figure("seconds_setup") > 0.0 && figure("seconds_assembly") > 0.0);
     // Samples deep in a region follow it exactly; those in its boundary cells blend with free
     // neighbors and miss by a fraction of a cell (0.03 here, cells of 0.25).
     let residual = json["residual_max"].as_f64().unwrap();

@@ -467,6 +467,75 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
     );
 }
 
+/// Every iteration is logged with both stopping figures and its time's parts. With the move
+/// test off the solve runs to the energy test; with the default tolerance it stops no later and
+/// at the same minimum (1e-6); with a tolerance of many cells each load step stops after its
+/// first full step; a tolerance that is not a fraction is refused.
+#[test]
+fn the_iteration_log_says_why_each_load_step_stopped() {
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let complex = cells(&pts, &triangles, 0.25);
+    let constraints = resolved(
+        &complex,
+        &pts,
+        &bar_ends(
+            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -60.0 }\ntranslate = [-1.0, 0.0, 2.0]",
+        ),
+    );
+    let run = |move_tolerance| {
+        let params = SolveParams {
+            move_tolerance,
+            ..Default::default()
+        };
+        solve::solve(
+            complex.clone(),
+            constraints.clone(),
+            &params,
+            Budget::default(),
+            &Silent,
+        )
+    };
+    let energy_only = run(0.0).unwrap().info;
+    let info = run(solve::MOVE_TOLERANCE).unwrap().info;
+    for i in [&energy_only, &info] {
+        assert_eq!(i.log.len(), i.iterations);
+        let mut after = i.energies.clone();
+        for &s in i.step_starts.iter().rev() {
+            after.remove(s);
+        }
+        let logged: Vec<f64> = i.log.iter().map(|l| l.energy).collect();
+        assert_eq!(logged, after);
+        for l in &i.log {
+            assert!(l.load_step < i.load_steps, "{l:?}");
+            assert!(
+                (0.0..=1.0).contains(&l.decrease) && l.largest_move >= 0.0,
+                "{l:?}"
+            );
+            assert!(l.step_length > 0.0 && l.seconds_setup > 0.0 && l.seconds_assembly > 0.0);
+        }
+    }
+    let last = energy_only.log.last().unwrap();
+    assert!(last.decrease <= 1e-6, "{last:?}");
+    let last = info.log.last().unwrap();
+    assert!(
+        last.decrease <= 1e-6 || (last.step_length >= 1.0 && last.largest_move <= 1e-3),
+        "{last:?}"
+    );
+    assert!(info.iterations <= energy_only.iterations);
+    let (a, b) = (
+        *info.energies.last().unwrap(),
+        *energy_only.energies.last().unwrap(),
+    );
+    assert!((a - b).abs() <= 1e-6 * b, "{a} against {b}");
+    let loose = run(1e3).unwrap().info;
+    assert!(
+        loose.iterations_per_step.iter().all(|&n| n == 1),
+        "{:?}",
+        loose.iterations_per_step
+    );
+    assert!(matches!(run(f64::NAN), Err(rigidcells::Error::Param(_))));
+}
+
 /// Merging sibling cells of one role keeps every fine cell's role (a region
 /// ends where it ended), and the adaptive solve splits the strained cells again, meeting the
 /// handle exactly with fewer cells than the uniform complex.

@@ -477,6 +477,14 @@ pub fn corridor_height(x: f64, y: f64, u: f64) -> (f64, u8) {
     (bank, 2)
 }
 
+/// Rolling ground under low vegetation: hills of tens of metres and every point raised by up
+/// to 3 m (LAS class 3), so that the cells of a metre or two fill columns two or three cells
+/// deep and every cell is a boundary cell (the solver benchmark's scene).
+pub fn vegetation_height(x: f64, y: f64, u: f64) -> (f64, u8) {
+    let ground = 100.0 + 20.0 * (x / 170.0).sin() + 8.0 * (y / 60.0 + x / 310.0).cos();
+    (ground + 3.0 * u, 3)
+}
+
 /// A synthetic scan's samples: points on a jittered grid over a rectangle at georeferenced
 /// coordinates (x from 500 000, y from 5 000 000), z from a height function with 2 cm of
 /// noise. Reproducible (xorshift64*).
@@ -497,6 +505,11 @@ impl Terrain {
     /// benchmark's scan).
     pub fn corridor(n: u64) -> Self {
         Self::over(n, [1000.0, 200.0], corridor_height)
+    }
+
+    /// A 1 km × 200 m strip of [`vegetation_height`], `n` samples.
+    pub fn vegetation(n: u64) -> Self {
+        Self::over(n, [1000.0, 200.0], vegetation_height)
     }
 
     fn over(n: u64, extent: [f64; 2], height: fn(f64, f64, f64) -> (f64, u8)) -> Self {

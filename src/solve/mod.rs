@@ -74,6 +74,8 @@ pub mod turns;
 
 use std::time::Instant;
 
+use rayon::prelude::*;
+
 pub use constraints::{
     Constraints, Role, Selections, carry_loose, coarsen, inherit, resolve, resolve_selected,
     sample_cell, seen,
@@ -99,6 +101,10 @@ pub struct SolveParams {
     /// Stop a load step when an iteration lowers the energy by less than this fraction of it.
     /// Default 1e-6.
     pub tolerance: f64,
+    /// Also stop a load step at a full Gauss-Newton step that moves no corner of any cell by
+    /// more than this fraction of the finest cell size (see [`IterationLog::largest_move`]); 0
+    /// keeps only the energy test. Default [`MOVE_TOLERANCE`].
+    pub move_tolerance: f64,
     /// Most rotation of any handle per load step, in degrees. Default 30.
     pub max_step_degrees: f64,
     /// Most handle, pin or target displacement per load step, as a fraction of the longest
@@ -146,6 +152,7 @@ impl Default for SolveParams {
         Self {
             max_iterations: 50,
             tolerance: 1e-6,
+            move_tolerance: MOVE_TOLERANCE,
             max_step_degrees: 30.0,
             max_step_fraction: 0.25,
             refine_strain: None,
@@ -158,6 +165,37 @@ impl Default for SolveParams {
             carry_loose: true,
         }
     }
+}
+
+/// The default [`SolveParams::move_tolerance`]: a thousandth of the finest cell.
+pub const MOVE_TOLERANCE: f64 = 1e-3;
+
+/// One accepted Gauss-Newton iteration: where it ended, why the solver went on or stopped,
+/// and where its time went.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct IterationLog {
+    /// The load step (0 first; refinement rounds count on after the last load step).
+    pub load_step: usize,
+    /// The energy after the iteration.
+    pub energy: f64,
+    /// What the iteration lowered the energy by, as a fraction of the energy before it (the
+    /// energy test: [`SolveParams::tolerance`]).
+    pub decrease: f64,
+    /// The largest distance any corner of any cell moved in the iteration, in finest cell
+    /// sizes (the move test: [`SolveParams::move_tolerance`]).
+    pub largest_move: f64,
+    /// The multiple of the Gauss-Newton step the line search took.
+    pub step_length: f64,
+    /// Conjugate-gradient iterations of the step (multilevel; 0 when factored).
+    pub linear_iterations: usize,
+    /// Seconds assembling the normal equations (pairs, targets, curvature, the matrix).
+    pub seconds_assembly: f64,
+    /// Seconds factoring them numerically, or building or refreshing the multilevel hierarchy.
+    pub seconds_setup: f64,
+    /// Seconds in the linear solve (triangular solves, or conjugate gradients).
+    pub seconds_linear: f64,
+    /// Seconds in the line search: trial motions, their positions' projection and energy.
+    pub seconds_line_search: f64,
 }
 
 /// Refinement stops before the complex grows past this many times the cells it started from
@@ -193,8 +231,10 @@ pub struct SolverInfo {
     pub unknowns: usize,
     /// Seconds spent in symbolic analysis.
     pub seconds_symbolic: f64,
-    /// Seconds spent assembling and factoring.
+    /// Seconds spent assembling, factoring and solving the normal equations.
     pub seconds_factor: f64,
+    /// Every accepted iteration, in order.
+    pub log: Vec<IterationLog>,
     /// Seconds in total.
     pub seconds: f64,
     /// Whether the last load step stopped on the tolerance (not on the iteration limit).
@@ -262,6 +302,12 @@ where
     Dim<D>: Rigid<D>,
 {
     let start = Instant::now();
+    if !(params.move_tolerance >= 0.0 && params.move_tolerance.is_finite()) {
+        return Err(Error::Param(format!(
+            "the solver's move tolerance must be a fraction of a cell, 0 or more (got {})",
+            params.move_tolerance
+        )));
+    }
     let (complex, constraints) = match params.coarsen_levels {
         0 => (complex, constraints),
         levels => coarsen(&complex, &constraints, levels),
@@ -721,12 +767,16 @@ where
         let t0 = Instant::now();
         // Newton's curvature once Gauss-Newton has brought the load step near its minimum.
         let newton = params.newton && iterations > 0;
-        let delta = system.step(complex, constraints, motions, &targets_to, newton, settled)?;
+        let (delta, cost) =
+            system.step(complex, constraints, motions, &targets_to, newton, settled)?;
         info.seconds_factor += t0.elapsed().as_secs_f64();
+        let mut linear_iterations = 0;
         if let Some((linear, levels)) = system.multilevel_stats() {
             info.linear_iterations += linear;
             info.levels = levels;
+            linear_iterations = linear;
         }
+        let searching = Instant::now();
         // One trial: the step scaled by `t`, positions projected, and its energy.
         let trial = |t: f64| {
             let mut m = system.advance(complex, constraints, motions, &pins_to, &delta, t);
@@ -766,20 +816,83 @@ where
             info.converged = true;
             break;
         };
+        let largest_move = largest_corner_move(complex, motions, &trial) / size;
         motions.copy_from_slice(&trial);
         let decrease = energy - e;
         settled = newton && 2.0 * decrease < energy;
+        let before = energy;
         energy = e;
         iterations += 1;
         info.iterations += 1;
         info.energies.push(energy);
-        observer.message(&format!("iteration {iterations}, energy {energy:.3e}"));
-        if decrease <= params.tolerance * (energy + decrease) {
+        let log = IterationLog {
+            load_step: info.step_starts.len() - 1,
+            energy,
+            decrease: decrease / before,
+            largest_move,
+            step_length: t,
+            linear_iterations,
+            seconds_assembly: cost.assembly,
+            seconds_setup: cost.setup,
+            seconds_linear: cost.linear,
+            seconds_line_search: searching.elapsed().as_secs_f64(),
+        };
+        info.log.push(log);
+        observer.message(&log.to_string());
+        // A short step's small move says only that the line search shortened it.
+        if decrease <= params.tolerance * before
+            || (t >= 1.0 && largest_move <= params.move_tolerance)
+        {
             info.converged = true;
             break;
         }
     }
     Ok(iterations)
+}
+
+/// The largest distance a corner of a cell moves from `from` to `to`.
+fn largest_corner_move<const D: usize>(
+    complex: &CellComplex<D>,
+    from: &[Motion<D>],
+    to: &[Motion<D>],
+) -> f64 {
+    complex
+        .cells
+        .par_iter()
+        .zip(from.par_iter().zip(to))
+        .map(|(cell, (a, b))| {
+            let h = cell.half;
+            (0..1usize << D)
+                .map(|bits| {
+                    let corner = Vect::<D>::from_fn(|k, _| if bits >> k & 1 == 1 { h } else { -h });
+                    let at = cell.center + corner;
+                    (a.apply(&cell.center, &at) - b.apply(&cell.center, &at)).norm()
+                })
+                .fold(0.0, f64::max)
+        })
+        .reduce(|| 0.0, f64::max)
+}
+
+impl std::fmt::Display for IterationLog {
+    /// One line for the progress bar: the energy, both stopping figures and the time's parts.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "energy {:.4e} (-{:.1e}), largest move {:.1e} cells, step {}; assembly {:.0} ms, \
+             setup {:.0} ms, solve {:.0} ms",
+            self.energy,
+            self.decrease,
+            self.largest_move,
+            self.step_length,
+            1e3 * self.seconds_assembly,
+            1e3 * self.seconds_setup,
+            1e3 * self.seconds_linear,
+        )?;
+        if self.linear_iterations > 0 {
+            write!(f, " ({} CG)", self.linear_iterations)?;
+        }
+        write!(f, ", line search {:.0} ms", 1e3 * self.seconds_line_search)
+    }
 }
 
 /// Where the soft targets pull at load fraction `f`.

@@ -75,6 +75,19 @@ pub(crate) struct System<const D: usize> {
     positions: Positions,
 }
 
+/// Where one Gauss-Newton step's time went, in seconds (damping retries included).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepCost {
+    /// The pairs' and targets' blocks, the gradient and the curvature, and the matrix made of
+    /// them.
+    pub assembly: f64,
+    /// The numeric Cholesky factorization, or the multilevel hierarchy's construction (its
+    /// prolongations, Galerkin products, smoothers and coarsest factor) or refresh.
+    pub setup: f64,
+    /// The triangular solves, or the preconditioned conjugate gradients.
+    pub linear: f64,
+}
+
 /// Free cells past which `auto` solves a complex of one-size cells by the multilevel path: on
 /// the 10M-point terrain the factorization is the faster up to 80k free cells (12.3 s against
 /// 15.1 s), the multilevel path from 229k (27 s against 42 s; at 742k in half the memory).
@@ -389,7 +402,9 @@ where
         mu: f64,
         floor: f64,
         settled: bool,
+        cost: &mut StepCost,
     ) -> Option<Vec<f64>> {
+        let assembling = std::time::Instant::now();
         let dof = Self::DOF;
         let bb = dof * dof;
         let (cell_vals, pair_vals) = values.split_at(self.free_cells.len() * Self::CELL_SLOT);
@@ -458,6 +473,8 @@ where
                 .map(|&c| matches!(constraints.roles[c as usize], Role::Pin(_)))
                 .collect(),
         };
+        cost.assembly += assembling.elapsed().as_secs_f64();
+        let setting_up = std::time::Instant::now();
         let kept = ml
             .kept
             .lock()
@@ -482,7 +499,11 @@ where
                 rhs[k * dof + a] = -grad[s.offset + a];
             }
         }
-        let (x, iterations) = hierarchy.solve(&rhs)?;
+        cost.setup += setting_up.elapsed().as_secs_f64();
+        let solving = std::time::Instant::now();
+        let solved = hierarchy.solve(&rhs);
+        cost.linear += solving.elapsed().as_secs_f64();
+        let (x, iterations) = solved?;
         ml.iterations.store(iterations, Ordering::Relaxed);
         ml.levels.store(hierarchy.depth(), Ordering::Relaxed);
         // Kept for the next step unless it has aged: twice the iterations it first took.
@@ -615,8 +636,9 @@ where
         targets_to: &[Vect<D>],
         newton: bool,
         settled: bool,
-    ) -> Result<Vec<f64>> {
+    ) -> Result<(Vec<f64>, StepCost)> {
         let cell_part = self.free_cells.len() * Self::CELL_SLOT;
+        let mut cost = StepCost::default();
         let mut buffers = std::mem::take(&mut self.buffers);
         let result = self.step_into(
             &mut buffers,
@@ -627,9 +649,10 @@ where
             targets_to,
             newton,
             settled,
+            &mut cost,
         );
         self.buffers = buffers;
-        result
+        Ok((result?, cost))
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -643,7 +666,9 @@ where
         targets_to: &[Vect<D>],
         newton: bool,
         settled: bool,
+        cost: &mut StepCost,
     ) -> Result<Vec<f64>> {
+        let started = std::time::Instant::now();
         let dof = Self::DOF;
         let Buffers {
             values,
@@ -759,6 +784,7 @@ where
             .fold(0.0f64, |m, &d| m.max(d))
             .max(f64::MIN_POSITIVE);
         let scale_floor = 1e-12 * scale;
+        cost.assembly += started.elapsed().as_secs_f64();
         if let Some(ml) = &self.multilevel {
             let mut mu = 0.0;
             for _ in 0..12 {
@@ -773,6 +799,7 @@ where
                     mu,
                     scale_floor,
                     settled && mu == 0.0,
+                    cost,
                 ) {
                     return Ok(step);
                 }
@@ -790,6 +817,7 @@ where
         let (argsort, llt) = self.symbolic.as_ref().expect("a system with unknowns");
         let mut mu = 0.0;
         for _ in 0..13 {
+            let assembling = std::time::Instant::now();
             // Levenberg–Marquardt on the diagonal, plus a floor for singular directions.
             self.damp(&mut values[..cell_part], &diag, mu, 1e-12 * scale);
             let sym = pattern.take().ok_or_else(|| {
@@ -798,9 +826,11 @@ where
             let matrix = SparseColMat::new_from_argsort(sym, argsort, values)
                 .map_err(|e| Error::Solver(format!("assembly: {e:?}")))?;
             let rhs = Mat::<f64>::from_fn(self.n, 1, |r, _| -grad[r]);
+            cost.assembly += assembling.elapsed().as_secs_f64();
             let solved = crate::with_faer(|| {
                 let par = faer::get_global_parallelism();
                 let stack = MemStack::new(scratch);
+                let factoring = std::time::Instant::now();
                 let l = llt.factorize_numeric_llt(
                     factor,
                     matrix.as_ref(),
@@ -809,9 +839,13 @@ where
                     par,
                     stack,
                     Default::default(),
-                )?;
+                );
+                cost.setup += factoring.elapsed().as_secs_f64();
+                let l = l?;
+                let solving = std::time::Instant::now();
                 let mut x = rhs;
                 l.solve_in_place_with_conj(faer::Conj::No, x.as_mut(), par, stack);
+                cost.linear += solving.elapsed().as_secs_f64();
                 Ok::<_, faer::sparse::linalg::LltError>(x)
             });
             *pattern = Some(matrix.into_parts().0);

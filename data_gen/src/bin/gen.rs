@@ -3,13 +3,17 @@
 //! a LAS or LAZ scan's records `scan` (default), `shuffled` or sorted into 1 m `strips`.
 //! `gen corridor N OUT.las|OUT.laz`: N points of a 1 km × 200 m road corridor, z over ~50 m
 //! (the scale benchmark's large-extent scan).
+//! `gen vegetation N OUT.las|OUT.laz`: a 1 km × 200 m strip of rolling ground under up to 3 m of
+//! low vegetation, so that every cell is a boundary cell (the solver benchmark's scene).
 //! `gen tube OUT.ply`: the closed 480k-vertex tube of the `--cells 5500` benchmark
 //! (10 × 2 × 2, wall 0.2; binary PLY).
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     match args.get(1).map(String::as_str) {
-        Some(scene @ ("terrain" | "corridor")) if args.len() == 4 || args.len() == 5 => {
+        Some(scene @ ("terrain" | "corridor" | "vegetation"))
+            if args.len() == 4 || args.len() == 5 =>
+        {
             let n: u64 = args[2].parse().expect("N is a point count");
             let out = std::path::Path::new(&args[3]);
             let order: data_gen::Order = match args.get(4) {
@@ -24,10 +28,11 @@ fn main() {
                 Some("ply") if scene == "terrain" => {
                     data_gen::write_ply_terrain(out, n).expect("writing the scan")
                 }
-                Some("ply") => panic!("the corridor is written as LAS or LAZ"),
+                Some("ply") => panic!("the {scene} is written as LAS or LAZ"),
                 ext => {
                     let terrain = match scene {
                         "corridor" => data_gen::Terrain::corridor(n),
+                        "vegetation" => data_gen::Terrain::vegetation(n),
                         _ => data_gen::Terrain::new(n),
                     };
                     data_gen::write_las_ordered(out, terrain, n, ext == Some("laz"), order)
@@ -49,7 +54,7 @@ fn main() {
         _ => {
             eprintln!(
                 "usage: gen terrain N OUT.las|OUT.laz|OUT.ply [scan|shuffled|strips] | \
-                 gen corridor N OUT.las|OUT.laz [ORDER] | gen tube OUT.ply"
+                 gen corridor|vegetation N OUT.las|OUT.laz [ORDER] | gen tube OUT.ply"
             );
             std::process::exit(2);
         }
