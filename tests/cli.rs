@@ -261,7 +261,8 @@ fn deform_writes_a_report_with_the_stable_keys() {
         .collect();
     assert!(iterations > 0 && energy.len() > iterations);
     assert!(energy.last().unwrap() < &energy[1]);
-    // One log entry per iteration, ending on one of the two stopping tests.
+    // One log entry per iteration (no load step is taken again here), ending on one of the two
+    // stopping tests.
     let log = json["iteration_log"].as_array().unwrap();
     assert_eq!(log.len(), iterations);
     let last = log.last().unwrap();

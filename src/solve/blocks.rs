@@ -2,8 +2,9 @@
 //! per pair of face neighbors), in `f64` or `f32`, and the small dense block arithmetic the
 //! multilevel solve ([`super::multilevel`]) builds its levels with.
 
-use faer::sparse::Triplet;
-use faer::sparse::linalg::solvers::Llt;
+use faer::Side;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
 use crate::rigid::MAX_DOF;
@@ -228,19 +229,37 @@ pub(super) fn mul_add_any(out: &mut [f64], x: &[f64], transpose: bool, y: &[f64]
     }
 }
 
-/// The sparse Cholesky factor of the coarsest level.
-pub(super) fn factor_coarsest(a: &BlockMatrix) -> Option<Llt<usize, f64>> {
+/// The sparse Cholesky factor of the coarsest level, with its pattern's analysis (the
+/// entries' order and the symbolic factorization), which a later hierarchy of the same groups
+/// reuses: within a load step every rebuild groups the same cells, and on the 2.5 m vegetation
+/// scene (10.8k coarse nodes, 96k edges) the entries' order and the analysis took 0.5 s of the
+/// factor's 1.5 s.
+pub(crate) struct CoarseFactor {
+    n: usize,
+    edges: Vec<[u32; 2]>,
+    pattern: SymbolicSparseColMat<usize>,
+    argsort: Argsort<usize>,
+    symbolic: SymbolicLlt<usize>,
+    /// The factor (`None`: the matrix was not positive definite).
+    pub(super) llt: Option<Llt<usize, f64>>,
+}
+
+/// The factor of `a`, reusing the analysis of `reuse` when it was made for the same nodes and
+/// edges (`None` when the pattern cannot be analysed).
+pub(super) fn factor_coarsest(
+    a: &BlockMatrix,
+    reuse: Option<CoarseFactor>,
+) -> Option<CoarseFactor> {
     let d = a.dof;
     let bb = d * d;
-    let mut triplets = Vec::new();
+    let entries = a.n * d * (d + 1) / 2 + a.edges.len() * bb;
+    let mut values = Vec::with_capacity(entries);
+    let mut indices = Vec::with_capacity(entries);
     for g in 0..a.n {
         for r in 0..d {
             for c in 0..=r {
-                triplets.push(Triplet::new(
-                    g * d + r,
-                    g * d + c,
-                    a.diag[g * bb + r * d + c],
-                ));
+                indices.push(Pair::new(g * d + r, g * d + c));
+                values.push(a.diag[g * bb + r * d + c]);
             }
         }
     }
@@ -249,13 +268,35 @@ pub(super) fn factor_coarsest(a: &BlockMatrix) -> Option<Llt<usize, f64>> {
         let (i, j) = (e[0] as usize, e[1] as usize);
         for r in 0..d {
             for c in 0..d {
-                let v = a.blocks[k * bb + r * d + c];
                 let (row, col) = (i * d + r, j * d + c);
-                triplets.push(Triplet::new(row.max(col), row.min(col), v));
+                indices.push(Pair::new(row.max(col), row.min(col)));
+                values.push(a.blocks[k * bb + r * d + c]);
             }
         }
     }
-    super::positions::factor(a.len(), &triplets)
+    let n = a.len();
+    let (pattern, argsort, symbolic) = match reuse {
+        Some(f) if f.n == n && f.edges == a.edges => (f.pattern, f.argsort, f.symbolic),
+        _ => {
+            let (pattern, argsort) =
+                SymbolicSparseColMat::try_new_from_indices(n, n, &indices).ok()?;
+            let symbolic =
+                crate::with_faer(|| SymbolicLlt::try_new(pattern.as_ref(), Side::Lower)).ok()?;
+            (pattern, argsort, symbolic)
+        }
+    };
+    let matrix = SparseColMat::new_from_argsort(pattern.clone(), &argsort, &values).ok()?;
+    let llt = crate::with_faer(|| {
+        Llt::try_new_with_symbolic(symbolic.clone(), matrix.as_ref(), Side::Lower).ok()
+    });
+    Some(CoarseFactor {
+        n,
+        edges: a.edges.clone(),
+        pattern,
+        argsort,
+        symbolic,
+        llt,
+    })
 }
 
 pub(super) fn transpose(m: &[f64], d: usize) -> Block {

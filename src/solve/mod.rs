@@ -65,6 +65,7 @@
 mod blocks;
 pub mod constraints;
 pub mod energy;
+mod iteration;
 mod multilevel;
 mod positions;
 mod session;
@@ -74,13 +75,13 @@ pub mod turns;
 
 use std::time::Instant;
 
-use rayon::prelude::*;
-
 pub use constraints::{
     Constraints, Role, Selections, carry_loose, coarsen, inherit, resolve, resolve_selected,
     sample_cell, seen,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
+use iteration::largest_corner_move;
+pub use iteration::{IterationLog, MOVE_TOLERANCE};
 pub use session::Session;
 pub use sight::Sight;
 
@@ -167,37 +168,6 @@ impl Default for SolveParams {
     }
 }
 
-/// The default [`SolveParams::move_tolerance`]: a thousandth of the finest cell.
-pub const MOVE_TOLERANCE: f64 = 1e-3;
-
-/// One accepted Gauss-Newton iteration: where it ended, why the solver went on or stopped,
-/// and where its time went.
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
-pub struct IterationLog {
-    /// The load step (0 first; refinement rounds count on after the last load step).
-    pub load_step: usize,
-    /// The energy after the iteration.
-    pub energy: f64,
-    /// What the iteration lowered the energy by, as a fraction of the energy before it (the
-    /// energy test: [`SolveParams::tolerance`]).
-    pub decrease: f64,
-    /// The largest distance any corner of any cell moved in the iteration, in finest cell
-    /// sizes (the move test: [`SolveParams::move_tolerance`]).
-    pub largest_move: f64,
-    /// The multiple of the Gauss-Newton step the line search took.
-    pub step_length: f64,
-    /// Conjugate-gradient iterations of the step (multilevel; 0 when factored).
-    pub linear_iterations: usize,
-    /// Seconds assembling the normal equations (pairs, targets, curvature, the matrix).
-    pub seconds_assembly: f64,
-    /// Seconds factoring them numerically, or building or refreshing the multilevel hierarchy.
-    pub seconds_setup: f64,
-    /// Seconds in the linear solve (triangular solves, or conjugate gradients).
-    pub seconds_linear: f64,
-    /// Seconds in the line search: trial motions, their positions' projection and energy.
-    pub seconds_line_search: f64,
-}
-
 /// Refinement stops before the complex grows past this many times the cells it started from
 /// (without a bound, a tiny `--refine-strain` splits every cell, round after round, for
 /// minutes).
@@ -233,7 +203,8 @@ pub struct SolverInfo {
     pub seconds_symbolic: f64,
     /// Seconds spent assembling, factoring and solving the normal equations.
     pub seconds_factor: f64,
-    /// Every accepted iteration, in order.
+    /// Every accepted iteration, in order (those of a load step taken again in halves are
+    /// dropped, as from `energies`).
     pub log: Vec<IterationLog>,
     /// Seconds in total.
     pub seconds: f64,
@@ -491,7 +462,7 @@ where
             },
             ..*params
         };
-        let marks = (info.energies.len(), info.step_starts.len());
+        let marks = (info.energies.len(), info.step_starts.len(), info.log.len());
         let it = minimize_with(
             system,
             complex,
@@ -518,6 +489,7 @@ where
             motions.copy_from_slice(&start);
             info.energies.truncate(marks.0);
             info.step_starts.truncate(marks.1);
+            info.log.truncate(marks.2);
             info.halvings += 1;
             halvings += 1;
             continue;
@@ -848,51 +820,6 @@ where
         }
     }
     Ok(iterations)
-}
-
-/// The largest distance a corner of a cell moves from `from` to `to`.
-fn largest_corner_move<const D: usize>(
-    complex: &CellComplex<D>,
-    from: &[Motion<D>],
-    to: &[Motion<D>],
-) -> f64 {
-    complex
-        .cells
-        .par_iter()
-        .zip(from.par_iter().zip(to))
-        .map(|(cell, (a, b))| {
-            let h = cell.half;
-            (0..1usize << D)
-                .map(|bits| {
-                    let corner = Vect::<D>::from_fn(|k, _| if bits >> k & 1 == 1 { h } else { -h });
-                    let at = cell.center + corner;
-                    (a.apply(&cell.center, &at) - b.apply(&cell.center, &at)).norm()
-                })
-                .fold(0.0, f64::max)
-        })
-        .reduce(|| 0.0, f64::max)
-}
-
-impl std::fmt::Display for IterationLog {
-    /// One line for the progress bar: the energy, both stopping figures and the time's parts.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "energy {:.4e} (-{:.1e}), largest move {:.1e} cells, step {}; assembly {:.0} ms, \
-             setup {:.0} ms, solve {:.0} ms",
-            self.energy,
-            self.decrease,
-            self.largest_move,
-            self.step_length,
-            1e3 * self.seconds_assembly,
-            1e3 * self.seconds_setup,
-            1e3 * self.seconds_linear,
-        )?;
-        if self.linear_iterations > 0 {
-            write!(f, " ({} CG)", self.linear_iterations)?;
-        }
-        write!(f, ", line search {:.0} ms", 1e3 * self.seconds_line_search)
-    }
 }
 
 /// Where the soft targets pull at load fraction `f`.

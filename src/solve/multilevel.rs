@@ -44,7 +44,6 @@
 //! one-cell-thick terrain), and a K-cycle (Notay) over the same levels.
 
 use faer::prelude::*;
-use faer::sparse::linalg::solvers::Llt;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
@@ -96,7 +95,7 @@ struct Prolongation {
 /// The multigrid hierarchy of one Gauss-Newton system.
 pub(crate) struct Hierarchy {
     levels: Vec<Level>,
-    coarsest: Option<Llt<usize, f64>>,
+    coarsest: Option<CoarseFactor>,
 }
 
 /// What a node of a level is, for grouping and the rigid prolongation.
@@ -112,12 +111,15 @@ pub(crate) struct Nodes<const D: usize> {
 impl Hierarchy {
     /// The hierarchy of `matrix`, whose nodes are `nodes`; `size` is the finest cell size. A
     /// matrix of at most `coarsest` nodes is factored as it is; otherwise levels are added until
-    /// one has at most `factored` nodes ([`COARSEST`] and [`FACTORED`] but in tests).
+    /// one has at most `factored` nodes ([`COARSEST`] and [`FACTORED`] but in tests). `reuse`:
+    /// an earlier hierarchy's coarsest factor ([`Hierarchy::into_coarsest`]), whose analysis
+    /// serves again where the coarsest level has the same nodes and edges.
     pub fn new<const D: usize>(
         matrix: BlockMatrix,
         nodes: Nodes<D>,
         size: f64,
         [coarsest, factored]: [usize; 2],
+        reuse: Option<CoarseFactor>,
     ) -> Self
     where
         Dim<D>: Rigid<D>,
@@ -167,7 +169,7 @@ impl Hierarchy {
             (matrix, nodes) = (next, coarse);
         }
         Self {
-            coarsest: factor_coarsest(&matrix),
+            coarsest: factor_coarsest(&matrix, reuse),
             levels,
         }
     }
@@ -183,7 +185,7 @@ impl Hierarchy {
                 fine.smoother = matrix.to_f32();
                 fine.matrix = matrix;
             }
-            None => self.coarsest = factor_coarsest(&matrix),
+            None => self.coarsest = factor_coarsest(&matrix, self.coarsest.take()),
         }
     }
 
@@ -195,6 +197,15 @@ impl Hierarchy {
             fine.smoother = BlockMatrix::empty(fine.matrix.dof);
             fine.inverse = Vec::new();
         }
+    }
+
+    /// The coarsest level's analysis, for the next hierarchy of the same cells (its numeric
+    /// factor freed first: the next one is made before this one would be dropped).
+    pub fn into_coarsest(self) -> Option<CoarseFactor> {
+        self.coarsest.map(|mut f| {
+            f.llt = None;
+            f
+        })
     }
 
     /// Levels including the coarsest.
@@ -265,7 +276,7 @@ impl Hierarchy {
     }
 
     fn coarse_solve(&self, b: &[f64]) -> Vec<f64> {
-        match &self.coarsest {
+        match self.coarsest.as_ref().and_then(|f| f.llt.as_ref()) {
             Some(llt) => {
                 let rhs = Mat::<f64>::from_fn(b.len(), 1, |r, _| b[r]);
                 let x = crate::with_faer(|| llt.solve(&rhs));
@@ -718,7 +729,7 @@ mod tests {
             .map(|i| ((i * 7919) % 13) as f64 - 6.0)
             .collect();
         let (check, _) = lattice(96, 24, 1.0);
-        let mut h = Hierarchy::new(matrix, nodes, 1.0, [100, 60]);
+        let mut h = Hierarchy::new(matrix, nodes, 1.0, [100, 60], None);
         assert!(h.depth() >= 4, "{} levels", h.depth());
         let (x, iterations) = h.solve(&b).unwrap();
         assert!(iterations <= 20, "{iterations} iterations");
@@ -737,6 +748,37 @@ mod tests {
         assert!(residual(&check, &x, &b) <= TOLERANCE);
     }
 
+    /// A hierarchy built on an earlier one's coarsest analysis (the same groups, other values)
+    /// solves with the same bits as one built from nothing; a coarsest level of other edges
+    /// is analysed anew.
+    #[test]
+    fn a_reused_coarse_analysis_gives_the_same_bits() {
+        let b: Vec<f64> = (0..96 * 24 * 3)
+            .map(|i| ((i * 31) % 17) as f64 - 8.0)
+            .collect();
+        let build = |stiff: f64, reuse| {
+            let (matrix, nodes) = lattice(96, 24, stiff);
+            Hierarchy::new(matrix, nodes, 1.0, [100, 60], reuse)
+        };
+        let earlier = build(1.0, None).into_coarsest();
+        assert!(earlier.as_ref().is_some_and(|f| f.llt.is_none()));
+        let fresh = build(3.0, None).solve(&b).unwrap();
+        let reused = build(3.0, earlier).solve(&b).unwrap();
+        assert_eq!(fresh, reused);
+        let (small, nodes) = lattice(48, 24, 3.0);
+        let other = Hierarchy::new(
+            small,
+            nodes,
+            1.0,
+            [100, 60],
+            build(1.0, None).into_coarsest(),
+        );
+        let (check, _) = lattice(48, 24, 3.0);
+        let b = &b[..check.len()];
+        let (x, _) = other.solve(b).unwrap();
+        assert!(residual(&check, &x, b) <= TOLERANCE);
+    }
+
     /// The solve gives the same bits on one thread and on three (fixed summation orders).
     #[test]
     fn solves_the_same_on_any_number_of_threads() {
@@ -750,7 +792,7 @@ mod tests {
                 .unwrap();
             pool.install(|| {
                 let (matrix, nodes) = lattice(96, 24, 1.0);
-                Hierarchy::new(matrix, nodes, 1.0, [100, 60])
+                Hierarchy::new(matrix, nodes, 1.0, [100, 60], None)
                     .solve(&b)
                     .unwrap()
             })

@@ -475,21 +475,20 @@ where
         };
         cost.assembly += assembling.elapsed().as_secs_f64();
         let setting_up = std::time::Instant::now();
-        let kept = ml
-            .kept
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .take()
-            .filter(|_| settled);
+        let kept = ml.kept.lock().unwrap_or_else(|e| e.into_inner()).take();
         let (hierarchy, first) = match kept {
-            Some((mut h, first)) => {
+            Some((mut h, first)) if settled => {
                 h.refresh(matrix);
                 (h, Some(first))
             }
-            None => {
+            kept => {
                 let limits = [super::multilevel::COARSEST, super::multilevel::FACTORED];
                 let size = complex.grid.finest_size();
-                (Hierarchy::new::<D>(matrix, nodes, size, limits), None)
+                let reuse = kept.and_then(|(h, _)| h.into_coarsest());
+                (
+                    Hierarchy::new::<D>(matrix, nodes, size, limits, reuse),
+                    None,
+                )
             }
         };
         let mut rhs = vec![0.0; self.free_cells.len() * dof];

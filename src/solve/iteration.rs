@@ -1,0 +1,84 @@
+//! One Gauss-Newton iteration as the solver reports it ([`IterationLog`]): where it ended, the
+//! two figures its stopping rule reads, and where its time went.
+
+use rayon::prelude::*;
+
+use crate::cells::CellComplex;
+use crate::rigid::{Motion, Vect};
+
+/// The default [`super::SolveParams::move_tolerance`]: a thousandth of the finest cell.
+pub const MOVE_TOLERANCE: f64 = 1e-3;
+
+/// One accepted Gauss-Newton iteration: where it ended, why the solver went on or stopped,
+/// and where its time went.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct IterationLog {
+    /// The load step (0 first; refinement rounds count on after the last load step): the
+    /// index into [`super::SolverInfo::step_starts`].
+    pub load_step: usize,
+    /// The energy after the iteration.
+    pub energy: f64,
+    /// What the iteration lowered the energy by, as a fraction of the energy before it (the
+    /// energy test: [`super::SolveParams::tolerance`]).
+    pub decrease: f64,
+    /// The largest distance any corner of any cell moved in the iteration, in finest cell
+    /// sizes (the move test: [`super::SolveParams::move_tolerance`]).
+    pub largest_move: f64,
+    /// The multiple of the Gauss-Newton step the line search took.
+    pub step_length: f64,
+    /// Conjugate-gradient iterations of the step (multilevel; 0 when factored).
+    pub linear_iterations: usize,
+    /// Seconds assembling the normal equations (pairs, targets, curvature, the matrix).
+    pub seconds_assembly: f64,
+    /// Seconds factoring them numerically, or building or refreshing the multilevel hierarchy.
+    pub seconds_setup: f64,
+    /// Seconds in the linear solve (triangular solves, or conjugate gradients).
+    pub seconds_linear: f64,
+    /// Seconds in the line search: trial motions, their positions' projection and energy.
+    pub seconds_line_search: f64,
+}
+
+/// The largest distance a corner of a cell moves from `from` to `to`.
+pub(super) fn largest_corner_move<const D: usize>(
+    complex: &CellComplex<D>,
+    from: &[Motion<D>],
+    to: &[Motion<D>],
+) -> f64 {
+    complex
+        .cells
+        .par_iter()
+        .zip(from.par_iter().zip(to))
+        .map(|(cell, (a, b))| {
+            let h = cell.half;
+            (0..1usize << D)
+                .map(|bits| {
+                    let corner = Vect::<D>::from_fn(|k, _| if bits >> k & 1 == 1 { h } else { -h });
+                    let at = cell.center + corner;
+                    (a.apply(&cell.center, &at) - b.apply(&cell.center, &at)).norm()
+                })
+                .fold(0.0, f64::max)
+        })
+        .reduce(|| 0.0, f64::max)
+}
+
+impl std::fmt::Display for IterationLog {
+    /// One line for the progress bar: the energy, both stopping figures and the time's parts.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "energy {:.4e} (-{:.1e}), largest move {:.1e} cells, step {}; assembly {:.0} ms, \
+             setup {:.0} ms, solve {:.0} ms",
+            self.energy,
+            self.decrease,
+            self.largest_move,
+            self.step_length,
+            1e3 * self.seconds_assembly,
+            1e3 * self.seconds_setup,
+            1e3 * self.seconds_linear,
+        )?;
+        if self.linear_iterations > 0 {
+            write!(f, " ({} CG)", self.linear_iterations)?;
+        }
+        write!(f, ", line search {:.0} ms", 1e3 * self.seconds_line_search)
+    }
+}
