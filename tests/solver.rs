@@ -418,33 +418,43 @@ where
     );
 }
 
+/// The 8-long bar in cells of 0.25, its first 1.0 fixed and its last 1.0 moved by `motion`.
+fn bent_bar(motion: &str) -> (CellComplex<3>, solve::Constraints<3>) {
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let complex = cells(&pts, &triangles, 0.25);
+    let constraints = resolved(&complex, &pts, &bar_ends(motion));
+    (complex, constraints)
+}
+
+/// [`solve::solve`] of copies of `complex` and `constraints`.
+fn solve_bar(
+    complex: &CellComplex<3>,
+    constraints: &solve::Constraints<3>,
+    params: &SolveParams,
+) -> rigidcells::Result<solve::Solution<3>> {
+    solve::solve(
+        complex.clone(),
+        constraints.clone(),
+        params,
+        Budget::default(),
+        &Silent,
+    )
+}
+
 /// Newton's curvature term (the default) reaches Gauss-Newton's minimum, or a lower
 /// one, in fewer iterations on a bar bent by 90°, where the residuals at the minimum are large
 /// and Gauss-Newton converges only linearly.
 #[test]
 fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
-    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
-    let complex = cells(&pts, &triangles, 0.25);
-    let constraints = resolved(
-        &complex,
-        &pts,
-        &bar_ends(
-            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]",
-        ),
+    let (complex, constraints) = bent_bar(
+        "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]",
     );
     let solved = |newton| {
         let params = SolveParams {
             newton,
             ..Default::default()
         };
-        let s = solve::solve(
-            complex.clone(),
-            constraints.clone(),
-            &params,
-            Budget::default(),
-            &Silent,
-        )
-        .unwrap();
+        let s = solve_bar(&complex, &constraints, &params).unwrap();
         monotone(&s.info);
         assert!(s.info.converged, "newton {newton}: {:?}", s.info);
         s.info
@@ -473,27 +483,15 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
 /// first full step; a tolerance that is not a fraction is refused.
 #[test]
 fn the_iteration_log_says_why_each_load_step_stopped() {
-    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
-    let complex = cells(&pts, &triangles, 0.25);
-    let constraints = resolved(
-        &complex,
-        &pts,
-        &bar_ends(
-            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -60.0 }\ntranslate = [-1.0, 0.0, 2.0]",
-        ),
+    let (complex, constraints) = bent_bar(
+        "rotate = { axis = [0.0, 1.0, 0.0], degrees = -60.0 }\ntranslate = [-1.0, 0.0, 2.0]",
     );
     let run = |move_tolerance| {
         let params = SolveParams {
             move_tolerance,
             ..Default::default()
         };
-        solve::solve(
-            complex.clone(),
-            constraints.clone(),
-            &params,
-            Budget::default(),
-            &Silent,
-        )
+        solve_bar(&complex, &constraints, &params)
     };
     let energy_only = run(0.0).unwrap().info;
     let info = run(solve::MOVE_TOLERANCE).unwrap().info;
