@@ -277,7 +277,7 @@ fn deform_writes_a_report_with_the_stable_keys() {
             || (figure("step_length") >= 1.0 && figure("largest_move") <= 1e-3),
         "{last}"
     );
-    assert!(figure("seconds_setup") > 0.0 && figure("seconds_assembly") > 0.0);
+    assert!(figure("seconds_setup") >= 0.0 && figure("seconds_assembly") >= 0.0);
     // Samples deep in a region follow it exactly; those in its boundary cells blend with free
     // neighbors and miss by a fraction of a cell (0.03 here, cells of 0.25).
     let residual = json["residual_max"].as_f64().unwrap();

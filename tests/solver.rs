@@ -480,7 +480,7 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
 /// Every iteration is logged with both stopping figures and its time's parts. With the move
 /// test off the solve runs to the energy test; with the default tolerance it stops no later and
 /// at the same minimum (1e-6); with a tolerance of many cells each load step stops after its
-/// first full step; a tolerance that is not a fraction is refused.
+/// first full step; a tolerance that is not a number of cells is refused.
 #[test]
 fn the_iteration_log_says_why_each_load_step_stopped() {
     let (complex, constraints) = bent_bar(
@@ -509,7 +509,8 @@ fn the_iteration_log_says_why_each_load_step_stopped() {
                 (0.0..=1.0).contains(&l.decrease) && l.largest_move >= 0.0,
                 "{l:?}"
             );
-            assert!(l.step_length > 0.0 && l.seconds_setup > 0.0 && l.seconds_assembly > 0.0);
+            let seconds = [l.seconds_assembly, l.seconds_setup, l.seconds_linear];
+            assert!(l.step_length > 0.0 && seconds.iter().all(|s| s.is_finite() && *s >= 0.0));
         }
     }
     let last = energy_only.log.last().unwrap();
@@ -519,6 +520,8 @@ fn the_iteration_log_says_why_each_load_step_stopped() {
         last.decrease <= 1e-6 || (last.step_length >= 1.0 && last.largest_move <= 1e-3),
         "{last:?}"
     );
+    // (Not a law: an earlier load step stopped sooner starts the next elsewhere; on this bar it
+    // holds, and the same every run.)
     assert!(info.iterations <= energy_only.iterations);
     let (a, b) = (
         *info.energies.last().unwrap(),

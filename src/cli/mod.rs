@@ -380,9 +380,10 @@ struct CellArgs {
     /// the cells; BENCHMARKS.md says which is faster where).
     #[arg(long, value_parser = choice::<Method>(), default_value_t = Method::Auto)]
     solver: Method,
-    /// Stop the solve (each load step) at the first full Gauss-Newton step that moves no
-    /// corner of any cell by more than this fraction of the finest cell size, or that lowers
-    /// the energy by less than a millionth of it; 0 keeps only the energy test.
+    /// Stop each load step at the first full Gauss-Newton step that moves no corner of any
+    /// cell by more than this many finest cell sizes, or that lowers the energy by less than a
+    /// millionth of it (a thousandth in the load steps before the last); 0 keeps only the
+    /// energy test.
     #[arg(long, value_name = "F", default_value_t = rigidcells::solve::MOVE_TOLERANCE)]
     tolerance: f64,
     /// Parts of the shape that no constraint reaches (leaves, fittings, a loose piece of a

@@ -155,6 +155,7 @@ pub trait Sink: Send {
 /// (Linux: `sync_file_range`, which starts the writing and does not wait for it), so that the
 /// sync before [`TempFile::commit`]'s rename waits for the last window only: the output's
 /// gigabyte reaches the disk while later chunks are still computed, instead of after them.
+/// Scratch files ([`TempFile::scratch`]), read back and removed, are left to the system.
 #[derive(Debug)]
 pub struct OutFile {
     file: File,
@@ -162,23 +163,27 @@ pub struct OutFile {
     at: u64,
     /// Everything before this was handed to the disk.
     handed: u64,
+    /// Whether to hand windows to the disk at all.
+    write_back: bool,
 }
 
 /// The window [`OutFile`] hands to the disk at once.
 const WRITEBACK: u64 = 32 << 20;
 
 impl OutFile {
-    fn new(file: File) -> Self {
+    fn new(file: File, write_back: bool) -> Self {
         Self {
             file,
             at: 0,
             handed: 0,
+            write_back,
         }
     }
 
-    /// Starts writing bytes `handed..at` to the disk once they are a window.
+    /// Starts writing bytes `handed..at` to the disk once they are a window (a gap left by a
+    /// seek forward goes with it, harmlessly).
     fn hand_over(&mut self) {
-        if self.at < self.handed + WRITEBACK {
+        if !self.write_back || self.at < self.handed + WRITEBACK {
             return;
         }
         start_writeback(&self.file, self.handed, self.at - self.handed);
@@ -227,10 +232,10 @@ impl Write for OutFile {
 }
 
 impl Seek for OutFile {
+    /// A write behind the windows handed over (a header rewritten) waits for the sync; the
+    /// LAZ writer's position queries (`SeekFrom::Current(0)`, once a chunk) move nothing.
     fn seek(&mut self, to: SeekFrom) -> std::io::Result<u64> {
         self.at = self.file.seek(to)?;
-        // A write behind the windows handed over (a header rewritten) waits for the sync.
-        self.handed = self.handed.max(self.at);
         Ok(self.at)
     }
 }
@@ -246,8 +251,18 @@ pub struct TempFile {
 }
 
 impl TempFile {
-    /// Creates the temporary file for `target`.
+    /// Creates the temporary file for `target`, handed to the disk as it is written.
     pub fn create(target: &Path) -> Result<(Self, BufWriter<OutFile>)> {
+        Self::open(target, true)
+    }
+
+    /// Creates a scratch file named after `target`, read back and removed before the output is
+    /// complete: left to the system's own write-back.
+    pub fn scratch(target: &Path) -> Result<(Self, BufWriter<OutFile>)> {
+        Self::open(target, false)
+    }
+
+    fn open(target: &Path, write_back: bool) -> Result<(Self, BufWriter<OutFile>)> {
         let dir = match target.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
@@ -268,7 +283,7 @@ impl TempFile {
                 target: target.to_path_buf(),
                 committed: false,
             },
-            BufWriter::with_capacity(1 << 20, OutFile::new(file)),
+            BufWriter::with_capacity(1 << 20, OutFile::new(file, write_back)),
         ))
     }
 
@@ -317,6 +332,34 @@ impl Drop for TempFile {
         if !self.committed {
             let _ = std::fs::remove_file(&self.tmp);
             crate::interrupt::forget(&self.tmp);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Windows are handed over as they fill, through the position queries a LAZ writer makes
+    /// between chunks; a scratch file hands nothing over; the bytes are all there.
+    #[test]
+    fn written_windows_are_handed_to_the_disk() {
+        let dir = tempfile::tempdir().unwrap();
+        let piece = vec![7u8; 1 << 20];
+        for (name, write_back) in [("out.bin", true), ("scratch.bin", false)] {
+            let target = dir.path().join(name);
+            let (tmp, out) = TempFile::open(&target, write_back).unwrap();
+            let mut file = out.into_inner().unwrap();
+            for _ in 0..40 {
+                file.write_all(&piece).unwrap();
+                assert_eq!(file.stream_position().unwrap(), file.at);
+            }
+            let handed = file.handed;
+            assert_eq!(handed >= WRITEBACK, write_back, "{name}: {handed}");
+            assert!(handed <= 40 << 20);
+            drop(file);
+            tmp.commit().unwrap();
+            assert_eq!(std::fs::metadata(&target).unwrap().len(), 40 << 20);
         }
     }
 }

@@ -236,7 +236,8 @@ pub(super) fn mul_add_any(out: &mut [f64], x: &[f64], transpose: bool, y: &[f64]
 /// factor's 1.5 s.
 pub(crate) struct CoarseFactor {
     n: usize,
-    edges: Vec<[u32; 2]>,
+    dof: usize,
+    pub(super) edges: Vec<[u32; 2]>,
     pattern: SymbolicSparseColMat<usize>,
     argsort: Argsort<usize>,
     symbolic: SymbolicLlt<usize>,
@@ -252,13 +253,19 @@ pub(super) fn factor_coarsest(
 ) -> Option<CoarseFactor> {
     let d = a.dof;
     let bb = d * d;
+    let n = a.len();
+    let reuse = reuse.filter(|f| f.n == n && f.dof == d && f.edges == a.edges);
     let entries = a.n * d * (d + 1) / 2 + a.edges.len() * bb;
     let mut values = Vec::with_capacity(entries);
-    let mut indices = Vec::with_capacity(entries);
+    // The entries' positions, only where the pattern is analysed anew.
+    let mut indices = Vec::with_capacity(if reuse.is_some() { 0 } else { entries });
+    let fresh = reuse.is_none();
     for g in 0..a.n {
         for r in 0..d {
             for c in 0..=r {
-                indices.push(Pair::new(g * d + r, g * d + c));
+                if fresh {
+                    indices.push(Pair::new(g * d + r, g * d + c));
+                }
                 values.push(a.diag[g * bb + r * d + c]);
             }
         }
@@ -269,15 +276,16 @@ pub(super) fn factor_coarsest(
         for r in 0..d {
             for c in 0..d {
                 let (row, col) = (i * d + r, j * d + c);
-                indices.push(Pair::new(row.max(col), row.min(col)));
+                if fresh {
+                    indices.push(Pair::new(row.max(col), row.min(col)));
+                }
                 values.push(a.blocks[k * bb + r * d + c]);
             }
         }
     }
-    let n = a.len();
     let (pattern, argsort, symbolic) = match reuse {
-        Some(f) if f.n == n && f.edges == a.edges => (f.pattern, f.argsort, f.symbolic),
-        _ => {
+        Some(f) => (f.pattern, f.argsort, f.symbolic),
+        None => {
             let (pattern, argsort) =
                 SymbolicSparseColMat::try_new_from_indices(n, n, &indices).ok()?;
             let symbolic =
@@ -291,6 +299,7 @@ pub(super) fn factor_coarsest(
     });
     Some(CoarseFactor {
         n,
+        dof: d,
         edges: a.edges.clone(),
         pattern,
         argsort,

@@ -103,8 +103,8 @@ pub struct SolveParams {
     /// Default 1e-6.
     pub tolerance: f64,
     /// Also stop a load step at a full Gauss-Newton step that moves no corner of any cell by
-    /// more than this fraction of the finest cell size (see [`IterationLog::largest_move`]); 0
-    /// keeps only the energy test. Default [`MOVE_TOLERANCE`].
+    /// more than this many finest cell sizes (see [`IterationLog::largest_move`]); 0 keeps
+    /// only the energy test. Default [`MOVE_TOLERANCE`].
     pub move_tolerance: f64,
     /// Most rotation of any handle per load step, in degrees. Default 30.
     pub max_step_degrees: f64,
@@ -275,7 +275,7 @@ where
     let start = Instant::now();
     if !(params.move_tolerance >= 0.0 && params.move_tolerance.is_finite()) {
         return Err(Error::Param(format!(
-            "the solver's move tolerance must be a fraction of a cell, 0 or more (got {})",
+            "the solver's move tolerance must be a number of cells, 0 or more (got {})",
             params.move_tolerance
         )));
     }

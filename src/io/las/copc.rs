@@ -132,7 +132,7 @@ impl CopcSink {
             frame,
             vlrs,
             evlrs,
-            spill: Some(TempFile::create(&spill_name)?),
+            spill: Some(TempFile::scratch(&spill_name)?),
             count: 0,
             lo: [f64::INFINITY; 3],
             hi: [f64::NEG_INFINITY; 3],
@@ -373,7 +373,7 @@ fn write_copc(
                 .to_string_lossy(),
             runs.len()
         ));
-        let (tmp, mut w) = TempFile::create(&name)?;
+        let (tmp, mut w) = TempFile::scratch(&name)?;
         for (key, i) in &order {
             w.write_all(&key.to_le_bytes())
                 .and_then(|_| w.write_all(&block[*i as usize * rl..(*i as usize + 1) * rl]))
@@ -434,7 +434,7 @@ fn write_copc(
                     .unwrap_or_default()
                     .to_string_lossy()
             ));
-            *slot = Some(TempFile::create(&name)?);
+            *slot = Some(TempFile::scratch(&name)?);
         }
         let (tmp, w) = slot.as_mut().expect("just opened");
         let run = &mut open[i];
