@@ -273,12 +273,6 @@ where
     Dim<D>: Rigid<D>,
 {
     let start = Instant::now();
-    if !(params.move_tolerance >= 0.0 && params.move_tolerance.is_finite()) {
-        return Err(Error::Param(format!(
-            "the solver's move tolerance must be a number of cells, 0 or more (got {})",
-            params.move_tolerance
-        )));
-    }
     let (complex, constraints) = match params.coarsen_levels {
         0 => (complex, constraints),
         levels => coarsen(&complex, &constraints, levels),
@@ -368,6 +362,17 @@ where
     })
 }
 
+/// Refuses parameters no solve can take.
+fn check_params(params: &SolveParams) -> Result<()> {
+    if !(params.move_tolerance >= 0.0 && params.move_tolerance.is_finite()) {
+        return Err(Error::Param(format!(
+            "the solver's move tolerance must be a number of cells, 0 or more (got {})",
+            params.move_tolerance
+        )));
+    }
+    Ok(())
+}
+
 /// The solve from rest through its load steps: the sparse system, the motions and what was
 /// done so far.
 #[allow(clippy::type_complexity)]
@@ -381,6 +386,7 @@ fn from_rest<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
+    check_params(params)?;
     let mut info = SolverInfo {
         cells_initial: complex.len(),
         load_steps: load_steps(complex, constraints, params)?,

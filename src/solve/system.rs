@@ -37,7 +37,7 @@ use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
 use super::Method;
-use super::blocks::BlockMatrix;
+use super::blocks::{BlockMatrix, CoarseFactor};
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
 use super::multilevel::{Hierarchy, Nodes};
@@ -106,6 +106,8 @@ struct Multilevel {
     levels: AtomicUsize,
     /// The last hierarchy and the iterations of its first solve.
     kept: std::sync::Mutex<Option<(Hierarchy, usize)>>,
+    /// The coarsest analysis of a hierarchy dropped for its age, for the next one.
+    analysis: std::sync::Mutex<Option<CoarseFactor>>,
 }
 
 /// The storage of an iteration: the assembled values (one slot per block entry), the numeric
@@ -384,6 +386,7 @@ where
             iterations: AtomicUsize::new(0),
             levels: AtomicUsize::new(0),
             kept: std::sync::Mutex::new(None),
+            analysis: std::sync::Mutex::new(None),
         }
     }
 
@@ -484,7 +487,8 @@ where
             kept => {
                 let limits = [super::multilevel::COARSEST, super::multilevel::FACTORED];
                 let size = complex.grid.finest_size();
-                let reuse = kept.and_then(|(h, _)| h.into_coarsest());
+                let aged = ml.analysis.lock().unwrap_or_else(|e| e.into_inner()).take();
+                let reuse = kept.and_then(|(h, _)| h.into_coarsest()).or(aged);
                 (
                     Hierarchy::new::<D>(matrix, nodes, size, limits, reuse),
                     None,
@@ -511,6 +515,8 @@ where
             let mut hierarchy = hierarchy;
             hierarchy.shed_finest();
             *ml.kept.lock().unwrap_or_else(|e| e.into_inner()) = Some((hierarchy, first));
+        } else {
+            *ml.analysis.lock().unwrap_or_else(|e| e.into_inner()) = hierarchy.into_coarsest();
         }
         let mut step = vec![0.0; self.n];
         for (k, &c) in self.free_cells.iter().enumerate() {
