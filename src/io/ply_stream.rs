@@ -27,7 +27,7 @@ use super::ply::numbers;
 use super::ply::{
     VertexFields, Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element,
 };
-use super::stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
+use super::stream::{Accepted, Bounds, Chunk, OutFile, Sink, Source, TempFile};
 use super::text::{Precision, SpanSink, fit_singles};
 use super::{Opening, require_extension};
 use crate::error::{Error, Result};
@@ -291,7 +291,7 @@ struct PlySink {
     map: Arc<Mmap>,
     layout: Layout,
     file: TempFile,
-    out: BufWriter<crate::io::stream::OutFile>,
+    out: BufWriter<OutFile>,
     buf: Vec<u8>,
     /// Records written so far.
     next: usize,

@@ -189,11 +189,6 @@ impl OutFile {
         start_writeback(&self.file, self.handed, self.at - self.handed);
         self.handed = self.at;
     }
-
-    /// Waits until the file is on the disk.
-    pub fn sync_all(&self) -> std::io::Result<()> {
-        self.file.sync_all()
-    }
 }
 
 /// Starts writing `len` bytes of `file` from `from` to the disk, without waiting for it. A

@@ -18,7 +18,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use super::require_extension;
-use super::stream::{Accepted, Chunk, Sink, TempFile};
+use super::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
 // The readers of text formats take `Span` from here, with the `Edit`s made of it.
 pub(crate) use super::stream::Span;
 use crate::error::{Error, Result};
@@ -232,7 +232,7 @@ pub(crate) fn splice(bytes: &[u8], mut edits: Vec<Edit>, precision: &Precision) 
 pub(crate) struct SpanSink {
     input: PathBuf,
     file: TempFile,
-    out: BufWriter<crate::io::stream::OutFile>,
+    out: BufWriter<OutFile>,
     numbers: Numbers,
     singles: [bool; 3],
     normal_singles: Option<[bool; 3]>,

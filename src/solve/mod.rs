@@ -816,7 +816,7 @@ where
             seconds_line_search: searching.elapsed().as_secs_f64(),
         };
         info.log.push(log);
-        observer.message(&log.to_string());
+        observer.message(&format!("iteration {iterations}: {log}"));
         // A short step's small move says only that the line search shortened it.
         if decrease <= params.tolerance * before
             || (t >= 1.0 && largest_move <= params.move_tolerance)

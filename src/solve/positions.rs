@@ -149,7 +149,7 @@ impl Positions {
 }
 
 /// The sparse Cholesky factor of the `n × n` matrix given by lower-triangle `triplets`.
-pub(super) fn factor(n: usize, triplets: &[Triplet<usize, usize, f64>]) -> Option<Llt<usize, f64>> {
+fn factor(n: usize, triplets: &[Triplet<usize, usize, f64>]) -> Option<Llt<usize, f64>> {
     let m = SparseColMat::try_new_from_triplets(n, n, triplets).ok()?;
     crate::with_faer(|| {
         let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).ok()?;

@@ -37,7 +37,7 @@ use super::coords::{Frame, encode};
 use super::header::{LasHeader, SOFTWARE, VlrRecord, standard_record_len};
 use super::raw::{EVLR_HEADER, HEADER_1_4, RawHeader, RawVlrHeader, VLR_HEADER, text_field};
 use crate::error::{Error, Result};
-use crate::io::stream::{Accepted, Chunk, Sink, TempFile};
+use crate::io::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
 use crate::rigid::Vect;
 
 /// The deepest octree level; points declined by every level down to it go to its nodes.
@@ -65,7 +65,7 @@ pub(super) struct CopcSink {
     frame: Frame,
     vlrs: Vec<VlrRecord>,
     evlrs: Vec<VlrRecord>,
-    spill: Option<(TempFile, BufWriter<crate::io::stream::OutFile>)>,
+    spill: Option<(TempFile, BufWriter<OutFile>)>,
     count: u64,
     lo: [f64; 3],
     hi: [f64; 3],
@@ -236,10 +236,9 @@ impl Sink for CopcSink {
             let p = p.to_path_buf();
             move |e: std::io::Error| Error::write(&p, e)
         };
+        // A scratch file: read back through the page cache, never synced.
         w.into_inner()
-            .map_err(|e| io(spill.path())(e.into_error()))?
-            .sync_all()
-            .ok();
+            .map_err(|e| io(spill.path())(e.into_error()))?;
         let (tmp, out) = TempFile::create(&self.output)?;
         write_copc(&self, spill.path(), out, tmp.path())?;
         tmp.commit()?;
@@ -329,7 +328,7 @@ impl Run {
 fn write_copc(
     sink: &CopcSink,
     spill: &Path,
-    mut out: BufWriter<crate::io::stream::OutFile>,
+    mut out: BufWriter<OutFile>,
     target: &Path,
 ) -> Result<()> {
     let rl = sink.record_len;
@@ -404,7 +403,7 @@ fn write_copc(
         .map(|(i, r)| std::cmp::Reverse((r.key, i)))
         .collect();
     let levels = MAX_LEVEL as usize + 1;
-    let mut level_files: Vec<Option<(TempFile, BufWriter<crate::io::stream::OutFile>)>> =
+    let mut level_files: Vec<Option<(TempFile, BufWriter<OutFile>)>> =
         (0..levels).map(|_| None).collect();
     let mut level_counts = vec![0u64; levels];
     // Per level: the sampling cell of the last point seen, and whether a point took it.
@@ -503,7 +502,7 @@ fn write_copc(
         let mut finish = |node: u64,
                           points: u64,
                           start: &mut u64,
-                          c: &mut laz::LasZipCompressor<BufWriter<crate::io::stream::OutFile>>|
+                          c: &mut laz::LasZipCompressor<BufWriter<OutFile>>|
          -> Result<()> {
             c.finish_current_chunk().map_err(werr)?;
             let end = c.get_mut().stream_position().map_err(werr)?;

@@ -15,13 +15,13 @@ use super::header::{SOFTWARE, return_number};
 use super::raw::{HEADER_1_4, RawHeader};
 use super::{Input, LAZ_BATCH};
 use crate::error::{Error, Result};
-use crate::io::stream::{Accepted, Chunk, Sink, TempFile};
+use crate::io::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
 use crate::rigid::Vect;
 
 /// LAZ in or out, through the `las` crate's raw slab path.
 pub(super) struct CrateSink {
     tmp: Option<TempFile>,
-    writer: Option<las::Writer<BufWriter<crate::io::stream::OutFile>>>,
+    writer: Option<las::Writer<BufWriter<OutFile>>>,
     /// Records waiting to be written, [`LAZ_BATCH`] at a time.
     pending: Vec<u8>,
     record_len: usize,

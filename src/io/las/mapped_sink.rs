@@ -12,13 +12,13 @@ use super::coords::{Frame, encode};
 use super::header::{LasHeader, SOFTWARE};
 use super::raw::{RawHeader, text_field};
 use crate::error::{Error, Result};
-use crate::io::stream::{Accepted, Chunk, Sink, TempFile};
+use crate::io::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
 use crate::rigid::Vect;
 
 /// LAS → LAS without the `las` crate: header, VLRs and trailing bytes copied verbatim.
 pub(super) struct MappedSink {
     tmp: TempFile,
-    out: BufWriter<crate::io::stream::OutFile>,
+    out: BufWriter<OutFile>,
     input: Arc<Mmap>,
     header: LasHeader,
     /// The output's header: the input's, with this writer's software, frame and bounds.
