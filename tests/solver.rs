@@ -537,6 +537,59 @@ fn the_iteration_log_says_why_each_load_step_stopped() {
     assert!(matches!(run(f64::NAN), Err(rigidcells::Error::Param(_))));
 }
 
+/// Solved coarse to fine (two coarse stages, each starting the next finer one at its
+/// solution), the bent bar reaches the minimum it reaches from rest (1e-6), with its fixed and
+/// handle cells where they are prescribed, and its own cells need fewer iterations than from
+/// rest; the automatic choice leaves a complex this small alone.
+#[test]
+fn coarse_to_fine_reaches_the_minimum_from_rest_in_fewer_fine_iterations() {
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let complex = cells(&pts, &triangles, 0.125);
+    let constraints = resolved(
+        &complex,
+        &pts,
+        &bar_ends(
+            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }
+translate = [-2.5, 0.0, 4.0]",
+        ),
+    );
+    let run = |coarse_levels| {
+        let params = SolveParams {
+            coarse_levels,
+            ..Default::default()
+        };
+        let s = solve_bar(&complex, &constraints, &params).unwrap();
+        assert!(s.info.converged, "{coarse_levels:?}: {:?}", s.info);
+        s
+    };
+    let (rest, staged, auto) = (run(Some(0)), run(Some(2)), run(None));
+    assert_eq!(auto.info.energies, rest.info.energies);
+    let energy = |s: &solve::Solution<3>| *s.info.energies.last().unwrap();
+    let (a, b) = (energy(&staged), energy(&rest));
+    assert!(
+        (a - b).abs() <= 1e-6 * b,
+        "coarse to fine {a} against {b} from rest"
+    );
+    // The load steps on the coarsest cells, then one stage for each finer complex.
+    let stages = staged.info.iterations_per_step.len();
+    assert_eq!(stages, staged.info.load_steps + 2, "{:?}", staged.info);
+    assert_eq!(staged.info.cells_initial, complex.len());
+    let fine = staged.info.iterations_per_step[stages - 1];
+    assert!(
+        fine < rest.info.iterations,
+        "{fine} against {:?}",
+        rest.info
+    );
+    let last = staged.info.log.last().unwrap();
+    assert_eq!(last.load_step, stages - 1);
+    for (c, role) in constraints.roles.iter().enumerate() {
+        let (m, r) = (&staged.motions[c], &rest.motions[c]);
+        if matches!(role, solve::Role::Fixed | solve::Role::Handle(_)) {
+            assert!(m.rot == r.rot && m.pos == r.pos, "cell {c} ({role:?})");
+        }
+    }
+}
+
 /// Merging sibling cells of one role keeps every fine cell's role (a region
 /// ends where it ended), and the adaptive solve splits the strained cells again, meeting the
 /// handle exactly with fewer cells than the uniform complex.

@@ -386,6 +386,12 @@ struct CellArgs {
     /// energy test.
     #[arg(long, value_name = "F", default_value_t = rigidcells::solve::MOVE_TOLERANCE)]
     tolerance: f64,
+    /// Solve this many coarser complexes first (each cell's parents, then theirs), each
+    /// starting the next finer one at its solution, so that the cells' own Gauss-Newton
+    /// iterations only correct; 0 solves the cells from rest [default: as many as bring the
+    /// coarsest under 20,000 cells, at most 3; none for fewer cells or with --refine-strain]
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=8))]
+    coarse_levels: Option<u8>,
     /// Parts of the shape that no constraint reaches (leaves, fittings, a loose piece of a
     /// soup): carried rigidly by the nearest constrained part, or kept where they were.
     #[arg(long, value_enum, default_value_t = LooseArg::Carry)]
@@ -429,6 +435,7 @@ impl CellArgs {
             method: self.solver,
             carry_loose: self.loose_parts == LooseArg::Carry,
             move_tolerance: self.tolerance,
+            coarse_levels: self.coarse_levels,
             ..Default::default()
         }
     }

@@ -13,9 +13,12 @@ pub const MOVE_TOLERANCE: f64 = 1e-3;
 /// and where its time went.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct IterationLog {
-    /// The load step (0 first; refinement rounds count on after the last load step): the
-    /// index into [`super::SolverInfo::step_starts`].
+    /// The load step (0 first; the stages of a solve coarse to fine, and refinement rounds,
+    /// count on after the last load step): the index into
+    /// [`super::SolverInfo::step_starts`].
     pub load_step: usize,
+    /// The cells of the complex solved (fewer than the cells in a coarse stage).
+    pub cells: usize,
     /// The energy after the iteration.
     pub energy: f64,
     /// What the iteration lowered the energy by, as a fraction of the energy before it (the

@@ -63,6 +63,7 @@
 //! load step (children inherit motion and constraint) and the solve continues.
 
 mod blocks;
+mod coarse;
 pub mod constraints;
 pub mod energy;
 mod iteration;
@@ -75,6 +76,7 @@ pub mod turns;
 
 use std::time::Instant;
 
+pub use coarse::{COARSE_FROM, MAX_COARSE_LEVELS};
 pub use constraints::{
     Constraints, Role, Selections, carry_loose, coarsen, inherit, resolve, resolve_selected,
     sample_cell, seen,
@@ -123,6 +125,10 @@ pub struct SolveParams {
     pub refine_levels: u8,
     /// Rounds of refinement at most. Default 4.
     pub max_refinements: usize,
+    /// Coarse stages before the cells themselves are solved (the `coarse` module): 0 solves
+    /// them from rest; `None` (default): as many as the cells call for (none below
+    /// [`COARSE_FROM`] cells).
+    pub coarse_levels: Option<u8>,
     /// How each Gauss-Newton system is solved. Default [`Method::Auto`].
     pub method: Method,
     /// Parts of the shape without any constraint ride along rigidly with the nearest cell of
@@ -136,9 +142,11 @@ pub struct SolveParams {
 /// How the Gauss-Newton normal equations are solved.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub enum Method {
-    /// [`Method::Multilevel`] for cells of one size (a scan, a shell) past 100,000 free cells;
-    /// otherwise [`Method::Direct`] where its factor fits the memory budget and its 32-bit
-    /// indices, else [`Method::Multilevel`] (BENCHMARKS.md: which is faster where).
+    /// [`Method::Multilevel`] for cells of one size (a scan, a shell) past 100,000 free cells,
+    /// or where their Cholesky factor would hold more than 200 entries per unknown (its work
+    /// grows as their square: thick or closed shapes); otherwise [`Method::Direct`] where its
+    /// factor fits the memory budget and its 32-bit indices, else [`Method::Multilevel`]
+    /// (BENCHMARKS.md: which is faster where).
     #[default]
     Auto,
     /// faer's supernodal sparse Cholesky (memory grows faster than the cells: its fill).
@@ -161,6 +169,7 @@ impl Default for SolveParams {
             coarsen_levels: 0,
             refine_levels: 2,
             max_refinements: 4,
+            coarse_levels: None,
             method: Method::Auto,
             newton: true,
             carry_loose: true,
@@ -180,15 +189,18 @@ pub struct SolverInfo {
     pub iterations: usize,
     /// Load steps.
     pub load_steps: usize,
-    /// The energy at the start of every load step (and refinement round) and after every
-    /// accepted iteration.
+    /// The energy at the start of every load step (and coarse-to-fine stage, and refinement
+    /// round) and after every accepted iteration. A coarse stage's energy is that of its own
+    /// cells: it falls by a stage's refinement, not only by iterations.
     pub energies: Vec<f64>,
-    /// Where each load step (and refinement round) starts in `energies`. Within a step the
-    /// energy never increases; between steps it jumps as the handles move on.
+    /// Where each load step (and stage, and refinement round) starts in `energies`. Within a
+    /// step the energy never increases; between steps it jumps as the handles move on.
     pub step_starts: Vec<usize>,
-    /// Iterations in each load step (and each refinement round after the last step).
+    /// Iterations in each load step, then in each finer stage of a solve coarse to fine
+    /// ([`SolveParams::coarse_levels`]; the load steps are those of the coarsest cells), then
+    /// in each refinement round.
     pub iterations_per_step: Vec<usize>,
-    /// Cells before refinement.
+    /// Cells before refinement (of the complex given, not of a coarse stage).
     pub cells_initial: usize,
     /// Cells after refinement.
     pub cells_final: usize,
@@ -387,12 +399,19 @@ where
     Dim<D>: Rigid<D>,
 {
     check_params(params)?;
+    check_solver_memory(complex.len(), params.method, budget, CELLS_ADVICE)?;
+    let levels = coarse::levels(complex.len(), params);
+    if levels > 0
+        && let Some(staged) =
+            coarse::coarse_to_fine(complex, constraints, levels, params, budget, observer)?
+    {
+        return Ok(staged);
+    }
     let mut info = SolverInfo {
         cells_initial: complex.len(),
         load_steps: load_steps(complex, constraints, params)?,
         ..Default::default()
     };
-    check_solver_memory(complex.len(), params.method, budget, CELLS_ADVICE)?;
     let mut motions: Vec<Motion<D>> = complex
         .cells
         .iter()
@@ -797,7 +816,7 @@ where
         let largest_move = largest_corner_move(complex, motions, &trial) / size;
         motions.copy_from_slice(&trial);
         let decrease = energy - e;
-        settled = newton && 2.0 * decrease < energy;
+        settled = 2.0 * decrease < energy;
         let before = energy;
         energy = e;
         iterations += 1;
@@ -805,6 +824,7 @@ where
         info.energies.push(energy);
         let log = IterationLog {
             load_step: info.step_starts.len() - 1,
+            cells: complex.len(),
             energy,
             decrease: decrease / before,
             largest_move,

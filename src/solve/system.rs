@@ -40,7 +40,7 @@ use super::Method;
 use super::blocks::{BlockMatrix, CoarseFactor};
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
-use super::multilevel::{Hierarchy, Nodes};
+use super::multilevel::{COARSEST, Hierarchy, Nodes};
 use super::positions::Positions;
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
@@ -92,6 +92,17 @@ pub struct StepCost {
 /// the 10M-point terrain the factorization is the faster up to 80k free cells (12.3 s against
 /// 15.1 s), the multilevel path from 229k (27 s against 42 s; at 742k in half the memory).
 const MULTILEVEL_FROM: usize = 100_000;
+
+/// Entries of the Cholesky factor per unknown past which `auto` takes the multilevel path for
+/// cells of one size (where the hierarchy has a level to build, past [`COARSEST`] free cells;
+/// the grid groups merge a solid's large interior cells poorly, and the bunny at 20k cells of
+/// four sizes factors in 15 s against 38 s multilevel): the factor's work grows as their
+/// square. Measured by `tools/src/bin/solver.rs` (BENCHMARKS.md,
+/// "Which solver `auto` takes"): the one-cell-thick terrain at 82k cells has 150 and factors
+/// faster (9.1 s against 13.1 s); the vegetation scan at 5 m, 140, takes the same either way;
+/// the tube at 5.5k, 10k and 20k cells (269, 316, 413) and the vegetation scan at 2.5 m (290)
+/// solve 1.2–1.6 times faster by the multilevel path.
+const MULTILEVEL_FILL: usize = 200;
 
 /// The multilevel path's view of the unknowns: node `k` is the free cell `free_cells[k]`; the
 /// pairs of each node (`2 · pair slot + side`, over `pair_start`), and the pairs joining two
@@ -208,7 +219,9 @@ where
         if n > 0 {
             match method {
                 Method::Multilevel => system.set_up_multilevel(complex),
-                Method::Direct => system.set_up_direct(complex, budget, advice)?,
+                Method::Direct => {
+                    system.set_up_direct(complex, budget, advice, None)?;
+                }
                 // Cells of one size (a scan, a shell) past `MULTILEVEL_FROM` free cells: the
                 // multilevel path (BENCHMARKS.md, "Which solver `auto` takes": faster from
                 // there, in half the memory). Otherwise the factorization where it fits, else
@@ -223,12 +236,14 @@ where
                         system.set_up_multilevel(complex);
                         Ok::<_, Error>(())
                     };
-                    if uniform && system.free_cells.len() > MULTILEVEL_FROM {
+                    let cells = system.free_cells.len();
+                    if uniform && cells > MULTILEVEL_FROM {
                         multilevel(&mut system)?;
                     } else {
-                        match system.set_up_direct(complex, budget, advice) {
-                            Ok(()) => {}
-                            Err(Error::Memory { .. } | Error::Solver(_)) => {
+                        let most_fill = (uniform && cells > COARSEST).then_some(MULTILEVEL_FILL);
+                        match system.set_up_direct(complex, budget, advice, most_fill) {
+                            Ok(true) => {}
+                            Ok(false) | Err(Error::Memory { .. } | Error::Solver(_)) => {
                                 multilevel(&mut system)?
                             }
                             Err(e) => return Err(e),
@@ -248,13 +263,15 @@ where
     }
 
     /// The direct path's pattern, symbolic factorization and storage, each checked against the
-    /// memory budget before it is allocated.
+    /// memory budget before it is allocated. With `most_fill`, a factor of more entries per
+    /// unknown is not allocated and the answer is `false` (the multilevel path is the faster).
     fn set_up_direct(
         &mut self,
         complex: &CellComplex<D>,
         budget: Budget,
         advice: &str,
-    ) -> Result<()> {
+        most_fill: Option<usize>,
+    ) -> Result<bool> {
         let n = self.n;
         let limit = budget.limit();
         let entries = self.free_cells.len() * Self::CELL_SLOT + self.pairs.len() * Self::PAIR_SLOT;
@@ -291,6 +308,9 @@ where
             )),
             e => Error::Solver(format!("symbolic Cholesky: {e:?}")),
         })?;
+        if most_fill.is_some_and(|most| llt.len_val() > most * n) {
+            return Ok(false);
+        }
         let par = faer::get_global_parallelism();
         let scratch = llt
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())
@@ -310,7 +330,7 @@ where
             pattern: Some(sym),
         };
         self.symbolic = Some((argsort, llt));
-        Ok(())
+        Ok(true)
     }
 
     /// Sets the free cells' positions to their optimum for the current rotations.
