@@ -62,6 +62,7 @@
 //! decrease the energy ends the load step. With `refine_strain`, cells whose strain exceeds the threshold are split after the last
 //! load step (children inherit motion and constraint) and the solve continues.
 
+mod auto;
 mod blocks;
 mod coarse;
 pub mod constraints;

@@ -36,12 +36,12 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use rayon::prelude::*;
 
-use super::Method;
 use super::blocks::{BlockMatrix, CoarseFactor};
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
 use super::multilevel::{COARSEST, Hierarchy, Nodes};
 use super::positions::Positions;
+use super::{Method, auto};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::memory::Budget;
@@ -87,22 +87,6 @@ pub struct StepCost {
     /// The triangular solves, or the preconditioned conjugate gradients.
     pub linear: f64,
 }
-
-/// Free cells past which `auto` solves a complex of one-size cells by the multilevel path: on
-/// the 10M-point terrain the factorization is the faster up to 80k free cells (12.3 s against
-/// 15.1 s), the multilevel path from 229k (27 s against 42 s; at 742k in half the memory).
-const MULTILEVEL_FROM: usize = 100_000;
-
-/// Entries of the Cholesky factor per unknown past which `auto` takes the multilevel path for
-/// cells of one size (where the hierarchy has a level to build, past [`COARSEST`] free cells;
-/// the grid groups merge a solid's large interior cells poorly, and the bunny at 20k cells of
-/// four sizes factors in 15 s against 38 s multilevel): the factor's work grows as their
-/// square. Measured by `tools/src/bin/solver.rs` (BENCHMARKS.md,
-/// "Which solver `auto` takes"): the one-cell-thick terrain at 82k cells has 150 and factors
-/// faster (9.1 s against 13.1 s); the vegetation scan at 5 m, 140, takes the same either way;
-/// the tube at 5.5k, 10k and 20k cells (269, 316, 413) and the vegetation scan at 2.5 m (290)
-/// solve 1.2–1.6 times faster by the multilevel path.
-const MULTILEVEL_FILL: usize = 200;
 
 /// The multilevel path's view of the unknowns: node `k` is the free cell `free_cells[k]`; the
 /// pairs of each node (`2 · pair slot + side`, over `pair_start`), and the pairs joining two
@@ -237,10 +221,11 @@ where
                         Ok::<_, Error>(())
                     };
                     let cells = system.free_cells.len();
-                    if uniform && cells > MULTILEVEL_FROM {
+                    if uniform && cells > auto::MULTILEVEL_FROM {
                         multilevel(&mut system)?;
                     } else {
-                        let most_fill = (uniform && cells > COARSEST).then_some(MULTILEVEL_FILL);
+                        let most_fill =
+                            (uniform && cells > COARSEST).then_some(auto::MULTILEVEL_FILL);
                         match system.set_up_direct(complex, budget, advice, most_fill) {
                             Ok(true) => {}
                             Ok(false) | Err(Error::Memory { .. } | Error::Solver(_)) => {
@@ -289,6 +274,11 @@ where
                  {advice}, or --solver multilevel"
             )));
         }
+        if most_fill.is_some_and(|most| {
+            auto::cell_fill(complex, &self.free_cells, &self.pairs, Self::DOF) > most
+        }) {
+            return Ok(false);
+        }
         let indices = self.pattern(complex);
         let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &indices)
             .map_err(|e| Error::Solver(format!("sparsity pattern: {e:?}")))?;
@@ -308,9 +298,6 @@ where
             )),
             e => Error::Solver(format!("symbolic Cholesky: {e:?}")),
         })?;
-        if most_fill.is_some_and(|most| llt.len_val() > most * n) {
-            return Ok(false);
-        }
         let par = faer::get_global_parallelism();
         let scratch = llt
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())

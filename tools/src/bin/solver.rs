@@ -6,11 +6,12 @@
 //!
 //! Scenes (all by default but `veg-1.25`, which takes minutes):
 //! - `tube`: the closed 480k-vertex tube (`data_gen::tube`), its first metre fixed and its last
-//!   turned by −90° about y and moved by (−3, 0, 5), `--cells 5500` (the direct solver);
-//! - `tube-ml`: the same with `--solver multilevel`;
+//!   turned by −90° about y and moved by (−3, 0, 5), `--cells 5500`;
+//! - `tube-direct`: the same with `--solver direct`;
 //! - `veg-2.5`, `veg-1.25`: 1 km × 200 m of rolling ground under up to 3 m of low vegetation
 //!   (`gen vegetation`, 2M points: every cell a boundary cell), the west 100 m fixed and the
-//!   east 100 m lifted by 20 m, cells of 2.5 m and 1.25 m.
+//!   east 100 m lifted by 20 m, cells of 2.5 m and 1.25 m (solved coarse to fine);
+//! - any scene with `-rest` after its name: solved from rest (`--coarse-levels 0`).
 //!
 //! Each scene is one `rigidcells deform --report` process (its peak memory its own); the
 //! table comes from the report's `iteration_log`.
@@ -21,7 +22,9 @@ use std::process::Command;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut scenes: Vec<String> = std::env::args().skip(1).collect();
     if scenes.is_empty() {
-        scenes = ["tube", "tube-ml", "veg-2.5"].map(String::from).to_vec();
+        scenes = ["tube", "tube-direct", "veg-2.5", "veg-2.5-rest"]
+            .map(String::from)
+            .to_vec();
     }
     let bin = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/release/rigidcells");
     if !bin.exists() {
@@ -31,8 +34,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::create_dir_all(&dir)?;
     println!("{} threads", rayon::current_num_threads());
     for scene in &scenes {
-        let (input, edit, args): (_, _, Vec<&str>) = match scene.as_str() {
-            "tube" | "tube-ml" => {
+        let (name, rest) = match scene.strip_suffix("-rest") {
+            Some(name) => (name, true),
+            None => (scene.as_str(), false),
+        };
+        let (input, edit, mut args): (_, _, Vec<&str>) = match name {
+            "tube" | "tube-direct" => {
                 let tube = dir.join("tube.ply");
                 if !tube.exists() {
                     let mesh = data_gen::tube(10.0, 1.0, 0.8, 400, 599);
@@ -46,8 +53,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                      rotate = { axis = [0, 1, 0], degrees = -90 }\ntranslate = [-3, 0, 5]\n",
                 )?;
                 let mut args = vec!["--cells", "5500"];
-                if scene == "tube-ml" {
-                    args.extend(["--solver", "multilevel"]);
+                if name == "tube-direct" {
+                    args.extend(["--solver", "direct"]);
                 }
                 (tube, edit, args)
             }
@@ -65,11 +72,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                      [[handle]]\nbox = { min = [500900, 4999990, -100], \
                      max = [501010, 5000210, 1000] }\ntranslate = [0, 0, 20]\n",
                 )?;
-                let size = if scene == "veg-2.5" { "2.5" } else { "1.25" };
+                let size = if name == "veg-2.5" { "2.5" } else { "1.25" };
                 (scan, edit, vec!["--cell-size", size])
             }
             other => return Err(format!("unknown scene `{other}`").into()),
         };
+        if rest {
+            args.extend(["--coarse-levels", "0"]);
+        }
         let out = dir.join(format!(
             "out.{}",
             input.extension().unwrap_or_default().to_string_lossy()
@@ -123,10 +133,10 @@ fn print_report(scene: &str, text: &str) -> Result<(), Box<dyn std::error::Error
         secs(&t["write"]),
     );
     println!(
-        "| it | step | energy | decrease | largest move (cells) | step length | CG | assembly ms \
-         | setup ms | linear ms | line search ms |"
+        "| it | step | cells | energy | decrease | largest move (cells) | step length | CG \
+         | assembly ms | setup ms | linear ms | line search ms |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     let mut sums = [0.0; 4];
     let keys = [
         "seconds_assembly",
@@ -141,9 +151,10 @@ fn print_report(scene: &str, text: &str) -> Result<(), Box<dyn std::error::Error
             *s += m;
         }
         println!(
-            "| {} | {} | {:.10e} | {:.1e} | {:.1e} | {} | {} | {:.0} | {:.0} | {:.0} | {:.0} |",
+            "| {} | {} | {} | {:.10e} | {:.1e} | {:.1e} | {} | {} | {:.0} | {:.0} | {:.0} | {:.0} |",
             i + 1,
             it["load_step"],
+            it["cells"],
             secs(&it["energy"]),
             secs(&it["decrease"]),
             secs(&it["largest_move"]),
@@ -157,7 +168,7 @@ fn print_report(scene: &str, text: &str) -> Result<(), Box<dyn std::error::Error
     }
     let n = log.len().max(1) as f64;
     println!(
-        "| mean | | | | | | | {:.0} | {:.0} | {:.0} | {:.0} |",
+        "| mean | | | | | | | | {:.0} | {:.0} | {:.0} | {:.0} |",
         sums[0] / n,
         sums[1] / n,
         sums[2] / n,
