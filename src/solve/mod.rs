@@ -400,6 +400,7 @@ where
     Dim<D>: Rigid<D>,
 {
     check_params(params)?;
+    let steps = load_steps(complex, constraints, params)?;
     check_solver_memory(complex.len(), params.method, budget, CELLS_ADVICE)?;
     let levels = coarse::levels(complex.len(), params);
     if levels > 0
@@ -410,7 +411,7 @@ where
     }
     let mut info = SolverInfo {
         cells_initial: complex.len(),
-        load_steps: load_steps(complex, constraints, params)?,
+        load_steps: steps,
         ..Default::default()
     };
     let mut motions: Vec<Motion<D>> = complex
