@@ -7,7 +7,8 @@
 //! full load from its parents' motions ([`prolong`]): a fine cell takes the rigid motion of
 //! the coarse cell holding it. The coarse stages stop at a looser tolerance
 //! ([`COARSE_TOLERANCE`]): their minimum is not the fine one, they only have to bring the
-//! motions near it.
+//! motions near it. A twist that a coarse stage gives way to (a part a coarse cell or two
+//! thick untwists sooner) is solved from rest on the cells themselves.
 //!
 //! The first iteration on the fine cells still moves corners by about half a cell on the
 //! vegetation scans of BENCHMARKS.md: the fine minimum holds detail the parents could not.
@@ -16,7 +17,7 @@
 //! iteration: not kept.
 
 use crate::cells::CellComplex;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid};
@@ -41,8 +42,7 @@ pub const COARSE_TOLERANCE: f64 = 1e-4;
 /// How many coarse stages a solve of `cells` cells takes: `params.coarse_levels` where given,
 /// else enough that the coarsest has fewer than [`COARSE_FROM`] cells, assuming each stage
 /// keeps a quarter of them (a scan's or a shell's cells have about four children, a volume's
-/// eight), and none with refinement, whose rounds
-/// start from a coarse complex of their own.
+/// eight), and none with refinement, whose rounds start from a coarse complex of their own.
 pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
     if let Some(levels) = params.coarse_levels {
         return levels;
@@ -62,7 +62,8 @@ pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
 /// The solve of `complex` coarse to fine over `levels` coarse stages: the coarsest
 /// ([`coarsen`] by `levels`) from rest through the load steps, each finer one (by one level
 /// fewer, down to `complex` itself) from the last one's motions at full load. `None` where no
-/// coarsening merges a cell (the caller solves from rest). The returned [`SolverInfo`] holds
+/// coarsening merges a cell, or where a coarse stage gives way to a twist
+/// ([`Error::TurnNotHeld`]): the caller then solves from rest. The returned [`SolverInfo`] holds
 /// every stage's iterations (the load steps are the coarsest's).
 #[allow(clippy::type_complexity)]
 pub(super) fn coarse_to_fine<const D: usize>(
@@ -93,25 +94,23 @@ where
         if parents.len() >= complex.len() || parents.len() <= coarser {
             continue;
         }
-        solved = Some(match solved.take() {
-            None => {
-                let (_, motions, info) =
-                    from_rest(&parents, &on_parents, &stage_params, budget, observer)?;
-                (parents, motions, info)
-            }
+        let at = (&parents, &on_parents);
+        let done = match solved.take() {
+            None => from_rest(at.0, at.1, &stage_params, budget, observer)
+                .map(|(_, motions, info)| (motions, info)),
             Some((coarse, motions, mut info)) => {
-                let at = (&parents, &on_parents);
-                let (_, motions) = stage(
-                    at,
-                    (&coarse, &motions),
-                    &stage_params,
-                    budget,
-                    &mut info,
-                    observer,
-                )?;
-                (parents, motions, info)
+                let coarse = (&coarse, motions.as_slice());
+                stage(at, coarse, &stage_params, budget, &mut info, observer)
+                    .map(|(_, motions)| (motions, info))
             }
-        });
+        };
+        match done {
+            Ok((motions, info)) => solved = Some((parents, motions, info)),
+            // Coarse cells give way to a twist sooner (a part a cell or two thick): the cells
+            // themselves are solved from rest, and say for themselves whether they hold it.
+            Err(Error::TurnNotHeld { .. }) => return Ok(None),
+            Err(e) => return Err(e),
+        }
     }
     let Some((coarse, motions, mut info)) = solved else {
         return Ok(None);
