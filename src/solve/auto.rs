@@ -19,11 +19,11 @@ pub(super) const MULTILEVEL_FROM: usize = 100_000;
 /// four sizes factors in 15 s against 38 s multilevel): the factor's work grows as their
 /// square. The entries are estimated before the system's own analysis (`cell_fill`: within
 /// 15 % of the true count on these scenes, 300 against 268 on the tube at 5.5k cells, 121
-/// against 140 on the vegetation at 5 m). Measured by `tools/src/bin/solver.rs` (BENCHMARKS.md,
+/// against 140 on the vegetation at 5 m). Measured one `deform` process each (BENCHMARKS.md,
 /// "Which solver `auto` takes"): the one-cell-thick terrain at 82k cells has 150 and factors
 /// faster (9.1 s against 13.1 s); the vegetation scan at 5 m, 140, takes the same either way;
 /// the tube at 5.5k, 10k and 20k cells (269, 316, 413) and the vegetation scan at 2.5 m (290)
-/// solve 1.2–1.6 times faster by the multilevel path.
+/// solve 1.1–1.6 times faster by the multilevel path.
 pub(super) const MULTILEVEL_FILL: usize = 200;
 
 /// The entries per unknown of the Cholesky factor of the system on `free_cells` (`dof`
