@@ -455,9 +455,13 @@ fn triangle_cells<const D: usize>(
             let tri = local(t);
             let (lo, hi) = range(&tri);
             if lo == hi {
-                // The triangle's box lies in this one cell (a small triangle).
+                // The triangle's box lies in this one cell (a small triangle); runs of
+                // triangles in one cell (a mesh's order) are stored once.
                 let coord: [i64; D] = std::array::from_fn(|a| lo[a]);
-                out.push(morton(&coord));
+                let code = morton(&coord);
+                if out.last() != Some(&code) {
+                    out.push(code);
+                }
                 return out;
             }
             for x in lo[0]..=hi[0] {

@@ -29,7 +29,7 @@ mod winding;
 pub use build::Occupancy;
 pub use export::{Pose, write_cells_ply};
 pub use size::{DEFAULT_DIVISIONS, cell_size_for};
-pub(crate) use size::{check_size, shortfall, sized};
+pub(crate) use size::{Sized, check_size, shortfall, sized};
 pub use tri_box::triangle_box_overlap;
 pub use winding::Winding;
 
@@ -118,7 +118,11 @@ pub fn build<const D: usize>(
     budget: Budget,
 ) -> Result<(CellComplex<D>, BuildInfo)> {
     let (lo, hi) = bounds(points)?;
-    let (params, _) = sized(params, budget, || Ok((points.into(), triangles)))?;
+    let sized = sized(params, budget, || Ok((points.into(), triangles)))?;
+    if let Some(built) = sized.built {
+        return Ok(built);
+    }
+    let params = sized.params;
     let mut occupancy = Occupancy::new(&lo, &hi, &params, budget)?;
     occupancy.add_points(points)?;
     occupancy.add_triangles(points, triangles)?;

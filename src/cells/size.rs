@@ -8,7 +8,7 @@
 
 use std::borrow::Cow;
 
-use super::{BuildParams, bounds, build};
+use super::{BuildInfo, BuildParams, CellComplex, bounds, build};
 use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::rigid::Vect;
@@ -39,6 +39,16 @@ pub(crate) fn check_size(size: f64, what: &str) -> Result<f64> {
     )))
 }
 
+/// What [`sized`] decided: the build's parameters with the finest cell size, what the search
+/// says when it ran, and the complex its last try built when that try's size is the one
+/// chosen (the search's points then make the same complex again, so a caller that builds on
+/// those very points, in the same bounds, takes this one instead).
+pub(crate) struct Sized<const D: usize> {
+    pub params: BuildParams,
+    pub note: Option<String>,
+    pub built: Option<(CellComplex<D>, BuildInfo)>,
+}
+
 /// `params` with the finest cell size decided, and how, when it was searched for: with a
 /// target count (`--cells N`), the size is searched on the points `proxy` gives (the samples,
 /// or a decimated copy of a streamed file's) after the target is checked against the budget;
@@ -48,13 +58,17 @@ pub(crate) fn sized<'a, const D: usize>(
     params: &BuildParams,
     budget: Budget,
     proxy: impl FnOnce() -> Result<(Cow<'a, [Vect<D>]>, &'a [[u32; 3]])>,
-) -> Result<(BuildParams, Option<String>)> {
+) -> Result<Sized<D>> {
     let Some(n) = params.target_cells else {
-        return Ok((*params, None));
+        return Ok(Sized {
+            params: *params,
+            note: None,
+            built: None,
+        });
     };
     check_target(n, budget)?;
     let (points, triangles) = proxy()?;
-    let size = search(&points, triangles, params, n, budget)?;
+    let (size, built) = search(&points, triangles, params, n, budget)?;
     let note = format!(
         "--cells {n}: finest cell size {}",
         crate::human::length(size, size)
@@ -64,7 +78,11 @@ pub(crate) fn sized<'a, const D: usize>(
         target_cells: None,
         ..*params
     };
-    Ok((params, Some(note)))
+    Ok(Sized {
+        params,
+        note: Some(note),
+        built,
+    })
 }
 
 /// What a build asked for `target` cells says when the shape gave far fewer (too few
@@ -103,17 +121,20 @@ pub fn cell_size_for<const D: usize>(
     budget: Budget,
 ) -> Result<f64> {
     check_target(target, budget)?;
-    search(points, triangles, params, target, budget)
+    Ok(search(points, triangles, params, target, budget)?.0)
 }
 
-/// [`cell_size_for`] once the target is known to fit the budget.
+/// [`cell_size_for`] once the target is known to fit the budget, with the complex of the
+/// last try when the search ends on it (a count within 2 % of the target): the build at the
+/// size returned, which need not be made again.
+#[allow(clippy::type_complexity)]
 fn search<const D: usize>(
     points: &[Vect<D>],
     triangles: &[[u32; 3]],
     params: &BuildParams,
     target: usize,
     budget: Budget,
-) -> Result<f64> {
+) -> Result<(f64, Option<(CellComplex<D>, BuildInfo)>)> {
     let (lo, hi) = bounds(points)?;
     let longest = (hi - lo).max().max(f64::MIN_POSITIVE);
     // `small` gives too many cells (or fails), `large` at most `target`.
@@ -122,14 +143,14 @@ fn search<const D: usize>(
     // sparse shape (four samples, a scan flattened onto a plane) may never reach the target,
     // and the search ends at the finest size it tries. The final complex may then have fewer
     // cells than asked; its count is reported.
-    let count = |size: f64| -> Result<Option<usize>> {
+    let try_size = |size: f64| -> Result<Option<(CellComplex<D>, BuildInfo)>> {
         let at = BuildParams {
             cell_size: Some(size),
             target_cells: None,
             ..*params
         };
         match build(points, triangles, &at, budget) {
-            Ok((complex, _)) => Ok(Some(complex.len())),
+            Ok(built) => Ok(Some(built)),
             Err(Error::GridTooLarge { .. } | Error::Memory { .. }) => Ok(None),
             Err(e) => Err(e),
         }
@@ -150,7 +171,8 @@ fn search<const D: usize>(
         if large / small < 1.01 {
             break;
         }
-        let got = count(size)?;
+        let built = try_size(size)?;
+        let got = built.as_ref().map(|(complex, _)| complex.len());
         if let Some(c) = got {
             let miss = (c.max(1) as f64).ln() - goal;
             if best.is_none_or(|(b, _)| miss.abs() < b) {
@@ -166,8 +188,9 @@ fn search<const D: usize>(
         if let Some(c) = got
             && (c as f64 / target as f64 - 1.0).abs() <= 0.02
         {
-            return Ok(size);
+            return Ok((size, built));
         }
+        drop(built);
         let now = got.map(|c| (size.ln(), (c.max(1) as f64).ln()));
         let slope = match (last, now) {
             (Some((s0, c0)), Some((s1, c1))) if (s1 - s0).abs() > 1e-12 && c1 != c0 => {
@@ -188,7 +211,7 @@ fn search<const D: usize>(
             last = now;
         }
     }
-    Ok(best.map_or(large, |(_, size)| size))
+    Ok((best.map_or(large, |(_, size)| size), None))
 }
 
 /// Bytes a complex needs per cell while it is built, its adjacency found and its cells written

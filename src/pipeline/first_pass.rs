@@ -34,22 +34,50 @@ pub(super) fn first_pass_cells(
     if target.is_some() {
         observer.stage("sizing", 0);
     }
-    let (build, sizing) = crate::cells::sized(&params.build, params.memory, || {
-        size_proxy(source, (lo, hi), chunk)
+    let mut proxy_bounds = None;
+    let crate::cells::Sized {
+        params: build,
+        note,
+        built,
+    } = crate::cells::sized(&params.build, params.memory, || {
+        let (points, triangles) = size_proxy(source, (lo, hi), chunk)?;
+        proxy_bounds = Some(crate::cells::bounds(&points)?);
+        Ok((points, triangles))
     })?;
     if target.is_some() {
         observer.finish();
     }
-    notes.extend(sizing);
+    notes.extend(note);
+    // A mesh's proxy is all its vertices: when the file's bounds are theirs, the search's last
+    // complex is the one this pass would fill.
+    let built = built
+        .filter(|_| !source.triangles().is_empty() && proxy_bounds.is_some_and(|b| b == (lo, hi)));
     let sized = &DeformParams { build, ..*params };
-    let mut pass = first_pass(source, spec, sized, (lo, hi), chunk, proxy_max, observer)?;
+    let fill = built.is_none();
+    let mut pass = first_pass(
+        source,
+        spec,
+        sized,
+        (lo, hi),
+        chunk,
+        proxy_max,
+        fill,
+        observer,
+    )?;
+    if let Some((complex, build_info)) = built {
+        let FirstPass {
+            selections, proxy, ..
+        } = pass;
+        notes.extend(crate::cells::shortfall(target, complex.len()));
+        return Ok((complex, build_info, selections, proxy));
+    }
     if pass.outside > 0 {
         notes.push(format!(
             "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
             pass.outside
         ));
         let b = pass.bounds;
-        pass = first_pass(source, spec, sized, b, chunk, proxy_max, observer)?;
+        pass = first_pass(source, spec, sized, b, chunk, proxy_max, true, observer)?;
     }
     let FirstPass {
         mut occupancy,
@@ -173,6 +201,9 @@ fn scan_bounds(source: &mut dyn Source, chunk_len: usize) -> Result<Bounds> {
     Ok((lo, hi))
 }
 
+/// One pass over `source`: what the spec's regions select, the preview proxy, the samples'
+/// bounds and, with `fill`, the cells' occupancy (and a mesh's positions for its triangles).
+#[allow(clippy::too_many_arguments)]
 fn first_pass(
     source: &mut dyn Source,
     spec: &EditSpec<3>,
@@ -180,12 +211,13 @@ fn first_pass(
     (lo, hi): Bounds,
     chunk_len: usize,
     proxy_max: usize,
+    fill: bool,
     observer: &dyn Observer,
 ) -> Result<FirstPass> {
     source.rewind()?;
     let mut occupancy = Occupancy::new(&lo, &hi, &params.build, params.memory)?;
     let mut selections = Selections::new(spec, source.has_classes())?;
-    let keep = !source.triangles().is_empty();
+    let keep = fill && !source.triangles().is_empty();
     let mut positions = Vec::new();
     let mut proxy = (proxy_max > 0).then(|| Proxy::new(source.len(), proxy_max));
     let mut bounds = (
@@ -201,7 +233,9 @@ fn first_pass(
             bounds.0 = bounds.0.inf(p);
             bounds.1 = bounds.1.sup(p);
         }
-        outside += if chunk.normals.is_empty() {
+        outside += if !fill {
+            0
+        } else if chunk.normals.is_empty() {
             occupancy.add_points(&chunk.positions)?
         } else {
             occupancy.add_oriented_points(&chunk.positions, &chunk.normals)?
