@@ -388,8 +388,9 @@ struct CellArgs {
     tolerance: f64,
     /// Solve this many coarser complexes first (each cell's parents, then theirs), each
     /// starting the next finer one at its solution, so that the cells' own Gauss-Newton
-    /// iterations only correct; 0 solves the cells from rest [default: as many as bring the
-    /// coarsest under 20,000 cells, at most 3; none for fewer cells or with --refine-strain]
+    /// iterations only correct; 0 solves the cells from rest [default: from 2,000 cells, as
+    /// many as bring the coarsest under 20,000 cells (one at least, at most 3); none for fewer
+    /// cells or with --refine-strain]
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(0..=8))]
     coarse_levels: Option<u8>,
     /// Parts of the shape that no constraint reaches (leaves, fittings, a loose piece of a

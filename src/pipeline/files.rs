@@ -114,11 +114,14 @@ pub fn deform_file(
     observer.finish();
     let controls = control_results(spec, &solution, &deformer, params, observer)?;
     let t2 = Instant::now();
+    // A mesh's proxy is all its vertices, moved above: the pass writes those.
+    let moved = (info.proxy.stride == 1).then_some(&info.proxy.after[..]);
     info.notes.extend(transfer_pass(
         source.as_mut(),
         output,
         &deformer,
         &origin,
+        moved,
         chunk,
         observer,
     )?);
@@ -330,7 +333,7 @@ fn apply_saved(
     observer.stage("transfer", 0);
     let deformer = field.tile_deformer(params.transfer, params.rbf_tolerance, params.outside)?;
     observer.finish();
-    let mut notes = transfer_pass(source, output, &deformer, &origin, chunk, observer)?;
+    let mut notes = transfer_pass(source, output, &deformer, &origin, None, chunk, observer)?;
     if deformer.beyond_window() > 0 {
         return Ok(Applied::BeyondWindow(deformer.beyond_window()));
     }

@@ -36,21 +36,31 @@ const IN_FLIGHT: usize = 5;
 /// moved bounds fits them, and a source that has seen the records makes a header for them.
 /// Samples beyond the field's margin, when `warp` refuses them, fail the pass before the output
 /// is renamed into place.
+///
+/// `moved`, when given, holds every sample already moved by `warp`, in file order (a mesh's
+/// vertices, moved for the fold-over check): the pass copies them rather than warp them again,
+/// except in chunks with normals, which need the warp's Jacobian. The samples `warp` met
+/// beyond its margin were counted then, and are not counted again.
 pub(super) fn transfer_pass(
     source: &mut dyn Source,
     output: &Path,
     warp: &Constrained<3>,
     origin: &Vect<3>,
+    moved: Option<&[Vect<3>]>,
     chunk_len: usize,
     observer: &dyn Observer,
 ) -> Result<Vec<String>> {
     let mut bounds = None;
     let mut restarted = false;
+    let moved = moved.filter(|m| m.len() as u64 == source.len());
     loop {
         source.rewind()?;
-        warp.reset_outside();
+        if moved.is_none() {
+            warp.reset_outside();
+        }
         let sink = source.sink(output, bounds)?;
-        let (pass, moved_bounds) = pipelined_pass(source, sink, warp, origin, chunk_len, observer)?;
+        let (pass, moved_bounds) =
+            pipelined_pass(source, sink, warp, origin, moved, chunk_len, observer)?;
         match pass {
             Pass::Refused(Accepted::Overflow) if bounds.is_none() => bounds = Some(moved_bounds),
             Pass::Refused(Accepted::Restart) if !restarted => restarted = true,
@@ -102,6 +112,7 @@ fn pipelined_pass(
     sink: Box<dyn Sink>,
     warp: &impl Warp<3>,
     origin: &Vect<3>,
+    known: Option<&[Vect<3>]>,
     chunk_len: usize,
     observer: &dyn Observer,
 ) -> Result<(Pass, Bounds)> {
@@ -143,15 +154,22 @@ fn pipelined_pass(
                     moved,
                     normals,
                 } = &mut job;
-                apply_in_order(
-                    warp,
-                    origin,
-                    &chunk.positions,
-                    &chunk.normals,
-                    order,
-                    moved,
-                    normals,
-                );
+                match known {
+                    Some(known) if chunk.normals.is_empty() => {
+                        let first = chunk.first as usize;
+                        moved.clear();
+                        moved.extend_from_slice(&known[first..first + chunk.len()]);
+                    }
+                    _ => apply_in_order(
+                        warp,
+                        origin,
+                        &chunk.positions,
+                        &chunk.normals,
+                        order,
+                        moved,
+                        normals,
+                    ),
+                }
                 check_moved(chunk.first, moved)?;
                 let (lo, hi) = moved_bounds(moved);
                 bounds = (bounds.0.inf(&lo), bounds.1.sup(&hi));
@@ -172,6 +190,9 @@ fn pipelined_pass(
             };
             match got {
                 Ok(0) => break,
+                Ok(_) if known.is_some() && job.chunk.normals.is_empty() => {
+                    job.order.order.clear();
+                }
                 Ok(_) => job.order.compute(&job.chunk.positions),
                 Err(e) => {
                     reading = Err(e);

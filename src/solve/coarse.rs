@@ -28,9 +28,16 @@ use super::{
     prescribe, targets_at, timed,
 };
 
-/// A complex is solved coarse to fine (automatically) from this many cells on, with stages
-/// down to fewer than this many cells.
-pub const COARSE_FROM: usize = 20_000;
+/// A complex is solved coarse to fine (automatically) from this many cells on. Below it a
+/// solve takes a few tenths of a second anyway; from it on, the bends of
+/// BENCHMARKS.md §3 (the paper's models at 2k-12k cells, the lowest 15 % fixed, the highest
+/// turned 60° and lifted) converged 1.2-8.6 times faster coarse to fine, with the dragon at
+/// 5.5k cells in 17 iterations where from rest it crept through 89, and in a few easy bends
+/// 1.2 times slower.
+pub const COARSE_FROM: usize = 2_000;
+
+/// Automatic stages go on down to fewer than this many cells (one stage at least).
+pub const COARSE_STAGE: usize = 20_000;
 
 /// Coarse stages at most.
 pub const MAX_COARSE_LEVELS: u8 = 3;
@@ -40,9 +47,10 @@ pub const MAX_COARSE_LEVELS: u8 = 3;
 pub const COARSE_TOLERANCE: f64 = 1e-4;
 
 /// How many coarse stages a solve of `cells` cells takes: `params.coarse_levels` where given,
-/// else enough that the coarsest has fewer than [`COARSE_FROM`] cells, assuming each stage
-/// keeps a quarter of them (a scan's or a shell's cells have about four children, a volume's
-/// eight), and none with refinement, whose rounds start from a coarse complex of their own.
+/// else none under [`COARSE_FROM`] cells and from there enough that the coarsest has fewer
+/// than [`COARSE_STAGE`] cells (one at least), assuming each stage keeps a quarter of them (a
+/// scan's or a shell's cells have about four children, a volume's eight), and none with
+/// refinement, whose rounds start from a coarse complex of their own.
 pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
     if let Some(levels) = params.coarse_levels {
         return levels;
@@ -50,9 +58,12 @@ pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
     if params.refine_strain.is_some() || params.refine_fraction.is_some() {
         return 0;
     }
-    let mut levels = 0;
-    let mut left = cells;
-    while left >= COARSE_FROM && levels < MAX_COARSE_LEVELS {
+    if cells < COARSE_FROM {
+        return 0;
+    }
+    let mut levels = 1;
+    let mut left = cells / 4;
+    while left >= COARSE_STAGE && levels < MAX_COARSE_LEVELS {
         levels += 1;
         left /= 4;
     }
@@ -194,9 +205,10 @@ mod tests {
     #[test]
     fn automatic_levels_follow_the_cells() {
         let params = SolveParams::default();
-        assert_eq!(levels(5_000, &params), 0);
+        assert_eq!(levels(COARSE_FROM - 1, &params), 0);
         assert_eq!(levels(COARSE_FROM, &params), 1);
-        assert_eq!(levels(4 * COARSE_FROM, &params), 2);
+        assert_eq!(levels(4 * COARSE_STAGE - 1, &params), 1);
+        assert_eq!(levels(4 * COARSE_STAGE, &params), 2);
         assert_eq!(levels(1_000_000_000, &params), MAX_COARSE_LEVELS);
         let given = SolveParams {
             coarse_levels: Some(2),

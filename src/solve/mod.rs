@@ -77,7 +77,7 @@ pub mod turns;
 
 use std::time::Instant;
 
-pub use coarse::{COARSE_FROM, MAX_COARSE_LEVELS};
+pub use coarse::{COARSE_FROM, COARSE_STAGE, MAX_COARSE_LEVELS};
 pub use constraints::{
     Constraints, Role, Selections, carry_loose, coarsen, inherit, resolve, resolve_selected,
     sample_cell, seen,
