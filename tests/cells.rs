@@ -248,6 +248,36 @@ fn cells_option_gives_about_the_asked_count() {
     }
 }
 
+/// The `--cells` search ends on a try within 2 % of the count asked; that try's complex is
+/// kept rather than built again, and it is the complex a build given the chosen size makes.
+#[test]
+fn cells_search_keeps_the_complex_a_build_at_its_size_makes() {
+    let (dragon, tris) = mesh("dragon_11k_binary.ply");
+    let asked = BuildParams {
+        target_cells: Some(1200),
+        ..Default::default()
+    };
+    let (kept, _) = build(&dragon, &tris, &asked, Budget::default()).unwrap();
+    let size =
+        rigidcells::cells::cell_size_for(&dragon, &tris, &asked, 1200, Budget::default()).unwrap();
+    let given = BuildParams {
+        cell_size: Some(size),
+        target_cells: None,
+        ..asked
+    };
+    let (made, _) = build(&dragon, &tris, &given, Budget::default()).unwrap();
+    assert!(
+        (kept.len() as f64 / 1200.0 - 1.0).abs() <= 0.02,
+        "{}",
+        kept.len()
+    );
+    assert_eq!(kept.grid.finest_size(), size);
+    assert_eq!(kept.len(), made.len());
+    for (a, b) in kept.cells.iter().zip(&made.cells) {
+        assert_eq!((a.key, a.center, a.half), (b.key, b.center, b.half));
+    }
+}
+
 /// The dragon as a welded mesh, an unwelded soup and a point cloud sampled from its surface
 /// (its vertices plus 60k points uniform on its surface): interior cells agree (mesh and soup
 /// identically, points within one cell layer), and the same bend moves the vertices to within

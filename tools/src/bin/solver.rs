@@ -6,11 +6,12 @@
 //!
 //! Scenes (all by default but `veg-1.25`, which takes minutes):
 //! - `tube`: the closed 480k-vertex tube (`data_gen::tube`), its first metre fixed and its last
-//!   turned by −90° about y and moved by (−3, 0, 5), `--cells 5500`;
+//!   turned by −90° about y and moved by (−3, 0, 5), `--cells 5500` (coarse to fine, by default
+//!   from 2,000 cells);
 //! - `tube-direct`: the same with `--solver direct`;
 //! - `veg-2.5`, `veg-1.25`: 1 km × 200 m of rolling ground under up to 3 m of low vegetation
 //!   (`gen vegetation`, 2M points: every cell a boundary cell), the west 100 m fixed and the
-//!   east 100 m lifted by 20 m, cells of 2.5 m and 1.25 m (solved coarse to fine);
+//!   east 100 m lifted by 20 m, cells of 2.5 m and 1.25 m;
 //! - any scene with `-rest` after its name: solved from rest (`--coarse-levels 0`).
 //!
 //! Each scene is one `rigidcells deform --report` process (its peak memory its own); the
