@@ -61,17 +61,30 @@ def rigidcells(binary, tube, edit, out, extra):
     return time.perf_counter() - start
 
 
-def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def arguments(doc, extra):
+    """The command line of a tube benchmark: the tube, the binary, `--runs` and, with `extra`,
+    more flags for `rigidcells deform`."""
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     parser.add_argument("tube")
     parser.add_argument("binary")
     parser.add_argument("--runs", type=int, default=3)
-    parser.add_argument("extra", nargs="*", help="more flags for rigidcells deform")
-    args = parser.parse_args()
+    if extra:
+        parser.add_argument("extra", nargs="*", help="more flags for rigidcells deform")
+    return parser.parse_args()
+
+
+def write_edit(folder):
+    """The bend's edit spec, written in `folder`: its path."""
+    edit = os.path.join(folder, "bend.toml")
+    with open(edit, "w") as spec:
+        spec.write(EDIT)
+    return edit
+
+
+def main():
+    args = arguments(__doc__, extra=True)
     with tempfile.TemporaryDirectory() as folder:
-        edit = os.path.join(folder, "bend.toml")
-        with open(edit, "w") as spec:
-            spec.write(EDIT)
+        edit = write_edit(folder)
         best = [float("inf"), float("inf")]
         for run in range(args.runs):
             ours = rigidcells(

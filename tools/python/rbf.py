@@ -15,9 +15,7 @@ and handle boxes (there both interpolate the same function; in the boxes' cells 
 the edit's maps exactly).
 """
 
-import argparse
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -25,7 +23,9 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from arap import EDIT  # noqa: E402
+from arap import arguments, rigidcells, write_edit  # noqa: E402
+
+RBF = ["--transfer", "rbf"]
 
 HEADER = "end_header\n".encode()
 
@@ -69,33 +69,16 @@ def scipy_rbf(tube, field, out):
     return time.perf_counter() - start
 
 
-def rigidcells(binary, tube, edit, out, extra):
-    """`rigidcells deform --transfer rbf` of the tube to `out`: seconds in all."""
-    start = time.perf_counter()
-    subprocess.run(
-        [binary, "deform", tube, "--edit", edit, "-o", out, "--cells", "5500", "-q",
-         "--transfer", "rbf", *extra],
-        check=True,
-    )
-    return time.perf_counter() - start
-
-
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("tube")
-    parser.add_argument("binary")
-    parser.add_argument("--runs", type=int, default=3)
-    args = parser.parse_args()
+    args = arguments(__doc__, extra=False)
     with tempfile.TemporaryDirectory() as folder:
-        edit = os.path.join(folder, "bend.toml")
-        with open(edit, "w") as spec:
-            spec.write(EDIT)
+        edit = write_edit(folder)
         field = os.path.join(folder, "bend.field")
         ours_out, theirs_out = os.path.join(folder, "ours.ply"), os.path.join(folder, "scipy.ply")
-        rigidcells(args.binary, args.tube, edit, ours_out, ["--save-field", field])
+        rigidcells(args.binary, args.tube, edit, ours_out, [*RBF, "--save-field", field])
         best = [float("inf"), float("inf")]
         for run in range(args.runs):
-            ours = rigidcells(args.binary, args.tube, edit, ours_out, [])
+            ours = rigidcells(args.binary, args.tube, edit, ours_out, RBF)
             theirs = scipy_rbf(args.tube, field, theirs_out)
             best = [min(best[0], ours), min(best[1], theirs)]
             print(f"run {run + 1}: rigidcells {ours:.2f} s, SciPy RBF {theirs:.2f} s, "
