@@ -356,6 +356,78 @@ translate = [0.0, 0.0, {lift}]
     assert!(worst < 0.01, "cells differ by {worst}");
 }
 
+/// A drag on the cells' parents: each step moves the parents and the cells follow them (the
+/// info says the cells are not converged; the fixed cells stay at rest, the handle's cells
+/// are where the pose puts them), and the update after the drag solves the cells to the
+/// minimum an update without the drag reaches.
+#[test]
+fn a_drag_on_the_parents_ends_where_the_cells_solve() {
+    let pts = blob([2.0, 1.0, 1.0], 20_000);
+    let complex = cells(&pts, &[], 0.2);
+    let spec = |lift: f64| {
+        let text = format!(
+            r#"
+[[fixed]]
+box = {{ min = [-3.0, -3.0, -3.0], max = [-1.5, 3.0, 3.0] }}
+[[handle]]
+box = {{ min = [1.5, -3.0, -3.0], max = [3.0, 3.0, 3.0] }}
+rotate = {{ axis = [0.0, 1.0, 0.0], degrees = -20.0 }}
+pivot = [1.5, 0.0, 0.0]
+translate = [0.0, 0.0, {lift}]
+"#
+        );
+        resolved(&complex, &pts, &text)
+    };
+    let session = || {
+        let params = SolveParams::default();
+        solve::Session::new(
+            complex.clone(),
+            spec(0.8),
+            &params,
+            Budget::default(),
+            &Silent,
+        )
+        .unwrap()
+        .0
+    };
+    let (mut dragged, mut plain) = (session(), session());
+    for lift in [0.85, 0.9] {
+        let info = dragged.drag_on_parents(spec(lift), 1).unwrap();
+        assert!(!info.converged && info.iterations == 1, "{info:?}");
+    }
+    // The cells of a parent share its rotation.
+    let rotations: std::collections::BTreeSet<Vec<u64>> = dragged
+        .motions()
+        .iter()
+        .map(|m| m.rot.iter().map(|v| v.to_bits()).collect())
+        .collect();
+    assert!(
+        3 * rotations.len() < 2 * complex.len(),
+        "{} rotations",
+        rotations.len()
+    );
+    let roles = &dragged.constraints().roles;
+    let handle = dragged.constraints().handle_map(0, 1.0);
+    for ((m, role), cell) in dragged.motions().iter().zip(roles).zip(&complex.cells) {
+        let at = match role {
+            solve::Role::Fixed => cell.center,
+            solve::Role::Handle(_) => handle.cell_motion(&cell.center).pos,
+            _ => continue,
+        };
+        assert!((m.pos - at).norm() < 1e-12, "{role:?} cell at {:?}", m.pos);
+    }
+    let (ends, direct) = (
+        dragged.update(spec(0.9)).unwrap(),
+        plain.update(spec(0.9)).unwrap(),
+    );
+    assert!(ends.converged && direct.converged);
+    let (a, b) = (
+        *ends.energies.last().unwrap(),
+        *direct.energies.last().unwrap(),
+    );
+    assert!((a - b).abs() <= 1e-6 * b, "{a} after the drag, {b} without");
+}
+
 /// The multilevel path (conjugate gradients with the rigid-motion multigrid) reaches
 /// the direct factorization's minimum, on a bent bar with a pin (3D) and on a 2D disk with a
 /// turned handle, both large enough for a coarse level.

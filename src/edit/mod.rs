@@ -359,10 +359,7 @@ impl Editor {
                     handle.pivot = p;
                 }
             }
-            (
-                session.update_with(constraints, DRAG_ITERATIONS)?,
-                Vec::new(),
-            )
+            (session.drag(constraints, DRAG_ITERATIONS)?, Vec::new())
         } else {
             let selected = Selected::Samples {
                 points: &self.scene.points,
