@@ -288,16 +288,10 @@ fn refinement_splits_strained_cells_and_continues() {
     assert!(e_refined < e_plain, "{e_refined} vs {e_plain}");
 }
 
-/// The interactive case: after a bend is solved, dragging the handle a little further and
-/// updating the session from the solved motions reaches the same minimum as a solve from rest
-/// of the new edit, in fewer iterations, with the symbolic factorization kept.
-#[test]
-fn a_session_follows_a_dragged_handle_from_its_last_solution() {
-    let pts = blob([2.0, 1.0, 1.0], 20_000);
-    let complex = cells(&pts, &[], 0.2);
-    let spec = |lift: f64| {
-        let text = format!(
-            r#"
+/// The blob's west end fixed and its east end turned by 20° about y and lifted by `lift`.
+fn lifted_end(lift: f64) -> String {
+    format!(
+        r#"
 [[fixed]]
 box = {{ min = [-3.0, -3.0, -3.0], max = [-1.5, 3.0, 3.0] }}
 [[handle]]
@@ -306,9 +300,17 @@ rotate = {{ axis = [0.0, 1.0, 0.0], degrees = -20.0 }}
 pivot = [1.5, 0.0, 0.0]
 translate = [0.0, 0.0, {lift}]
 "#
-        );
-        resolved(&complex, &pts, &text)
-    };
+    )
+}
+
+/// The interactive case: after a bend is solved, dragging the handle a little further and
+/// updating the session from the solved motions reaches the same minimum as a solve from rest
+/// of the new edit, in fewer iterations, with the symbolic factorization kept.
+#[test]
+fn a_session_follows_a_dragged_handle_from_its_last_solution() {
+    let pts = blob([2.0, 1.0, 1.0], 20_000);
+    let complex = cells(&pts, &[], 0.2);
+    let spec = |lift: f64| resolved(&complex, &pts, &lifted_end(lift));
     let solve_params = SolveParams::default();
     let (mut session, first) = solve::Session::new(
         complex.clone(),
@@ -364,20 +366,7 @@ translate = [0.0, 0.0, {lift}]
 fn a_drag_on_the_parents_ends_where_the_cells_solve() {
     let pts = blob([2.0, 1.0, 1.0], 20_000);
     let complex = cells(&pts, &[], 0.2);
-    let spec = |lift: f64| {
-        let text = format!(
-            r#"
-[[fixed]]
-box = {{ min = [-3.0, -3.0, -3.0], max = [-1.5, 3.0, 3.0] }}
-[[handle]]
-box = {{ min = [1.5, -3.0, -3.0], max = [3.0, 3.0, 3.0] }}
-rotate = {{ axis = [0.0, 1.0, 0.0], degrees = -20.0 }}
-pivot = [1.5, 0.0, 0.0]
-translate = [0.0, 0.0, {lift}]
-"#
-        );
-        resolved(&complex, &pts, &text)
-    };
+    let spec = |lift: f64| resolved(&complex, &pts, &lifted_end(lift));
     let session = || {
         let params = SolveParams::default();
         solve::Session::new(

@@ -169,6 +169,15 @@ where
     Ok((system, motions))
 }
 
+/// The cell of `coarse`, a coarsening of the complex of `cell`, that holds `cell` (itself or an
+/// ancestor of it).
+pub(super) fn holder<const D: usize>(
+    coarse: &CellComplex<D>,
+    cell: &crate::cells::Cell<D>,
+) -> Option<usize> {
+    std::iter::successors(Some(cell.key), |k| k.parent()).find_map(|k| coarse.find(&k))
+}
+
 /// The motions of `fine`'s cells from those of `coarse`, a coarsening of it: each fine cell
 /// moves with the coarse cell that holds it (a cell kept as it was keeps its motion).
 pub(super) fn prolong<const D: usize>(
@@ -181,19 +190,15 @@ where
 {
     fine.cells
         .iter()
-        .map(|cell| {
-            let holder =
-                std::iter::successors(Some(cell.key), |k| k.parent()).find_map(|k| coarse.find(&k));
-            match holder {
-                Some(c) => {
-                    let (m, at) = (&motions[c], &coarse.cells[c].center);
-                    Motion {
-                        rot: m.rot,
-                        pos: m.apply(at, &cell.center),
-                    }
+        .map(|cell| match holder(coarse, cell) {
+            Some(c) => {
+                let (m, at) = (&motions[c], &coarse.cells[c].center);
+                Motion {
+                    rot: m.rot,
+                    pos: m.apply(at, &cell.center),
                 }
-                None => Motion::rest(&cell.center),
             }
+            None => Motion::rest(&cell.center),
         })
         .collect()
 }

@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use super::coarse::prolong;
+use super::coarse::{holder, prolong};
 use super::system::System;
 use super::turns::TurnGauge;
 use super::{
@@ -105,25 +105,12 @@ where
                 self.complex.len()
             )));
         }
-        let start = Instant::now();
-        let mut info = SolverInfo {
-            cells_initial: self.complex.len(),
-            load_steps: 1,
-            ..Default::default()
-        };
+        let (start, mut info) = (Instant::now(), self.warm_info());
         let same_structure = !self.stale_system && same_structure(&constraints, &self.constraints);
         if !same_structure {
             self.drag = None;
             self.stale_system = false;
-            self.system = timed(&mut info.seconds_symbolic, || {
-                System::new(
-                    &self.complex,
-                    &constraints,
-                    self.params.method,
-                    self.budget,
-                    CELLS_ADVICE,
-                )
-            })?;
+            self.system = self.system_for(&self.complex, &constraints, &mut info)?;
         }
         self.constraints = constraints;
         if self.dragged {
@@ -134,21 +121,14 @@ where
                 .project_positions(complex, constraints, &mut self.motions, &targets);
             self.dragged = false;
         }
-        let params = SolveParams {
-            max_iterations,
-            ..self.params
-        };
-        let it = minimize_with(
+        let (complex, constraints) = (&self.complex, &self.constraints);
+        let cells = (
             &mut self.system,
-            &self.complex,
-            &self.constraints,
-            &mut self.motions,
-            1.0,
-            &params,
-            &mut info,
-            &crate::progress::Silent,
-        )?;
-        info.iterations_per_step.push(it);
+            complex,
+            constraints,
+            &mut self.motions[..],
+        );
+        warm_steps(cells, &self.params, max_iterations, &mut info)?;
         Ok(self.finished(info, start))
     }
 
@@ -182,12 +162,7 @@ where
         if constraints.roles.len() != self.complex.len() {
             return self.update_with(constraints, max_iterations);
         }
-        let start = Instant::now();
-        let mut info = SolverInfo {
-            cells_initial: self.complex.len(),
-            load_steps: 1,
-            ..Default::default()
-        };
+        let (start, mut info) = (Instant::now(), self.warm_info());
         let same = !self.stale_system && same_structure(&constraints, &self.constraints);
         let mut stage = match self.drag.take() {
             Some(mut stage) if same => {
@@ -206,15 +181,7 @@ where
                 if 3 * complex.len() > 2 * self.complex.len() {
                     return self.update_with(constraints, max_iterations);
                 }
-                let system = timed(&mut info.seconds_symbolic, || {
-                    System::new(
-                        &complex,
-                        &on_parents,
-                        self.params.method,
-                        self.budget,
-                        CELLS_ADVICE,
-                    )
-                })?;
+                let system = self.system_for(&complex, &on_parents, &mut info)?;
                 let motions = restrict(&self.complex, &self.motions, &complex);
                 DragStage {
                     complex,
@@ -224,21 +191,13 @@ where
                 }
             }
         };
-        let params = SolveParams {
-            max_iterations,
-            ..self.params
-        };
-        let it = minimize_with(
+        let cells = (
             &mut stage.system,
             &stage.complex,
             &stage.constraints,
-            &mut stage.motions,
-            1.0,
-            &params,
-            &mut info,
-            &crate::progress::Silent,
-        )?;
-        info.iterations_per_step.push(it);
+            &mut stage.motions[..],
+        );
+        warm_steps(cells, &self.params, max_iterations, &mut info)?;
         info.converged = false;
         self.motions = prolong(&stage.complex, &stage.motions, &self.complex);
         prescribe(&self.complex, &constraints, &mut self.motions, 1.0);
@@ -247,6 +206,34 @@ where
         self.dragged = true;
         self.drag = Some(stage);
         Ok(self.finished(info, start))
+    }
+
+    /// The info a warm solve starts with: one load step on the session's cells.
+    fn warm_info(&self) -> SolverInfo {
+        SolverInfo {
+            cells_initial: self.complex.len(),
+            load_steps: 1,
+            ..Default::default()
+        }
+    }
+
+    /// The system of `constraints` on `complex` under the session's method and budget, its
+    /// time counted as the info's symbolic analysis.
+    fn system_for(
+        &self,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        info: &mut SolverInfo,
+    ) -> Result<System<D>> {
+        timed(&mut info.seconds_symbolic, || {
+            System::new(
+                complex,
+                constraints,
+                self.params.method,
+                self.budget,
+                CELLS_ADVICE,
+            )
+        })
     }
 
     fn finished(&self, mut info: SolverInfo, start: Instant) -> SolverInfo {
@@ -282,6 +269,42 @@ where
     }
 }
 
+/// At most `max_iterations` Gauss-Newton iterations of `params` at full load, from the motions
+/// as they are, into `info`.
+#[allow(clippy::type_complexity)]
+fn warm_steps<const D: usize>(
+    (system, complex, constraints, motions): (
+        &mut System<D>,
+        &CellComplex<D>,
+        &Constraints<D>,
+        &mut [Motion<D>],
+    ),
+    params: &SolveParams,
+    max_iterations: usize,
+    info: &mut SolverInfo,
+) -> Result<()>
+where
+    Dim<D>: Rigid<D>,
+{
+    let params = SolveParams {
+        max_iterations,
+        ..*params
+    };
+    let silent = &crate::progress::Silent;
+    let it = minimize_with(
+        system,
+        complex,
+        constraints,
+        motions,
+        1.0,
+        &params,
+        info,
+        silent,
+    )?;
+    info.iterations_per_step.push(it);
+    Ok(())
+}
+
 /// Whether `a` and `b` give systems of one structure: the same roles, stiffness, and targets'
 /// cells, weights and masks (handles, pins and targets may have moved).
 fn same_structure<const D: usize>(a: &Constraints<D>, b: &Constraints<D>) -> bool {
@@ -306,9 +329,7 @@ where
 {
     let mut out: Vec<Option<Motion<D>>> = vec![None; coarse.len()];
     for (cell, m) in fine.cells.iter().zip(motions) {
-        let holder =
-            std::iter::successors(Some(cell.key), |k| k.parent()).find_map(|k| coarse.find(&k));
-        if let Some(c) = holder
+        if let Some(c) = holder(coarse, cell)
             && out[c].is_none()
         {
             out[c] = Some(Motion {
