@@ -31,9 +31,9 @@ use super::{
 /// A complex is solved coarse to fine (automatically) from this many cells on. Below it a
 /// solve takes a few tenths of a second anyway; from it on, the bends of
 /// BENCHMARKS.md §3 (the paper's models at 2k-12k cells, the lowest 15 % fixed, the highest
-/// turned 60° and lifted) converged 1.2-8.6 times faster coarse to fine, with the dragon at
-/// 5.5k cells in 17 iterations where from rest it crept through 89, and in a few easy bends
-/// 1.2 times slower.
+/// turned 60° and lifted) converged 1.2-7.5 times faster coarse to fine in ten of twelve
+/// runs, the dragon at 5.5k cells in 17 iterations where from rest it crept through 89, and
+/// 1.2 times slower in the other two, easy bends.
 pub const COARSE_FROM: usize = 2_000;
 
 /// Automatic stages go on down to fewer than this many cells (one stage at least).
