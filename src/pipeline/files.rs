@@ -100,6 +100,9 @@ pub fn deform_file(
     observer.stage("checking", 0);
     let mut after = proxy.before.clone();
     apply(&deformer, &origin, &mut after);
+    // When the proxy holds every sample, these are the output's positions, and the samples
+    // beyond the margin among them are all the output's (the checks below warp more points).
+    let proxy_outside = deformer.outside().count;
     let triangles = if proxy.stride == 1 && proxy.before.len() as u64 == source.len() {
         source.triangles().to_vec()
     } else {
@@ -114,8 +117,9 @@ pub fn deform_file(
     observer.finish();
     let controls = control_results(spec, &solution, &deformer, params, observer)?;
     let t2 = Instant::now();
-    // A mesh's proxy is all its vertices, moved above: the pass writes those.
-    let moved = (info.proxy.stride == 1).then_some(&info.proxy.after[..]);
+    // A proxy of every sample (a mesh's vertices, a small file) was moved above: the pass
+    // writes those positions.
+    let moved = (info.proxy.after.len() as u64 == source.len()).then_some(&info.proxy.after[..]);
     info.notes.extend(transfer_pass(
         source.as_mut(),
         output,
@@ -126,7 +130,10 @@ pub fn deform_file(
         observer,
     )?);
     // Every sample made the cells; one beyond their margin would be extrapolated, so say so.
-    let outside = deformer.outside().count;
+    let outside = match moved {
+        Some(_) => proxy_outside,
+        None => deformer.outside().count,
+    };
     if outside > 0 {
         info.notes.push(format!(
             "{outside} samples lay beyond the cells' margin ({}) and were moved by the transfer \

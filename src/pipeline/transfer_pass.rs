@@ -39,8 +39,9 @@ const IN_FLIGHT: usize = 5;
 ///
 /// `moved`, when given, holds every sample already moved by `warp`, in file order (a mesh's
 /// vertices, moved for the fold-over check): the pass copies them rather than warp them again,
-/// except in chunks with normals, which need the warp's Jacobian. The samples `warp` met
-/// beyond its margin were counted then, and are not counted again.
+/// except in chunks with normals, which need the warp's Jacobian. The copied samples are not
+/// counted beyond the margin here (the caller counted them when it moved them), so `moved` is
+/// taken only where `warp` extends the transfer there, never where it refuses such samples.
 pub(super) fn transfer_pass(
     source: &mut dyn Source,
     output: &Path,
@@ -52,12 +53,12 @@ pub(super) fn transfer_pass(
 ) -> Result<Vec<String>> {
     let mut bounds = None;
     let mut restarted = false;
-    let moved = moved.filter(|m| m.len() as u64 == source.len());
+    let moved = moved.filter(|m| {
+        m.len() as u64 == source.len() && warp.outside_policy() == crate::field::Outside::Extend
+    });
     loop {
         source.rewind()?;
-        if moved.is_none() {
-            warp.reset_outside();
-        }
+        warp.reset_outside();
         let sink = source.sink(output, bounds)?;
         let (pass, moved_bounds) =
             pipelined_pass(source, sink, warp, origin, moved, chunk_len, observer)?;

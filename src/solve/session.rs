@@ -31,7 +31,8 @@ pub struct Session<const D: usize> {
     drag: Option<DragStage<D>>,
     /// Whether `motions` are a drag stage's carried down (the next update on the cells starts
     /// from their free positions' optimum), and whether `system` was made for constraints of
-    /// another structure than `constraints` (a drag changed them).
+    /// another structure than `constraints` (a drag changed them; the stage follows the
+    /// constraints, the cells' system waits for the next update on the cells).
     dragged: bool,
     stale_system: bool,
 }
@@ -163,7 +164,9 @@ where
             return self.update_with(constraints, max_iterations);
         }
         let (start, mut info) = (Instant::now(), self.warm_info());
-        let same = !self.stale_system && same_structure(&constraints, &self.constraints);
+        // The stage was made for the last constraints' structure (an update that changed it
+        // dropped the stage).
+        let same = same_structure(&constraints, &self.constraints);
         let mut stage = match self.drag.take() {
             Some(mut stage) if same => {
                 let on_parents = &mut stage.constraints;
