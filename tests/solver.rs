@@ -417,6 +417,34 @@ fn a_drag_on_the_parents_ends_where_the_cells_solve() {
     assert!((a - b).abs() <= 1e-6 * b, "{a} after the drag, {b} without");
 }
 
+/// On a large complex a drag moves ancestors of a few thousand cells, older than the parents
+/// where the parents are still many (a shell, whose parents merge about four cells each).
+#[test]
+fn a_drag_on_many_cells_moves_a_few_thousand_ancestors() {
+    let pts = blob([2.0, 1.0, 1.0], 80_000);
+    let complex = cells(&pts, &[], 0.03);
+    // 25.7k cells, 6.3k parents, 1.9k grandparents.
+    assert!(complex.len() > 4 * 6_000, "{} cells", complex.len());
+    let spec = |lift: f64| resolved(&complex, &pts, &lifted_end(lift));
+    let params = SolveParams::default();
+    let (mut session, _) = solve::Session::new(
+        complex.clone(),
+        spec(0.0),
+        &params,
+        Budget::default(),
+        &Silent,
+    )
+    .unwrap();
+    let info = session.drag(spec(0.05), 1).unwrap();
+    assert!(!info.converged, "{info:?}");
+    let rotations: std::collections::BTreeSet<Vec<u64>> = session
+        .motions()
+        .iter()
+        .map(|m| m.rot.iter().map(|v| v.to_bits()).collect())
+        .collect();
+    assert!(rotations.len() <= 6_000, "{} rotations", rotations.len());
+}
+
 /// The multilevel path (conjugate gradients with the rigid-motion multigrid) reaches
 /// the direct factorization's minimum, on a bent bar with a pin (3D) and on a 2D disk with a
 /// turned handle, both large enough for a coarse level.

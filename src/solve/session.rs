@@ -27,7 +27,7 @@ pub struct Session<const D: usize> {
     motions: Vec<Motion<D>>,
     params: SolveParams,
     budget: Budget,
-    /// The parents' stage that drags move on large complexes ([`Session::drag`]).
+    /// The ancestors' stage that drags move on large complexes ([`Session::drag`]).
     drag: Option<DragStage<D>>,
     /// Whether `motions` are a drag stage's carried down (the next update on the cells starts
     /// from their free positions' optimum), and whether `system` was made for constraints of
@@ -37,11 +37,41 @@ pub struct Session<const D: usize> {
     stale_system: bool,
 }
 
-/// From this many cells on, a drag moves the cells' parents (one level coarser, a quarter of
-/// the cells on a scan) and the cells follow them rigidly; the cells themselves are solved
+/// From this many cells on, a drag moves the cells' ancestors (a few thousand: see
+/// [`DRAG_STAGE_CELLS`]) and the cells follow them rigidly; the cells themselves are solved
 /// when the drag pauses or ends. At 50k cells of a terrain an update on the cells costs
 /// 0.45–0.75 s, most of it the factorization.
 pub const DRAG_COARSE_FROM: usize = 20_000;
+
+/// A drag's stage has at most this many cells where coarsening gets there in
+/// [`DRAG_MOST_LEVELS`] levels. On autzen_trim at 50k cells the parents are 17.4k (an update
+/// 260–300 ms) and the grandparents 5.4k (55–110 ms after the first, most of it the
+/// factorization).
+const DRAG_STAGE_CELLS: usize = 6_000;
+const DRAG_MOST_LEVELS: u8 = 3;
+
+/// The ancestors a drag moves: the parents, or older ones while the stage has more than
+/// [`DRAG_STAGE_CELLS`] and a level still merges cells.
+fn drag_parents<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+) -> (CellComplex<D>, Constraints<D>)
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut stage = coarsen(complex, constraints, 1);
+    for k in 2..=DRAG_MOST_LEVELS {
+        if stage.0.len() <= DRAG_STAGE_CELLS {
+            break;
+        }
+        let older = coarsen(complex, constraints, k);
+        if 4 * older.0.len() > 3 * stage.0.len() {
+            break;
+        }
+        stage = older;
+    }
+    stage
+}
 
 /// The coarse complex a drag solves, with its constraints, system and motions.
 struct DragStage<const D: usize> {
@@ -135,11 +165,11 @@ where
 
     /// One step of a drag toward `constraints` (at most `max_iterations` Gauss-Newton
     /// iterations). From [`DRAG_COARSE_FROM`] cells on, the step is taken on the cells'
-    /// parents (`coarsen` by one level, made once for the drag's constraints and kept while
-    /// only their handles, pins and targets move), and each cell then takes its parent's
-    /// rigid motion, as a solve coarse to fine starts its cells: the step costs what a quarter
-    /// of the cells cost ([`Session::drag_on_parents`]). Smaller complexes take
-    /// [`Session::update_with`] itself.
+    /// ancestors (`coarsen` by as many levels as bring them to a few thousand, made once for
+    /// the drag's constraints and kept while only their handles, pins and targets move), and
+    /// each cell then takes its ancestor's rigid motion, as a solve coarse to fine starts its
+    /// cells: the step costs what those few thousand cells cost
+    /// ([`Session::drag_on_parents`]). Smaller complexes take [`Session::update_with`] itself.
     pub fn drag(
         &mut self,
         constraints: Constraints<D>,
@@ -151,7 +181,7 @@ where
         self.drag_on_parents(constraints, max_iterations)
     }
 
-    /// [`Session::drag`]'s step on the cells' parents, whatever the count of cells: the info
+    /// [`Session::drag`]'s step on the cells' ancestors, whatever the count of cells: the info
     /// says it has not converged, and the next [`Session::update_with`] solves the cells
     /// themselves from there. Constraints for other cells, and complexes that coarsening
     /// hardly merges, take [`Session::update_with`].
@@ -180,7 +210,7 @@ where
                 stage
             }
             _ => {
-                let (complex, on_parents) = coarsen(&self.complex, &constraints, 1);
+                let (complex, on_parents) = drag_parents(&self.complex, &constraints);
                 if 3 * complex.len() > 2 * self.complex.len() {
                     return self.update_with(constraints, max_iterations);
                 }
