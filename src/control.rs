@@ -131,6 +131,7 @@ where
             point.left_out = Some(spec.targets[i].pulled(predicted - t.to).norm());
         }
         observer.advance(1);
+        crate::progress::check(observer)?;
     }
     observer.finish();
     Ok(())

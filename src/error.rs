@@ -143,6 +143,10 @@ pub enum Error {
     /// A numerical failure that damping could not repair.
     #[error("solver failure: {0}")]
     Solver(String),
+    /// The caller stopped the work ([`crate::progress::Observer::cancelled`]); no output was
+    /// left behind.
+    #[error("cancelled")]
+    Cancelled,
 }
 
 /// `Result` with [`Error`].

@@ -1,5 +1,8 @@
 //! Progress reporting. The library never prints; long stages report through an [`Observer`],
-//! which the binary implements with a progress bar on a terminal.
+//! which the binary implements with a progress bar on a terminal; the observer may also ask
+//! the work to stop ([`Observer::cancelled`]).
+
+use crate::error::{Error, Result};
 
 /// Receives progress of long stages. A stage of `len` 0 has no known length (a spinner).
 pub trait Observer: Sync {
@@ -11,6 +14,19 @@ pub trait Observer: Sync {
     fn message(&self, _text: &str) {}
     /// The stage is done.
     fn finish(&self) {}
+    /// Whether the caller wants the work stopped: long loops ask between their steps (a
+    /// solver iteration, a chunk read or written) and end with [`Error::Cancelled`].
+    fn cancelled(&self) -> bool {
+        false
+    }
+}
+
+/// [`Error::Cancelled`] once `observer` asks to stop.
+pub fn check(observer: &dyn Observer) -> Result<()> {
+    if observer.cancelled() {
+        return Err(Error::Cancelled);
+    }
+    Ok(())
 }
 
 /// An observer that ignores everything.

@@ -37,6 +37,50 @@ pub struct View {
     pub zoom: f64,
 }
 
+/// Refuses a picture's path that does not name a PNG.
+pub fn png_path(path: &Path) -> Result<()> {
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
+    {
+        Ok(())
+    } else {
+        Err(Error::Param(format!(
+            "{}: pictures are written as .png",
+            path.display()
+        )))
+    }
+}
+
+impl View {
+    /// Refuses a view no picture can have: a size outside 16 to 8192 pixels a side, an angle
+    /// that is not finite, a zoom not above 0 or past 1e6.
+    pub fn check(&self) -> Result<()> {
+        let sides = 16..=8192;
+        if !sides.contains(&self.width) || !sides.contains(&self.height) {
+            return Err(Error::Param(format!(
+                "--size {}x{}: 16 to 8192 pixels each way",
+                self.width, self.height
+            )));
+        }
+        if !self.azimuth.is_finite() || !self.elevation.is_finite() {
+            return Err(Error::Param(
+                "--azimuth and --elevation must be finite".into(),
+            ));
+        }
+        if !(self.zoom.is_finite() && self.zoom > 0.0 && self.zoom <= 1e6) {
+            return Err(Error::Param(format!(
+                "--zoom {}: a factor above 0, at most 1e6",
+                self.zoom
+            )));
+        }
+        if self.up > 2 {
+            return Err(Error::Param(format!("--up {}: an axis, 0 to 2", self.up)));
+        }
+        Ok(())
+    }
+}
+
 impl Default for View {
     fn default() -> Self {
         Self {

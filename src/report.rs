@@ -22,6 +22,7 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use crate::pipeline::FileInfo;
+use crate::rigid::Vect;
 use crate::solve::{Role, Solution};
 
 /// The report; see the module docs for the stable keys.
@@ -169,8 +170,9 @@ impl Report {
             };
             *cell_roles.entry(name).or_insert(0) += 1;
         }
+        let proxy = &file.proxy;
         let (residual_fixed_max, residual_handle_max, residual_samples) =
-            proxy_residual(solution, file);
+            residuals(solution, &proxy.before, &proxy.after);
         let target_residual_max = solution
             .constraints
             .targets
@@ -231,9 +233,13 @@ impl Report {
     }
 }
 
-/// The largest distances of a proxy sample in a fixed cell and in a handle cell from where its
-/// cell's constraint sends it, and how many samples were measured.
-fn proxy_residual(solution: &Solution<3>, file: &FileInfo) -> (f64, f64, usize) {
+/// The largest distances of a sample in a fixed cell and in a handle cell from where its cell's
+/// constraint sends it (`before[i]` went to `after[i]`), and how many samples were measured.
+pub fn residuals(
+    solution: &Solution<3>,
+    before: &[Vect<3>],
+    after: &[Vect<3>],
+) -> (f64, f64, usize) {
     let constraints = &solution.constraints;
     let origin = constraints.origin;
     let maps: Vec<_> = (0..constraints.handles.len())
@@ -241,7 +247,7 @@ fn proxy_residual(solution: &Solution<3>, file: &FileInfo) -> (f64, f64, usize) 
         .collect();
     let (mut fixed, mut handle) = (0.0f64, 0.0f64);
     let mut count = 0;
-    for (before, after) in file.proxy.before.iter().zip(&file.proxy.after) {
+    for (before, after) in before.iter().zip(after) {
         match solution.role_at(before) {
             Some(Role::Fixed) => fixed = fixed.max((after - before).norm()),
             Some(Role::Handle(k)) => {

@@ -248,6 +248,35 @@ fn cells_option_gives_about_the_asked_count() {
     }
 }
 
+/// Where no size gives the count asked within 2 % (a thin bar, whose count jumps as the
+/// cells' alignment with it changes), the run says how many cells it has instead.
+#[test]
+fn cells_option_says_when_the_count_misses() {
+    let dir = tempfile::tempdir().unwrap();
+    let bar = dir.path().join("bar.xyz");
+    let mut rng = StdRng::seed_from_u64(5);
+    let text: String = (0..20_000)
+        .map(|_| {
+            let (x, y, z): (f64, f64, f64) =
+                (rng.random_range(0.0..10.0), rng.random(), rng.random());
+            format!("{x} {y} {z}\n")
+        })
+        .collect();
+    std::fs::write(&bar, text).unwrap();
+    let output = dir.path().join("cells.ply");
+    let mut missed = 0;
+    for n in [1000usize, 3000] {
+        let r = common::cells(&bar, &output, &["--cells", &n.to_string()]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let got = Document::read(&output).unwrap().positions().len() / 8;
+        let off = (got as f64 / n as f64 - 1.0).abs();
+        let said = r.stderr.contains(&format!("--cells {n}: {got} cells ("));
+        assert_eq!(said, off > 0.02, "asked {n}, got {got}: {}", r.stderr);
+        missed += usize::from(said);
+    }
+    assert_eq!(missed, 1, "one count of the two misses on this bar");
+}
+
 /// The `--cells` search ends on a try within 2 % of the count asked; that try's complex is
 /// kept rather than built again, and it is the complex a build given the chosen size makes.
 #[test]

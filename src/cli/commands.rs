@@ -6,10 +6,9 @@ use anyhow::Context;
 use rigidcells::Error;
 use rigidcells::field::Transfer;
 use rigidcells::io::refuse_overwrite;
-use rigidcells::pipeline::{self, CHUNK, DeformParams, FileInfo};
+use rigidcells::pipeline::{self, CHUNK, DeformParams, MAX_CHUNK};
 use rigidcells::render::{self, View};
-use rigidcells::report::{Report, Summary};
-use rigidcells::solve::Solution;
+use rigidcells::report::Summary;
 use rigidcells::spec::read_spec;
 
 use super::progress::Bar;
@@ -64,7 +63,6 @@ pub(super) fn run_cells(
 
 pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     refuse_overwrite(&args.input, &args.output)?;
-    args.tolerance.check(args.transfer)?;
     for extra in [&args.save_field, &args.report, &args.preview]
         .into_iter()
         .flatten()
@@ -84,63 +82,35 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
-    // The proxy serves the fold-over check, the report's residual and the preview (which
-    // draws a mesh's triangles when it holds every vertex).
-    let proxy = match args.preview {
-        Some(_) => pipeline::PROXY_SAMPLES,
-        None => pipeline::FOLDOVER_SAMPLES,
-    };
-    let params = args.params(Some(proxy))?;
+    let params = args.params()?;
     let view = args.view.view(&args.input)?;
-    if let Some(p) = &args.preview {
-        png_path(p)?;
-    }
-    deform_file(
-        &args.input,
-        &args.output,
-        &args.edit,
-        &params,
-        args.chunk.clamp(1, MAX_CHUNK),
-        args.save_field.as_deref(),
-        args.report.as_deref(),
-        args.preview.as_deref().map(|p| (p, view, args.strain)),
-        args.quiet,
-    )
+    let outputs = pipeline::Outputs {
+        save_field: args.save_field.as_deref(),
+        report: args.report.as_deref(),
+        preview: args.preview.as_deref().map(|p| (p, view, args.strain)),
+    };
+    let chunk = args.chunk.clamp(1, MAX_CHUNK);
+    let files = (
+        args.input.as_path(),
+        args.output.as_path(),
+        args.edit.as_path(),
+    );
+    deform_file(files, &params, chunk, &outputs, args.quiet)
 }
 
-#[allow(clippy::too_many_arguments)]
-pub(super) fn deform_file(
-    input: &Path,
-    output: &Path,
-    edit: &Path,
+/// `deform` of the file `input` into `output` under the spec in `edit`, with the `outputs`
+/// beside it; prints the warnings and the summary unless `quiet`.
+fn deform_file(
+    (input, output, edit): (&Path, &Path, &Path),
     params: &DeformParams,
     chunk: usize,
-    save_field: Option<&Path>,
-    report_to: Option<&Path>,
-    preview: Option<(&Path, View, bool)>,
+    outputs: &pipeline::Outputs,
     quiet: bool,
 ) -> anyhow::Result<()> {
-    let start = std::time::Instant::now();
     let spec = read_spec::<3>(edit)?;
     let bar = Bar::new(quiet);
-    // The output, the field, the report and the preview are there together or not at all.
-    let set = rigidcells::interrupt::ResultSet::open();
-    let (solution, info) =
-        pipeline::deform_file(input, output, &spec, params, chunk, save_field, &bar)?;
-    let summary = Report::new(
-        input,
-        output,
-        &solution,
-        &info,
-        start.elapsed().as_secs_f64(),
-    );
-    if let Some(path) = report_to {
-        summary.write(path)?;
-    }
-    if let Some((path, view, strain)) = preview {
-        preview_image(&solution, &info, &view, strain).write_png(path)?;
-    }
-    set.close();
+    let (_, info, summary) =
+        pipeline::deform_file_with(input, output, &spec, params, chunk, outputs, &bar)?;
     if !quiet {
         for w in &summary.warnings {
             eprintln!("warning: {w}");
@@ -154,30 +124,6 @@ pub(super) fn deform_file(
         );
     }
     Ok(())
-}
-
-/// `path`, when it names a PNG.
-pub(super) fn png_path(path: &Path) -> anyhow::Result<()> {
-    if path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("png"))
-    {
-        Ok(())
-    } else {
-        Err(Error::Param(format!("{}: pictures are written as .png", path.display())).into())
-    }
-}
-
-/// The preview of a deformation: the proxy before and after, side by side in one view fitted
-/// to both, each sample colored by its cell's role; with `strain`, the deformed cells colored
-/// by their strain beside them.
-pub(super) fn preview_image(
-    solution: &Solution<3>,
-    info: &FileInfo,
-    view: &View,
-    strain: bool,
-) -> render::Image {
-    rigidcells::preview::preview(solution, &info.proxy, view, strain)
 }
 
 pub(super) fn is_xy(path: &Path) -> bool {
@@ -199,7 +145,7 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
         }
     }
     let spec = read_spec::<2>(&args.edit)?;
-    let params = args.params(None)?;
+    let params = args.params()?;
     let bar = Bar::new(args.quiet);
     let (solution, info, points) =
         pipeline::deform_xy_file(&args.input, &args.output, &spec, &params, &bar)?;
@@ -245,7 +191,7 @@ pub(super) fn image_job(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    png_path(output)?;
+    rigidcells::render::png_path(output)?;
     let background = background.map(parse_color).transpose()?;
     let spec = read_spec::<2>(edit)?;
     let raster = rigidcells::image::Raster::read_png(input)?;
@@ -295,7 +241,7 @@ pub(super) fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
 
 pub(super) fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    png_path(output)?;
+    rigidcells::render::png_path(output)?;
     let image = render::render_file(input, view)?;
     image.write_png(output)?;
     println!(
@@ -392,17 +338,12 @@ pub(super) fn print_control_points(points: &[rigidcells::control::ControlPoint])
 pub(super) fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
     let demo = rigidcells::demo::prepare(out)?;
     for job in &demo.shapes {
-        deform_file(
-            &job.input,
-            &job.output,
-            &job.edit,
-            &job.params,
-            CHUNK,
-            None,
-            None,
-            None,
-            quiet,
-        )?;
+        let files = (
+            job.input.as_path(),
+            job.output.as_path(),
+            job.edit.as_path(),
+        );
+        deform_file(files, &job.params, CHUNK, &Default::default(), quiet)?;
     }
     let p = &demo.picture;
     image_job(&p.input, &p.edit, &p.output, None, &p.params, quiet)?;

@@ -11,12 +11,12 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use rigidcells::Error;
-use rigidcells::cells::{BuildParams, Inside};
+use rigidcells::cells::Inside;
 use rigidcells::field::{Outside, Transfer};
 use rigidcells::memory::Budget;
-use rigidcells::pipeline::{self, CHUNK, DeformParams};
+use rigidcells::pipeline::{self, CHUNK, DeformParams, MAX_CHUNK};
 use rigidcells::render::{self, View};
-use rigidcells::solve::{Method, SolveParams};
+use rigidcells::solve::Method;
 
 use choice::choice;
 use commands::*;
@@ -237,19 +237,15 @@ struct DeformArgs {
 }
 
 impl DeformArgs {
-    /// The library's parameters for these arguments, keeping a proxy of `proxy_samples`.
-    fn params(&self, proxy_samples: Option<usize>) -> Result<DeformParams, Error> {
-        let params = self.cells.deform_params(self.transfer)?;
-        Ok(DeformParams {
-            solve: SolveParams {
-                refine_strain: self.refine_strain,
-                ..params.solve
-            },
+    /// The library's parameters for these arguments.
+    fn params(&self) -> Result<DeformParams, Error> {
+        pipeline::Options {
+            refine_strain: self.refine_strain,
             rbf_tolerance: self.tolerance.rbf_tolerance,
-            proxy_samples,
             check_control_points: self.check_gcp,
-            ..params
-        })
+            ..self.cells.options(self.transfer)
+        }
+        .params()
     }
 }
 
@@ -263,19 +259,6 @@ struct ToleranceArg {
     /// the same speed.
     #[arg(long, value_name = "LENGTH")]
     rbf_tolerance: Option<f64>,
-}
-
-impl ToleranceArg {
-    /// Refuses a tolerance given with a transfer other than the RBF, or not a length.
-    fn check(&self, transfer: Transfer) -> anyhow::Result<()> {
-        match self.rbf_tolerance {
-            Some(_) if transfer != Transfer::Rbf => {
-                Err(Error::Param("--rbf-tolerance applies to --transfer rbf only".into()).into())
-            }
-            Some(t) => Ok(rigidcells::field::Rbf::<3>::check_tolerance(t)?),
-            None => Ok(()),
-        }
-    }
 }
 
 /// Where pictures are seen from.
@@ -319,22 +302,7 @@ impl ViewArgs {
         let (w, h) = self.size.split_once('x').ok_or_else(bad)?;
         let (width, height): (u32, u32) =
             (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
-        if !(16..=8192).contains(&width) || !(16..=8192).contains(&height) {
-            return Err(
-                Error::Param(format!("--size {}: 16 to 8192 pixels each way", self.size)).into(),
-            );
-        }
-        if !self.azimuth.is_finite() || !self.elevation.is_finite() {
-            return Err(Error::Param("--azimuth and --elevation must be finite".into()).into());
-        }
-        if !(self.zoom.is_finite() && self.zoom > 0.0 && self.zoom <= 1e6) {
-            return Err(Error::Param(format!(
-                "--zoom {}: a factor above 0, at most 1e6",
-                self.zoom
-            ))
-            .into());
-        }
-        Ok(View {
+        let view = View {
             azimuth: self.azimuth,
             elevation: self.elevation,
             width,
@@ -346,7 +314,9 @@ impl ViewArgs {
                 None => render::up_of(input),
             },
             zoom: self.zoom,
-        })
+        };
+        view.check()?;
+        Ok(view)
     }
 }
 
@@ -356,8 +326,8 @@ struct CellArgs {
     /// Edge length of the finest cells, in input units [default: longest extent / 32].
     #[arg(long)]
     cell_size: Option<f64>,
-    /// About this many cells: picks the finest cell size (overrides --cell-size).
-    #[arg(long)]
+    /// About this many cells: picks the finest cell size.
+    #[arg(long, conflicts_with = "cell_size")]
     cells: Option<usize>,
     /// Adaptive cells: built at this size, merged up to 8× it wherever one role holds (the
     /// edit's regions keep their borders), solved, and split again, round by round, where the
@@ -430,50 +400,28 @@ fn parse_memory(text: &str) -> Result<u64, String> {
 }
 
 impl CellArgs {
-    /// The solver's parameters: the defaults, with the method and the loose parts' rule.
-    fn solve_params(&self) -> SolveParams {
-        SolveParams {
-            method: self.solver,
-            carry_loose: self.loose_parts == LooseArg::Carry,
-            move_tolerance: self.tolerance,
+    /// The library's options of these arguments, with `transfer`.
+    fn options(&self, transfer: Transfer) -> pipeline::Options {
+        pipeline::Options {
+            cell_size: self.cell_size,
+            cells: self.cells,
+            min_cell_size: self.min_cell_size,
+            max_level: self.max_level,
+            shell: self.shell,
+            inside: self.inside,
+            solver: self.solver,
+            tolerance: self.tolerance,
             coarse_levels: self.coarse_levels,
+            carry_loose: self.loose_parts == LooseArg::Carry,
+            transfer,
+            memory_limit: self.memory.memory_limit,
             ..Default::default()
         }
     }
 
     /// The parameters of a command that takes only the cells' options and a transfer.
     fn deform_params(&self, transfer: Transfer) -> Result<DeformParams, Error> {
-        let (build, solve) = self.params()?;
-        Ok(DeformParams {
-            build,
-            solve,
-            transfer,
-            memory: self.memory.budget(),
-            ..Default::default()
-        })
-    }
-
-    /// The build's and the solver's parameters; with `--min-cell-size`, those of an adaptive
-    /// solve ([`rigidcells::solve::adaptive`]).
-    fn params(&self) -> Result<(BuildParams, SolveParams), Error> {
-        let (build, solve) = (self.build_params(), self.solve_params());
-        match self.min_cell_size {
-            Some(size) => rigidcells::solve::adaptive(size, &build, &solve),
-            None => Ok((build, solve)),
-        }
-    }
-
-    fn build_params(&self) -> BuildParams {
-        BuildParams {
-            cell_size: self.cell_size,
-            target_cells: self.cells,
-            max_level: self.max_level,
-            inside: if self.shell {
-                Inside::None
-            } else {
-                self.inside
-            },
-        }
+        self.options(transfer).params()
     }
 }
 
@@ -492,17 +440,15 @@ pub(crate) fn main() -> ExitCode {
             outside,
             memory,
             quiet,
-        } => tolerance
-            .check(transfer.unwrap_or(Transfer::Rbf))
-            .and_then(|()| {
-                let params = pipeline::ApplyParams {
-                    transfer,
-                    rbf_tolerance: tolerance.rbf_tolerance,
-                    outside,
-                    memory: memory.budget(),
-                };
-                run_apply(&field, &input, &output, &params, quiet)
-            }),
+        } => {
+            let params = pipeline::ApplyParams {
+                transfer,
+                rbf_tolerance: tolerance.rbf_tolerance,
+                outside,
+                memory: memory.budget(),
+            };
+            run_apply(&field, &input, &output, &params, quiet)
+        }
         Command::Info { input } => run_info(&input),
         Command::Solve {
             inputs,
@@ -582,10 +528,6 @@ pub(crate) fn main() -> ExitCode {
 }
 
 /// 3: unreadable or malformed input; 4: a bad edit spec or parameter; 1: anything else.
-/// The largest `--chunk`: a chunk's buffers are sized by what it holds, but 2⁶⁴ − 1 overflowed
-/// the index arithmetic of the readers.
-const MAX_CHUNK: usize = 1 << 24;
-
 fn exit_code(e: &anyhow::Error) -> u8 {
     e.downcast_ref::<Error>().map_or(1, Error::exit_code)
 }

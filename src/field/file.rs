@@ -212,6 +212,11 @@ where
 
     /// Writes the field to `path` atomically.
     pub fn save(&self, path: &Path) -> Result<()> {
+        crate::io::write_atomic(path, &self.to_bytes()?)
+    }
+
+    /// The bytes [`SavedField::save`] writes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>> {
         let f = &self.field;
         let mut out = Vec::new();
         out.extend_from_slice(MAGIC);
@@ -298,7 +303,7 @@ where
         } else {
             out.push(0);
         }
-        crate::io::write_atomic(path, &out)
+        Ok(out)
     }
 
     /// Reads a field saved by [`SavedField::save`].
@@ -308,6 +313,11 @@ where
             .and_then(|mut f| f.read_to_end(&mut bytes))
             .map_err(|e| Error::io(path, e))?;
         Self::parse(&bytes, path, None)
+    }
+
+    /// The field of bytes [`SavedField::to_bytes`] made; `name` names them in errors.
+    pub fn from_bytes(bytes: &[u8], name: &Path) -> Result<Self> {
+        Self::parse(bytes, name, None)
     }
 
     /// Reads the part of the field saved in `path` that samples in the box `samples` (world

@@ -23,6 +23,10 @@ use super::{DeformInfo, DeformParams, PROXY_SAMPLES, Proxy};
 /// way, with a peak RSS of 45 MB instead of 370 MB.
 pub const CHUNK: usize = 1 << 16;
 
+/// The largest chunk a caller may ask for: a chunk's buffers are sized by what it holds, but
+/// 2⁶⁴ − 1 overflowed the index arithmetic of the readers.
+pub const MAX_CHUNK: usize = 1 << 24;
+
 /// What [`deform_file`] and [`apply_file`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FileInfo {
@@ -54,6 +58,14 @@ pub struct ApplyParams {
     pub outside: Outside,
     /// The memory budget, for an RBF that must be factored.
     pub memory: Budget,
+}
+
+impl ApplyParams {
+    /// Refuses a far-field tolerance that is not a length, or that comes with a transfer
+    /// other than the RBF (without a transfer, the field's own decides, when it is read).
+    pub fn check(&self) -> Result<()> {
+        super::options::check_rbf_tolerance(self.rbf_tolerance, self.transfer)
+    }
 }
 
 /// Deforms the file `input` into `output` in two streaming passes: pass 1 builds
@@ -270,6 +282,7 @@ pub fn apply_file(
     chunk: usize,
     observer: &dyn Observer,
 ) -> Result<FileInfo> {
+    params.check()?;
     let mut source = io::open(input)?;
     // Beyond the margin, `--outside extend` takes the nearest patch of the whole field.
     let hint = match (params.transfer, params.outside) {

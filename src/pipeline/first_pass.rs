@@ -255,6 +255,7 @@ fn first_pass(
             proxy.gather(&chunk);
         }
         observer.advance(chunk.len() as u64);
+        crate::progress::check(observer)?;
     }
     observer.finish();
     Ok(FirstPass {

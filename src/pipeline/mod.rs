@@ -1,5 +1,6 @@
 //! The method on samples in memory ([`deform`], [`solve_points`]) and on files streamed in
-//! passes ([`deform_file`], [`apply_file`], [`solve_files`]); every face calls these.
+//! passes ([`deform_file`], [`apply_file`], [`solve_files`]); every face calls these, with
+//! the parameters its user's [`Options`] make.
 //!
 //! The stage sequence itself — cells, constraints, solve, field, exact transfer — is written
 //! once, in `stages`; the files here differ only in where the samples come from and go.
@@ -7,14 +8,19 @@
 mod checks;
 mod files;
 mod first_pass;
+mod options;
+mod outputs;
 pub(crate) mod stages;
 mod transfer_pass;
 
 pub(crate) use checks::check_moved;
 pub use checks::{FOLDOVER_SAMPLES, check_foldovers};
 pub use files::{
-    ApplyParams, CHUNK, FileInfo, apply_file, deform_file, file_cells, solve_files, write_cells,
+    ApplyParams, CHUNK, FileInfo, MAX_CHUNK, apply_file, deform_file, file_cells, solve_files,
+    write_cells,
 };
+pub use options::Options;
+pub use outputs::{Outputs, deform_file_with};
 
 use std::path::Path;
 use std::time::Instant;

@@ -81,6 +81,9 @@ pub(crate) fn run<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
+    // What a `--cells N` search says when the count it found is not N (a streamed file's
+    // first pass says it among the file's notes).
+    let mut sizing = None;
     let (complex, build, constraints) = match cells {
         Cells::Samples {
             points,
@@ -88,6 +91,7 @@ where
             classes,
         } => {
             let (complex, info) = build(points, triangles, &params.build, params.memory)?;
+            sizing = crate::cells::shortfall(params.build.target_cells, complex.len());
             let selected = Selected::Samples { points, classes };
             let constraints = self::constraints(&complex, spec, selected, params)?;
             (complex, info, constraints)
@@ -104,12 +108,13 @@ where
     };
     let solution = solve::solve(complex, constraints, &params.solve, params.memory, observer)?;
     // The solved constraints' warnings: an adaptive solve decides its parts at rest again.
-    let warnings = warnings(
+    let mut warnings = warnings(
         &build,
         &solution.complex,
         &solution.constraints,
         &solution.info,
     );
+    warnings.extend(sizing);
     let transfer_start = Instant::now();
     let saved = field(&solution, params, observer)?;
     Ok(Staged {

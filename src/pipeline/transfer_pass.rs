@@ -184,6 +184,11 @@ fn pipelined_pass(
         // an error, which `join` returns, or on a refusal.
         let mut reading = Ok(());
         while let Ok(mut job) = empty.recv() {
+            // Asked on the calling thread, where an observer may look at the caller's signals.
+            if let Err(e) = crate::progress::check(observer) {
+                reading = Err(e);
+                break;
+            }
             let got = if raw {
                 source.read(chunk_len, &mut job.chunk)
             } else {

@@ -839,6 +839,7 @@ where
         };
         info.log.push(log);
         observer.message(&format!("iteration {iterations}: {log}"));
+        crate::progress::check(observer)?;
         // A short step's small move says only that the line search shortened it.
         if decrease <= params.tolerance * before
             || (t >= 1.0 && largest_move <= params.move_tolerance)

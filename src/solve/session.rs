@@ -37,8 +37,8 @@ pub struct Session<const D: usize> {
     stale_system: bool,
 }
 
-/// From this many cells on, a drag moves the cells' ancestors (a few thousand: see
-/// [`DRAG_STAGE_CELLS`]) and the cells follow them rigidly; the cells themselves are solved
+/// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels
+/// of coarsening reach that) and the cells follow them rigidly; the cells themselves are solved
 /// when the drag pauses or ends. At 50k cells of a terrain an update on the cells costs
 /// 0.45–0.75 s, most of it the factorization.
 pub const DRAG_COARSE_FROM: usize = 20_000;
