@@ -6,21 +6,26 @@
 //! structured arrays.
 
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyOSError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyBytes, PyDict, PyList};
 use rigidcells::Error;
-use rigidcells::cells::BuildParams;
+use rigidcells::cells::Inside;
 use rigidcells::field::{Outside, SavedField, Transfer};
 use rigidcells::io;
 use rigidcells::names::{Named, UnknownName};
+use rigidcells::pipeline::Options;
 use rigidcells::pipeline::{self, DeformInfo, DeformParams};
-use rigidcells::progress::Silent;
+use rigidcells::progress::Observer;
+use rigidcells::render::View;
 use rigidcells::rigid::Vect;
+use rigidcells::solve::Method;
 use rigidcells::spec::{EditSpec, parse_spec};
 
 create_exception!(
@@ -30,14 +35,197 @@ create_exception!(
     "A malformed or unreadable input file."
 );
 
-/// The library's error as a Python exception, by its exit code's class.
+/// The library's error as a Python exception, by its exit code's class, in the package's
+/// terms (keyword arguments, not the command line's flags).
 fn py_err(e: Error) -> PyErr {
-    let text = e.to_string();
+    let text = python_terms(&e.to_string());
     match (&e, e.exit_code()) {
         (Error::Io { .. } | Error::Write { .. }, _) => PyOSError::new_err(text),
         (_, 3) => FormatError::new_err(text),
         (_, 4) => PyValueError::new_err(text),
         _ => PyRuntimeError::new_err(text),
+    }
+}
+
+/// The command line's flags in a message as the package's keyword arguments: `--cell-size`
+/// becomes `cell_size`, `--outside keep` becomes `outside="keep"` (a flag followed by one of
+/// its choices) and `--cells 1000` becomes `cells=1000`.
+fn python_terms(text: &str) -> String {
+    const CHOICES: &[&str] = &[
+        "keep",
+        "extend",
+        "refuse",
+        "carry",
+        "rest",
+        "pu",
+        "rbf",
+        "blend-idw",
+        "blend",
+        "direct",
+        "multilevel",
+        "auto",
+        "winding",
+        "flood",
+        "none",
+    ];
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find("--") {
+        out.push_str(&rest[..at]);
+        let after = &rest[at + 2..];
+        // A flag starts a word (`a--b` in a file name is not one).
+        if !out.is_empty() && !out.ends_with([' ', '(', '`', '"', '\'']) {
+            out.push_str("--");
+            rest = after;
+            continue;
+        }
+        let len = after
+            .find(|c: char| !(c.is_ascii_lowercase() || c == '-'))
+            .unwrap_or(after.len());
+        let name = after[..len].trim_end_matches('-');
+        if name.is_empty() || !name.starts_with(|c: char| c.is_ascii_lowercase()) {
+            out.push_str("--");
+            rest = after;
+            continue;
+        }
+        let arg = match name {
+            "edit" => "spec".to_string(),
+            other => other.replace('-', "_"),
+        };
+        let tail = &after[name.len()..];
+        let value = tail.strip_prefix(' ').and_then(|t| {
+            CHOICES.iter().find(|c| {
+                t.starts_with(**c)
+                    && !t[c.len()..].starts_with(|ch: char| ch.is_ascii_alphanumeric() || ch == '-')
+            })
+        });
+        let number = tail.strip_prefix(' ').map(|t| {
+            let len = t
+                .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+                .unwrap_or(t.len());
+            &t[..len]
+        });
+        match (value, number) {
+            (Some(v), _) => {
+                out.push_str(&format!("{arg}=\"{v}\""));
+                rest = &tail[1 + v.len()..];
+            }
+            (None, Some(n)) if n.starts_with(|c: char| c.is_ascii_digit()) => {
+                out.push_str(&format!("{arg}={n}"));
+                rest = &tail[1 + n.len()..];
+            }
+            _ => {
+                out.push_str(&arg);
+                rest = tail;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
+/// Messages for the user in the package's terms.
+fn said(messages: &[String]) -> Vec<String> {
+    messages.iter().map(|m| python_terms(m)).collect()
+}
+
+/// Reports progress to a Python callable `(stage, done, total)` and asks Python's signal
+/// handlers between the library's steps: Ctrl-C (`KeyboardInterrupt`), or an exception the
+/// callable raises, stops the call at the next step and is raised in its place.
+struct PyObserver {
+    progress: Option<Py<PyAny>>,
+    stopped: Mutex<Option<PyErr>>,
+    /// The stage's name, units done and its length (0: unknown).
+    at: Mutex<(String, u64, u64)>,
+    reported: Mutex<Instant>,
+}
+
+/// Progress is reported at most this often (and at each stage's start and end).
+const REPORT_EVERY: Duration = Duration::from_millis(100);
+
+impl PyObserver {
+    fn new(progress: Option<Py<PyAny>>) -> Self {
+        Self {
+            progress,
+            stopped: Mutex::new(None),
+            at: Mutex::new((String::new(), 0, 0)),
+            reported: Mutex::new(Instant::now()),
+        }
+    }
+
+    /// Calls the progress callable with where the work is (always with `now`, else at most
+    /// every [`REPORT_EVERY`]).
+    fn report(&self, now: bool) {
+        let Some(progress) = &self.progress else {
+            return;
+        };
+        {
+            let mut last = self.reported.lock().expect("not poisoned");
+            if !now && last.elapsed() < REPORT_EVERY {
+                return;
+            }
+            *last = Instant::now();
+        }
+        let (stage, done, len) = self.at.lock().expect("not poisoned").clone();
+        Python::attach(|py| {
+            let total = (len > 0).then_some(len);
+            if let Err(e) = progress.call1(py, (stage, done, total)) {
+                self.stop(e);
+            }
+        });
+    }
+
+    fn stop(&self, e: PyErr) {
+        let mut stopped = self.stopped.lock().expect("not poisoned");
+        if stopped.is_none() {
+            *stopped = Some(e);
+        }
+    }
+
+    /// The library's result, with the exception that stopped it in place of its
+    /// `Cancelled`.
+    fn result<T>(&self, result: rigidcells::Result<T>) -> PyResult<T> {
+        match result {
+            Err(Error::Cancelled) => Err(self
+                .stopped
+                .lock()
+                .expect("not poisoned")
+                .take()
+                .unwrap_or_else(|| PyRuntimeError::new_err("cancelled"))),
+            other => other.map_err(py_err),
+        }
+    }
+}
+
+impl Observer for PyObserver {
+    fn stage(&self, name: &str, len: u64) {
+        *self.at.lock().expect("not poisoned") = (name.to_string(), 0, len);
+        self.report(true);
+    }
+
+    fn advance(&self, n: u64) {
+        self.at.lock().expect("not poisoned").1 += n;
+        self.report(false);
+    }
+
+    fn finish(&self) {
+        {
+            let mut at = self.at.lock().expect("not poisoned");
+            at.1 = at.1.max(at.2);
+        }
+        self.report(true);
+    }
+
+    fn cancelled(&self) -> bool {
+        if self.stopped.lock().expect("not poisoned").is_some() {
+            return true;
+        }
+        // Python runs signal handlers on its main thread only; elsewhere this asks nothing.
+        if let Err(e) = Python::attach(|py| py.check_signals()) {
+            self.stop(e);
+            return true;
+        }
+        false
     }
 }
 
@@ -89,59 +277,125 @@ fn spec(text: &str, base: &str) -> PyResult<EditSpec<3>> {
     parse_spec(text, Path::new(base), Path::new("spec")).map_err(py_err)
 }
 
-/// The transfer named `name` (default: the command line's, `pu`).
-fn transfer(name: Option<&str>) -> PyResult<Transfer> {
-    let Some(name) = name else {
-        return Ok(Transfer::Pu);
-    };
-    name.parse().map_err(|e: UnknownName| {
-        // The default first, as the package's documentation lists them.
-        let order = [
-            Transfer::Pu,
-            Transfer::Rbf,
-            Transfer::Blend,
-            Transfer::BlendIdw,
-        ];
-        let expected = order.map(Named::name).to_vec();
-        PyValueError::new_err(UnknownName { expected, ..e }.to_string())
-    })
+/// A choice named by the user (`transfer="rbf"`), or its default.
+fn named<T: std::str::FromStr<Err = UnknownName> + Named>(
+    name: Option<String>,
+    default: T,
+) -> PyResult<T> {
+    match name {
+        None => Ok(default),
+        Some(name) => name.parse().map_err(|e: UnknownName| {
+            let expected = T::ALL.iter().map(|v| v.name()).collect();
+            PyValueError::new_err(UnknownName { expected, ..e }.to_string())
+        }),
+    }
 }
 
-fn params(
-    cell_size: Option<f64>,
-    cells: Option<usize>,
-    name: Option<&str>,
-) -> PyResult<DeformParams> {
-    Ok(DeformParams {
-        build: BuildParams {
-            cell_size,
-            target_cells: cells,
-            ..Default::default()
-        },
-        transfer: transfer(name)?,
-        ..Default::default()
-    })
+/// The keyword arguments the package takes for a deformation (every option of the command
+/// line's `deform`), as the library's options; a wrong type or value names the argument.
+fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
+    let mut o = Options::default();
+    let Some(d) = d else { return Ok(o) };
+    for (key, value) in d.iter() {
+        let key: String = key.extract()?;
+        if value.is_none() {
+            continue;
+        }
+        let whole = |what: &str| whole(&value, &key, what);
+        let number = || -> PyResult<f64> {
+            if value.is_instance_of::<pyo3::types::PyBool>() {
+                return Err(PyTypeError::new_err(format!(
+                    "{key} must be a number, got a bool"
+                )));
+            }
+            value.extract::<f64>().map_err(|_| {
+                PyTypeError::new_err(format!("{key} must be a number, got {}", type_name(&value)))
+            })
+        };
+        let level = |n: u64, most: u64| {
+            u8::try_from(n)
+                .ok()
+                .filter(|&n| u64::from(n) <= most)
+                .ok_or_else(|| PyValueError::new_err(format!("{key} must be 0 to {most}, got {n}")))
+        };
+        let flag = || -> PyResult<bool> {
+            value
+                .extract::<bool>()
+                .map_err(|_| PyTypeError::new_err(format!("{key} must be True or False")))
+        };
+        let name = || -> PyResult<Option<String>> {
+            value
+                .extract::<String>()
+                .map(Some)
+                .map_err(|_| PyTypeError::new_err(format!("{key} must be a name (a str)")))
+        };
+        match key.as_str() {
+            "cell_size" => o.cell_size = Some(number()?),
+            "cells" => match whole("a whole number of cells, 1 or more")? {
+                0 => return Err(PyValueError::new_err("cells must be 1 or more, got 0")),
+                n => o.cells = Some(usize::try_from(n).unwrap_or(usize::MAX)),
+            },
+            "min_cell_size" => o.min_cell_size = Some(number()?),
+            "max_level" => o.max_level = Some(level(whole("a whole number of levels")?, 30)?),
+            "shell" => o.shell = flag()?,
+            "inside" => o.inside = named(name()?, Inside::Auto)?,
+            "solver" => o.solver = named(name()?, Method::Auto)?,
+            "tolerance" => o.tolerance = number()?,
+            "coarse_levels" => {
+                o.coarse_levels = Some(level(whole("a whole number of levels")?, 8)?)
+            }
+            "loose_parts" => {
+                o.carry_loose = match name()?.as_deref() {
+                    Some("carry") => true,
+                    Some("rest") => false,
+                    Some(other) => {
+                        return Err(PyValueError::new_err(format!(
+                            "loose_parts `{other}`: expected carry or rest"
+                        )));
+                    }
+                    None => true,
+                }
+            }
+            "refine_strain" => o.refine_strain = Some(number()?),
+            "transfer" => o.transfer = named(name()?, Transfer::Pu)?,
+            "rbf_tolerance" => o.rbf_tolerance = Some(number()?),
+            "check_gcp" => o.check_control_points = flag()?,
+            "memory_limit" => {
+                o.memory_limit = Some(if value.is_instance_of::<pyo3::types::PyString>() {
+                    let text: String = value.extract()?;
+                    rigidcells::memory::parse_size(&text)
+                        .map_err(|e| PyValueError::new_err(format!("memory_limit: {e}")))?
+                } else {
+                    whole("a number of bytes or a size such as \"8G\"")?
+                })
+            }
+            _ => return Err(PyTypeError::new_err(format!("unexpected argument {key}"))),
+        }
+    }
+    Ok(o)
 }
 
-/// The arguments `deform` and `solve` share, checked and converted.
-#[allow(clippy::type_complexity)]
-fn inputs(
-    points: &PyReadonlyArray2<f64>,
-    triangles: Option<&PyReadonlyArray2<i64>>,
-    spec_text: &str,
-    base: &str,
-    cell_size: Option<f64>,
-    cells: Option<usize>,
-    transfer: Option<&str>,
-) -> PyResult<(Vec<Vect<3>>, Vec<[u32; 3]>, EditSpec<3>, DeformParams)> {
-    let pts = self::points(points)?;
-    let tris = self::triangles(triangles, pts.len())?;
-    Ok((
-        pts,
-        tris,
-        self::spec(spec_text, base)?,
-        params(cell_size, cells, transfer)?,
-    ))
+/// `value` as a whole number 0 or more; a wrong type or value names the argument `key` and
+/// says `what` it must be.
+fn whole(value: &Bound<'_, PyAny>, key: &str, what: &str) -> PyResult<u64> {
+    if value.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(PyTypeError::new_err(format!(
+            "{key} must be {what}, got a bool"
+        )));
+    }
+    let n: i128 = value.extract().map_err(|_| {
+        PyTypeError::new_err(format!("{key} must be {what}, got {}", type_name(value)))
+    })?;
+    u64::try_from(n).map_err(|_| PyValueError::new_err(format!("{key} must be {what}, got {n}")))
+}
+
+/// The Python type's name of `value`, for messages.
+fn type_name(value: &Bound<'_, PyAny>) -> String {
+    value
+        .get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_else(|_| "another type".into())
 }
 
 /// What a deformation did, as a dict.
@@ -160,7 +414,7 @@ fn info_dict<'py>(
     )?;
     d.set_item("converged", info.solver.converged)?;
     d.set_item("foldovers", (info.foldovers.1, info.foldovers.0))?;
-    d.set_item("warnings", PyList::new(py, &info.warnings)?)?;
+    d.set_item("warnings", PyList::new(py, said(&info.warnings))?)?;
     let turns = PyList::empty(py);
     for t in &info.solver.turns {
         let c = PyDict::new(py);
@@ -188,11 +442,27 @@ fn info_dict<'py>(
     Ok(d)
 }
 
+/// The arguments `deform` and `solve` share, checked and converted.
+#[allow(clippy::type_complexity)]
+fn inputs(
+    points: &PyReadonlyArray2<f64>,
+    triangles: Option<&PyReadonlyArray2<i64>>,
+    spec_text: &str,
+    base: &str,
+    options: Option<&Bound<'_, PyDict>>,
+) -> PyResult<(Vec<Vect<3>>, Vec<[u32; 3]>, EditSpec<3>, DeformParams)> {
+    let params = self::options(options)?.params().map_err(py_err)?;
+    let pts = self::points(points)?;
+    let tris = self::triangles(triangles, pts.len())?;
+    Ok((pts, tris, self::spec(spec_text, base)?, params))
+}
+
 /// Deforms `points` ((n, 3) float64), with their `normals` when given, under the TOML `spec`
-/// (relative file names against `base`); returns the moved points and what was done (with the
-/// turned normals under `"normals"` when normals were given).
+/// (relative file names against `base`) with the `options` (keyword arguments as the command
+/// line's options); returns the moved points and what was done (with the turned normals under
+/// `"normals"` when normals were given).
 #[pyfunction]
-#[pyo3(signature = (points, spec_text, base, triangles=None, normals=None, cell_size=None, cells=None, transfer=None))]
+#[pyo3(signature = (points, spec_text, base, triangles=None, normals=None, options=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn deform<'py>(
     py: Python<'py>,
@@ -201,64 +471,130 @@ fn deform<'py>(
     base: &str,
     triangles: Option<PyReadonlyArray2<'py, i64>>,
     normals: Option<PyReadonlyArray2<'py, f64>>,
-    cell_size: Option<f64>,
-    cells: Option<usize>,
-    transfer: Option<&str>,
+    options: Option<Bound<'py, PyDict>>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
     let (pts, tris, spec, params) = inputs(
         &points,
         triangles.as_ref(),
         spec_text,
         base,
-        cell_size,
-        cells,
-        transfer,
+        options.as_ref(),
     )?;
     let nrm = match &normals {
         Some(n) => self::points(n)?,
         None => Vec::new(),
     };
-    let (moved, moved_normals, _, info) = py
-        .detach(|| pipeline::deform_oriented(&pts, &nrm, &tris, &spec, &params, &Silent))
-        .map_err(py_err)?;
+    let observer = PyObserver::new(progress);
+    let start = Instant::now();
+    let result =
+        py.detach(|| pipeline::deform_oriented(&pts, &nrm, &tris, &spec, &params, &observer));
+    let (moved, moved_normals, solution, info) = observer.result(result)?;
+    let seconds = start.elapsed().as_secs_f64();
     let d = info_dict(py, &info, pts.len() as u64)?;
+    let (fixed, handle, _) = rigidcells::report::residuals(&solution, &pts, &moved);
+    d.set_item("residual_fixed_max", fixed)?;
+    d.set_item("residual_handle_max", handle)?;
+    d.set_item("cell_size", solution.complex.grid.finest_size())?;
+    let timings = timings(py, &info, 0.0, 0.0, seconds)?;
+    d.set_item("timings", timings)?;
     if normals.is_some() {
         d.set_item("normals", moved_array(py, &moved_normals))?;
     }
     Ok((moved_array(py, &moved), d))
 }
 
-/// A solved field: apply it to samples, save it for `rigidcells apply`, load one.
-#[pyclass(module = "rigidcells")]
+/// Seconds per stage, as the command line's report names them (`read` and `write` are
+/// those of a file, 0 for samples in memory).
+fn timings<'py>(
+    py: Python<'py>,
+    info: &DeformInfo,
+    read: f64,
+    write: f64,
+    total: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let t = PyDict::new(py);
+    t.set_item("read", (read - info.build.seconds).max(0.0))?;
+    t.set_item("voxelize", info.build.seconds)?;
+    t.set_item("solve", info.solver.seconds)?;
+    t.set_item("transfer", (info.seconds_transfer - write).max(0.0))?;
+    t.set_item("write", write)?;
+    t.set_item("check_gcp", info.seconds_check)?;
+    t.set_item("total", total)?;
+    Ok(t)
+}
+
+/// A solved field: apply it to samples, save it for `rigidcells apply`, load one; pickled as
+/// its saved bytes.
+#[pyclass(module = "rigidcells._rigidcells")]
 struct Field {
     saved: SavedField<3>,
 }
 
 #[pymethods]
 impl Field {
-    /// Moves `points` ((n, 3) float64) through the field; samples beyond its margin are an
-    /// error (as `rigidcells apply` refuses them).
+    /// Moves `points` ((n, 3) float64), with their `normals` ((n, 3)) when given, through the
+    /// field. `outside`: `refuse` (samples beyond the field's margin are an error, as
+    /// `rigidcells apply` refuses them), `keep` or `extend`. Returns the moved points and the
+    /// turned normals (or None).
+    #[pyo3(signature = (points, normals=None, outside=None))]
+    #[allow(clippy::type_complexity)]
     fn apply<'py>(
         &self,
         py: Python<'py>,
         points: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let mut pts = self::points(&points)?;
-        let saved = &self.saved;
-        py.detach(|| -> rigidcells::Result<()> {
-            let deformer = saved.deformer_of(None, None, Outside::Refuse)?;
-            rigidcells::field::apply(&deformer, &saved.field.origin, &mut pts);
-            let outside = deformer.outside();
-            if outside.count > 0 {
-                return Err(Error::Param(format!(
-                    "{} samples lie beyond the field's margin (the farthest {} from it)",
-                    outside.count, outside.farthest
-                )));
+        normals: Option<PyReadonlyArray2<'py, f64>>,
+        outside: Option<String>,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
+        let outside = named(outside, Outside::Refuse)?;
+        let pts = self::points(&points)?;
+        if let Some(k) = pts.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+            return Err(PyValueError::new_err(format!(
+                "points: row {k} is not finite ({:?})",
+                pts[k].as_slice()
+            )));
+        }
+        let nrm = match &normals {
+            Some(n) => {
+                let n = self::points(n)?;
+                if n.len() != pts.len() {
+                    return Err(PyValueError::new_err(format!(
+                        "normals: {} rows for {} points",
+                        n.len(),
+                        pts.len()
+                    )));
+                }
+                n
             }
-            Ok(())
-        })
-        .map_err(py_err)?;
-        Ok(moved_array(py, &pts))
+            None => Vec::new(),
+        };
+        let saved = &self.saved;
+        let (moved, moved_normals) = py
+            .detach(|| -> rigidcells::Result<_> {
+                let deformer = saved.deformer_of(None, None, outside)?;
+                let (mut moved, mut turned) = (Vec::new(), Vec::new());
+                let origin = &saved.field.origin;
+                rigidcells::field::apply_into(
+                    &deformer,
+                    origin,
+                    &pts,
+                    &nrm,
+                    &mut moved,
+                    &mut turned,
+                );
+                let beyond = deformer.outside();
+                if outside == Outside::Refuse && beyond.count > 0 {
+                    return Err(Error::Param(format!(
+                        "points: {} lie beyond the field's margin (the farthest {} from it); \
+                         pass outside=\"keep\" or outside=\"extend\", or solve a field over them",
+                        beyond.count, beyond.farthest
+                    )));
+                }
+                Ok((moved, turned))
+            })
+            .map_err(py_err)?;
+        let turned = normals.is_some().then(|| moved_array(py, &moved_normals));
+        Ok((moved_array(py, &moved), turned))
     }
 
     /// Writes the field to `path` (the format `rigidcells apply` reads).
@@ -274,24 +610,62 @@ impl Field {
         Ok(Self { saved })
     }
 
+    /// The field's saved bytes (what `save` writes).
+    fn to_bytes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
+        let bytes = self.saved.to_bytes().map_err(py_err)?;
+        Ok(PyBytes::new(py, &bytes))
+    }
+
+    /// The field of bytes `to_bytes` gave.
+    #[staticmethod]
+    fn from_bytes(bytes: &[u8]) -> PyResult<Self> {
+        let saved =
+            SavedField::<3>::from_bytes(bytes, Path::new("<field bytes>")).map_err(py_err)?;
+        Ok(Self { saved })
+    }
+
     /// The number of cells.
     #[getter]
     fn cells(&self) -> usize {
         self.saved.field.centers.len()
     }
 
-    fn __repr__(&self) -> String {
-        format!(
-            "rigidcells.Field({} cells, transfer {})",
-            self.cells(),
-            self.saved.transfer
-        )
+    /// The transfer the field was made for.
+    #[getter]
+    fn transfer(&self) -> String {
+        self.saved.transfer.to_string()
+    }
+
+    /// The finest cells' edge length.
+    #[getter]
+    fn cell_size(&self) -> f64 {
+        self.saved
+            .field
+            .halves
+            .iter()
+            .fold(f64::INFINITY, |a, &h| a.min(2.0 * h))
+    }
+
+    /// The cells' bounding box, `((xmin, ymin, zmin), (xmax, ymax, zmax))` in the points'
+    /// coordinates.
+    #[getter]
+    fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let f = &self.saved.field;
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for (c, h) in f.centers.iter().zip(&f.halves) {
+            for a in 0..3 {
+                lo[a] = lo[a].min(f.origin[a] + c[a] - h);
+                hi[a] = hi[a].max(f.origin[a] + c[a] + h);
+            }
+        }
+        (lo, hi)
     }
 }
 
-/// Solves the TOML `spec` over `points`; returns the field and what was done.
+/// Solves the TOML `spec` over `points` with the `options`; returns the field and what was
+/// done.
 #[pyfunction]
-#[pyo3(signature = (points, spec_text, base, triangles=None, cell_size=None, cells=None, transfer=None))]
+#[pyo3(signature = (points, spec_text, base, triangles=None, options=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn solve<'py>(
     py: Python<'py>,
@@ -299,29 +673,34 @@ fn solve<'py>(
     spec_text: &str,
     base: &str,
     triangles: Option<PyReadonlyArray2<'py, i64>>,
-    cell_size: Option<f64>,
-    cells: Option<usize>,
-    transfer: Option<&str>,
+    options: Option<Bound<'py, PyDict>>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<(Field, Bound<'py, PyDict>)> {
     let (pts, tris, spec, params) = inputs(
         &points,
         triangles.as_ref(),
         spec_text,
         base,
-        cell_size,
-        cells,
-        transfer,
+        options.as_ref(),
     )?;
-    let (saved, _, info) = py
-        .detach(|| pipeline::solve_points(&pts, &tris, &spec, &params, &Silent))
-        .map_err(py_err)?;
-    Ok((Field { saved }, info_dict(py, &info, pts.len() as u64)?))
+    let observer = PyObserver::new(progress);
+    let start = Instant::now();
+    let result = py.detach(|| pipeline::solve_points(&pts, &tris, &spec, &params, &observer));
+    let (saved, solution, info) = observer.result(result)?;
+    let d = info_dict(py, &info, pts.len() as u64)?;
+    d.set_item("cell_size", solution.complex.grid.finest_size())?;
+    let seconds = start.elapsed().as_secs_f64();
+    d.set_item("timings", timings(py, &info, 0.0, 0.0, seconds)?)?;
+    Ok((Field { saved }, d))
 }
 
 /// `rigidcells deform` on a file: streams `input` into `output` (atomically), with the field
-/// saved to `save_field` when given.
+/// saved to `save_field`, the JSON report written to `report` and the preview picture to
+/// `preview` (seen as the `view` dict says: `azimuth`, `elevation`, `size`, `up`, `zoom`,
+/// `strain`) when given, all together or none. Stopped (Ctrl-C, or `progress` raising), it
+/// leaves no output behind.
 #[pyfunction]
-#[pyo3(signature = (input, output, spec_text, base, save_field=None, cell_size=None, cells=None, transfer=None))]
+#[pyo3(signature = (input, output, spec_text, base, save_field=None, report=None, preview=None, view=None, chunk=None, options=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn deform_file<'py>(
     py: Python<'py>,
@@ -330,64 +709,186 @@ fn deform_file<'py>(
     spec_text: &str,
     base: &str,
     save_field: Option<PathBuf>,
-    cell_size: Option<f64>,
-    cells: Option<usize>,
-    transfer: Option<&str>,
+    report: Option<PathBuf>,
+    preview: Option<PathBuf>,
+    view: Option<Bound<'py, PyDict>>,
+    chunk: Option<Bound<'py, PyAny>>,
+    options: Option<Bound<'py, PyDict>>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let params = self::options(options.as_ref())?.params().map_err(py_err)?;
     let spec = self::spec(spec_text, base)?;
-    let params = DeformParams {
-        proxy_samples: Some(pipeline::FOLDOVER_SAMPLES),
-        ..params(cell_size, cells, transfer)?
+    let (view, strain) = self::view(view.as_ref(), &input)?;
+    let chunk = self::chunk(chunk)?;
+    let outputs = pipeline::Outputs {
+        save_field: save_field.as_deref(),
+        report: report.as_deref(),
+        preview: preview.as_deref().map(|p| (p, view, strain)),
     };
-    let (_, info) = py
-        .detach(|| -> rigidcells::Result<_> {
-            rigidcells::io::refuse_overwrite(&input, &output)?;
-            pipeline::deform_file(
-                &input,
-                &output,
-                &spec,
-                &params,
-                pipeline::CHUNK,
-                save_field.as_deref(),
-                &Silent,
-            )
-        })
-        .map_err(py_err)?;
+    let observer = PyObserver::new(progress);
+    let result = py.detach(|| -> rigidcells::Result<_> {
+        rigidcells::io::refuse_overwrite(&input, &output)?;
+        pipeline::deform_file_with(&input, &output, &spec, &params, chunk, &outputs, &observer)
+    });
+    let (solution, info, summary) = observer.result(result)?;
     let d = info_dict(py, &info.deform, info.samples)?;
-    d.set_item("notes", PyList::new(py, &info.notes)?)?;
+    d.set_item("residual_fixed_max", summary.residual_fixed_max)?;
+    d.set_item("residual_handle_max", summary.residual_handle_max)?;
+    d.set_item("cell_size", solution.complex.grid.finest_size())?;
+    let seconds = summary.timings_s.total;
+    let t = timings(
+        py,
+        &info.deform,
+        info.seconds_read,
+        info.seconds_write,
+        seconds,
+    )?;
+    d.set_item("timings", t)?;
+    d.set_item("notes", PyList::new(py, said(&info.notes))?)?;
     Ok(d)
 }
 
-/// `rigidcells apply` on a file: the field saved in `field` applied to `input`, written to
-/// `output` (atomically). `outside`: `refuse` (default), `keep` or `extend`.
+/// Samples per streamed chunk (default: the command line's), as the command line bounds them.
+fn chunk(chunk: Option<Bound<'_, PyAny>>) -> PyResult<usize> {
+    Ok(match chunk {
+        None => pipeline::CHUNK,
+        Some(c) => whole(&c, "chunk", "a number of samples, 1 or more")?
+            .clamp(1, pipeline::MAX_CHUNK as u64) as usize,
+    })
+}
+
+/// `rigidcells solve`: the field of the edit over several files taken as one (the tiles of a
+/// scan), written to `save_field` for `apply_file` on each tile; together they give what
+/// `deform_file` gives on the merged file.
 #[pyfunction]
-#[pyo3(signature = (field, input, output, outside=None))]
+#[pyo3(signature = (inputs, save_field, spec_text, base, chunk=None, options=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
+fn solve_files<'py>(
+    py: Python<'py>,
+    inputs: Vec<PathBuf>,
+    save_field: PathBuf,
+    spec_text: &str,
+    base: &str,
+    chunk: Option<Bound<'py, PyAny>>,
+    options: Option<Bound<'py, PyDict>>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let params = self::options(options.as_ref())?.params().map_err(py_err)?;
+    let spec = self::spec(spec_text, base)?;
+    let chunk = self::chunk(chunk)?;
+    let observer = PyObserver::new(progress);
+    let start = Instant::now();
+    let result = py.detach(|| -> rigidcells::Result<_> {
+        for input in &inputs {
+            rigidcells::io::refuse_overwrite(input, &save_field)?;
+        }
+        pipeline::solve_files(&inputs, &spec, &params, chunk, &save_field, &observer)
+    });
+    let (solution, info) = observer.result(result)?;
+    let d = info_dict(py, &info.deform, info.samples)?;
+    d.set_item("cell_size", solution.complex.grid.finest_size())?;
+    let seconds = start.elapsed().as_secs_f64();
+    let t = timings(py, &info.deform, info.seconds_read, 0.0, seconds)?;
+    d.set_item("timings", t)?;
+    d.set_item("notes", PyList::new(py, said(&info.notes))?)?;
+    Ok(d)
+}
+
+/// The preview's view of a `view` dict (`azimuth`, `elevation`, `size` as (width, height),
+/// `up` as "x", "y" or "z", `zoom`, `strain`), the command line's defaults for the rest.
+fn view(d: Option<&Bound<'_, PyDict>>, input: &Path) -> PyResult<(View, bool)> {
+    let mut view = View {
+        up: rigidcells::render::up_of(input),
+        ..Default::default()
+    };
+    let mut strain = false;
+    if let Some(d) = d {
+        for (key, value) in d.iter() {
+            let key: String = key.extract()?;
+            if value.is_none() {
+                continue;
+            }
+            let number = || {
+                value.extract::<f64>().map_err(|_| {
+                    PyTypeError::new_err(format!(
+                        "{key} must be a number, got {}",
+                        type_name(&value)
+                    ))
+                })
+            };
+            match key.as_str() {
+                "azimuth" => view.azimuth = number()?,
+                "elevation" => view.elevation = number()?,
+                "zoom" => view.zoom = number()?,
+                "strain" => {
+                    strain = value
+                        .extract::<bool>()
+                        .map_err(|_| PyTypeError::new_err("strain must be True or False"))?
+                }
+                "size" => {
+                    let (w, h): (u64, u64) = value.extract().map_err(|_| {
+                        PyTypeError::new_err("size must be (width, height) in pixels")
+                    })?;
+                    let side = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+                    (view.width, view.height) = (side(w), side(h));
+                }
+                "up" => {
+                    view.up = match value.extract::<String>().as_deref() {
+                        Ok("x") => 0,
+                        Ok("y") => 1,
+                        Ok("z") => 2,
+                        _ => return Err(PyValueError::new_err("up must be \"x\", \"y\" or \"z\"")),
+                    }
+                }
+                _ => return Err(PyTypeError::new_err(format!("unexpected argument {key}"))),
+            }
+        }
+    }
+    view.check().map_err(py_err)?;
+    Ok((view, strain))
+}
+
+/// `rigidcells apply` on a file: the field saved in `field` applied to `input`, written to
+/// `output` (atomically). `outside`: `refuse` (default), `keep` or `extend`; `transfer`
+/// (default: the field's own), `rbf_tolerance` and `memory_limit` as for `deform_file`.
+#[pyfunction]
+#[pyo3(signature = (field, input, output, outside=None, options=None, chunk=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
 fn apply_file<'py>(
     py: Python<'py>,
     field: PathBuf,
     input: PathBuf,
     output: PathBuf,
-    outside: Option<&str>,
+    outside: Option<String>,
+    options: Option<Bound<'py, PyDict>>,
+    chunk: Option<Bound<'py, PyAny>>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let outside = match outside {
-        Some(name) => name
-            .parse::<Outside>()
-            .map_err(|e| PyValueError::new_err(e.to_string()))?,
-        None => Outside::Refuse,
-    };
-    let params = pipeline::ApplyParams {
-        outside,
-        ..Default::default()
-    };
-    let info = py
-        .detach(|| -> rigidcells::Result<_> {
-            rigidcells::io::refuse_overwrite(&input, &output)?;
-            pipeline::apply_file(&field, &input, &output, &params, pipeline::CHUNK, &Silent)
+    let given = |key: &str| -> PyResult<bool> {
+        Ok(match &options {
+            Some(d) => d.get_item(key)?.is_some_and(|v| !v.is_none()),
+            None => false,
         })
-        .map_err(py_err)?;
+    };
+    let transfer_given = given("transfer")?;
+    let o = self::options(options.as_ref())?;
+    let params = pipeline::ApplyParams {
+        transfer: transfer_given.then_some(o.transfer),
+        rbf_tolerance: o.rbf_tolerance,
+        outside: named(outside, Outside::Refuse)?,
+        memory: rigidcells::memory::Budget::given(o.memory_limit),
+    };
+    params.check().map_err(py_err)?;
+    let chunk = self::chunk(chunk)?;
+    let observer = PyObserver::new(progress);
+    let result = py.detach(|| -> rigidcells::Result<_> {
+        rigidcells::io::refuse_overwrite(&input, &output)?;
+        pipeline::apply_file(&field, &input, &output, &params, chunk, &observer)
+    });
+    let info = observer.result(result)?;
     let d = PyDict::new(py);
     d.set_item("samples", info.samples)?;
-    d.set_item("notes", PyList::new(py, &info.notes)?)?;
+    d.set_item("notes", PyList::new(py, said(&info.notes))?)?;
     d.set_item("seconds", info.seconds_write)?;
     Ok(d)
 }
@@ -449,11 +950,13 @@ fn toml_from_json(json: &str) -> PyResult<String> {
 #[pymodule]
 fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", m.py().get_type::<FormatError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<Field>()?;
     m.add_function(wrap_pyfunction!(deform, m)?)?;
     m.add_function(wrap_pyfunction!(solve, m)?)?;
     m.add_function(wrap_pyfunction!(deform_file, m)?)?;
     m.add_function(wrap_pyfunction!(apply_file, m)?)?;
+    m.add_function(wrap_pyfunction!(solve_files, m)?)?;
     m.add_function(wrap_pyfunction!(toml_from_json, m)?)?;
     m.add_function(wrap_pyfunction!(decode_las, m)?)?;
     m.add_function(wrap_pyfunction!(encode_las, m)?)?;

@@ -230,13 +230,14 @@ def test_scale_and_offset_are_for_integers_only():
         rigidcells.deform(bar_records(), SHIFT, scale=-0.001)
 
 
-def test_triangles_are_whole_indices_never_truncated():
+def test_triangles_are_integer_indices_never_truncated():
     pts = bar_points()
-    whole, _ = rigidcells.deform(pts, BEND, triangles=[[0.0, 1.0, 2.0]], cell_size=0.5)
     ints, _ = rigidcells.deform(pts, BEND, triangles=[[0, 1, 2]], cell_size=0.5)
-    assert np.array_equal(whole, ints)
-    with pytest.raises(ValueError, match="whole vertex indices"):
-        rigidcells.deform(pts, BEND, triangles=[[0, 1.5, 2]], cell_size=0.5)
+    small, _ = rigidcells.deform(pts, BEND, triangles=np.array([[0, 1, 2]], dtype=np.uint16), cell_size=0.5)
+    assert np.array_equal(small, ints)
+    for floats in ([[0.0, 1.0, 2.0]], [[0, 1.5, 2]]):
+        with pytest.raises(TypeError, match="triangles must be integer vertex indices, got float64"):
+            rigidcells.deform(pts, BEND, triangles=floats, cell_size=0.5)
     with pytest.raises(ValueError, match="outside"):
         rigidcells.deform(pts, BEND, triangles=np.array([[0, 1, 2**64 - 1]], dtype=np.uint64))
     with pytest.raises(TypeError):

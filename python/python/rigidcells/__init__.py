@@ -1,25 +1,36 @@
 """rigidcells: adaptive space deformations based on rigid cells (Botsch, Pauly, Wicke, Gross).
 
-Deform point clouds and meshes held in numpy arrays or laspy objects, or files of any size,
-with the same library the ``rigidcells`` command line uses::
+Deform point clouds and meshes held in numpy arrays, laspy, trimesh or Open3D objects, or
+files of any size, with the same library the ``rigidcells`` command line uses::
 
     import numpy as np, rigidcells
-    moved, info = rigidcells.deform(points, "edit.toml")        # (n, 3) float64 in and out
-    bent, info = rigidcells.deform(laspy.read("scan.laz"), "edit.toml")   # a new LasData
+    moved, report = rigidcells.deform(points, "edit.toml")      # (n, 3) float64 in and out
+    bent, report = rigidcells.deform(laspy.read("scan.laz"), "edit.toml")   # a new LasData
+    bent_mesh, report = rigidcells.deform(trimesh.load("part.ply"), spec)   # a new Trimesh
     field = rigidcells.solve(points, {"fixed": [...], "handle": [...]})
-    field.apply(other_points); field.save("bend.field")
-    rigidcells.deform_file("scan.laz", "bent.laz", "edit.toml")
+    field.apply(other_points); field.save("bend.field"); pickle.dumps(field)
+    rigidcells.deform_file("scan.laz", "bent.laz", "edit.toml", cells=20_000)
 
 ``spec`` is the edit spec: TOML text, a path to a ``.toml`` file, or a dict of the same
-structure. ``points`` may also be a numpy structured array with float fields ``X``, ``Y``,
-``Z`` (as PDAL's Python bindings hand them out): the same dtype comes back with only those
-fields changed. A laspy ``LasData`` or ``ScaleAwarePointRecord`` comes back as a new one of the
-same kind, its coordinates written through the header's scale and offset rounded to the
-nearest step (as the command line writes LAS). Integer ``X``, ``Y``, ``Z`` (LAS records, such as
-laspy's ``points.array``) are decoded with ``scale=`` and ``offset=``, and refused without them.
-laspy is not a dependency: its objects are recognized when laspy is imported. Errors are
-exceptions: ``ValueError`` for a bad spec or parameter, ``OSError`` for I/O,
-``rigidcells.FormatError`` (a ``ValueError``) for malformed files. Heavy calls release the GIL.
+structure (numbers may be numpy scalars or arrays; an error in it names its key path, such as
+``spec["handle"][0]["translate"]``). Every option of the command line's ``deform`` is a
+keyword argument of the same name and default (``cell_size``, ``cells``, ``transfer``,
+``solver``, ``loose_parts``, ...). ``points`` may also be a numpy structured array with float
+fields ``X``, ``Y``, ``Z`` (as PDAL's Python bindings hand them out): the same dtype comes back
+with only those fields changed. A laspy ``LasData`` or ``ScaleAwarePointRecord`` comes back as
+a new one of the same kind, its coordinates written through the header's scale and offset
+rounded to the nearest step (as the command line writes LAS). Integer ``X``, ``Y``, ``Z`` (LAS
+records, such as laspy's ``points.array``) are decoded with ``scale=`` and ``offset=``, and
+refused without them. A ``trimesh.Trimesh`` or ``PointCloud``, an Open3D ``TriangleMesh`` or
+``PointCloud`` comes back as a new one with its triangles, colors and other attributes kept and
+its normals turned (a Trimesh derives its own from the moved faces). None of laspy, trimesh and
+Open3D is a dependency: their objects are recognized when the library is imported.
+
+A deformation returns a ``Report`` (a dataclass: cells, cell size, iterations, energy,
+residuals, fold-overs, warnings, timings). Errors are exceptions that name the argument:
+``TypeError`` or ``ValueError`` for a bad argument, spec or parameter, ``OSError`` for I/O,
+``rigidcells.FormatError`` (a ``ValueError``) for malformed files. Heavy calls release the GIL;
+Ctrl-C stops them within a step (``KeyboardInterrupt``), leaving no output file behind.
 """
 
 from __future__ import annotations
@@ -27,25 +38,81 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 import sys
 import warnings
 from pathlib import Path
+from dataclasses import dataclass
 from typing import Any, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _rigidcells, dask
+from . import _interop, _rigidcells, dask
 from ._rigidcells import FormatError
 
-__all__ = ["deform", "solve", "deform_file", "apply_file", "Field", "FormatError"]
+__all__ = [
+    "deform", "solve", "deform_file", "apply_file", "solve_files", "Field", "Report",
+    "FormatError", "__version__",
+]
+
+__version__: str = _rigidcells.__version__
 
 Spec = Union[str, "os.PathLike[str]", dict]
 
 
-def _spec(spec: Spec) -> Tuple[str, str]:
-    """The spec's TOML text and the folder its relative file names are resolved against."""
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays in a dict spec as the Python numbers and lists they hold."""
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind not in "fiub":
+            raise TypeError(f"spec: an array of {value.dtype} is not a number or numbers")
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    raise TypeError(f"spec: {type(value).__name__} is not a number, text, list or dict")
+
+
+def _key_paths(text: str) -> List[str]:
+    """For each line of TOML made from a dict spec, the dict's key path of what it holds
+    (``spec["handle"][0]["translate"]``), or "" for a blank line."""
+    paths: List[str] = []
+    counts: dict = {}
+    table: List[Any] = []
+    for line in text.splitlines():
+        t = line.strip()
+        if t.startswith("[["):
+            names = t.strip("[]").split(".")
+            counts[tuple(names)] = counts.get(tuple(names), -1) + 1
+            table = names[:-1] + [names[-1], counts[tuple(names)]]
+        elif t.startswith("["):
+            names = t.strip("[]").split(".")
+            table = []
+            for k, name in enumerate(names):
+                table.append(name)
+                if tuple(names[: k + 1]) in counts:
+                    table.append(counts[tuple(names[: k + 1])])
+        elif "=" in t:
+            paths.append(_key_path(table + [t.split("=", 1)[0].strip().strip('"')]))
+            continue
+        else:
+            paths.append("")
+            continue
+        paths.append(_key_path(table))
+    return paths
+
+
+def _key_path(parts: List[Any]) -> str:
+    """``["handle", 0, "box"]`` as ``spec["handle"][0]["box"]``."""
+    return "spec" + "".join(f"[{p}]" if isinstance(p, int) else f'["{p}"]' for p in parts)
+
+
+def _spec(spec: Spec) -> Tuple[str, str, Optional[List[str]]]:
+    """The spec's TOML text, the folder its relative file names are resolved against, and for
+    a dict the key path of each line of that text."""
     if isinstance(spec, dict):
-        return _rigidcells.toml_from_json(json.dumps(spec)), os.getcwd()
+        text = _rigidcells.toml_from_json(json.dumps(spec, default=_plain))
+        return text, os.getcwd(), _key_paths(text)
     if isinstance(spec, os.PathLike) or (
         isinstance(spec, str) and "\n" not in spec and spec.strip().endswith(".toml")
     ):
@@ -54,10 +121,34 @@ def _spec(spec: Spec) -> Tuple[str, str]:
             text = path.read_text(encoding="utf-8")
         except FileNotFoundError as e:
             raise OSError(f"{path}: {e.strerror}") from e
-        return text, str(path.parent.resolve())
+        return text, str(path.parent.resolve()), None
     if isinstance(spec, str):
-        return spec, os.getcwd()
+        return spec, os.getcwd(), None
     raise TypeError("spec must be TOML text, a path to a .toml file, or a dict")
+
+
+_LINE = re.compile(r"^spec: line (\d+)(?:, column \d+)?: ")
+
+
+def _in_dict_terms(error: ValueError, paths: Optional[List[str]]) -> ValueError:
+    """A spec error of a dict spec, its TOML line said as the dict's key path."""
+    text = str(error)
+    m = _LINE.match(text)
+    if paths is None or m is None or not (0 < int(m.group(1)) <= len(paths)):
+        return error
+    path = paths[int(m.group(1)) - 1] or "spec"
+    return type(error)(f"{path}: {text[m.end():]}")
+
+
+def _call(paths: Optional[List[str]], f: Any, *args: Any) -> Any:
+    """``f(*args)``, a dict spec's errors said by key path."""
+    try:
+        return f(*args)
+    except ValueError as e:
+        raised = _in_dict_terms(e, paths)
+        if raised is e:
+            raise
+        raise raised from None
 
 
 Frame = Union[float, Sequence[float], np.ndarray]
@@ -131,6 +222,20 @@ class _Points:
         self._las = self._record = self._structured = self._plain = None
         self._frame: Any = None
         self._reframe = False
+        # A trimesh or Open3D object's triangles and normals, taken where none are given.
+        self.triangles: Optional[np.ndarray] = None
+        self.normals: Optional[np.ndarray] = None
+        self._geometry = _interop.of(points)
+        if self._geometry is not None:
+            if given:
+                raise ValueError(
+                    f"scale and offset decode LAS records; a {type(points).__name__} holds "
+                    "coordinates: leave them out"
+                )
+            self.xyz = self._geometry.xyz
+            self.triangles = self._geometry.triangles
+            self.normals = self._geometry.normals
+            return
         if laspy is not None and isinstance(points, laspy.LasData):
             if given:
                 raise ValueError(
@@ -154,7 +259,7 @@ class _Points:
                 self._reframe = True
             arr = points.array
         else:
-            arr = np.asarray(points)
+            arr = _numbers(points, "points")
         if arr.dtype.names is not None:
             names = arr.dtype.names
             if not all(k in names for k in ("X", "Y", "Z")):
@@ -200,9 +305,14 @@ class _Points:
         else:
             self.xyz = np.ascontiguousarray(arr, dtype=np.float64)
 
-    def back(self, moved: np.ndarray) -> Tuple[Any, List[str]]:
-        """The moved coordinates in the input's form, and a note per re-framed axis."""
+    def back(
+        self, moved: np.ndarray, turned: Optional[np.ndarray] = None
+    ) -> Tuple[Any, List[str]]:
+        """The moved coordinates in the input's form (a trimesh or Open3D object with its
+        normals ``turned``), and a note per re-framed axis."""
         notes: List[str] = []
+        if self._geometry is not None:
+            return self._geometry.back(moved, turned), notes
         if self._frame is None:
             if self._structured is None:
                 return moved, notes
@@ -235,55 +345,142 @@ class _Points:
 
 
 def _plain3(values: Any, name: str) -> np.ndarray:
-    a = np.asarray(values)
-    if a.ndim != 2 or a.shape[1] != 3 or a.dtype.kind not in "fiu":
-        raise ValueError(f"{name} must be an (n, 3) array of numbers, got {a.dtype} {a.shape}")
+    a = _numbers(values, name)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must be an (n, 3) array of numbers, got shape {a.shape}")
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
+def _numbers(values: Any, name: str) -> np.ndarray:
+    """``values`` as a numpy array of real numbers: masked, complex, bool and object arrays
+    are refused, never read silently."""
+    if isinstance(values, np.ma.MaskedArray):
+        raise TypeError(
+            f"{name}: a masked array; pass its unmasked rows (a.compressed() or a[~a.mask.any(1)])"
+        )
+    a = np.asarray(values)
+    if a.dtype.names is None and a.dtype.kind not in "fiu":
+        kind = {"b": "bool", "c": "complex"}.get(a.dtype.kind, str(a.dtype))
+        raise TypeError(f"{name} must hold real numbers, got {kind} values")
+    return a
+
+
 def _triangles(triangles: Any) -> Optional[np.ndarray]:
-    """Vertex indices as int64; whole-numbered floats are taken, fractions refused (an index
-    is never truncated)."""
+    """Vertex indices as int64; an index is never rounded or truncated, so floats are refused."""
     if triangles is None:
         return None
-    t = np.asarray(triangles)
+    t = _numbers(triangles, "triangles")
+    if t.dtype.kind not in "iu":
+        raise TypeError(
+            f"triangles must be integer vertex indices, got {t.dtype} (a whole-numbered float "
+            "array: .astype(np.int64))"
+        )
     if t.ndim != 2 or t.shape[1] != 3:
         raise ValueError(f"triangles must be an (m, 3) array, got shape {t.shape}")
-    if t.dtype.kind == "f":
-        if not np.all(np.isfinite(t)) or not np.array_equal(t, np.floor(t)):
-            raise ValueError("triangles must hold whole vertex indices, got fractions")
-        if t.size and (t.min() < 0 or t.max() >= 2.0**63):
-            raise ValueError("triangles name a vertex outside the points")
-    elif t.dtype.kind == "u":
+    if t.dtype.kind == "u":
         if t.size and int(t.max()) > np.iinfo(np.int64).max:
             raise ValueError("triangles name a vertex outside the points")
-    elif t.dtype.kind != "i":
-        raise ValueError(f"triangles must be integer vertex indices, got {t.dtype}")
     return np.ascontiguousarray(t, dtype=np.int64)
 
 
-class Field:
-    """A solved field (``solve``): apply it to points, save it for ``rigidcells apply``, load one."""
+@dataclass
+class Report:
+    """What a deformation did: the command line's report (``deform --report``) in Python.
+    Its fields keep their names; ``report["cells"]`` reads a field as a dict would."""
 
-    def __init__(self, native: _rigidcells.Field) -> None:
+    samples: int
+    """Samples deformed."""
+    cells: int
+    """Cells of the complex solved (after refinement)."""
+    cell_size: float
+    """The finest cells' edge length, in the points' units (chosen by ``cells=`` or the
+    default when not given)."""
+    iterations: int
+    """Gauss-Newton iterations in all."""
+    energy: float
+    """The energy at the end."""
+    converged: bool
+    """Whether the last load step met the tolerance."""
+    residual_fixed_max: float
+    """The largest distance of a sample in a fixed cell from its rest position (0: exact)."""
+    residual_handle_max: float
+    """The largest distance of a sample in a handle's cell from where the handle sends it."""
+    foldovers: Tuple[int, int]
+    """Samples where the map folds space over, and samples checked."""
+    warnings: List[str]
+    """Messages for the user, as the command line prints them."""
+    notes: List[str]
+    """Notes on the output (an offset moved to fit, samples beyond the margin)."""
+    timings: dict
+    """Seconds per stage: ``read``, ``voxelize``, ``solve``, ``transfer``, ``write``,
+    ``check_gcp``, ``total``."""
+    handle_turns: List[dict]
+    """Per turning handle: its ``line`` in the spec, ``turn_asked_degrees`` and
+    ``turn_taken_degrees``."""
+    control_points: List[dict]
+    """Per control point (``[[target]]``): ``id``, ``from``, ``wanted``, ``got``,
+    ``residual``."""
+    control_rmse: Optional[float]
+    """The control points' root mean square residual (None without any)."""
+    normals: Optional[np.ndarray] = None
+    """The turned normals, when normals were given."""
+
+    def __getitem__(self, key: str) -> Any:
+        if key not in self.__dataclass_fields__:
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def __contains__(self, key: object) -> bool:
+        return key in self.__dataclass_fields__
+
+    @staticmethod
+    def _of(info: dict, notes: Optional[List[str]] = None) -> "Report":
+        if notes is not None:
+            info["notes"] = list(info.get("notes", [])) + list(notes)
+        known = {k: info.get(k) for k in Report.__dataclass_fields__}
+        known["notes"] = known["notes"] or []
+        for k in ("residual_fixed_max", "residual_handle_max"):
+            known[k] = known[k] if known[k] is not None else 0.0
+        return Report(**known)
+
+
+def _field_from_bytes(data: bytes) -> "Field":
+    """A pickled field (its saved bytes) back."""
+    return Field(_rigidcells.Field.from_bytes(data))
+
+
+class Field:
+    """A solved field (``solve``): apply it to points, save it for ``rigidcells apply``, load
+    one. It pickles (as the bytes ``save`` writes), so it goes to process pools and Dask
+    workers as it is."""
+
+    def __init__(self, native: _rigidcells.Field, report: Optional[Report] = None) -> None:
         self._native = native
+        self.report = report
+        """What the solve did (None for a loaded field)."""
 
     def apply(
         self,
         points: Any,
         *,
+        normals: Any = None,
+        outside: str = "refuse",
         scale: Optional[Frame] = None,
         offset: Optional[Frame] = None,
     ) -> Any:
         """Moves ``points`` through the field and returns them in the same form (as ``deform``
-        takes and returns them); points beyond the field's margin are a ``ValueError`` (as
-        ``rigidcells apply`` refuses them). A LAS offset moved to fit the coordinates is said
-        in a ``UserWarning``."""
+        takes and returns them). ``outside``: ``"refuse"`` (points beyond the field's margin
+        are a ``ValueError``, as ``rigidcells apply`` refuses them), ``"keep"`` (they keep
+        their coordinates) or ``"extend"`` (the transfer extrapolated). With ``normals``
+        ((n, 3)), returns ``(points, normals)``, the normals turned as the map turns the
+        surface. A LAS offset moved to fit the coordinates is said in a ``UserWarning``."""
         p = _Points(points, scale, offset)
-        out, notes = p.back(self._native.apply(p.xyz))
+        nrm = p.normals if normals is None else _plain3(normals, "normals")
+        moved, turned = self._native.apply(p.xyz, nrm, outside)
+        out, notes = p.back(moved, turned)
         for note in notes:
             warnings.warn(note, stacklevel=2)
-        return out
+        return out if normals is None else (out, turned)
 
     def save(self, path: Union[str, "os.PathLike[str]"]) -> None:
         """Writes the field to ``path`` (the format ``rigidcells apply`` reads)."""
@@ -294,13 +491,114 @@ class Field:
         """Reads a field saved by ``save`` or ``rigidcells deform --save-field``."""
         return Field(_rigidcells.Field.load(os.fspath(path)))
 
+    def __reduce__(self) -> Any:
+        return (_field_from_bytes, (self._native.to_bytes(),))
+
     @property
     def cells(self) -> int:
         """The number of cells."""
         return self._native.cells
 
+    @property
+    def cell_size(self) -> float:
+        """The finest cells' edge length."""
+        return self._native.cell_size
+
+    @property
+    def transfer(self) -> str:
+        """The transfer the field was made for."""
+        return self._native.transfer
+
+    @property
+    def bounds(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]:
+        """The cells' bounding box: ``((xmin, ymin, zmin), (xmax, ymax, zmax))``."""
+        lo, hi = self._native.bounds
+        return tuple(lo), tuple(hi)
+
     def __repr__(self) -> str:
-        return repr(self._native)
+        lo, hi = self.bounds
+        return (
+            f"rigidcells.Field({self.cells} cells of {self.cell_size:.6g}, transfer "
+            f"{self.transfer}, bounds {tuple(round(v, 6) for v in lo)} to "
+            f"{tuple(round(v, 6) for v in hi)})"
+        )
+
+
+_OPTIONS_DOC = """
+    Options (each as the command line's option of the same name; None: its default):
+    ``cell_size`` (edge of the finest cells; default: longest extent / 32), ``cells`` (about
+    this many cells, within 2 % where the counts allow, else ``report.warnings`` gives the
+    count; not with ``cell_size``), ``min_cell_size`` (adaptive cells
+    down to this size), ``max_level`` (octree levels above the finest cells), ``shell`` (occupied
+    cells only), ``inside`` (``"auto"``, ``"winding"``, ``"flood"``, ``"none"``), ``solver``
+    (``"auto"``, ``"direct"``, ``"multilevel"``), ``tolerance`` (the move test, in finest cell
+    sizes; default 1e-3; 0: the energy test only), ``coarse_levels`` (coarser complexes solved
+    first, 0 to 8), ``loose_parts`` (``"carry"`` or ``"rest"``), ``refine_strain`` (split
+    cells strained past this and solve again), ``transfer`` (``"pu"``, ``"rbf"``,
+    ``"blend"``, ``"blend-idw"``), ``rbf_tolerance`` (with ``transfer="rbf"``: the far
+    field's error bound, a length), ``check_gcp`` (the control points' leave-one-out check),
+    ``memory_limit`` (bytes, or a size such as ``"8G"``).
+
+    ``progress``: a callable ``(stage, done, total)`` (``total`` None when unknown), called at
+    most ten times a second; by default a tqdm bar where tqdm is installed and standard error
+    is a terminal; ``False`` for none. Ctrl-C stops the call within a step (a solver
+    iteration, a chunk of a file) and raises ``KeyboardInterrupt``; an exception the callable
+    raises stops it the same way.
+"""
+
+
+def _options(**given: Any) -> dict:
+    """The options given (not None), for the native calls."""
+    return {k: v for k, v in given.items() if v is not None}
+
+
+class _Tqdm:
+    """A tqdm bar per stage, as a progress callable."""
+
+    def __init__(self, tqdm: Any) -> None:
+        self._tqdm, self._bar, self._stage = tqdm, None, None
+
+    def __call__(self, stage: str, done: int, total: Optional[int]) -> None:
+        if stage != self._stage:
+            self.close()
+            self._stage = stage
+            self._bar = self._tqdm(total=total, desc=stage, leave=False, unit=" ")
+        self._bar.n = done
+        self._bar.refresh()
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+
+def _progress(progress: Any) -> Tuple[Any, Any]:
+    """The progress callable to pass on, and what to close after the call."""
+    if progress is False:
+        return None, None
+    if progress is not None and progress is not True:
+        if not callable(progress):
+            raise TypeError("progress must be a callable (stage, done, total), True or False")
+        return progress, None
+    interactive = progress is True or (hasattr(sys.stderr, "isatty") and sys.stderr.isatty())
+    if not interactive:
+        return None, None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return None, None
+    bar = _Tqdm(tqdm)
+    return bar, bar
+
+
+def _with_progress(progress: Any, f: Any) -> Any:
+    """``f(callback)`` with the progress callable ``progress`` asks for."""
+    callback, bar = _progress(progress)
+    try:
+        return f(callback)
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def deform(
@@ -309,44 +607,66 @@ def deform(
     *,
     triangles: Any = None,
     normals: Any = None,
-    cell_size: Optional[float] = None,
-    cells: Optional[int] = None,
-    transfer: Optional[str] = None,
     scale: Optional[Frame] = None,
     offset: Optional[Frame] = None,
-) -> Tuple[Any, dict]:
+    cell_size: Optional[float] = None,
+    cells: Optional[int] = None,
+    min_cell_size: Optional[float] = None,
+    max_level: Optional[int] = None,
+    shell: Optional[bool] = None,
+    inside: Optional[str] = None,
+    solver: Optional[str] = None,
+    tolerance: Optional[float] = None,
+    coarse_levels: Optional[int] = None,
+    loose_parts: Optional[str] = None,
+    refine_strain: Optional[float] = None,
+    transfer: Optional[str] = None,
+    rbf_tolerance: Optional[float] = None,
+    check_gcp: Optional[bool] = None,
+    memory_limit: Union[int, str, None] = None,
+    progress: Any = None,
+) -> Tuple[Any, Report]:
     """Deforms ``points`` under ``spec``; returns the moved points, in the form they came in,
-    and what was done.
+    and a ``Report`` of what was done.
 
     ``points``: an (n, 3) array of coordinates (float64 back); a numpy structured array with
     float fields ``X``, ``Y``, ``Z`` (PDAL's; the same dtype back, only those fields changed);
     a laspy ``LasData`` or its ``points`` (a new one back, coordinates written through the
     header's scale and offset, rounded to the nearest step as the command line's LAS writer
     rounds them; an offset that no longer fits moves as the command line moves it, said in
-    ``info["notes"]``). Integer ``X``, ``Y``, ``Z`` (laspy's ``points.array``, LAS records) need
+    ``report.notes``). Integer ``X``, ``Y``, ``Z`` (laspy's ``points.array``, LAS records) need
     ``scale`` and ``offset`` (a number or three each; offset 0 by default): they are decoded,
     moved and encoded back rounded to the nearest step, and a moved record that does not fit
     its field is a ``ValueError``. An (n, 3) integer array with ``scale`` is taken the same way.
+    A trimesh or Open3D mesh or point cloud: its vertices, triangles and normals are taken,
+    and a new object of its kind comes back. Masked, complex and bool arrays are refused.
+    ``triangles``: (m, 3) vertex indices.
+    ``normals`` ((n, 3), one per point): turned as the map turns the surface, returned as
+    ``report.normals``.
 
-    ``transfer``: ``"pu"`` (the command line's default), ``"rbf"``, ``"blend"`` or
-    ``"blend-idw"``. ``cell_size`` or ``cells`` size the cells as ``--cell-size``/``--cells``
-    do. ``normals`` ((n, 3), one per point): turned as the map turns the surface, returned
-    as ``info["normals"]``.
-
-    ``info["handle_turns"]``: per turning handle, its ``line`` in the spec, the turn asked and
-    the turn the cells carry from the fixed cells to it (``turn_asked_degrees``,
-    ``turn_taken_degrees``); ``info["warnings"]`` says when they differ by more than a tenth.
-    A turn the shape cannot carry (a whole turn of a part as short as it is wide) is a
-    ``ValueError`` rather than a part untwisted the short way round.
+    ``report.handle_turns``: per turning handle, its ``line`` in the spec, the turn asked and
+    the turn the cells carry from the fixed cells to it; ``report.warnings`` says when they
+    differ by more than a tenth. A turn the shape cannot carry (a whole turn of a part as short
+    as it is wide) is a ``ValueError`` rather than a part untwisted the short way round.
     """
     p = _Points(points, scale, offset)
-    text, base = _spec(spec)
-    nrm = None if normals is None else _plain3(normals, "normals")
-    moved, info = _rigidcells.deform(
-        p.xyz, text, base, _triangles(triangles), nrm, cell_size, cells, transfer
+    text, base, paths = _spec(spec)
+    nrm = p.normals if normals is None else _plain3(normals, "normals")
+    options = _options(
+        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
+        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
+        coarse_levels=coarse_levels, loose_parts=loose_parts, refine_strain=refine_strain,
+        transfer=transfer, rbf_tolerance=rbf_tolerance, check_gcp=check_gcp,
+        memory_limit=memory_limit,
     )
-    out, info["notes"] = p.back(moved)
-    return out, info
+    tris = p.triangles if triangles is None else _triangles(triangles)
+    moved, info = _with_progress(
+        progress, lambda cb: _call(
+            paths, _rigidcells.deform, p.xyz, text, base, tris, nrm, options, cb
+        )
+    )
+    out, notes = p.back(moved, info.get("normals"))
+    return out, Report._of(info, notes)
 
 
 def solve(
@@ -354,20 +674,42 @@ def solve(
     spec: Spec,
     *,
     triangles: Any = None,
-    cell_size: Optional[float] = None,
-    cells: Optional[int] = None,
-    transfer: Optional[str] = None,
     scale: Optional[Frame] = None,
     offset: Optional[Frame] = None,
+    cell_size: Optional[float] = None,
+    cells: Optional[int] = None,
+    min_cell_size: Optional[float] = None,
+    max_level: Optional[int] = None,
+    shell: Optional[bool] = None,
+    inside: Optional[str] = None,
+    solver: Optional[str] = None,
+    tolerance: Optional[float] = None,
+    coarse_levels: Optional[int] = None,
+    loose_parts: Optional[str] = None,
+    refine_strain: Optional[float] = None,
+    transfer: Optional[str] = None,
+    rbf_tolerance: Optional[float] = None,
+    check_gcp: Optional[bool] = None,
+    memory_limit: Union[int, str, None] = None,
+    progress: Any = None,
 ) -> Field:
     """Solves ``spec`` over ``points`` (any form ``deform`` takes, with ``scale`` and ``offset``
-    as there) and returns the field (``Field.apply``, ``.save``)."""
+    as there) and returns the field (``Field.apply``, ``.save``; ``field.report`` says what the
+    solve did)."""
     p = _Points(points, scale, offset)
-    text, base = _spec(spec)
-    field, _info = _rigidcells.solve(
-        p.xyz, text, base, _triangles(triangles), cell_size, cells, transfer
+    text, base, paths = _spec(spec)
+    options = _options(
+        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
+        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
+        coarse_levels=coarse_levels, loose_parts=loose_parts, refine_strain=refine_strain,
+        transfer=transfer, rbf_tolerance=rbf_tolerance, check_gcp=check_gcp,
+        memory_limit=memory_limit,
     )
-    return Field(field)
+    tris = p.triangles if triangles is None else _triangles(triangles)
+    field, info = _with_progress(
+        progress, lambda cb: _call(paths, _rigidcells.solve, p.xyz, text, base, tris, options, cb)
+    )
+    return Field(field, Report._of(info))
 
 
 def deform_file(
@@ -376,23 +718,60 @@ def deform_file(
     spec: Spec,
     *,
     save_field: Union[str, "os.PathLike[str]", None] = None,
+    report: Union[str, "os.PathLike[str]", None] = None,
+    preview: Union[str, "os.PathLike[str]", None] = None,
+    strain: Optional[bool] = None,
+    azimuth: Optional[float] = None,
+    elevation: Optional[float] = None,
+    size: Optional[Tuple[int, int]] = None,
+    up: Optional[str] = None,
+    zoom: Optional[float] = None,
+    chunk: Optional[int] = None,
     cell_size: Optional[float] = None,
     cells: Optional[int] = None,
+    min_cell_size: Optional[float] = None,
+    max_level: Optional[int] = None,
+    shell: Optional[bool] = None,
+    inside: Optional[str] = None,
+    solver: Optional[str] = None,
+    tolerance: Optional[float] = None,
+    coarse_levels: Optional[int] = None,
+    loose_parts: Optional[str] = None,
+    refine_strain: Optional[float] = None,
     transfer: Optional[str] = None,
-) -> dict:
+    rbf_tolerance: Optional[float] = None,
+    check_gcp: Optional[bool] = None,
+    memory_limit: Union[int, str, None] = None,
+    progress: Any = None,
+) -> Report:
     """``rigidcells deform INPUT -o OUTPUT --edit SPEC``: streams the file, writes the output
-    atomically (and the field with ``save_field``); returns what was done."""
-    text, base = _spec(spec)
-    return _rigidcells.deform_file(
-        os.fspath(input),
-        os.fspath(output),
-        text,
-        base,
-        None if save_field is None else os.fspath(save_field),
-        cell_size,
-        cells,
-        transfer,
+    atomically; returns a ``Report`` (its residuals measured on the preview proxy, as the
+    command line's report measures them). Beside the output, all together or none:
+    ``save_field`` (the field, for ``apply_file``), ``report`` (the command line's JSON
+    report), ``preview`` (a PNG of the input and the output side by side, with the strained
+    cells beside them with ``strain=True``, seen from ``azimuth``, ``elevation`` in degrees,
+    ``size`` (width, height) in pixels, ``up`` ``"x"``, ``"y"`` or ``"z"``, ``zoom``).
+    ``chunk``: samples per streamed chunk (the bytes written are the same). Stopped (Ctrl-C,
+    or ``progress`` raising), it leaves no output behind."""
+    text, base, paths = _spec(spec)
+    options = _options(
+        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
+        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
+        coarse_levels=coarse_levels, loose_parts=loose_parts, refine_strain=refine_strain,
+        transfer=transfer, rbf_tolerance=rbf_tolerance, check_gcp=check_gcp,
+        memory_limit=memory_limit,
     )
+    path = lambda p: None if p is None else os.fspath(p)
+    view = _options(
+        strain=strain, azimuth=azimuth, elevation=elevation, size=size, up=up, zoom=zoom
+    )
+    info = _with_progress(
+        progress, lambda cb: _call(
+            paths, _rigidcells.deform_file, os.fspath(input), os.fspath(output), text, base,
+            path(save_field), path(report), path(preview), view, chunk, options, cb,
+        )
+    )
+    return Report._of(info)
 
 
 def apply_file(
@@ -401,8 +780,65 @@ def apply_file(
     output: Union[str, "os.PathLike[str]"],
     *,
     outside: str = "refuse",
+    transfer: Optional[str] = None,
+    rbf_tolerance: Optional[float] = None,
+    memory_limit: Union[int, str, None] = None,
+    chunk: Optional[int] = None,
+    progress: Any = None,
 ) -> dict:
-    """``rigidcells apply FIELD INPUT -o OUTPUT``: the same bytes as the command line."""
-    return _rigidcells.apply_file(
-        os.fspath(field), os.fspath(input), os.fspath(output), outside
+    """``rigidcells apply FIELD INPUT -o OUTPUT``: the same bytes as the command line.
+    ``outside``: ``"refuse"`` (samples beyond the field's margin are an error), ``"keep"`` or
+    ``"extend"``; ``transfer`` (default: the one the field was solved for), ``rbf_tolerance``,
+    ``memory_limit`` and ``chunk`` as for ``deform_file``. Returns ``samples``, ``notes`` and
+    ``seconds``."""
+    options = _options(transfer=transfer, rbf_tolerance=rbf_tolerance, memory_limit=memory_limit)
+    return _with_progress(
+        progress, lambda cb: _rigidcells.apply_file(
+            os.fspath(field), os.fspath(input), os.fspath(output), outside, options, chunk, cb
+        )
     )
+
+
+def solve_files(
+    inputs: Sequence[Union[str, "os.PathLike[str]"]],
+    spec: Spec,
+    save_field: Union[str, "os.PathLike[str]"],
+    *,
+    chunk: Optional[int] = None,
+    cell_size: Optional[float] = None,
+    cells: Optional[int] = None,
+    min_cell_size: Optional[float] = None,
+    max_level: Optional[int] = None,
+    shell: Optional[bool] = None,
+    inside: Optional[str] = None,
+    solver: Optional[str] = None,
+    tolerance: Optional[float] = None,
+    coarse_levels: Optional[int] = None,
+    loose_parts: Optional[str] = None,
+    transfer: Optional[str] = None,
+    memory_limit: Union[int, str, None] = None,
+    progress: Any = None,
+) -> Report:
+    """``rigidcells solve INPUTS --edit SPEC --save-field FIELD``: the field of the edit over
+    several files taken as one (the tiles of a scan), streamed, written to ``save_field``;
+    ``apply_file`` of it to each tile gives what ``deform_file`` gives on the merged file,
+    record for record. Returns a ``Report`` of the solve."""
+    text, base, paths = _spec(spec)
+    options = _options(
+        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
+        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
+        coarse_levels=coarse_levels, loose_parts=loose_parts, transfer=transfer,
+        memory_limit=memory_limit,
+    )
+    files = [os.fspath(p) for p in inputs]
+    info = _with_progress(
+        progress, lambda cb: _call(
+            paths, _rigidcells.solve_files, files, os.fspath(save_field), text, base, chunk,
+            options, cb,
+        )
+    )
+    return Report._of(info)
+
+
+for _f in (deform, solve, deform_file):
+    _f.__doc__ = (_f.__doc__ or "") + _OPTIONS_DOC

@@ -1,30 +1,82 @@
 import os
-from typing import Any, Optional, Sequence, Tuple, Union, overload
+from dataclasses import dataclass
+from typing import Any, Callable, List, Literal, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
+
+__version__: str
 
 Spec = Union[str, os.PathLike[str], dict]
 PathLike = Union[str, os.PathLike[str]]
 # A LAS frame's scale or offset: one number for all axes, or (x, y, z).
 Frame = Union[float, Sequence[float], np.ndarray]
+Transfer = Literal["pu", "rbf", "blend", "blend-idw"]
+Outside = Literal["refuse", "keep", "extend"]
+# A callable (stage, done, total or None), True (a tqdm bar), False (none), or None (a tqdm
+# bar where tqdm is installed and standard error is a terminal).
+Progress = Union[Callable[[str, int, Optional[int]], Any], bool, None]
 
 class FormatError(ValueError):
     """A malformed or unreadable input file."""
 
-class Field:
-    """A solved field (`solve`): apply it to points, save it for `rigidcells apply`, load one."""
+@dataclass
+class Report:
+    """What a deformation did (the command line's report)."""
 
+    samples: int
+    cells: int
+    cell_size: float
+    iterations: int
+    energy: float
+    converged: bool
+    residual_fixed_max: float
+    residual_handle_max: float
+    foldovers: Tuple[int, int]
+    warnings: List[str]
+    notes: List[str]
+    timings: dict
+    handle_turns: List[dict]
+    control_points: List[dict]
+    control_rmse: Optional[float]
+    normals: Optional[np.ndarray] = ...
+    def __getitem__(self, key: str) -> Any: ...
+    def __contains__(self, key: object) -> bool: ...
+
+class Field:
+    """A solved field (`solve`): apply it to points, save it for `rigidcells apply`, load one;
+    it pickles."""
+
+    report: Optional[Report]
     @property
     def cells(self) -> int: ...
+    @property
+    def cell_size(self) -> float: ...
+    @property
+    def transfer(self) -> str: ...
+    @property
+    def bounds(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]: ...
     # Points come back in the form they came in: an (n, 3) float array as float64, a numpy
-    # structured array with its dtype, a laspy LasData or point record as a new one.
+    # structured array with its dtype, a laspy LasData or point record as a new one; with
+    # normals, (points, turned normals).
     @overload
     def apply(
-        self, points: np.ndarray, *, scale: Optional[Frame] = ..., offset: Optional[Frame] = ...
+        self,
+        points: np.ndarray,
+        *,
+        normals: None = ...,
+        outside: Outside = ...,
+        scale: Optional[Frame] = ...,
+        offset: Optional[Frame] = ...,
     ) -> np.ndarray: ...
     @overload
     def apply(
-        self, points: Any, *, scale: Optional[Frame] = ..., offset: Optional[Frame] = ...
+        self,
+        points: Any,
+        *,
+        normals: Any = ...,
+        outside: Outside = ...,
+        scale: Optional[Frame] = ...,
+        offset: Optional[Frame] = ...,
     ) -> Any: ...
     def save(self, path: PathLike) -> None: ...
     @staticmethod
@@ -37,12 +89,25 @@ def deform(
     *,
     triangles: Any = ...,
     normals: Any = ...,
-    cell_size: Optional[float] = ...,
-    cells: Optional[int] = ...,
-    transfer: Optional[str] = ...,
     scale: Optional[Frame] = ...,
     offset: Optional[Frame] = ...,
-) -> Tuple[np.ndarray, dict]: ...
+    cell_size: Optional[float] = ...,
+    cells: Optional[int] = ...,
+    min_cell_size: Optional[float] = ...,
+    max_level: Optional[int] = ...,
+    shell: Optional[bool] = ...,
+    inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    tolerance: Optional[float] = ...,
+    coarse_levels: Optional[int] = ...,
+    loose_parts: Optional[Literal["carry", "rest"]] = ...,
+    refine_strain: Optional[float] = ...,
+    transfer: Optional[Transfer] = ...,
+    rbf_tolerance: Optional[float] = ...,
+    check_gcp: Optional[bool] = ...,
+    memory_limit: Union[int, str, None] = ...,
+    progress: Progress = ...,
+) -> Tuple[np.ndarray, Report]: ...
 @overload
 def deform(
     points: Any,
@@ -50,22 +115,48 @@ def deform(
     *,
     triangles: Any = ...,
     normals: Any = ...,
-    cell_size: Optional[float] = ...,
-    cells: Optional[int] = ...,
-    transfer: Optional[str] = ...,
     scale: Optional[Frame] = ...,
     offset: Optional[Frame] = ...,
-) -> Tuple[Any, dict]: ...
+    cell_size: Optional[float] = ...,
+    cells: Optional[int] = ...,
+    min_cell_size: Optional[float] = ...,
+    max_level: Optional[int] = ...,
+    shell: Optional[bool] = ...,
+    inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    tolerance: Optional[float] = ...,
+    coarse_levels: Optional[int] = ...,
+    loose_parts: Optional[Literal["carry", "rest"]] = ...,
+    refine_strain: Optional[float] = ...,
+    transfer: Optional[Transfer] = ...,
+    rbf_tolerance: Optional[float] = ...,
+    check_gcp: Optional[bool] = ...,
+    memory_limit: Union[int, str, None] = ...,
+    progress: Progress = ...,
+) -> Tuple[Any, Report]: ...
 def solve(
     points: Any,
     spec: Spec,
     *,
     triangles: Any = ...,
-    cell_size: Optional[float] = ...,
-    cells: Optional[int] = ...,
-    transfer: Optional[str] = ...,
     scale: Optional[Frame] = ...,
     offset: Optional[Frame] = ...,
+    cell_size: Optional[float] = ...,
+    cells: Optional[int] = ...,
+    min_cell_size: Optional[float] = ...,
+    max_level: Optional[int] = ...,
+    shell: Optional[bool] = ...,
+    inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    tolerance: Optional[float] = ...,
+    coarse_levels: Optional[int] = ...,
+    loose_parts: Optional[Literal["carry", "rest"]] = ...,
+    refine_strain: Optional[float] = ...,
+    transfer: Optional[Transfer] = ...,
+    rbf_tolerance: Optional[float] = ...,
+    check_gcp: Optional[bool] = ...,
+    memory_limit: Union[int, str, None] = ...,
+    progress: Progress = ...,
 ) -> Field: ...
 def deform_file(
     input: PathLike,
@@ -73,10 +164,61 @@ def deform_file(
     spec: Spec,
     *,
     save_field: Optional[PathLike] = ...,
+    report: Optional[PathLike] = ...,
+    preview: Optional[PathLike] = ...,
+    strain: Optional[bool] = ...,
+    azimuth: Optional[float] = ...,
+    elevation: Optional[float] = ...,
+    size: Optional[Tuple[int, int]] = ...,
+    up: Optional[Literal["x", "y", "z"]] = ...,
+    zoom: Optional[float] = ...,
+    chunk: Optional[int] = ...,
     cell_size: Optional[float] = ...,
     cells: Optional[int] = ...,
-    transfer: Optional[str] = ...,
-) -> dict: ...
+    min_cell_size: Optional[float] = ...,
+    max_level: Optional[int] = ...,
+    shell: Optional[bool] = ...,
+    inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    tolerance: Optional[float] = ...,
+    coarse_levels: Optional[int] = ...,
+    loose_parts: Optional[Literal["carry", "rest"]] = ...,
+    refine_strain: Optional[float] = ...,
+    transfer: Optional[Transfer] = ...,
+    rbf_tolerance: Optional[float] = ...,
+    check_gcp: Optional[bool] = ...,
+    memory_limit: Union[int, str, None] = ...,
+    progress: Progress = ...,
+) -> Report: ...
 def apply_file(
-    field: PathLike, input: PathLike, output: PathLike, *, outside: str = ...
+    field: PathLike,
+    input: PathLike,
+    output: PathLike,
+    *,
+    outside: Outside = ...,
+    transfer: Optional[Transfer] = ...,
+    rbf_tolerance: Optional[float] = ...,
+    memory_limit: Union[int, str, None] = ...,
+    chunk: Optional[int] = ...,
+    progress: Progress = ...,
 ) -> dict: ...
+def solve_files(
+    inputs: Sequence[PathLike],
+    spec: Spec,
+    save_field: PathLike,
+    *,
+    chunk: Optional[int] = ...,
+    cell_size: Optional[float] = ...,
+    cells: Optional[int] = ...,
+    min_cell_size: Optional[float] = ...,
+    max_level: Optional[int] = ...,
+    shell: Optional[bool] = ...,
+    inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    tolerance: Optional[float] = ...,
+    coarse_levels: Optional[int] = ...,
+    loose_parts: Optional[Literal["carry", "rest"]] = ...,
+    transfer: Optional[Transfer] = ...,
+    memory_limit: Union[int, str, None] = ...,
+    progress: Progress = ...,
+) -> Report: ...

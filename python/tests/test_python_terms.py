@@ -1,0 +1,322 @@
+"""The package in Python's own terms: every option of the command line as a keyword argument
+(the same bytes), a typed report, errors naming arguments and dict keys, fields that pickle,
+`Field.apply` taking what `deform` takes, progress, and Ctrl-C."""
+
+import copy
+import os
+import pickle
+import signal
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import rigidcells
+from test_rigidcells import BEND, SHARED, bar_points, cli
+
+BEND_DICT = {
+    "fixed": [{"box": {"min": [-0.1, -0.1, -0.1], "max": [0.5, 1.1, 1.1]}}],
+    "handle": [
+        {
+            "box": {"min": [9.5, -0.1, -0.1], "max": [10.1, 1.1, 1.1]},
+            "rotate": {"axis": [0.0, 1.0, 0.0], "degrees": -90.0},
+            "translate": [-3.4, 0.0, 5.9],
+        }
+    ],
+}
+
+
+def test_version():
+    assert rigidcells.__version__.count(".") == 2
+    out = subprocess.run([cli(), "--version"], capture_output=True, text=True, check=True)
+    assert out.stdout.split()[-1] == rigidcells.__version__
+
+
+@pytest.mark.parametrize(
+    "options, flags",
+    [
+        (
+            {"solver": "multilevel", "tolerance": 0.0, "coarse_levels": 0},
+            ["--solver", "multilevel", "--tolerance", "0", "--coarse-levels", "0"],
+        ),
+        (
+            {"cells": 400, "inside": "flood", "loose_parts": "rest", "transfer": "blend"},
+            ["--cells", "400", "--inside", "flood", "--loose-parts", "rest", "--transfer", "blend"],
+        ),
+        (
+            {"min_cell_size": 0.125, "max_level": 4, "memory_limit": "2G"},
+            ["--min-cell-size", "0.125", "--max-level", "4", "--memory-limit", "2G"],
+        ),
+        (
+            {"cell_size": 0.25, "shell": True, "refine_strain": 0.05, "transfer": "rbf",
+             "rbf_tolerance": 0.01},
+            ["--cell-size", "0.25", "--shell", "--refine-strain", "0.05", "--transfer", "rbf",
+             "--rbf-tolerance", "0.01"],
+        ),
+    ],
+)
+def test_every_option_gives_the_command_lines_bytes(tmp_path, options, flags):
+    pts = bar_points()
+    xyz = tmp_path / "bar.xyz"
+    xyz.write_text("".join(f"{x:.17e} {y:.17e} {z:.17e}\n" for x, y, z in pts))
+    edit = tmp_path / "bend.toml"
+    edit.write_text(BEND)
+    out, ours = tmp_path / "cli.xyz", tmp_path / "py.xyz"
+    run = [cli(), "deform", str(xyz), "-o", str(out), "--edit", str(edit), "-q", *flags]
+    subprocess.run(run, check=True)
+    report = rigidcells.deform_file(xyz, ours, edit, progress=False, **options)
+    assert ours.read_bytes() == out.read_bytes()
+    assert isinstance(report, rigidcells.Report) and report.cells > 0
+    # The same options in memory: the moved points the file holds.
+    moved, _ = rigidcells.deform(pts, BEND, progress=False, **options)
+    written = np.array([[float(v) for v in line.split()[:3]] for line in out.read_text().splitlines()])
+    assert np.array_equal(moved, written)
+
+
+def test_deform_file_writes_the_command_lines_report_and_preview(tmp_path):
+    import json
+
+    src = SHARED / "las" / "autzen_trim.laz"
+    edit = tmp_path / "edit.toml"
+    edit.write_text(rigidcells._rigidcells.toml_from_json(json.dumps(BEND_AUTZEN)))
+    picture = ["--azimuth", "30", "--elevation", "40", "--size", "320x200", "--up", "z", "--zoom", "1.5"]
+    outputs = {}
+    for face in ("cli", "py"):
+        d = tmp_path / face
+        d.mkdir()
+        outputs[face] = d
+        if face == "cli":
+            subprocess.run(
+                [cli(), "deform", str(src), "-o", str(d / "bent.laz"), "--edit", str(edit),
+                 "--cells", "2000", "--report", str(d / "r.json"), "--preview", str(d / "p.png"),
+                 "--strain", "--save-field", str(d / "f.field"), "--chunk", "5000", "-q", *picture],
+                check=True,
+            )
+        else:
+            rigidcells.deform_file(
+                src, d / "bent.laz", edit, cells=2000, report=d / "r.json", preview=d / "p.png",
+                strain=True, save_field=d / "f.field", chunk=5000, azimuth=30, elevation=40,
+                size=(320, 200), up="z", zoom=1.5, progress=False,
+            )
+    for name in ("bent.laz", "p.png", "f.field"):
+        assert (outputs["py"] / name).read_bytes() == (outputs["cli"] / name).read_bytes(), name
+    a, b = (json.loads((outputs[f] / "r.json").read_text()) for f in ("cli", "py"))
+    for varying in ("output", "timings_s", "peak_memory_bytes", "iteration_log"):
+        a.pop(varying), b.pop(varying)
+    assert a == b
+    # A bad view is refused before any work, naming the argument.
+    with pytest.raises(ValueError, match=r"^invalid parameter: zoom=0: a factor above 0"):
+        rigidcells.deform_file(src, tmp_path / "x.laz", edit, preview=tmp_path / "x.png", zoom=0)
+    assert not (tmp_path / "x.laz").exists()
+
+
+def test_tiles_solved_and_applied_as_the_command_line_does(tmp_path):
+    import json
+
+    tiles = [SHARED / "las" / "autzen_trim.laz", SHARED / "las" / "autzen_trim.las"]
+    edit = tmp_path / "edit.toml"
+    edit.write_text(rigidcells._rigidcells.toml_from_json(json.dumps(BEND_AUTZEN)))
+    cli_field, py_field = tmp_path / "cli.field", tmp_path / "py.field"
+    subprocess.run(
+        [cli(), "solve", *map(str, tiles), "--edit", str(edit), "--save-field", str(cli_field),
+         "--cells", "2000", "--transfer", "rbf", "-q"],
+        check=True,
+    )
+    report = rigidcells.solve_files(tiles, BEND_AUTZEN, py_field, cells=2000, transfer="rbf", progress=False)
+    assert py_field.read_bytes() == cli_field.read_bytes() and report.cells > 1000
+    out_cli, out_py = tmp_path / "cli.laz", tmp_path / "py.laz"
+    subprocess.run(
+        [cli(), "apply", str(cli_field), str(tiles[0]), "-o", str(out_cli), "--rbf-tolerance", "0.01", "-q"],
+        check=True,
+    )
+    rigidcells.apply_file(py_field, tiles[0], out_py, rbf_tolerance=0.01, chunk=1000, progress=False)
+    assert out_py.read_bytes() == out_cli.read_bytes()
+    with pytest.raises(ValueError, match=r'rbf_tolerance applies to transfer="rbf" only'):
+        rigidcells.apply_file(py_field, tiles[0], tmp_path / "x.laz", transfer="pu", rbf_tolerance=0.01)
+
+
+def test_the_report_is_typed_and_says_what_the_cli_report_says(tmp_path):
+    pts = bar_points()
+    moved, report = rigidcells.deform(pts, BEND, cells=600, progress=False)
+    assert isinstance(report, rigidcells.Report)
+    assert report.samples == len(pts) and report.iterations > 0 and report.converged
+    # Fixed samples keep their bytes, handle samples follow the handle.
+    assert report.residual_fixed_max == 0.0 and report.residual_handle_max < 1e-12
+    assert set(report.timings) == {"read", "voxelize", "solve", "transfer", "write", "check_gcp", "total"}
+    assert report.timings["total"] >= report.timings["solve"] > 0
+    # The chosen cell size: the one `cells=` picked, within 2 % of the count asked.
+    assert abs(report.cells - 600) <= 0.02 * 600 or report.cell_size > 0
+    again, r2 = rigidcells.deform(pts, BEND, cell_size=report.cell_size, progress=False)
+    assert np.array_equal(again, moved) and r2.cells == report.cells
+    assert report["cells"] == report.cells and "energy" in report
+    # A count the search cannot reach within 2 % is said, in Python's terms.
+    thin = np.random.default_rng(0).uniform([0, 0, 0], [10, 1, 1], (20_000, 3))
+    _, r3 = rigidcells.deform(thin, BEND, cells=1000, progress=False)
+    assert abs(r3.cells / 1000 - 1) > 0.02
+    assert any(w.startswith(f"cells=1000: {r3.cells} cells (") for w in r3.warnings), r3.warnings
+    field = rigidcells.solve(pts, BEND, cells=600, progress=False)
+    assert field.report.cells == report.cells and field.cell_size == pytest.approx(report.cell_size)
+    lo, hi = field.bounds
+    assert all(l <= p for l, p in zip(lo, pts.min(axis=0))) and all(h >= p for h, p in zip(hi, pts.max(axis=0)))
+    assert "cells of" in repr(field) and field.transfer == "pu"
+
+
+def test_options_are_checked_by_name():
+    pts = bar_points()
+    with pytest.raises(ValueError, match=r"^cells must be"):
+        rigidcells.deform(pts, BEND, cells=-1)
+    with pytest.raises(TypeError, match=r"^cells must be .* got a bool"):
+        rigidcells.deform(pts, BEND, cells=True)
+    with pytest.raises(ValueError, match=r"cell_size and cells both size the cells"):
+        rigidcells.deform(pts, BEND, cells=100, cell_size=0.5)
+    with pytest.raises(ValueError) as e:
+        rigidcells.deform(pts, BEND, transfer="blend", rbf_tolerance=0.1)
+    assert str(e.value) == 'invalid parameter: rbf_tolerance applies to transfer="rbf" only'
+    with pytest.raises(ValueError, match=r"solver `fast`: expected auto, direct or multilevel"):
+        rigidcells.deform(pts, BEND, solver="fast")
+    with pytest.raises(ValueError, match=r"^coarse_levels must be 0 to 8"):
+        rigidcells.deform(pts, BEND, coarse_levels=9)
+    with pytest.raises(ValueError, match=r"memory_limit"):
+        rigidcells.deform(pts, BEND, memory_limit="lots")
+    # A message that names a remedy names the argument, never a command-line flag.
+    with pytest.raises(ValueError) as e:
+        rigidcells.deform(pts, BEND, cell_size=1e-9, memory_limit="64M")
+    assert "--" not in str(e.value) and "cell_size" in str(e.value), e.value
+    # A file name keeps its dashes.
+    with pytest.raises(OSError, match="no--such--file.laz"):
+        rigidcells.deform_file("no--such--file.laz", "out.laz", BEND)
+
+
+def test_inputs_python_would_misread_are_refused():
+    pts = bar_points()
+    for bad, kind in ((pts.astype(complex), "complex"), (pts > 1, "bool")):
+        with pytest.raises(TypeError, match=f"points must hold real numbers, got {kind}"):
+            rigidcells.deform(bad, BEND)
+    with pytest.raises(TypeError, match="masked array"):
+        rigidcells.deform(np.ma.masked_array(pts, mask=np.zeros_like(pts, dtype=bool)), BEND)
+    with pytest.raises(TypeError, match="normals must hold real numbers"):
+        rigidcells.deform(pts, BEND, normals=np.ones_like(pts, dtype=bool))
+    with pytest.raises(TypeError, match="triangles must be integer vertex indices"):
+        rigidcells.deform(pts, BEND, triangles=[[0, 1, 2.5]])
+
+
+def test_dict_specs_take_numpy_values_and_errors_name_the_key():
+    pts = bar_points()
+    plain, _ = rigidcells.deform(pts, BEND_DICT, cell_size=0.25, progress=False)
+    numpy_spec = copy.deepcopy(BEND_DICT)
+    numpy_spec["fixed"][0]["box"]["min"] = np.array([-0.1, -0.1, -0.1])
+    numpy_spec["handle"][0]["translate"] = np.array([-3.4, 0.0, 5.9], dtype=np.float64)
+    numpy_spec["handle"][0]["rotate"]["axis"] = [np.int64(0), np.float32(1.0), np.int32(0)]
+    numpy_spec["handle"][0]["rotate"]["degrees"] = np.float64(-90.0)
+    moved, _ = rigidcells.deform(pts, numpy_spec, cell_size=0.25, progress=False)
+    assert np.array_equal(moved, plain)
+    bad = copy.deepcopy(BEND_DICT)
+    bad["handle"][0]["translate"] = [1.0, 2.0]
+    with pytest.raises(ValueError) as e:
+        rigidcells.deform(pts, bad)
+    assert str(e.value).startswith('spec["handle"][0]["translate"]: '), e.value
+    assert "line" not in str(e.value)
+
+
+def test_a_field_pickles_and_applies_what_deform_takes():
+    pts = bar_points()
+    field = rigidcells.solve(pts, BEND, cell_size=0.25, progress=False)
+    moved = field.apply(pts)
+    for copied in (pickle.loads(pickle.dumps(field)), copy.deepcopy(field)):
+        assert np.array_equal(copied.apply(pts), moved) and copied.cells == field.cells
+    assert np.array_equal(field.apply(pts.tolist()), moved)
+    assert np.array_equal(field.apply(pts.astype(np.float32)), field.apply(pts.astype(np.float32).astype(np.float64)))
+    structured = np.zeros(len(pts), dtype=[("X", "f8"), ("Y", "f8"), ("Z", "f8"), ("i", "u2")])
+    structured["X"], structured["Y"], structured["Z"] = pts.T
+    out = field.apply(structured)
+    assert out.dtype == structured.dtype and np.array_equal(out["X"], moved[:, 0])
+    # Normals turn as deform turns them.
+    normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    _, report = rigidcells.deform(pts, BEND, cell_size=0.25, normals=normals, progress=False)
+    got, turned = field.apply(pts, normals=normals)
+    assert np.array_equal(got, moved) and np.allclose(turned, report.normals, atol=1e-12)
+    # Beyond the margin: refused by default, kept or extended when asked.
+    far = np.array([[100.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match='outside="keep"'):
+        field.apply(far)
+    assert np.array_equal(field.apply(far, outside="keep"), far)
+    assert not np.array_equal(field.apply(far, outside="extend"), far)
+    with pytest.raises(ValueError, match="row 0 is not finite"):
+        field.apply(np.array([[np.nan, 0.0, 0.0]]))
+
+
+def test_progress_reaches_a_callable_and_an_exception_there_stops_the_call(tmp_path):
+    pts = bar_points()
+    seen = []
+    rigidcells.deform(pts, BEND, cell_size=0.25, progress=lambda *a: seen.append(a))
+    stages = [s for s, _, _ in seen]
+    assert "solving" in stages and all(d >= 0 for _, d, _ in seen)
+
+    class Stop(Exception):
+        pass
+
+    def stop(stage, done, total):
+        if stage == "solving":
+            raise Stop()
+
+    with pytest.raises(Stop):
+        rigidcells.deform(pts, BEND, cell_size=0.25, progress=stop)
+    out = tmp_path / "out.laz"
+    with pytest.raises(Stop):
+        rigidcells.deform_file(SHARED / "las" / "autzen_trim.laz", out, BEND_AUTZEN, progress=stop)
+    assert os.listdir(tmp_path) == []
+
+
+BEND_AUTZEN = {
+    "fixed": [{"box": {"min": [636000, 848900, 0], "max": [636300, 849600, 1000]}}],
+    "handle": [{"box": {"min": [636900, 848900, 0], "max": [637200, 849600, 1000]}, "translate": [0, 0, 20]}],
+}
+
+
+def interrupt_after(seconds):
+    """Sends this process SIGINT (Ctrl-C) after `seconds`; returns when it was sent."""
+    sent = {}
+
+    def fire():
+        sent["at"] = time.monotonic()
+        os.kill(os.getpid(), signal.SIGINT)
+
+    timer = threading.Timer(seconds, fire)
+    timer.start()
+    return sent, timer
+
+
+def test_ctrl_c_stops_a_call_within_a_second_and_leaves_no_file(tmp_path):
+    rng = np.random.default_rng(1)
+    pts = rng.uniform([0, 0, 0], [40, 10, 4], size=(400_000, 3))
+    spec = {
+        "fixed": [{"box": {"min": [-1, -1, -1], "max": [2, 11, 5]}}],
+        "handle": [{"box": {"min": [38, -1, -1], "max": [41, 11, 5]},
+                    "rotate": {"axis": [1, 0, 0], "degrees": 170}}],
+    }
+    sent, timer = interrupt_after(1.0)
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        rigidcells.deform(pts, spec, cells=60_000, progress=False)
+        pytest.fail(f"the call ended after {time.monotonic() - start:.1f} s before Ctrl-C")
+    timer.join()
+    assert time.monotonic() - sent["at"] < 1.0
+    # A file: the output is not left behind, complete or not.
+    out = tmp_path / "bent.laz"
+    sent, timer = interrupt_after(0.5)
+    with pytest.raises(KeyboardInterrupt):
+        rigidcells.deform_file(SHARED / "las" / "autzen_trim.laz", out, BEND_AUTZEN, cells=60_000, progress=False)
+    timer.join()
+    assert time.monotonic() - sent["at"] < 1.0
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_tqdm_bar_shows_where_asked(capsys):
+    pytest.importorskip("tqdm")
+    rigidcells.deform(bar_points(), BEND, cell_size=0.25, progress=True)
+    assert "solving" in capsys.readouterr().err
+    # Not a terminal, not asked: no bar.
+    rigidcells.deform(bar_points(), BEND, cell_size=0.25)
+    assert capsys.readouterr().err == ""
