@@ -38,9 +38,15 @@ create_exception!(
 /// The library's error as a Python exception, by its exit code's class, in the package's
 /// terms (keyword arguments, not the command line's flags).
 fn py_err(e: Error) -> PyErr {
-    let text = python_terms(&e.to_string());
+    // A bad argument or array is a ValueError that says what is wrong, without the command
+    // line's "invalid parameter:" (a malformed file is a FormatError).
+    let text = match &e {
+        Error::Param(m) | Error::Input(m) => python_terms(m.trim_end()),
+        e => python_terms(e.to_string().trim_end()),
+    };
     match (&e, e.exit_code()) {
         (Error::Io { .. } | Error::Write { .. }, _) => PyOSError::new_err(text),
+        (Error::Input(_), _) => PyValueError::new_err(text),
         (_, 3) => FormatError::new_err(text),
         (_, 4) => PyValueError::new_err(text),
         _ => PyRuntimeError::new_err(text),
@@ -100,9 +106,10 @@ fn python_terms(text: &str) -> String {
             })
         });
         let number = tail.strip_prefix(' ').map(|t| {
-            let len = t
+            let sign = usize::from(t.starts_with('-'));
+            let len = t[sign..]
                 .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-                .unwrap_or(t.len());
+                .map_or(t.len(), |n| n + sign);
             &t[..len]
         });
         match (value, number) {
@@ -110,7 +117,10 @@ fn python_terms(text: &str) -> String {
                 out.push_str(&format!("{arg}=\"{v}\""));
                 rest = &tail[1 + v.len()..];
             }
-            (None, Some(n)) if n.starts_with(|c: char| c.is_ascii_digit()) => {
+            (None, Some(n))
+                if n.trim_start_matches('-')
+                    .starts_with(|c: char| c.is_ascii_digit()) =>
+            {
                 out.push_str(&format!("{arg}={n}"));
                 rest = &tail[1 + n.len()..];
             }
@@ -413,6 +423,7 @@ fn info_dict<'py>(
         info.solver.energies.last().copied().unwrap_or(0.0),
     )?;
     d.set_item("converged", info.solver.converged)?;
+    d.set_item("energies", info.solver.energies.clone())?;
     d.set_item("foldovers", (info.foldovers.1, info.foldovers.0))?;
     d.set_item("warnings", PyList::new(py, said(&info.warnings))?)?;
     let turns = PyList::empty(py);
@@ -826,10 +837,11 @@ fn view(d: Option<&Bound<'_, PyDict>>, input: &Path) -> PyResult<(View, bool)> {
                         .map_err(|_| PyTypeError::new_err("strain must be True or False"))?
                 }
                 "size" => {
-                    let (w, h): (u64, u64) = value.extract().map_err(|_| {
+                    let (w, h): (i64, i64) = value.extract().map_err(|_| {
                         PyTypeError::new_err("size must be (width, height) in pixels")
                     })?;
-                    let side = |v: u64| u32::try_from(v).unwrap_or(u32::MAX);
+                    let side =
+                        |v: i64| u32::try_from(v).unwrap_or(if v < 0 { 0 } else { u32::MAX });
                     (view.width, view.height) = (side(w), side(h));
                 }
                 "up" => {

@@ -84,7 +84,7 @@ def test_a_las_data_comes_back_new_and_rounded_as_the_cli_writes_it(las, tmp_pat
     header_before = (las.header.scales.copy(), las.header.offsets.copy(), las.header.mins.copy())
     bent, info = rigidcells.deform(las, BEND)
     assert isinstance(bent, laspy.LasData) and bent is not las
-    assert info["samples"] == 110000 and info["notes"] == []
+    assert info["points"] == 110000 and info["notes"] == []
     # The input is untouched.
     assert las.points.array.tobytes() == arr_before.tobytes()
     assert all(np.array_equal(a, b) for a, b in zip(header_before, (las.header.scales, las.header.offsets, las.header.mins)))

@@ -84,7 +84,7 @@ def test_deform_file_writes_the_command_lines_bytes(tmp_path):
     )
     ours, theirs = tmp_path / "py.las", tmp_path / "cli.las"
     info = rigidcells.deform_file(src, ours, spec, save_field=tmp_path / "f.field")
-    assert info["samples"] == 110000
+    assert info["points"] == 110000
     subprocess.run([cli(), "deform", str(src), "-o", str(theirs), "--edit", str(edit), "-q"], check=True)
     assert ours.read_bytes() == theirs.read_bytes()
     again = tmp_path / "again.las"

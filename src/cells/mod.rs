@@ -18,6 +18,7 @@
 
 mod adjacency;
 mod build;
+mod decimate;
 mod export;
 mod morton;
 mod size;
@@ -27,6 +28,7 @@ mod tri_box;
 mod winding;
 
 pub use build::Occupancy;
+pub(crate) use decimate::Decimation;
 pub use export::{Pose, write_cells_ply};
 pub use size::{DEFAULT_DIVISIONS, cell_size_for};
 pub(crate) use size::{Sized, check_size, shortfall, sized};
@@ -118,8 +120,20 @@ pub fn build<const D: usize>(
     budget: Budget,
 ) -> Result<(CellComplex<D>, BuildInfo)> {
     let (lo, hi) = bounds(points)?;
-    let sized = sized(params, budget, || Ok((points.into(), triangles)))?;
-    if let Some(built) = sized.built {
+    // A point cloud is sized on the decimated samples a file of the same points is sized on
+    // (`Decimation`); a mesh on all its vertices, which its triangles need.
+    let mut every_point = true;
+    let sized = sized(params, budget, || {
+        if !triangles.is_empty() {
+            return Ok((points.into(), triangles));
+        }
+        let mut proxy = Decimation::new(&lo, &hi);
+        proxy.add(points, false);
+        every_point = proxy.kept.len() == points.len();
+        Ok((proxy.kept.into(), triangles))
+    })?;
+    // The search's last complex is this one when the search saw every point.
+    if let Some(built) = sized.built.filter(|_| every_point) {
         return Ok(built);
     }
     let params = sized.params;

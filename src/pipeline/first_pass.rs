@@ -4,7 +4,7 @@
 
 use std::borrow::Cow;
 
-use crate::cells::{BuildInfo, CellComplex, Occupancy};
+use crate::cells::{BuildInfo, CellComplex, Decimation, Occupancy};
 use crate::error::{Error, Result};
 use crate::io::{Bounds, Chunk, Source};
 use crate::progress::Observer;
@@ -95,51 +95,6 @@ pub(super) fn first_pass_cells(
     Ok((complex, build_info, selections, proxy))
 }
 
-/// Voxels per longest extent of the decimated proxy that the cell size is searched on.
-const PROXY_RESOLUTION: f64 = 1024.0;
-
-/// Voxels along each axis of a block of [`Seen`].
-const BLOCK: i64 = 16;
-
-/// Blocks along each axis of the grid of [`Seen`]: they cover voxels `0..=PROXY_RESOLUTION`.
-const BLOCKS: i64 = PROXY_RESOLUTION as i64 / BLOCK + 1;
-
-/// The proxy grid's voxels seen so far: a bitmap of `16³` voxels per block, each block made
-/// when a sample first reaches it (memory grows with the occupied blocks, 512 bytes each, not
-/// with the grid), and a hash set for voxels off the grid (samples beyond the bounds used). A
-/// scan in no spatial order reaches its voxels at random, which a hash set of a million
-/// voxels pays for in cache misses.
-#[derive(Default)]
-struct Seen {
-    /// Block slot → 1 + its bitmap's index, or 0.
-    blocks: Vec<u32>,
-    bits: Vec<[u64; 64]>,
-    off: rustc_hash::FxHashSet<[i64; 3]>,
-}
-
-impl Seen {
-    /// Marks `key` seen; whether it was new.
-    fn insert(&mut self, key: [i64; 3]) -> bool {
-        if !key.iter().all(|&k| (0..BLOCKS * BLOCK).contains(&k)) {
-            return self.off.insert(key);
-        }
-        if self.blocks.is_empty() {
-            self.blocks = vec![0; (BLOCKS * BLOCKS * BLOCKS) as usize];
-        }
-        let slot = ((key[2] / BLOCK * BLOCKS + key[1] / BLOCK) * BLOCKS + key[0] / BLOCK) as usize;
-        if self.blocks[slot] == 0 {
-            self.bits.push([0; 64]);
-            self.blocks[slot] = self.bits.len() as u32;
-        }
-        let bit =
-            (key[0] % BLOCK + (key[1] % BLOCK) * BLOCK + (key[2] % BLOCK) * BLOCK * BLOCK) as usize;
-        let word = &mut self.bits[self.blocks[slot] as usize - 1][bit / 64];
-        let new = *word & (1 << (bit % 64)) == 0;
-        *word |= 1 << (bit % 64);
-        new
-    }
-}
-
 /// The points a cell size for `--cells N` is searched on ([`crate::cells::sized`]), gathered in
 /// one extra pass over `source`: meshes keep their vertices (their triangles need them), point
 /// clouds are decimated to one sample per occupied voxel of 1/1024 of the longest extent.
@@ -150,26 +105,15 @@ fn size_proxy<'a>(
     chunk_len: usize,
 ) -> Result<(Cow<'a, [Vect<3>]>, &'a [[u32; 3]])> {
     source.rewind()?;
-    let voxel = (hi - lo).max().max(f64::MIN_POSITIVE) / PROXY_RESOLUTION;
     let keep_all = !source.triangles().is_empty();
-    let mut proxy = Vec::new();
-    let mut seen = Seen::default();
-    let mut last = None;
+    let mut proxy = Decimation::new(&lo, &hi);
     let mut chunk = Chunk::default();
     while source.read_samples(chunk_len, &mut chunk)? > 0 {
         check_finite(source.path(), &chunk)?;
-        for p in &chunk.positions {
-            let key = ((p - lo) / voxel).map(|v| v.floor() as i64);
-            // A scan's next sample is mostly in the voxel of the last: no lookup then.
-            let new = last != Some(key) && seen.insert([key[0], key[1], key[2]]);
-            last = Some(key);
-            if keep_all || new {
-                proxy.push(*p);
-            }
-        }
+        proxy.add(&chunk.positions, keep_all);
     }
     let source: &'a dyn Source = source;
-    Ok((Cow::Owned(proxy), source.triangles()))
+    Ok((Cow::Owned(proxy.kept), source.triangles()))
 }
 
 struct FirstPass {

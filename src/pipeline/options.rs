@@ -88,6 +88,21 @@ impl Options {
         if let Some(size) = self.cell_size {
             crate::cells::check_size(size, "--cell-size")?;
         }
+        if let Some(size) = self.min_cell_size {
+            crate::cells::check_size(size, "--min-cell-size")?;
+        }
+        if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
+            return Err(Error::Param(format!(
+                "--tolerance {}: a number of finest cell sizes, 0 or more",
+                self.tolerance
+            )));
+        }
+        if self.shell && !matches!(self.inside, Inside::Auto | Inside::None) {
+            return Err(Error::Param(format!(
+                "--shell keeps no inside; --inside {} asks for one: give one",
+                self.inside
+            )));
+        }
         if let Some(s) = self.refine_strain
             && !(s.is_finite() && s >= 0.0)
         {

@@ -60,17 +60,31 @@ __version__: str = _rigidcells.__version__
 Spec = Union[str, "os.PathLike[str]", dict]
 
 
-def _plain(value: Any) -> Any:
-    """numpy scalars and arrays in a dict spec as the Python numbers and lists they hold."""
+def _plain(value: Any, path: List[Any]) -> Any:
+    """A dict spec's value as plain Python (numpy scalars and arrays as the numbers and lists
+    they hold, paths as text); a value no spec holds (None, NaN, a masked array, an object)
+    is an error naming its key path."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v, path + [str(k)]) for k, v in value.items()}
+    if isinstance(value, np.ma.MaskedArray):
+        raise TypeError(f"{_key_path(path)}: a masked array; pass the values themselves")
     if isinstance(value, np.ndarray):
         if value.dtype.kind not in "fiub":
-            raise TypeError(f"spec: an array of {value.dtype} is not a number or numbers")
-        return value.tolist()
+            raise TypeError(f"{_key_path(path)}: an array of {value.dtype}, not numbers")
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [_plain(v, path + [k]) for k, v in enumerate(value)]
     if isinstance(value, np.generic):
-        return value.item()
+        value = value.item()
     if isinstance(value, os.PathLike):
         return os.fspath(value)
-    raise TypeError(f"spec: {type(value).__name__} is not a number, text, list or dict")
+    if value is None:
+        raise ValueError(f"{_key_path(path)}: None is not a value (leave the key out)")
+    if isinstance(value, float) and not np.isfinite(value):
+        raise ValueError(f"{_key_path(path)}: {value} is not a finite number")
+    if not isinstance(value, (str, int, float, bool)):
+        raise TypeError(f"{_key_path(path)}: a {type(value).__name__} is not a number, text, list or dict")
+    return value
 
 
 def _key_paths(text: str) -> List[str]:
@@ -111,7 +125,7 @@ def _spec(spec: Spec) -> Tuple[str, str, Optional[List[str]]]:
     """The spec's TOML text, the folder its relative file names are resolved against, and for
     a dict the key path of each line of that text."""
     if isinstance(spec, dict):
-        text = _rigidcells.toml_from_json(json.dumps(spec, default=_plain))
+        text = _rigidcells.toml_from_json(json.dumps(_plain(spec, [])))
         return text, os.getcwd(), _key_paths(text)
     if isinstance(spec, os.PathLike) or (
         isinstance(spec, str) and "\n" not in spec and spec.strip().endswith(".toml")
@@ -127,17 +141,42 @@ def _spec(spec: Spec) -> Tuple[str, str, Optional[List[str]]]:
     raise TypeError("spec must be TOML text, a path to a .toml file, or a dict")
 
 
-_LINE = re.compile(r"^spec: line (\d+)(?:, column \d+)?: ")
+_LINE = re.compile(r"^spec: (?:TOML parse error at )?line (\d+)(?:, column \d+)?(?::|\n)\s*")
+# The TOML parser's picture of the line (`7 | [handle]`, `  | ^^^`), which a dict never had.
+_SNIPPET = re.compile(r"^\s*\d*\s*\|.*$\n?", re.M)
+_SERDE_TYPES = {"map": "a dict", "sequence": "a list", "a sequence": "a list", "string": "a str",
+                "a string": "a str", "floating point": "a float", "integer": "an int",
+                "boolean": "a bool", "a map": "a dict"}
+_INVALID_TYPE = re.compile(r"invalid type: ([\w ]+?)(?: `[^`]*`| \S+)?, expected ([\w ]+)")
 
 
 def _in_dict_terms(error: ValueError, paths: Optional[List[str]]) -> ValueError:
-    """A spec error of a dict spec, its TOML line said as the dict's key path."""
+    """A spec error of a dict spec, its TOML line said as the dict's key path, and the
+    parser's names of types as Python's."""
     text = str(error)
     m = _LINE.match(text)
     if paths is None or m is None or not (0 < int(m.group(1)) <= len(paths)):
         return error
     path = paths[int(m.group(1)) - 1] or "spec"
-    return type(error)(f"{path}: {text[m.end():]}")
+    what = _SNIPPET.sub("", text[m.end():]).strip()
+    what = _INVALID_TYPE.sub(
+        lambda t: f"expected {_SERDE_TYPES.get(t.group(2), t.group(2))}, got "
+        f"{_SERDE_TYPES.get(t.group(1).split(' ')[0], t.group(1))}",
+        what,
+    )
+    return type(error)(f"{path}: {what}")
+
+
+def _lines_said(texts: List[str], paths: Optional[List[str]]) -> List[str]:
+    """Messages that name a dict spec's TOML lines (`line 7`), with its key paths instead."""
+    if paths is None:
+        return texts
+
+    def said(m: "re.Match[str]") -> str:
+        n = int(m.group(1))
+        return paths[n - 1] if 0 < n <= len(paths) and paths[n - 1] else m.group(0)
+
+    return [re.sub(r"\bline (\d+)", said, t) for t in texts]
 
 
 def _call(paths: Optional[List[str]], f: Any, *args: Any) -> Any:
@@ -385,38 +424,45 @@ def _triangles(triangles: Any) -> Optional[np.ndarray]:
 
 @dataclass
 class Report:
-    """What a deformation did: the command line's report (``deform --report``) in Python.
-    Its fields keep their names; ``report["cells"]`` reads a field as a dict would."""
+    """What a deformation did: the figures of the command line's report (``deform --report``)
+    under the same names (``points``, ``cells``, ``iterations``, ``residual_max``,
+    ``foldovers``, ``timings_s``, ...), with ``energy`` the last energy (the JSON's ``energy``
+    list is ``energies`` here). ``report["cells"]`` and ``report.keys()`` read it as a dict."""
 
-    samples: int
+    points: int
     """Samples deformed."""
     cells: int
     """Cells of the complex solved (after refinement)."""
     cell_size: float
-    """The finest cells' edge length, in the points' units (chosen by ``cells=`` or the
-    default when not given)."""
+    """The finest cells' edge length, in the points' units (the one ``cells=`` chose)."""
     iterations: int
     """Gauss-Newton iterations in all."""
     energy: float
     """The energy at the end."""
+    energies: List[float]
+    """The energy before each load step's first iteration and after every iteration."""
     converged: bool
     """Whether the last load step met the tolerance."""
+    residual_max: float
+    """The largest of the two residuals below."""
     residual_fixed_max: float
     """The largest distance of a sample in a fixed cell from its rest position (0: exact)."""
     residual_handle_max: float
     """The largest distance of a sample in a handle's cell from where the handle sends it."""
-    foldovers: Tuple[int, int]
-    """Samples where the map folds space over, and samples checked."""
+    foldovers: int
+    """Samples where the map folds space over (its Jacobian's determinant not positive)."""
+    foldovers_checked: int
+    """Samples checked for fold-overs."""
     warnings: List[str]
     """Messages for the user, as the command line prints them."""
     notes: List[str]
     """Notes on the output (an offset moved to fit, samples beyond the margin)."""
-    timings: dict
+    timings_s: dict
     """Seconds per stage: ``read``, ``voxelize``, ``solve``, ``transfer``, ``write``,
     ``check_gcp``, ``total``."""
     handle_turns: List[dict]
-    """Per turning handle: its ``line`` in the spec, ``turn_asked_degrees`` and
-    ``turn_taken_degrees``."""
+    """Per turning handle: its ``line`` in the spec (for a dict spec also its ``key``),
+    ``turn_asked_degrees`` and ``turn_taken_degrees``."""
     control_points: List[dict]
     """Per control point (``[[target]]``): ``id``, ``from``, ``wanted``, ``got``,
     ``residual``."""
@@ -433,20 +479,39 @@ class Report:
     def __contains__(self, key: object) -> bool:
         return key in self.__dataclass_fields__
 
+    def keys(self) -> List[str]:
+        """The fields' names, as a dict's keys."""
+        return list(self.__dataclass_fields__)
+
     @staticmethod
-    def _of(info: dict, notes: Optional[List[str]] = None) -> "Report":
-        if notes is not None:
-            info["notes"] = list(info.get("notes", [])) + list(notes)
+    def _of(info: dict, notes: Optional[List[str]] = None, paths: Optional[List[str]] = None) -> "Report":
+        """The report of the native call's ``info``, with the Python layer's ``notes`` and a
+        dict spec's key ``paths`` for the lines its messages name."""
         known = {k: info.get(k) for k in Report.__dataclass_fields__}
-        known["notes"] = known["notes"] or []
-        for k in ("residual_fixed_max", "residual_handle_max"):
-            known[k] = known[k] if known[k] is not None else 0.0
+        known["points"] = info["samples"]
+        known["foldovers"], known["foldovers_checked"] = info["foldovers"]
+        energies = list(info.get("energies", []))
+        known["energies"] = energies
+        known["timings_s"] = info.get("timings", {})
+        fixed = info.get("residual_fixed_max") or 0.0
+        handle = info.get("residual_handle_max") or 0.0
+        known["residual_fixed_max"], known["residual_handle_max"] = fixed, handle
+        known["residual_max"] = max(fixed, handle)
+        known["warnings"] = _lines_said(list(info.get("warnings", [])), paths)
+        known["notes"] = _lines_said(list(info.get("notes", [])) + list(notes or []), paths)
+        turns = [dict(t) for t in info.get("handle_turns", [])]
+        if paths is not None:
+            for t in turns:
+                n = t["line"]
+                if 0 < n <= len(paths):
+                    t["key"] = paths[n - 1]
+        known["handle_turns"] = turns
         return Report(**known)
 
 
-def _field_from_bytes(data: bytes) -> "Field":
-    """A pickled field (its saved bytes) back."""
-    return Field(_rigidcells.Field.from_bytes(data))
+def _field_from_bytes(data: bytes, report: Optional[Report] = None) -> "Field":
+    """A pickled field (its saved bytes and its report) back."""
+    return Field(_rigidcells.Field.from_bytes(data), report)
 
 
 class Field:
@@ -492,7 +557,15 @@ class Field:
         return Field(_rigidcells.Field.load(os.fspath(path)))
 
     def __reduce__(self) -> Any:
-        return (_field_from_bytes, (self._native.to_bytes(),))
+        return (_field_from_bytes, (self._native.to_bytes(), self.report))
+
+    def __eq__(self, other: object) -> bool:
+        """The same field: the same saved bytes (the report aside)."""
+        if not isinstance(other, Field):
+            return NotImplemented
+        return self._native.to_bytes() == other._native.to_bytes()
+
+    __hash__ = None  # type: ignore[assignment]
 
     @property
     def cells(self) -> int:
@@ -666,7 +739,7 @@ def deform(
         )
     )
     out, notes = p.back(moved, info.get("normals"))
-    return out, Report._of(info, notes)
+    return out, Report._of(info, notes, paths)
 
 
 def solve(
@@ -709,7 +782,7 @@ def solve(
     field, info = _with_progress(
         progress, lambda cb: _call(paths, _rigidcells.solve, p.xyz, text, base, tris, options, cb)
     )
-    return Field(field, Report._of(info))
+    return Field(field, Report._of(info, paths=paths))
 
 
 def deform_file(
@@ -765,13 +838,15 @@ def deform_file(
     view = _options(
         strain=strain, azimuth=azimuth, elevation=elevation, size=size, up=up, zoom=zoom
     )
+    if view and preview is None:
+        raise ValueError(f"{next(iter(view))} applies to the preview: pass preview= too")
     info = _with_progress(
         progress, lambda cb: _call(
             paths, _rigidcells.deform_file, os.fspath(input), os.fspath(output), text, base,
             path(save_field), path(report), path(preview), view, chunk, options, cb,
         )
     )
-    return Report._of(info)
+    return Report._of(info, paths=paths)
 
 
 def apply_file(
@@ -830,14 +905,15 @@ def solve_files(
         coarse_levels=coarse_levels, loose_parts=loose_parts, transfer=transfer,
         memory_limit=memory_limit,
     )
-    files = [os.fspath(p) for p in inputs]
+    one = isinstance(inputs, (str, bytes, os.PathLike))
+    files = [os.fspath(inputs)] if one else [os.fspath(p) for p in inputs]
     info = _with_progress(
         progress, lambda cb: _call(
             paths, _rigidcells.solve_files, files, os.fspath(save_field), text, base, chunk,
             options, cb,
         )
     )
-    return Report._of(info)
+    return Report._of(info, paths=paths)
 
 
 for _f in (deform, solve, deform_file):

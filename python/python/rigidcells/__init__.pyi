@@ -23,24 +23,28 @@ class FormatError(ValueError):
 class Report:
     """What a deformation did (the command line's report)."""
 
-    samples: int
+    points: int
     cells: int
     cell_size: float
     iterations: int
     energy: float
+    energies: List[float]
     converged: bool
+    residual_max: float
     residual_fixed_max: float
     residual_handle_max: float
-    foldovers: Tuple[int, int]
+    foldovers: int
+    foldovers_checked: int
     warnings: List[str]
     notes: List[str]
-    timings: dict
+    timings_s: dict
     handle_turns: List[dict]
     control_points: List[dict]
     control_rmse: Optional[float]
     normals: Optional[np.ndarray] = ...
     def __getitem__(self, key: str) -> Any: ...
     def __contains__(self, key: object) -> bool: ...
+    def keys(self) -> List[str]: ...
 
 class Field:
     """A solved field (`solve`): apply it to points, save it for `rigidcells apply`, load one;
