@@ -288,6 +288,20 @@ mod tests {
     }
 
     #[test]
+    fn indices_come_as_a_list_or_a_file() {
+        let spec = parse("[[fixed]]\nindices = [0, 5, 9]\n").unwrap();
+        let origin = Vect::<3>::zeros();
+        let selected: Vec<u64> = (0..12)
+            .filter(|&i| spec.fixed[0].region.selects(i, &origin, None))
+            .collect();
+        assert_eq!(selected, [0, 5, 9]);
+        let err = parse("[[fixed]]\nindices = [0, -5]\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("line 2") && err.contains("indices"), "{err}");
+    }
+
+    #[test]
     fn parses_the_design_example() {
         let spec = parse(
             r#"

@@ -136,10 +136,17 @@ impl Ctx<'_> {
                     normal,
                 }
             }
-            "indices" => {
-                let file: String = self.field(t, key, line)?;
-                Region::Indices(self.read_indices(&file, line)?)
-            }
+            // A list of indices, or the file that holds them.
+            "indices" => match t.get(key) {
+                Some(toml::Value::Array(_)) => {
+                    let list: Vec<u64> = self.field(t, key, line)?;
+                    Region::Indices(list.into_iter().collect())
+                }
+                _ => {
+                    let file: String = self.field(t, key, line)?;
+                    Region::Indices(self.read_indices(&file, line)?)
+                }
+            },
             "polygon" | "polygon_file" => {
                 let rings = if key == "polygon" {
                     let ring: Vec<Vec<f64>> = self.field(t, key, line)?;
