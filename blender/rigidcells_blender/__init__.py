@@ -181,6 +181,12 @@ def deform(obj: bpy.types.Object, progress: Any = False) -> Any:
     return report
 
 
+def _mesh_active(context: Any) -> bool:
+    """Whether the active object is a mesh, which the operator and the panel work on."""
+    obj = context.active_object
+    return obj is not None and obj.type == "MESH"
+
+
 class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
     """Bend the object with rigid cells: the fixed group stays, the handle group follows the
     handle Empty, the rest follows as stiffly as cells glued face to face allow"""
@@ -191,8 +197,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context: Any) -> bool:
-        obj = context.active_object
-        return obj is not None and obj.type == "MESH"
+        return _mesh_active(context)
 
     def execute(self, context: Any) -> set:
         obj = context.active_object
@@ -234,8 +239,7 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
 
     @classmethod
     def poll(cls, context: Any) -> bool:
-        obj = context.active_object
-        return obj is not None and obj.type == "MESH"
+        return _mesh_active(context)
 
     def draw(self, context: Any) -> None:
         obj = context.active_object

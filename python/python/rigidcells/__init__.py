@@ -625,6 +625,19 @@ def _options(**given: Any) -> dict:
     return {k: v for k, v in given.items() if v is not None}
 
 
+# The keyword arguments that are options of a deformation (the command line's names).
+_OPTION_NAMES = (
+    "cell_size", "cells", "min_cell_size", "max_level", "shell", "inside", "solver",
+    "tolerance", "coarse_levels", "loose_parts", "refine_strain", "transfer", "rbf_tolerance",
+    "check_gcp", "memory_limit",
+)
+
+
+def _picked(arguments: dict) -> dict:
+    """The options among a call's ``arguments`` (its ``locals()``) that were given."""
+    return _options(**{k: arguments[k] for k in _OPTION_NAMES if k in arguments})
+
+
 class _Tqdm:
     """A tqdm bar per stage, as a progress callable."""
 
@@ -722,16 +735,10 @@ def deform(
     differ by more than a tenth. A turn the shape cannot carry (a whole turn of a part as short
     as it is wide) is a ``ValueError`` rather than a part untwisted the short way round.
     """
+    options = _picked(locals())
     p = _Points(points, scale, offset)
     text, base, paths = _spec(spec)
     nrm = p.normals if normals is None else _plain3(normals, "normals")
-    options = _options(
-        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
-        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
-        coarse_levels=coarse_levels, loose_parts=loose_parts, refine_strain=refine_strain,
-        transfer=transfer, rbf_tolerance=rbf_tolerance, check_gcp=check_gcp,
-        memory_limit=memory_limit,
-    )
     tris = p.triangles if triangles is None else _triangles(triangles)
     moved, info = _with_progress(
         progress, lambda cb: _call(
@@ -769,15 +776,9 @@ def solve(
     """Solves ``spec`` over ``points`` (any form ``deform`` takes, with ``scale`` and ``offset``
     as there) and returns the field (``Field.apply``, ``.save``; ``field.report`` says what the
     solve did)."""
+    options = _picked(locals())
     p = _Points(points, scale, offset)
     text, base, paths = _spec(spec)
-    options = _options(
-        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
-        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
-        coarse_levels=coarse_levels, loose_parts=loose_parts, refine_strain=refine_strain,
-        transfer=transfer, rbf_tolerance=rbf_tolerance, check_gcp=check_gcp,
-        memory_limit=memory_limit,
-    )
     tris = p.triangles if triangles is None else _triangles(triangles)
     field, info = _with_progress(
         progress, lambda cb: _call(paths, _rigidcells.solve, p.xyz, text, base, tris, options, cb)
@@ -826,14 +827,8 @@ def deform_file(
     ``size`` (width, height) in pixels, ``up`` ``"x"``, ``"y"`` or ``"z"``, ``zoom``).
     ``chunk``: samples per streamed chunk (the bytes written are the same). Stopped (Ctrl-C,
     or ``progress`` raising), it leaves no output behind."""
+    options = _picked(locals())
     text, base, paths = _spec(spec)
-    options = _options(
-        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
-        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
-        coarse_levels=coarse_levels, loose_parts=loose_parts, refine_strain=refine_strain,
-        transfer=transfer, rbf_tolerance=rbf_tolerance, check_gcp=check_gcp,
-        memory_limit=memory_limit,
-    )
     path = lambda p: None if p is None else os.fspath(p)
     view = _options(
         strain=strain, azimuth=azimuth, elevation=elevation, size=size, up=up, zoom=zoom
@@ -898,13 +893,8 @@ def solve_files(
     several files taken as one (the tiles of a scan), streamed, written to ``save_field``;
     ``apply_file`` of it to each tile gives what ``deform_file`` gives on the merged file,
     record for record. Returns a ``Report`` of the solve."""
+    options = _picked(locals())
     text, base, paths = _spec(spec)
-    options = _options(
-        cell_size=cell_size, cells=cells, min_cell_size=min_cell_size, max_level=max_level,
-        shell=shell, inside=inside, solver=solver, tolerance=tolerance,
-        coarse_levels=coarse_levels, loose_parts=loose_parts, transfer=transfer,
-        memory_limit=memory_limit,
-    )
     one = isinstance(inputs, (str, bytes, os.PathLike))
     files = [os.fspath(inputs)] if one else [os.fspath(p) for p in inputs]
     info = _with_progress(
