@@ -552,20 +552,10 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
     info.samples_are = "cells";
     info.samples = f.centers.len() as u64;
     // The domain: the cells' cubes in world coordinates.
-    let mut lo = vec![f64::INFINITY; D];
-    let mut hi = vec![f64::NEG_INFINITY; D];
-    let mut sizes: Vec<f64> = Vec::new();
-    for (c, &h) in f.centers.iter().zip(&f.halves) {
-        for a in 0..D {
-            lo[a] = lo[a].min(f.origin[a] + c[a] - h);
-            hi[a] = hi[a].max(f.origin[a] + c[a] + h);
-        }
-        if !sizes.contains(&(2.0 * h)) {
-            sizes.push(2.0 * h);
-        }
-    }
-    sizes.sort_by(f64::total_cmp);
-    if !f.centers.is_empty() {
+    let sizes: Vec<f64> = f.cell_sizes().iter().map(|&(s, _)| s).collect();
+    if let Some((lo, hi)) = f.domain() {
+        let (lo, hi): (Vec<f64>, Vec<f64>) =
+            (lo.iter().copied().collect(), hi.iter().copied().collect());
         // The cubes' faces to a thousandth of the finest cell (no more decimals than that
         // needs), not to 17 digits.
         let decimals = lo

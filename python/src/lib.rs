@@ -650,26 +650,24 @@ impl Field {
     /// The finest cells' edge length.
     #[getter]
     fn cell_size(&self) -> f64 {
-        self.saved
-            .field
-            .halves
-            .iter()
-            .fold(f64::INFINITY, |a, &h| a.min(2.0 * h))
+        self.levels().first().map_or(0.0, |&(size, _)| size)
+    }
+
+    /// The cells' edge lengths, one per octree level they occupy, smallest first, each with
+    /// its count of cells.
+    #[getter]
+    fn levels(&self) -> Vec<(f64, usize)> {
+        self.saved.field.cell_sizes()
     }
 
     /// The cells' bounding box, `((xmin, ymin, zmin), (xmax, ymax, zmax))` in the points'
     /// coordinates.
     #[getter]
     fn bounds(&self) -> ([f64; 3], [f64; 3]) {
-        let f = &self.saved.field;
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for (c, h) in f.centers.iter().zip(&f.halves) {
-            for a in 0..3 {
-                lo[a] = lo[a].min(f.origin[a] + c[a] - h);
-                hi[a] = hi[a].max(f.origin[a] + c[a] + h);
-            }
+        match self.saved.field.domain() {
+            Some((lo, hi)) => (lo.into(), hi.into()),
+            None => ([f64::NAN; 3], [f64::NAN; 3]),
         }
-        (lo, hi)
     }
 }
 

@@ -161,6 +161,7 @@ def test_the_report_is_typed_and_says_what_the_cli_report_says(tmp_path):
     lo, hi = field.bounds
     assert all(l <= p for l, p in zip(lo, pts.min(axis=0))) and all(h >= p for h, p in zip(hi, pts.max(axis=0)))
     assert "cells of" in repr(field) and field.transfer == "pu"
+    assert field.levels[0][0] == field.cell_size and sum(n for _, n in field.levels) == field.cells
 
 
 def test_options_are_checked_by_name():

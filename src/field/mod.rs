@@ -55,6 +55,32 @@ pub struct Field<const D: usize> {
 }
 
 impl<const D: usize> Field<D> {
+    /// The cells' cubes' bounding box in world coordinates (`None` without cells).
+    pub fn domain(&self) -> Option<(Vect<D>, Vect<D>)> {
+        let mut lo = Vect::<D>::repeat(f64::INFINITY);
+        let mut hi = Vect::<D>::repeat(f64::NEG_INFINITY);
+        for (c, &h) in self.centers.iter().zip(&self.halves) {
+            let world = self.origin + c;
+            lo = lo.inf(&world.add_scalar(-h));
+            hi = hi.sup(&world.add_scalar(h));
+        }
+        (!self.centers.is_empty()).then_some((lo, hi))
+    }
+
+    /// The cells' edge lengths, one per octree level they occupy, smallest first, with how
+    /// many cells have each.
+    pub fn cell_sizes(&self) -> Vec<(f64, usize)> {
+        let mut sizes: Vec<(f64, usize)> = Vec::new();
+        for &h in &self.halves {
+            match sizes.iter_mut().find(|(s, _)| *s == 2.0 * h) {
+                Some((_, n)) => *n += 1,
+                None => sizes.push((2.0 * h, 1)),
+            }
+        }
+        sizes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        sizes
+    }
+
     /// The field of a solution: its fixed cells and the cells it kept at rest follow the
     /// identity exactly, and each handle's cells its transform.
     pub fn from_solution(solution: &Solution<D>) -> Self

@@ -583,6 +583,12 @@ class Field:
         return self._native.transfer
 
     @property
+    def levels(self) -> List[Tuple[float, int]]:
+        """The cells' edge lengths, one per octree level they occupy, smallest first, each
+        with its count of cells (as ``rigidcells info`` lists a field's levels)."""
+        return self._native.levels
+
+    @property
     def bounds(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]:
         """The cells' bounding box: ``((xmin, ymin, zmin), (xmax, ymax, zmax))``."""
         lo, hi = self._native.bounds
