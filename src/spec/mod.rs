@@ -34,9 +34,9 @@
 //! of the camera that the 4×4 world-to-clip matrix projects into it, as the editor writes it;
 //! with `visible = true` as well, only the samples whose cell the camera sees, the front
 //! surface: [`crate::solve::Sight`] states the rule),
-//! `indices = "file.txt"` (sample indices, whitespace or comma separated,
-//! 0-based; or the list itself, `indices = [0, 5, 9]`) or `classification = [..]` (LAS classes); several in one entry combine (a sample
-//! must satisfy all), and `invert = true` takes the rest. A handle's transform is
+//! `indices = "file.txt"` (sample indices, whitespace or comma separated, 0-based; or the
+//! list itself, `indices = [0, 5, 9]`) or `classification = [..]` (LAS classes); several in
+//! one entry combine (a sample must satisfy all), and `invert = true` takes the rest. A handle's transform is
 //! `A(x) = S·R·(x − pivot) + pivot + translate`, or a general affine `matrix` (row-major 4×4 in
 //! 3D, 3×3 in 2D, last row `0 … 0 1`). Unknown keys are errors, so typos do not pass silently;
 //! every error names the line.
