@@ -18,6 +18,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
@@ -142,6 +143,23 @@ pub struct Timings {
     pub total: f64,
 }
 
+impl Timings {
+    /// The stages' seconds of a deformation: `read` and `write` are a file's passes (0 for
+    /// samples in memory; the read less the cells' construction, which is `voxelize`), `total`
+    /// the wall time the caller measured.
+    pub fn of(deform: &crate::pipeline::DeformInfo, read: f64, write: f64, total: f64) -> Self {
+        Self {
+            read: (read - deform.build.seconds).max(0.0),
+            voxelize: deform.build.seconds,
+            solve: deform.solver.seconds,
+            transfer: (deform.seconds_transfer - write).max(0.0),
+            write,
+            check_gcp: deform.seconds_check,
+            total,
+        }
+    }
+}
+
 impl Report {
     /// The report of `deform_file`'s result; `total` is the wall time the caller measured.
     pub fn new(
@@ -182,7 +200,6 @@ impl Report {
                 (solution.motions[c].apply(&complex.cells[c].center, &t.from) - t.to).norm()
             })
             .fold(0.0, f64::max);
-        let transfer = (d.seconds_transfer - file.seconds_write).max(0.0);
         Self {
             input: input.display().to_string(),
             output: output.display().to_string(),
@@ -208,15 +225,7 @@ impl Report {
             target_residual_max,
             foldovers: d.foldovers.1,
             foldovers_checked: d.foldovers.0,
-            timings_s: Timings {
-                read: (file.seconds_read - d.build.seconds).max(0.0),
-                voxelize: d.build.seconds,
-                solve: s.seconds,
-                transfer,
-                write: file.seconds_write,
-                check_gcp: d.seconds_check,
-                total,
-            },
+            timings_s: Timings::of(d, file.seconds_read, file.seconds_write, total),
             peak_memory_bytes: peak_memory(),
             warnings: d.warnings.clone(),
             control_points: d.control_points.clone(),
@@ -245,20 +254,25 @@ pub fn residuals(
     let maps: Vec<_> = (0..constraints.handles.len())
         .map(|k| constraints.handle_map(k, 1.0))
         .collect();
-    let (mut fixed, mut handle) = (0.0f64, 0.0f64);
-    let mut count = 0;
-    for (before, after) in before.iter().zip(after) {
-        match solution.role_at(before) {
-            Some(Role::Fixed) => fixed = fixed.max((after - before).norm()),
-            Some(Role::Handle(k)) => {
-                let sent = maps[k as usize].apply(&(before - origin)) + origin;
-                handle = handle.max((after - sent).norm());
-            }
-            _ => continue,
-        }
-        count += 1;
-    }
-    (fixed, handle, count)
+    // Every sample in memory may be measured: in parallel, each thread its own maxima.
+    before
+        .par_iter()
+        .zip(after)
+        .fold(
+            || (0.0f64, 0.0f64, 0usize),
+            |(fixed, handle, count), (before, after)| match solution.role_at(before) {
+                Some(Role::Fixed) => (fixed.max((after - before).norm()), handle, count + 1),
+                Some(Role::Handle(k)) => {
+                    let sent = maps[k as usize].apply(&(before - origin)) + origin;
+                    (fixed, handle.max((after - sent).norm()), count + 1)
+                }
+                _ => (fixed, handle, count),
+            },
+        )
+        .reduce(
+            || (0.0, 0.0, 0),
+            |a, b| (a.0.max(b.0), a.1.max(b.1), a.2 + b.2),
+        )
 }
 
 /// `VmHWM` of `/proc/self/status`, in bytes.

@@ -24,6 +24,7 @@ use rigidcells::pipeline::Options;
 use rigidcells::pipeline::{self, DeformInfo, DeformParams};
 use rigidcells::progress::Observer;
 use rigidcells::render::View;
+use rigidcells::report::Timings;
 use rigidcells::rigid::Vect;
 use rigidcells::solve::Method;
 use rigidcells::spec::{EditSpec, parse_spec};
@@ -370,19 +371,25 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
             "transfer" => o.transfer = named(name()?, Transfer::Pu)?,
             "rbf_tolerance" => o.rbf_tolerance = Some(number()?),
             "check_gcp" => o.check_control_points = flag()?,
-            "memory_limit" => {
-                o.memory_limit = Some(if value.is_instance_of::<pyo3::types::PyString>() {
-                    let text: String = value.extract()?;
-                    rigidcells::memory::parse_size(&text)
-                        .map_err(|e| PyValueError::new_err(format!("memory_limit: {e}")))?
-                } else {
-                    whole("a number of bytes or a size such as \"8G\"")?
-                })
-            }
+            "memory_limit" => o.memory_limit = Some(memory_limit(&value)?),
             _ => return Err(PyTypeError::new_err(format!("unexpected argument {key}"))),
         }
     }
     Ok(o)
+}
+
+/// A memory budget in bytes, given as a number or as a size such as "8G".
+fn memory_limit(value: &Bound<'_, PyAny>) -> PyResult<u64> {
+    if value.is_instance_of::<pyo3::types::PyString>() {
+        let text: String = value.extract()?;
+        return rigidcells::memory::parse_size(&text)
+            .map_err(|e| PyValueError::new_err(format!("memory_limit: {e}")));
+    }
+    whole(
+        value,
+        "memory_limit",
+        "a number of bytes or a size such as \"8G\"",
+    )
 }
 
 /// `value` as a whole number 0 or more; a wrong type or value names the argument `key` and
@@ -515,8 +522,8 @@ fn deform<'py>(
     Ok((moved_array(py, &moved), d))
 }
 
-/// Seconds per stage, as the command line's report names them (`read` and `write` are
-/// those of a file, 0 for samples in memory).
+/// Seconds per stage ([`Timings::of`]: `read` and `write` are a file's passes, 0 for samples
+/// in memory), under the command line's report's names.
 fn timings<'py>(
     py: Python<'py>,
     info: &DeformInfo,
@@ -524,15 +531,20 @@ fn timings<'py>(
     write: f64,
     total: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let t = PyDict::new(py);
-    t.set_item("read", (read - info.build.seconds).max(0.0))?;
-    t.set_item("voxelize", info.build.seconds)?;
-    t.set_item("solve", info.solver.seconds)?;
-    t.set_item("transfer", (info.seconds_transfer - write).max(0.0))?;
-    t.set_item("write", write)?;
-    t.set_item("check_gcp", info.seconds_check)?;
-    t.set_item("total", total)?;
-    Ok(t)
+    let t = Timings::of(info, read, write, total);
+    let d = PyDict::new(py);
+    for (name, seconds) in [
+        ("read", t.read),
+        ("voxelize", t.voxelize),
+        ("solve", t.solve),
+        ("transfer", t.transfer),
+        ("write", t.write),
+        ("check_gcp", t.check_gcp),
+        ("total", t.total),
+    ] {
+        d.set_item(name, seconds)?;
+    }
+    Ok(d)
 }
 
 /// A solved field: apply it to samples, save it for `rigidcells apply`, load one; pickled as
@@ -559,50 +571,13 @@ impl Field {
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
         let outside = named(outside, Outside::Refuse)?;
         let pts = self::points(&points)?;
-        if let Some(k) = pts.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-            return Err(PyValueError::new_err(format!(
-                "points: row {k} is not finite ({:?})",
-                pts[k].as_slice()
-            )));
-        }
         let nrm = match &normals {
-            Some(n) => {
-                let n = self::points(n)?;
-                if n.len() != pts.len() {
-                    return Err(PyValueError::new_err(format!(
-                        "normals: {} rows for {} points",
-                        n.len(),
-                        pts.len()
-                    )));
-                }
-                n
-            }
+            Some(n) => self::points(n)?,
             None => Vec::new(),
         };
         let saved = &self.saved;
         let (moved, moved_normals) = py
-            .detach(|| -> rigidcells::Result<_> {
-                let deformer = saved.deformer_of(None, None, outside)?;
-                let (mut moved, mut turned) = (Vec::new(), Vec::new());
-                let origin = &saved.field.origin;
-                rigidcells::field::apply_into(
-                    &deformer,
-                    origin,
-                    &pts,
-                    &nrm,
-                    &mut moved,
-                    &mut turned,
-                );
-                let beyond = deformer.outside();
-                if outside == Outside::Refuse && beyond.count > 0 {
-                    return Err(Error::Param(format!(
-                        "points: {} lie beyond the field's margin (the farthest {} from it); \
-                         pass outside=\"keep\" or outside=\"extend\", or solve a field over them",
-                        beyond.count, beyond.farthest
-                    )));
-                }
-                Ok((moved, turned))
-            })
+            .detach(|| pipeline::apply_points(saved, &pts, &nrm, outside, Path::new("points")))
             .map_err(py_err)?;
         let turned = normals.is_some().then(|| moved_array(py, &moved_normals));
         Ok((moved_array(py, &moved), turned))
@@ -862,7 +837,7 @@ fn view(d: Option<&Bound<'_, PyDict>>, input: &Path) -> PyResult<(View, bool)> {
 /// `output` (atomically). `outside`: `refuse` (default), `keep` or `extend`; `transfer`
 /// (default: the field's own), `rbf_tolerance` and `memory_limit` as for `deform_file`.
 #[pyfunction]
-#[pyo3(signature = (field, input, output, outside=None, options=None, chunk=None, progress=None))]
+#[pyo3(signature = (field, input, output, outside=None, transfer=None, rbf_tolerance=None, memory_limit=None, chunk=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn apply_file<'py>(
     py: Python<'py>,
@@ -870,25 +845,20 @@ fn apply_file<'py>(
     input: PathBuf,
     output: PathBuf,
     outside: Option<String>,
-    options: Option<Bound<'py, PyDict>>,
+    transfer: Option<String>,
+    rbf_tolerance: Option<f64>,
+    memory_limit: Option<Bound<'py, PyAny>>,
     chunk: Option<Bound<'py, PyAny>>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let given = |key: &str| -> PyResult<bool> {
-        Ok(match &options {
-            Some(d) => d.get_item(key)?.is_some_and(|v| !v.is_none()),
-            None => false,
-        })
-    };
-    let transfer_given = given("transfer")?;
-    let o = self::options(options.as_ref())?;
     let params = pipeline::ApplyParams {
-        transfer: transfer_given.then_some(o.transfer),
-        rbf_tolerance: o.rbf_tolerance,
+        transfer: transfer.map(|t| named(Some(t), Transfer::Pu)).transpose()?,
+        rbf_tolerance,
         outside: named(outside, Outside::Refuse)?,
-        memory: rigidcells::memory::Budget::given(o.memory_limit),
+        memory: rigidcells::memory::Budget::given(
+            memory_limit.map(|m| self::memory_limit(&m)).transpose()?,
+        ),
     };
-    params.check().map_err(py_err)?;
     let chunk = self::chunk(chunk)?;
     let observer = PyObserver::new(progress);
     let result = py.detach(|| -> rigidcells::Result<_> {

@@ -244,7 +244,7 @@ def test_a_field_pickles_and_applies_what_deform_takes():
         field.apply(far)
     assert np.array_equal(field.apply(far, outside="keep"), far)
     assert not np.array_equal(field.apply(far, outside="extend"), far)
-    with pytest.raises(ValueError, match="row 0 is not finite"):
+    with pytest.raises(ValueError, match="point 0 has a coordinate that is not a finite number"):
         field.apply(np.array([[np.nan, 0.0, 0.0]]))
 
 

@@ -234,6 +234,52 @@ pub fn deform_xy_file(
     Ok((solution, info, moved.len()))
 }
 
+/// Moves samples in memory (and their `normals`, one each or none) through a solved field, as
+/// `rigidcells apply` moves a file's: samples beyond the field's margin are refused unless
+/// `outside` keeps or extends them; a coordinate that is not finite is refused. `name` names
+/// the samples in errors. The Python package's `Field.apply`.
+pub fn apply_points(
+    saved: &SavedField<3>,
+    points: &[Vect<3>],
+    normals: &[Vect<3>],
+    outside: Outside,
+    name: &Path,
+) -> Result<(Vec<Vect<3>>, Vec<Vect<3>>)> {
+    if !points.is_empty() {
+        crate::cells::bounds(points)?;
+    }
+    if !normals.is_empty() && normals.len() != points.len() {
+        return Err(Error::Param(format!(
+            "{} normals for {} samples",
+            normals.len(),
+            points.len()
+        )));
+    }
+    let deformer = saved.deformer_of(None, None, outside)?;
+    let (mut moved, mut turned) = (Vec::new(), Vec::new());
+    apply_into(
+        &deformer,
+        &saved.field.origin,
+        points,
+        normals,
+        &mut moved,
+        &mut turned,
+    );
+    let beyond = deformer.outside();
+    if outside == Outside::Refuse && beyond.count > 0 {
+        let margin = deformer.margin();
+        return Err(Error::Param(format!(
+            "{}: {} samples lie beyond the field's margin of {} (the farthest {} from it); pass \
+             --outside keep or --outside extend, or solve a field over them",
+            name.display(),
+            beyond.count,
+            crate::human::length(margin, margin),
+            crate::human::length(beyond.farthest, margin)
+        )));
+    }
+    Ok((moved, turned))
+}
+
 /// Solves `spec` over samples in memory and returns the field (with its transfer, and the
 /// RBF's coefficients when that is the transfer), to apply to these or other samples, or to
 /// save: the Python package's `solve`. The info's control points are as the field moves them.

@@ -867,10 +867,10 @@ def apply_file(
     ``"extend"``; ``transfer`` (default: the one the field was solved for), ``rbf_tolerance``,
     ``memory_limit`` and ``chunk`` as for ``deform_file``. Returns ``samples``, ``notes`` and
     ``seconds``."""
-    options = _options(transfer=transfer, rbf_tolerance=rbf_tolerance, memory_limit=memory_limit)
     return _with_progress(
         progress, lambda cb: _rigidcells.apply_file(
-            os.fspath(field), os.fspath(input), os.fspath(output), outside, options, chunk, cb
+            os.fspath(field), os.fspath(input), os.fspath(output), outside, transfer,
+            rbf_tolerance, memory_limit, chunk, cb,
         )
     )
 
