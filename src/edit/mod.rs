@@ -1,9 +1,10 @@
 //! The interactive editor (`rigidcells edit`): the paper's setting, in a browser.
 //!
 //! The server ([`server`]) holds an [`Editor`]: a decimated proxy of the input ([`Scene`], at
-//! most [`crate::pipeline::PROXY_SAMPLES`] samples), the cells built from it once, and a
-//! [`Session`] that re-solves warm (Gauss-Newton from the current motions, the symbolic
-//! factorization kept) each time the page moves a handle. The page sends the whole edit
+//! most [`crate::pipeline::PROXY_SAMPLES`] samples) and its live deformation
+//! ([`crate::pipeline::Live`]: the cells built once, and a session that re-solves warm —
+//! Gauss-Newton from the current motions, the symbolic factorization kept — each time the
+//! page moves a handle). The page sends the whole edit
 //! ([`Edit`]: its selections and handle poses) on every change; the editor writes it as an edit
 //! spec in TOML ([`Editor::spec_text`]) — the file *Save edit* writes and the CLI reads — and
 //! parses that same text, so what the page shows and what `deform --edit` computes come from
@@ -13,7 +14,7 @@
 //!
 //! While dragging, the page blends the cells' motions itself on the GPU ([`Editor::blend`]:
 //! each proxy sample's four nearest cells and weights, the continuous blend of
-//! [`crate::field::Blend`], sent once), so drawing costs the same whatever the solver does. On
+//! [`crate::field::Blend`], sent once: [`crate::pipeline::Live::blend_weights`]), so drawing costs the same whatever the solver does. On
 //! release, [`Editor::release`] runs the chosen transfer on the proxy with the exact
 //! constraints, and counts fold-overs as `deform` does.
 //!
@@ -33,18 +34,15 @@
 pub mod server;
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use serde::Deserialize;
 
-use crate::cells::{BuildInfo, CellComplex};
+use crate::cells::CellComplex;
 use crate::error::{Error, Result};
-use crate::field::{Blend, Field, Outside, Prescribed, Weights};
-use crate::pipeline::DeformParams;
-use crate::pipeline::stages::{self, Selected};
-use crate::progress::Observer;
-use crate::rigid::{Motion, Vect};
-use crate::solve::{self, Session};
+use crate::pipeline::{DeformParams, Live, Step};
+use crate::progress::{Observer, Silent};
+use crate::rigid::Vect;
+use crate::solve;
 use crate::spec::EditSpec;
 
 /// The proxy of the input the editor shows and solves on.
@@ -218,43 +216,30 @@ pub struct Released {
     pub warnings: Vec<String>,
 }
 
-/// The editor's state: the scene, its cells, the current spec and session.
+/// The editor's state: the scene, and the live deformation of its samples
+/// ([`crate::pipeline::Live`]: the cells, the current spec and its session).
 pub struct Editor {
     scene: Scene,
-    complex: CellComplex<3>,
-    /// How the cells were built (for the build's warnings).
-    build: BuildInfo,
-    params: DeformParams,
-    /// The spec of the last edit, its text, and the text of its selections alone.
-    spec: Option<(EditSpec<3>, String, String)>,
-    session: Option<Session<3>>,
-    /// Whether the session's last solve converged.
-    converged: bool,
+    live: Live,
+    /// The TOML text of the last edit solved.
+    text: Option<String>,
 }
 
-/// Gauss-Newton iterations per pose while dragging: one, at about 40 ms for 5,000 cells on two
-/// cores, so that the shape follows the hand at 20 updates a second; the next pose goes on from
-/// there, the idle solver converges the last one ([`Editor::refine`]), and a release converges
-/// before the final transfer. (Three iterations an update, to convergence, gave 7 a second.)
-pub const DRAG_ITERATIONS: usize = 1;
+pub use crate::pipeline::live::DRAG_ITERATIONS;
 
 impl Editor {
     /// Builds the cells of `scene` with `params` (cell size or count as `deform` takes them).
     pub fn new(scene: Scene, params: DeformParams) -> Result<Self> {
-        let (complex, build) = crate::cells::build(
-            &scene.points,
+        let live = Live::new(
+            scene.points.clone(),
             &scene.triangles,
-            &params.build,
-            params.memory,
+            scene.classes.clone(),
+            params,
         )?;
         Ok(Self {
             scene,
-            complex,
-            build,
-            params,
-            spec: None,
-            session: None,
-            converged: true,
+            live,
+            text: None,
         })
     }
 
@@ -265,18 +250,19 @@ impl Editor {
 
     /// The cells.
     pub fn complex(&self) -> &CellComplex<3> {
-        &self.complex
+        self.live.complex()
     }
 
     /// The parameters.
     pub fn params(&self) -> &DeformParams {
-        &self.params
+        self.live.params()
     }
 
     /// The cells' centers (relative) and edge lengths, `f32`, four per cell.
     pub fn cells(&self) -> Vec<f32> {
-        let shift = self.complex.grid.origin - self.scene.center;
-        self.complex
+        let complex = self.live.complex();
+        let shift = complex.grid.origin - self.scene.center;
+        complex
             .cells
             .iter()
             .flat_map(|c| {
@@ -289,35 +275,8 @@ impl Editor {
     /// Each proxy sample's four nearest cells and their continuous blend weights (summing to
     /// one; unused slots weigh zero): `(cells, weights)`, four of each per sample.
     pub fn blend(&self) -> Result<(Vec<u32>, Vec<f32>)> {
-        let field = Field {
-            origin: self.complex.grid.origin,
-            centers: self.complex.cells.iter().map(|c| c.center).collect(),
-            halves: self.complex.cells.iter().map(|c| c.half).collect(),
-            motions: self
-                .complex
-                .cells
-                .iter()
-                .map(|c| Motion::rest(&c.center))
-                .collect(),
-            prescribed: Prescribed::default(),
-        };
-        let blend = Blend::new(&field, Weights::Continuous)?;
-        let origin = self.complex.grid.origin;
-        let n = self.scene.points.len();
-        let (mut cells, mut weights) = (vec![0u32; 4 * n], vec![0f32; 4 * n]);
-        use rayon::prelude::*;
-        cells
-            .par_chunks_mut(4)
-            .zip(weights.par_chunks_mut(4))
-            .zip(&self.scene.points)
-            .for_each(|((c, w), p)| {
-                let (found, k) = blend.weights(&(p - origin));
-                for (slot, &(cell, weight)) in found[..k].iter().enumerate() {
-                    c[slot] = cell as u32;
-                    w[slot] = weight as f32;
-                }
-            });
-        Ok((cells, weights))
+        let (cells, weights) = self.live.blend_weights()?;
+        Ok((cells.concat(), weights.concat()))
     }
 
     /// The edit spec of `edit` as TOML, in the input's coordinates: what *Save edit* writes.
@@ -329,96 +288,58 @@ impl Editor {
     pub fn flags(&self) -> String {
         format!(
             "--cell-size {:?} --transfer {}",
-            self.complex.grid.finest_size(),
-            self.params.transfer
+            self.live.complex().grid.finest_size(),
+            self.live.params().transfer
         )
     }
 
     /// Solves `edit`: warm from the current motions when only the poses changed since the
-    /// last call, from rest when the selections did. `None` when the edit constrains nothing.
+    /// last call, one Gauss-Newton iteration ([`DRAG_ITERATIONS`]), from rest when the
+    /// selections did ([`Live::solve`]). `None` when the edit constrains nothing.
     pub fn solve(&mut self, edit: &Edit) -> Result<Option<Motions>> {
         let text = self.spec_text(edit);
-        let selections = spec_text(&edit.posed_at_rest(), &self.scene, "");
         if edit.is_empty() {
-            self.spec = None;
-            self.session = None;
+            self.text = None;
+            self.live
+                .solve(EditSpec::default(), DRAG_ITERATIONS, &Silent)?;
             return Ok(None);
         }
+        let spec = self.parse(&text)?;
+        let Some(step) = self.live.solve(spec, DRAG_ITERATIONS, &Silent)? else {
+            self.text = None;
+            return Ok(None);
+        };
+        self.text = Some(text);
+        Ok(Some(self.motions(&step)))
+    }
+
+    /// `text`, a spec the editor wrote, parsed as the CLI parses it.
+    fn parse(&self, text: &str) -> Result<EditSpec<3>> {
         let name = self.scene.input.with_extension("edit.toml");
         let base = name.parent().unwrap_or(Path::new(".")).to_path_buf();
-        let spec = crate::spec::parse_spec::<3>(&text, &base, &name)?;
-        let start = Instant::now();
-        let same =
-            self.session.is_some() && self.spec.as_ref().is_some_and(|(_, _, s)| *s == selections);
-        let (info, warnings) = if same {
-            let session = self.session.as_mut().expect("checked");
-            let mut constraints = session.constraints().clone();
-            for (handle, entry) in constraints.handles.iter_mut().zip(&spec.handles) {
-                handle.motion = entry.value;
-                if let Some(p) = entry.value.pivot {
-                    handle.pivot = p;
-                }
-            }
-            (session.drag(constraints, DRAG_ITERATIONS)?, Vec::new())
-        } else {
-            let selected = Selected::Samples {
-                points: &self.scene.points,
-                classes: (!self.scene.classes.is_empty()).then_some(&self.scene.classes[..]),
-            };
-            let constraints = stages::constraints(&self.complex, &spec, selected, &self.params)?;
-            let (session, info) = Session::new(
-                self.complex.clone(),
-                constraints,
-                &self.params.solve,
-                self.params.memory,
-                &crate::progress::Silent,
-            )?;
-            let warnings =
-                stages::warnings(&self.build, &self.complex, session.constraints(), &info);
-            self.session = Some(session);
-            (info, warnings)
-        };
-        self.spec = Some((spec, text, selections));
-        self.converged = info.converged;
-        let session = self.session.as_ref().expect("solved");
-        let mut motions = self.motions(session.motions());
-        motions.iterations = info.iterations;
-        motions.seconds = start.elapsed().as_secs_f64();
-        motions.warnings = warnings;
-        Ok(Some(motions))
+        crate::spec::parse_spec::<3>(text, &base, &name)
     }
 
     /// Whether the last solve converged (a drag's update may stop after one iteration).
     pub fn converged(&self) -> bool {
-        self.session.is_none() || self.converged
+        self.live.converged()
     }
 
     /// One more iteration on the current pose when the last solve stopped short of converging
     /// (the server runs it while no new pose waits); `None` when there is nothing to do.
     pub fn refine(&mut self) -> Result<Option<Motions>> {
-        if self.converged() {
-            return Ok(None);
-        }
-        let start = Instant::now();
-        let Some(session) = self.session.as_mut() else {
-            return Ok(None);
-        };
-        let info = session.update_with(session.constraints().clone(), DRAG_ITERATIONS)?;
-        self.converged = info.converged;
-        let mut motions = self.motions(self.session.as_ref().expect("checked").motions());
-        motions.iterations = info.iterations;
-        motions.seconds = start.elapsed().as_secs_f64();
-        Ok(Some(motions))
+        Ok(self.live.refine()?.map(|step| self.motions(&step)))
     }
 
-    /// The page's form of `motions` ([`Motions`]).
-    fn motions(&self, motions: &[Motion<3>]) -> Motions {
+    /// The page's form of the cells' current motions after `step` ([`Motions`]).
+    fn motions(&self, step: &Step) -> Motions {
+        let complex = self.live.complex();
+        let motions = self.live.motions().unwrap_or_default();
         // x' = origin + R (x − origin − c) + p with x = x_rel + center:
         // x'_rel = R x_rel + R (center − origin − c) + p + origin − center.
-        let origin = self.complex.grid.origin;
-        let shift = self.scene.center - origin;
+        let shift = self.scene.center - complex.grid.origin;
         let mut maps = Vec::with_capacity(12 * motions.len());
-        for (m, cell) in motions.iter().zip(&self.complex.cells) {
+        for (m, cell) in motions.iter().zip(&complex.cells) {
             let b = m.rot * (shift - cell.center) + m.pos - shift;
             for r in 0..3 {
                 for c in 0..3 {
@@ -427,46 +348,29 @@ impl Editor {
             }
             maps.extend(b.iter().map(|&v| v as f32));
         }
-        let strain = solve::cell_strain(&self.complex, motions)
+        let strain = solve::cell_strain(complex, motions)
             .into_iter()
             .map(|s| s as f32)
             .collect();
         Motions {
             maps,
             strain,
-            ..Default::default()
+            iterations: step.solver.iterations,
+            seconds: step.seconds,
+            warnings: step.warnings.clone(),
         }
     }
 
     /// The final transfer of the last solve on the proxy, with the fold-over check; the solve
     /// is converged first.
     pub fn release(&mut self) -> Result<Released> {
-        if let (false, Some(session)) = (self.converged(), self.session.as_mut()) {
-            self.converged = session.update(session.constraints().clone())?.converged;
-        }
-        let Some(session) = &self.session else {
-            return Ok(Released {
-                positions: self.scene.relative(),
-                ..Default::default()
-            });
-        };
-        let solution = session.solution(Default::default());
-        let saved = stages::field(&solution, &self.params, &crate::progress::Silent)?;
-        let origin = saved.field.origin;
-        let deformer = saved.deformer(None, self.params.rbf_tolerance, Outside::Extend)?;
-        let mut moved = self.scene.points.clone();
-        crate::field::apply(&deformer, &origin, &mut moved);
-        let mut warnings = Vec::new();
-        let foldovers = crate::pipeline::check_foldovers(
-            &deformer,
-            &solution,
-            &self.scene.points,
-            &mut warnings,
-        );
+        let said = self.live.warnings().len();
+        let (moved, _, mut info) = self.live.release(&Silent)?;
         Ok(Released {
             positions: relative(&moved, &self.scene.center),
-            foldovers,
-            warnings,
+            foldovers: info.foldovers,
+            // The solve's own warnings were said with its motions.
+            warnings: info.warnings.split_off(said.min(info.warnings.len())),
         })
     }
 
@@ -504,12 +408,15 @@ impl Editor {
                 .points
                 .par_iter()
                 .zip(&out)
-                .map(|(p, &on)| on.then(|| solve::sample_cell(&self.complex, p)).flatten())
+                .map(|(p, &on)| {
+                    on.then(|| solve::sample_cell(self.live.complex(), p))
+                        .flatten()
+                })
                 .collect();
             let mut candidates: Vec<usize> = cells.iter().flatten().copied().collect();
             candidates.sort_unstable();
             candidates.dedup();
-            let seen = solve::seen(&self.complex, view, &candidates);
+            let seen = solve::seen(self.live.complex(), view, &candidates);
             for (o, c) in out.iter_mut().zip(&cells) {
                 *o = c.is_some_and(|c| seen[c]);
             }
@@ -519,32 +426,16 @@ impl Editor {
 
     /// The spec of the last [`Editor::solve`] (its TOML text).
     pub fn last_spec(&self) -> Option<&str> {
-        self.spec.as_ref().map(|(_, t, _)| t.as_str())
+        self.text.as_deref()
     }
 
     /// The spec of the last [`Editor::solve`].
     pub fn last_parsed(&self) -> Option<&EditSpec<3>> {
-        self.spec.as_ref().map(|(s, _, _)| s)
+        self.live.spec()
     }
 }
 
 impl Edit {
-    /// This edit with every handle at rest: what its selections alone say.
-    fn posed_at_rest(&self) -> Edit {
-        Edit {
-            fixed: self.fixed.clone(),
-            handles: self
-                .handles
-                .iter()
-                .map(|h| HandleEdit {
-                    selections: h.selections.clone(),
-                    ..Default::default()
-                })
-                .collect(),
-            pins: self.pins.clone(),
-        }
-    }
-
     /// Whether the edit selects nothing yet.
     pub fn is_empty(&self) -> bool {
         self.fixed.is_empty()

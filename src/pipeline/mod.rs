@@ -8,6 +8,7 @@
 mod checks;
 mod files;
 mod first_pass;
+pub mod live;
 mod options;
 mod outputs;
 pub(crate) mod stages;
@@ -19,6 +20,7 @@ pub use files::{
     ApplyParams, CHUNK, FileInfo, MAX_CHUNK, apply_file, deform_file, file_cells, solve_files,
     write_cells,
 };
+pub use live::{Live, Step};
 pub use options::Options;
 pub use outputs::{Outputs, deform_file_with};
 

@@ -5,10 +5,11 @@
 //! ([`Cells`]: samples in memory, or a streaming first pass that built them and gathered what
 //! the spec's regions select) and in what they do with the result: [`super::deform`] warps the
 //! samples, [`super::solve_points`] keeps the field, [`super::deform_file`] streams a file
-//! through it and [`crate::image::deform_image`] warps a picture's pixel corners. The editor
-//! solves warm, one pose at a time, on cells it built once: it calls the same stages one by
-//! one ([`constraints`], then its [`crate::solve::Session`], then [`warnings`] and [`field`]),
-//! so that it refuses and warns as `deform` does.
+//! through it and [`crate::image::deform_image`] warps a picture's pixel corners. A live
+//! deformation ([`super::Live`]: the editor, Python's `Session`, Blender's Live) solves warm,
+//! one pose at a time, on cells it built once: it calls the same stages one by one
+//! ([`constraints`], then its [`crate::solve::Session`], then [`warnings`], [`field`] and
+//! [`control_results`]), so that it refuses and warns as `deform` does.
 //!
 //! The checks live here: the dense RBF's memory before the solve and again after refinement
 //! ([`check_rbf_memory`]), and the warnings of the build, the constraints and the solver, in

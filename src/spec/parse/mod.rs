@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::entries::{EditSpec, Entry, Pin};
+use super::entries::{EditSpec, Entry, HandleMotion, Pin};
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, Rigid, Vect};
 
@@ -137,6 +137,36 @@ where
         return Err(Error::NoConstraints);
     }
     Ok(spec)
+}
+
+/// Parses handle poses alone: one `[[handle]]` table a handle, holding only its motion
+/// (`translate`, `rotate`, `scale`, `pivot`, or `matrix`), as a live deformation takes the
+/// poses of the handles its spec already selected. `name` names the text in errors.
+pub fn parse_poses<const D: usize>(text: &str, name: &Path) -> Result<Vec<HandleMotion<D>>>
+where
+    Dim<D>: Rigid<D>,
+{
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct RawPoses {
+        #[serde(default)]
+        handle: Vec<Spanned<toml::Table>>,
+    }
+    let ctx = Ctx {
+        text,
+        base: Path::new("."),
+        name,
+    };
+    let raw: RawPoses = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
+    raw.handle
+        .iter()
+        .map(|t| {
+            let line = ctx.line(t);
+            let keys = ["translate", "rotate", "scale", "pivot", "matrix"];
+            ctx.allow_only(t.get_ref(), &keys, line)?;
+            ctx.handle_motion(t.get_ref(), line)
+        })
+        .collect()
 }
 
 struct Ctx<'a> {

@@ -1,0 +1,363 @@
+//! Live deformation of samples in memory: the paper's interactive setting, for every face that
+//! drags a handle (the browser editor, the Python package's `Session`, Blender's Live).
+//!
+//! [`Live`] builds the cells once. Each [`Live::solve`] takes the whole edit spec: when only
+//! the handles' poses changed since the last one, the session goes on warm from its current
+//! motions for a few Gauss-Newton iterations ([`Session::drag`], one per pose while dragging);
+//! otherwise the spec is resolved again and solved from rest. [`Live::preview`] blends the
+//! cells' current motions at the samples (cheap, for every pose); [`Live::release`] converges
+//! and runs the chosen transfer with its exact constraints, as [`super::deform`] does.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::DeformParams;
+use super::stages::{self, Selected};
+use crate::cells::{BuildInfo, CellComplex};
+use crate::error::Error;
+use crate::error::Result;
+use crate::field::{Blend, Field, Outside, Prescribed, Weights};
+use crate::progress::{Observer, Silent};
+use crate::rigid::{Motion, Vect};
+use crate::solve::{Session, Solution, SolverInfo};
+use crate::spec::EditSpec;
+use crate::spec::HandleMotion;
+
+use super::{DeformInfo, check_foldovers, check_moved};
+
+/// Gauss-Newton iterations per pose while dragging: one, at about 40 ms for 5,000 cells on two
+/// cores, so that the shape follows the hand at 20 updates a second; the next pose goes on from
+/// there, the idle solver converges the last one ([`Live::refine`]), and a release converges
+/// before the final transfer. (Three iterations an update, to convergence, gave 7 a second.)
+pub const DRAG_ITERATIONS: usize = 1;
+
+/// A live deformation: the samples, their cells, and the warm session of the last spec.
+pub struct Live {
+    points: Vec<Vect<3>>,
+    classes: Vec<u8>,
+    complex: CellComplex<3>,
+    /// How the cells were built (for the build's warnings).
+    build: BuildInfo,
+    params: DeformParams,
+    /// The last spec solved, and its session.
+    spec: Option<EditSpec<3>>,
+    session: Option<Session<3>>,
+    /// The last solve's report, and the warnings of the session's solve from rest.
+    info: SolverInfo,
+    warnings: Vec<String>,
+    /// Each sample's four nearest cells and blend weights, made at the first preview.
+    blend: Option<(Vec<[u32; 4]>, Vec<[f32; 4]>)>,
+}
+
+/// What one [`Live::solve`] or [`Live::refine`] did.
+#[derive(Debug, Clone, Default)]
+pub struct Step {
+    /// The solver: its iterations, and whether it converged.
+    pub solver: SolverInfo,
+    /// Whether the spec was solved from rest (its regions changed, or it was the first).
+    pub from_rest: bool,
+    /// The warnings of a solve from rest: the build's, the constraints', the solver's.
+    pub warnings: Vec<String>,
+    /// Seconds of the step.
+    pub seconds: f64,
+}
+
+impl Live {
+    /// Builds the cells of `points` (with `triangles` over them, and their LAS `classes` or
+    /// none) as [`super::deform`] builds them.
+    pub fn new(
+        points: Vec<Vect<3>>,
+        triangles: &[[u32; 3]],
+        classes: Vec<u8>,
+        params: DeformParams,
+    ) -> Result<Self> {
+        let (complex, build) =
+            crate::cells::build(&points, triangles, &params.build, params.memory)?;
+        Ok(Self {
+            points,
+            classes,
+            complex,
+            build,
+            params,
+            spec: None,
+            session: None,
+            info: SolverInfo::default(),
+            warnings: Vec::new(),
+            blend: None,
+        })
+    }
+
+    /// The samples at rest.
+    pub fn points(&self) -> &[Vect<3>] {
+        &self.points
+    }
+
+    /// The cells.
+    pub fn complex(&self) -> &CellComplex<3> {
+        &self.complex
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &DeformParams {
+        &self.params
+    }
+
+    /// The last spec solved.
+    pub fn spec(&self) -> Option<&EditSpec<3>> {
+        self.spec.as_ref()
+    }
+
+    /// The warnings of the last solve from rest: the build's, the constraints', the
+    /// solver's (a [`Live::release`]'s info holds them, then its fold-overs).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
+    /// The cells' current motions (`None` before a spec constrains anything).
+    pub fn motions(&self) -> Option<&[Motion<3>]> {
+        self.session.as_ref().map(|s| s.motions())
+    }
+
+    /// Moves to `spec` with at most `max_iterations` Gauss-Newton iterations: warm from the
+    /// current motions when only its handles' poses differ from the last spec's, else resolved
+    /// and solved from rest (to convergence, with load steps). `None` when the spec constrains
+    /// nothing (the samples stay at rest). `observer` hears a solve from rest.
+    pub fn solve(
+        &mut self,
+        spec: EditSpec<3>,
+        max_iterations: usize,
+        observer: &dyn Observer,
+    ) -> Result<Option<Step>> {
+        if !spec.has_constraints() {
+            self.spec = None;
+            self.session = None;
+            return Ok(None);
+        }
+        let start = Instant::now();
+        let warm = match (&mut self.session, &self.spec) {
+            (Some(session), Some(last)) if same_but_poses(last, &spec) => {
+                let mut constraints = session.constraints().clone();
+                for (handle, entry) in constraints.handles.iter_mut().zip(&spec.handles) {
+                    handle.motion = entry.value;
+                    if let Some(p) = entry.value.pivot {
+                        handle.pivot = p;
+                    }
+                }
+                Some(session.drag(constraints, max_iterations)?)
+            }
+            _ => None,
+        };
+        let step = match warm {
+            Some(solver) => Step {
+                solver,
+                ..Default::default()
+            },
+            None => {
+                let classes = (!self.classes.is_empty()).then_some(&self.classes[..]);
+                let selected = Selected::Samples {
+                    points: &self.points,
+                    classes,
+                };
+                let constraints =
+                    stages::constraints(&self.complex, &spec, selected, &self.params)?;
+                let (session, solver) = Session::new(
+                    self.complex.clone(),
+                    constraints,
+                    &self.params.solve,
+                    self.params.memory,
+                    observer,
+                )?;
+                let mut warnings =
+                    stages::warnings(&self.build, &self.complex, session.constraints(), &solver);
+                warnings.extend(crate::cells::shortfall(
+                    self.params.build.target_cells,
+                    self.complex.len(),
+                ));
+                self.warnings = warnings.clone();
+                self.session = Some(session);
+                Step {
+                    solver,
+                    from_rest: true,
+                    warnings,
+                    ..Default::default()
+                }
+            }
+        };
+        self.spec = Some(spec);
+        self.info = step.solver.clone();
+        Ok(Some(Step {
+            seconds: start.elapsed().as_secs_f64(),
+            ..step
+        }))
+    }
+
+    /// [`Live::solve`] of the last spec with its handles in `poses` (one per handle, in the
+    /// spec's order): the warm step of a drag, without writing or reading the regions again.
+    pub fn pose(&mut self, poses: &[HandleMotion<3>], max_iterations: usize) -> Result<Step> {
+        let Some(last) = &self.spec else {
+            return Err(Error::Param(
+                "no spec to pose: give the spec with its regions first".into(),
+            ));
+        };
+        if poses.len() != last.handles.len() {
+            return Err(Error::Param(format!(
+                "{} poses for the spec's {} handles: give one a handle",
+                poses.len(),
+                last.handles.len()
+            )));
+        }
+        let mut spec = last.clone();
+        for (entry, pose) in spec.handles.iter_mut().zip(poses) {
+            entry.value = *pose;
+        }
+        Ok(self
+            .solve(spec, max_iterations, &Silent)?
+            .expect("a spec with handles constrains"))
+    }
+
+    /// Whether the last solve converged (a drag's step may stop short); true with nothing to
+    /// solve.
+    pub fn converged(&self) -> bool {
+        self.session.is_none() || self.info.converged
+    }
+
+    /// One more iteration on the last spec when its solve stopped short of converging (a face
+    /// runs it while no new pose waits); `None` when there is nothing to do.
+    pub fn refine(&mut self) -> Result<Option<Step>> {
+        if self.converged() {
+            return Ok(None);
+        }
+        let start = Instant::now();
+        let Some(session) = self.session.as_mut() else {
+            return Ok(None);
+        };
+        let solver = session.update_with(session.constraints().clone(), DRAG_ITERATIONS)?;
+        self.info = solver.clone();
+        Ok(Some(Step {
+            solver,
+            seconds: start.elapsed().as_secs_f64(),
+            ..Default::default()
+        }))
+    }
+
+    /// Each sample's four nearest cells and their continuous blend weights (summing to one;
+    /// unused slots weigh zero), four of each per sample: what [`Live::preview`] blends, and
+    /// what the editor's page blends on the GPU.
+    pub fn blend_weights(&self) -> Result<(Vec<[u32; 4]>, Vec<[f32; 4]>)> {
+        let field = Field {
+            origin: self.complex.grid.origin,
+            centers: self.complex.cells.iter().map(|c| c.center).collect(),
+            halves: self.complex.cells.iter().map(|c| c.half).collect(),
+            motions: self
+                .complex
+                .cells
+                .iter()
+                .map(|c| Motion::rest(&c.center))
+                .collect(),
+            prescribed: Prescribed::default(),
+        };
+        let blend = Blend::new(&field, Weights::Continuous)?;
+        let origin = self.complex.grid.origin;
+        Ok(self
+            .points
+            .par_iter()
+            .map(|p| {
+                let (found, k) = blend.weights(&(p - origin));
+                let (mut c, mut w) = ([0u32; 4], [0f32; 4]);
+                for (slot, &(cell, weight)) in found[..k].iter().enumerate().take(4) {
+                    c[slot] = cell as u32;
+                    w[slot] = weight as f32;
+                }
+                (c, w)
+            })
+            .unzip())
+    }
+
+    /// The samples moved by the cells' current motions, blended ([`Live::blend_weights`]):
+    /// the preview of a pose, a few milliseconds for a million samples, without the exact
+    /// constraints of [`Live::release`]. The samples at rest before anything is constrained.
+    pub fn preview(&mut self) -> Result<Vec<Vect<3>>> {
+        let Some(session) = &self.session else {
+            return Ok(self.points.clone());
+        };
+        if self.blend.is_none() {
+            self.blend = Some(self.blend_weights()?);
+        }
+        let (cells, weights) = self.blend.as_ref().expect("made");
+        let motions = session.motions();
+        let origin = self.complex.grid.origin;
+        let centers = &self.complex.cells;
+        Ok(self
+            .points
+            .par_iter()
+            .zip(cells)
+            .zip(weights)
+            .map(|((p, c), w)| {
+                let x = p - origin;
+                let mut moved = Vect::<3>::zeros();
+                for (&cell, &weight) in c.iter().zip(w) {
+                    if weight > 0.0 {
+                        let cell = cell as usize;
+                        moved += motions[cell].apply(&centers[cell].center, &x) * f64::from(weight);
+                    }
+                }
+                moved + origin
+            })
+            .collect())
+    }
+
+    /// The last spec's deformation of the samples: the solve converged, then the chosen
+    /// transfer with its exact constraints and the fold-over check, as [`super::deform`]
+    /// gives them. The samples at rest (and no solution) before anything is constrained.
+    pub fn release(
+        &mut self,
+        observer: &dyn Observer,
+    ) -> Result<(Vec<Vect<3>>, Option<Solution<3>>, DeformInfo)> {
+        let Some(session) = self.session.as_mut() else {
+            let info = DeformInfo {
+                build: self.build.clone(),
+                ..Default::default()
+            };
+            return Ok((self.points.clone(), None, info));
+        };
+        if !self.info.converged {
+            self.info = session.update(session.constraints().clone())?;
+        }
+        let solution = session.solution(self.info.clone());
+        let transfer_start = Instant::now();
+        let saved = stages::field(&solution, &self.params, observer)?;
+        let origin = saved.field.origin;
+        let deformer = saved.deformer(None, self.params.rbf_tolerance, Outside::Extend)?;
+        let mut moved = self.points.clone();
+        crate::field::apply(&deformer, &origin, &mut moved);
+        check_moved(0, &moved)?;
+        let mut warnings = self.warnings.clone();
+        let foldovers = check_foldovers(&deformer, &solution, &self.points, &mut warnings);
+        let spec = self.spec.as_ref().expect("a session has its spec");
+        let controls = stages::control_results(spec, &solution, &deformer, &self.params, observer)?;
+        let info = DeformInfo::of(
+            self.build.clone(),
+            &solution.info,
+            transfer_start,
+            foldovers,
+            controls,
+            warnings,
+        );
+        Ok((moved, Some(solution), info))
+    }
+}
+
+/// Whether `b` is `a` with only its handles' poses changed: the same regions, pins, targets
+/// and stiffness, so that the resolved constraints hold with new handle maps.
+fn same_but_poses(a: &EditSpec<3>, b: &EditSpec<3>) -> bool {
+    a.fixed == b.fixed
+        && a.pins == b.pins
+        && a.targets == b.targets
+        && a.stiffness == b.stiffness
+        && a.handles.len() == b.handles.len()
+        && a.handles
+            .iter()
+            .zip(&b.handles)
+            .all(|(h, k)| h.region == k.region && h.line == k.line)
+}

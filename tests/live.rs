@@ -1,0 +1,174 @@
+//! A live deformation (`pipeline::Live`): poses dragged one Gauss-Newton iteration at a time,
+//! previewed by the blend, and released onto what `deform` gives for the last pose.
+
+use std::path::Path;
+
+use rigidcells::pipeline::{self, DeformParams, Live, Options};
+use rigidcells::progress::Silent;
+use rigidcells::rigid::Vect;
+use rigidcells::spec::{EditSpec, parse_poses, parse_spec};
+
+/// A 10 × 1 × 1 bar's vertices and triangles.
+fn bar() -> (Vec<Vect<3>>, Vec<[u32; 3]>) {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let points = bar
+        .vertices
+        .iter()
+        .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
+        .collect();
+    (points, bar.triangles)
+}
+
+/// The bar's left end fixed and its right end lifted by `lift` and turned by `degrees` about
+/// y, both as index lists.
+fn spec(points: &[Vect<3>], lift: f64, degrees: f64) -> EditSpec<3> {
+    let list = |keep: &dyn Fn(&Vect<3>) -> bool| {
+        let indices: Vec<String> = (0..points.len())
+            .filter(|&i| keep(&points[i]))
+            .map(|i| i.to_string())
+            .collect();
+        format!("[{}]", indices.join(", "))
+    };
+    let text = format!(
+        "[[fixed]]\nindices = {}\n[[handle]]\nindices = {}\ntranslate = [0.0, 0.0, {lift:?}]\n\
+         rotate = {{ axis = [0.0, 1.0, 0.0], degrees = {degrees:?} }}\npivot = [10.0, 0.5, 0.5]\n",
+        list(&|p| p.x < 2.0),
+        list(&|p| p.x > 8.0),
+    );
+    parse_spec::<3>(&text, Path::new("."), Path::new("live.toml")).unwrap()
+}
+
+fn params() -> DeformParams {
+    Options {
+        cell_size: Some(0.25),
+        ..Default::default()
+    }
+    .params()
+    .unwrap()
+}
+
+fn farthest(a: &[Vect<3>], b: &[Vect<3>]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn a_drag_of_small_steps_ends_where_deform_does() {
+    let (points, triangles) = bar();
+    let params = params();
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+    // Nothing constrained: nothing to solve, and the preview is the rest.
+    assert!(
+        live.solve(EditSpec::default(), 1, &Silent)
+            .unwrap()
+            .is_none()
+    );
+    assert_eq!(live.preview().unwrap(), points);
+
+    let first = live
+        .solve(spec(&points, 0.0, 0.0), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(first.from_rest && first.solver.converged);
+    assert!(farthest(&live.preview().unwrap(), &points) < 1e-9);
+    let cells = live.complex().len();
+
+    // Twelve poses, one iteration each: warm steps on the same cells, never from rest.
+    let mut previews = Vec::new();
+    for k in 1..=12 {
+        let f = f64::from(k) / 12.0;
+        let step = live
+            .solve(spec(&points, 3.0 * f, -30.0 * f), 1, &Silent)
+            .unwrap()
+            .unwrap();
+        assert!(!step.from_rest, "pose {k} was solved from rest");
+        assert!(step.solver.iterations <= 1, "pose {k}: {:?}", step.solver);
+        previews.push(live.preview().unwrap());
+    }
+    assert_eq!(live.complex().len(), cells);
+    // The preview follows the hand: the handle's end rises pose by pose.
+    let tip = points.iter().position(|p| p.x == 10.0).unwrap();
+    let rises: Vec<f64> = previews.iter().map(|p| p[tip].z - points[tip].z).collect();
+    assert!(rises.windows(2).all(|w| w[1] > w[0]), "{rises:?}");
+    assert!(rises[11] > 2.0, "{rises:?}");
+
+    // Idle refinement converges; the release is deform's shape for the last pose.
+    let mut idle = 0;
+    while live.refine().unwrap().is_some() {
+        idle += 1;
+        assert!(idle < 50, "the refinement does not converge");
+    }
+    assert!(live.converged());
+    let (moved, solution, info) = live.release(&Silent).unwrap();
+    assert!(solution.unwrap().info.converged);
+    let last = spec(&points, 3.0, -30.0);
+    let (expected, _, expected_info) =
+        pipeline::deform(&points, &triangles, &last, &params, &Silent).unwrap();
+    let off = farthest(&moved, &expected);
+    assert!(off < 1e-3, "the release is {off} from deform's shape");
+    assert_eq!(info.foldovers.0, expected_info.foldovers.0);
+    // Exact where the spec said: fixed samples keep their coordinates, handle samples follow
+    // the handle's map.
+    for (i, p) in points.iter().enumerate() {
+        if p.x < 2.0 {
+            assert_eq!(moved[i], *p);
+        }
+    }
+}
+
+#[test]
+fn new_regions_solve_from_rest_and_an_empty_spec_rests() {
+    let (points, triangles) = bar();
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params()).unwrap();
+    let a = live
+        .solve(spec(&points, 1.0, 0.0), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(a.from_rest);
+    // Another fixed region: resolved and solved from rest, to convergence.
+    let mut other = spec(&points, 1.0, 0.0);
+    other.fixed.truncate(0);
+    other.pins.push(rigidcells::spec::Pin {
+        point: Vect::<3>::new(0.0, 0.5, 0.5),
+        to: Vect::<3>::new(0.0, 0.5, 0.5),
+        line: 1,
+    });
+    let b = live.solve(other, 1, &Silent).unwrap().unwrap();
+    assert!(b.from_rest && b.solver.converged, "{b:?}");
+    // Nothing constrained: the session ends and the release is the rest.
+    assert!(
+        live.solve(EditSpec::default(), 1, &Silent)
+            .unwrap()
+            .is_none()
+    );
+    let (moved, solution, _) = live.release(&Silent).unwrap();
+    assert!(solution.is_none());
+    assert_eq!(moved, points);
+}
+
+#[test]
+fn poses_alone_move_the_handles_of_the_last_spec() {
+    let (points, triangles) = bar();
+    let name = Path::new("poses");
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params()).unwrap();
+    // No spec yet: nothing to pose.
+    let lift = parse_poses::<3>("[[handle]]\ntranslate = [0.0, 0.0, 1.0]\n", name).unwrap();
+    assert!(live.pose(&lift, 1).is_err());
+    live.solve(spec(&points, 0.0, 0.0), 1, &Silent).unwrap();
+    // The pose as a matrix: the same step as the whole spec with that translation.
+    let matrix = "[[handle]]\nmatrix = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], \
+                  [0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 0.0, 1.0]]\n";
+    let poses = parse_poses::<3>(matrix, name).unwrap();
+    let step = live.pose(&poses, 50).unwrap();
+    assert!(!step.from_rest && step.solver.converged, "{step:?}");
+    let (moved, _, _) = live.release(&Silent).unwrap();
+    let tip = points.iter().position(|p| p.x == 10.0).unwrap();
+    assert!((moved[tip].z - points[tip].z - 1.0).abs() < 1e-9);
+    // One pose a handle, and nothing but a pose.
+    assert!(live.pose(&[], 1).is_err());
+    let region = "[[handle]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n";
+    let err = parse_poses::<3>(region, name).unwrap_err().to_string();
+    assert!(err.contains("box"), "{err}");
+}
