@@ -101,7 +101,7 @@ fn a_drag_of_small_steps_ends_where_deform_does() {
         assert!(idle < 50, "the refinement does not converge");
     }
     assert!(live.converged());
-    let (moved, solution, info) = live.release(&Silent).unwrap();
+    let (moved, _, solution, info) = live.release(&[], &Silent).unwrap();
     assert!(solution.unwrap().info.converged);
     let last = spec(&points, 3.0, -30.0);
     let (expected, _, expected_info) =
@@ -143,7 +143,7 @@ fn new_regions_solve_from_rest_and_an_empty_spec_rests() {
             .unwrap()
             .is_none()
     );
-    let (moved, solution, _) = live.release(&Silent).unwrap();
+    let (moved, _, solution, _) = live.release(&[], &Silent).unwrap();
     assert!(solution.is_none());
     assert_eq!(moved, points);
 }
@@ -163,7 +163,7 @@ fn poses_alone_move_the_handles_of_the_last_spec() {
     let poses = parse_poses::<3>(matrix, name).unwrap();
     let step = live.pose(&poses, 50).unwrap();
     assert!(!step.from_rest && step.solver.converged, "{step:?}");
-    let (moved, _, _) = live.release(&Silent).unwrap();
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
     let tip = points.iter().position(|p| p.x == 10.0).unwrap();
     assert!((moved[tip].z - points[tip].z - 1.0).abs() < 1e-9);
     // One pose a handle, and nothing but a pose.

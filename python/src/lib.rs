@@ -21,13 +21,14 @@ use rigidcells::field::{Outside, SavedField, Transfer};
 use rigidcells::io;
 use rigidcells::names::{Named, UnknownName};
 use rigidcells::pipeline::Options;
-use rigidcells::pipeline::{self, DeformInfo, DeformParams};
+use rigidcells::pipeline::{self, DeformInfo, DeformParams, Live, Step};
 use rigidcells::progress::Observer;
 use rigidcells::render::View;
 use rigidcells::report::Timings;
 use rigidcells::rigid::Vect;
 use rigidcells::solve::Method;
-use rigidcells::spec::{EditSpec, parse_spec};
+use rigidcells::solve::Solution;
+use rigidcells::spec::{EditSpec, parse_poses, parse_spec};
 
 create_exception!(
     _rigidcells,
@@ -509,17 +510,36 @@ fn deform<'py>(
         py.detach(|| pipeline::deform_oriented(&pts, &nrm, &tris, &spec, &params, &observer));
     let (moved, moved_normals, solution, info) = observer.result(result)?;
     let seconds = start.elapsed().as_secs_f64();
-    let d = info_dict(py, &info, pts.len() as u64)?;
-    let (fixed, handle, _) = rigidcells::report::residuals(&solution, &pts, &moved);
-    d.set_item("residual_fixed_max", fixed)?;
-    d.set_item("residual_handle_max", handle)?;
-    d.set_item("cell_size", solution.complex.grid.finest_size())?;
-    let timings = timings(py, &info, 0.0, 0.0, seconds)?;
-    d.set_item("timings", timings)?;
+    let d = deformed_dict(py, &info, Some(&solution), &pts, &moved, seconds)?;
     if normals.is_some() {
         d.set_item("normals", moved_array(py, &moved_normals))?;
     }
     Ok((moved_array(py, &moved), d))
+}
+
+/// What a deformation of samples in memory did, as a dict: [`info_dict`] with the residuals
+/// at the fixed and handle samples, the cell size and the timings.
+fn deformed_dict<'py>(
+    py: Python<'py>,
+    info: &DeformInfo,
+    solution: Option<&Solution<3>>,
+    points: &[Vect<3>],
+    moved: &[Vect<3>],
+    seconds: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = info_dict(py, info, points.len() as u64)?;
+    let (fixed, handle, cell_size) = match solution {
+        Some(solution) => {
+            let (fixed, handle, _) = rigidcells::report::residuals(solution, points, moved);
+            (fixed, handle, solution.complex.grid.finest_size())
+        }
+        None => (0.0, 0.0, 0.0),
+    };
+    d.set_item("residual_fixed_max", fixed)?;
+    d.set_item("residual_handle_max", handle)?;
+    d.set_item("cell_size", cell_size)?;
+    d.set_item("timings", timings(py, info, 0.0, 0.0, seconds)?)?;
+    Ok(d)
 }
 
 /// Seconds per stage ([`Timings::of`]: `read` and `write` are a file's passes, 0 for samples
@@ -643,6 +663,159 @@ impl Field {
             Some((lo, hi)) => (lo.into(), hi.into()),
             None => ([f64::NAN; 3], [f64::NAN; 3]),
         }
+    }
+}
+
+/// A live deformation of samples in memory ([`Live`]): the cells built once, a spec solved
+/// from rest, then poses dragged a Gauss-Newton iteration at a time, previewed by the blend,
+/// and released through the transfer. Every heavy call releases the GIL, so a face may run
+/// it on a thread of its own.
+#[pyclass(module = "rigidcells._rigidcells")]
+struct Session {
+    live: Live,
+    /// The points' normals (one a point, or none), turned by the release.
+    normals: Vec<Vect<3>>,
+}
+
+/// What a step of a [`Session`] did, as a dict.
+fn step_dict<'py>(py: Python<'py>, step: Option<&Step>) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    // Nothing constrained: nothing to solve, and the samples rest.
+    d.set_item("converged", step.is_none_or(|s| s.solver.converged))?;
+    let step = step.cloned().unwrap_or_default();
+    d.set_item("iterations", step.solver.iterations)?;
+    d.set_item("from_rest", step.from_rest)?;
+    d.set_item("seconds", step.seconds)?;
+    d.set_item("warnings", PyList::new(py, said(&step.warnings))?)?;
+    Ok(d)
+}
+
+#[pymethods]
+impl Session {
+    /// Builds the cells of `points` ((n, 3) float64, with `triangles`, and `normals` to turn
+    /// at the release) with the `options`.
+    #[new]
+    #[pyo3(signature = (points, triangles=None, normals=None, options=None))]
+    fn new(
+        py: Python<'_>,
+        points: PyReadonlyArray2<'_, f64>,
+        triangles: Option<PyReadonlyArray2<'_, i64>>,
+        normals: Option<PyReadonlyArray2<'_, f64>>,
+        options: Option<Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let params = self::options(options.as_ref())?.params().map_err(py_err)?;
+        let pts = self::points(&points)?;
+        let tris = self::triangles(triangles.as_ref(), pts.len())?;
+        let normals = match &normals {
+            Some(n) => self::points(n)?,
+            None => Vec::new(),
+        };
+        if !normals.is_empty() && normals.len() != pts.len() {
+            return Err(PyValueError::new_err(format!(
+                "normals: {} for {} points; give one per point, or none",
+                normals.len(),
+                pts.len()
+            )));
+        }
+        let live = py
+            .detach(|| Live::new(pts, &tris, Vec::new(), params))
+            .map_err(py_err)?;
+        Ok(Self { live, normals })
+    }
+
+    /// Moves to the TOML `spec` with at most `iterations` Gauss-Newton iterations (all it
+    /// takes when None): warm when only its handles' poses changed, else from rest.
+    #[pyo3(signature = (spec_text, base, iterations=None, progress=None))]
+    fn solve<'py>(
+        &mut self,
+        py: Python<'py>,
+        spec_text: &str,
+        base: &str,
+        iterations: Option<usize>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let spec = self::spec(spec_text, base)?;
+        let most = iterations.unwrap_or(self.live.params().solve.max_iterations);
+        let observer = PyObserver::new(progress);
+        let live = &mut self.live;
+        let step = observer.result(py.detach(|| live.solve(spec, most, &observer)))?;
+        step_dict(py, step.as_ref())
+    }
+
+    /// The last spec with its handles posed as the TOML `poses` say (one `[[handle]]` table
+    /// a handle, its motion alone), with at most `iterations` Gauss-Newton iterations.
+    fn pose<'py>(
+        &mut self,
+        py: Python<'py>,
+        poses_text: &str,
+        iterations: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        // Named as a spec, so that the package says its errors by key path.
+        let poses = parse_poses::<3>(poses_text, Path::new("spec")).map_err(py_err)?;
+        let live = &mut self.live;
+        let step = py
+            .detach(|| live.pose(&poses, iterations))
+            .map_err(py_err)?;
+        step_dict(py, Some(&step))
+    }
+
+    /// One more iteration when the last step stopped short of converging; whether it ran.
+    fn refine(&mut self, py: Python<'_>) -> PyResult<bool> {
+        let live = &mut self.live;
+        Ok(py.detach(|| live.refine()).map_err(py_err)?.is_some())
+    }
+
+    /// Whether the last step converged.
+    #[getter]
+    fn converged(&self) -> bool {
+        self.live.converged()
+    }
+
+    /// The number of cells.
+    #[getter]
+    fn cells(&self) -> usize {
+        self.live.complex().len()
+    }
+
+    /// The finest cells' edge.
+    #[getter]
+    fn cell_size(&self) -> f64 {
+        self.live.complex().grid.finest_size()
+    }
+
+    /// The samples moved by the cells' current motions, blended: the preview of a pose.
+    fn preview<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let live = &mut self.live;
+        let moved = py.detach(|| live.preview()).map_err(py_err)?;
+        Ok(moved_array(py, &moved))
+    }
+
+    /// The last spec's deformation through the transfer, converged first; the moved samples
+    /// and what was done (with the turned normals under `"normals"` when normals were given).
+    #[pyo3(signature = (progress=None))]
+    fn release<'py>(
+        &mut self,
+        py: Python<'py>,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
+        let observer = PyObserver::new(progress);
+        let start = Instant::now();
+        let (live, normals) = (&mut self.live, &self.normals);
+        let released = py.detach(|| live.release(normals, &observer));
+        let (moved, turned, solution, info) = observer.result(released)?;
+        let seconds = start.elapsed().as_secs_f64();
+        let d = deformed_dict(
+            py,
+            &info,
+            solution.as_ref(),
+            self.live.points(),
+            &moved,
+            seconds,
+        )?;
+        if !self.normals.is_empty() {
+            d.set_item("normals", moved_array(py, &turned))?;
+        }
+        Ok((moved_array(py, &moved), d))
     }
 }
 
@@ -932,6 +1105,7 @@ fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", m.py().get_type::<FormatError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<Field>()?;
+    m.add_class::<Session>()?;
     m.add_function(wrap_pyfunction!(deform, m)?)?;
     m.add_function(wrap_pyfunction!(solve, m)?)?;
     m.add_function(wrap_pyfunction!(deform_file, m)?)?;

@@ -365,7 +365,7 @@ impl Editor {
     /// is converged first.
     pub fn release(&mut self) -> Result<Released> {
         let said = self.live.warnings().len();
-        let (moved, _, mut info) = self.live.release(&Silent)?;
+        let (moved, _, _, mut info) = self.live.release(&[], &Silent)?;
         Ok(Released {
             positions: relative(&moved, &self.scene.center),
             foldovers: info.foldovers,

@@ -17,7 +17,7 @@ use super::stages::{self, Selected};
 use crate::cells::{BuildInfo, CellComplex};
 use crate::error::Error;
 use crate::error::Result;
-use crate::field::{Blend, Field, Outside, Prescribed, Weights};
+use crate::field::{Blend, Field, Outside, Prescribed, Weights, apply_into};
 use crate::progress::{Observer, Silent};
 use crate::rigid::{Motion, Vect};
 use crate::solve::{Session, Solution, SolverInfo};
@@ -65,13 +65,24 @@ pub struct Step {
 
 impl Live {
     /// Builds the cells of `points` (with `triangles` over them, and their LAS `classes` or
-    /// none) as [`super::deform`] builds them.
+    /// none) as [`super::deform`] builds them. Parameters that refine the cells are refused:
+    /// a session's cells stay those it built.
     pub fn new(
         points: Vec<Vect<3>>,
         triangles: &[[u32; 3]],
         classes: Vec<u8>,
         params: DeformParams,
     ) -> Result<Self> {
+        let refining = [
+            (params.solve.refine_strain.is_some(), "--refine-strain"),
+            (params.solve.refine_fraction.is_some(), "--min-cell-size"),
+        ];
+        if let Some((_, option)) = refining.iter().find(|(given, _)| *given) {
+            return Err(Error::Param(format!(
+                "{option} refines the cells where they strain; a live deformation keeps the \
+                 cells it built: give --cell-size or --cells (deform refines)"
+            )));
+        }
         let (complex, build) =
             crate::cells::build(&points, triangles, &params.build, params.memory)?;
         Ok(Self {
@@ -295,31 +306,49 @@ impl Live {
             .zip(weights)
             .map(|((p, c), w)| {
                 let x = p - origin;
-                let mut moved = Vect::<3>::zeros();
+                let (mut moved, mut total) = (Vect::<3>::zeros(), 0.0);
                 for (&cell, &weight) in c.iter().zip(w) {
                     if weight > 0.0 {
-                        let cell = cell as usize;
-                        moved += motions[cell].apply(&centers[cell].center, &x) * f64::from(weight);
+                        let (cell, weight) = (cell as usize, f64::from(weight));
+                        moved += motions[cell].apply(&centers[cell].center, &x) * weight;
+                        total += weight;
                     }
                 }
-                moved + origin
+                // Divided by the weights' sum as rounded to f32, so that cells at rest
+                // leave the sample where it was.
+                if total > 0.0 {
+                    moved / total + origin
+                } else {
+                    *p
+                }
             })
             .collect())
     }
 
     /// The last spec's deformation of the samples: the solve converged, then the chosen
     /// transfer with its exact constraints and the fold-over check, as [`super::deform`]
-    /// gives them. The samples at rest (and no solution) before anything is constrained.
+    /// gives them, with `normals` (one a sample, or none) turned as
+    /// [`super::deform_oriented`] turns them. The samples at rest (and no solution) before
+    /// anything is constrained.
+    #[allow(clippy::type_complexity)]
     pub fn release(
         &mut self,
+        normals: &[Vect<3>],
         observer: &dyn Observer,
-    ) -> Result<(Vec<Vect<3>>, Option<Solution<3>>, DeformInfo)> {
+    ) -> Result<(Vec<Vect<3>>, Vec<Vect<3>>, Option<Solution<3>>, DeformInfo)> {
+        if !normals.is_empty() && normals.len() != self.points.len() {
+            return Err(Error::Param(format!(
+                "{} normals for {} points: give one per point, or none",
+                normals.len(),
+                self.points.len()
+            )));
+        }
         let Some(session) = self.session.as_mut() else {
             let info = DeformInfo {
                 build: self.build.clone(),
                 ..Default::default()
             };
-            return Ok((self.points.clone(), None, info));
+            return Ok((self.points.clone(), normals.to_vec(), None, info));
         };
         if !self.info.converged {
             self.info = session.update(session.constraints().clone())?;
@@ -329,8 +358,9 @@ impl Live {
         let saved = stages::field(&solution, &self.params, observer)?;
         let origin = saved.field.origin;
         let deformer = saved.deformer(None, self.params.rbf_tolerance, Outside::Extend)?;
-        let mut moved = self.points.clone();
-        crate::field::apply(&deformer, &origin, &mut moved);
+        let (mut moved, mut turned) = (Vec::new(), Vec::new());
+        let points = &self.points;
+        apply_into(&deformer, &origin, points, normals, &mut moved, &mut turned);
         check_moved(0, &moved)?;
         let mut warnings = self.warnings.clone();
         let foldovers = check_foldovers(&deformer, &solution, &self.points, &mut warnings);
@@ -344,7 +374,7 @@ impl Live {
             controls,
             warnings,
         );
-        Ok((moved, Some(solution), info))
+        Ok((moved, turned, Some(solution), info))
     }
 }
 

@@ -10,6 +10,9 @@ files of any size, with the same library the ``rigidcells`` command line uses::
     field = rigidcells.solve(points, {"fixed": [...], "handle": [...]})
     field.apply(other_points); field.save("bend.field"); pickle.dumps(field)
     rigidcells.deform_file("scan.laz", "bent.laz", "edit.toml", cells=20_000)
+    live = rigidcells.Session(points, spec)                # the cells built once, solved
+    live.drag({"translate": [0, 0, 2]}); live.preview()     # one warm iteration, its blend
+    moved, report = live.release()                          # converged, exact transfer
 
 ``spec`` is the edit spec: TOML text, a path to a ``.toml`` file, or a dict of the same
 structure (numbers may be numpy scalars or arrays; an error in it names its key path, such as
@@ -52,7 +55,7 @@ from ._rigidcells import FormatError
 
 __all__ = [
     "deform", "solve", "deform_file", "apply_file", "solve_files", "Field", "Report",
-    "FormatError", "__version__",
+    "Session", "Step", "FormatError", "__version__",
 ]
 
 __version__: str = _rigidcells.__version__
@@ -753,6 +756,152 @@ def deform(
     )
     out, notes = p.back(moved, info.get("normals"))
     return out, Report._of(info, notes, paths)
+
+
+@dataclass
+class Step:
+    """What a step of a ``Session`` did."""
+
+    iterations: int
+    """Gauss-Newton iterations of this step."""
+    converged: bool
+    """Whether the pose is solved (a drag's step may stop short; ``refine`` goes on)."""
+    from_rest: bool
+    """Whether the spec was solved from rest (the first, or its regions changed)."""
+    seconds: float
+    """Seconds of the step."""
+    warnings: List[str]
+    """A solve from rest's warnings: the cells', the constraints', the solver's."""
+
+
+def _poses_path(path: str) -> str:
+    """A pose's key path said from the ``poses`` given to ``Session.drag``."""
+    return path.replace('spec["handle"]', "poses", 1)
+
+
+class Session:
+    """A live deformation, the paper's interactive setting: the cells of ``points`` are built
+    once and ``spec`` is solved; then each ``drag`` moves the handles to a new pose with one
+    Gauss-Newton iteration from where the cells are (tens of milliseconds at a few thousand
+    cells), ``preview`` blends the cells' motions at the points, ``refine`` goes on while the
+    handles rest, and ``release`` converges and moves the points through the transfer with its
+    exact constraints, as ``deform`` does. ``points``, ``triangles`` and the keyword options
+    are ``deform``'s; ``release`` gives the points back in the form they came in.
+
+    Every call but the light properties releases the GIL: a face may run the session on a
+    thread of its own (one call at a time).
+    """
+
+    def __init__(
+        self,
+        points: Any,
+        spec: Spec,
+        *,
+        triangles: Any = None,
+        normals: Any = None,
+        scale: Optional[Frame] = None,
+        offset: Optional[Frame] = None,
+        cell_size: Optional[float] = None,
+        cells: Optional[int] = None,
+        min_cell_size: Optional[float] = None,
+        max_level: Optional[int] = None,
+        shell: Optional[bool] = None,
+        inside: Optional[str] = None,
+        solver: Optional[str] = None,
+        tolerance: Optional[float] = None,
+        coarse_levels: Optional[int] = None,
+        loose_parts: Optional[str] = None,
+        refine_strain: Optional[float] = None,
+        transfer: Optional[str] = None,
+        rbf_tolerance: Optional[float] = None,
+        check_gcp: Optional[bool] = None,
+        memory_limit: Union[int, str, None] = None,
+        progress: Any = None,
+    ) -> None:
+        options = _picked(locals())
+        self._points = _Points(points, scale, offset)
+        tris = self._points.triangles if triangles is None else _triangles(triangles)
+        nrm = self._points.normals if normals is None else _plain3(normals, "normals")
+        self._native = _rigidcells.Session(self._points.xyz, tris, nrm, options)
+        self._paths: Optional[List[str]] = None
+        self.last: Step = self.solve(spec, progress=progress)
+
+    def solve(self, spec: Spec, iterations: Optional[int] = None, progress: Any = None) -> Step:
+        """Moves to the whole ``spec``: warm from the cells' current motions when only its
+        handles' poses changed, else resolved and solved from rest; at most ``iterations``
+        Gauss-Newton iterations (all it takes when None)."""
+        text, base, paths = _spec(spec)
+        info = _with_progress(
+            progress, lambda cb: _call(paths, self._native.solve, text, base, iterations, cb)
+        )
+        self._paths = paths
+        self.last = self._step(info)
+        return self.last
+
+    def drag(self, poses: Union[dict, Sequence[dict]], iterations: int = 1) -> Step:
+        """Moves the handles to ``poses``: one dict a handle, in the spec's order (a dict alone
+        for one handle), each with a handle's motion keys only (``translate``, ``rotate``,
+        ``scale``, ``pivot``, or ``matrix``), solved with ``iterations`` Gauss-Newton
+        iterations from where the cells are."""
+        if isinstance(poses, dict):
+            poses = [poses]
+        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
+                or iterations < 1:
+            raise ValueError(f"iterations must be a whole number 1 or more, got {iterations!r}")
+        try:
+            plain = _plain({"handle": list(poses)}, [])
+        except (TypeError, ValueError) as e:
+            raise type(e)(_poses_path(str(e))) from None
+        text = _rigidcells.toml_from_json(json.dumps(plain))
+        paths = [_poses_path(p) for p in _key_paths(text)]
+        self.last = self._step(_call(paths, self._native.pose, text, int(iterations)))
+        return self.last
+
+    def refine(self) -> bool:
+        """One more iteration on the current pose when its solve stopped short; whether one
+        ran (False once converged)."""
+        return self._native.refine()
+
+    @property
+    def converged(self) -> bool:
+        """Whether the current pose is solved."""
+        return self._native.converged
+
+    @property
+    def cells(self) -> int:
+        """The number of cells."""
+        return self._native.cells
+
+    @property
+    def cell_size(self) -> float:
+        """The finest cells' edge length."""
+        return self._native.cell_size
+
+    def preview(self) -> np.ndarray:
+        """The points ((n, 3) float64) moved by the cells' current motions, blended: the
+        shape of the current pose, without the transfer's exact constraints."""
+        return self._native.preview()
+
+    def release(self, progress: Any = None) -> Tuple[Any, Report]:
+        """The current pose's deformation, as ``deform`` gives it: the solve converged, the
+        points moved through the transfer (fixed points keep their coordinates, handle points
+        follow their handle), in the form they came in, and a ``Report``."""
+        moved, info = _with_progress(progress, lambda cb: self._native.release(cb))
+        out, notes = self._points.back(moved, info.get("normals"))
+        return out, Report._of(info, notes, self._paths)
+
+    def _step(self, info: dict) -> Step:
+        return Step(
+            iterations=info["iterations"],
+            converged=info["converged"],
+            from_rest=info["from_rest"],
+            seconds=info["seconds"],
+            warnings=_lines_said(list(info["warnings"]), self._paths),
+        )
+
+    def __repr__(self) -> str:
+        state = "converged" if self.converged else "not converged"
+        return f"<rigidcells.Session: {self.cells} cells, {state}>"
 
 
 def solve(

@@ -88,6 +88,61 @@ class Field:
     @staticmethod
     def load(path: PathLike) -> "Field": ...
 
+@dataclass
+class Step:
+    """What a step of a `Session` did."""
+
+    iterations: int
+    converged: bool
+    from_rest: bool
+    seconds: float
+    warnings: List[str]
+
+class Session:
+    """A live deformation: the cells built once, the spec solved; drag the handles a
+    Gauss-Newton iteration a pose, preview the blend, release through the transfer."""
+
+    last: Step
+    def __init__(
+        self,
+        points: Any,
+        spec: Spec,
+        *,
+        triangles: Any = ...,
+        normals: Any = ...,
+        scale: Optional[Frame] = ...,
+        offset: Optional[Frame] = ...,
+        cell_size: Optional[float] = ...,
+        cells: Optional[int] = ...,
+        min_cell_size: Optional[float] = ...,
+        max_level: Optional[int] = ...,
+        shell: Optional[bool] = ...,
+        inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
+        solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+        tolerance: Optional[float] = ...,
+        coarse_levels: Optional[int] = ...,
+        loose_parts: Optional[Literal["carry", "rest"]] = ...,
+        refine_strain: Optional[float] = ...,
+        transfer: Optional[Transfer] = ...,
+        rbf_tolerance: Optional[float] = ...,
+        check_gcp: Optional[bool] = ...,
+        memory_limit: Union[int, str, None] = ...,
+        progress: Progress = ...,
+    ) -> None: ...
+    def solve(
+        self, spec: Spec, iterations: Optional[int] = ..., progress: Progress = ...
+    ) -> Step: ...
+    def drag(self, poses: Union[dict, Sequence[dict]], iterations: int = ...) -> Step: ...
+    def refine(self) -> bool: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def cells(self) -> int: ...
+    @property
+    def cell_size(self) -> float: ...
+    def preview(self) -> np.ndarray: ...
+    def release(self, progress: Progress = ...) -> Tuple[Any, Report]: ...
+
 @overload
 def deform(
     points: np.ndarray,

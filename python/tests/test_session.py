@@ -1,0 +1,125 @@
+"""The live session: poses dragged one Gauss-Newton iteration at a time, previewed, and
+released onto what `deform` gives for the last pose; its errors in Python's terms; its calls
+free of the GIL, so that a face can run it on a thread of its own."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import rigidcells
+from test_rigidcells import bar_points
+
+
+def bar_spec(pts, turn=0.0, lift=0.0):
+    """The bar's left end fixed, its right end turned about y and lifted."""
+    return {
+        "fixed": [{"indices": np.nonzero(pts[:, 0] < 1.0)[0]}],
+        "handle": [
+            {
+                "indices": np.nonzero(pts[:, 0] > 9.0)[0],
+                "rotate": {"axis": [0.0, 1.0, 0.0], "degrees": turn},
+                "translate": [0.0, 0.0, lift],
+                "pivot": [10.0, 0.5, 0.5],
+            }
+        ],
+    }
+
+
+def test_a_drag_ends_on_the_shape_deform_gives():
+    pts = bar_points()
+    live = rigidcells.Session(pts, bar_spec(pts), cell_size=0.25)
+    assert live.last.from_rest and live.last.converged and live.cells > 100
+    assert np.abs(live.preview() - pts).max() < 1e-12
+    tip = int(np.argmax(pts[:, 0] + pts[:, 2]))
+    rises = []
+    for k in range(1, 13):
+        f = k / 12
+        step = live.drag({"rotate": {"axis": [0, 1, 0], "degrees": -40 * f},
+                          "translate": [0, 0, 3 * f], "pivot": [10.0, 0.5, 0.5]})
+        assert not step.from_rest and step.iterations <= 1
+        rises.append(live.preview()[tip, 2] - pts[tip, 2])
+    assert all(b > a for a, b in zip(rises, rises[1:])), rises
+    while live.refine():
+        pass
+    assert live.converged
+    moved, report = live.release()
+    assert report.converged and report.cells == live.cells
+    expected, _ = rigidcells.deform(pts, bar_spec(pts, -40.0, 3.0), cell_size=0.25)
+    # Both converge to the solver's move test (a thousandth of a cell) from other starts.
+    assert np.abs(moved - expected).max() < 1e-3 * live.cell_size
+    fixed = pts[:, 0] < 1.0
+    assert np.array_equal(moved[fixed], pts[fixed])
+    assert report.residual_max < 1e-9
+
+
+def test_a_whole_spec_with_other_regions_solves_from_rest():
+    pts = bar_points()
+    live = rigidcells.Session(pts, bar_spec(pts, lift=1.0), cell_size=0.25)
+    same = live.solve(bar_spec(pts, lift=2.0))
+    assert not same.from_rest and same.converged
+    other = bar_spec(pts, lift=2.0)
+    other["fixed"] = [{"indices": np.nonzero(pts[:, 0] < 2.0)[0]}]
+    assert live.solve(other).from_rest
+    moved, _ = live.release()
+    expected, _ = rigidcells.deform(pts, other, cell_size=0.25)
+    assert np.abs(moved - expected).max() < 1e-3 * live.cell_size
+
+
+def test_release_gives_the_points_back_in_their_form():
+    pts = bar_points()
+    structured = np.zeros(len(pts), dtype=[("X", "f8"), ("Y", "f8"), ("Z", "f8"), ("i", "u2")])
+    for k, name in enumerate("XYZ"):
+        structured[name] = pts[:, k]
+    structured["i"] = np.arange(len(pts)) % 7
+    live = rigidcells.Session(structured, bar_spec(pts, lift=2.0), cell_size=0.25)
+    moved, _ = live.release()
+    assert moved.dtype == structured.dtype
+    assert np.array_equal(moved["i"], structured["i"])
+    assert moved["Z"].max() > pts[:, 2].max() + 1.5
+
+
+def test_errors_name_the_poses_and_arguments():
+    pts = bar_points()
+    live = rigidcells.Session(pts, bar_spec(pts), cell_size=0.25)
+    with pytest.raises(ValueError, match=r"^poses\[0\]: unknown key `box`"):
+        live.drag({"box": {"min": [0, 0, 0], "max": [1, 1, 1]}})
+    with pytest.raises(ValueError, match=r"poses\[0\]\[\"translate\"\]\[2\]: nan"):
+        live.drag({"translate": [0, 0, float("nan")]})
+    with pytest.raises(ValueError, match="2 poses for the spec's 1 handles"):
+        live.drag([{"translate": [0, 0, 1]}, {"translate": [0, 0, 1]}])
+    with pytest.raises(ValueError, match="iterations must be"):
+        live.drag({"translate": [0, 0, 1]}, iterations=0)
+    with pytest.raises(ValueError, match="^min_cell_size refines .* give cell_size or cells"):
+        rigidcells.Session(pts, bar_spec(pts), min_cell_size=0.1)
+    with pytest.raises(TypeError, match="unexpected"):
+        rigidcells.Session(pts, bar_spec(pts), cell_sise=0.25)
+    # The session goes on after a refused pose.
+    live.drag({"translate": [0, 0, 1]})
+    assert live.preview()[:, 2].max() > 1.5
+
+
+def test_a_step_on_a_thread_leaves_the_gil_free():
+    pts = bar_points()
+    live = rigidcells.Session(pts, bar_spec(pts), cell_size=0.2)
+    other = bar_spec(pts, turn=-120.0, lift=4.0)
+    other["fixed"] = [{"indices": np.nonzero(pts[:, 0] < 2.0)[0]}]
+    ticks = []
+    done = threading.Event()
+
+    def work():
+        live.solve(other)  # from rest, with load steps
+        done.set()
+
+    worker = threading.Thread(target=work)
+    start = time.perf_counter()
+    worker.start()
+    while not done.is_set():
+        ticks.append(time.perf_counter())
+        time.sleep(0.001)
+    worker.join()
+    seconds = time.perf_counter() - start
+    # Python ran on this thread all along the solve (a held GIL would allow no tick).
+    assert seconds > 0.05 and len(ticks) > 10, (seconds, len(ticks))
+    assert live.converged
