@@ -2,11 +2,18 @@
 and vertex-only scans with the rigidcells library, into a shape key.
 
 The add-on turns Blender's data into the library's inputs and back and nothing more: the
-vertices of the base shape, the triangles, the vertex groups as `indices` regions and the
-handle Empty's motion since it was assigned as a `matrix` go to `rigidcells.deform`; the moved
-vertices come back as the shape key `RigidCells`, which the artist can blend, animate or
-apply. Vertices of the fixed group keep their coordinates bit for bit; vertices of the handle
-group land where the Empty sends them (to Blender's single precision).
+vertices of the base shape, the triangles, the vertex groups as `indices` regions, each handle
+Empty's motion since it was assigned as a `matrix`, pins (a vertex group's center, moved by its
+Empty) and a stiffness group go to `rigidcells.deform`; the moved vertices come back as the
+shape key `RigidCells`, which the artist can blend, animate or apply. Vertices of the fixed
+group keep their coordinates bit for bit; vertices of a handle group land where its Empty
+sends them (to Blender's single precision).
+
+Deform solves on a thread of its own (`work.DeformJob`) while Blender stays responsive; Live
+keeps a `rigidcells.Session` on a thread (`work.LiveWorker`) that follows the handle Empties
+as the artist moves them: one Gauss-Newton iteration and a blended preview a pose, the exact
+transfer once they rest. Scripts and Blender without a window (`bpy` as a module) run Deform
+on the calling thread.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from typing import Any, List, Optional, Tuple
 import bpy
 import numpy as np
 from bpy.props import (
+    CollectionProperty,
     EnumProperty,
     FloatProperty,
     FloatVectorProperty,
@@ -23,6 +31,8 @@ from bpy.props import (
     PointerProperty,
     StringProperty,
 )
+
+from .work import Cancelled, DeformJob, LiveWorker
 
 SHAPE_KEY = "RigidCells"
 
@@ -34,11 +44,40 @@ TRANSFERS = [
 ]
 
 
+def _flat(matrix: Any) -> List[float]:
+    return [v for row in matrix for v in row]
+
+
 def _take_rest(settings: "RigidCellsSettings", _context: Any) -> None:
     """The handle Empty's pose when it is assigned: its motion from here is the handle's."""
     empty = settings.handle_object
     if empty is not None:
-        settings.handle_rest = [v for row in empty.matrix_world for v in row]
+        settings.handle_rest = _flat(empty.matrix_world)
+
+
+def _take_item_rest(item: "RigidCellsMover", _context: Any) -> None:
+    """An extra handle's or a pin's Empty pose when it is assigned."""
+    if item.object is not None:
+        item.rest = _flat(item.object.matrix_world)
+
+
+def _is_empty(_self: Any, obj: bpy.types.Object) -> bool:
+    return obj.type == "EMPTY"
+
+
+class RigidCellsMover(bpy.types.PropertyGroup):
+    """A vertex group moved by an Empty: another handle (the group follows the Empty's
+    motion), or a pin (the group's center goes where the Empty moves it; its cell may turn)."""
+
+    group: StringProperty(name="Group", description="The vertex group the Empty moves")
+    object: PointerProperty(
+        name="Empty",
+        type=bpy.types.Object,
+        poll=_is_empty,
+        update=_take_item_rest,
+        description="An Empty: its motion since it was assigned moves the group",
+    )
+    rest: FloatVectorProperty(size=16, options={"HIDDEN"})
 
 
 class RigidCellsSettings(bpy.types.PropertyGroup):
@@ -53,11 +92,24 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
     handle_object: PointerProperty(
         name="Handle",
         type=bpy.types.Object,
-        poll=lambda _self, obj: obj.type == "EMPTY",
+        poll=_is_empty,
         update=_take_rest,
         description="An Empty: its motion since it was assigned moves the handle group",
     )
     handle_rest: FloatVectorProperty(size=16, options={"HIDDEN"})
+    handles: CollectionProperty(type=RigidCellsMover, name="More handles")
+    pins: CollectionProperty(type=RigidCellsMover, name="Pins")
+    stiffness_group: StringProperty(
+        name="Stiffness group",
+        description="Vertex group whose cells are stiffer (or softer) than the rest",
+    )
+    stiffness: FloatProperty(
+        name="Stiffness",
+        default=10.0,
+        min=1e-3,
+        max=1e3,
+        description="How much stiffer the stiffness group's cells are (below 1: softer)",
+    )
     cell_size: FloatProperty(
         name="Cell size",
         default=0.0,
@@ -116,16 +168,51 @@ def _triangles(mesh: bpy.types.Mesh) -> Optional[np.ndarray]:
     return tris.reshape(-1, 3)
 
 
+def _motion(obj: bpy.types.Object, empty: bpy.types.Object, rest: Any) -> np.ndarray:
+    """The Empty's motion since its rest pose (world), seen from the object: a 4 × 4 affine
+    map of the object's own coordinates."""
+    rest = np.array(rest, dtype=np.float64).reshape(4, 4)
+    now = np.array(empty.matrix_world, dtype=np.float64)
+    world = np.array(obj.matrix_world, dtype=np.float64)
+    local = np.linalg.inv(world) @ (now @ np.linalg.inv(rest)) @ world
+    local[3] = [0.0, 0.0, 0.0, 1.0]
+    return local
+
+
 def handle_matrix(obj: bpy.types.Object, settings: RigidCellsSettings) -> List[List[float]]:
     """The handle's affine map in the object's own coordinates: the Empty's motion since its
     rest pose (world), seen from the object."""
-    rest = np.array(settings.handle_rest, dtype=np.float64).reshape(4, 4)
-    now = np.array(settings.handle_object.matrix_world, dtype=np.float64)
-    world = np.array(obj.matrix_world, dtype=np.float64)
-    motion = now @ np.linalg.inv(rest)
-    local = np.linalg.inv(world) @ motion @ world
-    local[3] = [0.0, 0.0, 0.0, 1.0]
-    return local.tolist()
+    return _motion(obj, settings.handle_object, settings.handle_rest).tolist()
+
+
+def _movers(settings: RigidCellsSettings, kind: str) -> List[RigidCellsMover]:
+    """The extra handles or the pins, each checked to name an Empty."""
+    items = list(getattr(settings, kind))
+    what, first = ("handle", 2) if kind == "handles" else ("pin", 1)
+    for k, item in enumerate(items):
+        if item.object is None:
+            raise InputError(f"Rigid Cells: choose the Empty of {what} {first + k}")
+    return items
+
+
+def poses(obj: bpy.types.Object) -> List[dict]:
+    """Each handle's pose, in the spec's order (the handle, then the extra ones): what Live
+    hands the session as the Empties move."""
+    settings = obj.rigidcells
+    moves = [handle_matrix(obj, settings)]
+    for item in _movers(settings, "handles"):
+        moves.append(_motion(obj, item.object, item.rest).tolist())
+    return [{"matrix": m} for m in moves]
+
+
+def _pins(obj: bpy.types.Object, rest: np.ndarray) -> List[dict]:
+    """The pins: each group's center at rest, and where its Empty's motion sends it."""
+    out = []
+    for item in _movers(obj.rigidcells, "pins"):
+        center = rest[_group_indices(obj, item.group, "pin")].mean(axis=0)
+        to = _motion(obj, item.object, item.rest) @ np.append(center, 1.0)
+        out.append({"point": center.tolist(), "to": to[:3].tolist()})
+    return out
 
 
 def inputs(obj: bpy.types.Object) -> Tuple[np.ndarray, Optional[np.ndarray], dict]:
@@ -137,11 +224,29 @@ def inputs(obj: bpy.types.Object) -> Tuple[np.ndarray, Optional[np.ndarray], dic
     handle = _group_indices(obj, settings.handle_group, "handle")
     if settings.handle_object is None:
         raise InputError("Rigid Cells: choose the handle Empty")
-    spec = {
+    groups = [handle] + [
+        _group_indices(obj, item.group, f"handle {k + 2}")
+        for k, item in enumerate(_movers(settings, "handles"))
+    ]
+    rest = _rest_vertices(obj.data)
+    spec: dict = {
         "fixed": [{"indices": fixed}],
-        "handle": [{"indices": handle, "matrix": handle_matrix(obj, settings)}],
+        "handle": [
+            {"indices": g, **pose} for g, pose in zip(groups, poses(obj))
+        ],
     }
-    return _rest_vertices(obj.data), _triangles(obj.data), spec
+    pins = _pins(obj, rest)
+    if pins:
+        spec["pin"] = pins
+    if settings.stiffness_group:
+        stiff = _group_indices(obj, settings.stiffness_group, "stiffness")
+        spec["stiffness"] = [{"indices": stiff, "scale": settings.stiffness}]
+    return rest, _triangles(obj.data), spec
+
+
+def options(settings: RigidCellsSettings) -> dict:
+    """The library's keyword options the settings give."""
+    return {"cell_size": settings.cell_size or None, "transfer": settings.transfer}
 
 
 def write_shape_key(obj: bpy.types.Object, moved: np.ndarray) -> bpy.types.ShapeKey:
@@ -157,28 +262,113 @@ def write_shape_key(obj: bpy.types.Object, moved: np.ndarray) -> bpy.types.Shape
     return key
 
 
-def deform(obj: bpy.types.Object, progress: Any = False) -> Any:
-    """Deforms `obj` as its settings say and writes the shape key; returns the library's
-    report. Nothing of the object changes when an error is raised."""
-    import rigidcells
-
-    points, triangles, spec = inputs(obj)
+def show_report(obj: bpy.types.Object, report: Any) -> None:
+    """The report's figures in the panel's settings."""
     settings = obj.rigidcells
-    moved, report = rigidcells.deform(
-        points,
-        spec,
-        triangles=triangles,
-        cell_size=settings.cell_size or None,
-        transfer=settings.transfer,
-        progress=progress,
-    )
-    write_shape_key(obj, moved)
     settings.cells = report.cells
     settings.iterations = report.iterations
     settings.residual_fixed = report.residual_fixed_max
     settings.residual_handle = report.residual_handle_max
     settings.foldovers = report.foldovers
+
+
+def finish(obj: bpy.types.Object, moved: np.ndarray, report: Any) -> None:
+    """A deformation's result as the shape key and the panel's figures; refused when the mesh
+    no longer has the vertices it was solved for."""
+    if len(moved) != len(obj.data.vertices):
+        raise InputError(
+            f"Rigid Cells: {obj.name} has {len(obj.data.vertices)} vertices now, "
+            f"{len(moved)} were solved; deform again"
+        )
+    write_shape_key(obj, moved)
+    show_report(obj, report)
+
+
+def deform(obj: bpy.types.Object, progress: Any = False) -> Any:
+    """Deforms `obj` as its settings say and writes the shape key, on this thread; returns
+    the library's report. Nothing of the object changes when an error is raised."""
+    import rigidcells
+
+    points, triangles, spec = inputs(obj)
+    moved, report = rigidcells.deform(
+        points, spec, triangles=triangles, progress=progress, **options(obj.rigidcells)
+    )
+    finish(obj, moved, report)
     return report
+
+
+class LiveState:
+    """Live on one object, driven by the main thread: `tick` hands the session the handles'
+    poses when an Empty moved and writes the newest shape into the shape key; `finish` ends
+    on the exact shape of the last pose; `cancel` puts the shape key back as it was."""
+
+    def __init__(self, obj: bpy.types.Object, settle: float = 0.25) -> None:
+        points, triangles, spec = inputs(obj)
+        self.name = obj.name
+        self.pins = spec.get("pin", [])
+        self.poses = poses(obj)
+        self.count = len(points)
+        keys = obj.data.shape_keys
+        key = keys.key_blocks.get(SHAPE_KEY) if keys is not None else None
+        # What Esc restores: no shape keys, no RigidCells key, or the key's shape and value.
+        self._before: Optional[Tuple[Optional[np.ndarray], float]] = None
+        self._had_keys = keys is not None
+        if key is not None:
+            co = np.empty(3 * len(key.data), dtype=np.float32)
+            key.data.foreach_get("co", co)
+            self._before = (co, key.value)
+        self.kind: Optional[str] = None
+        self.worker = LiveWorker(points, spec, triangles, options(obj.rigidcells), settle).start()
+
+    def tick(self, obj: bpy.types.Object) -> Optional[str]:
+        """One look at the Empties and the worker: the kind of shape written, if any. The
+        worker's error is raised here."""
+        if self.worker.error is not None:
+            raise self.worker.error
+        now = poses(obj)
+        if now != self.poses:
+            self.poses = now
+            self.worker.move(now)
+        shape = self.worker.take()
+        if shape is None:
+            return None
+        self.kind, moved = shape
+        if len(moved) != len(obj.data.vertices):
+            raise InputError(f"Rigid Cells: {obj.name} changed its vertices during Live")
+        write_shape_key(obj, moved)
+        if self.kind == "released" and self.worker.report is not None:
+            show_report(obj, self.worker.report)
+        return self.kind
+
+    @property
+    def pins_moved(self) -> bool:
+        """Whether a pin's Empty moved since Live began (Live holds its pins where they were)."""
+        obj = bpy.data.objects.get(self.name)
+        return obj is not None and _pins(obj, _rest_vertices(obj.data)) != self.pins
+
+    def finish(self) -> None:
+        self.worker.finish()
+
+    def cancel(self, obj: Optional[bpy.types.Object]) -> None:
+        """Stops the worker and puts the shape key back as it was before Live."""
+        self.worker.stop()
+        if obj is None:
+            return
+        if not self._had_keys:
+            if obj.data.shape_keys is not None:
+                obj.shape_key_clear()
+        elif self._before is None:
+            key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
+            if key is not None:
+                obj.shape_key_remove(key)
+        else:
+            co, value = self._before
+            key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
+            if key is None:
+                key = obj.shape_key_add(name=SHAPE_KEY, from_mix=False)
+            key.data.foreach_set("co", co)
+            key.value = value
+        obj.data.update()
 
 
 def _mesh_active(context: Any) -> bool:
@@ -187,9 +377,17 @@ def _mesh_active(context: Any) -> bool:
     return obj is not None and obj.type == "MESH"
 
 
+ERRORS = (ValueError, TypeError, OSError, RuntimeError, Cancelled)
+
+
+def _status(context: Any, text: Optional[str]) -> None:
+    if context.workspace is not None:
+        context.workspace.status_text_set(text)
+
+
 class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
-    """Bend the object with rigid cells: the fixed group stays, the handle group follows the
-    handle Empty, the rest follows as stiffly as cells glued face to face allow"""
+    """Bend the object with rigid cells: the fixed group stays, the handle groups follow their
+    Empties, the rest follows as stiffly as cells glued face to face allow"""
 
     bl_idname = "object.rigidcells_deform"
     bl_label = "Rigid Cells Deform"
@@ -200,6 +398,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         return _mesh_active(context)
 
     def execute(self, context: Any) -> set:
+        """The deformation on this thread (scripts, and Blender without a window)."""
         obj = context.active_object
         wm = context.window_manager
         stages: dict = {}
@@ -207,30 +406,189 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         def progress(stage: str, done: int, total: Optional[int]) -> None:
             if total:
                 wm.progress_update(int(100 * done / total))
-            if stage not in stages and context.workspace is not None:
+            if stage not in stages:
                 stages[stage] = True
-                context.workspace.status_text_set(f"Rigid Cells: {stage}")
+                _status(context, f"Rigid Cells: {stage}")
 
         wm.progress_begin(0, 100)
         try:
             report = deform(obj, progress=progress)
-        except (ValueError, TypeError, OSError, RuntimeError) as e:
+        except ERRORS as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         finally:
             wm.progress_end()
-            if context.workspace:
-                context.workspace.status_text_set(None)
+            _status(context, None)
+        self._done(report)
+        return {"FINISHED"}
+
+    def invoke(self, context: Any, event: Any) -> set:
+        """The deformation on a thread of its own, Blender responsive meanwhile; Esc stops
+        it and leaves the mesh as it was."""
+        if context.window is None:
+            return self.execute(context)
+        obj = context.active_object
+        try:
+            points, triangles, spec = inputs(obj)
+        except ERRORS as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        self._name = obj.name
+        self._job = DeformJob(points, spec, triangles, options(obj.rigidcells)).start()
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, 100)
+        _status(context, "Rigid Cells: solving (Esc stops)")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context: Any, event: Any) -> set:
+        job = self._job
+        if event.type == "ESC":
+            job.cancel()
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        stage, done, total = job.progress
+        wm = context.window_manager
+        if total:
+            wm.progress_update(int(100 * done / total))
+        _status(context, f"Rigid Cells: {stage} (Esc stops)")
+        if not job.done:
+            return {"RUNNING_MODAL"}
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        _status(context, None)
+        obj = bpy.data.objects.get(self._name)
+        try:
+            if job.error is not None:
+                raise job.error
+            if obj is None:
+                raise InputError(f"Rigid Cells: {self._name} was removed while solving")
+            moved, report = job.result
+            finish(obj, moved, report)
+        except Cancelled as e:
+            self.report({"INFO"}, str(e))
+            return {"CANCELLED"}
+        except ERRORS as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        self._done(report)
+        return {"FINISHED"}
+
+    def _done(self, report: Any) -> None:
         self.report(
             {"INFO"},
             f"Rigid Cells: {report.cells} cells, {report.iterations} iterations, "
             f"{report.foldovers} fold-overs",
         )
+
+
+# The object Live runs on, for the panel.
+_live: dict = {}
+
+
+class OBJECT_OT_rigidcells_live(bpy.types.Operator):
+    """Re-solve while you move the handle Empties: a blended preview on the shape key as they
+    move, the exact shape once they rest. Enter keeps it, Esc puts the shape key back"""
+
+    bl_idname = "object.rigidcells_live"
+    bl_label = "Rigid Cells Live"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context: Any) -> bool:
+        return _mesh_active(context) and not _live
+
+    def invoke(self, context: Any, event: Any) -> set:
+        if context.window is None:
+            self.report({"ERROR"}, "Rigid Cells: Live follows the Empties in Blender's window")
+            return {"CANCELLED"}
+        try:
+            self._state = LiveState(context.active_object)
+        except ERRORS as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        _live[self._state.name] = True
+        self._finishing = False
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(1 / 60, window=context.window)
+        wm.modal_handler_add(self)
+        _status(context, "Rigid Cells Live: move the handle Empties; Enter keeps, Esc restores")
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context: Any, event: Any) -> set:
+        state = self._state
+        obj = bpy.data.objects.get(state.name)
+        if event.type == "ESC" and event.value == "PRESS":
+            state.cancel(obj)
+            return self._end(context, {"CANCELLED"})
+        if event.type in {"RET", "NUMPAD_ENTER"} and event.value == "PRESS":
+            self._finishing = True
+            state.finish()
+            _status(context, "Rigid Cells Live: releasing")
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            if obj is None:
+                raise InputError(f"Rigid Cells: {state.name} was removed during Live")
+            state.tick(obj)
+        except ERRORS as e:
+            state.cancel(obj)
+            self.report({"ERROR"}, str(e))
+            return self._end(context, {"CANCELLED"})
+        if self._finishing and state.worker.done:
+            if state.pins_moved:
+                self.report({"WARNING"}, "Rigid Cells: Live held the pins where it began; "
+                            "Deform takes their Empties' new places")
+            return self._end(context, {"FINISHED"})
+        return {"PASS_THROUGH"}
+
+    def _end(self, context: Any, result: set) -> set:
+        context.window_manager.event_timer_remove(self._timer)
+        _live.pop(self._state.name, None)
+        _status(context, None)
+        return result
+
+
+class RIGIDCELLS_OT_add(bpy.types.Operator):
+    """Add another handle or a pin: a vertex group moved by an Empty"""
+
+    bl_idname = "rigidcells.add"
+    bl_label = "Add"
+    bl_options = {"REGISTER", "UNDO", "INTERNAL"}
+    kind: EnumProperty(items=[("handles", "Handle", ""), ("pins", "Pin", "")])
+
+    @classmethod
+    def poll(cls, context: Any) -> bool:
+        return _mesh_active(context)
+
+    def execute(self, context: Any) -> set:
+        getattr(context.active_object.rigidcells, self.kind).add()
+        return {"FINISHED"}
+
+
+class RIGIDCELLS_OT_remove(bpy.types.Operator):
+    """Remove this handle or pin"""
+
+    bl_idname = "rigidcells.remove"
+    bl_label = "Remove"
+    bl_options = {"REGISTER", "UNDO", "INTERNAL"}
+    kind: EnumProperty(items=[("handles", "Handle", ""), ("pins", "Pin", "")])
+    index: IntProperty()
+
+    @classmethod
+    def poll(cls, context: Any) -> bool:
+        return _mesh_active(context)
+
+    def execute(self, context: Any) -> set:
+        getattr(context.active_object.rigidcells, self.kind).remove(self.index)
         return {"FINISHED"}
 
 
 class VIEW3D_PT_rigidcells(bpy.types.Panel):
-    """The settings, Deform, and the last run's figures, in the 3D view's sidebar."""
+    """The settings, Deform, Live, and the last run's figures, in the 3D view's sidebar."""
 
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
@@ -248,9 +606,30 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
         layout.prop_search(s, "fixed_group", obj, "vertex_groups")
         layout.prop_search(s, "handle_group", obj, "vertex_groups")
         layout.prop(s, "handle_object")
+        for kind, label in (("handles", "Handle"), ("pins", "Pin")):
+            first = 2 if kind == "handles" else 1
+            for k, item in enumerate(getattr(s, kind)):
+                box = layout.box()
+                row = box.row()
+                row.label(text=f"{label} {first + k}")
+                remove = row.operator(RIGIDCELLS_OT_remove.bl_idname, text="", icon="X")
+                remove.kind, remove.index = kind, k
+                box.prop_search(item, "group", obj, "vertex_groups")
+                box.prop(item, "object")
+        row = layout.row(align=True)
+        row.operator(RIGIDCELLS_OT_add.bl_idname, text="Handle", icon="ADD").kind = "handles"
+        row.operator(RIGIDCELLS_OT_add.bl_idname, text="Pin", icon="ADD").kind = "pins"
+        layout.prop_search(s, "stiffness_group", obj, "vertex_groups")
+        if s.stiffness_group:
+            layout.prop(s, "stiffness")
         layout.prop(s, "cell_size")
         layout.prop(s, "transfer")
-        layout.operator(OBJECT_OT_rigidcells_deform.bl_idname, text="Deform")
+        row = layout.row(align=True)
+        row.operator(OBJECT_OT_rigidcells_deform.bl_idname, text="Deform")
+        if obj.name in _live:
+            row.label(text="Live: Enter keeps, Esc restores")
+        else:
+            row.operator(OBJECT_OT_rigidcells_live.bl_idname, text="Live")
         if s.cells:
             col = layout.column(align=True)
             col.label(text=f"{s.cells} cells, {s.iterations} iterations")
@@ -258,7 +637,15 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
             col.label(text=f"Fold-overs: {s.foldovers}")
 
 
-CLASSES = (RigidCellsSettings, OBJECT_OT_rigidcells_deform, VIEW3D_PT_rigidcells)
+CLASSES = (
+    RigidCellsMover,
+    RigidCellsSettings,
+    OBJECT_OT_rigidcells_deform,
+    OBJECT_OT_rigidcells_live,
+    RIGIDCELLS_OT_add,
+    RIGIDCELLS_OT_remove,
+    VIEW3D_PT_rigidcells,
+)
 
 
 def register() -> None:

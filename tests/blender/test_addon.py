@@ -1,8 +1,14 @@
 """The Blender add-on in a real Blender (the `bpy` module, headless): it registers and
 unregisters cleanly, its shape key is `rigidcells.deform` of the same vertices, a soup of loose
-cubes bends with every cube carried, and bad input leaves the mesh as it was."""
+cubes bends with every cube carried, bad input leaves the mesh as it was, Deform runs off the
+main thread, Live follows scripted Empty moves to the converged shape and Esc restores the
+shape key, and more handles, pins and a stiffness group reach the library.
+
+Blender without a window runs no modal operators: the tests drive the pieces the modal
+operators call on each timer tick and key press (`DeformJob`, `LiveState`)."""
 
 import math
+import time
 import sys
 from pathlib import Path
 
@@ -156,3 +162,156 @@ def test_bad_input_refuses_and_leaves_the_mesh_as_it_was(breaks, says):
         bpy.ops.object.rigidcells_deform()
     assert obj.data.shape_keys is None
     assert np.array_equal(vertices(obj), before)
+
+
+def wait_for(predicate, seconds=60.0):
+    """Polls `predicate` as a modal timer would, until it holds (or the time is up)."""
+    end = time.monotonic() + seconds
+    while not predicate():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(0.005)
+
+
+def test_deform_runs_off_the_main_thread_and_gives_the_operators_key():
+    obj, empty = setup_bar()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    want = vertices(obj, "RigidCells")
+    obj.shape_key_clear()
+    points, triangles, spec = addon.inputs(obj)
+    job = addon.DeformJob(points, spec, triangles, addon.options(obj.rigidcells)).start()
+    ticks = 0
+    while not job.done:  # the main thread is free meanwhile
+        ticks += 1
+        time.sleep(0.001)
+    assert job.error is None and ticks > 0
+    addon.finish(obj, *job.result)
+    assert np.array_equal(vertices(obj, "RigidCells"), want)
+    # Cancelled (Esc): the job ends with Cancelled, and the mesh is left as it was.
+    obj.shape_key_clear()
+    obj.rigidcells.cell_size = 0.08
+    points, triangles, spec = addon.inputs(obj)
+    job = addon.DeformJob(points, spec, triangles, addon.options(obj.rigidcells)).start()
+    job.cancel()
+    wait_for(lambda: job.done)
+    assert isinstance(job.error, addon.Cancelled), job.error
+    assert obj.data.shape_keys is None
+
+
+def live_moves(obj, empty, state, poses):
+    """Moves the Empty through `poses` ((location, y-angle in degrees)), ticking Live after
+    each until it wrote that pose's preview."""
+    for location, degrees in poses:
+        empty.location = location
+        empty.rotation_euler = (0.0, math.radians(degrees), 0.0)
+        bpy.context.view_layer.update()
+        steps = state.worker.steps
+        state.tick(obj)
+        wait_for(lambda: state.worker.steps > steps)
+        wait_for(lambda: state.tick(obj) is not None)
+
+
+def test_live_follows_scripted_moves_and_ends_on_the_converged_shape():
+    obj, empty = setup_bar()  # the Empty at its posed place: (4, 0, 3), turned -60° about y
+    empty.location, empty.rotation_euler = (5.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    state = addon.LiveState(obj)
+    tip = max(range(len(obj.data.vertices)), key=lambda i: obj.data.vertices[i].co.x)
+    rises = []
+    for k in range(1, 6):  # five moves on the way to the posed place
+        live_moves(obj, empty, state, [((5.0 - 0.2 * k, 0.0, 0.6 * k), -12.0 * k)])
+        assert state.kind == "preview"
+        rises.append(vertices(obj, "RigidCells")[tip, 2])
+    assert all(b > a for a, b in zip(rises, rises[1:])) and rises[-1] > 2.0, rises
+    # At rest the solve converges and the exact transfer is written; Enter ends on it.
+    state.finish()
+    wait_for(lambda: (state.tick(obj), state.worker.done)[1])
+    state.tick(obj)
+    assert state.kind == "released" and state.worker.error is None
+    live = vertices(obj, "RigidCells")
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    once = vertices(obj, "RigidCells")
+    # The same converged shape (the solver's move test, a thousandth of a cell, reached from
+    # other starts; Blender's single precision).
+    assert np.abs(live - once).max() < 1e-3 * 0.25
+    assert obj.rigidcells.cells == state.worker.cells
+
+
+def test_esc_puts_the_shape_key_back():
+    obj, empty = setup_bar()
+    # No shape keys before Live: none after Esc.
+    state = addon.LiveState(obj)
+    live_moves(obj, empty, state, [((4.0, 0.0, 4.0), -30.0)])
+    assert obj.data.shape_keys is not None
+    state.cancel(obj)
+    assert obj.data.shape_keys is None
+    # A RigidCells key before Live: the same key and value after Esc.
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    before = vertices(obj, "RigidCells")
+    obj.data.shape_keys.key_blocks["RigidCells"].value = 0.5
+    state = addon.LiveState(obj)
+    live_moves(obj, empty, state, [((3.0, 0.0, 5.0), -80.0)])
+    assert not np.array_equal(vertices(obj, "RigidCells"), before)
+    state.cancel(obj)
+    assert np.array_equal(vertices(obj, "RigidCells"), before)
+    assert obj.data.shape_keys.key_blocks["RigidCells"].value == 0.5
+    state.worker.thread.join(10)
+    assert state.worker.done
+
+
+def test_more_handles_pins_and_stiffness():
+    obj = grid_bar()
+    group(obj, "fixed", lambda co: abs(co.x) < 0.6)
+    group(obj, "left", lambda co: co.x < -4.4)
+    group(obj, "right", lambda co: co.x > 4.4)
+    rest = vertices(obj)
+    pinned = int(np.argmin(np.linalg.norm(rest - [2.5, 0.0, 0.5], axis=1)))
+    obj.vertex_groups.new(name="pin").add([pinned], 1.0, "REPLACE")
+    group(obj, "stiff", lambda co: co.x < -1.0)
+    s = obj.rigidcells
+    s.fixed_group, s.handle_group, s.cell_size = "fixed", "right", 0.25
+    right = handle_empty(obj, at=(5.0, 0.0, 0.0))
+    s.handle_object = right
+    left = handle_empty(obj, at=(-5.0, 0.0, 0.0))
+    bpy.ops.rigidcells.add(kind="handles")
+    s.handles[0].group = "left"
+    # An extra handle without its Empty is refused, the mesh untouched.
+    with pytest.raises(RuntimeError, match="choose the Empty of handle 2"):
+        bpy.ops.object.rigidcells_deform()
+    assert obj.data.shape_keys is None
+    s.handles[0].object = left
+    right.location = (5.0, 0.0, 2.0)
+    left.location = (-5.0, 0.0, 1.0)
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    free = vertices(obj, "RigidCells")
+    ends = {"left": (rest[:, 0] < -4.4, 1.0), "right": (rest[:, 0] > 4.4, 2.0)}
+    for name, (on, lift) in ends.items():
+        # Each handle group lands where its Empty sends it.
+        assert np.abs(free[on] - (rest[on] + [0.0, 0.0, lift])).max() < 1e-5, name
+    # A pin: its vertex group's center is pulled where its Empty moves it, its cell turning
+    # freely about it. The pinned cell's motion holds the point; the transfer blends it with
+    # its neighbours', which bend away from it: here the vertex ends a fifth of the way back
+    # toward where it went without the pin.
+    pin = handle_empty(obj, at=tuple(rest[pinned]))
+    bpy.ops.rigidcells.add(kind="pins")
+    s.pins[0].group, s.pins[0].object = "pin", pin
+    pin.location = tuple(rest[pinned] + [0.0, 0.0, 0.1])
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    pinned_shape = vertices(obj, "RigidCells")
+    move = free[pinned, 2] - rest[pinned, 2]
+    assert move > 0.3, move
+    target = rest[pinned, 2] + 0.1
+    assert abs(pinned_shape[pinned, 2] - target) < 0.25 * abs(free[pinned, 2] - target)
+    # A stiffness group: the left half, a hundred times stiffer, changes the shape there,
+    # as the library's stiffness region of those vertices does.
+    s.stiffness_group, s.stiffness = "stiff", 100.0
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    stiff = vertices(obj, "RigidCells")
+    points, triangles, spec = addon.inputs(obj)
+    assert spec["stiffness"][0]["scale"] == 100.0
+    assert len(spec["handle"]) == 2 and len(spec["pin"]) == 1
+    want, _ = rigidcells.deform(points, spec, triangles=triangles, cell_size=0.25, progress=False)
+    assert np.abs(stiff - want).max() < 1e-6
+    part = rest[:, 0] < -1.0
+    assert np.abs(stiff[part] - pinned_shape[part]).max() > 0.01

@@ -1,0 +1,171 @@
+"""The add-on's work off Blender's main thread: a deformation (`DeformJob`) and a live session
+(`LiveWorker`) on threads of their own, with no Blender data in them.
+
+Blender's data may only be touched on its main thread. The operators read everything the
+library needs there (vertices, triangles, the spec, the handles' poses), hand plain arrays and
+dicts to these classes, and write their results back there, on a timer. The library releases
+the GIL around every heavy call, so Blender stays responsive while the solver works.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable, List, Optional, Tuple
+
+import numpy as np
+
+
+class Cancelled(Exception):
+    """The artist stopped the work (Esc)."""
+
+
+class DeformJob:
+    """`rigidcells.deform` on a thread: `start`, then poll `done`; `cancel` stops it at the
+    library's next step. Its `progress` is `(stage, done, total)` as last heard."""
+
+    def __init__(self, points: np.ndarray, spec: dict, triangles: Any, options: dict) -> None:
+        self._args = (points, spec, triangles, options)
+        self._cancel = threading.Event()
+        self.progress: Tuple[str, int, Optional[int]] = ("starting", 0, None)
+        self.result: Optional[Tuple[np.ndarray, Any]] = None
+        self.error: Optional[BaseException] = None
+        self.thread = threading.Thread(target=self._run, name="rigidcells deform", daemon=True)
+
+    def start(self) -> "DeformJob":
+        self.thread.start()
+        return self
+
+    @property
+    def done(self) -> bool:
+        return not self.thread.is_alive() and (self.result is not None or self.error is not None)
+
+    def cancel(self) -> None:
+        self._cancel.set()
+
+    def _heard(self, stage: str, done: int, total: Optional[int]) -> None:
+        self.progress = (stage, done, total)
+        if self._cancel.is_set():
+            raise Cancelled("Rigid Cells: cancelled")
+
+    def _run(self) -> None:
+        import rigidcells
+
+        points, spec, triangles, options = self._args
+        try:
+            self.result = rigidcells.deform(
+                points, spec, triangles=triangles, progress=self._heard, **options
+            )
+        except BaseException as e:  # handed to the main thread, which reports it
+            self.error = e
+
+
+class LiveWorker:
+    """A `rigidcells.Session` on a thread, following the handles' poses as the main thread
+    hands them over (`move`): each new pose is one Gauss-Newton iteration and a blended
+    preview; while the poses rest the solve goes on to convergence, and once converged and
+    at rest for `settle` seconds the exact transfer is released. `take` gives the newest
+    shape not yet taken, `("preview" | "released", positions)`. `finish` ends on the last
+    pose's exact shape; `stop` ends at once."""
+
+    def __init__(
+        self,
+        points: np.ndarray,
+        spec: dict,
+        triangles: Any,
+        options: dict,
+        settle: float = 0.25,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._args = (points, spec, triangles, options)
+        self._settle, self._clock = settle, clock
+        self._wake = threading.Condition()
+        self._pose: Optional[List[dict]] = None
+        self._moved_at = clock()
+        self._finishing = self._stopping = False
+        self._shape: Optional[Tuple[str, np.ndarray]] = None
+        self.report: Any = None
+        self.error: Optional[BaseException] = None
+        self.cells = 0
+        # Drag steps taken, and when each shape was published (for the updates per second).
+        self.steps = 0
+        self.published: List[float] = []
+        self.thread = threading.Thread(target=self._run, name="rigidcells live", daemon=True)
+
+    def start(self) -> "LiveWorker":
+        self.thread.start()
+        return self
+
+    def move(self, poses: List[dict]) -> None:
+        """The handles' newest poses (one dict a handle); an older one not yet solved is
+        dropped."""
+        with self._wake:
+            self._pose = poses
+            self._moved_at = self._clock()
+            self._wake.notify()
+
+    def take(self) -> Optional[Tuple[str, np.ndarray]]:
+        """The newest shape not yet taken."""
+        with self._wake:
+            shape, self._shape = self._shape, None
+            return shape
+
+    def finish(self) -> None:
+        """Ends on the last pose, converged and released through the transfer."""
+        with self._wake:
+            self._finishing = True
+            self._wake.notify()
+
+    def stop(self) -> None:
+        """Ends now, publishing nothing more."""
+        with self._wake:
+            self._stopping = True
+            self._wake.notify()
+
+    @property
+    def done(self) -> bool:
+        return not self.thread.is_alive()
+
+    def _publish(self, kind: str, positions: np.ndarray) -> None:
+        with self._wake:
+            if not self._stopping:
+                self._shape = (kind, positions)
+                self.published.append(self._clock())
+
+    def _run(self) -> None:
+        import rigidcells
+
+        points, spec, triangles, options = self._args
+        try:
+            session = rigidcells.Session(points, spec, triangles=triangles, progress=False, **options)
+            self.cells = session.cells
+            released = False
+            while True:
+                with self._wake:
+                    while True:
+                        if self._stopping:
+                            return
+                        pose, self._pose = self._pose, None
+                        resting = self._clock() - self._moved_at >= self._settle
+                        if pose is not None or not session.converged:
+                            break
+                        if not released and (resting or self._finishing):
+                            break
+                        if released and self._finishing:
+                            return
+                        wait = None if released else max(0.0, self._settle - (self._clock() - self._moved_at))
+                        self._wake.wait(wait)
+                if pose is not None:
+                    session.drag(pose)
+                    self.steps += 1
+                    released = False
+                    self._publish("preview", session.preview())
+                elif not session.converged:
+                    session.refine()
+                    self._publish("preview", session.preview())
+                else:
+                    moved, self.report = session.release()
+                    released = True
+                    self._publish("released", moved)
+        except BaseException as e:  # handed to the main thread, which reports it
+            self.error = e
