@@ -43,6 +43,13 @@ pub struct Session<const D: usize> {
 /// 0.45–0.75 s, most of it the factorization.
 pub const DRAG_COARSE_FROM: usize = 20_000;
 
+/// A drag also moves the cells' ancestors when the cells' Cholesky factor has more nonzeros
+/// than this, whatever their count: a numeric factorization costs about what its factor
+/// holds. On two cores, a step on 5k cells of a terrain (autzen_trim, 2.5M nonzeros) takes
+/// 95–180 ms; on 5k cells of a solid (the Stanford bunny and dragons, 5.3–5.5M) 160–350 ms,
+/// and on their parents a few tens of milliseconds.
+pub const DRAG_FACTOR_MOST: usize = 3_000_000;
+
 /// A drag's stage has at most this many cells where coarsening gets there in
 /// [`DRAG_MOST_LEVELS`] levels. On autzen_trim at 50k cells the parents are 17.4k (an update
 /// 260–300 ms) and the grandparents 5.4k (55–110 ms after the first, most of it the
@@ -164,8 +171,8 @@ where
     }
 
     /// One step of a drag toward `constraints` (at most `max_iterations` Gauss-Newton
-    /// iterations). From [`DRAG_COARSE_FROM`] cells on, the step is taken on the cells'
-    /// ancestors (`coarsen` by as many levels as bring them to a few thousand, made once for
+    /// iterations). From [`DRAG_COARSE_FROM`] cells on, or with a factor of more than
+    /// [`DRAG_FACTOR_MOST`] nonzeros, the step is taken on the cells' ancestors (`coarsen` by as many levels as bring them to a few thousand, made once for
     /// the drag's constraints and kept while only their handles, pins and targets move), and
     /// each cell then takes its ancestor's rigid motion, as a solve coarse to fine starts its
     /// cells: the step costs what those few thousand cells cost
@@ -175,7 +182,11 @@ where
         constraints: Constraints<D>,
         max_iterations: usize,
     ) -> Result<SolverInfo> {
-        if self.complex.len() < DRAG_COARSE_FROM {
+        let dense = self
+            .system
+            .factor_len()
+            .is_some_and(|n| n > DRAG_FACTOR_MOST);
+        if self.complex.len() < DRAG_COARSE_FROM && !dense {
             return self.update_with(constraints, max_iterations);
         }
         self.drag_on_parents(constraints, max_iterations)
