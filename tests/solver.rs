@@ -445,6 +445,45 @@ fn a_drag_on_many_cells_moves_a_few_thousand_ancestors() {
     assert!(rotations.len() <= 6_000, "{} rotations", rotations.len());
 }
 
+/// A drag on a few thousand cells of a solid moves their ancestors: a step on the cells
+/// themselves would factor more than `DRAG_FACTOR_MOST` nonzeros. The release (an update on
+/// the cells) then converges on the cells.
+#[test]
+fn a_drag_on_a_dense_solid_moves_its_ancestors() {
+    let pts = blob([2.0, 1.0, 1.0], 60_000);
+    let complex = cells(&pts, &[], 0.06);
+    assert!(
+        complex.len() < solve::DRAG_COARSE_FROM,
+        "{} cells",
+        complex.len()
+    );
+    let spec = |lift: f64| resolved(&complex, &pts, &lifted_end(lift));
+    let params = SolveParams::default();
+    let (mut session, _) = solve::Session::new(
+        complex.clone(),
+        spec(0.0),
+        &params,
+        Budget::default(),
+        &Silent,
+    )
+    .unwrap();
+    let info = session.drag(spec(0.05), 1).unwrap();
+    assert!(!info.converged, "{info:?}");
+    let rotations: std::collections::BTreeSet<Vec<u64>> = session
+        .motions()
+        .iter()
+        .map(|m| m.rot.iter().map(|v| v.to_bits()).collect())
+        .collect();
+    assert!(
+        2 * rotations.len() < complex.len(),
+        "{} rotations for {} cells",
+        rotations.len(),
+        complex.len()
+    );
+    let info = session.update(spec(0.05)).unwrap();
+    assert!(info.converged, "{info:?}");
+}
+
 /// The multilevel path (conjugate gradients with the rigid-motion multigrid) reaches
 /// the direct factorization's minimum, on a bent bar with a pin (3D) and on a 2D disk with a
 /// turned handle, both large enough for a coarse level.

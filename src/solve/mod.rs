@@ -85,7 +85,7 @@ pub use constraints::{
 pub use energy::{cell_strain, glue_energy, pair_energy};
 use iteration::largest_corner_move;
 pub use iteration::{IterationLog, MOVE_TOLERANCE};
-pub use session::{DRAG_COARSE_FROM, Session};
+pub use session::{DRAG_COARSE_FROM, DRAG_FACTOR_MOST, Session};
 pub use sight::Sight;
 
 use crate::cells::CellComplex;
