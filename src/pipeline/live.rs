@@ -32,6 +32,9 @@ use super::{DeformInfo, check_foldovers, check_moved};
 /// before the final transfer. (Three iterations an update, to convergence, gave 7 a second.)
 pub const DRAG_ITERATIONS: usize = 1;
 
+/// Per sample, its four nearest cells and their blend weights ([`Live::blend_weights`]).
+pub type BlendWeights = (Vec<[u32; 4]>, Vec<[f32; 4]>);
+
 /// A live deformation: the samples, their cells, and the warm session of the last spec.
 pub struct Live {
     points: Vec<Vect<3>>,
@@ -47,7 +50,7 @@ pub struct Live {
     info: SolverInfo,
     warnings: Vec<String>,
     /// Each sample's four nearest cells and blend weights, made at the first preview.
-    blend: Option<(Vec<[u32; 4]>, Vec<[f32; 4]>)>,
+    blend: Option<BlendWeights>,
 }
 
 /// What one [`Live::solve`] or [`Live::refine`] did.
@@ -255,7 +258,7 @@ impl Live {
     /// Each sample's four nearest cells and their continuous blend weights (summing to one;
     /// unused slots weigh zero), four of each per sample: what [`Live::preview`] blends, and
     /// what the editor's page blends on the GPU.
-    pub fn blend_weights(&self) -> Result<(Vec<[u32; 4]>, Vec<[f32; 4]>)> {
+    pub fn blend_weights(&self) -> Result<BlendWeights> {
         let field = Field {
             origin: self.complex.grid.origin,
             centers: self.complex.cells.iter().map(|c| c.center).collect(),
