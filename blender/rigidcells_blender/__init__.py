@@ -603,27 +603,35 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
         obj = context.active_object
         s = obj.rigidcells
         layout = self.layout
-        layout.prop_search(s, "fixed_group", obj, "vertex_groups")
-        layout.prop_search(s, "handle_group", obj, "vertex_groups")
-        layout.prop(s, "handle_object")
+        # Each label above its field: the sidebar is narrow.
+        col = layout.column(align=True)
+        col.label(text="Fixed group")
+        col.prop_search(s, "fixed_group", obj, "vertex_groups", text="")
+        col = layout.column(align=True)
+        col.label(text="Handle: group, Empty")
+        col.prop_search(s, "handle_group", obj, "vertex_groups", text="")
+        col.prop(s, "handle_object", text="")
         for kind, label in (("handles", "Handle"), ("pins", "Pin")):
             first = 2 if kind == "handles" else 1
             for k, item in enumerate(getattr(s, kind)):
-                box = layout.box()
-                row = box.row()
-                row.label(text=f"{label} {first + k}")
+                col = layout.box().column(align=True)
+                row = col.row()
+                row.label(text=f"{label} {first + k}: group, Empty")
                 remove = row.operator(RIGIDCELLS_OT_remove.bl_idname, text="", icon="X")
                 remove.kind, remove.index = kind, k
-                box.prop_search(item, "group", obj, "vertex_groups")
-                box.prop(item, "object")
+                col.prop_search(item, "group", obj, "vertex_groups", text="")
+                col.prop(item, "object", text="")
         row = layout.row(align=True)
         row.operator(RIGIDCELLS_OT_add.bl_idname, text="Handle", icon="ADD").kind = "handles"
         row.operator(RIGIDCELLS_OT_add.bl_idname, text="Pin", icon="ADD").kind = "pins"
-        layout.prop_search(s, "stiffness_group", obj, "vertex_groups")
+        col = layout.column(align=True)
+        col.label(text="Stiffness group")
+        col.prop_search(s, "stiffness_group", obj, "vertex_groups", text="")
         if s.stiffness_group:
-            layout.prop(s, "stiffness")
-        layout.prop(s, "cell_size")
-        layout.prop(s, "transfer")
+            col.prop(s, "stiffness")
+        col = layout.column(align=True)
+        col.prop(s, "cell_size")
+        col.prop(s, "transfer", text="")
         row = layout.row(align=True)
         row.operator(OBJECT_OT_rigidcells_deform.bl_idname, text="Deform")
         if obj.name in _live:
