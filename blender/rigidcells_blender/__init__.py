@@ -10,8 +10,8 @@ group keep their coordinates bit for bit; vertices of a handle group land where 
 sends them (to Blender's single precision).
 
 Deform solves on a thread of its own (`work.DeformJob`) while Blender stays responsive; Live
-keeps a `rigidcells.Session` on a thread (`work.LiveWorker`) that follows the handle Empties
-as the artist moves them: one Gauss-Newton iteration and a blended preview a pose, the exact
+keeps a `rigidcells.Session` on a thread (`work.LiveWorker`) that follows the handle and pin
+Empties as the artist moves them: one Gauss-Newton iteration and a blended preview a pose, the exact
 transfer once they rest. Scripts and Blender without a window (`bpy` as a module) run Deform
 on the calling thread.
 """
@@ -207,12 +207,19 @@ def poses(obj: bpy.types.Object) -> List[dict]:
 
 def _pins(obj: bpy.types.Object, rest: np.ndarray) -> List[dict]:
     """The pins: each group's center at rest, and where its Empty's motion sends it."""
-    out = []
-    for item in _movers(obj.rigidcells, "pins"):
-        center = rest[_group_indices(obj, item.group, "pin")].mean(axis=0)
-        to = _motion(obj, item.object, item.rest) @ np.append(center, 1.0)
-        out.append({"point": center.tolist(), "to": to[:3].tolist()})
-    return out
+    items = _movers(obj.rigidcells, "pins")
+    centers = [rest[_group_indices(obj, item.group, "pin")].mean(axis=0) for item in items]
+    places = pin_places(obj, centers)
+    return [{"point": c.tolist(), "to": to} for c, to in zip(centers, places)]
+
+
+def pin_places(obj: bpy.types.Object, centers: List[np.ndarray]) -> List[List[float]]:
+    """Where each pin's Empty sends its group's center now (what Live hands the session)."""
+    items = _movers(obj.rigidcells, "pins")
+    return [
+        (_motion(obj, item.object, item.rest) @ np.append(c, 1.0))[:3].tolist()
+        for item, c in zip(items, centers)
+    ]
 
 
 def inputs(obj: bpy.types.Object) -> Tuple[np.ndarray, Optional[np.ndarray], dict]:
@@ -299,13 +306,15 @@ def deform(obj: bpy.types.Object, progress: Any = False) -> Any:
 
 class LiveState:
     """Live on one object, driven by the main thread: `tick` hands the session the handles'
-    poses when an Empty moved and writes the newest shape into the shape key; `finish` ends
+    poses and the pins' places when an Empty moved and writes the newest shape into the shape
+    key; `finish` ends
     on the exact shape of the last pose; `cancel` puts the shape key back as it was."""
 
     def __init__(self, obj: bpy.types.Object, settle: float = 0.25) -> None:
         points, triangles, spec = inputs(obj)
         self.name = obj.name
-        self.pins = spec.get("pin", [])
+        self._centers = [np.array(p["point"]) for p in spec.get("pin", [])]
+        self.pins = [p["to"] for p in spec.get("pin", [])]
         self.poses = poses(obj)
         self.count = len(points)
         keys = obj.data.shape_keys
@@ -326,9 +335,10 @@ class LiveState:
         if self.worker.error is not None:
             raise self.worker.error
         now = poses(obj)
-        if now != self.poses:
-            self.poses = now
-            self.worker.move(now)
+        pins = pin_places(obj, self._centers)
+        if now != self.poses or pins != self.pins:
+            self.poses, self.pins = now, pins
+            self.worker.move(now, pins or None)
         shape = self.worker.take()
         if shape is None:
             return None
@@ -339,12 +349,6 @@ class LiveState:
         if self.kind == "released" and self.worker.report is not None:
             show_report(obj, self.worker.report)
         return self.kind
-
-    @property
-    def pins_moved(self) -> bool:
-        """Whether a pin's Empty moved since Live began (Live holds its pins where they were)."""
-        obj = bpy.data.objects.get(self.name)
-        return obj is not None and _pins(obj, _rest_vertices(obj.data)) != self.pins
 
     def finish(self) -> None:
         self.worker.finish()
@@ -539,9 +543,6 @@ class OBJECT_OT_rigidcells_live(bpy.types.Operator):
             self.report({"ERROR"}, str(e))
             return self._end(context, {"CANCELLED"})
         if self._finishing and state.worker.done:
-            if state.pins_moved:
-                self.report({"WARNING"}, "Rigid Cells: Live held the pins where it began; "
-                            "Deform takes their Empties' new places")
             return self._end(context, {"FINISHED"})
         return {"PASS_THROUGH"}
 

@@ -61,8 +61,8 @@ class DeformJob:
 
 
 class LiveWorker:
-    """A `rigidcells.Session` on a thread, following the handles' poses as the main thread
-    hands them over (`move`): each new pose is one Gauss-Newton iteration and a blended
+    """A `rigidcells.Session` on a thread, following the handles' poses (and the pins'
+    places) as the main thread hands them over (`move`): each new pose is one Gauss-Newton iteration and a blended
     preview; while the poses rest the solve goes on to convergence, and once converged and
     at rest for `settle` seconds the exact transfer is released. `take` gives the newest
     shape not yet taken, `("preview" | "released", positions)`. `finish` ends on the last
@@ -80,7 +80,7 @@ class LiveWorker:
         self._args = (points, spec, triangles, options)
         self._settle, self._clock = settle, clock
         self._wake = threading.Condition()
-        self._pose: Optional[List[dict]] = None
+        self._pose: Optional[Tuple[List[dict], Optional[List[List[float]]]]] = None
         self._moved_at = clock()
         self._finishing = self._stopping = False
         self._shape: Optional[Tuple[str, np.ndarray]] = None
@@ -96,11 +96,11 @@ class LiveWorker:
         self.thread.start()
         return self
 
-    def move(self, poses: List[dict]) -> None:
-        """The handles' newest poses (one dict a handle); an older one not yet solved is
-        dropped."""
+    def move(self, poses: List[dict], pins: Optional[List[List[float]]] = None) -> None:
+        """The handles' newest poses (one dict a handle) and where the pins go now (one point
+        a pin, or None); an older move not yet solved is dropped."""
         with self._wake:
-            self._pose = poses
+            self._pose = (poses, pins)
             self._moved_at = self._clock()
             self._wake.notify()
 
@@ -156,7 +156,7 @@ class LiveWorker:
                         wait = None if released else max(0.0, self._settle - (self._clock() - self._moved_at))
                         self._wake.wait(wait)
                 if pose is not None:
-                    session.drag(pose)
+                    session.drag(pose[0], pins=pose[1])
                     self.steps += 1
                     released = False
                     self._publish("preview", session.preview())

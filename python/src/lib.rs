@@ -743,18 +743,31 @@ impl Session {
     }
 
     /// The last spec with its handles posed as the TOML `poses` say (one `[[handle]]` table
-    /// a handle, its motion alone), with at most `iterations` Gauss-Newton iterations.
+    /// a handle, its motion alone) and its pins going to `pins` ((k, 3), one a pin, or none),
+    /// with at most `iterations` Gauss-Newton iterations.
+    #[pyo3(signature = (poses_text, iterations, pins=None))]
     fn pose<'py>(
         &mut self,
         py: Python<'py>,
         poses_text: &str,
         iterations: usize,
+        pins: Option<PyReadonlyArray2<'py, f64>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         // Named as a spec, so that the package says its errors by key path.
         let poses = parse_poses::<3>(poses_text, Path::new("spec")).map_err(py_err)?;
+        let pins = match &pins {
+            Some(p) => self::points(p)?,
+            None => Vec::new(),
+        };
+        if let Some(k) = pins.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+            return Err(PyValueError::new_err(format!(
+                "pins[{k}]: {:?} is not 3 finite numbers",
+                pins[k].as_slice()
+            )));
+        }
         let live = &mut self.live;
         let step = py
-            .detach(|| live.pose(&poses, iterations))
+            .detach(|| live.pose(&poses, &pins, iterations))
             .map_err(py_err)?;
         step_dict(py, Some(&step))
     }

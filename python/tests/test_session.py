@@ -123,3 +123,21 @@ def test_a_step_on_a_thread_leaves_the_gil_free():
     # Python ran on this thread all along the solve (a held GIL would allow no tick).
     assert seconds > 0.05 and len(ticks) > 10, (seconds, len(ticks))
     assert live.converged
+
+
+def test_pins_follow_a_drag():
+    pts = bar_points()
+    spec = bar_spec(pts, lift=1.0)
+    spec["pin"] = [{"point": [5.0, 0.5, 1.0], "to": [5.0, 0.5, 1.0]}]
+    live = rigidcells.Session(pts, spec, cell_size=0.25)
+    pose = {"translate": [0, 0, 1.0], "pivot": [10.0, 0.5, 0.5]}
+    for z in (1.25, 1.5, 1.75, 2.0):
+        assert not live.drag(pose, pins=[[5.0, 0.5, z]]).from_rest
+    moved, _ = live.release()
+    spec["pin"][0]["to"] = [5.0, 0.5, 2.0]
+    expected, _ = rigidcells.deform(pts, spec, cell_size=0.25)
+    assert np.abs(moved - expected).max() < 1e-3 * live.cell_size
+    with pytest.raises(ValueError, match="2 pins for the spec's 1"):
+        live.drag(pose, pins=[[5.0, 0.5, 2.0], [5.0, 0.5, 2.0]])
+    with pytest.raises(ValueError, match=r"pins\[0\]"):
+        live.drag(pose, pins=[[5.0, 0.5, float("inf")]])

@@ -2,7 +2,7 @@
 //! drags a handle (the browser editor, the Python package's `Session`, Blender's Live).
 //!
 //! [`Live`] builds the cells once. Each [`Live::solve`] takes the whole edit spec: when only
-//! the handles' poses changed since the last one, the session goes on warm from its current
+//! the handles' poses and the pins' destinations changed since the last one, the session goes on warm from its current
 //! motions for a few Gauss-Newton iterations ([`Session::drag`], one per pose while dragging);
 //! otherwise the spec is resolved again and solved from rest. [`Live::preview`] blends the
 //! cells' current motions at the samples (cheap, for every pose); [`Live::release`] converges
@@ -158,6 +158,10 @@ impl Live {
                         handle.pivot = p;
                     }
                 }
+                let origin = self.complex.grid.origin;
+                for (pin, entry) in constraints.pins.iter_mut().zip(&spec.pins) {
+                    pin.to = entry.to - origin;
+                }
                 Some(session.drag(constraints, max_iterations)?)
             }
             _ => None,
@@ -207,8 +211,14 @@ impl Live {
     }
 
     /// [`Live::solve`] of the last spec with its handles in `poses` (one per handle, in the
-    /// spec's order): the warm step of a drag, without writing or reading the regions again.
-    pub fn pose(&mut self, poses: &[HandleMotion<3>], max_iterations: usize) -> Result<Step> {
+    /// spec's order) and its pins going to `pins` (one per pin, or none to leave them): the
+    /// warm step of a drag, without writing or reading the regions again.
+    pub fn pose(
+        &mut self,
+        poses: &[HandleMotion<3>],
+        pins: &[Vect<3>],
+        max_iterations: usize,
+    ) -> Result<Step> {
         let Some(last) = &self.spec else {
             return Err(Error::Param(
                 "no spec to pose: give the spec with its regions first".into(),
@@ -221,9 +231,19 @@ impl Live {
                 last.handles.len()
             )));
         }
+        if !pins.is_empty() && pins.len() != last.pins.len() {
+            return Err(Error::Param(format!(
+                "{} pins for the spec's {}: give one a pin, or none",
+                pins.len(),
+                last.pins.len()
+            )));
+        }
         let mut spec = last.clone();
         for (entry, pose) in spec.handles.iter_mut().zip(poses) {
             entry.value = *pose;
+        }
+        for (pin, to) in spec.pins.iter_mut().zip(pins) {
+            pin.to = *to;
         }
         Ok(self
             .solve(spec, max_iterations, &Silent)?
@@ -381,11 +401,16 @@ impl Live {
     }
 }
 
-/// Whether `b` is `a` with only its handles' poses changed: the same regions, pins, targets
-/// and stiffness, so that the resolved constraints hold with new handle maps.
+/// Whether `b` is `a` with only its handles' poses and its pins' destinations changed: the
+/// same regions, pinned points, targets and stiffness, so that the resolved constraints hold
+/// with new handle maps and pin destinations.
 fn same_but_poses(a: &EditSpec<3>, b: &EditSpec<3>) -> bool {
     a.fixed == b.fixed
-        && a.pins == b.pins
+        && a.pins.len() == b.pins.len()
+        && a.pins
+            .iter()
+            .zip(&b.pins)
+            .all(|(p, q)| p.point == q.point && p.line == q.line)
         && a.targets == b.targets
         && a.stiffness == b.stiffness
         && a.handles.len() == b.handles.len()

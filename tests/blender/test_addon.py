@@ -315,3 +315,27 @@ def test_more_handles_pins_and_stiffness():
     assert np.abs(stiff - want).max() < 1e-6
     part = rest[:, 0] < -1.0
     assert np.abs(stiff[part] - pinned_shape[part]).max() > 0.01
+
+
+def test_live_follows_a_pin_empty():
+    obj, empty = setup_bar()
+    rest = vertices(obj)
+    pinned = int(np.argmin(np.linalg.norm(rest - [0.0, 0.0, 0.5], axis=1)))
+    obj.vertex_groups.new(name="pin").add([pinned], 1.0, "REPLACE")
+    pin = handle_empty(obj, at=tuple(rest[pinned]))
+    bpy.ops.rigidcells.add(kind="pins")
+    obj.rigidcells.pins[0].group, obj.rigidcells.pins[0].object = "pin", pin
+    state = addon.LiveState(obj)
+    for k in range(1, 4):  # the pin's Empty alone moves: Live follows it warm
+        pin.location = tuple(rest[pinned] + [0.0, 0.0, 0.3 * k])
+        bpy.context.view_layer.update()
+        steps = state.worker.steps
+        state.tick(obj)
+        wait_for(lambda: state.worker.steps > steps)
+    state.finish()
+    wait_for(lambda: (state.tick(obj), state.worker.done)[1])
+    state.tick(obj)
+    assert state.kind == "released" and state.worker.error is None
+    live = vertices(obj, "RigidCells")
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    assert np.abs(live - vertices(obj, "RigidCells")).max() < 1e-3 * 0.25

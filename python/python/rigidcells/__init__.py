@@ -838,11 +838,14 @@ class Session:
         self.last = self._step(info)
         return self.last
 
-    def drag(self, poses: Union[dict, Sequence[dict]], iterations: int = 1) -> Step:
+    def drag(
+        self, poses: Union[dict, Sequence[dict]], iterations: int = 1, pins: Any = None
+    ) -> Step:
         """Moves the handles to ``poses``: one dict a handle, in the spec's order (a dict alone
         for one handle), each with a handle's motion keys only (``translate``, ``rotate``,
         ``scale``, ``pivot``, or ``matrix``), solved with ``iterations`` Gauss-Newton
-        iterations from where the cells are."""
+        iterations from where the cells are. ``pins`` ((k, 3), one point a pin of the spec):
+        where the pins go now (None: where they went)."""
         if isinstance(poses, dict):
             poses = [poses]
         if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
@@ -854,7 +857,8 @@ class Session:
             raise type(e)(_poses_path(str(e))) from None
         text = _rigidcells.toml_from_json(json.dumps(plain))
         paths = [_poses_path(p) for p in _key_paths(text)]
-        self.last = self._step(_call(paths, self._native.pose, text, int(iterations)))
+        to = None if pins is None else _plain3(pins, "pins")
+        self.last = self._step(_call(paths, self._native.pose, text, int(iterations), to))
         return self.last
 
     def refine(self) -> bool:
