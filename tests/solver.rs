@@ -417,15 +417,10 @@ fn a_drag_on_the_parents_ends_where_the_cells_solve() {
     assert!((a - b).abs() <= 1e-6 * b, "{a} after the drag, {b} without");
 }
 
-/// On a large complex a drag moves ancestors of a few thousand cells, older than the parents
-/// where the parents are still many (a shell, whose parents merge about four cells each).
-#[test]
-fn a_drag_on_many_cells_moves_a_few_thousand_ancestors() {
-    let pts = blob([2.0, 1.0, 1.0], 80_000);
-    let complex = cells(&pts, &[], 0.03);
-    // 25.7k cells, 6.3k parents, 1.9k grandparents.
-    assert!(complex.len() > 4 * 6_000, "{} cells", complex.len());
-    let spec = |lift: f64| resolved(&complex, &pts, &lifted_end(lift));
+/// A session of the lifted end on `complex` after one drag step: the session, and how many
+/// distinct rotations the cells took (cells that follow one ancestor share its rotation).
+fn dragged(complex: &CellComplex<3>, pts: &[Vect<3>]) -> (solve::Session<3>, usize) {
+    let spec = |lift: f64| resolved(complex, pts, &lifted_end(lift));
     let params = SolveParams::default();
     let (mut session, _) = solve::Session::new(
         complex.clone(),
@@ -442,7 +437,19 @@ fn a_drag_on_many_cells_moves_a_few_thousand_ancestors() {
         .iter()
         .map(|m| m.rot.iter().map(|v| v.to_bits()).collect())
         .collect();
-    assert!(rotations.len() <= 6_000, "{} rotations", rotations.len());
+    (session, rotations.len())
+}
+
+/// On a large complex a drag moves ancestors of a few thousand cells, older than the parents
+/// where the parents are still many (a shell, whose parents merge about four cells each).
+#[test]
+fn a_drag_on_many_cells_moves_a_few_thousand_ancestors() {
+    let pts = blob([2.0, 1.0, 1.0], 80_000);
+    let complex = cells(&pts, &[], 0.03);
+    // 25.7k cells, 6.3k parents, 1.9k grandparents.
+    assert!(complex.len() > 4 * 6_000, "{} cells", complex.len());
+    let (_, rotations) = dragged(&complex, &pts);
+    assert!(rotations <= 6_000, "{rotations} rotations");
 }
 
 /// A drag on a few thousand cells of a solid moves their ancestors: a step on the cells
@@ -452,35 +459,13 @@ fn a_drag_on_many_cells_moves_a_few_thousand_ancestors() {
 fn a_drag_on_a_dense_solid_moves_its_ancestors() {
     let pts = blob([2.0, 1.0, 1.0], 60_000);
     let complex = cells(&pts, &[], 0.06);
-    assert!(
-        complex.len() < solve::DRAG_COARSE_FROM,
-        "{} cells",
-        complex.len()
-    );
-    let spec = |lift: f64| resolved(&complex, &pts, &lifted_end(lift));
-    let params = SolveParams::default();
-    let (mut session, _) = solve::Session::new(
-        complex.clone(),
-        spec(0.0),
-        &params,
-        Budget::default(),
-        &Silent,
-    )
-    .unwrap();
-    let info = session.drag(spec(0.05), 1).unwrap();
-    assert!(!info.converged, "{info:?}");
-    let rotations: std::collections::BTreeSet<Vec<u64>> = session
-        .motions()
-        .iter()
-        .map(|m| m.rot.iter().map(|v| v.to_bits()).collect())
-        .collect();
-    assert!(
-        2 * rotations.len() < complex.len(),
-        "{} rotations for {} cells",
-        rotations.len(),
-        complex.len()
-    );
-    let info = session.update(spec(0.05)).unwrap();
+    let n = complex.len();
+    assert!(n < solve::DRAG_COARSE_FROM, "{n} cells");
+    let (mut session, rotations) = dragged(&complex, &pts);
+    assert!(2 * rotations < n, "{rotations} rotations for {n} cells");
+    let info = session
+        .update(resolved(&complex, &pts, &lifted_end(0.05)))
+        .unwrap();
     assert!(info.converged, "{info:?}");
 }
 

@@ -81,8 +81,9 @@ def laplacian():
     return per_cube(coords(obj.data.vertices), bent), bent, faces(obj)
 
 
-def rigid_cells():
-    obj = soup("rigidcells")
+def rigid_soup(name):
+    """The soup bent by the add-on: its first cube the fixed group, its last on the Empty."""
+    obj = soup(name)
     bpy.ops.object.empty_add(location=(4.5, 0, 0))
     empty = bpy.context.active_object
     bpy.context.view_layer.objects.active = obj
@@ -91,6 +92,11 @@ def rigid_cells():
     empty.location = (4.5, 0, LIFT)
     bpy.context.view_layer.update()
     bpy.ops.object.rigidcells_deform()
+    return obj
+
+
+def rigid_cells():
+    obj = rigid_soup("rigidcells")
     key = obj.data.shape_keys.key_blocks["RigidCells"]
     bent = coords(key.data)
     return per_cube(coords(obj.data.vertices), bent), bent, faces(obj)

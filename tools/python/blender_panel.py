@@ -29,22 +29,14 @@ sys.path.insert(0, str(ROOT / "blender"))
 sys.path.insert(0, str(ROOT / "tools" / "python"))
 
 import rigidcells_blender as addon  # noqa: E402
-from blender_laplacian import LIFT, soup  # noqa: E402
+from blender_laplacian import rigid_soup  # noqa: E402
 
 
 def scene():
     """The soup with its first cube fixed and its last on a lifted Empty, deformed."""
     for obj in list(bpy.data.objects):
         bpy.data.objects.remove(obj)
-    obj = soup("soup")
-    bpy.ops.object.empty_add(location=(4.5, 0, 0))
-    empty = bpy.context.active_object
-    bpy.context.view_layer.objects.active = obj
-    s = obj.rigidcells
-    s.fixed_group, s.handle_group, s.handle_object = "fixed", "handle", empty
-    empty.location = (4.5, 0, LIFT)
-    bpy.context.view_layer.update()
-    bpy.ops.object.rigidcells_deform()
+    obj = rigid_soup("soup")
     for o in bpy.context.view_layer.objects:
         o.select_set(o == obj)
     bpy.context.view_layer.objects.active = obj
