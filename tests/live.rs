@@ -193,8 +193,11 @@ fn pins_move_warm_and_release_onto_deforms_shape() {
             .unwrap()
             .from_rest
     );
-    let lift =
-        parse_poses::<3>("[[handle]]\ntranslate = [0.0, 0.0, 1.0]\n", Path::new("p")).unwrap();
+    let lift = parse_poses::<3>(
+        "[[handle]]\ntranslate = [0.0, 0.0, 1.0]\npivot = [10.0, 0.5, 0.5]\n",
+        Path::new("p"),
+    )
+    .unwrap();
     for k in 1..=4 {
         let to = Vect::<3>::new(5.0, 0.5, 1.0 + 0.25 * f64::from(k));
         let step = live.pose(&lift, &[to], 1).unwrap();
@@ -206,4 +209,39 @@ fn pins_move_warm_and_release_onto_deforms_shape() {
         pipeline::deform(&points, &triangles, &pinned(2.0), &params, &Silent).unwrap();
     let off = farthest(&moved, &expected);
     assert!(off < 1e-3, "the release is {off} from deform's shape");
+}
+
+#[test]
+fn a_pivot_given_or_left_to_the_centroid_and_tied_handles_are_resolved_again() {
+    let (points, triangles) = bar();
+    let params = params();
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+    live.solve(spec(&points, 1.0, -20.0), 1, &Silent).unwrap();
+    // The same handle turned about its centroid (no pivot): resolved from rest, so that the
+    // centroid is the pivot, and released onto deform's shape.
+    let mut centroid = spec(&points, 1.0, -20.0);
+    centroid.handles[0].value.pivot = None;
+    let step = live.solve(centroid.clone(), 1, &Silent).unwrap().unwrap();
+    assert!(step.from_rest, "{step:?}");
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+    let (expected, _, _) =
+        pipeline::deform(&points, &triangles, &centroid, &params, &Silent).unwrap();
+    assert!(farthest(&moved, &expected) < 1e-3);
+
+    // Two handles over the same end, moving together, then apart: as deform, refused.
+    let two = |second: f64| {
+        let mut s = spec(&points, 1.0, 0.0);
+        let mut other = s.handles[0].clone();
+        other.value.translate[2] = second;
+        other.line += 1;
+        s.handles.push(other);
+        s
+    };
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+    live.solve(two(1.0), 1, &Silent).unwrap();
+    let apart = live.solve(two(3.0), 1, &Silent).unwrap_err().to_string();
+    let alone = pipeline::deform(&points, &triangles, &two(3.0), &params, &Silent)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(apart, alone);
 }

@@ -182,6 +182,8 @@ def _motion(obj: bpy.types.Object, empty: bpy.types.Object, rest: Any) -> np.nda
 def handle_matrix(obj: bpy.types.Object, settings: RigidCellsSettings) -> List[List[float]]:
     """The handle's affine map in the object's own coordinates: the Empty's motion since its
     rest pose (world), seen from the object."""
+    if settings.handle_object is None:
+        raise InputError("Rigid Cells: choose the handle Empty")
     return _motion(obj, settings.handle_object, settings.handle_rest).tolist()
 
 
@@ -474,11 +476,18 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         except Cancelled as e:
             self.report({"INFO"}, str(e))
             return {"CANCELLED"}
-        except ERRORS as e:
+        except Exception as e:  # the library's errors and Blender's: the mesh as it was
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         self._done(report)
         return {"FINISHED"}
+
+    def cancel(self, context: Any) -> None:
+        """Blender ends the operator (a file loaded, the window closed): the solve stops."""
+        self._job.cancel()
+        context.window_manager.event_timer_remove(self._timer)
+        context.window_manager.progress_end()
+        _status(context, None)
 
     def _done(self, report: Any) -> None:
         self.report(
@@ -488,7 +497,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         )
 
 
-# The object Live runs on, for the panel.
+# The objects Live runs on, with their state (the panel shows it).
 _live: dict = {}
 
 
@@ -513,7 +522,7 @@ class OBJECT_OT_rigidcells_live(bpy.types.Operator):
         except ERRORS as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        _live[self._state.name] = True
+        _live[self._state.name] = self._state
         self._finishing = False
         wm = context.window_manager
         self._timer = wm.event_timer_add(1 / 60, window=context.window)
@@ -534,17 +543,28 @@ class OBJECT_OT_rigidcells_live(bpy.types.Operator):
             return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
+        # Whether the worker had ended before this tick takes its last shape.
+        done = state.worker.done
         try:
             if obj is None:
                 raise InputError(f"Rigid Cells: {state.name} was removed during Live")
+            # The Empties' world matrices as they are now, also when a script moved them and
+            # nothing has been redrawn since.
+            context.view_layer.update()
             state.tick(obj)
-        except ERRORS as e:
+        except Exception as e:  # a deleted Empty, a failed solve: the mesh as it was
             state.cancel(obj)
             self.report({"ERROR"}, str(e))
             return self._end(context, {"CANCELLED"})
-        if self._finishing and state.worker.done:
+        if self._finishing and done:
             return self._end(context, {"FINISHED"})
         return {"PASS_THROUGH"}
+
+    def cancel(self, context: Any) -> None:
+        """Blender ends the operator (a file loaded, the window closed): the shape key as it
+        was before Live."""
+        self._state.cancel(bpy.data.objects.get(self._state.name))
+        self._end(context, {"CANCELLED"})
 
     def _end(self, context: Any, result: set) -> set:
         context.window_manager.event_timer_remove(self._timer)
@@ -664,6 +684,10 @@ def register() -> None:
 
 
 def unregister() -> None:
+    for state in list(_live.values()):
+        state.worker.stop()
+        state.worker.thread.join(5.0)
+    _live.clear()
     del bpy.types.Object.rigidcells
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -126,6 +126,11 @@ class LiveWorker:
     def done(self) -> bool:
         return not self.thread.is_alive()
 
+    def _heard(self, _stage: str, _done: int, _total: Optional[int]) -> None:
+        """The first solve's progress: `stop` ends it at the library's next step."""
+        if self._stopping:
+            raise Cancelled("Rigid Cells: Live stopped")
+
     def _publish(self, kind: str, positions: np.ndarray) -> None:
         with self._wake:
             if not self._stopping:
@@ -137,7 +142,9 @@ class LiveWorker:
 
         points, spec, triangles, options = self._args
         try:
-            session = rigidcells.Session(points, spec, triangles=triangles, progress=False, **options)
+            session = rigidcells.Session(
+                points, spec, triangles=triangles, progress=self._heard, **options
+            )
             self.cells = session.cells
             released = False
             while True:

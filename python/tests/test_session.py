@@ -89,8 +89,10 @@ def test_errors_name_the_poses_and_arguments():
         live.drag({"translate": [0, 0, float("nan")]})
     with pytest.raises(ValueError, match="2 poses for the spec's 1 handles"):
         live.drag([{"translate": [0, 0, 1]}, {"translate": [0, 0, 1]}])
-    with pytest.raises(ValueError, match="iterations must be"):
+    with pytest.raises(ValueError, match="iterations must be 1 or more"):
         live.drag({"translate": [0, 0, 1]}, iterations=0)
+    with pytest.raises(TypeError, match="iterations must be a whole number"):
+        live.solve(bar_spec(pts), iterations=True)
     with pytest.raises(ValueError, match="^min_cell_size refines .* give cell_size or cells"):
         rigidcells.Session(pts, bar_spec(pts), min_cell_size=0.1)
     with pytest.raises(TypeError, match="unexpected"):

@@ -220,6 +220,10 @@ pub struct Released {
 /// ([`crate::pipeline::Live`]: the cells, the current spec and its session).
 pub struct Editor {
     scene: Scene,
+    /// The parameters, as *Apply* deforms the file with them.
+    params: DeformParams,
+    /// The live deformation of the proxy, on cells that are not refined
+    /// ([`crate::pipeline::Live::new`]).
     live: Live,
     /// The TOML text of the last edit solved.
     text: Option<String>,
@@ -229,15 +233,26 @@ pub use crate::pipeline::live::DRAG_ITERATIONS;
 
 impl Editor {
     /// Builds the cells of `scene` with `params` (cell size or count as `deform` takes them).
+    /// With `--min-cell-size` or `--refine-strain` the page's cells are those the first
+    /// solve starts on (a live session keeps its cells); *Apply* refines as `deform` does.
     pub fn new(scene: Scene, params: DeformParams) -> Result<Self> {
+        let unrefined = DeformParams {
+            solve: crate::solve::SolveParams {
+                refine_strain: None,
+                refine_fraction: None,
+                ..params.solve
+            },
+            ..params
+        };
         let live = Live::new(
             scene.points.clone(),
             &scene.triangles,
             scene.classes.clone(),
-            params,
+            unrefined,
         )?;
         Ok(Self {
             scene,
+            params,
             live,
             text: None,
         })
@@ -253,9 +268,9 @@ impl Editor {
         self.live.complex()
     }
 
-    /// The parameters.
+    /// The parameters (those *Apply* deforms with).
     pub fn params(&self) -> &DeformParams {
-        self.live.params()
+        &self.params
     }
 
     /// The cells' centers (relative) and edge lengths, `f32`, four per cell.
@@ -289,7 +304,7 @@ impl Editor {
         format!(
             "--cell-size {:?} --transfer {}",
             self.live.complex().grid.finest_size(),
-            self.live.params().transfer
+            self.params.transfer
         )
     }
 
@@ -364,13 +379,14 @@ impl Editor {
     /// The final transfer of the last solve on the proxy, with the fold-over check; the solve
     /// is converged first.
     pub fn release(&mut self) -> Result<Released> {
-        let said = self.live.warnings().len();
+        let said = self.live.warnings().to_vec();
         let (moved, _, _, mut info) = self.live.release(&[], &Silent)?;
+        // The solve's own warnings were said with its motions.
+        info.warnings.retain(|w| !said.contains(w));
         Ok(Released {
             positions: relative(&moved, &self.scene.center),
             foldovers: info.foldovers,
-            // The solve's own warnings were said with its motions.
-            warnings: info.warnings.split_off(said.min(info.warnings.len())),
+            warnings: info.warnings,
         })
     }
 

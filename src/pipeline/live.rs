@@ -49,6 +49,10 @@ pub struct Live {
     /// The last solve's report, and the warnings of the session's solve from rest.
     info: SolverInfo,
     warnings: Vec<String>,
+    /// Pairs of handles whose motions were equal when the spec was resolved.
+    tied: Vec<(usize, usize)>,
+    /// Each handle's selection centroid where the spec it was resolved from gave no pivot.
+    centroids: Vec<Option<Vect<3>>>,
     /// Each sample's four nearest cells and blend weights, made at the first preview.
     blend: Option<BlendWeights>,
 }
@@ -98,6 +102,8 @@ impl Live {
             session: None,
             info: SolverInfo::default(),
             warnings: Vec::new(),
+            tied: Vec::new(),
+            centroids: Vec::new(),
             blend: None,
         })
     }
@@ -134,8 +140,10 @@ impl Live {
     }
 
     /// Moves to `spec` with at most `max_iterations` Gauss-Newton iterations: warm from the
-    /// current motions when only its handles' poses differ from the last spec's, else resolved
-    /// and solved from rest (to convergence, with load steps). `None` when the spec constrains
+    /// current motions when only its handles' poses and pins' destinations differ from the
+    /// last spec's (a drag's step below the solver's iteration limit, else the whole solve),
+    /// else resolved and solved from rest (to convergence, with load steps). A failed warm
+    /// step ends the session: the next spec is solved from rest. `None` when the spec constrains
     /// nothing (the samples stay at rest). `observer` hears a solve from rest.
     pub fn solve(
         &mut self,
@@ -149,12 +157,39 @@ impl Live {
             return Ok(None);
         }
         let start = Instant::now();
-        let warm = match (&mut self.session, &self.spec) {
-            (Some(session), Some(last)) if same_but_poses(last, &spec) => {
+        // Handles that shared a motion when the spec was resolved may share cells, which they
+        // may only while their motions stay equal: once they differ, it is resolved again.
+        let still_tied = self
+            .tied
+            .iter()
+            .all(|&(i, j)| spec.handles[i].value == spec.handles[j].value);
+        // A pose without a pivot turns about its selection's centroid, known where the spec
+        // it was resolved from gave none (a matrix needs no pivot at full load).
+        let pivots: Option<Vec<Option<Vect<3>>>> = spec
+            .handles
+            .iter()
+            .zip(self.centroids.iter().chain(std::iter::repeat(&None)))
+            .map(
+                |(entry, centroid)| match (entry.value.pivot, entry.value.from_matrix) {
+                    (Some(p), _) => Some(Some(p)),
+                    (None, true) => Some(None),
+                    (None, false) => centroid.map(Some),
+                },
+            )
+            .collect();
+        let warm = match (&mut self.session, &self.spec, pivots) {
+            (Some(session), Some(last), Some(pivots))
+                if still_tied && same_but_poses(last, &spec) =>
+            {
                 let mut constraints = session.constraints().clone();
-                for (handle, entry) in constraints.handles.iter_mut().zip(&spec.handles) {
+                for ((handle, entry), pivot) in constraints
+                    .handles
+                    .iter_mut()
+                    .zip(&spec.handles)
+                    .zip(pivots)
+                {
                     handle.motion = entry.value;
-                    if let Some(p) = entry.value.pivot {
+                    if let Some(p) = pivot {
                         handle.pivot = p;
                     }
                 }
@@ -162,7 +197,22 @@ impl Live {
                 for (pin, entry) in constraints.pins.iter_mut().zip(&spec.pins) {
                     pin.to = entry.to - origin;
                 }
-                Some(session.drag(constraints, max_iterations)?)
+                // A drag's step (which may move the cells' ancestors), or the whole solve.
+                let stepped = if max_iterations < self.params.solve.max_iterations {
+                    session.drag(constraints, max_iterations)
+                } else {
+                    session.update(constraints)
+                };
+                match stepped {
+                    Ok(solver) => Some(solver),
+                    Err(e) => {
+                        // The session may hold constraints it did not solve: the next spec
+                        // starts from rest.
+                        self.session = None;
+                        self.spec = None;
+                        return Err(e);
+                    }
+                }
             }
             _ => None,
         };
@@ -194,6 +244,17 @@ impl Live {
                 ));
                 self.warnings = warnings.clone();
                 self.session = Some(session);
+                self.centroids = spec
+                    .handles
+                    .iter()
+                    .zip(&self.session.as_ref().expect("set").constraints().handles)
+                    .map(|(entry, handle)| entry.value.pivot.is_none().then_some(handle.pivot))
+                    .collect();
+                let n = spec.handles.len();
+                self.tied = (0..n)
+                    .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
+                    .filter(|&(i, j)| spec.handles[i].value == spec.handles[j].value)
+                    .collect();
                 Step {
                     solver,
                     from_rest: true,
@@ -376,6 +437,9 @@ impl Live {
         if !self.info.converged {
             self.info = session.update(session.constraints().clone())?;
         }
+        // The turns the cells carry now, and the warnings of this pose (a drag may have
+        // turned a handle further than the solve from rest did).
+        self.info.turns = session.turns();
         let solution = session.solution(self.info.clone());
         let transfer_start = Instant::now();
         let saved = stages::field(&solution, &self.params, observer)?;
@@ -385,7 +449,16 @@ impl Live {
         let points = &self.points;
         apply_into(&deformer, &origin, points, normals, &mut moved, &mut turned);
         check_moved(0, &moved)?;
-        let mut warnings = self.warnings.clone();
+        let mut warnings = stages::warnings(
+            &self.build,
+            &solution.complex,
+            &solution.constraints,
+            &solution.info,
+        );
+        warnings.extend(crate::cells::shortfall(
+            self.params.build.target_cells,
+            self.complex.len(),
+        ));
         let foldovers = check_foldovers(&deformer, &solution, &self.points, &mut warnings);
         let spec = self.spec.as_ref().expect("a session has its spec");
         let controls = stages::control_results(spec, &solution, &deformer, &self.params, observer)?;

@@ -302,6 +302,12 @@ where
         &self.motions
     }
 
+    /// The turn the cells carry from the fixed cells to each turning handle, as they are now
+    /// (what a solve from rest reports in its info).
+    pub fn turns(&self) -> Vec<super::HandleTurn> {
+        TurnGauge::new(&self.complex).turns(&self.constraints, &self.motions)
+    }
+
     /// The session's state as a [`Solution`] with `info`.
     pub fn solution(&self, info: SolverInfo) -> Solution<D> {
         Solution {

@@ -332,13 +332,13 @@ where
             .project(complex, constraints, motions, targets_to);
     }
 
-    /// Number of unknowns.
     /// The nonzeros of the direct path's Cholesky factor (its symbolic analysis knows them):
     /// what a numeric factorization costs grows with them. `None` on the multilevel path.
     pub fn factor_len(&self) -> Option<usize> {
         self.symbolic.as_ref().map(|(_, llt)| llt.len_val())
     }
 
+    /// Number of unknowns.
     pub fn unknowns(&self) -> usize {
         self.n
     }

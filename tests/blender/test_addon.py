@@ -5,7 +5,8 @@ main thread, Live follows scripted Empty moves to the converged shape and Esc re
 shape key, and more handles, pins and a stiffness group reach the library.
 
 Blender without a window runs no modal operators: the tests drive the pieces the modal
-operators call on each timer tick and key press (`DeformJob`, `LiveState`)."""
+operators call on each timer tick and key press (`DeformJob`, `LiveState`);
+`modal_check.py` runs the operators themselves in Blender's window."""
 
 import math
 import time

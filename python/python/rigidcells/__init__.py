@@ -774,6 +774,15 @@ class Step:
     """A solve from rest's warnings: the cells', the constraints', the solver's."""
 
 
+def _iterations(iterations: Any) -> int:
+    """A number of Gauss-Newton iterations, 1 or more."""
+    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)):
+        raise TypeError(f"iterations must be a whole number, got {type(iterations).__name__}")
+    if iterations < 1:
+        raise ValueError(f"iterations must be 1 or more, got {iterations}")
+    return int(iterations)
+
+
 def _poses_path(path: str) -> str:
     """A pose's key path said from the ``poses`` given to ``Session.drag``."""
     return path.replace('spec["handle"]', "poses", 1)
@@ -786,7 +795,9 @@ class Session:
     cells), ``preview`` blends the cells' motions at the points, ``refine`` goes on while the
     handles rest, and ``release`` converges and moves the points through the transfer with its
     exact constraints, as ``deform`` does. ``points``, ``triangles`` and the keyword options
-    are ``deform``'s; ``release`` gives the points back in the form they came in.
+    are ``deform``'s, but a session keeps the cells it built: ``min_cell_size`` and
+    ``refine_strain`` (which refine them) are refused. ``release`` gives the points back in
+    the form they came in.
 
     Every call but the light properties releases the GIL: a face may run the session on a
     thread of its own (one call at a time).
@@ -830,6 +841,8 @@ class Session:
         """Moves to the whole ``spec``: warm from the cells' current motions when only its
         handles' poses changed, else resolved and solved from rest; at most ``iterations``
         Gauss-Newton iterations (all it takes when None)."""
+        if iterations is not None:
+            iterations = _iterations(iterations)
         text, base, paths = _spec(spec)
         info = _with_progress(
             progress, lambda cb: _call(paths, self._native.solve, text, base, iterations, cb)
@@ -848,9 +861,7 @@ class Session:
         where the pins go now (None: where they went)."""
         if isinstance(poses, dict):
             poses = [poses]
-        if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) \
-                or iterations < 1:
-            raise ValueError(f"iterations must be a whole number 1 or more, got {iterations!r}")
+        iterations = _iterations(iterations)
         try:
             plain = _plain({"handle": list(poses)}, [])
         except (TypeError, ValueError) as e:
@@ -858,7 +869,7 @@ class Session:
         text = _rigidcells.toml_from_json(json.dumps(plain))
         paths = [_poses_path(p) for p in _key_paths(text)]
         to = None if pins is None else _plain3(pins, "pins")
-        self.last = self._step(_call(paths, self._native.pose, text, int(iterations), to))
+        self.last = self._step(_call(paths, self._native.pose, text, iterations, to))
         return self.last
 
     def refine(self) -> bool:
