@@ -827,3 +827,23 @@ fn a_box_over_the_horse_head_takes_the_head_alone() {
     assert!(count > 100, "{count} seen");
     assert_eq!(behind(&seen), 0, "the body behind the head selected");
 }
+
+/// `edit --min-cell-size` edits on the cells the refinement starts from (a live session keeps
+/// its cells) and keeps the refinement for *Apply*.
+#[test]
+fn the_editor_keeps_min_cell_size_for_apply() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let params = rigidcells::pipeline::Options {
+        min_cell_size: Some(0.25),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    assert!(params.solve.refine_fraction.is_some());
+    let editor = Editor::new(scene, params).unwrap();
+    assert_eq!(editor.params(), &params);
+    assert!(editor.complex().len() > 0);
+}
