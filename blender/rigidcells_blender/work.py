@@ -62,9 +62,9 @@ class DeformJob:
 
 class LiveWorker:
     """A `rigidcells.Session` on a thread, following the handles' poses (and the pins'
-    places) as the main thread hands them over (`move`): each new pose is one Gauss-Newton iteration and a blended
-    preview; while the poses rest the solve goes on to convergence, and once converged and
-    at rest for `settle` seconds the exact transfer is released. `take` gives the newest
+    places) as the main thread hands them over (`move`): each new pose is one Gauss-Newton
+    iteration and a blended preview; while the poses rest the solve goes on to convergence,
+    and once converged and at rest for `settle` seconds the exact transfer is released. `take` gives the newest
     shape not yet taken, `("preview" | "released", positions)`. `finish` ends on the last
     pose's exact shape; `stop` ends at once."""
 
@@ -160,8 +160,8 @@ class LiveWorker:
                             break
                         if released and self._finishing:
                             return
-                        wait = None if released else max(0.0, self._settle - (self._clock() - self._moved_at))
-                        self._wake.wait(wait)
+                        still = self._clock() - self._moved_at
+                        self._wake.wait(None if released else max(0.0, self._settle - still))
                 if pose is not None:
                     session.drag(pose[0], pins=pose[1])
                     self.steps += 1

@@ -14,8 +14,8 @@
 //!
 //! While dragging, the page blends the cells' motions itself on the GPU ([`Editor::blend`]:
 //! each proxy sample's four nearest cells and weights, the continuous blend of
-//! [`crate::field::Blend`], sent once: [`crate::pipeline::Live::blend_weights`]), so drawing costs the same whatever the solver does. On
-//! release, [`Editor::release`] runs the chosen transfer on the proxy with the exact
+//! [`crate::field::Blend`], sent once: [`crate::pipeline::Live::blend_weights`]), so drawing
+//! costs the same whatever the solver does. On release, [`Editor::release`] runs the chosen transfer on the proxy with the exact
 //! constraints, and counts fold-overs as `deform` does.
 //!
 //! Which samples a selection holds is decided here, never by the page ([`Editor::selected`]):

@@ -2,9 +2,9 @@
 //! drags a handle (the browser editor, the Python package's `Session`, Blender's Live).
 //!
 //! [`Live`] builds the cells once. Each [`Live::solve`] takes the whole edit spec: when only
-//! the handles' poses and the pins' destinations changed since the last one, the session goes on warm from its current
-//! motions for a few Gauss-Newton iterations ([`Session::drag`], one per pose while dragging);
-//! otherwise the spec is resolved again and solved from rest. [`Live::preview`] blends the
+//! the handles' poses and the pins' destinations changed since the last one, the session goes
+//! on warm from its current motions for a few Gauss-Newton iterations ([`Session::drag`], one
+//! per pose while dragging); otherwise the spec is resolved again and solved from rest. [`Live::preview`] blends the
 //! cells' current motions at the samples (cheap, for every pose); [`Live::release`] converges
 //! and runs the chosen transfer with its exact constraints, as [`super::deform`] does.
 

@@ -172,8 +172,9 @@ where
 
     /// One step of a drag toward `constraints` (at most `max_iterations` Gauss-Newton
     /// iterations). From [`DRAG_COARSE_FROM`] cells on, or with a factor of more than
-    /// [`DRAG_FACTOR_MOST`] nonzeros, the step is taken on the cells' ancestors (`coarsen` by as many levels as bring them to a few thousand, made once for
-    /// the drag's constraints and kept while only their handles, pins and targets move), and
+    /// [`DRAG_FACTOR_MOST`] nonzeros, the step is taken on the cells' ancestors (`coarsen` by
+    /// as many levels as bring them to a few thousand, made once for the drag's constraints
+    /// and kept while only their handles, pins and targets move), and
     /// each cell then takes its ancestor's rigid motion, as a solve coarse to fine starts its
     /// cells: the step costs what those few thousand cells cost
     /// ([`Session::drag_on_parents`]). Smaller complexes take [`Session::update_with`] itself.
