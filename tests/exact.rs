@@ -555,3 +555,44 @@ fn text_files_keep_the_lines_of_their_fixed_samples() {
         assert_ne!(a, b, "{name}: the handle moved");
     }
 }
+
+/// A pinned point goes exactly where its pin sends it, with every transfer: the pinned cell
+/// follows its own rigid motion, which holds the point there.
+#[test]
+fn a_pinned_point_lands_where_the_pin_sends_it() {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let mut points: Vec<Vect<3>> = bar
+        .vertices
+        .iter()
+        .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
+        .collect();
+    let pinned = Vect::<3>::new(5.0, 0.5, 1.0);
+    points.push(pinned);
+    let spec = parse_spec::<3>(
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.0, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0.0, 0.0, 2.0]\n\
+         [[pin]]\npoint = [5.0, 0.5, 1.0]\nto = [5.0, 0.5, 1.3]\n",
+        Path::new("."),
+        Path::new("edit.toml"),
+    )
+    .unwrap();
+    for transfer in [Transfer::Pu, Transfer::Rbf, Transfer::Blend] {
+        let params = DeformParams {
+            build: rigidcells::cells::BuildParams {
+                cell_size: Some(0.25),
+                ..Default::default()
+            },
+            transfer,
+            ..Default::default()
+        };
+        let (moved, _, _) =
+            pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
+        let landed = moved[moved.len() - 1];
+        let off = (landed - Vect::<3>::new(5.0, 0.5, 1.3)).norm();
+        assert!(
+            off < 1e-9,
+            "{transfer:?}: the pinned point is {off} from where the pin sends it"
+        );
+    }
+}

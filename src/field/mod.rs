@@ -82,7 +82,8 @@ impl<const D: usize> Field<D> {
     }
 
     /// The field of a solution: its fixed cells and the cells it kept at rest follow the
-    /// identity exactly, and each handle's cells its transform.
+    /// identity exactly, each handle's cells its transform, and a pinned cell (its pinned
+    /// point held where the pin sends it) and a carried part's cells their own rigid motion.
     pub fn from_solution(solution: &Solution<D>) -> Self
     where
         Dim<D>: Rigid<D>,
@@ -96,7 +97,7 @@ impl<const D: usize> Field<D> {
         for (c, role) in constraints.roles.iter().enumerate() {
             match role {
                 Role::Fixed | Role::Rest => prescribed.set(c, n, Affine::identity()),
-                Role::Carried(_) => {
+                Role::Carried(_) | Role::Pin(_) => {
                     // The cell's rigid motion, exactly: A(x) = R (x − c) + p.
                     let m = &solution.motions[c];
                     let center = solution.complex.cells[c].center;
@@ -110,7 +111,7 @@ impl<const D: usize> Field<D> {
                     );
                 }
                 Role::Handle(k) => prescribed.set(c, n, maps[*k as usize]),
-                Role::Free | Role::Pin(_) => {}
+                Role::Free => {}
             }
         }
         Self {
