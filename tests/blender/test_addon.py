@@ -336,3 +336,41 @@ def test_live_follows_a_pin_empty():
         state.tick(obj)
         wait_for(lambda: state.worker.steps > steps)
     ends_on_deforms_shape(obj, state)
+
+
+@pytest.mark.parametrize("kind", ["vertices only", "non-manifold"])
+def test_a_scan_of_vertices_and_a_non_manifold_mesh_bend(kind):
+    """How imported scans arrive (vertices, no faces), and a mesh whose edges are shared by
+    three faces (a fin glued along a plate's middle): both bend, exact at both ends."""
+    xs, ys = np.meshgrid(np.linspace(-5, 5, 41), np.linspace(-0.5, 0.5, 5), indexing="ij")
+    verts = [(x, y, 0.0) for x, y in zip(xs.ravel(), ys.ravel())]
+    faces = []
+    if kind == "non-manifold":
+        def at(i, j):
+            return i * 5 + j
+        faces = [(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1))
+                 for i in range(40) for j in range(4)]
+        # A fin standing on the plate's middle row: its bottom edges are the plate's.
+        n = len(verts)
+        verts += [(x, 0.0, 0.5) for x in np.linspace(-5, 5, 41)]
+        faces += [(at(i, 2), at(i + 1, 2), n + i + 1, n + i) for i in range(40)]
+    mesh = bpy.data.meshes.new(kind)
+    mesh.from_pydata(verts, [], faces)
+    obj = bpy.data.objects.new(kind, mesh)
+    bpy.context.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    group(obj, "fixed", lambda co: co.x < -4.4)
+    group(obj, "handle", lambda co: co.x > 4.4)
+    empty = handle_empty(obj, at=(5.0, 0.0, 0.0))
+    s = obj.rigidcells
+    s.fixed_group, s.handle_group, s.handle_object, s.cell_size = "fixed", "handle", empty, 0.25
+    empty.location = (5.0, 0.0, 2.0)
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    rest, bent = vertices(obj), vertices(obj, "RigidCells")
+    fixed, handle = rest[:, 0] < -4.4, rest[:, 0] > 4.4
+    assert np.array_equal(bent[fixed], rest[fixed])
+    assert np.abs(bent[handle] - (rest[handle] + [0, 0, 2.0])).max() < 1e-5
+    rise = (bent - rest)[:, 2]
+    middle = np.abs(rest[:, 0]) < 0.2
+    assert 0.3 < rise[middle].mean() < 1.7, rise[middle].mean()
