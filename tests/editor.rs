@@ -845,5 +845,5 @@ fn the_editor_keeps_min_cell_size_for_apply() {
     assert!(params.solve.refine_fraction.is_some());
     let editor = Editor::new(scene, params).unwrap();
     assert_eq!(editor.params(), &params);
-    assert!(editor.complex().len() > 0);
+    assert!(!editor.complex().is_empty());
 }
