@@ -1,7 +1,9 @@
 //! The names users type for the library's choices — `--transfer blend-idw`, `--inside flood`,
-//! `--solver multilevel`, `--outside keep` — written once, here. The command line's options,
-//! the Python package's arguments and the editor's `deform` flags read them through [`FromStr`]
-//! and write them through [`Display`](fmt::Display), so the faces cannot disagree on a name.
+//! `--solver multilevel`, `--outside keep`, `--loose-parts rest` — written once, here. The
+//! command line's options, the Python package's arguments (and its messages, which say a
+//! flag and its choice as a keyword argument) and the editor's `deform` flags read them
+//! through [`FromStr`] and write them through [`Display`](fmt::Display), so the faces cannot
+//! disagree on a name.
 //!
 //! Each choice gets its table from `named!`: the values in the order help texts list them,
 //! each with its name, and an exhaustive `match`, so a new value without a name does not
@@ -12,7 +14,7 @@ use std::str::FromStr;
 
 use crate::cells::Inside;
 use crate::field::{Outside, Transfer};
-use crate::solve::Method;
+use crate::solve::{LooseParts, Method};
 
 /// A choice whose values have names.
 pub trait Named: Copy + PartialEq + 'static {
@@ -130,6 +132,11 @@ named!(Outside, "outside", {
     Extend => "extend",
 });
 
+named!(LooseParts, "loose parts", {
+    Carry => "carry",
+    Rest => "rest",
+});
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -152,6 +159,7 @@ mod tests {
         round_trip::<Inside>();
         round_trip::<Method>();
         round_trip::<Outside>();
+        round_trip::<LooseParts>();
     }
 
     #[test]

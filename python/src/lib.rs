@@ -26,8 +26,8 @@ use rigidcells::progress::Observer;
 use rigidcells::render::View;
 use rigidcells::report::Timings;
 use rigidcells::rigid::Vect;
-use rigidcells::solve::Method;
 use rigidcells::solve::Solution;
+use rigidcells::solve::{LooseParts, Method};
 use rigidcells::spec::{EditSpec, parse_poses, parse_spec};
 
 create_exception!(
@@ -59,23 +59,16 @@ fn py_err(e: Error) -> PyErr {
 /// becomes `cell_size`, `--outside keep` becomes `outside="keep"` (a flag followed by one of
 /// its choices) and `--cells 1000` becomes `cells=1000`.
 fn python_terms(text: &str) -> String {
-    const CHOICES: &[&str] = &[
-        "keep",
-        "extend",
-        "refuse",
-        "carry",
-        "rest",
-        "pu",
-        "rbf",
-        "blend-idw",
-        "blend",
-        "direct",
-        "multilevel",
-        "auto",
-        "winding",
-        "flood",
-        "none",
-    ];
+    fn names<T: Named>() -> impl Iterator<Item = &'static str> {
+        T::ALL.iter().map(|v| v.name())
+    }
+    // The names of the library's choices (a flag followed by one is said as `flag="name"`).
+    let choices: Vec<&str> = names::<Outside>()
+        .chain(names::<LooseParts>())
+        .chain(names::<Transfer>())
+        .chain(names::<Method>())
+        .chain(names::<Inside>())
+        .collect();
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
     while let Some(at) = rest.find("--") {
@@ -102,7 +95,7 @@ fn python_terms(text: &str) -> String {
         };
         let tail = &after[name.len()..];
         let value = tail.strip_prefix(' ').and_then(|t| {
-            CHOICES.iter().find(|c| {
+            choices.iter().find(|c| {
                 t.starts_with(**c)
                     && !t[c.len()..].starts_with(|ch: char| ch.is_ascii_alphanumeric() || ch == '-')
             })
@@ -356,18 +349,7 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
             "coarse_levels" => {
                 o.coarse_levels = Some(level(whole("a whole number of levels")?, 8)?)
             }
-            "loose_parts" => {
-                o.carry_loose = match name()?.as_deref() {
-                    Some("carry") => true,
-                    Some("rest") => false,
-                    Some(other) => {
-                        return Err(PyValueError::new_err(format!(
-                            "loose_parts `{other}`: expected carry or rest"
-                        )));
-                    }
-                    None => true,
-                }
-            }
+            "loose_parts" => o.loose_parts = named(name()?, LooseParts::Carry)?,
             "refine_strain" => o.refine_strain = Some(number()?),
             "transfer" => o.transfer = named(name()?, Transfer::Pu)?,
             "rbf_tolerance" => o.rbf_tolerance = Some(number()?),

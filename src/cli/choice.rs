@@ -10,7 +10,7 @@ use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use rigidcells::cells::Inside;
 use rigidcells::field::{Outside, Transfer};
 use rigidcells::names::Named;
-use rigidcells::solve::Method;
+use rigidcells::solve::{LooseParts, Method};
 
 /// A named choice with a line of help for each value.
 pub(super) trait Help: Named + Send + Sync {
@@ -73,6 +73,17 @@ impl Help for Outside {
             }
             Outside::Keep => "Samples beyond the margin keep their coordinates bit for bit",
             Outside::Extend => "The transfer is evaluated beyond the margin as anywhere",
+        }
+    }
+}
+
+impl Help for LooseParts {
+    fn help(self) -> &'static str {
+        match self {
+            LooseParts::Carry => {
+                "Each rides along rigidly with the nearest cell of a constrained part"
+            }
+            LooseParts::Rest => "Each keeps its rest pose",
         }
     }
 }

@@ -16,7 +16,7 @@ use rigidcells::field::{Outside, Transfer};
 use rigidcells::memory::Budget;
 use rigidcells::pipeline::{self, CHUNK, DeformParams, MAX_CHUNK};
 use rigidcells::render::{self, View};
-use rigidcells::solve::Method;
+use rigidcells::solve::{LooseParts, Method};
 
 use choice::choice;
 use commands::*;
@@ -365,18 +365,10 @@ struct CellArgs {
     coarse_levels: Option<u8>,
     /// Parts of the shape that no constraint reaches (leaves, fittings, a loose piece of a
     /// soup): carried rigidly by the nearest constrained part, or kept where they were.
-    #[arg(long, value_enum, default_value_t = LooseArg::Carry)]
-    loose_parts: LooseArg,
+    #[arg(long, value_parser = choice::<LooseParts>(), default_value_t = LooseParts::Carry)]
+    loose_parts: LooseParts,
     #[command(flatten)]
     memory: MemoryArg,
-}
-
-#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
-enum LooseArg {
-    /// Each rides along rigidly with the nearest cell of a constrained part.
-    Carry,
-    /// Each keeps its rest pose.
-    Rest,
 }
 
 /// The memory budget.
@@ -412,7 +404,7 @@ impl CellArgs {
             solver: self.solver,
             tolerance: self.tolerance,
             coarse_levels: self.coarse_levels,
-            carry_loose: self.loose_parts == LooseArg::Carry,
+            loose_parts: self.loose_parts,
             transfer,
             memory_limit: self.memory.memory_limit,
             ..Default::default()

@@ -8,7 +8,7 @@ use crate::cells::{BuildParams, Inside};
 use crate::error::{Error, Result};
 use crate::field::Transfer;
 use crate::memory::Budget;
-use crate::solve::{self, Method, SolveParams};
+use crate::solve::{self, LooseParts, Method, SolveParams};
 
 use super::DeformParams;
 
@@ -34,8 +34,8 @@ pub struct Options {
     /// Coarser complexes solved first (`--coarse-levels`).
     pub coarse_levels: Option<u8>,
     /// Whether parts no constraint reaches are carried by the nearest constrained part
-    /// (`--loose-parts carry`) or kept at rest (`--loose-parts rest`).
-    pub carry_loose: bool,
+    /// or kept at rest (`--loose-parts`).
+    pub loose_parts: LooseParts,
     /// Split cells whose strain exceeds this and solve again (`--refine-strain`).
     pub refine_strain: Option<f64>,
     /// The transfer to the samples (`--transfer`).
@@ -60,7 +60,7 @@ impl Default for Options {
             solver: Method::Auto,
             tolerance: solve::MOVE_TOLERANCE,
             coarse_levels: None,
-            carry_loose: true,
+            loose_parts: LooseParts::Carry,
             refine_strain: None,
             transfer: Transfer::Pu,
             rbf_tolerance: None,
@@ -123,7 +123,7 @@ impl Options {
         };
         let solve = SolveParams {
             method: self.solver,
-            carry_loose: self.carry_loose,
+            carry_loose: self.loose_parts == LooseParts::Carry,
             move_tolerance: self.tolerance,
             coarse_levels: self.coarse_levels,
             refine_strain: self.refine_strain,

@@ -97,6 +97,16 @@ use system::System;
 pub use turns::HandleTurn;
 use turns::TurnGauge;
 
+/// What becomes of the parts of a shape that no constraint reaches (`--loose-parts`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LooseParts {
+    /// Each rides along rigidly with the nearest cell of a constrained part ([`carry_loose`]).
+    #[default]
+    Carry,
+    /// Each keeps its rest pose.
+    Rest,
+}
+
 /// Parameters of [`solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolveParams {
