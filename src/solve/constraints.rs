@@ -658,6 +658,16 @@ where
 
 /// The end of the warning [`anchor`] gives.
 const LOOSE_WARNING: &str = "have no constraint and keep their rest pose";
+/// What becomes of the parts of a shape that no constraint reaches (`--loose-parts`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LooseParts {
+    /// Each rides along rigidly with the nearest cell of a constrained part ([`carry_loose`]).
+    #[default]
+    Carry,
+    /// Each keeps its rest pose.
+    Rest,
+}
+
 /// The end of the warning once [`carry_loose`] moved them.
 const CARRIED_WARNING: &str = "have no constraint and ride along rigidly with the nearest \
                                cell of a constrained part (--loose-parts rest keeps them at rest)";

@@ -79,8 +79,8 @@ use std::time::Instant;
 
 pub use coarse::{COARSE_FROM, COARSE_STAGE, MAX_COARSE_LEVELS};
 pub use constraints::{
-    Constraints, Role, Selections, carry_loose, coarsen, inherit, resolve, resolve_selected,
-    sample_cell, seen,
+    Constraints, LooseParts, Role, Selections, carry_loose, coarsen, inherit, resolve,
+    resolve_selected, sample_cell, seen,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
 use iteration::largest_corner_move;
@@ -96,16 +96,6 @@ use crate::rigid::{Dim, Motion, Rigid, Vect};
 use system::System;
 pub use turns::HandleTurn;
 use turns::TurnGauge;
-
-/// What becomes of the parts of a shape that no constraint reaches (`--loose-parts`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum LooseParts {
-    /// Each rides along rigidly with the nearest cell of a constrained part ([`carry_loose`]).
-    #[default]
-    Carry,
-    /// Each keeps its rest pose.
-    Rest,
-}
 
 /// Parameters of [`solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
