@@ -867,9 +867,17 @@ class Session:
         except (TypeError, ValueError) as e:
             raise type(e)(_poses_path(str(e))) from None
         text = _rigidcells.toml_from_json(json.dumps(plain))
-        paths = [_poses_path(p) for p in _key_paths(text)]
         to = None if pins is None else _plain3(pins, "pins")
-        self.last = self._step(_call(paths, self._native.pose, text, iterations, to))
+        try:
+            info = self._native.pose(text, iterations, to)
+        except ValueError as e:
+            # The poses' key paths, worked out only for an error (a drag is the hot path).
+            paths = [_poses_path(p) for p in _key_paths(text)]
+            raised = _in_dict_terms(e, paths)
+            if raised is e:
+                raise
+            raise raised from None
+        self.last = self._step(info)
         return self.last
 
     def refine(self) -> bool:
