@@ -5,10 +5,11 @@
 //! tools, by SIGPIPE, instead of a panic. A file-size limit (`ulimit -f`, as a full disk) makes
 //! the write fail (SIGXFSZ ignored): exit 1 naming the output, and no file left.
 //!
-//! SIGINT or SIGTERM during a run removes the temporary outputs
-//! (hidden `.NAME.PID.tmp` files beside the outputs, [`crate::io::TempFile`]) instead of
-//! leaving them behind, and the outputs of the run's [`ResultSet`] already in place, then exits
-//! with 128 + the signal's number, as a shell reports it.
+//! SIGINT or SIGTERM during a run removes the temporary outputs (hidden `.NAME.*.tmp` files
+//! beside the outputs, [`crate::io::TempFile`]) instead of leaving them behind, then exits with
+//! 128 + the signal's number, as a shell reports it. A run's outputs are renamed into place
+//! together at its end ([`crate::io::ResultSet::commit`]), with no interrupt between the
+//! renames: an interrupted run leaves all of its outputs or none.
 //!
 //! The signals are blocked in every thread ([`remove_temporaries_on_signals`] runs before
 //! any other thread starts, and threads inherit the mask) and taken by one thread that waits
@@ -42,87 +43,35 @@ pub fn guarded<T>(path: &Path, doing: &str, f: impl FnOnce() -> Result<T>) -> Re
     })
 }
 
-/// The temporary files alive now.
+/// The temporary files alive now, in every run of the process: what an interrupt removes.
 static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
-/// The outputs of the open [`ResultSet`] already in place (`None`: no set is open).
-static RESULT_SET: Mutex<Option<Vec<PathBuf>>> = Mutex::new(None);
-
-/// The outputs of one run, there only together: the output, its saved field, its report and
-/// its preview. While a set is open, every output renamed into place is noted; an interrupt,
-/// or the set dropped before [`ResultSet::close`] (an error on the way), removes them, so a
-/// run leaves all of its files or none.
-#[derive(Debug)]
-pub struct ResultSet {
-    closed: bool,
-}
-
-impl ResultSet {
-    /// Opens the set: outputs committed from now on belong to it.
-    pub fn open() -> Self {
-        if let Ok(mut set) = RESULT_SET.lock() {
-            *set = Some(Vec::new());
-        }
-        Self { closed: false }
-    }
-
-    /// Every output is in place: they stay.
-    pub fn close(mut self) {
-        if let Ok(mut set) = RESULT_SET.lock() {
-            *set = None;
-        }
-        self.closed = true;
-    }
-}
-
-impl Drop for ResultSet {
-    fn drop(&mut self) {
-        if self.closed {
-            return;
-        }
-        if let Ok(mut set) = RESULT_SET.lock() {
-            for path in set.take().unwrap_or_default() {
-                let _ = std::fs::remove_file(path);
-            }
-        }
-    }
-}
-
-/// Notes the output `path`, just renamed into place, as a member of the open result set.
-pub(crate) fn committed(path: &Path) {
-    if let Ok(mut set) = RESULT_SET.lock()
-        && let Some(paths) = set.as_mut()
-    {
-        paths.push(path.to_path_buf());
-    }
-}
-
-/// Creates the temporary file `path` with `create` and notes it, to be removed if the run is
-/// interrupted: under the registry's lock, so that no interrupt comes between the two.
+/// Creates a temporary file with `create`, which returns it and its path, and notes the path,
+/// to be removed if the process is interrupted: under the registry's lock, so that no interrupt
+/// comes between the two.
 pub(crate) fn create_registered<T>(
-    path: &Path,
-    create: impl FnOnce() -> std::io::Result<T>,
-) -> std::io::Result<T> {
+    create: impl FnOnce() -> std::io::Result<(T, PathBuf)>,
+) -> std::io::Result<(T, PathBuf)> {
     let mut t = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
-    let made = create()?;
-    t.push(path.to_path_buf());
-    Ok(made)
+    let (made, path) = create()?;
+    t.push(path.clone());
+    Ok((made, path))
 }
 
-/// Renames the temporary `tmp` over `target` with `rename` and notes `target` as a member of
-/// the open result set, under the registry's lock: an interrupt removes either the temporary
-/// or the output in place, never neither. On an error `tmp` stays noted.
+/// Renames each temporary of `pairs` over its target, in order, under the registry's lock: an
+/// interrupt comes before the first rename (and removes every temporary) or after the last
+/// (and the run's outputs are all in place), never between. The renamed temporaries are
+/// forgotten. On an error, how many were renamed before it, and the error.
 pub(crate) fn commit_registered(
-    tmp: &Path,
-    target: &Path,
-    rename: impl FnOnce() -> std::io::Result<()>,
-) -> std::io::Result<()> {
+    pairs: &[(&Path, &Path)],
+) -> std::result::Result<(), (usize, std::io::Error)> {
     let mut t = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
-    rename()?;
-    if let Some(i) = t.iter().position(|p| p == tmp) {
-        t.swap_remove(i);
+    for (done, &(tmp, target)) in pairs.iter().enumerate() {
+        std::fs::rename(tmp, target).map_err(|e| (done, e))?;
+        if let Some(i) = t.iter().position(|p| p == tmp) {
+            t.swap_remove(i);
+        }
     }
-    committed(target);
     Ok(())
 }
 
@@ -178,12 +127,6 @@ pub fn remove_temporaries_on_signals() {
                 let mut removed = false;
                 if let Ok(t) = TEMPORARIES.lock() {
                     for path in t.iter() {
-                        removed |= std::fs::remove_file(path).is_ok();
-                    }
-                }
-                // The outputs of an unfinished result set go with it.
-                if let Ok(mut set) = RESULT_SET.lock() {
-                    for path in set.take().unwrap_or_default() {
                         removed |= std::fs::remove_file(path).is_ok();
                     }
                 }

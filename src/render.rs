@@ -212,7 +212,12 @@ impl Image {
 
     /// Writes the image as a PNG, atomically.
     pub fn write_png(&self, path: &Path) -> Result<()> {
-        write_png(
+        crate::io::write_atomic(path, &self.png(path)?)
+    }
+
+    /// The image encoded as a PNG (`path` names it in errors).
+    pub fn png(&self, path: &Path) -> Result<Vec<u8>> {
+        png_bytes(
             path,
             self.width,
             self.height,
@@ -230,6 +235,17 @@ pub(crate) fn write_png(
     color: png::ColorType,
     data: &[u8],
 ) -> Result<()> {
+    crate::io::write_atomic(path, &png_bytes(path, width, height, color, data)?)
+}
+
+/// 8-bit pixels of `color` type encoded as a PNG (`path` names it in errors).
+pub(crate) fn png_bytes(
+    path: &Path,
+    width: u32,
+    height: u32,
+    color: png::ColorType,
+    data: &[u8],
+) -> Result<Vec<u8>> {
     let mut bytes = Vec::new();
     let fail = |e: png::EncodingError| Error::write(path, std::io::Error::other(e));
     {
@@ -240,7 +256,7 @@ pub(crate) fn write_png(
         let mut w = enc.write_header().map_err(fail)?;
         w.write_image_data(data).map_err(fail)?;
     }
-    crate::io::write_atomic(path, &bytes)
+    Ok(bytes)
 }
 
 /// An orthographic camera fitted to a box.

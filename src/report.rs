@@ -236,9 +236,14 @@ impl Report {
 
     /// Writes the report as pretty JSON to `path`, atomically.
     pub fn write(&self, path: &Path) -> Result<()> {
+        crate::io::write_atomic(path, &self.json(path)?)
+    }
+
+    /// The report as pretty JSON, ending in a newline (`path` names it in errors).
+    pub fn json(&self, path: &Path) -> Result<Vec<u8>> {
         let text = serde_json::to_string_pretty(self)
             .map_err(|e| Error::Param(format!("{}: {e}", path.display())))?;
-        crate::io::write_atomic(path, format!("{text}\n").as_bytes())
+        Ok(format!("{text}\n").into_bytes())
     }
 }
 

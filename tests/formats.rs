@@ -490,7 +490,9 @@ fn translate_stream(
         let accepted = sink.write(&buffer, &moved, &buffer.normals).unwrap();
         assert_eq!(accepted, Accepted::Yes);
     }
-    sink.finish().unwrap();
+    let set = rigidcells::io::ResultSet::new();
+    sink.finish(&set).unwrap();
+    set.commit().unwrap();
     (positions, std::fs::read(out).unwrap())
 }
 

@@ -7,12 +7,14 @@
 //!
 //! Every reader keeps the input's bytes and knows where the coordinates live, so the writer
 //! changes the coordinates and nothing else. Output goes to a temporary file in the output's
-//! folder that is renamed over the target at the end: a failure never leaves a partial file
-//! under the output's name, and the input is never opened for writing.
+//! folder, created new under a random name, that is renamed over the target with the run's
+//! other outputs at its end ([`ResultSet`]): a failure never leaves a partial file under the
+//! output's name, and the input is never opened for writing.
 
 mod las;
 pub(crate) mod mapped;
 mod obj;
+mod output;
 mod ply;
 mod ply_stream;
 mod stream;
@@ -26,14 +28,14 @@ pub use las::{
     encode_coordinates, frame_error,
 };
 pub use obj::{ObjFile, ObjSource};
+pub use output::{ResultSet, TempFile, write_atomic};
 pub use ply::{Colors, colors};
 pub use ply_stream::{PlyRecordStream, PlyStream};
-pub use stream::{Accepted, Bounds, Chunk, Sink, Source, TempFile};
+pub use stream::{Accepted, Bounds, Chunk, Sink, Source};
 pub use tiles::Tiles;
 pub use xy::XyFile;
 pub use xyz::XyzStream;
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use crate::error::{Error, Result};
@@ -218,16 +220,6 @@ pub fn refuse_same_outputs(outputs: &[(&str, &Path)]) -> Result<()> {
         seen.push((option, id));
     }
     Ok(())
-}
-
-/// Writes `bytes` to a temporary file beside `path` and renames it over `path`.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let (tmp, mut out) = TempFile::create(path)?;
-    out.write_all(bytes)
-        .and_then(|_| out.flush())
-        .map_err(|e| Error::write(path, e))?;
-    drop(out);
-    tmp.commit()
 }
 
 /// A short description of a file's layout for `rigidcells info`: a PLY's header lines, an

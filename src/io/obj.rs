@@ -13,9 +13,9 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use super::stream::{Accepted, Bounds, Chunk, Sink, Source};
+use super::stream::{Accepted, Bounds, Chunk, ResultSet, Sink, Source};
 use super::text::{Edit, Precision, Span, check_count, edits3, splice};
-use super::{Opening, require_extension, write_atomic};
+use super::{Opening, require_extension};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 
@@ -293,10 +293,10 @@ impl Sink for ObjSink {
         self.loose = normals;
     }
 
-    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+    fn finish(self: Box<Self>, set: &ResultSet) -> Result<Vec<String>> {
         require_extension(&self.output, "obj")?;
         let bytes = self.file.encode(&self.positions, &self.loose)?;
-        write_atomic(&self.output, &bytes)?;
+        set.write(&self.output, &bytes)?;
         Ok(Vec::new())
     }
 }

@@ -27,7 +27,7 @@ use super::ply::numbers;
 use super::ply::{
     VertexFields, Walker, check_triangles, parse_header, scalar_size, vertex_layout, walk_element,
 };
-use super::stream::{Accepted, Bounds, Chunk, OutFile, Sink, Source, TempFile};
+use super::stream::{Accepted, Bounds, Chunk, OutFile, ResultSet, Sink, Source, TempFile};
 use super::text::{Precision, SpanSink, fit_singles};
 use super::{Opening, require_extension};
 use crate::error::{Error, Result};
@@ -340,7 +340,7 @@ impl Sink for PlySink {
         Ok(Accepted::Yes)
     }
 
-    fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
+    fn finish(mut self: Box<Self>, set: &ResultSet) -> Result<Vec<String>> {
         let l = self.layout;
         if self.next != l.count {
             return Err(Error::Solver(format!(
@@ -353,7 +353,7 @@ impl Sink for PlySink {
         let map = self.map.clone();
         self.put(&map[l.span(0, l.count).end..])?;
         let Self { file, out, .. } = *self;
-        file.commit_writer(out)?;
+        set.stage_writer(file, out)?;
         Ok(Vec::new())
     }
 }

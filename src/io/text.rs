@@ -18,7 +18,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use super::require_extension;
-use super::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
+use super::stream::{Accepted, Chunk, OutFile, ResultSet, Sink, TempFile};
 // The readers of text formats take `Span` from here, with the `Edit`s made of it.
 pub(crate) use super::stream::Span;
 use crate::error::{Error, Result};
@@ -284,9 +284,9 @@ impl Sink for SpanSink {
         Ok(Accepted::Yes)
     }
 
-    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+    fn finish(self: Box<Self>, set: &ResultSet) -> Result<Vec<String>> {
         let Self { file, out, .. } = *self;
-        file.commit_writer(out)?;
+        set.stage_writer(file, out)?;
         Ok(Vec::new())
     }
 }

@@ -6,7 +6,7 @@ use std::time::Instant;
 use crate::cells::{BuildInfo, CellComplex};
 use crate::error::{Error, Result};
 use crate::field::{Deformer, Outside, SavedField, Transfer, apply};
-use crate::io::{self, Source};
+use crate::io::{self, ResultSet, Source};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::solve::{self, Solution};
@@ -73,7 +73,9 @@ impl ApplyParams {
 /// samples (meshes excepted: their triangles need the vertices); the solve runs on the cells;
 /// pass 2 streams chunks of `chunk` samples through the field, in file order, into the output.
 /// With `save_field`, the solved field (with its transfer, and the RBF's coefficients when that
-/// is the transfer) is written there too; [`apply_file`] with it writes the same bytes.
+/// is the transfer) is written there too; [`apply_file`] with it writes the same bytes. The
+/// outputs appear together at the end, or, on an error, not at all; an output that names the
+/// input, or two that name one file, are refused before any work.
 pub fn deform_file(
     input: &Path,
     output: &Path,
@@ -83,6 +85,44 @@ pub fn deform_file(
     save_field: Option<&Path>,
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo)> {
+    let set = ResultSet::new();
+    let done = deform_in(
+        &set,
+        input,
+        (output, save_field),
+        spec,
+        params,
+        chunk,
+        observer,
+    )?;
+    set.commit()?;
+    Ok(done)
+}
+
+/// Refuses `outputs` (each with what it is, for the message) that would replace one of
+/// `inputs` or each other: before any work, in every face.
+pub(super) fn refuse_clobbering(inputs: &[&Path], outputs: &[(&str, &Path)]) -> Result<()> {
+    for (_, output) in outputs {
+        for input in inputs {
+            io::refuse_overwrite(input, output)?;
+        }
+    }
+    io::refuse_same_outputs(outputs)
+}
+
+/// [`deform_file`] with its outputs handed to `set` (renamed into place by the caller).
+pub(super) fn deform_in(
+    set: &ResultSet,
+    input: &Path,
+    (output, save_field): (&Path, Option<&Path>),
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    observer: &dyn Observer,
+) -> Result<(Solution<3>, FileInfo)> {
+    let mut outputs = vec![("the output", output)];
+    outputs.extend(save_field.map(|f| ("the saved field", f)));
+    refuse_clobbering(&[input], &outputs)?;
     let mut source = io::open(input)?;
     let mut info = FileInfo::default();
     let (
@@ -99,13 +139,10 @@ pub fn deform_file(
         spec,
         params,
         chunk,
-        save_field,
+        save_field.map(|f| (f, set)),
         &mut info,
         observer,
     )?;
-    // The field is written before the output; should the output fail, the field goes too (a
-    // run that fails leaves no file under any name it was given).
-    let mut saved_guard = RemoveOnDrop(save_field);
     let origin = saved.field.origin;
     // Every sample made the cells, so none lies beyond the margin.
     let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
@@ -134,7 +171,7 @@ pub fn deform_file(
     let moved = (info.proxy.after.len() as u64 == source.len()).then_some(&info.proxy.after[..]);
     info.notes.extend(transfer_pass(
         source.as_mut(),
-        output,
+        (output, set),
         &deformer,
         &origin,
         moved,
@@ -163,12 +200,12 @@ pub fn deform_file(
         controls,
         warnings,
     );
-    saved_guard.0 = None;
     Ok((solution, info))
 }
 
 /// Pass 1 over `source` and the stages after it ([`stages::run`]): the field (with the RBF's
-/// factorization when that is the transfer), saved to `save_field` when given, and the proxy
+/// factorization when that is the transfer), saved to `save_field` (staged in its set) when
+/// given, and the proxy
 /// of pass 1. What [`deform_file`] does before its transfer pass, and all that [`solve_files`]
 /// does. Fills `info`'s samples, notes and read time.
 fn solve_source(
@@ -176,7 +213,7 @@ fn solve_source(
     spec: &EditSpec<3>,
     params: &DeformParams,
     chunk: usize,
-    save_field: Option<&Path>,
+    save_field: Option<(&Path, &ResultSet)>,
     info: &mut FileInfo,
     observer: &dyn Observer,
 ) -> Result<(Staged<3>, Proxy)> {
@@ -199,8 +236,8 @@ fn solve_source(
         selections,
     };
     let staged = stages::run(cells, spec, params, observer)?;
-    if let Some(path) = save_field {
-        staged.saved.save(path)?;
+    if let Some((path, set)) = save_field {
+        set.write(path, &staged.saved.to_bytes()?)?;
     }
     Ok((staged, proxy))
 }
@@ -219,7 +256,10 @@ pub fn solve_files(
     save_field: &Path,
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo)> {
+    let inputs_: Vec<&Path> = inputs.iter().map(|p| p.as_path()).collect();
+    refuse_clobbering(&inputs_, &[("the saved field", save_field)])?;
     let mut tiles = io::Tiles::open(inputs)?;
+    let set = ResultSet::new();
     let mut info = FileInfo::default();
     let params = DeformParams {
         proxy_samples: Some(0),
@@ -230,11 +270,10 @@ pub fn solve_files(
         spec,
         &params,
         chunk,
-        Some(save_field),
+        Some((save_field, &set)),
         &mut info,
         observer,
     )?;
-    let mut guard = RemoveOnDrop(Some(save_field));
     let Staged {
         solution,
         saved,
@@ -252,19 +291,8 @@ pub fn solve_files(
         controls,
         warnings,
     );
-    guard.0 = None;
+    set.commit()?;
     Ok((solution, info))
-}
-
-/// Removes the file it names when dropped, unless disarmed (`.0 = None`).
-struct RemoveOnDrop<'a>(Option<&'a Path>);
-
-impl Drop for RemoveOnDrop<'_> {
-    fn drop(&mut self) {
-        if let Some(path) = self.0 {
-            let _ = std::fs::remove_file(path);
-        }
-    }
 }
 
 /// Applies the field saved in `field` to the file `input`, writing `output` (one streaming
@@ -283,6 +311,7 @@ pub fn apply_file(
     observer: &dyn Observer,
 ) -> Result<FileInfo> {
     params.check()?;
+    refuse_clobbering(&[input, field], &[("the output", output)])?;
     let mut source = io::open(input)?;
     // Beyond the margin, `--outside extend` takes the nearest patch of the whole field.
     let hint = match (params.transfer, params.outside) {
@@ -303,27 +332,33 @@ pub fn apply_file(
         )));
     }
     let windowed = saved.is_window();
-    let info = apply_saved(saved, source.as_mut(), output, params, chunk, observer)?;
-    match info {
-        Applied::Done(info) => Ok(*info),
+    let set = ResultSet::new();
+    let to = (output, &set);
+    let info = apply_saved(saved, source.as_mut(), to, params, chunk, observer)?;
+    let info = match info {
+        Applied::Done(info) => *info,
         Applied::BeyondWindow(count) => {
             let whole = SavedField::<3>::load(field)?;
             debug_assert!(windowed);
-            match apply_saved(whole, source.as_mut(), output, params, chunk, observer)? {
+            match apply_saved(whole, source.as_mut(), to, params, chunk, observer)? {
                 Applied::Done(mut info) => {
                     info.notes.push(format!(
                         "{count} samples lay outside the bounds in {}'s header; the whole \
                          field was read",
                         input.display()
                     ));
-                    Ok(*info)
+                    *info
                 }
-                Applied::BeyondWindow(_) => Err(Error::Solver(
-                    "a whole field reported samples outside its window".into(),
-                )),
+                Applied::BeyondWindow(_) => {
+                    return Err(Error::Solver(
+                        "a whole field reported samples outside its window".into(),
+                    ));
+                }
             }
         }
-    }
+    };
+    set.commit()?;
+    Ok(info)
 }
 
 /// What [`apply_saved`] did: applied the field, or met samples outside the window of the
@@ -336,7 +371,7 @@ enum Applied {
 fn apply_saved(
     field: SavedField<3>,
     source: &mut dyn Source,
-    output: &Path,
+    output: (&Path, &ResultSet),
     params: &ApplyParams,
     chunk: usize,
     observer: &dyn Observer,

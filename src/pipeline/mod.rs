@@ -230,6 +230,7 @@ pub fn deform_xy_file(
             output.display()
         )));
     }
+    files::refuse_clobbering(&[input], &[("the output", output)])?;
     let file = io::XyFile::read(input)?;
     let (moved, solution, info) = deform(file.points(), &[], spec, params, observer)?;
     file.write(output, &moved)?;

@@ -7,14 +7,15 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::error::Result;
-use crate::interrupt::ResultSet;
+use crate::io::ResultSet;
 use crate::progress::Observer;
 use crate::render::View;
 use crate::report::Report;
 use crate::solve::Solution;
 use crate::spec::EditSpec;
 
-use super::{DeformParams, FOLDOVER_SAMPLES, FileInfo, PROXY_SAMPLES, deform_file};
+use super::files::{deform_in, refuse_clobbering};
+use super::{DeformParams, FOLDOVER_SAMPLES, FileInfo, PROXY_SAMPLES};
 
 /// What is written beside a deformed file.
 #[derive(Debug, Clone, Copy, Default)]
@@ -29,8 +30,10 @@ pub struct Outputs<'a> {
 }
 
 /// [`deform_file`] of `input` into `output` with the `outputs` beside it: the proxy is the
-/// preview's when a preview is asked (else the fold-over check's), and an error or an
-/// interrupt on the way leaves none of the files. Returns the solution, what the pass did and
+/// preview's when a preview is asked (else the fold-over check's). The files are renamed into
+/// place together at the end: an error or an interrupt on the way leaves none of them, and an
+/// output that names the input, or two that name one file, are refused before any work.
+/// Returns the solution, what the pass did and
 /// the report (whether or not it is written).
 pub fn deform_file_with(
     input: &Path,
@@ -42,6 +45,11 @@ pub fn deform_file_with(
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo, Report)> {
     let start = Instant::now();
+    let mut named = vec![("the output", output)];
+    named.extend(outputs.save_field.map(|p| ("the saved field", p)));
+    named.extend(outputs.report.map(|p| ("the report", p)));
+    named.extend(outputs.preview.map(|(p, _, _)| ("the preview", p)));
+    refuse_clobbering(&[input], &named)?;
     if let Some((path, view, _)) = &outputs.preview {
         crate::render::png_path(path)?;
         view.check()?;
@@ -55,14 +63,14 @@ pub fn deform_file_with(
         }),
         ..*params
     };
-    let set = ResultSet::open();
-    let (solution, info) = deform_file(
+    let set = ResultSet::new();
+    let (solution, info) = deform_in(
+        &set,
         input,
-        output,
+        (output, outputs.save_field),
         spec,
         &params,
         chunk,
-        outputs.save_field,
         observer,
     )?;
     let report = Report::new(
@@ -73,11 +81,12 @@ pub fn deform_file_with(
         start.elapsed().as_secs_f64(),
     );
     if let Some(path) = outputs.report {
-        report.write(path)?;
+        set.write(path, &report.json(path)?)?;
     }
     if let Some((path, view, strain)) = &outputs.preview {
-        crate::preview::preview(&solution, &info.proxy, view, *strain).write_png(path)?;
+        let picture = crate::preview::preview(&solution, &info.proxy, view, *strain);
+        set.write(path, &picture.png(path)?)?;
     }
-    set.close();
+    set.commit()?;
     Ok((solution, info, report))
 }

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::field::{Constrained, Order, Warp, apply_in_order};
-use crate::io::{Accepted, Bounds, Chunk, Sink, Source};
+use crate::io::{Accepted, Bounds, Chunk, ResultSet, Sink, Source};
 use crate::progress::Observer;
 use crate::rigid::Vect;
 
@@ -34,8 +34,8 @@ const IN_FLIGHT: usize = 5;
 /// for what the refusal showed: after an overflow of the output's encoding the pass first
 /// finishes computing the moved bounds. Each refusal is allowed once: a sink framed for the
 /// moved bounds fits them, and a source that has seen the records makes a header for them.
-/// Samples beyond the field's margin, when `warp` refuses them, fail the pass before the output
-/// is renamed into place.
+/// The finished output is handed to `set`, to be renamed into place with the run's other
+/// outputs; samples beyond the field's margin, when `warp` refuses them, fail the pass before.
 ///
 /// `moved`, when given, holds every sample already moved by `warp`, in file order (a mesh's
 /// vertices, moved for the fold-over check): the pass copies them rather than warp them again,
@@ -44,7 +44,7 @@ const IN_FLIGHT: usize = 5;
 /// taken only where `warp` extends the transfer there, never where it refuses such samples.
 pub(super) fn transfer_pass(
     source: &mut dyn Source,
-    output: &Path,
+    (output, set): (&Path, &ResultSet),
     warp: &Constrained<3>,
     origin: &Vect<3>,
     moved: Option<&[Vect<3>]>,
@@ -86,7 +86,7 @@ pub(super) fn transfer_pass(
                 s.loose_normals(loose);
                 // Finishing may be long (a COPC sorts and compresses every point there).
                 observer.stage("finishing", 0);
-                let finished = s.finish();
+                let finished = s.finish(set);
                 observer.finish();
                 return finished;
             }

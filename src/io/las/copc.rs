@@ -37,7 +37,7 @@ use super::coords::{Frame, encode};
 use super::header::{LasHeader, SOFTWARE, VlrRecord, standard_record_len};
 use super::raw::{EVLR_HEADER, HEADER_1_4, RawHeader, RawVlrHeader, VLR_HEADER, text_field};
 use crate::error::{Error, Result};
-use crate::io::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
+use crate::io::stream::{Accepted, Chunk, OutFile, ResultSet, Sink, TempFile};
 use crate::rigid::Vect;
 
 /// The deepest octree level; points declined by every level down to it go to its nodes.
@@ -230,7 +230,7 @@ impl Sink for CopcSink {
         Ok(Accepted::Yes)
     }
 
-    fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
+    fn finish(mut self: Box<Self>, set: &ResultSet) -> Result<Vec<String>> {
         let (spill, w) = self.spill.take().expect("open until finish");
         let io = |p: &Path| {
             let p = p.to_path_buf();
@@ -241,7 +241,7 @@ impl Sink for CopcSink {
             .map_err(|e| io(spill.path())(e.into_error()))?;
         let (tmp, out) = TempFile::create(&self.output)?;
         write_copc(&self, spill.path(), out, tmp.path())?;
-        tmp.commit()?;
+        set.stage(tmp)?;
         drop(spill);
         Ok(std::mem::take(&mut self.notes))
     }
@@ -739,7 +739,9 @@ mod tests {
             let moved = chunk.positions.clone();
             assert_eq!(sink.write(&chunk, &moved, &[]).unwrap(), Accepted::Yes);
         }
-        Box::new(sink).finish().unwrap();
+        let set = ResultSet::new();
+        Box::new(sink).finish(&set).unwrap();
+        set.commit().unwrap();
         assert_eq!(positions(&input), positions(&output));
         // Each node's points lie in its cube.
         let bytes = std::fs::read(&output).unwrap();

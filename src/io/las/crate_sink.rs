@@ -15,7 +15,7 @@ use super::header::{SOFTWARE, return_number};
 use super::raw::{HEADER_1_4, RawHeader};
 use super::{Input, LAZ_BATCH};
 use crate::error::{Error, Result};
-use crate::io::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
+use crate::io::stream::{Accepted, Chunk, OutFile, ResultSet, Sink, TempFile};
 use crate::rigid::Vect;
 
 /// LAZ in or out, through the `las` crate's raw slab path.
@@ -167,7 +167,7 @@ impl Sink for CrateSink {
         Ok(accepted)
     }
 
-    fn finish(mut self: Box<Self>) -> Result<Vec<String>> {
+    fn finish(mut self: Box<Self>, set: &ResultSet) -> Result<Vec<String>> {
         self.flush()?;
         let target = self.target();
         let mut writer = self.writer.take().expect("writer open until finish");
@@ -188,7 +188,7 @@ impl Sink for CrateSink {
             file.write_all(&raw.to_bytes())
         };
         restore().map_err(|e| Error::write(&target, e))?;
-        self.tmp.take().expect("open until finish").commit()?;
+        set.stage(self.tmp.take().expect("open until finish"))?;
         Ok(std::mem::take(&mut self.notes))
     }
 }

@@ -12,7 +12,7 @@ use super::coords::{Frame, encode};
 use super::header::{LasHeader, SOFTWARE};
 use super::raw::{RawHeader, text_field};
 use crate::error::{Error, Result};
-use crate::io::stream::{Accepted, Chunk, OutFile, Sink, TempFile};
+use crate::io::stream::{Accepted, Chunk, OutFile, ResultSet, Sink, TempFile};
 use crate::rigid::Vect;
 
 /// LAS → LAS without the `las` crate: header, VLRs and trailing bytes copied verbatim.
@@ -96,7 +96,7 @@ impl Sink for MappedSink {
         false
     }
 
-    fn finish(self: Box<Self>) -> Result<Vec<String>> {
+    fn finish(self: Box<Self>, set: &ResultSet) -> Result<Vec<String>> {
         let Self {
             tmp,
             mut out,
@@ -120,7 +120,7 @@ impl Sink for MappedSink {
             .and_then(|_| file.flush())
             .map_err(io)?;
         drop(file);
-        tmp.commit()?;
+        set.stage(tmp)?;
         Ok(notes)
     }
 }

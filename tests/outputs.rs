@@ -1,0 +1,263 @@
+//! Outputs that cannot be hijacked or half-written: temporaries created new under random
+//! names (a planted link is never followed), a result set per run (concurrent runs keep each
+//! other's outputs), every output renamed into place at the run's end (a killed run leaves none
+//! under its final name), and the library's own refusal to write over its input.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::arg;
+use rigidcells::io::{ResultSet, TempFile};
+use rigidcells::pipeline::{self, ApplyParams, CHUNK, Options, Outputs};
+use rigidcells::progress::Silent;
+use rigidcells::spec::read_spec;
+
+/// The names in `dir`, sorted.
+fn names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+fn params() -> pipeline::DeformParams {
+    Options {
+        cell_size: Some(0.5),
+        ..Default::default()
+    }
+    .params()
+    .unwrap()
+}
+
+/// A link planted beside the output, at the name a temporary used to take (`.NAME.PID.tmp`)
+/// and at names of the same shape, is left alone: the file it points to, outside the folder,
+/// keeps its bytes, and the run's output is a new regular file.
+#[cfg(unix)]
+#[test]
+fn a_link_planted_beside_the_output_is_never_followed() {
+    let dir = tempfile::tempdir().unwrap();
+    let outside = tempfile::tempdir().unwrap();
+    let victim = outside.path().join("victim.txt");
+    std::fs::write(&victim, b"precious").unwrap();
+    let (input, out, edit) = common::lifted_bar(dir.path(), 4.0);
+    let field = dir.path().join("bar.field");
+    let report = dir.path().join("bar.json");
+    let pid = std::process::id();
+    for name in ["out.ply", "bar.field", "bar.json"] {
+        for planted in [format!(".{name}.{pid}.tmp"), format!(".{name}.tmp")] {
+            std::os::unix::fs::symlink(&victim, dir.path().join(planted)).unwrap();
+        }
+    }
+    let spec = read_spec::<3>(&edit).unwrap();
+    let outputs = Outputs {
+        save_field: Some(&field),
+        report: Some(&report),
+        preview: None,
+    };
+    pipeline::deform_file_with(&input, &out, &spec, &params(), CHUNK, &outputs, &Silent).unwrap();
+    assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+    for path in [&out, &field, &report] {
+        let meta = std::fs::symlink_metadata(path).unwrap();
+        assert!(meta.file_type().is_file(), "{}", path.display());
+        assert!(meta.len() > 0, "{}", path.display());
+    }
+    // The planted links are still links to the victim, and no temporary is left.
+    let left: Vec<String> = names(dir.path())
+        .into_iter()
+        .filter(|n| n.ends_with(".tmp"))
+        .collect();
+    assert_eq!(left.len(), 6, "{left:?}");
+}
+
+/// Two temporaries for one target have different, unguessable names, and each is a regular
+/// file created new.
+#[test]
+fn temporaries_have_random_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("out.las");
+    let (a, _wa) = TempFile::create(&target).unwrap();
+    let (b, _wb) = TempFile::create(&target).unwrap();
+    assert_ne!(a.path(), b.path());
+    for t in [&a, &b] {
+        let name = t.path().file_name().unwrap().to_string_lossy().into_owned();
+        assert!(
+            name.starts_with(".out.las.") && name.ends_with(".tmp"),
+            "{name}"
+        );
+        assert!(!name.contains(&std::process::id().to_string()), "{name}");
+        assert!(std::fs::symlink_metadata(t.path()).unwrap().is_file());
+    }
+    drop((a, b));
+    assert_eq!(names(dir.path()), Vec::<String>::new());
+}
+
+/// Each run has its own set: a set dropped uncommitted removes its own temporaries and
+/// nothing of another's, committed before, after or between.
+#[test]
+fn result_sets_of_two_runs_are_independent() {
+    let dir = tempfile::tempdir().unwrap();
+    let (kept, lost) = (ResultSet::new(), ResultSet::new());
+    kept.write(&dir.path().join("a.txt"), b"a").unwrap();
+    lost.write(&dir.path().join("b.txt"), b"b").unwrap();
+    kept.write(&dir.path().join("c.txt"), b"c").unwrap();
+    // Nothing is under its final name before the commit.
+    assert!(names(dir.path()).iter().all(|n| n.ends_with(".tmp")));
+    kept.commit().unwrap();
+    drop(lost);
+    assert_eq!(names(dir.path()), ["a.txt", "c.txt"]);
+}
+
+/// Two threads deform at once, one failing after its first pass (its spec selects nothing
+/// there), the other with a saved field and a report: the other's outputs are all there, the
+/// failing one's are not. Two threads writing one output path both succeed.
+#[test]
+fn concurrent_runs_keep_each_others_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, _, edit) = common::lifted_bar(dir.path(), 4.0);
+    let empty = dir.path().join("empty.toml");
+    std::fs::write(
+        &empty,
+        "[[fixed]]\nbox = { min = [50, 50, 50], max = [51, 51, 51] }\n",
+    )
+    .unwrap();
+    let (good, bad) = (
+        read_spec::<3>(&edit).unwrap(),
+        read_spec::<3>(&empty).unwrap(),
+    );
+    for round in 0..4 {
+        let out = dir.path().join(format!("good{round}.ply"));
+        let field = dir.path().join(format!("good{round}.field"));
+        let report = dir.path().join(format!("good{round}.json"));
+        let failed = dir.path().join(format!("bad{round}.ply"));
+        let failed_field = dir.path().join(format!("bad{round}.field"));
+        std::thread::scope(|s| {
+            let ok = s.spawn(|| {
+                let outputs = Outputs {
+                    save_field: Some(&field),
+                    report: Some(&report),
+                    preview: None,
+                };
+                pipeline::deform_file_with(&input, &out, &good, &params(), 97, &outputs, &Silent)
+            });
+            let err = s.spawn(|| {
+                let outputs = Outputs {
+                    save_field: Some(&failed_field),
+                    ..Default::default()
+                };
+                pipeline::deform_file_with(&input, &failed, &bad, &params(), 97, &outputs, &Silent)
+            });
+            ok.join().unwrap().unwrap();
+            err.join().unwrap().unwrap_err();
+        });
+        for path in [&out, &field, &report] {
+            assert!(
+                path.exists(),
+                "round {round}: {} was removed",
+                path.display()
+            );
+        }
+        assert!(!failed.exists() && !failed_field.exists());
+    }
+    // One output path, two writers at once: neither collides with the other's temporary.
+    let same = dir.path().join("same.ply");
+    std::thread::scope(|s| {
+        let runs: Vec<_> = (0..2)
+            .map(|_| {
+                s.spawn(|| {
+                    pipeline::deform_file(&input, &same, &good, &params(), 97, None, &Silent)
+                })
+            })
+            .collect();
+        for r in runs {
+            r.join().unwrap().unwrap();
+        }
+    });
+    assert!(same.exists());
+    assert!(names(dir.path()).iter().all(|n| !n.ends_with(".tmp")));
+}
+
+/// The library refuses what the command line refuses: an output over the input (`deform_file`,
+/// `apply_file` over the input or the field), a saved field over the output, an `.xy` output
+/// over its input; nothing is written and the input keeps its bytes.
+#[test]
+fn the_library_never_writes_over_its_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out, edit) = common::lifted_bar(dir.path(), 4.0);
+    let bytes = std::fs::read(&input).unwrap();
+    let spec = read_spec::<3>(&edit).unwrap();
+    let field = dir.path().join("bar.field");
+    let refused = |r: rigidcells::Result<()>| {
+        let e = r.unwrap_err();
+        assert!(matches!(e, rigidcells::Error::Param(_)), "{e}");
+        e.to_string()
+    };
+    let m = refused(
+        pipeline::deform_file(&input, &input, &spec, &params(), CHUNK, None, &Silent).map(|_| ()),
+    );
+    assert!(m.contains("overwrite the input"), "{m}");
+    let m = refused(
+        pipeline::deform_file(&input, &out, &spec, &params(), CHUNK, Some(&out), &Silent)
+            .map(|_| ()),
+    );
+    assert!(m.contains("name the same file"), "{m}");
+    assert!(!out.exists());
+    pipeline::deform_file(&input, &out, &spec, &params(), CHUNK, Some(&field), &Silent).unwrap();
+    let field_bytes = std::fs::read(&field).unwrap();
+    let apply = |to: &PathBuf| {
+        pipeline::apply_file(&field, &out, to, &ApplyParams::default(), CHUNK, &Silent).map(|_| ())
+    };
+    refused(apply(&out));
+    refused(apply(&field));
+    assert_eq!(std::fs::read(&input).unwrap(), bytes);
+    assert_eq!(std::fs::read(&field).unwrap(), field_bytes);
+}
+
+/// SIGKILL while the output is being written: the field and the report, complete by then, are
+/// not under their names either (they are renamed with the output at the run's end).
+#[cfg(unix)]
+#[test]
+fn a_killed_run_leaves_no_output_under_its_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("terrain.las");
+    data_gen::write_las_terrain(&input, 1_500_000, false).unwrap();
+    let edit = dir.path().join("lift.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [499990, 4999990, -1e4], max = [500300, 5002010, 1e4] }\n\
+         [[handle]]\nbox = { min = [501700, 4999990, -1e4], max = [502010, 5002010, 1e4] }\n\
+         translate = [0, 0, 10]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("out.las");
+    let field = dir.path().join("lift.field");
+    let report = dir.path().join("lift.json");
+    let mut child = common::bin()
+        .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&edit)])
+        .args(["--cell-size", "40", "--transfer", "rbf", "-q"])
+        .args(["--save-field", arg(&field), "--report", arg(&report)])
+        .spawn()
+        .unwrap();
+    // The output's temporary appears when pass 2 starts, after the field was written.
+    let writing = || names(dir.path()).iter().any(|n| n.starts_with(".out.las."));
+    let started = std::time::Instant::now();
+    while !writing() {
+        assert!(started.elapsed().as_secs() < 120, "no output was started");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run finished before its output was started: give it more work"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    for path in [&out, &field, &report] {
+        assert!(
+            !path.exists(),
+            "{} is in place after a kill",
+            path.display()
+        );
+    }
+}
