@@ -5,10 +5,9 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::cells::BuildParams;
 use crate::error::{Error, Result};
 use crate::field::Transfer;
-use crate::pipeline::DeformParams;
+use crate::pipeline::{DeformParams, Options};
 
 /// The edit of the bar and the soup: the left end fixed, the right end turned 90° upwards.
 pub const BEND_SPEC: &str = "# Bend the bar 90 degrees upwards: fix the left end, turn the right end.\n\
@@ -57,14 +56,12 @@ pub fn prepare(out: &Path) -> Result<Demo> {
             output: out.join(format!("{name}_bent.ply")),
             input,
             edit: edit.clone(),
-            params: DeformParams {
-                build: BuildParams {
-                    cell_size: Some(0.25),
-                    ..Default::default()
-                },
+            params: Options {
+                cell_size: Some(0.25),
                 transfer,
                 ..Default::default()
-            },
+            }
+            .params()?,
         });
     }
     // The 2D picture of paper Fig. 7: a gingerbread figure with its arms moved.
@@ -78,10 +75,11 @@ pub fn prepare(out: &Path) -> Result<Demo> {
         input: out.join("gingerbread.png"),
         output: out.join("gingerbread_bent.png"),
         edit: out.join("gingerbread.toml"),
-        params: DeformParams {
+        params: Options {
             transfer: crate::image::IMAGE_TRANSFER,
             ..Default::default()
-        },
+        }
+        .params()?,
     };
     figure.write_png(&picture.input)?;
     crate::io::write_atomic(&picture.edit, data_gen::GINGERBREAD_SPEC.as_bytes())?;

@@ -15,8 +15,7 @@
 //! ```
 //!
 //! ```
-//! use rigidcells::cells::BuildParams;
-//! use rigidcells::pipeline::{deform, DeformParams};
+//! use rigidcells::pipeline::{Options, deform};
 //! use rigidcells::progress::Silent;
 //! use rigidcells::rigid::Vect;
 //! use rigidcells::spec::parse_spec;
@@ -33,10 +32,8 @@
 //!     Path::new("."),
 //!     Path::new("edit.toml"),
 //! )?;
-//! let params = DeformParams {
-//!     build: BuildParams { cell_size: Some(0.25), ..Default::default() },
-//!     ..Default::default()
-//! };
+//! // The user's options, checked, become the parameters (the rest at their defaults).
+//! let params = Options { cell_size: Some(0.25), ..Default::default() }.params()?;
 //! let (moved, solution, info) = deform(&points, &mesh.triangles, &spec, &params, &Silent)?;
 //! assert_eq!(moved.len(), points.len());
 //! assert!(info.solver.converged && solution.complex.len() > 100);

@@ -314,7 +314,7 @@ fn cells_search_keeps_the_complex_a_build_at_its_size_makes() {
 /// the centroid of the handle's samples, moves with the soup's duplicated vertices).
 #[test]
 fn mesh_soup_and_points_give_the_same_cells_and_bend() {
-    use rigidcells::pipeline::{DeformParams, deform};
+    use rigidcells::pipeline::{Options, deform};
     use rigidcells::progress::Silent;
     let (dragon, tris) = mesh("dragon_11k_binary.ply");
     let (soup, soup_tris) = unweld(&dragon, &tris);
@@ -344,16 +344,15 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
         .iter()
         .fold((dragon[0], dragon[0]), |(l, h), p| (l.inf(p), h.sup(p)));
     let cell = (hi - lo).max() / 24.0;
-    let params = DeformParams {
-        build: BuildParams {
-            cell_size: Some(cell),
-            ..Default::default()
-        },
+    let params = Options {
+        cell_size: Some(cell),
         transfer: rigidcells::field::Transfer::Rbf,
         ..Default::default()
-    };
-    let (m, _) = build(&dragon, &tris, &params.build, Budget::default()).unwrap();
-    let (p, pi) = build(&cloud, &[], &params.build, Budget::default()).unwrap();
+    }
+    .params()
+    .unwrap();
+    let (m, _) = build(&dragon, &tris, params.build(), Budget::default()).unwrap();
+    let (p, pi) = build(&cloud, &[], params.build(), Budget::default()).unwrap();
     assert_eq!(pi.inside, Inside::Flood);
     // Every interior cell of one lies within one finest cell of the other's cells.
     let covered = |a: &rigidcells::cells::CellComplex<3>, b: &rigidcells::cells::CellComplex<3>| {
@@ -446,7 +445,7 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
 /// numbers (the default for oriented points) keeps the interior, close to the closed cloud's.
 #[test]
 fn oriented_points_with_a_hole_keep_their_interior() {
-    use rigidcells::pipeline::{CHUNK, DeformParams, file_cells};
+    use rigidcells::pipeline::{CHUNK, Options, file_cells};
     use rigidcells::progress::Silent;
     let dir = tempfile::tempdir().unwrap();
     let doc = Document::read(&shared("meshes/bunny_vn.ply")).unwrap();
@@ -473,14 +472,13 @@ fn oriented_points_with_a_hole_keep_their_interior() {
     let closed = write("closed.ply", &|_| true);
     let holed = write("holed.ply", &|p| p.y > cut);
     let interior = |path: &std::path::Path, inside| {
-        let params = DeformParams {
-            build: BuildParams {
-                cell_size: Some(0.075),
-                inside,
-                ..Default::default()
-            },
+        let params = Options {
+            cell_size: Some(0.075),
+            inside,
             ..Default::default()
-        };
+        }
+        .params()
+        .unwrap();
         let (_, info, _, _) = file_cells(path, None, &params, CHUNK, &Silent).unwrap();
         (info.inside, info.interior_cells)
     };

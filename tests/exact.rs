@@ -9,7 +9,7 @@ use std::path::Path;
 use common::{arg as s, deform, records, run, shared};
 use rigidcells::field::{Constrained, Deformer, Field, Outside, Transfer, Warp};
 use rigidcells::io::{Document, LasHeader};
-use rigidcells::pipeline::{self, DeformParams};
+use rigidcells::pipeline::{self, Options};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::{Dim, Rigid, Vect};
 use rigidcells::spec::parse_spec;
@@ -178,13 +178,12 @@ fn exact_regions_blend_smoothly_into_the_field() {
         Path::new("edit.toml"),
     )
     .unwrap();
-    let params = DeformParams {
-        build: rigidcells::cells::BuildParams {
-            cell_size: Some(0.25),
-            ..Default::default()
-        },
+    let params = Options {
+        cell_size: Some(0.25),
         ..Default::default()
-    };
+    }
+    .params()
+    .unwrap();
     let (_, solution, _) =
         pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
     let field = Field::from_solution(&solution);
@@ -578,14 +577,13 @@ fn a_pinned_point_lands_where_the_pin_sends_it() {
     )
     .unwrap();
     for transfer in [Transfer::Pu, Transfer::Rbf, Transfer::Blend] {
-        let params = DeformParams {
-            build: rigidcells::cells::BuildParams {
-                cell_size: Some(0.25),
-                ..Default::default()
-            },
+        let params = Options {
+            cell_size: Some(0.25),
             transfer,
             ..Default::default()
-        };
+        }
+        .params()
+        .unwrap();
         let (moved, _, _) =
             pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
         let landed = moved[moved.len() - 1];

@@ -667,7 +667,7 @@ fn xyz_streams_like_the_whole_file() {
 #[test]
 fn the_preview_proxy_samples_the_input_and_the_output() {
     use rigidcells::field::Transfer;
-    use rigidcells::pipeline::{DeformParams, deform_file};
+    use rigidcells::pipeline::{Options, deform_file};
     use rigidcells::progress::Silent;
     use rigidcells::spec::read_spec;
     let dir = tempfile::tempdir().unwrap();
@@ -684,11 +684,13 @@ fn the_preview_proxy_samples_the_input_and_the_output() {
     let spec = read_spec::<3>(&spec_path).unwrap();
     let output = dir.path().join("bent.las");
     let max = 1000;
-    let params = DeformParams {
+    let params = Options {
         transfer: Transfer::Blend,
-        proxy_samples: Some(max),
         ..Default::default()
-    };
+    }
+    .params()
+    .and_then(|p| p.with_proxy_samples(max))
+    .unwrap();
     let (_, info) = deform_file(&input, &output, &spec, &params, 4099, None, &Silent).unwrap();
     let proxy = &info.proxy;
     let n = rest.len() as u64;

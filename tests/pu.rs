@@ -4,9 +4,8 @@
 
 use std::path::Path;
 
-use rigidcells::cells::BuildParams;
 use rigidcells::field::{Field, Outside, PuRbf, Rbf, SavedField, Transfer, Warp};
-use rigidcells::pipeline::{self, DeformParams};
+use rigidcells::pipeline::{self, Options};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
 use rigidcells::spec::parse_spec;
@@ -24,13 +23,12 @@ fn bent_bar(cell: f64) -> Field<3> {
         Path::new("edit.toml"),
     )
     .unwrap();
-    let params = DeformParams {
-        build: BuildParams {
-            cell_size: Some(cell),
-            ..Default::default()
-        },
+    let params = Options {
+        cell_size: Some(cell),
         ..Default::default()
-    };
+    }
+    .params()
+    .unwrap();
     let (_, solution, _) =
         pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
     Field::from_solution(&solution)

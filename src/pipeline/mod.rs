@@ -40,25 +40,81 @@ use crate::spec::EditSpec;
 
 use stages::{Cells, Staged, control_results};
 
-/// Parameters of [`deform`].
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+/// Parameters of [`deform`] and the other stage sequences, made only from a user's
+/// [`Options`] ([`Options::params`], which checks them), so every face runs with checked
+/// parameters; the default is the default options' ([`DeformParams::default`]). What a run
+/// needs beyond them (a proxy for previews) its own function sets.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DeformParams {
     /// The cell complex.
-    pub build: BuildParams,
+    pub(crate) build: BuildParams,
     /// The solver.
-    pub solve: SolveParams,
+    pub(crate) solve: SolveParams,
     /// The transfer to the samples.
-    pub transfer: Transfer,
+    pub(crate) transfer: Transfer,
     /// With the RBF transfer: evaluate positions through its far field, each coordinate
     /// within this length of the exact sum's ([`crate::field::Rbf::with_tolerance`]).
-    pub rbf_tolerance: Option<f64>,
+    pub(crate) rbf_tolerance: Option<f64>,
     /// The most samples in the preview proxy of [`deform_file`] (`None`: [`PROXY_SAMPLES`];
-    /// `Some(0)`: no proxy).
-    pub proxy_samples: Option<usize>,
+    /// `Some(0)`: no proxy, for a run that moves no samples).
+    pub(crate) proxy_samples: Option<usize>,
     /// Run the control points' leave-one-out check ([`crate::control::leave_one_out`]).
-    pub check_control_points: bool,
+    pub(crate) check_control_points: bool,
     /// The memory budget of every stage: the cells, the solver, the RBF.
-    pub memory: Budget,
+    pub(crate) memory: Budget,
+}
+
+impl Default for DeformParams {
+    /// The parameters of the default [`Options`]: what `rigidcells deform` runs without flags.
+    fn default() -> Self {
+        Options::default().unchecked()
+    }
+}
+
+impl DeformParams {
+    /// The cell complex's parameters.
+    pub fn build(&self) -> &BuildParams {
+        &self.build
+    }
+
+    /// The solver's parameters.
+    pub fn solve(&self) -> &SolveParams {
+        &self.solve
+    }
+
+    /// The transfer to the samples.
+    pub fn transfer(&self) -> Transfer {
+        self.transfer
+    }
+
+    /// The RBF's far-field tolerance, when given.
+    pub fn rbf_tolerance(&self) -> Option<f64> {
+        self.rbf_tolerance
+    }
+
+    /// Whether the control points' leave-one-out check runs.
+    pub fn check_control_points(&self) -> bool {
+        self.check_control_points
+    }
+
+    /// The memory budget.
+    pub fn memory(&self) -> Budget {
+        self.memory
+    }
+
+    /// These parameters with at most `samples` samples in [`deform_file`]'s preview proxy
+    /// (the fold-over check's and the report's samples among them): 1 or more.
+    pub fn with_proxy_samples(self, samples: usize) -> Result<Self> {
+        if samples == 0 {
+            return Err(Error::Param(
+                "the proxy needs 1 sample or more (the fold-over check runs on it)".into(),
+            ));
+        }
+        Ok(Self {
+            proxy_samples: Some(samples),
+            ..self
+        })
+    }
 }
 
 /// The default bound on the samples of a [`Proxy`].

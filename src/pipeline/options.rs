@@ -1,6 +1,7 @@
-//! The options a user gives a deformation, as the command line and the Python package both
-//! take them, and the one place they become [`DeformParams`]: the defaults, the conflicts
-//! between options and their checks are written here once. Messages name the options by the
+//! The options a user gives a deformation, as the command line, the Python package, the
+//! editor and the Blender add-on take them, and the one place they become [`DeformParams`]
+//! (which nothing else makes): the defaults, the conflicts between options and their checks
+//! are written here once. Messages name the options by the
 //! command line's flags (`--cell-size`); the Python package says them as its keyword
 //! arguments.
 
@@ -111,6 +112,21 @@ impl Options {
             )));
         }
         check_rbf_tolerance(self.rbf_tolerance, Some(self.transfer))?;
+        let params = self.unchecked();
+        let (build, solve) = match self.min_cell_size {
+            Some(size) => solve::adaptive(size, &params.build, &params.solve)?,
+            None => (params.build, params.solve),
+        };
+        Ok(DeformParams {
+            build,
+            solve,
+            ..params
+        })
+    }
+
+    /// The parameters these options give, before the checks of [`Options::params`] and without
+    /// the adaptive cells of `min_cell_size`.
+    pub(super) fn unchecked(&self) -> DeformParams {
         let build = BuildParams {
             cell_size: self.cell_size,
             target_cells: self.cells,
@@ -129,19 +145,15 @@ impl Options {
             refine_strain: self.refine_strain,
             ..Default::default()
         };
-        let (build, solve) = match self.min_cell_size {
-            Some(size) => solve::adaptive(size, &build, &solve)?,
-            None => (build, solve),
-        };
-        Ok(DeformParams {
+        DeformParams {
             build,
             solve,
             transfer: self.transfer,
             rbf_tolerance: self.rbf_tolerance,
+            proxy_samples: None,
             check_control_points: self.check_control_points,
             memory: Budget::given(self.memory_limit),
-            ..Default::default()
-        })
+        }
     }
 }
 
@@ -157,5 +169,52 @@ pub(super) fn check_rbf_tolerance(
             "--rbf-tolerance applies to --transfer rbf only".into(),
         )),
         (Some(t), _) => crate::field::Rbf::<3>::check_tolerance(t),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The parameters a Rust caller gets by default are those of the user's default options
+    /// (the partition-of-unity transfer, the machine's memory budget), checked or not.
+    #[test]
+    fn the_default_parameters_are_the_default_options() {
+        let checked = Options::default().params().unwrap();
+        assert_eq!(DeformParams::default(), checked);
+        assert_eq!(checked.transfer(), Transfer::Pu);
+        assert_eq!(checked.proxy_samples, None);
+    }
+
+    /// Every check of the options holds for the parameters: they cannot be made without it.
+    #[test]
+    fn options_that_contradict_or_are_out_of_range_make_no_parameters() {
+        for options in [
+            Options {
+                cell_size: Some(0.1),
+                cells: Some(100),
+                ..Default::default()
+            },
+            Options {
+                cell_size: Some(-1.0),
+                ..Default::default()
+            },
+            Options {
+                tolerance: f64::NAN,
+                ..Default::default()
+            },
+            Options {
+                rbf_tolerance: Some(0.01),
+                ..Default::default()
+            },
+        ] {
+            assert!(
+                matches!(options.params(), Err(Error::Param(_))),
+                "{options:?}"
+            );
+        }
+        let params = DeformParams::default();
+        assert!(params.with_proxy_samples(0).is_err());
+        assert_eq!(params.with_proxy_samples(5).unwrap().proxy_samples, Some(5));
     }
 }

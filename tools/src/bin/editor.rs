@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use rigidcells::edit::server::Server;
 use rigidcells::edit::{Edit, Editor, HandleEdit, Scene, Selection};
-use rigidcells::pipeline::{DeformParams, PROXY_SAMPLES};
+use rigidcells::pipeline::{Options, PROXY_SAMPLES};
 use tungstenite::Message;
 
 /// The west and east tenths of the scene as screen selections of a view looking down z.
@@ -55,9 +55,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let input = PathBuf::from(args.next().ok_or("usage: editor FILE [CELLS] [UPDATES]")?);
     let cells: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(5000);
     let updates: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(30);
-    let mut params = DeformParams::default();
-    params.build.target_cells = Some(cells);
-    params.transfer = rigidcells::field::Transfer::Pu;
+    let params = Options {
+        cells: Some(cells),
+        transfer: rigidcells::field::Transfer::Pu,
+        ..Default::default()
+    }
+    .params()?;
 
     let t = Instant::now();
     let scene = Scene::load(&input, PROXY_SAMPLES, &rigidcells::progress::Silent)?;

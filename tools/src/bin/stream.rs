@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use las::{Builder, LazParallelism, PointDataBuilder, ReaderOptions, WriterOptions};
 use rigidcells::field::Transfer;
-use rigidcells::pipeline::{CHUNK, DeformParams, deform_file};
+use rigidcells::pipeline::{CHUNK, Options, deform_file};
 use rigidcells::progress::Silent;
 use rigidcells::spec::{parse_spec, read_spec};
 
@@ -64,12 +64,14 @@ fn main() {
     };
     let copy_out = dir.join(format!("rigidcells-stream-copy.{ext}"));
     let out = dir.join(format!("rigidcells-stream-deform.{ext}"));
-    let params = DeformParams {
+    let params = Options {
         transfer: Transfer::Blend,
-        // As the CLI: a proxy for the fold-over check.
-        proxy_samples: Some(rigidcells::pipeline::FOLDOVER_SAMPLES),
         ..Default::default()
-    };
+    }
+    .params()
+    // As the CLI: a proxy for the fold-over check.
+    .and_then(|p| p.with_proxy_samples(rigidcells::pipeline::FOLDOVER_SAMPLES))
+    .unwrap();
     // Alternating runs, medians reported: the copy writes as many bytes as the deform and its
     // time swings with page-cache writeback. `deform` syncs its output before the rename (so
     // that a crash never leaves a file under the output's name that is not whole), so the copy

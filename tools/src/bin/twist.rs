@@ -11,8 +11,7 @@
 use std::time::Instant;
 
 use rigidcells::Error;
-use rigidcells::cells::BuildParams;
-use rigidcells::pipeline::{self, DeformParams};
+use rigidcells::pipeline::{self, Options};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
 use rigidcells::spec::parse_spec;
@@ -46,13 +45,12 @@ fn row(height: f64, cell: f64, degrees: f64) -> Result<(), Box<dyn std::error::E
         height + 1.0
     );
     let spec = parse_spec::<3>(&text, ".".as_ref(), "twist.toml".as_ref())?;
-    let params = DeformParams {
-        build: BuildParams {
-            cell_size: Some(cell),
-            ..Default::default()
-        },
+    let params = Options {
+        cell_size: Some(cell),
         ..Default::default()
-    };
+    }
+    .params()
+    .unwrap();
     let start = Instant::now();
     let result = pipeline::deform(&points, &mesh.triangles, &spec, &params, &Silent);
     let seconds = start.elapsed().as_secs_f64();
