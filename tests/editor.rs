@@ -847,3 +847,76 @@ fn the_editor_keeps_min_cell_size_for_apply() {
     assert_eq!(editor.params(), &params);
     assert!(!editor.complex().is_empty());
 }
+
+/// The bar's vertices (10 × 1 × 1, 4 a unit) and a `Live` on them with cells of 0.5.
+fn live_bar() -> (Vec<rigidcells::rigid::Vect<3>>, rigidcells::pipeline::Live) {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 4.0);
+    let points: Vec<_> = bar
+        .vertices
+        .iter()
+        .map(|p| rigidcells::rigid::Vect::<3>::new(p[0], p[1], p[2]))
+        .collect();
+    let params = rigidcells::pipeline::Options {
+        cell_size: Some(0.5),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let live = rigidcells::pipeline::Live::new(points.clone(), &bar.triangles, Vec::new(), params)
+        .unwrap();
+    (points, live)
+}
+
+/// The bar's left end fixed, and a handle box over its right end per entry of `lifts` (each
+/// lifted by its number; boxes that overlap, as a handle drawn as two boxes is).
+fn handles_spec(lifts: &[f64]) -> rigidcells::spec::EditSpec<3> {
+    let mut text = "[[fixed]]\nbox = { min = [-1, -1, -1], max = [1.5, 2, 2] }\n".to_string();
+    for (k, lift) in lifts.iter().enumerate() {
+        let low = 8.0 + 0.25 * k as f64;
+        text += &format!(
+            "[[handle]]\nbox = {{ min = [{low:?}, -1, -1], max = [11, 2, 2] }}\n\
+             translate = [0, 0, {lift:?}]\n"
+        );
+    }
+    rigidcells::spec::parse_spec::<3>(&text, Path::new("."), Path::new("e.toml")).unwrap()
+}
+
+/// Handles tied by an equal motion, then a spec of fewer handles (the page's Undo), or
+/// nothing and then one handle (Clear and a new box): each solved from rest, and the poses
+/// dragged after it solved warm.
+#[test]
+fn fewer_handles_after_tied_ones_solve() {
+    use rigidcells::progress::Silent;
+    let (_, mut live) = live_bar();
+    let tied = live.solve(handles_spec(&[0.0, 0.0]), 1, &Silent).unwrap();
+    assert!(tied.unwrap().from_rest);
+    // Undo: one box of the two.
+    let one = live
+        .solve(handles_spec(&[0.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(one.from_rest);
+    let drag = live
+        .solve(handles_spec(&[1.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(!drag.from_rest && drag.solver.iterations >= 1, "{drag:?}");
+
+    // Clear, then a new box.
+    live.solve(handles_spec(&[0.5, 0.5]), 1, &Silent).unwrap();
+    let cleared = live.solve(Default::default(), 1, &Silent).unwrap();
+    assert!(cleared.is_none());
+    let again = live
+        .solve(handles_spec(&[0.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(again.from_rest);
+    let drag = live
+        .solve(handles_spec(&[2.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(!drag.from_rest, "{drag:?}");
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+    let top = moved.iter().map(|p| p.z).fold(f64::MIN, f64::max);
+    assert!((top - 3.0).abs() < 1e-6, "the handle's top at {top}");
+}
