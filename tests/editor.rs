@@ -4,6 +4,8 @@
 //! existing file replaced only when confirmed; messages capped; selections of what is visible.
 
 mod common;
+#[path = "editor/limits.rs"]
+mod limits;
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
@@ -91,11 +93,16 @@ fn flat_view() -> serde_json::Value {
     json!([[0.2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0.1, 0], [0, 0, 0, 1]])
 }
 
+/// A box on the flat view's screen over `x` from `a` to `b` (normalized), x-ray.
+fn strip(a: f64, b: f64) -> serde_json::Value {
+    json!({"polygon": [[a, -1.1], [b, -1.1], [b, 1.1], [a, 1.1]], "view": flat_view()})
+}
+
 fn ends(translate: [f64; 3], degrees: f64) -> serde_json::Value {
     json!({
-        "fixed": [{"polygon": [[-1.1, -1.1], [-0.92, -1.1], [-0.92, 1.1], [-1.1, 1.1]], "view": flat_view()}],
+        "fixed": [strip(-1.1, -0.92)],
         "handles": [{
-            "selections": [{"polygon": [[0.92, -1.1], [1.1, -1.1], [1.1, 1.1], [0.92, 1.1]], "view": flat_view()}],
+            "selections": [strip(0.92, 1.1)],
             "translate": translate, "axis": [0, 1, 0], "degrees": degrees, "pivot": [4.8, 0, 0]
         }]
     })
@@ -197,6 +204,67 @@ fn a_websocket_needs_this_origin_and_the_page_is_not_framed_or_referred() {
         .find(|l| l.starts_with("content-security-policy:"))
         .unwrap_or_default();
     assert!(csp.contains("frame-ancestors 'none'"), "{head}");
+}
+
+/// The page runs only the server's own script and styles, nothing inline, and connects only to
+/// the server's own address: its script and styles are files of their own, fetched with the
+/// token.
+#[test]
+fn the_page_runs_no_inline_code_and_connects_only_to_its_server() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve(dir.path());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let host = format!("127.0.0.1:{port}");
+    let (status, head, body) = get_head(port, &format!("/?t={token}"), &host, None);
+    assert_eq!(status, 200);
+    let head = head.to_ascii_lowercase();
+    let csp = head
+        .lines()
+        .find_map(|l| l.strip_prefix("content-security-policy:"))
+        .unwrap_or_default()
+        .to_string();
+    let directive = |name: &str| {
+        csp.split(';')
+            .map(str::trim)
+            .find(|d| d.split_whitespace().next() == Some(name))
+            .map(str::to_string)
+    };
+    assert!(
+        !csp.contains("unsafe-inline") && !csp.contains('*'),
+        "{csp}"
+    );
+    assert_eq!(
+        directive("script-src").as_deref(),
+        Some("script-src 'self'")
+    );
+    assert_eq!(
+        directive("connect-src"),
+        Some(format!(
+            "connect-src 'self' ws://127.0.0.1:{port} ws://localhost:{port}"
+        ))
+    );
+    assert_eq!(
+        directive("default-src").as_deref(),
+        Some("default-src 'none'")
+    );
+    // No inline script or style: each script is a file, named with the token.
+    let page = String::from_utf8(body).unwrap();
+    assert!(!page.contains("<style"), "inline styles");
+    let scripts: Vec<&str> = page.split("<script").skip(1).collect();
+    assert_eq!(scripts.len(), 1, "{page}");
+    assert!(
+        scripts[0].starts_with(&format!(" src=\"page.js?t={token}\"></script>")),
+        "{}",
+        scripts[0]
+    );
+    for (file, kind) in [("page.js", "text/javascript"), ("page.css", "text/css")] {
+        let (status, head, body) = get_head(port, &format!("/{file}?t={token}"), &host, None);
+        assert_eq!(status, 200, "{file}");
+        assert!(head.contains(&format!("Content-Type: {kind}")), "{head}");
+        assert!(body.len() > 1000, "{file}");
+        assert_eq!(get(port, &format!("/{file}"), &host, None).0, 403, "{file}");
+    }
 }
 
 /// Messages are capped at [`MAX_MESSAGE`]: a larger one closes the connection unread, one
@@ -394,8 +462,13 @@ fn a_class_selection_fixes_the_ground() {
     ]);
     let mut editor = Editor::new(scene, params).unwrap();
     let edit: rigidcells::edit::Edit = serde_json::from_value(json!({
-        "fixed": [{"classification": [2]}, {"classification": [2], "polygon": [[-1.1, -1.1], [0.0, -1.1], [0.0, 1.1], [-1.1, 1.1]], "view": view}],
-        "handles": [{"selections": [{"polygon": [[0.9, -1.1], [1.1, -1.1], [1.1, 1.1], [0.9, 1.1]], "view": view}],
+        "fixed": [
+            {"classification": [2]},
+            {"classification": [2], "polygon": [[-1.1, -1.1], [0.0, -1.1], [0.0, 1.1], [-1.1, 1.1]],
+             "view": view}
+        ],
+        "handles": [{"selections": [{"polygon": [[0.9, -1.1], [1.1, -1.1], [1.1, 1.1], [0.9, 1.1]],
+                                     "view": view}],
                      "translate": [0, 0, 5], "axis": [0, 0, 1], "degrees": 0, "pivot": [0, 0, 0]}]
     }))
     .unwrap();
@@ -846,4 +919,277 @@ fn the_editor_keeps_min_cell_size_for_apply() {
     let editor = Editor::new(scene, params).unwrap();
     assert_eq!(editor.params(), &params);
     assert!(!editor.complex().is_empty());
+}
+
+/// The bar's vertices (10 × 1 × 1, 4 a unit) and a `Live` on them with cells of 0.5.
+fn live_bar() -> (Vec<rigidcells::rigid::Vect<3>>, rigidcells::pipeline::Live) {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 4.0);
+    let points: Vec<_> = bar
+        .vertices
+        .iter()
+        .map(|p| rigidcells::rigid::Vect::<3>::new(p[0], p[1], p[2]))
+        .collect();
+    let params = rigidcells::pipeline::Options {
+        cell_size: Some(0.5),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let live = rigidcells::pipeline::Live::new(points.clone(), &bar.triangles, Vec::new(), params)
+        .unwrap();
+    (points, live)
+}
+
+/// The bar's left end fixed, and a handle box over its right end per entry of `lifts` (each
+/// lifted by its number; boxes that overlap, as a handle drawn as two boxes is).
+fn handles_spec(lifts: &[f64]) -> rigidcells::spec::EditSpec<3> {
+    let mut text = "[[fixed]]\nbox = { min = [-1, -1, -1], max = [1.5, 2, 2] }\n".to_string();
+    for (k, lift) in lifts.iter().enumerate() {
+        let low = 8.0 + 0.25 * k as f64;
+        text += &format!(
+            "[[handle]]\nbox = {{ min = [{low:?}, -1, -1], max = [11, 2, 2] }}\n\
+             translate = [0, 0, {lift:?}]\n"
+        );
+    }
+    rigidcells::spec::parse_spec::<3>(&text, Path::new("."), Path::new("e.toml")).unwrap()
+}
+
+/// Handles tied by an equal motion, then a spec of fewer handles (the page's Undo), or
+/// nothing and then one handle (Clear and a new box): each solved from rest, and the poses
+/// dragged after it solved warm.
+#[test]
+fn fewer_handles_after_tied_ones_solve() {
+    use rigidcells::progress::Silent;
+    let (_, mut live) = live_bar();
+    let tied = live.solve(handles_spec(&[0.0, 0.0]), 1, &Silent).unwrap();
+    assert!(tied.unwrap().from_rest);
+    // Undo: one box of the two.
+    let one = live
+        .solve(handles_spec(&[0.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(one.from_rest);
+    let drag = live
+        .solve(handles_spec(&[1.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(!drag.from_rest && drag.solver.iterations >= 1, "{drag:?}");
+
+    // Clear, then a new box.
+    live.solve(handles_spec(&[0.5, 0.5]), 1, &Silent).unwrap();
+    let cleared = live.solve(Default::default(), 1, &Silent).unwrap();
+    assert!(cleared.is_none());
+    let again = live
+        .solve(handles_spec(&[0.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(again.from_rest);
+    let drag = live
+        .solve(handles_spec(&[2.0]), 1, &Silent)
+        .unwrap()
+        .unwrap();
+    assert!(!drag.from_rest, "{drag:?}");
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+    let top = moved.iter().map(|p| p.z).fold(f64::MIN, f64::max);
+    assert!((top - 3.0).abs() < 1e-6, "the handle's top at {top}");
+}
+
+/// The left end fixed and one handle of the `boxes` lifted by `lift`, as the page sends it.
+fn handle_of(boxes: &[(f64, f64)], lift: f64) -> serde_json::Value {
+    let selections: Vec<_> = boxes.iter().map(|&(a, b)| strip(a, b)).collect();
+    json!({
+        "fixed": [strip(-1.1, -0.9)],
+        "handles": [{"selections": selections, "translate": [0, 0, lift], "pivot": [4.8, 0, 0]}]
+    })
+}
+
+/// As the page drives it: a handle made of two overlapping boxes, then Undo (one box), a
+/// drag; then Clear, a new box and a drag. Every edit is answered with motions (the solver
+/// thread lives on), and the last drag lifts the handle.
+#[test]
+fn undo_and_clear_after_a_two_box_handle_are_solved() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve(dir.path());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let mut ws = connect(port, &token);
+    let two = [(0.8, 1.1), (0.9, 1.1)];
+    let steps = [
+        handle_of(&two, 0.0),
+        handle_of(&two[..1], 0.0),
+        handle_of(&two[..1], 0.5),
+        json!({}),
+        handle_of(&two[1..], 0.0),
+        handle_of(&two[1..], 1.0),
+    ];
+    let mut last = Vec::new();
+    for (seq, edit) in steps.iter().enumerate() {
+        let seq = seq as u32 + 1;
+        send(&mut ws, json!({"type": "edit", "seq": seq, "edit": edit}));
+        last = next_binary(&mut ws);
+        assert_eq!((u32_at(&last, 0), u32_at(&last, 1)), (1, seq));
+        assert_eq!(u32_at(&last, 2) == 0, edit == &json!({}), "edit {seq}");
+    }
+    let cells = u32_at(&last, 2) as usize;
+    let maps = f32s(&last[20..20 + 48 * cells]);
+    let top = (0..cells)
+        .map(|c| maps[12 * c + 11])
+        .fold(f32::MIN, f32::max);
+    assert!(top > 0.5, "the handle's cells rose only {top}");
+}
+
+/// A failed solve (a handle's box over the fixed end: a conflict) reaches the page as an error,
+/// and the next edit is solved, from rest.
+#[test]
+fn a_failed_solve_is_said_and_the_next_edit_solved() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve(dir.path());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let mut ws = connect(port, &token);
+    send(
+        &mut ws,
+        json!({"type": "edit", "seq": 1, "edit": handle_of(&[(0.9, 1.1)], 0.5)}),
+    );
+    assert_eq!(u32_at(&next_binary(&mut ws), 1), 1);
+    send(
+        &mut ws,
+        json!({"type": "edit", "seq": 2, "edit": handle_of(&[(-1.1, 1.1)], 1.0)}),
+    );
+    let m = next_text(&mut ws);
+    assert_eq!(m["type"], "error", "{m}");
+    assert!(m["message"].as_str().unwrap().contains("handle"), "{m}");
+    send(
+        &mut ws,
+        json!({"type": "edit", "seq": 3, "edit": handle_of(&[(0.9, 1.1)], 1.0)}),
+    );
+    let b = next_binary(&mut ws);
+    assert_eq!(u32_at(&b, 1), 3);
+    assert!(
+        u32_at(&b, 3) > 1,
+        "solved from rest: {} iterations",
+        u32_at(&b, 3)
+    );
+}
+
+/// *Apply* writes, byte for byte, what the command in the saved spec's comment writes
+/// (`rigidcells deform IN -o OUT --edit THIS.toml` with the editor's options), and warns as
+/// it does (the fold-over check included), on a real scan; the comment names the input by its
+/// absolute path.
+#[test]
+fn apply_writes_what_the_cli_writes_for_the_saved_spec() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = common::shared("meshes/dragon_11k_binary.ply");
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let (lo, hi) = scene.bounds;
+    let half = (hi - lo) * 0.5;
+    let params = rigidcells::pipeline::Options {
+        cells: Some(3000),
+        transfer: rigidcells::field::Transfer::Pu,
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let editor = Editor::new(scene, params).unwrap();
+    let server = Server::bind(editor, 0, Some(dir.path())).unwrap();
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let mut ws = connect(port, &token);
+    // The screen is x and y of the scan, its bounds at ±1.
+    let view = json!([
+        [1.0 / half.x, 0, 0, 0],
+        [0, 1.0 / half.y, 0, 0],
+        [0, 0, 0.1 / half.z, 0],
+        [0, 0, 0, 1]
+    ]);
+    let strip = |a: f64, b: f64| {
+        let ring = [[a, -1.1], [b, -1.1], [b, 1.1], [a, 1.1]];
+        json!({"polygon": ring, "view": view})
+    };
+    let edit = json!({
+        "fixed": [strip(-1.1, -0.6)],
+        "handles": [{"selections": [strip(0.6, 1.1)], "translate": [0, half.y, 0],
+            "axis": [0, 0, 1], "degrees": 150.0, "pivot": [0.8 * half.x, 0, 0]}]
+    });
+    send(
+        &mut ws,
+        json!({"type": "save", "name": "d.edit.toml", "edit": edit}),
+    );
+    assert_eq!(next_text(&mut ws)["type"], "saved");
+    send(
+        &mut ws,
+        json!({"type": "apply", "name": "applied.ply", "edit": edit}),
+    );
+    let applied = loop {
+        let m = next_text(&mut ws);
+        match m["type"].as_str() {
+            Some("progress") => {}
+            Some("applied") => break m,
+            _ => panic!("{m}"),
+        }
+    };
+
+    let spec = dir.path().join("d.edit.toml");
+    let text = std::fs::read_to_string(&spec).unwrap();
+    let canonical = std::fs::canonicalize(&input).unwrap();
+    let command = text.lines().nth(1).unwrap().trim_start_matches('#').trim();
+    let words: Vec<&str> = command.split_whitespace().collect();
+    assert_eq!(words[..2], ["rigidcells", "deform"], "{command}");
+    assert_eq!(Path::new(words[2]), canonical, "{command}");
+    let out = dir.path().join("cli.ply");
+    let args: Vec<&str> = words[1..]
+        .iter()
+        .map(|&w| match w {
+            "OUT" => out.to_str().unwrap(),
+            "THIS.toml" => spec.to_str().unwrap(),
+            w => w,
+        })
+        .collect();
+    let cli = common::run(&args);
+    assert_eq!(cli.code, 0, "{command}: {}", cli.stderr);
+    assert_eq!(
+        std::fs::read(dir.path().join("applied.ply")).unwrap(),
+        std::fs::read(&out).unwrap(),
+        "{command}"
+    );
+    let said: Vec<&str> = cli
+        .stderr
+        .lines()
+        .filter_map(|l| l.strip_prefix("warning: "))
+        .collect();
+    let warned: Vec<&str> = applied["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap())
+        .collect();
+    assert_eq!(warned, said);
+    assert!(said.iter().any(|w| w.contains("fold")), "{said:?}");
+}
+
+/// The saved spec's comment names the input by its absolute path (links resolved), whatever
+/// path the editor was given and whatever its working folder.
+#[test]
+fn the_saved_spec_names_the_input_absolute() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, input) = serve(dir.path());
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    // The same file through `..`, and relative to the working folder.
+    let cwd = std::env::current_dir().unwrap();
+    let up = "../".repeat(cwd.components().count() - 1);
+    let given = Path::new(&up).join(dir.path().join("sub/../bar.ply").strip_prefix("/").unwrap());
+    assert!(given.is_relative() && given.exists(), "{}", given.display());
+    let scene = Scene::load(&given, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let editor = Editor::new(scene, DeformParams::default()).unwrap();
+    let text = editor.spec_text(&serde_json::from_value(ends([0.0; 3], 0.0)).unwrap());
+    let canonical = std::fs::canonicalize(&input).unwrap();
+    let first = text.lines().next().unwrap();
+    assert_eq!(
+        first,
+        format!(
+            "# rigidcells edit of {}: the CLI reproduces it with",
+            canonical.display()
+        )
+    );
+    assert!(!text.contains(".."), "{text}");
 }

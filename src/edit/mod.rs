@@ -15,8 +15,8 @@
 //! While dragging, the page blends the cells' motions itself on the GPU ([`Editor::blend`]:
 //! each proxy sample's four nearest cells and weights, the continuous blend of
 //! [`crate::field::Blend`], sent once: [`crate::pipeline::Live::blend_weights`]), so drawing
-//! costs the same whatever the solver does. On release, [`Editor::release`] runs the chosen transfer on the proxy with the exact
-//! constraints, and counts fold-overs as `deform` does.
+//! costs the same whatever the solver does. On release, [`Editor::release`] runs the chosen
+//! transfer on the proxy with the exact constraints, and counts fold-overs as `deform` does.
 //!
 //! Which samples a selection holds is decided here, never by the page ([`Editor::selected`]):
 //! the selection is written as the spec region the CLI reads and evaluated as the solve
@@ -48,7 +48,8 @@ use crate::spec::EditSpec;
 /// The proxy of the input the editor shows and solves on.
 #[derive(Debug, Clone, Default)]
 pub struct Scene {
-    /// The input file.
+    /// The input file, absolute (links resolved): what the saved spec's comment names, the
+    /// same whatever folder the editor was started in.
     pub input: PathBuf,
     /// Samples (world coordinates).
     pub points: Vec<Vect<3>>,
@@ -116,7 +117,7 @@ impl Scene {
         let Some(bounds) = crate::render::bounds(&scene.points) else {
             return Err(Error::format(input, "no samples to edit"));
         };
-        scene.input = input.to_path_buf();
+        scene.input = std::fs::canonicalize(input).map_err(|e| Error::io(input, e))?;
         scene.center = (bounds.0 + bounds.1) * 0.5;
         scene.bounds = bounds;
         scene.up = crate::render::up_of(input);
@@ -128,6 +129,19 @@ impl Scene {
         relative(&self.points, &self.center)
     }
 }
+
+/// The most vertices of a selection's polygon: the page's lasso keeps at most this many (it
+/// halves a longer one), and the server refuses more.
+pub const MAX_POLYGON: usize = 4096;
+/// The most selections of an edit (fixed, and every handle's): each is a pass over the proxy's
+/// samples.
+pub const MAX_SELECTIONS: usize = 256;
+/// The most handles of an edit (each has its gizmo on the page).
+pub const MAX_HANDLES: usize = 64;
+/// The most pins of an edit (each a click on the page).
+pub const MAX_PINS: usize = 256;
+/// The most LAS classes a selection names (there are 256).
+pub const MAX_CLASSES: usize = 256;
 
 /// A selection the page made: a box or lasso on the screen (`polygon` in normalized device
 /// coordinates with the `view` it was drawn in), LAS classes, or both (then both must hold).
@@ -236,26 +250,31 @@ impl Editor {
     /// With `--min-cell-size` or `--refine-strain` the page's cells are those the first
     /// solve starts on (a live session keeps its cells); *Apply* refines as `deform` does.
     pub fn new(scene: Scene, params: DeformParams) -> Result<Self> {
-        let unrefined = DeformParams {
-            solve: crate::solve::SolveParams {
-                refine_strain: None,
-                refine_fraction: None,
-                ..params.solve
-            },
-            ..params
-        };
-        let live = Live::new(
-            scene.points.clone(),
-            &scene.triangles,
-            scene.classes.clone(),
-            unrefined,
-        )?;
+        let live = live(&scene, &params)?;
         Ok(Self {
             scene,
             params,
             live,
             text: None,
         })
+    }
+
+    /// Ends the live session: the next edit is solved from rest (after a failed solve, whose
+    /// session may hold what it did not solve).
+    pub fn reset(&mut self) {
+        self.text = None;
+        // An empty spec constrains nothing: it only drops the session.
+        let _ = self
+            .live
+            .solve(EditSpec::default(), DRAG_ITERATIONS, &Silent);
+    }
+
+    /// Builds the live deformation again, as [`Editor::new`] did (the same cells): after a
+    /// failure that may have left it half-changed.
+    pub fn restart(&mut self) -> Result<()> {
+        self.text = None;
+        self.live = live(&self.scene, &self.params)?;
+        Ok(())
     }
 
     /// The scene.
@@ -299,19 +318,18 @@ impl Editor {
         spec_text(edit, &self.scene, &self.flags())
     }
 
-    /// The `deform` options that build these cells and this transfer.
+    /// The `deform` options of [`Editor::params`], as the command line writes them (those left
+    /// at their defaults left out): with them, `deform` of the input under a saved spec writes
+    /// what *Apply* writes.
     pub fn flags(&self) -> String {
-        format!(
-            "--cell-size {:?} --transfer {}",
-            self.live.complex().grid.finest_size(),
-            self.params.transfer
-        )
+        flags(&self.params).join(" ")
     }
 
     /// Solves `edit`: warm from the current motions when only the poses changed since the
     /// last call, one Gauss-Newton iteration ([`DRAG_ITERATIONS`]), from rest when the
     /// selections did ([`Live::solve`]). `None` when the edit constrains nothing.
     pub fn solve(&mut self, edit: &Edit) -> Result<Option<Motions>> {
+        edit.check()?;
         let text = self.spec_text(edit);
         if edit.is_empty() {
             self.text = None;
@@ -395,6 +413,7 @@ impl Editor {
     /// `visible` in a cell the camera sees ([`crate::solve::Sight`]).
     pub fn selected(&self, selection: &Selection) -> Result<Vec<bool>> {
         use rayon::prelude::*;
+        selection.check()?;
         let edit = Edit {
             fixed: vec![selection.clone()],
             ..Default::default()
@@ -451,13 +470,150 @@ impl Editor {
     }
 }
 
+impl Selection {
+    /// Refuses a selection beyond the page's limits ([`MAX_POLYGON`] vertices,
+    /// [`MAX_CLASSES`] classes): the work of each message the server takes stays bounded.
+    pub fn check(&self) -> Result<()> {
+        let vertices = self.polygon.as_ref().map_or(0, Vec::len);
+        if vertices > MAX_POLYGON {
+            return Err(Error::Param(format!(
+                "a polygon of {vertices} vertices; the editor takes at most {MAX_POLYGON}: \
+                 draw a simpler lasso"
+            )));
+        }
+        let classes = self.classification.as_ref().map_or(0, Vec::len);
+        if classes > MAX_CLASSES {
+            return Err(Error::Param(format!(
+                "a selection of {classes} classes; the editor takes at most {MAX_CLASSES}"
+            )));
+        }
+        Ok(())
+    }
+}
+
 impl Edit {
+    /// Refuses an edit beyond the page's limits ([`MAX_HANDLES`] handles, [`MAX_PINS`] pins,
+    /// [`MAX_SELECTIONS`] selections, each selection within [`Selection::check`]): the work of
+    /// each message the server takes stays bounded.
+    pub fn check(&self) -> Result<()> {
+        let too_many = |count: usize, what: &str, most: usize| {
+            Err(Error::Param(format!(
+                "an edit of {count} {what}; the editor takes at most {most}"
+            )))
+        };
+        if self.handles.len() > MAX_HANDLES {
+            return too_many(self.handles.len(), "handles", MAX_HANDLES);
+        }
+        if self.pins.len() > MAX_PINS {
+            return too_many(self.pins.len(), "pins", MAX_PINS);
+        }
+        let selections = self.fixed.len()
+            + self
+                .handles
+                .iter()
+                .map(|h| h.selections.len())
+                .sum::<usize>();
+        if selections > MAX_SELECTIONS {
+            return too_many(selections, "selections", MAX_SELECTIONS);
+        }
+        self.fixed
+            .iter()
+            .chain(self.handles.iter().flat_map(|h| &h.selections))
+            .try_for_each(Selection::check)
+    }
+
     /// Whether the edit selects nothing yet.
     pub fn is_empty(&self) -> bool {
         self.fixed.is_empty()
             && self.pins.is_empty()
             && self.handles.iter().all(|h| h.selections.is_empty())
     }
+}
+
+/// The live deformation of `scene`'s samples with `params`, on cells that are not refined
+/// ([`Live::new`] refuses refinement; *Apply* refines).
+fn live(scene: &Scene, params: &DeformParams) -> Result<Live> {
+    let unrefined = DeformParams {
+        solve: crate::solve::SolveParams {
+            refine_strain: None,
+            refine_fraction: None,
+            ..params.solve
+        },
+        ..*params
+    };
+    Live::new(
+        scene.points.clone(),
+        &scene.triangles,
+        scene.classes.clone(),
+        unrefined,
+    )
+}
+
+/// The command line's options that give `params` (as [`crate::pipeline::Options::params`]
+/// makes them), each with its value; options at their defaults are left out, the transfer is
+/// always named.
+fn flags(params: &DeformParams) -> Vec<String> {
+    let (build, solve) = (&params.build, &params.solve);
+    let mut out = Vec::new();
+    match (solve.refine_fraction, build.target_cells, build.cell_size) {
+        (Some(_), _, Some(size)) => out.push(format!("--min-cell-size {size:?}")),
+        (_, Some(cells), _) => out.push(format!("--cells {cells}")),
+        (_, None, Some(size)) => out.push(format!("--cell-size {size:?}")),
+        _ => {}
+    }
+    if let Some(levels) = build.max_level {
+        out.push(format!("--max-level {levels}"));
+    }
+    if build.inside != crate::cells::Inside::Auto {
+        out.push(format!("--inside {}", build.inside));
+    }
+    if solve.method != crate::solve::Method::Auto {
+        out.push(format!("--solver {}", solve.method));
+    }
+    if solve.move_tolerance != solve::MOVE_TOLERANCE {
+        out.push(format!("--tolerance {:?}", solve.move_tolerance));
+    }
+    if let Some(levels) = solve.coarse_levels {
+        out.push(format!("--coarse-levels {levels}"));
+    }
+    if !solve.carry_loose {
+        out.push(format!("--loose-parts {}", solve::LooseParts::Rest));
+    }
+    if let Some(strain) = solve.refine_strain {
+        out.push(format!("--refine-strain {strain:?}"));
+    }
+    out.push(format!("--transfer {}", params.transfer));
+    if let Some(tolerance) = params.rbf_tolerance {
+        out.push(format!("--rbf-tolerance {tolerance:?}"));
+    }
+    out
+}
+
+/// `path` as one word of a POSIX shell, on one line: as it is when it needs no quoting, else in
+/// single quotes, and with bash's `$'…'` escapes when it holds a control character (a comment
+/// line of TOML holds none).
+fn shell_word(path: &Path) -> String {
+    let text = path.to_string_lossy();
+    let plain = |c: char| c.is_ascii_alphanumeric() || "/._-+,:@%=".contains(c);
+    if !text.is_empty() && text.chars().all(plain) {
+        return text.into_owned();
+    }
+    if !text.chars().any(char::is_control) {
+        return format!("'{}'", text.replace('\'', r"'\''"));
+    }
+    let mut out = String::from("$'");
+    for c in text.chars() {
+        match c {
+            '\'' | '\\' => {
+                out.push('\\');
+                out.push(c);
+            }
+            c if c.is_control() => out += &format!("\\u{:04x}", u32::from(c)),
+            c => out.push(c),
+        }
+    }
+    out.push('\'');
+    out
 }
 
 /// `points − center` as `f32` triples: coordinates on the wire.
@@ -509,11 +665,10 @@ fn region_keys(s: &Selection, center: &Vect<3>) -> String {
 /// reproduces it, in a comment.
 fn spec_text(edit: &Edit, scene: &Scene, flags: &str) -> String {
     let c = scene.center;
+    let input = shell_word(&scene.input);
     let mut out = format!(
-        "# rigidcells edit of {}: the CLI reproduces it with\n\
-         #   rigidcells deform {} -o OUT --edit THIS.toml {flags}\n",
-        scene.input.display(),
-        scene.input.display()
+        "# rigidcells edit of {input}: the CLI reproduces it with\n\
+         #   rigidcells deform {input} -o OUT --edit THIS.toml {flags}\n"
     );
     for s in &edit.fixed {
         out += &format!("\n[[fixed]]\n{}", region_keys(s, &c));
@@ -522,7 +677,8 @@ fn spec_text(edit: &Edit, scene: &Scene, flags: &str) -> String {
         let pivot = [h.pivot[0] + c[0], h.pivot[1] + c[1], h.pivot[2] + c[2]];
         for s in &h.selections {
             out += &format!(
-                "\n[[handle]] # handle {}\n{}translate = {}\nrotate = {{ axis = {}, degrees = {:?} }}\npivot = {}\n",
+                "\n[[handle]] # handle {}\n{}translate = {}\n\
+                 rotate = {{ axis = {}, degrees = {:?} }}\npivot = {}\n",
                 k + 1,
                 region_keys(s, &c),
                 array(&h.translate),
@@ -537,4 +693,43 @@ fn spec_text(edit: &Edit, scene: &Scene, flags: &str) -> String {
         out += &format!("\n[[pin]]\npoint = {at}\nto = {at}\n");
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paths_are_one_shell_word_on_one_line() {
+        let word = |p: &str| shell_word(Path::new(p));
+        assert_eq!(word("/data/scan_01.las"), "/data/scan_01.las");
+        assert_eq!(word("/data/my scan.las"), "'/data/my scan.las'");
+        assert_eq!(word("/data/it's.las"), r"'/data/it'\''s.las'");
+        assert_eq!(word("/data/a\nb.las"), r"$'/data/a\u000ab.las'");
+        assert!(!word("/x/'\r\n\t'").contains(char::is_control));
+    }
+
+    #[test]
+    fn flags_name_the_options_as_given() {
+        let params = |o: crate::pipeline::Options| o.params().unwrap();
+        let given = params(crate::pipeline::Options {
+            cells: Some(5000),
+            loose_parts: solve::LooseParts::Rest,
+            transfer: crate::field::Transfer::Blend,
+            ..Default::default()
+        });
+        assert_eq!(
+            flags(&given).join(" "),
+            "--cells 5000 --loose-parts rest --transfer blend"
+        );
+        let adaptive = params(crate::pipeline::Options {
+            min_cell_size: Some(0.25),
+            max_level: Some(3),
+            ..Default::default()
+        });
+        assert_eq!(
+            flags(&adaptive).join(" "),
+            "--min-cell-size 0.25 --max-level 3 --transfer pu"
+        );
+    }
 }

@@ -1,19 +1,26 @@
 //! The editor's local server: the page, the scene's data, and one WebSocket per page.
 //!
-//! Plain threads over `std::net` (one per connection) and `tungstenite` for the WebSocket:
-//! the work is one solver and one page, so an async runtime would only add weight. `httparse`
-//! reads the request line and headers; a request is peeked first, so that a WebSocket upgrade
-//! is handed to `tungstenite` whole.
+//! Plain threads over `std::net` and `tungstenite` for the WebSocket: the work is one solver
+//! and one page, so an async runtime would only add weight. At most [`MAX_CONNECTIONS`]
+//! connections are served at once, a thread each (two for a WebSocket: one reads the page's
+//! messages, one writes the answers; each blocks on its socket or its channel, neither polls);
+//! one more is answered 503 and closed, by one thread for all. `httparse` reads the request
+//! line and headers, read within [`HEAD_TIME`]; the server answers a WebSocket upgrade itself
+//! (RFC 6455's accept key) and hands the socket to `tungstenite`.
 //!
 //! Safety: the listener binds 127.0.0.1 only. Every request must carry the session's random
-//! token (`?t=…`, 128 bits from the system's generator) and a `Host` naming this server
-//! (`127.0.0.1:PORT` or `localhost:PORT`; a DNS-rebinding page carries its own host name), and
-//! any `Origin` must be this server's; a WebSocket upgrade must carry an `Origin` (a browser
-//! always sends one; without it nothing says which page asks); otherwise 403 and nothing else.
-//! Only GET is served, and only the page and the scene's data; the page is sent with
-//! `Referrer-Policy: no-referrer` (the token is in its address) and `frame-ancestors 'none'`
-//! (no other page may frame it). A WebSocket message or frame is at most [`MAX_MESSAGE`]
-//! bytes.
+//! token (`?t=…`, 128 bits from the system's generator, compared in constant time) and a
+//! `Host` naming this server (`127.0.0.1:PORT` or `localhost:PORT`; a DNS-rebinding page
+//! carries its own host name), and any `Origin` must be this server's; a WebSocket upgrade
+//! must carry an `Origin` (a browser always sends one; without it nothing says which page
+//! asks); otherwise 403 and nothing else. Only GET is served, and only the page (its markup,
+//! script and styles as three files) and the scene's data. Every answer carries a
+//! Content-Security-Policy that runs only the server's own script and styles (nothing inline),
+//! connects only to the server's own address (`ws://127.0.0.1:PORT`, `ws://localhost:PORT`)
+//! and lets no other page frame it, and `Referrer-Policy: no-referrer` (the token is in the
+//! page's address). A WebSocket message or frame is at most [`MAX_MESSAGE`] bytes, and an
+//! edit or a selection within the page's limits ([`crate::edit::Edit::check`]): refused with
+//! a message before any work.
 //!
 //! Files: the token lives in the browser's history, so the server is no general file writer.
 //! *Save edit* and *Apply* write into one folder chosen when the editor starts ([`Outputs`]:
@@ -25,10 +32,8 @@
 //! never replaced, nor the input. Writes go to a temporary file renamed over the target, which
 //! keeps the replaced file's permission bits.
 //!
-//! The solver runs on its own thread and takes commands in order; of several pose updates
-//! waiting, only the newest is solved (a drag sends one per frame; the solver answers as fast
-//! as it can and the page always sees the latest pose). *Apply* runs on a thread of its own and
-//! reports progress to the page.
+//! The solver runs on its own thread ([`solver`]) and takes commands in order; a failure
+//! there is the page's message and the session starts again, never a dead session.
 //!
 //! ## Wire format
 //! Page → server: text JSON `{"type": "edit", "seq": n, "edit": Edit}`, `{"type": "release",
@@ -45,73 +50,67 @@
 
 #![cfg(feature = "editor")]
 
+mod solver;
+
 use std::collections::HashSet;
 use std::io::{Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::{Shutdown, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use serde::Deserialize;
-use tungstenite::Message;
-use tungstenite::protocol::WebSocketConfig;
+use tungstenite::protocol::{Role, WebSocketConfig};
+use tungstenite::{Message, WebSocket};
 
-use super::{Edit, Editor, Selection};
+use super::Editor;
 use crate::error::{Error, Result};
+use solver::{Command, Request};
 
-/// The page, with its script and styles, built into the binary.
+/// The page's markup; `__TOKEN__` stands for the session's token in the addresses of its
+/// script and styles.
 const PAGE: &str = include_str!("page.html");
+/// The page's script.
+const SCRIPT: &str = include_str!("page.js");
+/// The page's styles.
+const STYLE: &str = include_str!("page.css");
 
 /// The largest WebSocket message (and frame) the server reads, in bytes: 1 MiB. The largest
 /// message is an edit (`edit`, `save`, `apply`), its selections' polygons most of it. The page
-/// keeps a lasso's vertices at least 3 pixels apart and at most 4,096, in normalized
-/// coordinates of 6 decimals: at most 22 bytes of JSON a vertex, 91 kB a lasso with its view
-/// (a lasso around a whole 4K screen at 3 pixels is 4,000 vertices; one around an object on it
-/// a few hundred). 1 MiB holds 11 such lassos and a handful of regions many times over (a box
-/// is 4 vertices, 0.5 kB with its view); the page refuses a selection that would make its
-/// messages larger. An edit at the cap raises the server's peak memory by about 55 MB (its
-/// spec's text, written and parsed as the CLI reads it), a fixed bound.
+/// keeps a lasso's vertices at least 3 pixels apart and at most
+/// [`MAX_POLYGON`](crate::edit::MAX_POLYGON), in normalized coordinates of 6 decimals: at most
+/// 22 bytes of JSON a vertex, 91 kB a lasso with its view (a lasso around a whole 4K screen at
+/// 3 pixels is 4,000 vertices; one around an object on it a few hundred). 1 MiB holds 11 such
+/// lassos and a handful of regions many times over (a box is 4 vertices, 0.5 kB with its
+/// view); the page refuses a selection that would make its messages larger. An edit at the cap
+/// raises the server's peak memory by about 55 MB (its spec's text, written and parsed as the
+/// CLI reads it), a fixed bound.
 pub const MAX_MESSAGE: usize = 1 << 20;
+
+/// The most connections served at once: a page opens one WebSocket and fetches its seven files
+/// over at most six connections (a browser's limit per host); a reload or a second tab doubles
+/// that.
+pub const MAX_CONNECTIONS: usize = 32;
+
+/// How long a request's head may take to arrive (and the most bytes it may have: 16 KiB).
+pub const HEAD_TIME: Duration = Duration::from_secs(10);
+const HEAD_BYTES: usize = 16 << 10;
+
+/// How long a write to the page may block (a page that reads nothing frees its connection).
+const WRITE_TIME: Duration = Duration::from_secs(30);
 
 /// The scene's data as served: computed once.
 struct Assets {
     scene_json: String,
+    /// The page's markup with the token in its addresses.
+    page: String,
     points: Vec<u8>,
     colors: Vec<u8>,
     classes: Vec<u8>,
     triangles: Vec<u8>,
     cells: Vec<u8>,
     blend: Vec<u8>,
-}
-
-/// What the page sends; the solver thread takes each with where to answer.
-#[derive(Deserialize)]
-#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
-enum Command {
-    Edit {
-        seq: u32,
-        edit: Edit,
-    },
-    Release {
-        seq: u32,
-    },
-    Select {
-        seq: u32,
-        selection: Selection,
-    },
-    Save {
-        name: String,
-        edit: Edit,
-        #[serde(default)]
-        overwrite: bool,
-    },
-    Apply {
-        name: String,
-        edit: Edit,
-        #[serde(default)]
-        overwrite: bool,
-    },
 }
 
 /// The one folder the editor writes into, and the names it wrote there.
@@ -196,13 +195,16 @@ impl Outputs {
     }
 
     fn wrote(&self, name: &str) -> bool {
-        self.written.lock().expect("not poisoned").contains(name)
+        self.written
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .contains(name)
     }
 
     fn record(&self, name: &str) {
         self.written
             .lock()
-            .expect("not poisoned")
+            .unwrap_or_else(|p| p.into_inner())
             .insert(name.to_string());
     }
 }
@@ -242,7 +244,7 @@ pub struct Server {
     token: String,
     port: u16,
     assets: Arc<Assets>,
-    commands: Sender<(Command, Sender<Message>)>,
+    commands: Sender<Request>,
     out_dir: PathBuf,
 }
 
@@ -258,13 +260,14 @@ impl Server {
             .local_addr()
             .map_err(|e| Error::Solver(format!("the listener's address: {e}")))?
             .port();
-        let assets = Arc::new(assets(&editor, &outputs)?);
+        let token = token()?;
+        let assets = Arc::new(assets(&editor, &outputs, &token)?);
         let (commands, queue) = mpsc::channel();
         let out_dir = outputs.dir().to_path_buf();
-        std::thread::spawn(move || solver(editor, outputs, queue));
+        std::thread::spawn(move || solver::run(editor, outputs, queue));
         Ok(Self {
             listener,
-            token: token()?,
+            token,
             port,
             assets,
             commands,
@@ -292,21 +295,76 @@ impl Server {
         format!("http://127.0.0.1:{}/?t={}", self.port, self.token)
     }
 
-    /// Serves until the process ends, a thread per connection.
+    /// Serves until the process ends: a thread per connection (named `edit-PORT` for the
+    /// page's end of it), at most [`MAX_CONNECTIONS`] at once; one more is answered 503 and
+    /// closed ([`refuse_all`], one thread for all).
     pub fn run(self) -> Result<()> {
         let gate = Arc::new(Gate {
             token: self.token.clone(),
             port: self.port,
         });
+        let open = Arc::new(AtomicUsize::new(0));
+        let (refuse, refused) = mpsc::sync_channel::<TcpStream>(MAX_CONNECTIONS);
+        std::thread::Builder::new()
+            .name("edit-refuse".into())
+            .spawn(move || refuse_all(refused))
+            .map_err(|e| Error::Solver(format!("no thread to refuse connections: {e}")))?;
         for stream in self.listener.incoming() {
             let Ok(stream) = stream else { continue };
+            let Some(slot) = Slot::take(&open) else {
+                // Closed at once when even the refusals are many.
+                let _ = refuse.try_send(stream);
+                continue;
+            };
             let (gate, assets, commands) =
                 (gate.clone(), self.assets.clone(), self.commands.clone());
-            std::thread::spawn(move || {
-                let _ = connection(stream, &gate, &assets, &commands);
-            });
+            // Named for the page's end of the connection (`edit-PORT`), as its writer is.
+            let peer = stream.peer_addr().map_or(0, |a| a.port());
+            let _ = std::thread::Builder::new()
+                .name(format!("edit-{peer}"))
+                .spawn(move || {
+                    let _slot = slot;
+                    let _ = connection(stream, &gate, &assets, &commands);
+                });
         }
         Ok(())
+    }
+}
+
+/// Answers each connection past [`MAX_CONNECTIONS`] 503, one after another: its request is
+/// read first (for at most [`REFUSE_TIME`]), as a socket closed with bytes unread is reset, and
+/// the answer lost with it.
+fn refuse_all(refused: Receiver<TcpStream>) {
+    for mut stream in refused {
+        let _ = stream.set_read_timeout(Some(REFUSE_TIME));
+        let _ = stream.set_write_timeout(Some(REFUSE_TIME));
+        let _ = stream.read(&mut [0u8; HEAD_BYTES]);
+        let _ = respond(&mut stream, 503, "text/plain", b"too many connections", 0);
+        let _ = stream.shutdown(Shutdown::Write);
+        // The rest of the request, if it was longer, before the socket closes.
+        let _ = stream.read(&mut [0u8; HEAD_BYTES]);
+    }
+}
+
+/// How long the refusal of a connection past [`MAX_CONNECTIONS`] may wait on it.
+const REFUSE_TIME: Duration = Duration::from_millis(200);
+
+/// One of the [`MAX_CONNECTIONS`] served at once, given back when dropped.
+struct Slot(Arc<AtomicUsize>);
+
+impl Slot {
+    fn take(open: &Arc<AtomicUsize>) -> Option<Self> {
+        open.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |n| {
+            (n < MAX_CONNECTIONS).then_some(n + 1)
+        })
+        .ok()
+        .map(|_| Self(open.clone()))
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
     }
 }
 
@@ -327,7 +385,7 @@ fn u32_bytes(v: &[u32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
-fn assets(editor: &Editor, outputs: &Outputs) -> Result<Assets> {
+fn assets(editor: &Editor, outputs: &Outputs, token: &str) -> Result<Assets> {
     let scene = editor.scene();
     let (lo, hi) = scene.bounds;
     let c = scene.center;
@@ -355,6 +413,10 @@ fn assets(editor: &Editor, outputs: &Outputs) -> Result<Assets> {
         "out_dir": outputs.dir().display().to_string(),
         "outputs": crate::io::output_extensions(&scene.input),
         "max_message": MAX_MESSAGE,
+        "max_polygon": super::MAX_POLYGON,
+        "max_selections": super::MAX_SELECTIONS,
+        "max_handles": super::MAX_HANDLES,
+        "max_pins": super::MAX_PINS,
     })
     .to_string();
     let (cells, weights) = editor.blend()?;
@@ -362,6 +424,7 @@ fn assets(editor: &Editor, outputs: &Outputs) -> Result<Assets> {
     blend.extend(f32_bytes(&weights));
     Ok(Assets {
         scene_json,
+        page: PAGE.replace("__TOKEN__", token),
         points: f32_bytes(&scene.relative()),
         colors: scene.colors.iter().flatten().copied().collect(),
         classes: scene.classes.clone(),
@@ -378,6 +441,16 @@ fn assets(editor: &Editor, outputs: &Outputs) -> Result<Assets> {
     })
 }
 
+/// Whether two secrets are equal, in a time that depends on their lengths alone (not on where
+/// they first differ).
+fn same_secret(a: &[u8], b: &[u8]) -> bool {
+    let differ = a
+        .iter()
+        .zip(b)
+        .fold(0u8, |acc, (x, y)| acc | std::hint::black_box(x ^ y));
+    a.len() == b.len() && differ == 0
+}
+
 /// What a request must carry.
 struct Gate {
     token: String,
@@ -390,21 +463,66 @@ impl Gate {
         let token_ok = query
             .split('&')
             .filter_map(|kv| kv.split_once('='))
-            .any(|(k, v)| k == "t" && v.as_bytes() == self.token.as_bytes());
-        let header = |name: &str| {
-            headers
-                .iter()
-                .find(|h| h.name.eq_ignore_ascii_case(name))
-                .map(|h| String::from_utf8_lossy(h.value).into_owned())
-        };
-        let hosts = [
+            .filter(|(k, _)| *k == "t")
+            .fold(false, |ok, (_, v)| {
+                same_secret(v.as_bytes(), self.token.as_bytes()) | ok
+            });
+        let host_ok = header(headers, "host").is_some_and(|h| self.hosts().contains(&h));
+        let origin_ok = header(headers, "origin")
+            .is_none_or(|o| self.hosts().iter().any(|h| o == format!("http://{h}")));
+        token_ok && host_ok && origin_ok
+    }
+
+    /// The names of this server as a `Host` header gives them.
+    fn hosts(&self) -> [String; 2] {
+        [
             format!("127.0.0.1:{}", self.port),
             format!("localhost:{}", self.port),
-        ];
-        let host_ok = header("host").is_some_and(|h| hosts.contains(&h));
-        let origin_ok =
-            header("origin").is_none_or(|o| hosts.iter().any(|h| o == format!("http://{h}")));
-        token_ok && host_ok && origin_ok
+        ]
+    }
+}
+
+/// The value of the header `name`, if the request has it.
+fn header(headers: &[httparse::Header<'_>], name: &str) -> Option<String> {
+    headers
+        .iter()
+        .find(|h| h.name.eq_ignore_ascii_case(name))
+        .map(|h| String::from_utf8_lossy(h.value).into_owned())
+}
+
+/// The request's head, read within [`HEAD_TIME`], and the bytes read after it; `None` when it
+/// is larger than [`HEAD_BYTES`] or slower.
+fn read_head(stream: &mut TcpStream) -> std::io::Result<Option<(Vec<u8>, Vec<u8>)>> {
+    let deadline = Instant::now() + HEAD_TIME;
+    let mut buf = vec![0u8; HEAD_BYTES];
+    let mut len = 0;
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() || len == buf.len() {
+            return Ok(None);
+        }
+        stream.set_read_timeout(Some(left))?;
+        let n = match stream.read(&mut buf[len..]) {
+            Ok(0) => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+            Ok(n) => n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) =>
+            {
+                return Ok(None);
+            }
+            Err(e) => return Err(e),
+        };
+        let from = len.saturating_sub(3);
+        len += n;
+        if let Some(at) = buf[from..len].windows(4).position(|w| w == b"\r\n\r\n") {
+            let end = from + at + 4;
+            let rest = buf[end..len].to_vec();
+            buf.truncate(end);
+            return Ok(Some((buf, rest)));
+        }
     }
 }
 
@@ -413,57 +531,49 @@ fn connection(
     mut stream: TcpStream,
     gate: &Gate,
     assets: &Assets,
-    commands: &Sender<(Command, Sender<Message>)>,
+    commands: &Sender<Request>,
 ) -> std::io::Result<()> {
-    stream.set_read_timeout(Some(Duration::from_secs(10)))?;
-    // Peek until the header is whole, so that a WebSocket upgrade reaches tungstenite intact.
-    let mut buf = vec![0u8; 16 << 10];
-    let start = Instant::now();
-    let len = loop {
-        let n = stream.peek(&mut buf)?;
-        if n == 0 {
-            return Ok(());
-        }
-        if let Some(at) = buf[..n].windows(4).position(|w| w == b"\r\n\r\n") {
-            break at + 4;
-        }
-        if n == buf.len() || start.elapsed() > Duration::from_secs(10) {
-            return respond(
-                &mut stream,
-                431,
-                "text/plain",
-                b"request header too large or slow",
-            );
-        }
-        std::thread::sleep(Duration::from_millis(2));
+    stream.set_write_timeout(Some(WRITE_TIME))?;
+    let port = gate.port;
+    let Some((head, rest)) = read_head(&mut stream)? else {
+        return respond(
+            &mut stream,
+            431,
+            "text/plain",
+            b"request header too large or slow",
+            port,
+        );
     };
     let mut headers = [httparse::EMPTY_HEADER; 64];
     let mut request = httparse::Request::new(&mut headers);
-    if !matches!(
-        request.parse(&buf[..len]),
-        Ok(httparse::Status::Complete(_))
-    ) {
-        return respond(&mut stream, 400, "text/plain", b"bad request");
+    if !matches!(request.parse(&head), Ok(httparse::Status::Complete(_))) {
+        return respond(&mut stream, 400, "text/plain", b"bad request", port);
     }
     let target = request.path.unwrap_or("/").to_string();
     let (path, query) = target.split_once('?').unwrap_or((&target, ""));
     let admitted = gate.admits(query, request.headers);
-    let upgrade = request.headers.iter().any(|h| {
-        h.name.eq_ignore_ascii_case("upgrade") && h.value.eq_ignore_ascii_case(b"websocket")
-    });
+    let upgrade =
+        header(request.headers, "upgrade").is_some_and(|v| v.eq_ignore_ascii_case("websocket"));
     // A browser sends an Origin with every WebSocket; one without says nothing of its page.
-    let origin = request
-        .headers
-        .iter()
-        .any(|h| h.name.eq_ignore_ascii_case("origin"));
+    let origin = header(request.headers, "origin").is_some();
     if admitted && origin && upgrade && path == "/ws" && request.method == Some("GET") {
-        return websocket(stream, commands);
+        let key = header(request.headers, "sec-websocket-key");
+        let version = header(request.headers, "sec-websocket-version");
+        return match key {
+            Some(key) if version.as_deref() == Some("13") => {
+                websocket(stream, &key, rest, commands)
+            }
+            _ => respond(
+                &mut stream,
+                400,
+                "text/plain",
+                b"bad WebSocket request",
+                port,
+            ),
+        };
     }
-    // Consume the request before answering it (unread bytes would reset the connection).
-    let mut consumed = vec![0u8; len];
-    stream.read_exact(&mut consumed)?;
     if request.method != Some("GET") {
-        return respond(&mut stream, 405, "text/plain", b"only GET");
+        return respond(&mut stream, 405, "text/plain", b"only GET", port);
     }
     if !admitted || upgrade {
         return respond(
@@ -471,10 +581,13 @@ fn connection(
             403,
             "text/plain",
             b"forbidden: token, Host or Origin",
+            port,
         );
     }
     let (kind, body): (&str, &[u8]) = match path {
-        "/" => ("text/html; charset=utf-8", PAGE.as_bytes()),
+        "/" => ("text/html; charset=utf-8", assets.page.as_bytes()),
+        "/page.js" => ("text/javascript; charset=utf-8", SCRIPT.as_bytes()),
+        "/page.css" => ("text/css; charset=utf-8", STYLE.as_bytes()),
         "/scene.json" => ("application/json", assets.scene_json.as_bytes()),
         "/points.bin" => ("application/octet-stream", &assets.points),
         "/colors.bin" => ("application/octet-stream", &assets.colors),
@@ -482,361 +595,164 @@ fn connection(
         "/triangles.bin" => ("application/octet-stream", &assets.triangles),
         "/cells.bin" => ("application/octet-stream", &assets.cells),
         "/blend.bin" => ("application/octet-stream", &assets.blend),
-        _ => return respond(&mut stream, 404, "text/plain", b"not found"),
+        _ => return respond(&mut stream, 404, "text/plain", b"not found", port),
     };
-    respond(&mut stream, 200, kind, body)
+    respond(&mut stream, 200, kind, body, port)
 }
 
-fn respond(stream: &mut TcpStream, status: u16, kind: &str, body: &[u8]) -> std::io::Result<()> {
+/// The Content-Security-Policy of the server on `port`: its own script and styles only, no
+/// inline code, connections only to itself, never framed.
+fn policy(port: u16) -> String {
+    format!(
+        "default-src 'none'; script-src 'self'; style-src 'self'; \
+         connect-src 'self' ws://127.0.0.1:{port} ws://localhost:{port}; \
+         base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
+    )
+}
+
+fn respond(
+    stream: &mut TcpStream,
+    status: u16,
+    kind: &str,
+    body: &[u8],
+    port: u16,
+) -> std::io::Result<()> {
     let reason = match status {
         200 => "OK",
         400 => "Bad Request",
         403 => "Forbidden",
         404 => "Not Found",
         405 => "Method Not Allowed",
+        503 => "Service Unavailable",
         _ => "Request Header Fields Too Large",
     };
     write!(
         stream,
         "HTTP/1.1 {status} {reason}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\n\
          Cache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\n\
-         Referrer-Policy: no-referrer\r\n\
-         Content-Security-Policy: default-src 'self' 'unsafe-inline'; connect-src 'self' ws://127.0.0.1:* ws://localhost:*; frame-ancestors 'none'\r\n\
+         Referrer-Policy: no-referrer\r\nContent-Security-Policy: {}\r\n\
          Connection: close\r\n\r\n",
-        body.len()
+        body.len(),
+        policy(port)
     )?;
     stream.write_all(body)?;
     stream.flush()
 }
 
-/// The page's WebSocket: requests in, answers out, on one thread (reads poll every 2 ms).
+/// The reading half of a WebSocket's socket: `tungstenite` writes its replies to pings and
+/// closes through the stream it reads, and this half drops them, so that the writing thread is
+/// the socket's one writer (the reader hands it a ping's pong).
+struct ReadHalf(TcpStream);
+
+impl Read for ReadHalf {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        self.0.read(buf)
+    }
+}
+
+impl Write for ReadHalf {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// The page's WebSocket (the upgrade with `key` accepted; `rest` the bytes read after the
+/// request): this thread reads the page's messages, blocked on the socket, and a second one
+/// writes the answers, blocked on their channel.
 fn websocket(
-    stream: TcpStream,
-    commands: &Sender<(Command, Sender<Message>)>,
+    mut stream: TcpStream,
+    key: &str,
+    rest: Vec<u8>,
+    commands: &Sender<Request>,
 ) -> std::io::Result<()> {
+    write!(
+        stream,
+        "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+         Sec-WebSocket-Accept: {}\r\n\r\n",
+        tungstenite::handshake::derive_accept_key(key.as_bytes())
+    )?;
+    stream.flush()?;
+    stream.set_read_timeout(None)?;
     let config = WebSocketConfig::default()
         .max_message_size(Some(MAX_MESSAGE))
         .max_frame_size(Some(MAX_MESSAGE));
-    let mut ws = match tungstenite::accept_with_config(stream, Some(config)) {
-        Ok(ws) => ws,
-        Err(_) => return Ok(()),
-    };
-    ws.get_mut()
-        .set_read_timeout(Some(Duration::from_millis(2)))?;
+    let mut reader = WebSocket::from_partially_read(
+        ReadHalf(stream.try_clone()?),
+        rest,
+        Role::Server,
+        Some(config),
+    );
+    let writer = WebSocket::from_raw_socket(stream.try_clone()?, Role::Server, Some(config));
     let (answers, outbox) = mpsc::channel::<Message>();
+    let peer = stream.peer_addr()?.port();
+    let writing = std::thread::Builder::new()
+        .name(format!("edit-w-{peer}"))
+        .spawn(move || write_answers(writer, outbox))?;
     loop {
-        match ws.read() {
-            Ok(Message::Text(text)) => {
-                let command = match serde_json::from_str::<Command>(text.as_str()) {
-                    Ok(c) => c,
-                    Err(e) => {
-                        let _ = ws.send(error(&format!("bad request: {e}")));
-                        continue;
+        match reader.read() {
+            Ok(Message::Text(text)) => match Command::parse(text.as_str()) {
+                Ok(command) => {
+                    if commands.send((command, answers.clone())).is_err() {
+                        break;
                     }
-                };
-                if commands.send((command, answers.clone())).is_err() {
-                    return Ok(());
                 }
+                Err(refusal) => {
+                    let _ = answers.send(refusal);
+                }
+            },
+            Ok(Message::Ping(data)) => {
+                let _ = answers.send(Message::Pong(data));
             }
-            Ok(Message::Close(_)) => return Ok(()),
+            Ok(Message::Close(_)) => break,
             Ok(_) => {}
-            Err(tungstenite::Error::Io(e))
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) => {}
-            Err(_) => return Ok(()),
-        }
-        while let Ok(m) = outbox.try_recv() {
-            if ws.send(m).is_err() {
-                return Ok(());
+            Err(_) => {
+                let _ = stream.shutdown(Shutdown::Both);
+                break;
             }
         }
     }
+    let _ = answers.send(Message::Close(None));
+    let _ = writing.join();
+    Ok(())
 }
 
-fn error(text: &str) -> Message {
-    Message::text(serde_json::json!({"type": "error", "message": text}).to_string())
-}
-
-fn text(value: serde_json::Value) -> Message {
-    Message::text(value.to_string())
-}
-
-/// The solver thread: commands in order; of consecutive edits only the newest is solved.
-fn solver(mut editor: Editor, outputs: Arc<Outputs>, queue: Receiver<(Command, Sender<Message>)>) {
-    let editor_input = editor.scene().input.clone();
-    let params = *editor.params();
-    let applying = Arc::new(Mutex::new(false));
-    // Where the last edit's answer went: the idle solver's iterations go there too.
-    let mut last: Option<(u32, Sender<Message>)> = None;
-    // Whether no pose came for [`IDLE`]: then the solver iterates until converged.
-    let mut idle = false;
-    loop {
-        let first = match (&last, editor.converged()) {
-            (Some((seq, reply)), false) => match next(&queue, idle) {
-                Ok(c) => {
-                    idle = false;
-                    c
-                }
-                Err(mpsc::RecvTimeoutError::Timeout) => {
-                    idle = true;
-                    let answer = match editor.refine() {
-                        Ok(m) => motions_message(*seq, m),
-                        Err(e) => vec![error(&e.to_string())],
-                    };
-                    for m in answer {
-                        let _ = reply.send(m);
-                    }
-                    continue;
-                }
-                Err(mpsc::RecvTimeoutError::Disconnected) => return,
-            },
-            _ => match queue.recv() {
-                Ok(c) => c,
-                Err(_) => return,
-            },
-        };
-        let mut pending = vec![first];
-        pending.extend(queue.try_iter());
-        // An edit followed at once by another is stale: edits carry the whole state.
-        let stale: Vec<bool> = (0..pending.len())
-            .map(|i| {
-                matches!(pending[i].0, Command::Edit { .. })
-                    && matches!(pending.get(i + 1), Some((Command::Edit { .. }, _)))
-            })
-            .collect();
-        for ((command, reply), stale) in pending.into_iter().zip(stale) {
-            let answer = match command {
-                Command::Edit { .. } if stale => continue,
-                Command::Edit { seq, edit } => {
-                    last = Some((seq, reply.clone()));
-                    match editor.solve(&edit) {
-                        Ok(m) => motions_message(seq, m),
-                        Err(e) => vec![error(&e.to_string())],
-                    }
-                }
-                Command::Release { seq } => match editor.release() {
-                    Ok(r) => released_message(seq, r),
-                    Err(e) => vec![error(&e.to_string())],
-                },
-                Command::Select { seq, selection } => match editor.selected(&selection) {
-                    Ok(mask) => vec![selected_message(seq, &mask)],
-                    Err(e) => vec![text(serde_json::json!({
-                        "type": "error", "message": e.to_string(), "select": seq
-                    }))],
-                },
-                Command::Save {
-                    name,
-                    edit,
-                    overwrite,
-                } => vec![save(&editor, &outputs, &name, &edit, overwrite)],
-                Command::Apply {
-                    name,
-                    edit,
-                    overwrite,
-                } => {
-                    let extensions = crate::io::output_extensions(&editor_input);
-                    match outputs.target(&name, extensions, overwrite) {
-                        Ok(output) => {
-                            let text = editor.spec_text(&edit);
-                            apply(
-                                editor_input.clone(),
-                                (output, name),
-                                text,
-                                params,
-                                (reply.clone(), outputs.clone()),
-                                applying.clone(),
-                            );
-                            Vec::new()
-                        }
-                        Err(r) => vec![refused(r, &name, "apply")],
-                    }
-                }
-            };
-            for m in answer {
-                let _ = reply.send(m);
+/// Writes the answers in `outbox` to the page until a close (which it sends) or a failed
+/// write; then closes the socket, which ends the reading thread too.
+fn write_answers(mut ws: WebSocket<TcpStream>, outbox: Receiver<Message>) {
+    for message in outbox {
+        let sent = match message {
+            Message::Close(_) => {
+                let _ = ws.close(None).and_then(|()| ws.flush());
+                break;
             }
-        }
-    }
-}
-
-fn motions_message(seq: u32, m: Option<super::Motions>) -> Vec<Message> {
-    let Some(m) = m else {
-        let mut bytes = u32_bytes(&[1, seq, 0, 0]);
-        bytes.extend(0f32.to_le_bytes());
-        return vec![Message::binary(bytes)];
-    };
-    let cells = m.strain.len() as u32;
-    let mut bytes = u32_bytes(&[1, seq, cells, m.iterations as u32]);
-    bytes.extend((m.seconds as f32).to_le_bytes());
-    bytes.extend(f32_bytes(&m.maps));
-    bytes.extend(f32_bytes(&m.strain));
-    let mut out = vec![Message::binary(bytes)];
-    for w in m.warnings {
-        out.push(text(serde_json::json!({"type": "warning", "message": w})));
-    }
-    out
-}
-
-/// Which samples a selection holds, one bit each.
-fn selected_message(seq: u32, mask: &[bool]) -> Message {
-    let count = mask.iter().filter(|&&m| m).count() as u32;
-    let mut bytes = u32_bytes(&[3, seq, mask.len() as u32, count]);
-    bytes.extend(mask.chunks(8).map(|bits| {
-        bits.iter()
-            .enumerate()
-            .fold(0u8, |byte, (i, &b)| byte | (u8::from(b) << i))
-    }));
-    Message::binary(bytes)
-}
-
-/// The answer to a save or apply that was not done: `exists` (the page asks its user) or an
-/// error.
-fn refused(r: Refusal, name: &str, action: &str) -> Message {
-    match r {
-        Refusal::Exists(path) => text(serde_json::json!({
-            "type": "exists", "name": name, "action": action,
-            "path": path.display().to_string(),
-        })),
-        Refusal::Error(e) => error(&e.to_string()),
-    }
-}
-
-fn released_message(seq: u32, r: super::Released) -> Vec<Message> {
-    let n = (r.positions.len() / 3) as u32;
-    let mut bytes = u32_bytes(&[2, seq, n, r.foldovers.1 as u32, r.foldovers.0 as u32]);
-    bytes.extend(f32_bytes(&r.positions));
-    let mut out = vec![Message::binary(bytes)];
-    for w in r.warnings {
-        out.push(text(serde_json::json!({"type": "warning", "message": w})));
-    }
-    out
-}
-
-/// *Save edit*: the spec of `edit` as `name` in the editor's folder ([`Outputs::target`];
-/// atomically).
-fn save(editor: &Editor, outputs: &Outputs, name: &str, edit: &Edit, overwrite: bool) -> Message {
-    let result = outputs.target(name, &["toml"], overwrite).and_then(|path| {
-        crate::io::write_atomic(&path, editor.spec_text(edit).as_bytes())?;
-        Ok(path)
-    });
-    match result {
-        Ok(path) => {
-            outputs.record(name);
-            text(serde_json::json!({
-                "type": "saved", "name": name, "path": path.display().to_string()
-            }))
-        }
-        Err(r) => refused(r, name, "save"),
-    }
-}
-
-/// How long the solver waits for the next pose of a drag before it converges the last one:
-/// a drag sends a pose every few tens of milliseconds, and an iteration started between two
-/// would delay the next pose's answer by its length.
-const IDLE: Duration = Duration::from_millis(150);
-
-/// The next command: at once when `idle` (or a timeout), else within [`IDLE`].
-fn next(
-    queue: &Receiver<(Command, Sender<Message>)>,
-    idle: bool,
-) -> std::result::Result<(Command, Sender<Message>), mpsc::RecvTimeoutError> {
-    if idle {
-        queue.try_recv().map_err(|e| match e {
-            mpsc::TryRecvError::Empty => mpsc::RecvTimeoutError::Timeout,
-            mpsc::TryRecvError::Disconnected => mpsc::RecvTimeoutError::Disconnected,
-        })
-    } else {
-        queue.recv_timeout(IDLE)
-    }
-}
-
-/// Reports *Apply*'s progress to the page, at most every 100 ms.
-struct Progress {
-    reply: Sender<Message>,
-    state: Mutex<(String, u64, u64, Instant)>,
-}
-
-impl crate::progress::Observer for Progress {
-    fn stage(&self, name: &str, len: u64) {
-        let mut s = self.state.lock().expect("not poisoned");
-        *s = (name.to_string(), len, 0, Instant::now());
-        self.send(&s);
-    }
-    fn advance(&self, n: u64) {
-        let mut s = self.state.lock().expect("not poisoned");
-        s.2 += n;
-        if s.3.elapsed() > Duration::from_millis(100) {
-            s.3 = Instant::now();
-            self.send(&s);
-        }
-    }
-}
-
-impl Progress {
-    fn send(&self, (stage, len, done, _): &(String, u64, u64, Instant)) {
-        let _ = self.reply.send(text(serde_json::json!({
-            "type": "progress", "stage": stage, "total": len, "done": done
-        })));
-    }
-}
-
-/// *Apply*: `deform` of the whole input under the spec `text` into `output` (named `name` in
-/// the editor's folder, checked), on a thread of its own.
-fn apply(
-    input: PathBuf,
-    (output, name): (PathBuf, String),
-    spec_text: String,
-    params: crate::pipeline::DeformParams,
-    (reply, outputs): (Sender<Message>, Arc<Outputs>),
-    applying: Arc<Mutex<bool>>,
-) {
-    {
-        let mut busy = applying.lock().expect("not poisoned");
-        if *busy {
-            let _ = reply.send(error("an Apply is already running"));
-            return;
-        }
-        *busy = true;
-    }
-    std::thread::spawn(move || {
-        let start = Instant::now();
-        let progress = Progress {
-            reply: reply.clone(),
-            state: Mutex::new((String::new(), 0, 0, Instant::now())),
+            m => ws.send(m),
         };
-        let result = crate::io::refuse_overwrite(&input, &output).and_then(|_| {
-            let name = output.with_extension("edit.toml");
-            let spec = crate::spec::parse_spec::<3>(&spec_text, Path::new("."), &name)?;
-            let params = crate::pipeline::DeformParams {
-                proxy_samples: Some(0),
-                ..params
-            };
-            crate::pipeline::deform_file(
-                &input,
-                &output,
-                &spec,
-                &params,
-                crate::pipeline::CHUNK,
-                None,
-                &progress,
-            )
-        });
-        let message = match result {
-            Ok((_, info)) => {
-                outputs.record(&name);
-                text(serde_json::json!({
-                "type": "applied",
-                "output": output.display().to_string(),
-                "samples": info.samples,
-                "seconds": start.elapsed().as_secs_f64(),
-                "warnings": info.deform.warnings,
-                }))
-            }
-            Err(e) => error(&e.to_string()),
-        };
-        let _ = reply.send(message);
-        *applying.lock().expect("not poisoned") = false;
-    });
+        if sent.is_err() {
+            break;
+        }
+    }
+    let _ = ws.get_ref().shutdown(Shutdown::Both);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn secrets_are_equal_only_when_every_byte_is() {
+        let token = b"0123456789abcdef0123456789abcdef";
+        assert!(same_secret(token, token));
+        let mut last = *token;
+        last[31] = b'0';
+        assert!(!same_secret(&last, token));
+        let mut first = *token;
+        first[0] = b'1';
+        assert!(!same_secret(&first, token));
+        assert!(!same_secret(&token[..31], token));
+        assert!(!same_secret(b"", token));
+        assert!(!same_secret(token, b""));
+    }
 }

@@ -157,12 +157,14 @@ impl Live {
             return Ok(None);
         }
         let start = Instant::now();
-        // Handles that shared a motion when the spec was resolved may share cells, which they
-        // may only while their motions stay equal: once they differ, it is resolved again.
-        let still_tied = self
-            .tied
-            .iter()
-            .all(|&(i, j)| spec.handles[i].value == spec.handles[j].value);
+        // Handles that shared a motion when the last spec was resolved may share cells, which
+        // they may only while their motions stay equal: once they differ, it is resolved again.
+        // The pairs index the last spec's handles: asked only of a spec with the same handles.
+        let tied = &self.tied;
+        let still_tied = |spec: &EditSpec<3>| {
+            tied.iter()
+                .all(|&(i, j)| spec.handles[i].value == spec.handles[j].value)
+        };
         // A pose without a pivot turns about its selection's centroid, known where the spec
         // it was resolved from gave none (a matrix needs no pivot at full load).
         let pivots: Option<Vec<Option<Vect<3>>>> = spec
@@ -179,7 +181,7 @@ impl Live {
             .collect();
         let warm = match (&mut self.session, &self.spec, pivots) {
             (Some(session), Some(last), Some(pivots))
-                if still_tied && same_but_poses(last, &spec) =>
+                if same_but_poses(last, &spec) && still_tied(&spec) =>
             {
                 let mut constraints = session.constraints().clone();
                 for ((handle, entry), pivot) in constraints

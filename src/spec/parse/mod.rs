@@ -67,7 +67,7 @@ pub fn parse_spec<const D: usize>(text: &str, base: &Path, name: &Path) -> Resul
 where
     Dim<D>: Rigid<D>,
 {
-    let ctx = Ctx { text, base, name };
+    let ctx = Ctx::new(text, base, name);
     let raw: RawSpec = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
     let top: toml::Table = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
     if let Some(k) = top
@@ -152,11 +152,7 @@ where
         #[serde(default)]
         handle: Vec<Spanned<toml::Table>>,
     }
-    let ctx = Ctx {
-        text,
-        base: Path::new("."),
-        name,
-    };
+    let ctx = Ctx::new(text, Path::new("."), name);
     let raw: RawPoses = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
     raw.handle
         .iter()
@@ -173,9 +169,22 @@ struct Ctx<'a> {
     text: &'a str,
     base: &'a Path,
     name: &'a Path,
+    /// Where each `\n` of the text lies: an entry's line is found by a binary search, so that
+    /// a spec of many entries is read in time linear in its length.
+    newlines: Vec<usize>,
 }
 
-impl Ctx<'_> {
+impl<'a> Ctx<'a> {
+    fn new(text: &'a str, base: &'a Path, name: &'a Path) -> Self {
+        let newlines = text.match_indices('\n').map(|(at, _)| at).collect();
+        Self {
+            text,
+            base,
+            name,
+            newlines,
+        }
+    }
+
     fn error(&self, line: Option<usize>, message: String) -> Error {
         let message = match line {
             Some(l) => format!("line {l}: {message}"),
@@ -215,7 +224,7 @@ impl Ctx<'_> {
 
     fn line<T>(&self, s: &Spanned<T>) -> usize {
         let start = s.span().start.min(self.text.len());
-        self.text[..start].matches('\n').count() + 1
+        self.newlines.partition_point(|&at| at < start) + 1
     }
 
     fn allow(&self, t: &toml::Table, extra: &[&str], line: usize) -> Result<()> {
