@@ -14,9 +14,14 @@ use std::time::Duration;
 
 use rigidcells::edit::server::Server;
 use rigidcells::edit::{Editor, Scene};
-use rigidcells::pipeline::DeformParams;
+use rigidcells::pipeline::{DeformParams, Options};
 use serde_json::json;
 use tungstenite::Message;
+
+/// The parameters of `options`, checked as every face checks them.
+fn options(options: Options) -> DeformParams {
+    options.params().unwrap()
+}
 
 /// The editor of the 10×1×1 bar (cells of 0.5), served on a free port, writing into the bar's
 /// folder.
@@ -29,9 +34,11 @@ fn serve_into(dir: &Path, out_dir: Option<&Path>) -> (Server, std::path::PathBuf
     let input = dir.join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
-    let mut params = DeformParams::default();
-    params.build.cell_size = Some(0.5);
-    params.transfer = rigidcells::field::Transfer::Pu;
+    let params = options(Options {
+        cell_size: Some(0.5),
+        transfer: rigidcells::field::Transfer::Pu,
+        ..Default::default()
+    });
     (
         Server::bind(Editor::new(scene, params).unwrap(), 0, out_dir).unwrap(),
         input,
@@ -451,8 +458,10 @@ fn a_class_selection_fixes_the_ground() {
     let input = common::shared("las/autzen_trim.las");
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
     assert!(scene.classes.contains(&2));
-    let mut params = DeformParams::default();
-    params.build.target_cells = Some(800);
+    let params = options(Options {
+        cells: Some(800),
+        ..Default::default()
+    });
     let (lo, hi) = (scene.bounds.0 - scene.center, scene.bounds.1 - scene.center);
     let view = json!([
         [2.0 / (hi[0] - lo[0]), 0, 0, 0],
@@ -500,10 +509,12 @@ fn the_editor_refuses_an_rbf_beyond_the_budget_as_deform_does() {
     let input = common::shared("las/autzen_trim.las");
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
     let limit = 2u64 << 20;
-    let mut params = DeformParams::default();
-    params.build.target_cells = Some(800);
-    params.memory = rigidcells::memory::Budget::bytes(limit);
-    params.transfer = rigidcells::field::Transfer::Rbf;
+    let params = options(Options {
+        cells: Some(800),
+        memory_limit: Some(limit),
+        transfer: rigidcells::field::Transfer::Rbf,
+        ..Default::default()
+    });
     let mut editor = Editor::new(scene, params).unwrap();
     let cells = editor.complex().len();
     assert!(
@@ -801,9 +812,11 @@ fn a_box_selects_what_is_visible_unless_xray() {
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
     let c = scene.center;
     let x: Vec<f64> = scene.points.iter().map(|p| p[0] - c[0]).collect();
-    let mut params = DeformParams::default();
-    params.build.cell_size = Some(0.25);
-    params.transfer = rigidcells::field::Transfer::Pu;
+    let params = options(Options {
+        cell_size: Some(0.25),
+        transfer: rigidcells::field::Transfer::Pu,
+        ..Default::default()
+    });
     let mut editor = Editor::new(scene, params).unwrap();
     let end_on = camera([20.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]);
 
@@ -874,8 +887,10 @@ fn a_box_over_the_horse_head_takes_the_head_alone() {
     let c = scene.center;
     // The horse faces +y, z up; its head is at y > 0.03.
     let y: Vec<f64> = scene.points.iter().map(|p| p[1] - c[1]).collect();
-    let mut params = DeformParams::default();
-    params.build.target_cells = Some(4000);
+    let params = options(Options {
+        cells: Some(4000),
+        ..Default::default()
+    });
     let editor = Editor::new(scene, params).unwrap();
     let front = camera([0.0, 1.0, 0.04], [0.0, 0.0, 0.04], [0.0, 0.0, 1.0]);
     let head = rigidcells::edit::Selection {
@@ -915,7 +930,7 @@ fn the_editor_keeps_min_cell_size_for_apply() {
     }
     .params()
     .unwrap();
-    assert!(params.solve.refine_fraction.is_some());
+    assert!(params.solve().refine_fraction.is_some());
     let editor = Editor::new(scene, params).unwrap();
     assert_eq!(editor.params(), &params);
     assert!(!editor.complex().is_empty());
