@@ -6,6 +6,7 @@ use std::path::Path;
 use rigidcells::pipeline::{self, DeformParams, Live, Options};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
+use rigidcells::solve::LooseParts;
 use rigidcells::spec::{EditSpec, parse_poses, parse_spec};
 
 /// A 10 × 1 × 1 bar's vertices and triangles.
@@ -244,4 +245,53 @@ fn a_pivot_given_or_left_to_the_centroid_and_tied_handles_are_resolved_again() {
         .unwrap_err()
         .to_string();
     assert_eq!(apart, alone);
+}
+
+#[test]
+fn a_release_without_a_drag_is_deforms_points_bit_for_bit_loose_parts_too() {
+    let (mut points, triangles) = bar();
+    // A block of points two units beside the bar: a part no constraint reaches.
+    let bar_len = points.len();
+    for k in 0..125 {
+        let (i, j, l) = (k % 5, k / 5 % 5, k / 25);
+        points.push(Vect::<3>::new(
+            6.0 + 0.25 * f64::from(i),
+            3.0 + 0.25 * f64::from(j),
+            0.25 * f64::from(l),
+        ));
+    }
+    let spec = spec(&points, 3.0, -30.0);
+    for loose in [LooseParts::Carry, LooseParts::Rest] {
+        let params = Options {
+            cell_size: Some(0.25),
+            loose_parts: loose,
+            ..Default::default()
+        }
+        .params()
+        .unwrap();
+        let (expected, _, expected_info) =
+            pipeline::deform(&points, &triangles, &spec, &params, &Silent).unwrap();
+        let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+        let most = params.solve.max_iterations;
+        let step = live.solve(spec.clone(), most, &Silent).unwrap().unwrap();
+        let preview = live.preview().unwrap();
+        let (moved, _, _, info) = live.release(&[], &Silent).unwrap();
+        let differ = moved.iter().zip(&expected).filter(|(a, b)| a != b).count();
+        assert_eq!(differ, 0, "{loose:?}: {differ} points differ from deform's");
+        assert_eq!(info.warnings, expected_info.warnings, "{loose:?}");
+        // The step and the preview say and show what the release gives.
+        assert!(
+            expected_info
+                .warnings
+                .iter()
+                .all(|w| step.warnings.contains(w))
+        );
+        let block = bar_len..points.len();
+        assert!(farthest(&preview[block.clone()], &moved[block.clone()]) < 1e-9);
+        let travel = farthest(&moved[block.clone()], &points[block]);
+        match loose {
+            LooseParts::Carry => assert!(travel > 0.5, "the loose block moved {travel}"),
+            LooseParts::Rest => assert_eq!(travel, 0.0),
+        }
+    }
 }
