@@ -97,6 +97,7 @@ impl Live {
                  cells it built: give --cell-size or --cells (deform refines)"
             )));
         }
+        super::classes_of(points.len(), &classes)?;
         let (complex, build) =
             crate::cells::build(&points, triangles, &params.build, params.memory)?;
         Ok(Self {
