@@ -22,17 +22,20 @@ keyword argument of the same name and default (``cell_size``, ``cells``, ``trans
 fields ``X``, ``Y``, ``Z`` (as PDAL's Python bindings hand them out): the same dtype comes back
 with only those fields changed. A laspy ``LasData`` or ``ScaleAwarePointRecord`` comes back as
 a new one of the same kind, its coordinates written through the header's scale and offset
-rounded to the nearest step (as the command line writes LAS). Integer ``X``, ``Y``, ``Z`` (LAS
-records, such as laspy's ``points.array``) are decoded with ``scale=`` and ``offset=``, and
-refused without them. A ``trimesh.Trimesh`` or ``PointCloud``, an Open3D ``TriangleMesh`` or
-``PointCloud`` comes back as a new one with its triangles, colors and other attributes kept and
-its normals turned (a Trimesh derives its own from the moved faces). None of laspy, trimesh and
+rounded to the nearest step (as the command line writes LAS); LAS records keep their classes
+for the spec's ``classification`` regions. Integer ``X``, ``Y``, ``Z`` (LAS records, such as
+laspy's ``points.array``) are decoded with ``scale=`` and ``offset=``, and refused without
+them. An (n, 3) float32 array comes back float32. A ``trimesh.Trimesh`` or ``PointCloud``, an
+Open3D ``TriangleMesh`` or ``PointCloud`` comes back as a new one with its triangles, colors
+and other attributes kept and its normals turned (a Trimesh derives its own from the moved
+faces). None of laspy, trimesh and
 Open3D is a dependency: their objects are recognized when the library is imported.
 
 A deformation returns a ``Report`` (a dataclass: cells, cell size, iterations, energy,
-residuals, fold-overs, warnings, timings). Errors are exceptions that name the argument:
-``TypeError`` or ``ValueError`` for a bad argument, spec or parameter, ``OSError`` for I/O,
-``rigidcells.FormatError`` (a ``ValueError``) for malformed files. Heavy calls release the GIL;
+residuals, fold-overs, warnings, timings); its warnings are also emitted through Python's
+``warnings`` module as ``rigidcells.RigidCellsWarning``. Errors are exceptions that name the
+argument: ``TypeError`` or ``ValueError`` for a bad argument, spec or parameter, ``OSError`` for
+I/O, ``rigidcells.FormatError`` (a ``ValueError``) for malformed files. Heavy calls release the GIL;
 Ctrl-C stops them within a step (``KeyboardInterrupt``), leaving no output file behind.
 """
 
@@ -42,6 +45,7 @@ import json
 import os
 import re
 import sys
+import threading
 import warnings
 from pathlib import Path
 from dataclasses import dataclass
@@ -50,17 +54,32 @@ from typing import Any, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _rigidcells, dask
-from ._points import Frame, _Points, _plain3, _triangles
+from ._points import Frame, _float_dtype, _Points, _plain3, _triangles
 from ._rigidcells import FormatError
 
 __all__ = [
     "deform", "solve", "deform_file", "apply_file", "solve_files", "Field", "Report",
-    "Session", "Step", "FormatError", "__version__",
+    "Session", "Step", "FormatError", "RigidCellsWarning", "__version__",
 ]
 
 __version__: str = _rigidcells.__version__
 
 Spec = Union[str, "os.PathLike[str]", dict]
+
+
+class RigidCellsWarning(UserWarning):
+    """What the command line prints as a warning (parts no constraint reaches, a turn the shape
+    did not carry, fold-overs, a cell count off its target, ...), emitted through ``warnings``
+    by every call that returns a ``Report`` (which also lists them in ``report.warnings``), and
+    the notes of ``Field.apply``. ``warnings.simplefilter("error", RigidCellsWarning)`` makes
+    them errors; ``"ignore"`` silences them."""
+
+
+def _warn(messages: Sequence[str]) -> None:
+    """Each message as a ``RigidCellsWarning`` at the line that called the package's function
+    calling this."""
+    for message in messages:
+        warnings.warn(message, RigidCellsWarning, stacklevel=3)
 
 
 def _plain(value: Any, path: List[Any]) -> Any:
@@ -309,14 +328,13 @@ class Field:
         are a ``ValueError``, as ``rigidcells apply`` refuses them), ``"keep"`` (they keep
         their coordinates) or ``"extend"`` (the transfer extrapolated). With ``normals``
         ((n, 3)), returns ``(points, normals)``, the normals turned as the map turns the
-        surface. A LAS offset moved to fit the coordinates is said in a ``UserWarning``."""
+        surface. A LAS offset moved to fit the coordinates is said in a ``RigidCellsWarning``."""
         p = _Points(points, scale, offset)
         nrm = p.normals if normals is None else _plain3(normals, "normals")
         moved, turned = self._native.apply(p.xyz, nrm, outside)
         out, notes = p.back(moved, turned)
-        for note in notes:
-            warnings.warn(note, stacklevel=2)
-        return out if normals is None else (out, turned)
+        _warn(notes)
+        return out if normals is None else (out, turned.astype(_float_dtype(normals), copy=False))
 
     def save(self, path: Union[str, "os.PathLike[str]"]) -> None:
         """Writes the field to ``path`` (the format ``rigidcells apply`` reads)."""
@@ -492,12 +510,15 @@ def deform(
     """Deforms ``points`` under ``spec``; returns the moved points, in the form they came in,
     and a ``Report`` of what was done.
 
-    ``points``: an (n, 3) array of coordinates (float64 back); a numpy structured array with
-    float fields ``X``, ``Y``, ``Z`` (PDAL's; the same dtype back, only those fields changed);
-    a laspy ``LasData`` or its ``points`` (a new one back, coordinates written through the
-    header's scale and offset, rounded to the nearest step as the command line's LAS writer
-    rounds them; an offset that no longer fits moves as the command line moves it, said in
-    ``report.notes``). Integer ``X``, ``Y``, ``Z`` (laspy's ``points.array``, LAS records) need
+    ``points``: an (n, 3) array of coordinates (float32 back for float32, else float64); a
+    numpy structured array with float fields ``X``, ``Y``, ``Z`` (PDAL's; the same dtype back,
+    only those fields changed); a laspy ``LasData`` or its ``points`` (a new one back,
+    coordinates written through the header's scale and offset, rounded to the nearest step as
+    the command line's LAS writer rounds them; an offset that no longer fits moves as the
+    command line moves it, said in ``report.notes``). Records keep their LAS classes for the
+    spec's ``classification`` regions (laspy's, or a structured array's ``classification``,
+    ``Classification`` or ``raw_classification`` field, read as the command line reads a
+    file's). Integer ``X``, ``Y``, ``Z`` (laspy's ``points.array``, LAS records) need
     ``scale`` and ``offset`` (a number or three each; offset 0 by default): they are decoded,
     moved and encoded back rounded to the nearest step, and a moved record that does not fit
     its field is a ``ValueError``. An (n, 3) integer array with ``scale`` is taken the same way.
@@ -505,8 +526,9 @@ def deform(
     and a new object of its kind comes back. Masked, complex and bool arrays are refused.
     ``triangles``: (m, 3) vertex indices.
     ``normals`` ((n, 3), one per point): turned as the map turns the surface, returned as
-    ``report.normals``.
+    ``report.normals`` (in the normals' float type).
 
+    ``report.warnings`` are also emitted as ``RigidCellsWarning`` warnings.
     ``report.handle_turns``: per turning handle, its ``line`` in the spec, the turn asked and
     the turn the cells carry from the fixed cells to it; ``report.warnings`` says when they
     differ by more than a tenth. A turn the shape cannot carry (a whole turn of a part as short
@@ -519,11 +541,22 @@ def deform(
     tris = p.triangles if triangles is None else _triangles(triangles)
     moved, info = _with_progress(
         progress, lambda cb: _call(
-            paths, _rigidcells.deform, p.xyz, text, base, tris, nrm, options, cb
+            paths, _rigidcells.deform, p.xyz, text, base, tris, nrm, options, cb, p.classes
         )
     )
-    out, notes = p.back(moved, info.get("normals"))
-    return out, Report._of(info, notes, paths)
+    out, notes = p.back(moved, _turned(info, _float_dtype(normals)))
+    report = Report._of(info, notes, paths)
+    _warn(report.warnings)
+    return out, report
+
+
+def _turned(info: dict, dtype: np.dtype) -> Optional[np.ndarray]:
+    """The turned normals of a native call's ``info`` (None without) as ``dtype``: the float
+    type of the normals given (float64 for a mesh's own)."""
+    turned = info.get("normals")
+    if turned is not None:
+        info["normals"] = turned = turned.astype(dtype, copy=False)
+    return turned
 
 
 @dataclass
@@ -565,10 +598,10 @@ class Session:
     exact constraints, as ``deform`` does. ``points``, ``triangles`` and the keyword options
     are ``deform``'s, but a session keeps the cells it built: ``min_cell_size`` and
     ``refine_strain`` (which refine them) are refused. ``release`` gives the points back in
-    the form they came in.
+    the form they came in; released without a drag, they are ``deform``'s, bit for bit.
 
     Every call but the light properties releases the GIL: a face may run the session on a
-    thread of its own (one call at a time).
+    thread of its own. Calls from several threads run one at a time, each waiting for the last.
     """
 
     def __init__(
@@ -601,8 +634,14 @@ class Session:
         self._points = _Points(points, scale, offset)
         tris = self._points.triangles if triangles is None else _triangles(triangles)
         nrm = self._points.normals if normals is None else _plain3(normals, "normals")
-        self._native = _rigidcells.Session(self._points.xyz, tris, nrm, options)
+        self._normals_dtype = _float_dtype(normals)
+        self._native = _rigidcells.Session(
+            self._points.xyz, tris, nrm, options, self._points.classes
+        )
         self._paths: Optional[List[str]] = None
+        # The spec's key paths and the last step go with the native session's state: one call
+        # at a time changes them together.
+        self._lock = threading.Lock()
         self.last: Step = self.solve(spec, progress=progress)
 
     def solve(self, spec: Spec, iterations: Optional[int] = None, progress: Any = None) -> Step:
@@ -612,12 +651,13 @@ class Session:
         if iterations is not None:
             iterations = _iterations(iterations)
         text, base, paths = _spec(spec)
-        info = _with_progress(
-            progress, lambda cb: _call(paths, self._native.solve, text, base, iterations, cb)
-        )
-        self._paths = paths
-        self.last = self._step(info)
-        return self.last
+        with self._lock:
+            info = _with_progress(
+                progress, lambda cb: _call(paths, self._native.solve, text, base, iterations, cb)
+            )
+            self._paths = paths
+            self.last = self._step(info)
+            return self.last
 
     def drag(
         self, poses: Union[dict, Sequence[dict]], iterations: int = 1, pins: Any = None
@@ -636,22 +676,24 @@ class Session:
             raise type(e)(_poses_path(str(e))) from None
         text = _rigidcells.toml_from_json(json.dumps(plain))
         to = None if pins is None else _plain3(pins, "pins")
-        try:
-            info = self._native.pose(text, iterations, to)
-        except ValueError as e:
-            # The poses' key paths, worked out only for an error (a drag is the hot path).
-            paths = [_poses_path(p) for p in _key_paths(text)]
-            raised = _in_dict_terms(e, paths)
-            if raised is e:
-                raise
-            raise raised from None
-        self.last = self._step(info)
-        return self.last
+        with self._lock:
+            try:
+                info = self._native.pose(text, iterations, to)
+            except ValueError as e:
+                # The poses' key paths, worked out only for an error (a drag is the hot path).
+                paths = [_poses_path(p) for p in _key_paths(text)]
+                raised = _in_dict_terms(e, paths)
+                if raised is e:
+                    raise
+                raise raised from None
+            self.last = self._step(info)
+            return self.last
 
     def refine(self) -> bool:
         """One more iteration on the current pose when its solve stopped short; whether one
         ran (False once converged)."""
-        return self._native.refine()
+        with self._lock:
+            return self._native.refine()
 
     @property
     def converged(self) -> bool:
@@ -669,17 +711,25 @@ class Session:
         return self._native.cell_size
 
     def preview(self) -> np.ndarray:
-        """The points ((n, 3) float64) moved by the cells' current motions, blended: the
-        shape of the current pose, without the transfer's exact constraints."""
-        return self._native.preview()
+        """The points ((n, 3), float32 for float32 points, else float64) moved by the cells'
+        current motions, blended: the shape of the current pose, without the transfer's exact
+        constraints."""
+        with self._lock:
+            return self._native.preview().astype(self._points.dtype, copy=False)
 
     def release(self, progress: Any = None) -> Tuple[Any, Report]:
         """The current pose's deformation, as ``deform`` gives it: the solve converged, the
         points moved through the transfer (fixed points keep their coordinates, handle points
-        follow their handle), in the form they came in, and a ``Report``."""
-        moved, info = _with_progress(progress, lambda cb: self._native.release(cb))
-        out, notes = self._points.back(moved, info.get("normals"))
-        return out, Report._of(info, notes, self._paths)
+        follow their handle), in the form they came in, and a ``Report`` (its warnings also
+        emitted as ``RigidCellsWarning`` warnings)."""
+        with self._lock:
+            moved, info = _with_progress(progress, lambda cb: self._native.release(cb))
+            paths = self._paths
+        turned = _turned(info, self._normals_dtype)
+        out, notes = self._points.back(moved, turned)
+        report = Report._of(info, notes, paths)
+        _warn(report.warnings)
+        return out, report
 
     def _step(self, info: dict) -> Step:
         return Step(
@@ -721,15 +771,19 @@ def solve(
 ) -> Field:
     """Solves ``spec`` over ``points`` (any form ``deform`` takes, with ``scale`` and ``offset``
     as there) and returns the field (``Field.apply``, ``.save``; ``field.report`` says what the
-    solve did)."""
+    solve did, its warnings also emitted as ``RigidCellsWarning`` warnings)."""
     options = _picked(locals())
     p = _Points(points, scale, offset)
     text, base, paths = _spec(spec)
     tris = p.triangles if triangles is None else _triangles(triangles)
     field, info = _with_progress(
-        progress, lambda cb: _call(paths, _rigidcells.solve, p.xyz, text, base, tris, options, cb)
+        progress, lambda cb: _call(
+            paths, _rigidcells.solve, p.xyz, text, base, tris, options, cb, p.classes
+        )
     )
-    return Field(field, Report._of(info, paths=paths))
+    report = Report._of(info, paths=paths)
+    _warn(report.warnings)
+    return Field(field, report)
 
 
 def deform_file(
@@ -787,7 +841,9 @@ def deform_file(
             path(save_field), path(report), path(preview), view, chunk, options, cb,
         )
     )
-    return Report._of(info, paths=paths)
+    report = Report._of(info, paths=paths)
+    _warn(report.warnings)
+    return report
 
 
 def apply_file(
@@ -849,7 +905,9 @@ def solve_files(
             options, cb,
         )
     )
-    return Report._of(info, paths=paths)
+    report = Report._of(info, paths=paths)
+    _warn(report.warnings)
+    return report
 
 
 for _f in (deform, solve, deform_file):

@@ -3,7 +3,8 @@ with fields ``X``, ``Y``, ``Z`` (floats, or LAS record integers with a scale and
 ``LasData`` or point record, a trimesh or Open3D object (``_interop``). ``_Points`` reads them
 into coordinates for the native calls and puts the moved coordinates back into a new object of
 the same form; LAS records are written through their frame, rounded to the nearest step as the
-command line's LAS writer rounds them."""
+command line's LAS writer rounds them. Records keep their LAS classes for the spec's
+classification regions, and float coordinates come back in their own precision."""
 
 from __future__ import annotations
 
@@ -76,9 +77,40 @@ def _into(records: np.ndarray, dtype: np.dtype, name: str) -> np.ndarray:
     return records.astype(dtype)
 
 
+# The fields of a structured array that hold LAS classes, and the bits of the class in each:
+# a byte in laspy's point formats 6 to 10 and in PDAL's arrays; in laspy's formats 0 to 5 the low
+# five bits of `raw_classification` (beside the synthetic, key-point and withheld flags), which
+# is what the command line reads from such a file.
+_CLASS_FIELDS = (("classification", 0xFF), ("Classification", 0xFF), ("raw_classification", 0x1F))
+
+
+def _classes(arr: np.ndarray) -> Optional[np.ndarray]:
+    """The LAS classes ((n,) uint8) of a structured array's records, or None where it has no
+    integer class field."""
+    for name, bits in _CLASS_FIELDS:
+        if name in arr.dtype.names and arr.dtype[name].kind in "iu":
+            c = arr[name]
+            if c.size and (int(c.min()) < 0 or int(c.max()) > 255):
+                raise ValueError(
+                    f"points: {name} holds {int(c.min())} to {int(c.max())}; LAS classes are 0 "
+                    "to 255"
+                )
+            return np.ascontiguousarray(c.astype(np.uint8) & bits)
+    return None
+
+
+def _float_dtype(values: Any) -> np.dtype:
+    """The dtype results take for coordinates or normals given as ``values``: theirs where it is
+    a float (float32 in, float32 out), else float64."""
+    dtype = getattr(values, "dtype", None)
+    return dtype if dtype is not None and dtype.kind == "f" else np.dtype(np.float64)
+
+
 class _Points:
-    """Points in any accepted form: their coordinates ((n, 3) float64), and ``back``, which
-    puts moved coordinates into a new object of the same form (the input is never changed)."""
+    """Points in any accepted form: their coordinates ((n, 3) float64), their LAS ``classes``
+    (or None), and ``back``, which puts moved coordinates into a new object of the same form
+    (the input is never changed). ``dtype``: the float type of the coordinates given (float64
+    where they are not floats), which moved coordinates take."""
 
     def __init__(self, points: Any, scale: Optional[Frame], offset: Optional[Frame]) -> None:
         laspy = _laspy()
@@ -86,6 +118,8 @@ class _Points:
         self._las = self._record = self._structured = self._plain = None
         self._frame: Any = None
         self._reframe = False
+        self.classes: Optional[np.ndarray] = None
+        self.dtype = np.dtype(np.float64)
         # A trimesh or Open3D object's triangles and normals, taken where none are given.
         self.triangles: Optional[np.ndarray] = None
         self.normals: Optional[np.ndarray] = None
@@ -130,6 +164,7 @@ class _Points:
                 raise ValueError(f"a structured array needs fields X, Y, Z; it has {names}")
             kinds = {arr.dtype[k].kind for k in ("X", "Y", "Z")}
             self._structured = arr
+            self.classes = _classes(arr)
             if kinds <= {"i", "u"}:
                 if self._frame is None:
                     if not given:
@@ -147,8 +182,9 @@ class _Points:
                         "scale and offset decode integer X, Y, Z; these are floats (coordinates "
                         "already): leave scale and offset out"
                     )
-                xyz = np.stack([arr["X"], arr["Y"], arr["Z"]], axis=1).astype(np.float64)
-                self.xyz = np.ascontiguousarray(xyz)
+                xyz = np.stack([arr["X"], arr["Y"], arr["Z"]], axis=1)
+                self.dtype = _float_dtype(xyz)
+                self.xyz = np.ascontiguousarray(xyz, dtype=np.float64)
             else:
                 raise ValueError(
                     "points: X, Y, Z must be all floats (coordinates) or all integers (LAS "
@@ -167,6 +203,7 @@ class _Points:
             self._plain = arr
             self.xyz = _decode(arr, self._frame)
         else:
+            self.dtype = _float_dtype(arr)
             self.xyz = np.ascontiguousarray(arr, dtype=np.float64)
 
     def back(
@@ -179,7 +216,7 @@ class _Points:
             return self._geometry.back(moved, turned), notes
         if self._frame is None:
             if self._structured is None:
-                return moved, notes
+                return moved.astype(self.dtype, copy=False), notes
             out = self._structured.copy()
             for k, name in enumerate(("X", "Y", "Z")):
                 out[name] = moved[:, k]  # a float field: rounded to its nearest value
