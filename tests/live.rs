@@ -295,3 +295,36 @@ fn a_release_without_a_drag_is_deforms_points_bit_for_bit_loose_parts_too() {
         }
     }
 }
+
+#[test]
+fn las_classes_select_in_a_live_session_as_in_deform() {
+    let (points, triangles) = bar();
+    // Class 2 at the right end (the "ground" a surveyor lifts), 1 elsewhere.
+    let classes: Vec<u8> = points
+        .iter()
+        .map(|p| if p.x > 8.0 { 2 } else { 1 })
+        .collect();
+    let text = "[[fixed]]\nbox = { min = [-1.0, -1.0, -1.0], max = [2.0, 2.0, 2.0] }\n\
+                [[handle]]\nclassification = [2]\ntranslate = [0.0, 0.0, 2.0]\n";
+    let spec = parse_spec::<3>(text, Path::new("."), Path::new("class.toml")).unwrap();
+    let params = params();
+    let (expected, _, _, _) =
+        pipeline::deform_oriented(&points, &[], &triangles, &classes, &spec, &params, &Silent)
+            .unwrap();
+    let tip = points.iter().position(|p| p.x == 10.0).unwrap();
+    assert_eq!(expected[tip].z, points[tip].z + 2.0);
+    let mut live = Live::new(points.clone(), &triangles, classes.clone(), params).unwrap();
+    live.solve(spec.clone(), params.solve.max_iterations, &Silent)
+        .unwrap();
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+    assert!(moved == expected, "the release is not deform's");
+    // Without classes, or with a class a sample too few, the spec is refused, never read past.
+    for wrong in [Vec::new(), classes[1..].to_vec()] {
+        let refused =
+            pipeline::deform_oriented(&points, &[], &triangles, &wrong, &spec, &params, &Silent);
+        assert!(refused.is_err(), "{} classes", wrong.len());
+    }
+    let short = Live::new(points.clone(), &triangles, classes[1..].to_vec(), params);
+    let message = short.err().unwrap().to_string();
+    assert!(message.contains("LAS classes for"), "{message}");
+}
