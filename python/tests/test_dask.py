@@ -66,7 +66,9 @@ def test_a_tile_the_library_refuses_is_not_run_again(tmp_path, monkeypatch):
                 rigidcells.dask.apply_tiles(field, [outside], tmp_path / "out", client)
             # An I/O error may pass: it is tried again.
             with pytest.raises(OSError):
-                rigidcells.dask.apply_tiles(field, [tmp_path / "gone.xyz"], tmp_path / "out", client, retries=1)
+                rigidcells.dask.apply_tiles(
+                    field, [tmp_path / "gone.xyz"], tmp_path / "out", client, retries=1
+                )
             infos = rigidcells.dask.apply_tiles(field, [inside], tmp_path / "out", client)
     assert runs == ["outside.xyz", "gone.xyz", "gone.xyz", "inside.xyz"]
     assert infos[0]["samples"] == 50

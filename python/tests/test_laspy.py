@@ -211,7 +211,8 @@ def test_a_class_region_selects_in_memory_what_the_cli_selects(tmp_path, point_f
     raised = np.asarray(las.classification) == 2
     assert np.count_nonzero((theirs[:, 2] - records(las)[:, 2] == 2000) & raised) > 10
     frame = dict(scale=las.header.scales, offset=las.header.offsets)
-    structured = np.zeros(len(las.points), dtype=[(k, "f8") for k in XYZ] + [("Classification", "u1")])
+    fields = [(k, "f8") for k in XYZ] + [("Classification", "u1")]
+    structured = np.zeros(len(las.points), dtype=fields)
     for k, name in enumerate(XYZ):
         structured[name] = las.xyz[:, k]
     structured["Classification"] = las.classification
