@@ -6,6 +6,7 @@ use std::path::Path;
 use rigidcells::pipeline::{self, DeformParams, Live, Options};
 use rigidcells::progress::Silent;
 use rigidcells::rigid::Vect;
+use rigidcells::solve::LooseParts;
 use rigidcells::spec::{EditSpec, parse_poses, parse_spec};
 
 /// A 10 × 1 × 1 bar's vertices and triangles.
@@ -244,4 +245,86 @@ fn a_pivot_given_or_left_to_the_centroid_and_tied_handles_are_resolved_again() {
         .unwrap_err()
         .to_string();
     assert_eq!(apart, alone);
+}
+
+#[test]
+fn a_release_without_a_drag_is_deforms_points_bit_for_bit_loose_parts_too() {
+    let (mut points, triangles) = bar();
+    // A block of points two units beside the bar: a part no constraint reaches.
+    let bar_len = points.len();
+    for k in 0..125 {
+        let (i, j, l) = (k % 5, k / 5 % 5, k / 25);
+        points.push(Vect::<3>::new(
+            6.0 + 0.25 * f64::from(i),
+            3.0 + 0.25 * f64::from(j),
+            0.25 * f64::from(l),
+        ));
+    }
+    let spec = spec(&points, 3.0, -30.0);
+    for loose in [LooseParts::Carry, LooseParts::Rest] {
+        let params = Options {
+            cell_size: Some(0.25),
+            loose_parts: loose,
+            ..Default::default()
+        }
+        .params()
+        .unwrap();
+        let (expected, _, expected_info) =
+            pipeline::deform(&points, &triangles, &spec, &params, &Silent).unwrap();
+        let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+        let most = params.solve.max_iterations;
+        let step = live.solve(spec.clone(), most, &Silent).unwrap().unwrap();
+        let preview = live.preview().unwrap();
+        let (moved, _, _, info) = live.release(&[], &Silent).unwrap();
+        let differ = moved.iter().zip(&expected).filter(|(a, b)| a != b).count();
+        assert_eq!(differ, 0, "{loose:?}: {differ} points differ from deform's");
+        assert_eq!(info.warnings, expected_info.warnings, "{loose:?}");
+        // The step and the preview say and show what the release gives.
+        assert!(
+            expected_info
+                .warnings
+                .iter()
+                .all(|w| step.warnings.contains(w))
+        );
+        let block = bar_len..points.len();
+        assert!(farthest(&preview[block.clone()], &moved[block.clone()]) < 1e-9);
+        let travel = farthest(&moved[block.clone()], &points[block]);
+        match loose {
+            LooseParts::Carry => assert!(travel > 0.5, "the loose block moved {travel}"),
+            LooseParts::Rest => assert_eq!(travel, 0.0),
+        }
+    }
+}
+
+#[test]
+fn las_classes_select_in_a_live_session_as_in_deform() {
+    let (points, triangles) = bar();
+    // Class 2 at the right end (the "ground" a surveyor lifts), 1 elsewhere.
+    let classes: Vec<u8> = points
+        .iter()
+        .map(|p| if p.x > 8.0 { 2 } else { 1 })
+        .collect();
+    let text = "[[fixed]]\nbox = { min = [-1.0, -1.0, -1.0], max = [2.0, 2.0, 2.0] }\n\
+                [[handle]]\nclassification = [2]\ntranslate = [0.0, 0.0, 2.0]\n";
+    let spec = parse_spec::<3>(text, Path::new("."), Path::new("class.toml")).unwrap();
+    let params = params();
+    let (expected, _, _, _) =
+        pipeline::deform_oriented(&points, &[], &triangles, &classes, &spec, &params, &Silent)
+            .unwrap();
+    let tip = points.iter().position(|p| p.x == 10.0).unwrap();
+    assert_eq!(expected[tip].z, points[tip].z + 2.0);
+    let mut live = Live::new(points.clone(), &triangles, classes.clone(), params).unwrap();
+    live.solve(spec.clone(), params.solve.max_iterations, &Silent)
+        .unwrap();
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+    assert!(moved == expected, "the release is not deform's");
+    // Without classes, or with a class a sample too few, the spec is refused, never read past.
+    for wrong in [Vec::new(), classes[1..].to_vec()] {
+        let refused =
+            pipeline::deform_oriented(&points, &[], &triangles, &wrong, &spec, &params, &Silent);
+        assert!(refused.is_err(), "{} classes", wrong.len());
+    }
+    let short = Live::new(points.clone(), &triangles, classes[1..].to_vec(), params);
+    let message = short.err().unwrap().to_string();
+    assert!(message.contains("LAS classes for"), "{message}");
 }

@@ -3,14 +3,14 @@
 //! heavy call, and the library's errors as Python exceptions (`ValueError` for a bad spec or
 //! parameter, `OSError` for I/O, `rigidcells.FormatError` for malformed files). The Python
 //! package (`python/python/rigidcells/__init__.py`) adds specs as dicts or paths and numpy
-//! structured arrays.
+//! structured arrays. The live `Session` is in `session.rs`.
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -21,14 +21,17 @@ use rigidcells::field::{Outside, SavedField, Transfer};
 use rigidcells::io;
 use rigidcells::names::{Named, UnknownName};
 use rigidcells::pipeline::Options;
-use rigidcells::pipeline::{self, DeformInfo, DeformParams, Live, Step};
+use rigidcells::pipeline::{self, DeformInfo, DeformParams};
 use rigidcells::progress::Observer;
 use rigidcells::render::View;
 use rigidcells::report::Timings;
 use rigidcells::rigid::Vect;
 use rigidcells::solve::Solution;
 use rigidcells::solve::{LooseParts, Method};
-use rigidcells::spec::{EditSpec, parse_poses, parse_spec};
+use rigidcells::spec::{EditSpec, parse_spec};
+
+mod session;
+use session::Session;
 
 create_exception!(
     _rigidcells,
@@ -271,6 +274,11 @@ fn triangles(a: Option<&PyReadonlyArray2<i64>>, n: usize) -> PyResult<Vec<[u32; 
         .collect()
 }
 
+/// LAS classes ((n,), uint8), one a point, or none.
+fn classes(a: Option<&PyReadonlyArray1<u8>>) -> Vec<u8> {
+    a.map_or_else(Vec::new, |a| a.as_array().to_vec())
+}
+
 fn moved_array<'py>(py: Python<'py>, moved: &[Vect<3>]) -> Bound<'py, PyArray2<f64>> {
     let flat: Vec<f64> = moved.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
     Array2::from_shape_vec((moved.len(), 3), flat)
@@ -443,27 +451,40 @@ fn info_dict<'py>(
     Ok(d)
 }
 
+/// The samples `deform` and `solve` take: points, triangles over them and their LAS classes
+/// (empty when none are given).
+struct Samples {
+    points: Vec<Vect<3>>,
+    triangles: Vec<[u32; 3]>,
+    classes: Vec<u8>,
+}
+
 /// The arguments `deform` and `solve` share, checked and converted.
-#[allow(clippy::type_complexity)]
 fn inputs(
     points: &PyReadonlyArray2<f64>,
     triangles: Option<&PyReadonlyArray2<i64>>,
+    classes: Option<&PyReadonlyArray1<u8>>,
     spec_text: &str,
     base: &str,
     options: Option<&Bound<'_, PyDict>>,
-) -> PyResult<(Vec<Vect<3>>, Vec<[u32; 3]>, EditSpec<3>, DeformParams)> {
+) -> PyResult<(Samples, EditSpec<3>, DeformParams)> {
     let params = self::options(options)?.params().map_err(py_err)?;
     let pts = self::points(points)?;
-    let tris = self::triangles(triangles, pts.len())?;
-    Ok((pts, tris, self::spec(spec_text, base)?, params))
+    let samples = Samples {
+        triangles: self::triangles(triangles, pts.len())?,
+        classes: self::classes(classes),
+        points: pts,
+    };
+    Ok((samples, self::spec(spec_text, base)?, params))
 }
 
 /// Deforms `points` ((n, 3) float64), with their `normals` when given, under the TOML `spec`
 /// (relative file names against `base`) with the `options` (keyword arguments as the command
-/// line's options); returns the moved points and what was done (with the turned normals under
-/// `"normals"` when normals were given).
+/// line's options); `classes` ((n,) uint8) are the points' LAS classes, for the spec's
+/// classification regions. Returns the moved points and what was done (with the turned normals
+/// under `"normals"` when normals were given).
 #[pyfunction]
-#[pyo3(signature = (points, spec_text, base, triangles=None, normals=None, options=None, progress=None))]
+#[pyo3(signature = (points, spec_text, base, triangles=None, normals=None, options=None, progress=None, classes=None))]
 #[allow(clippy::too_many_arguments)]
 fn deform<'py>(
     py: Python<'py>,
@@ -474,10 +495,12 @@ fn deform<'py>(
     normals: Option<PyReadonlyArray2<'py, f64>>,
     options: Option<Bound<'py, PyDict>>,
     progress: Option<Py<PyAny>>,
+    classes: Option<PyReadonlyArray1<'py, u8>>,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
-    let (pts, tris, spec, params) = inputs(
+    let (s, spec, params) = inputs(
         &points,
         triangles.as_ref(),
+        classes.as_ref(),
         spec_text,
         base,
         options.as_ref(),
@@ -488,35 +511,54 @@ fn deform<'py>(
     };
     let observer = PyObserver::new(progress);
     let start = Instant::now();
-    let result =
-        py.detach(|| pipeline::deform_oriented(&pts, &nrm, &tris, &spec, &params, &observer));
-    let (moved, moved_normals, solution, info) = observer.result(result)?;
+    let result = py.detach(|| -> rigidcells::Result<_> {
+        let (moved, turned, solution, info) = pipeline::deform_oriented(
+            &s.points,
+            &nrm,
+            &s.triangles,
+            &s.classes,
+            &spec,
+            &params,
+            &observer,
+        )?;
+        let residuals = residuals(Some(&solution), &s.points, &moved);
+        Ok((moved, turned, residuals, info))
+    });
+    let (moved, moved_normals, residuals, info) = observer.result(result)?;
     let seconds = start.elapsed().as_secs_f64();
-    let d = deformed_dict(py, &info, Some(&solution), &pts, &moved, seconds)?;
+    let d = deformed_dict(py, &info, residuals, s.points.len(), seconds)?;
     if normals.is_some() {
         d.set_item("normals", moved_array(py, &moved_normals))?;
     }
     Ok((moved_array(py, &moved), d))
 }
 
-/// What a deformation of samples in memory did, as a dict: [`info_dict`] with the residuals
-/// at the fixed and handle samples, the cell size and the timings.
-fn deformed_dict<'py>(
-    py: Python<'py>,
-    info: &DeformInfo,
+/// The largest residuals at the fixed and the handle samples of a deformation of `points` into
+/// `moved`, and its finest cell size (zeros without a solution: nothing was constrained).
+fn residuals(
     solution: Option<&Solution<3>>,
     points: &[Vect<3>],
     moved: &[Vect<3>],
-    seconds: f64,
-) -> PyResult<Bound<'py, PyDict>> {
-    let d = info_dict(py, info, points.len() as u64)?;
-    let (fixed, handle, cell_size) = match solution {
+) -> (f64, f64, f64) {
+    match solution {
         Some(solution) => {
             let (fixed, handle, _) = rigidcells::report::residuals(solution, points, moved);
             (fixed, handle, solution.complex.grid.finest_size())
         }
         None => (0.0, 0.0, 0.0),
-    };
+    }
+}
+
+/// What a deformation of `samples` samples in memory did, as a dict: [`info_dict`] with the
+/// [`residuals`] at the fixed and handle samples, the cell size and the timings.
+fn deformed_dict<'py>(
+    py: Python<'py>,
+    info: &DeformInfo,
+    (fixed, handle, cell_size): (f64, f64, f64),
+    samples: usize,
+    seconds: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = info_dict(py, info, samples as u64)?;
     d.set_item("residual_fixed_max", fixed)?;
     d.set_item("residual_handle_max", handle)?;
     d.set_item("cell_size", cell_size)?;
@@ -648,176 +690,10 @@ impl Field {
     }
 }
 
-/// A live deformation of samples in memory ([`Live`]): the cells built once, a spec solved
-/// from rest, then poses dragged a Gauss-Newton iteration at a time, previewed by the blend,
-/// and released through the transfer. Every heavy call releases the GIL, so a face may run
-/// it on a thread of its own.
-#[pyclass(module = "rigidcells._rigidcells")]
-struct Session {
-    live: Live,
-    /// The points' normals (one a point, or none), turned by the release.
-    normals: Vec<Vect<3>>,
-}
-
-/// What a step of a [`Session`] did, as a dict.
-fn step_dict<'py>(py: Python<'py>, step: Option<&Step>) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    // Nothing constrained: nothing to solve, and the samples rest.
-    d.set_item("converged", step.is_none_or(|s| s.solver.converged))?;
-    let step = step.cloned().unwrap_or_default();
-    d.set_item("iterations", step.solver.iterations)?;
-    d.set_item("from_rest", step.from_rest)?;
-    d.set_item("seconds", step.seconds)?;
-    d.set_item("warnings", PyList::new(py, said(&step.warnings))?)?;
-    Ok(d)
-}
-
-#[pymethods]
-impl Session {
-    /// Builds the cells of `points` ((n, 3) float64, with `triangles`, and `normals` to turn
-    /// at the release) with the `options`.
-    #[new]
-    #[pyo3(signature = (points, triangles=None, normals=None, options=None))]
-    fn new(
-        py: Python<'_>,
-        points: PyReadonlyArray2<'_, f64>,
-        triangles: Option<PyReadonlyArray2<'_, i64>>,
-        normals: Option<PyReadonlyArray2<'_, f64>>,
-        options: Option<Bound<'_, PyDict>>,
-    ) -> PyResult<Self> {
-        let params = self::options(options.as_ref())?.params().map_err(py_err)?;
-        let pts = self::points(&points)?;
-        let tris = self::triangles(triangles.as_ref(), pts.len())?;
-        let normals = match &normals {
-            Some(n) => self::points(n)?,
-            None => Vec::new(),
-        };
-        if !normals.is_empty() && normals.len() != pts.len() {
-            return Err(PyValueError::new_err(format!(
-                "normals: {} for {} points; give one per point, or none",
-                normals.len(),
-                pts.len()
-            )));
-        }
-        let live = py
-            .detach(|| Live::new(pts, &tris, Vec::new(), params))
-            .map_err(py_err)?;
-        Ok(Self { live, normals })
-    }
-
-    /// Moves to the TOML `spec` with at most `iterations` Gauss-Newton iterations (all it
-    /// takes when None): warm when only its handles' poses changed, else from rest.
-    #[pyo3(signature = (spec_text, base, iterations=None, progress=None))]
-    fn solve<'py>(
-        &mut self,
-        py: Python<'py>,
-        spec_text: &str,
-        base: &str,
-        iterations: Option<usize>,
-        progress: Option<Py<PyAny>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        let spec = self::spec(spec_text, base)?;
-        let most = iterations.unwrap_or(self.live.params().solve.max_iterations);
-        let observer = PyObserver::new(progress);
-        let live = &mut self.live;
-        let step = observer.result(py.detach(|| live.solve(spec, most, &observer)))?;
-        step_dict(py, step.as_ref())
-    }
-
-    /// The last spec with its handles posed as the TOML `poses` say (one `[[handle]]` table
-    /// a handle, its motion alone) and its pins going to `pins` ((k, 3), one a pin, or none),
-    /// with at most `iterations` Gauss-Newton iterations.
-    #[pyo3(signature = (poses_text, iterations, pins=None))]
-    fn pose<'py>(
-        &mut self,
-        py: Python<'py>,
-        poses_text: &str,
-        iterations: usize,
-        pins: Option<PyReadonlyArray2<'py, f64>>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        // Named as a spec, so that the package says its errors by key path.
-        let poses = parse_poses::<3>(poses_text, Path::new("spec")).map_err(py_err)?;
-        let pins = match &pins {
-            Some(p) => self::points(p)?,
-            None => Vec::new(),
-        };
-        if let Some(k) = pins.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-            return Err(PyValueError::new_err(format!(
-                "pins[{k}]: {:?} is not 3 finite numbers",
-                pins[k].as_slice()
-            )));
-        }
-        let live = &mut self.live;
-        let step = py
-            .detach(|| live.pose(&poses, &pins, iterations))
-            .map_err(py_err)?;
-        step_dict(py, Some(&step))
-    }
-
-    /// One more iteration when the last step stopped short of converging; whether it ran.
-    fn refine(&mut self, py: Python<'_>) -> PyResult<bool> {
-        let live = &mut self.live;
-        Ok(py.detach(|| live.refine()).map_err(py_err)?.is_some())
-    }
-
-    /// Whether the last step converged.
-    #[getter]
-    fn converged(&self) -> bool {
-        self.live.converged()
-    }
-
-    /// The number of cells.
-    #[getter]
-    fn cells(&self) -> usize {
-        self.live.complex().len()
-    }
-
-    /// The finest cells' edge.
-    #[getter]
-    fn cell_size(&self) -> f64 {
-        self.live.complex().grid.finest_size()
-    }
-
-    /// The samples moved by the cells' current motions, blended: the preview of a pose.
-    fn preview<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let live = &mut self.live;
-        let moved = py.detach(|| live.preview()).map_err(py_err)?;
-        Ok(moved_array(py, &moved))
-    }
-
-    /// The last spec's deformation through the transfer, converged first; the moved samples
-    /// and what was done (with the turned normals under `"normals"` when normals were given).
-    #[pyo3(signature = (progress=None))]
-    fn release<'py>(
-        &mut self,
-        py: Python<'py>,
-        progress: Option<Py<PyAny>>,
-    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyDict>)> {
-        let observer = PyObserver::new(progress);
-        let start = Instant::now();
-        let (live, normals) = (&mut self.live, &self.normals);
-        let released = py.detach(|| live.release(normals, &observer));
-        let (moved, turned, solution, info) = observer.result(released)?;
-        let seconds = start.elapsed().as_secs_f64();
-        let d = deformed_dict(
-            py,
-            &info,
-            solution.as_ref(),
-            self.live.points(),
-            &moved,
-            seconds,
-        )?;
-        if !self.normals.is_empty() {
-            d.set_item("normals", moved_array(py, &turned))?;
-        }
-        Ok((moved_array(py, &moved), d))
-    }
-}
-
-/// Solves the TOML `spec` over `points` with the `options`; returns the field and what was
-/// done.
+/// Solves the TOML `spec` over `points` (with their LAS `classes` when given) with the
+/// `options`; returns the field and what was done.
 #[pyfunction]
-#[pyo3(signature = (points, spec_text, base, triangles=None, options=None, progress=None))]
+#[pyo3(signature = (points, spec_text, base, triangles=None, options=None, progress=None, classes=None))]
 #[allow(clippy::too_many_arguments)]
 fn solve<'py>(
     py: Python<'py>,
@@ -827,19 +703,30 @@ fn solve<'py>(
     triangles: Option<PyReadonlyArray2<'py, i64>>,
     options: Option<Bound<'py, PyDict>>,
     progress: Option<Py<PyAny>>,
+    classes: Option<PyReadonlyArray1<'py, u8>>,
 ) -> PyResult<(Field, Bound<'py, PyDict>)> {
-    let (pts, tris, spec, params) = inputs(
+    let (s, spec, params) = inputs(
         &points,
         triangles.as_ref(),
+        classes.as_ref(),
         spec_text,
         base,
         options.as_ref(),
     )?;
     let observer = PyObserver::new(progress);
     let start = Instant::now();
-    let result = py.detach(|| pipeline::solve_points(&pts, &tris, &spec, &params, &observer));
+    let result = py.detach(|| {
+        pipeline::solve_points(
+            &s.points,
+            &s.triangles,
+            &s.classes,
+            &spec,
+            &params,
+            &observer,
+        )
+    });
     let (saved, solution, info) = observer.result(result)?;
-    let d = info_dict(py, &info, pts.len() as u64)?;
+    let d = info_dict(py, &info, s.points.len() as u64)?;
     d.set_item("cell_size", solution.complex.grid.finest_size())?;
     let seconds = start.elapsed().as_secs_f64();
     d.set_item("timings", timings(py, &info, 0.0, 0.0, seconds)?)?;

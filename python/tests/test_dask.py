@@ -40,3 +40,35 @@ def test_apply_tiles_on_a_local_cluster_matches_the_cli(tmp_path):
         ref = tmp_path / f"cli_{tile.name}"
         subprocess.run([cli(), "apply", str(field), str(tile), "-o", str(ref), "-q"], check=True)
         assert (tmp_path / "out" / tile.name).read_bytes() == ref.read_bytes(), tile.name
+
+
+def test_a_tile_the_library_refuses_is_not_run_again(tmp_path, monkeypatch):
+    from test_rigidcells import bar_points
+
+    pts = bar_points()
+    field = tmp_path / "bar.field"
+    rigidcells.solve(pts, {"fixed": [{"box": {"min": [-1, -1, -1], "max": [1, 2, 2]}}]}).save(field)
+    inside, outside = tmp_path / "inside.xyz", tmp_path / "outside.xyz"
+    inside.write_text("".join(f"{x} {y} {z}\n" for x, y, z in pts[:50]))
+    outside.write_text("".join(f"{x + 1000} {y} {z}\n" for x, y, z in pts[:50]))
+    runs = []
+    apply_file = rigidcells.apply_file
+
+    def counted(field, tile, *args, **kwargs):
+        runs.append(Path(tile).name)
+        return apply_file(field, tile, *args, **kwargs)
+
+    # Workers in this process (threads), so that they call the counted apply_file.
+    monkeypatch.setattr(rigidcells, "apply_file", counted)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False) as cluster:
+        with distributed.Client(cluster) as client:
+            with pytest.raises(ValueError, match="outside.xyz: 50 samples lie farther"):
+                rigidcells.dask.apply_tiles(field, [outside], tmp_path / "out", client)
+            # An I/O error may pass: it is tried again.
+            with pytest.raises(OSError):
+                rigidcells.dask.apply_tiles(
+                    field, [tmp_path / "gone.xyz"], tmp_path / "out", client, retries=1
+                )
+            infos = rigidcells.dask.apply_tiles(field, [inside], tmp_path / "out", client)
+    assert runs == ["outside.xyz", "gone.xyz", "gone.xyz", "inside.xyz"]
+    assert infos[0]["samples"] == 50

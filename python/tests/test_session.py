@@ -143,3 +143,88 @@ def test_pins_follow_a_drag():
         live.drag(pose, pins=[[5.0, 0.5, 2.0], [5.0, 0.5, 2.0]])
     with pytest.raises(ValueError, match=r"pins\[0\]"):
         live.drag(pose, pins=[[5.0, 0.5, float("inf")]])
+
+
+def cube_points():
+    """3,000 random points in a unit cube: most of its cells are parts of their own."""
+    return np.random.default_rng(7).random((3000, 3))
+
+
+CUBE = {
+    "fixed": [{"box": {"min": [-1, -1, -1], "max": [0.2, 2, 2]}}],
+    "handle": [{"box": {"min": [0.8, -1, -1], "max": [2, 2, 2]}, "translate": [0, 0, 0.3]}],
+}
+
+
+def test_a_release_without_a_drag_is_deform_bit_for_bit():
+    pts = cube_points()
+    still = {}
+    for loose_parts in (None, "carry", "rest"):
+        expected, report = rigidcells.deform(pts, CUBE, loose_parts=loose_parts)
+        assert any("connected parts" in w for w in report.warnings), report.warnings
+        live = rigidcells.Session(pts, CUBE, loose_parts=loose_parts)
+        moved, released = live.release()
+        assert np.array_equal(moved, expected), loose_parts
+        assert released.warnings == report.warnings
+        still[loose_parts] = [
+            np.count_nonzero(np.all(shape == pts, axis=1)) for shape in (moved, live.preview())
+        ]
+    # The loose parts ride along by default, in the release and in the preview.
+    assert still[None] == still["carry"]
+    assert all(c < r - 500 for c, r in zip(still["carry"], still["rest"])), still
+
+
+def test_calls_from_two_threads_wait_their_turn():
+    pts = bar_points()
+    live = rigidcells.Session(pts, bar_spec(pts), cell_size=0.2)
+    other = bar_spec(pts, turn=-60.0, lift=2.0)
+    other["fixed"] = [{"indices": np.nonzero(pts[:, 0] < 2.0)[0]}]
+    errors = []
+
+    def run(calls):
+        try:
+            for call in calls:
+                call()
+        except Exception as e:  # noqa: BLE001 - what the test reports
+            errors.append(e)
+
+    solving = threading.Thread(target=run, args=([lambda: live.solve(other)] * 3,))
+    posing = threading.Thread(
+        target=run,
+        args=([lambda: live.drag({"translate": [0, 0, 1]}), live.preview, live.release] * 5,),
+    )
+    solving.start()
+    posing.start()
+    solving.join()
+    posing.join()
+    assert errors == []
+    moved, _ = live.release()
+    assert np.isfinite(moved).all()
+
+
+def test_float32_points_and_normals_come_back_float32():
+    pts = bar_points().astype(np.float32)
+    normals = np.tile(np.array([0, 0, 1], np.float32), (len(pts), 1))
+    moved, report = rigidcells.deform(pts, bar_spec(pts, lift=1.0), normals=normals, cell_size=0.25)
+    assert moved.dtype == np.float32 and report.normals.dtype == np.float32
+    live = rigidcells.Session(pts, bar_spec(pts, lift=1.0), normals=normals, cell_size=0.25)
+    assert live.preview().dtype == np.float32
+    released, report = live.release()
+    assert released.dtype == np.float32 and report.normals.dtype == np.float32
+    assert np.array_equal(released, moved)
+    field = rigidcells.solve(pts, bar_spec(pts, lift=1.0), cell_size=0.25)
+    applied, turned = field.apply(pts, normals=normals)
+    assert applied.dtype == np.float32 and turned.dtype == np.float32
+    assert field.apply(pts.astype(np.float64)).dtype == np.float64
+
+
+def test_warnings_are_emitted_as_rigidcells_warnings():
+    pts = cube_points()
+    for call in (
+        lambda: rigidcells.deform(pts, CUBE),
+        lambda: rigidcells.solve(pts, CUBE),
+        lambda: rigidcells.Session(pts, CUBE).release(),
+    ):
+        with pytest.warns(rigidcells.RigidCellsWarning, match="have no constraint and ride along"):
+            call()
+    assert issubclass(rigidcells.RigidCellsWarning, UserWarning)

@@ -4,9 +4,14 @@
 //! [`Live`] builds the cells once. Each [`Live::solve`] takes the whole edit spec: when only
 //! the handles' poses and the pins' destinations changed since the last one, the session goes
 //! on warm from its current motions for a few Gauss-Newton iterations ([`Session::drag`], one
-//! per pose while dragging); otherwise the spec is resolved again and solved from rest. [`Live::preview`] blends the
-//! cells' current motions at the samples (cheap, for every pose); [`Live::release`] converges
-//! and runs the chosen transfer with its exact constraints, as [`super::deform`] does.
+//! per pose while dragging); otherwise the spec is resolved again and solved from rest.
+//! [`Live::preview`] blends the cells' current motions at the samples (cheap, for every pose);
+//! [`Live::release`] converges and runs the chosen transfer with its exact constraints, as
+//! [`super::deform`] does.
+//!
+//! A spec solved from rest and released without a drag gives `deform`'s points bit for bit:
+//! the cells are built, the spec resolved (with the samples' LAS classes), solved from rest
+//! and its loose parts carried as `deform` does each, and the release runs `deform`'s transfer.
 
 use std::time::Instant;
 
@@ -49,6 +54,8 @@ pub struct Live {
     /// The last solve's report, and the warnings of the session's solve from rest.
     info: SolverInfo,
     warnings: Vec<String>,
+    /// Whether the motions moved warm (a drag's step, a refinement) since the solve from rest.
+    warm: bool,
     /// Pairs of handles whose motions were equal when the spec was resolved.
     tied: Vec<(usize, usize)>,
     /// Each handle's selection centroid where the spec it was resolved from gave no pivot.
@@ -90,6 +97,7 @@ impl Live {
                  cells it built: give --cell-size or --cells (deform refines)"
             )));
         }
+        super::classes_of(points.len(), &classes)?;
         let (complex, build) =
             crate::cells::build(&points, triangles, &params.build, params.memory)?;
         Ok(Self {
@@ -102,6 +110,7 @@ impl Live {
             session: None,
             info: SolverInfo::default(),
             warnings: Vec::new(),
+            warm: false,
             tied: Vec::new(),
             centroids: Vec::new(),
             blend: None,
@@ -238,8 +247,12 @@ impl Live {
                     self.params.memory,
                     observer,
                 )?;
-                let mut warnings =
-                    stages::warnings(&self.build, &self.complex, session.constraints(), &solver);
+                let mut warnings = stages::warnings(
+                    &self.build,
+                    &self.complex,
+                    session.solution_constraints(),
+                    &solver,
+                );
                 warnings.extend(crate::cells::shortfall(
                     self.params.build.target_cells,
                     self.complex.len(),
@@ -267,6 +280,7 @@ impl Live {
         };
         self.spec = Some(spec);
         self.info = step.solver.clone();
+        self.warm = !step.from_rest;
         Ok(Some(Step {
             seconds: start.elapsed().as_secs_f64(),
             ..step
@@ -331,6 +345,7 @@ impl Live {
         };
         let solver = session.update_with(session.constraints().clone(), DRAG_ITERATIONS)?;
         self.info = solver.clone();
+        self.warm = true;
         Ok(Some(Step {
             solver,
             seconds: start.elapsed().as_secs_f64(),
@@ -411,11 +426,11 @@ impl Live {
             .collect())
     }
 
-    /// The last spec's deformation of the samples: the solve converged, then the chosen
-    /// transfer with its exact constraints and the fold-over check, as [`super::deform`]
-    /// gives them, with `normals` (one a sample, or none) turned as
-    /// [`super::deform_oriented`] turns them. The samples at rest (and no solution) before
-    /// anything is constrained.
+    /// The last spec's deformation of the samples: the solve converged (a drag's step may stop
+    /// short), then the chosen transfer with its exact constraints and the fold-over check, as
+    /// [`super::deform`] gives them (released without a drag, the same bits), with `normals`
+    /// (one a sample, or none) turned as [`super::deform_oriented`] turns them. The samples at
+    /// rest (and no solution) before anything is constrained.
     #[allow(clippy::type_complexity)]
     pub fn release(
         &mut self,
@@ -436,7 +451,9 @@ impl Live {
             };
             return Ok((self.points.clone(), normals.to_vec(), None, info));
         };
-        if !self.info.converged {
+        // A warm step that stopped short is converged; a solve from rest is taken as it ended,
+        // as `deform` takes it.
+        if self.warm && !self.info.converged {
             self.info = session.update(session.constraints().clone())?;
         }
         // The turns the cells carry now, and the warnings of this pose (a drag may have

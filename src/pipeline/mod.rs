@@ -211,11 +211,12 @@ where
     Dim<D>: Rigid<D>,
 {
     let (moved, _, solution, info) =
-        deform_oriented(points, &[], triangles, spec, params, observer)?;
+        deform_oriented(points, &[], triangles, &[], spec, params, observer)?;
     Ok((moved, solution, info))
 }
 
-/// [`deform`] of points with normals (one per point, or none): returns the moved points and
+/// [`deform`] of points with normals (one per point, or none) and LAS classes (one per point,
+/// or none; what the spec's classification regions select): returns the moved points and
 /// their normals as the map turns them (the transpose of the inverse Jacobian), each
 /// with its length.
 #[allow(clippy::type_complexity)]
@@ -223,6 +224,7 @@ pub fn deform_oriented<const D: usize>(
     points: &[Vect<D>],
     normals: &[Vect<D>],
     triangles: &[[u32; 3]],
+    classes: &[u8],
     spec: &EditSpec<D>,
     params: &DeformParams,
     observer: &dyn Observer,
@@ -237,7 +239,11 @@ where
             points.len()
         )));
     }
-    let samples = Cells::samples(points, triangles);
+    let samples = Cells::Samples {
+        points,
+        triangles,
+        classes: classes_of(points.len(), classes)?,
+    };
     let Staged {
         solution,
         saved,
@@ -268,6 +274,18 @@ where
         warnings,
     );
     Ok((moved, moved_normals, solution, info))
+}
+
+/// The LAS classes of `samples` samples in memory, one each or none (`None`): a count that
+/// is neither is refused.
+fn classes_of(samples: usize, classes: &[u8]) -> Result<Option<&[u8]>> {
+    match classes.len() {
+        0 => Ok(None),
+        n if n == samples => Ok(Some(classes)),
+        n => Err(Error::Param(format!(
+            "{n} LAS classes for {samples} points: give one per point, or none"
+        ))),
+    }
 }
 
 /// `deform` of a 2D point set file (`.xy`, read whole): the points deformed in memory under the
@@ -339,17 +357,23 @@ pub fn apply_points(
     Ok((moved, turned))
 }
 
-/// Solves `spec` over samples in memory and returns the field (with its transfer, and the
-/// RBF's coefficients when that is the transfer), to apply to these or other samples, or to
-/// save: the Python package's `solve`. The info's control points are as the field moves them.
+/// Solves `spec` over samples in memory (with their LAS `classes`, one per point, or none)
+/// and returns the field (with its transfer, and the RBF's coefficients when that is the
+/// transfer), to apply to these or other samples, or to save: the Python package's `solve`.
+/// The info's control points are as the field moves them.
 pub fn solve_points(
     points: &[Vect<3>],
     triangles: &[[u32; 3]],
+    classes: &[u8],
     spec: &EditSpec<3>,
     params: &DeformParams,
     observer: &dyn Observer,
 ) -> Result<(SavedField<3>, Solution<3>, DeformInfo)> {
-    let samples = Cells::samples(points, triangles);
+    let samples = Cells::Samples {
+        points,
+        triangles,
+        classes: classes_of(points.len(), classes)?,
+    };
     let Staged {
         solution,
         saved,

@@ -1,4 +1,11 @@
-//! Warm solves on fixed cells: the editor's session.
+//! Warm solves on fixed cells: the session of a live deformation (the editor, Python's
+//! `Session`, Blender's Live).
+//!
+//! A session's motions end as [`super::solve`]'s end: the parts no constraint reaches ride
+//! along with the nearest constrained cell ([`carry_loose`]) where the parameters carry them,
+//! so that its [`Session::motions`] and [`Session::solution`] are what `solve` gives for the
+//! same constraints. The solver itself works on the motions before that step (the loose parts at
+//! rest), as `solve`'s iterations do.
 
 use std::time::Instant;
 
@@ -6,8 +13,8 @@ use super::coarse::{holder, prolong};
 use super::system::System;
 use super::turns::TurnGauge;
 use super::{
-    CELLS_ADVICE, Constraints, Solution, SolveParams, SolverInfo, coarsen, from_rest,
-    minimize_with, prescribe, targets_at, timed,
+    CELLS_ADVICE, Constraints, Role, Solution, SolveParams, SolverInfo, carry_loose, coarsen,
+    from_rest, minimize_with, prescribe, targets_at, timed,
 };
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
@@ -16,10 +23,11 @@ use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid};
 
 /// An editing session on fixed cells: the paper's interactive case. The first solve runs from
-/// rest with load steps, as [`super::solve`] does (without refinement); each [`Session::update`] then
-/// starts Gauss-Newton from the current motions, without load steps, and reuses the sparse
-/// system's symbolic factorization when only the handles, pins and targets moved. A handle
-/// dragged a little converges in a few iterations instead of a solve from rest.
+/// rest with load steps, as [`super::solve`] does (without refinement); each
+/// [`Session::update`] then starts Gauss-Newton from the current motions, without load steps,
+/// and reuses the sparse system's symbolic factorization when only the handles, pins and
+/// targets moved. A handle dragged a little converges in a few iterations instead of a solve
+/// from rest. Each solve ends as `solve` ends, its loose parts carried.
 pub struct Session<const D: usize> {
     complex: CellComplex<D>,
     constraints: Constraints<D>,
@@ -35,6 +43,9 @@ pub struct Session<const D: usize> {
     /// constraints, the cells' system waits for the next update on the cells).
     dragged: bool,
     stale_system: bool,
+    /// The constraints and motions as a solution holds them, where they differ from
+    /// `constraints` and `motions`: the loose parts carried ([`carry_loose`]).
+    carried: Option<(Constraints<D>, Vec<Motion<D>>)>,
 }
 
 /// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels
@@ -106,7 +117,7 @@ where
             from_rest(&complex, &constraints, params, budget, observer)?;
         observer.finish();
         info.turns = TurnGauge::new(&complex).turns(&constraints, &motions);
-        let session = Self {
+        let mut session = Self {
             complex,
             constraints,
             system,
@@ -116,6 +127,7 @@ where
             drag: None,
             dragged: false,
             stale_system: false,
+            carried: None,
         };
         let info = session.finished(info, start);
         Ok((session, info))
@@ -281,7 +293,16 @@ where
         })
     }
 
-    fn finished(&self, mut info: SolverInfo, start: Instant) -> SolverInfo {
+    /// The end of a solve: the loose parts carried as [`super::solve`] carries them, and the
+    /// info's counts and seconds.
+    fn finished(&mut self, mut info: SolverInfo, start: Instant) -> SolverInfo {
+        self.carried = (self.params.carry_loose && self.constraints.roles.contains(&Role::Rest))
+            .then(|| {
+                let (mut constraints, mut motions) =
+                    (self.constraints.clone(), self.motions.clone());
+                carry_loose(&self.complex, &mut constraints, &mut motions);
+                (constraints, motions)
+            });
         info.cells_final = self.complex.len();
         info.unknowns = self.system.unknowns();
         info.seconds = start.elapsed().as_secs_f64();
@@ -293,14 +314,23 @@ where
         &self.complex
     }
 
-    /// The constraints of the last solve.
+    /// The constraints of the last solve, as the solver takes them (loose parts at rest): what
+    /// the next [`Session::update`] starts from.
     pub fn constraints(&self) -> &Constraints<D> {
         &self.constraints
     }
 
-    /// The current motions, one per cell (local frame).
+    /// The constraints as [`Session::solution`] holds them: the last solve's, with the cells
+    /// of loose parts [`Role::Carried`] and the warning saying so where the parameters carry
+    /// them.
+    pub fn solution_constraints(&self) -> &Constraints<D> {
+        self.carried.as_ref().map_or(&self.constraints, |(c, _)| c)
+    }
+
+    /// The current motions, one per cell (local frame), the loose parts carried as
+    /// [`Session::solution`] carries them.
     pub fn motions(&self) -> &[Motion<D>] {
-        &self.motions
+        self.carried.as_ref().map_or(&self.motions, |(_, m)| m)
     }
 
     /// The turn the cells carry from the fixed cells to each turning handle, as they are now
@@ -309,12 +339,13 @@ where
         TurnGauge::new(&self.complex).turns(&self.constraints, &self.motions)
     }
 
-    /// The session's state as a [`Solution`] with `info`.
+    /// The session's state as a [`Solution`] with `info`: what [`super::solve`] gives for these
+    /// motions, the loose parts carried where the parameters carry them.
     pub fn solution(&self, info: SolverInfo) -> Solution<D> {
         Solution {
             complex: self.complex.clone(),
-            motions: self.motions.clone(),
-            constraints: self.constraints.clone(),
+            motions: self.motions().to_vec(),
+            constraints: self.solution_constraints().clone(),
             info,
         }
     }

@@ -22,27 +22,30 @@ keyword argument of the same name and default (``cell_size``, ``cells``, ``trans
 fields ``X``, ``Y``, ``Z`` (as PDAL's Python bindings hand them out): the same dtype comes back
 with only those fields changed. A laspy ``LasData`` or ``ScaleAwarePointRecord`` comes back as
 a new one of the same kind, its coordinates written through the header's scale and offset
-rounded to the nearest step (as the command line writes LAS). Integer ``X``, ``Y``, ``Z`` (LAS
-records, such as laspy's ``points.array``) are decoded with ``scale=`` and ``offset=``, and
-refused without them. A ``trimesh.Trimesh`` or ``PointCloud``, an Open3D ``TriangleMesh`` or
-``PointCloud`` comes back as a new one with its triangles, colors and other attributes kept and
-its normals turned (a Trimesh derives its own from the moved faces). None of laspy, trimesh and
+rounded to the nearest step (as the command line writes LAS); LAS records keep their classes
+for the spec's ``classification`` regions. Integer ``X``, ``Y``, ``Z`` (LAS records, such as
+laspy's ``points.array``) are decoded with ``scale=`` and ``offset=``, and refused without
+them. An (n, 3) float32 array comes back float32. A ``trimesh.Trimesh`` or ``PointCloud``, an
+Open3D ``TriangleMesh`` or ``PointCloud`` comes back as a new one with its triangles, colors
+and other attributes kept and its normals turned (a Trimesh derives its own from the moved
+faces). None of laspy, trimesh and
 Open3D is a dependency: their objects are recognized when the library is imported.
 
 A deformation returns a ``Report`` (a dataclass: cells, cell size, iterations, energy,
-residuals, fold-overs, warnings, timings). Errors are exceptions that name the argument:
-``TypeError`` or ``ValueError`` for a bad argument, spec or parameter, ``OSError`` for I/O,
-``rigidcells.FormatError`` (a ``ValueError``) for malformed files. Heavy calls release the GIL;
+residuals, fold-overs, warnings, timings); its warnings are also emitted through Python's
+``warnings`` module as ``rigidcells.RigidCellsWarning``. Errors are exceptions that name the
+argument: ``TypeError`` or ``ValueError`` for a bad argument, spec or parameter, ``OSError`` for
+I/O, ``rigidcells.FormatError`` (a ``ValueError``) for malformed files. Heavy calls release the GIL;
 Ctrl-C stops them within a step (``KeyboardInterrupt``), leaving no output file behind.
 """
 
 from __future__ import annotations
 
-import copy
 import json
 import os
 import re
 import sys
+import threading
 import warnings
 from pathlib import Path
 from dataclasses import dataclass
@@ -50,17 +53,33 @@ from typing import Any, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _interop, _rigidcells, dask
+from . import _rigidcells, dask
+from ._points import Frame, _float_dtype, _Points, _plain3, _triangles
 from ._rigidcells import FormatError
 
 __all__ = [
     "deform", "solve", "deform_file", "apply_file", "solve_files", "Field", "Report",
-    "Session", "Step", "FormatError", "__version__",
+    "Session", "Step", "FormatError", "RigidCellsWarning", "__version__",
 ]
 
 __version__: str = _rigidcells.__version__
 
 Spec = Union[str, "os.PathLike[str]", dict]
+
+
+class RigidCellsWarning(UserWarning):
+    """What the command line prints as a warning (parts no constraint reaches, a turn the shape
+    did not carry, fold-overs, a cell count off its target, ...), emitted through ``warnings``
+    by every call that returns a ``Report`` (which also lists them in ``report.warnings``), and
+    the notes of ``Field.apply``. ``warnings.simplefilter("error", RigidCellsWarning)`` makes
+    them errors; ``"ignore"`` silences them."""
+
+
+def _warn(messages: Sequence[str]) -> None:
+    """Each message as a ``RigidCellsWarning`` at the line that called the package's function
+    calling this."""
+    for message in messages:
+        warnings.warn(message, RigidCellsWarning, stacklevel=3)
 
 
 def _plain(value: Any, path: List[Any]) -> Any:
@@ -193,238 +212,6 @@ def _call(paths: Optional[List[str]], f: Any, *args: Any) -> Any:
         raise raised from None
 
 
-Frame = Union[float, Sequence[float], np.ndarray]
-
-_RAW_HINT = (
-    "pass scale=(sx, sy, sz) and offset=(ox, oy, oz) to decode them (for laspy's "
-    "points.array: las.header.scales and las.header.offsets), or pass the LasData or "
-    "las.points itself"
-)
-
-
-def _laspy() -> Any:
-    """laspy's module if it is imported (an object of its classes exists only then), else None:
-    laspy is never imported here."""
-    return sys.modules.get("laspy")
-
-
-def _frame(scale: Optional[Frame], offset: Optional[Frame]) -> Tuple[Tuple[float, ...], ...]:
-    """``scale`` and ``offset`` as three floats each (a single number stands for all axes)."""
-
-    def three(value: Frame, name: str) -> Tuple[float, ...]:
-        try:
-            a = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            a = np.empty(0)
-        if a.shape == ():
-            a = np.repeat(a, 3)
-        if a.shape != (3,):
-            raise ValueError(f"{name} must be a number or three numbers, got {value!r}")
-        return tuple(float(v) for v in a)
-
-    if scale is None:
-        raise ValueError("offset was given without scale: pass scale=(sx, sy, sz) too")
-    return three(scale, "scale"), three(0.0 if offset is None else offset, "offset")
-
-
-def _encode(moved: np.ndarray, frame: Tuple[Tuple[float, ...], ...], reframe: bool):
-    """The moved coordinates as int32 LAS records (rounded to the nearest step), with the
-    frame they are in and a note per re-framed axis."""
-    return _rigidcells.encode_las(np.ascontiguousarray(moved), frame[0], frame[1], reframe)
-
-
-def _decode(records: np.ndarray, frame: Tuple[Tuple[float, ...], ...]) -> np.ndarray:
-    """Integer records ((n, 3)) as coordinates: ``X * scale + offset`` per axis."""
-    if records.dtype == np.uint64 and records.size and int(records.max()) > np.iinfo(np.int64).max:
-        raise ValueError("points: X, Y, Z hold values past int64")
-    return _rigidcells.decode_las(
-        np.ascontiguousarray(records, dtype=np.int64), frame[0], frame[1]
-    )
-
-
-def _into(records: np.ndarray, dtype: np.dtype, name: str) -> np.ndarray:
-    """int32 records as the integer ``dtype`` of field ``name``; a value it cannot hold is an
-    error, never wrapped."""
-    info = np.iinfo(dtype)
-    if records.size and (int(records.min()) < info.min or int(records.max()) > info.max):
-        raise ValueError(
-            f"{name}: the moved records span {int(records.min())} to {int(records.max())}, "
-            f"which {dtype} cannot hold"
-        )
-    return records.astype(dtype)
-
-
-class _Points:
-    """Points in any accepted form: their coordinates ((n, 3) float64), and ``back``, which
-    puts moved coordinates into a new object of the same form (the input is never changed)."""
-
-    def __init__(self, points: Any, scale: Optional[Frame], offset: Optional[Frame]) -> None:
-        laspy = _laspy()
-        given = scale is not None or offset is not None
-        self._las = self._record = self._structured = self._plain = None
-        self._frame: Any = None
-        self._reframe = False
-        # A trimesh or Open3D object's triangles and normals, taken where none are given.
-        self.triangles: Optional[np.ndarray] = None
-        self.normals: Optional[np.ndarray] = None
-        self._geometry = _interop.of(points)
-        if self._geometry is not None:
-            if given:
-                raise ValueError(
-                    f"scale and offset decode LAS records; a {type(points).__name__} holds "
-                    "coordinates: leave them out"
-                )
-            self.xyz = self._geometry.xyz
-            self.triangles = self._geometry.triangles
-            self.normals = self._geometry.normals
-            return
-        if laspy is not None and isinstance(points, laspy.LasData):
-            if given:
-                raise ValueError(
-                    "scale and offset come from the LasData's header; leave them out "
-                    "(las.change_scaling changes them)"
-                )
-            self._las = points
-            h = points.header
-            self._frame = _frame(h.scales, h.offsets)
-            self._reframe = True
-            arr = points.points.array
-        elif laspy is not None and isinstance(points, laspy.PackedPointRecord):
-            self._record = points
-            if isinstance(points, laspy.ScaleAwarePointRecord):
-                if given:
-                    raise ValueError(
-                        "scale and offset come from the point record's scales and offsets; "
-                        "leave them out"
-                    )
-                self._frame = _frame(points.scales, points.offsets)
-                self._reframe = True
-            arr = points.array
-        else:
-            arr = _numbers(points, "points")
-        if arr.dtype.names is not None:
-            names = arr.dtype.names
-            if not all(k in names for k in ("X", "Y", "Z")):
-                raise ValueError(f"a structured array needs fields X, Y, Z; it has {names}")
-            kinds = {arr.dtype[k].kind for k in ("X", "Y", "Z")}
-            self._structured = arr
-            if kinds <= {"i", "u"}:
-                if self._frame is None:
-                    if not given:
-                        raise ValueError(
-                            "points: X, Y, Z are integer fields "
-                            f"({', '.join(str(arr.dtype[k]) for k in 'XYZ')}), LAS records in "
-                            f"steps of the file's scale; {_RAW_HINT}"
-                        )
-                    self._frame = _frame(scale, offset)
-                records = np.stack([arr["X"], arr["Y"], arr["Z"]], axis=1)
-                self.xyz = _decode(records, self._frame)
-            elif kinds == {"f"}:
-                if given:
-                    raise ValueError(
-                        "scale and offset decode integer X, Y, Z; these are floats (coordinates "
-                        "already): leave scale and offset out"
-                    )
-                xyz = np.stack([arr["X"], arr["Y"], arr["Z"]], axis=1).astype(np.float64)
-                self.xyz = np.ascontiguousarray(xyz)
-            else:
-                raise ValueError(
-                    "points: X, Y, Z must be all floats (coordinates) or all integers (LAS "
-                    f"records, with scale and offset), got {[str(arr.dtype[k]) for k in 'XYZ']}"
-                )
-            return
-        if arr.ndim != 2 or arr.shape[1] != 3:
-            raise ValueError(f"points must be an (n, 3) array, got shape {arr.shape}")
-        if given:
-            if arr.dtype.kind not in "iu":
-                raise ValueError(
-                    "scale and offset decode integer records; these points are "
-                    f"{arr.dtype} (coordinates already): leave scale and offset out"
-                )
-            self._frame = _frame(scale, offset)
-            self._plain = arr
-            self.xyz = _decode(arr, self._frame)
-        else:
-            self.xyz = np.ascontiguousarray(arr, dtype=np.float64)
-
-    def back(
-        self, moved: np.ndarray, turned: Optional[np.ndarray] = None
-    ) -> Tuple[Any, List[str]]:
-        """The moved coordinates in the input's form (a trimesh or Open3D object with its
-        normals ``turned``), and a note per re-framed axis."""
-        notes: List[str] = []
-        if self._geometry is not None:
-            return self._geometry.back(moved, turned), notes
-        if self._frame is None:
-            if self._structured is None:
-                return moved, notes
-            out = self._structured.copy()
-            for k, name in enumerate(("X", "Y", "Z")):
-                out[name] = moved[:, k]  # a float field: rounded to its nearest value
-            return out, notes
-        records, scale, offset, notes = _encode(moved, self._frame, self._reframe)
-        if self._structured is None:
-            return _into(records, self._plain.dtype, "points"), notes
-        out = self._structured.copy()
-        for k, name in enumerate(("X", "Y", "Z")):
-            out[name] = _into(records[:, k], out.dtype[name], name)
-        laspy = _laspy()
-        if self._las is not None:
-            header = copy.deepcopy(self._las.header)
-            header.scales = np.array(scale)
-            header.offsets = np.array(offset)
-            if len(records):  # the bounds of the records, as laspy's update_header makes them
-                header.mins = records.min(axis=0) * header.scales + header.offsets
-                header.maxs = records.max(axis=0) * header.scales + header.offsets
-            rec = laspy.ScaleAwarePointRecord(out, header.point_format, header.scales, header.offsets)
-            return laspy.LasData(header=header, points=rec), notes
-        if self._record is not None:
-            fmt = copy.deepcopy(self._record.point_format)
-            if self._reframe:
-                return laspy.ScaleAwarePointRecord(out, fmt, np.array(scale), np.array(offset)), notes
-            return laspy.PackedPointRecord(out, fmt), notes
-        return out, notes
-
-
-def _plain3(values: Any, name: str) -> np.ndarray:
-    a = _numbers(values, name)
-    if a.ndim != 2 or a.shape[1] != 3:
-        raise ValueError(f"{name} must be an (n, 3) array of numbers, got shape {a.shape}")
-    return np.ascontiguousarray(a, dtype=np.float64)
-
-
-def _numbers(values: Any, name: str) -> np.ndarray:
-    """``values`` as a numpy array of real numbers: masked, complex, bool and object arrays
-    are refused, never read silently."""
-    if isinstance(values, np.ma.MaskedArray):
-        raise TypeError(
-            f"{name}: a masked array; pass its unmasked rows (a.compressed() or a[~a.mask.any(1)])"
-        )
-    a = np.asarray(values)
-    if a.dtype.names is None and a.dtype.kind not in "fiu":
-        kind = {"b": "bool", "c": "complex"}.get(a.dtype.kind, str(a.dtype))
-        raise TypeError(f"{name} must hold real numbers, got {kind} values")
-    return a
-
-
-def _triangles(triangles: Any) -> Optional[np.ndarray]:
-    """Vertex indices as int64; an index is never rounded or truncated, so floats are refused."""
-    if triangles is None:
-        return None
-    t = _numbers(triangles, "triangles")
-    if t.dtype.kind not in "iu":
-        raise TypeError(
-            f"triangles must be integer vertex indices, got {t.dtype} (a whole-numbered float "
-            "array: .astype(np.int64))"
-        )
-    if t.ndim != 2 or t.shape[1] != 3:
-        raise ValueError(f"triangles must be an (m, 3) array, got shape {t.shape}")
-    if t.dtype.kind == "u":
-        if t.size and int(t.max()) > np.iinfo(np.int64).max:
-            raise ValueError("triangles name a vertex outside the points")
-    return np.ascontiguousarray(t, dtype=np.int64)
-
-
 @dataclass
 class Report:
     """What a deformation did: the figures of the command line's report (``deform --report``)
@@ -541,14 +328,13 @@ class Field:
         are a ``ValueError``, as ``rigidcells apply`` refuses them), ``"keep"`` (they keep
         their coordinates) or ``"extend"`` (the transfer extrapolated). With ``normals``
         ((n, 3)), returns ``(points, normals)``, the normals turned as the map turns the
-        surface. A LAS offset moved to fit the coordinates is said in a ``UserWarning``."""
+        surface. A LAS offset moved to fit the coordinates is said in a ``RigidCellsWarning``."""
         p = _Points(points, scale, offset)
         nrm = p.normals if normals is None else _plain3(normals, "normals")
         moved, turned = self._native.apply(p.xyz, nrm, outside)
         out, notes = p.back(moved, turned)
-        for note in notes:
-            warnings.warn(note, stacklevel=2)
-        return out if normals is None else (out, turned)
+        _warn(notes)
+        return out if normals is None else (out, turned.astype(_float_dtype(normals), copy=False))
 
     def save(self, path: Union[str, "os.PathLike[str]"]) -> None:
         """Writes the field to ``path`` (the format ``rigidcells apply`` reads)."""
@@ -724,12 +510,15 @@ def deform(
     """Deforms ``points`` under ``spec``; returns the moved points, in the form they came in,
     and a ``Report`` of what was done.
 
-    ``points``: an (n, 3) array of coordinates (float64 back); a numpy structured array with
-    float fields ``X``, ``Y``, ``Z`` (PDAL's; the same dtype back, only those fields changed);
-    a laspy ``LasData`` or its ``points`` (a new one back, coordinates written through the
-    header's scale and offset, rounded to the nearest step as the command line's LAS writer
-    rounds them; an offset that no longer fits moves as the command line moves it, said in
-    ``report.notes``). Integer ``X``, ``Y``, ``Z`` (laspy's ``points.array``, LAS records) need
+    ``points``: an (n, 3) array of coordinates (float32 back for float32, else float64); a
+    numpy structured array with float fields ``X``, ``Y``, ``Z`` (PDAL's; the same dtype back,
+    only those fields changed); a laspy ``LasData`` or its ``points`` (a new one back,
+    coordinates written through the header's scale and offset, rounded to the nearest step as
+    the command line's LAS writer rounds them; an offset that no longer fits moves as the
+    command line moves it, said in ``report.notes``). Records keep their LAS classes for the
+    spec's ``classification`` regions (laspy's, or a structured array's ``classification``,
+    ``Classification`` or ``raw_classification`` field, read as the command line reads a
+    file's). Integer ``X``, ``Y``, ``Z`` (laspy's ``points.array``, LAS records) need
     ``scale`` and ``offset`` (a number or three each; offset 0 by default): they are decoded,
     moved and encoded back rounded to the nearest step, and a moved record that does not fit
     its field is a ``ValueError``. An (n, 3) integer array with ``scale`` is taken the same way.
@@ -737,8 +526,9 @@ def deform(
     and a new object of its kind comes back. Masked, complex and bool arrays are refused.
     ``triangles``: (m, 3) vertex indices.
     ``normals`` ((n, 3), one per point): turned as the map turns the surface, returned as
-    ``report.normals``.
+    ``report.normals`` (in the normals' float type).
 
+    ``report.warnings`` are also emitted as ``RigidCellsWarning`` warnings.
     ``report.handle_turns``: per turning handle, its ``line`` in the spec, the turn asked and
     the turn the cells carry from the fixed cells to it; ``report.warnings`` says when they
     differ by more than a tenth. A turn the shape cannot carry (a whole turn of a part as short
@@ -751,11 +541,22 @@ def deform(
     tris = p.triangles if triangles is None else _triangles(triangles)
     moved, info = _with_progress(
         progress, lambda cb: _call(
-            paths, _rigidcells.deform, p.xyz, text, base, tris, nrm, options, cb
+            paths, _rigidcells.deform, p.xyz, text, base, tris, nrm, options, cb, p.classes
         )
     )
-    out, notes = p.back(moved, info.get("normals"))
-    return out, Report._of(info, notes, paths)
+    out, notes = p.back(moved, _turned(info, _float_dtype(normals)))
+    report = Report._of(info, notes, paths)
+    _warn(report.warnings)
+    return out, report
+
+
+def _turned(info: dict, dtype: np.dtype) -> Optional[np.ndarray]:
+    """The turned normals of a native call's ``info`` (None without) as ``dtype``: the float
+    type of the normals given (float64 for a mesh's own)."""
+    turned = info.get("normals")
+    if turned is not None:
+        info["normals"] = turned = turned.astype(dtype, copy=False)
+    return turned
 
 
 @dataclass
@@ -797,10 +598,10 @@ class Session:
     exact constraints, as ``deform`` does. ``points``, ``triangles`` and the keyword options
     are ``deform``'s, but a session keeps the cells it built: ``min_cell_size`` and
     ``refine_strain`` (which refine them) are refused. ``release`` gives the points back in
-    the form they came in.
+    the form they came in; released without a drag, they are ``deform``'s, bit for bit.
 
     Every call but the light properties releases the GIL: a face may run the session on a
-    thread of its own (one call at a time).
+    thread of its own. Calls from several threads run one at a time, each waiting for the last.
     """
 
     def __init__(
@@ -833,8 +634,14 @@ class Session:
         self._points = _Points(points, scale, offset)
         tris = self._points.triangles if triangles is None else _triangles(triangles)
         nrm = self._points.normals if normals is None else _plain3(normals, "normals")
-        self._native = _rigidcells.Session(self._points.xyz, tris, nrm, options)
+        self._normals_dtype = _float_dtype(normals)
+        self._native = _rigidcells.Session(
+            self._points.xyz, tris, nrm, options, self._points.classes
+        )
         self._paths: Optional[List[str]] = None
+        # The spec's key paths and the last step go with the native session's state: one call
+        # at a time changes them together.
+        self._lock = threading.Lock()
         self.last: Step = self.solve(spec, progress=progress)
 
     def solve(self, spec: Spec, iterations: Optional[int] = None, progress: Any = None) -> Step:
@@ -844,12 +651,13 @@ class Session:
         if iterations is not None:
             iterations = _iterations(iterations)
         text, base, paths = _spec(spec)
-        info = _with_progress(
-            progress, lambda cb: _call(paths, self._native.solve, text, base, iterations, cb)
-        )
-        self._paths = paths
-        self.last = self._step(info)
-        return self.last
+        with self._lock:
+            info = _with_progress(
+                progress, lambda cb: _call(paths, self._native.solve, text, base, iterations, cb)
+            )
+            self._paths = paths
+            self.last = self._step(info)
+            return self.last
 
     def drag(
         self, poses: Union[dict, Sequence[dict]], iterations: int = 1, pins: Any = None
@@ -868,22 +676,24 @@ class Session:
             raise type(e)(_poses_path(str(e))) from None
         text = _rigidcells.toml_from_json(json.dumps(plain))
         to = None if pins is None else _plain3(pins, "pins")
-        try:
-            info = self._native.pose(text, iterations, to)
-        except ValueError as e:
-            # The poses' key paths, worked out only for an error (a drag is the hot path).
-            paths = [_poses_path(p) for p in _key_paths(text)]
-            raised = _in_dict_terms(e, paths)
-            if raised is e:
-                raise
-            raise raised from None
-        self.last = self._step(info)
-        return self.last
+        with self._lock:
+            try:
+                info = self._native.pose(text, iterations, to)
+            except ValueError as e:
+                # The poses' key paths, worked out only for an error (a drag is the hot path).
+                paths = [_poses_path(p) for p in _key_paths(text)]
+                raised = _in_dict_terms(e, paths)
+                if raised is e:
+                    raise
+                raise raised from None
+            self.last = self._step(info)
+            return self.last
 
     def refine(self) -> bool:
         """One more iteration on the current pose when its solve stopped short; whether one
         ran (False once converged)."""
-        return self._native.refine()
+        with self._lock:
+            return self._native.refine()
 
     @property
     def converged(self) -> bool:
@@ -901,17 +711,25 @@ class Session:
         return self._native.cell_size
 
     def preview(self) -> np.ndarray:
-        """The points ((n, 3) float64) moved by the cells' current motions, blended: the
-        shape of the current pose, without the transfer's exact constraints."""
-        return self._native.preview()
+        """The points ((n, 3), float32 for float32 points, else float64) moved by the cells'
+        current motions, blended: the shape of the current pose, without the transfer's exact
+        constraints."""
+        with self._lock:
+            return self._native.preview().astype(self._points.dtype, copy=False)
 
     def release(self, progress: Any = None) -> Tuple[Any, Report]:
         """The current pose's deformation, as ``deform`` gives it: the solve converged, the
         points moved through the transfer (fixed points keep their coordinates, handle points
-        follow their handle), in the form they came in, and a ``Report``."""
-        moved, info = _with_progress(progress, lambda cb: self._native.release(cb))
-        out, notes = self._points.back(moved, info.get("normals"))
-        return out, Report._of(info, notes, self._paths)
+        follow their handle), in the form they came in, and a ``Report`` (its warnings also
+        emitted as ``RigidCellsWarning`` warnings)."""
+        with self._lock:
+            moved, info = _with_progress(progress, lambda cb: self._native.release(cb))
+            paths = self._paths
+        turned = _turned(info, self._normals_dtype)
+        out, notes = self._points.back(moved, turned)
+        report = Report._of(info, notes, paths)
+        _warn(report.warnings)
+        return out, report
 
     def _step(self, info: dict) -> Step:
         return Step(
@@ -953,15 +771,19 @@ def solve(
 ) -> Field:
     """Solves ``spec`` over ``points`` (any form ``deform`` takes, with ``scale`` and ``offset``
     as there) and returns the field (``Field.apply``, ``.save``; ``field.report`` says what the
-    solve did)."""
+    solve did, its warnings also emitted as ``RigidCellsWarning`` warnings)."""
     options = _picked(locals())
     p = _Points(points, scale, offset)
     text, base, paths = _spec(spec)
     tris = p.triangles if triangles is None else _triangles(triangles)
     field, info = _with_progress(
-        progress, lambda cb: _call(paths, _rigidcells.solve, p.xyz, text, base, tris, options, cb)
+        progress, lambda cb: _call(
+            paths, _rigidcells.solve, p.xyz, text, base, tris, options, cb, p.classes
+        )
     )
-    return Field(field, Report._of(info, paths=paths))
+    report = Report._of(info, paths=paths)
+    _warn(report.warnings)
+    return Field(field, report)
 
 
 def deform_file(
@@ -1019,7 +841,9 @@ def deform_file(
             path(save_field), path(report), path(preview), view, chunk, options, cb,
         )
     )
-    return Report._of(info, paths=paths)
+    report = Report._of(info, paths=paths)
+    _warn(report.warnings)
+    return report
 
 
 def apply_file(
@@ -1081,7 +905,9 @@ def solve_files(
             options, cb,
         )
     )
-    return Report._of(info, paths=paths)
+    report = Report._of(info, paths=paths)
+    _warn(report.warnings)
+    return report
 
 
 for _f in (deform, solve, deform_file):

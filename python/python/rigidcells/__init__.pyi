@@ -19,6 +19,9 @@ Progress = Union[Callable[[str, int, Optional[int]], Any], bool, None]
 class FormatError(ValueError):
     """A malformed or unreadable input file."""
 
+class RigidCellsWarning(UserWarning):
+    """A warning of a deformation (also in `report.warnings`), or a note of `Field.apply`."""
+
 @dataclass
 class Report:
     """What a deformation did (the command line's report)."""
@@ -61,7 +64,7 @@ class Field:
     def levels(self) -> List[Tuple[float, int]]: ...
     @property
     def bounds(self) -> Tuple[Tuple[float, float, float], Tuple[float, float, float]]: ...
-    # Points come back in the form they came in: an (n, 3) float array as float64, a numpy
+    # Points come back in the form they came in: an (n, 3) float array as its float type, a numpy
     # structured array with its dtype, a laspy LasData or point record as a new one; with
     # normals, (points, turned normals).
     @overload

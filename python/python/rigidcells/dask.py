@@ -2,8 +2,11 @@
 per tile, each written to ``out_dir/<the tile's file name>``.
 
 Outputs are written atomically (a temporary file renamed over the target) and are a
-deterministic function of the field and the tile, so a task that a worker's loss makes Dask
-run again writes the same bytes: retries are safe.
+deterministic function of the field and the tile, so a task that a worker's loss or a passing
+I/O error makes Dask run again writes the same bytes: retries are safe. A tile the library
+refuses (``ValueError``, which ``FormatError`` is, or ``TypeError``: a tile outside the field, a
+malformed file, a bad argument) fails the same way every time, so it is not run again: its
+task returns the error instead of raising it, and ``apply_tiles`` raises it at once.
 """
 
 from __future__ import annotations
@@ -15,10 +18,21 @@ from typing import Iterable, List, Optional, Union
 PathLike = Union[str, "os.PathLike[str]"]
 
 
-def _apply_one(field: str, tile: str, output: str, outside: str) -> dict:
+class _Refused:
+    """A tile's error that running the tile again would only repeat (returned by its task, so
+    that Dask does not retry it)."""
+
+    def __init__(self, error: BaseException) -> None:
+        self.error = error
+
+
+def _apply_one(field: str, tile: str, output: str, outside: str) -> Union[dict, _Refused]:
     import rigidcells
 
-    info = rigidcells.apply_file(field, tile, output, outside=outside)
+    try:
+        info = rigidcells.apply_file(field, tile, output, outside=outside)
+    except (ValueError, TypeError) as e:
+        return _Refused(e)
     info["tile"] = tile
     info["output"] = output
     return info
@@ -38,10 +52,11 @@ def apply_tiles(
 
     ``client``: a ``dask.distributed.Client``; ``None`` takes the current one, or starts a
     ``LocalCluster`` of worker processes for the call. Tile names must be distinct (the
-    outputs are named after them). A tile that fails raises its exception here after the
-    retries.
+    outputs are named after them). A tile that fails raises its exception here: one the
+    library refused (a ``ValueError`` or ``TypeError``) at once, any other after ``retries``
+    more tries; the tiles still running are cancelled.
     """
-    from dask.distributed import Client, LocalCluster, get_client
+    from dask.distributed import Client, LocalCluster, as_completed, get_client
 
     tiles = [os.fspath(t) for t in tiles]
     out = Path(out_dir)
@@ -65,6 +80,14 @@ def apply_tiles(
             pure=False,
             retries=retries,
         )
+        try:
+            for future in as_completed(futures):
+                done = future.result()
+                if isinstance(done, _Refused):
+                    raise done.error
+        except BaseException:
+            client.cancel(futures)
+            raise
         return client.gather(futures)
     finally:
         if own is not None:
