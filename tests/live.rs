@@ -272,7 +272,7 @@ fn a_release_without_a_drag_is_deforms_points_bit_for_bit_loose_parts_too() {
         let (expected, _, expected_info) =
             pipeline::deform(&points, &triangles, &spec, &params, &Silent).unwrap();
         let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
-        let most = params.solve.max_iterations;
+        let most = params.solve().max_iterations;
         let step = live.solve(spec.clone(), most, &Silent).unwrap().unwrap();
         let preview = live.preview().unwrap();
         let (moved, _, _, info) = live.release(&[], &Silent).unwrap();
@@ -314,7 +314,7 @@ fn las_classes_select_in_a_live_session_as_in_deform() {
     let tip = points.iter().position(|p| p.x == 10.0).unwrap();
     assert_eq!(expected[tip].z, points[tip].z + 2.0);
     let mut live = Live::new(points.clone(), &triangles, classes.clone(), params).unwrap();
-    live.solve(spec.clone(), params.solve.max_iterations, &Silent)
+    live.solve(spec.clone(), params.solve().max_iterations, &Silent)
         .unwrap();
     let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
     assert!(moved == expected, "the release is not deform's");

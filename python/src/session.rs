@@ -119,7 +119,7 @@ impl Session {
         let spec = self::spec(spec_text, base)?;
         let observer = PyObserver::new(progress);
         let solved = self.with(py, |live, _| {
-            let most = iterations.unwrap_or(live.params().solve.max_iterations);
+            let most = iterations.unwrap_or(live.params().solve().max_iterations);
             live.solve(spec, most, &observer)
         })?;
         let step = observer.result(solved)?;
