@@ -335,7 +335,8 @@ struct CellArgs {
     #[arg(long, value_name = "S", conflicts_with_all = ["cell_size", "cells"])]
     min_cell_size: Option<f64>,
     /// Octree levels above the finest cells [default: enough for the largest cell that fits the
-    /// input's shortest extent].
+    /// input's shortest extent]. Fewer make the largest cells smaller than the shape, and its
+    /// inside takes as many of them as its box holds (counted against --memory-limit first).
     #[arg(long)]
     max_level: Option<u8>,
     /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.
