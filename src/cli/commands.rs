@@ -79,6 +79,8 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     .filter_map(|(option, path)| Some((option, path?.as_path())))
     .collect();
     rigidcells::io::refuse_same_outputs(&outputs)?;
+    check_output_format(&args.input, &args.output)?;
+    let chunk = chunk_len(args.chunk)?;
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
@@ -89,7 +91,6 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         report: args.report.as_deref(),
         preview: args.preview.as_deref().map(|p| (p, view, args.strain)),
     };
-    let chunk = args.chunk.clamp(1, MAX_CHUNK);
     let files = (
         args.input.as_path(),
         args.output.as_path(),
@@ -124,6 +125,36 @@ fn deform_file(
         );
     }
     Ok(())
+}
+
+/// Refuses an `output` that cannot have the format of `input` (LAS and LAZ write each other,
+/// every other format its own), before any work: the writer would refuse it only once the
+/// field is solved. An input of a format rigidcells does not read is left to its reader.
+pub(super) fn check_output_format(input: &Path, output: &Path) -> Result<(), Error> {
+    let formats: &[&str] = match is_xy(input) {
+        true => &["xy"],
+        false => rigidcells::io::output_extensions(input),
+    };
+    let ext = rigidcells::io::extension(output).unwrap_or_default();
+    if formats.is_empty() || formats.contains(&ext.as_str()) {
+        return Ok(());
+    }
+    let names: Vec<String> = formats.iter().map(|e| format!(".{e}")).collect();
+    Err(Error::Param(format!(
+        "{}: the output must have the input's format ({})",
+        output.display(),
+        names.join(" or ")
+    )))
+}
+
+/// `--chunk` checked: 1 sample or more (more than [`MAX_CHUNK`] is taken as that many).
+pub(super) fn chunk_len(chunk: usize) -> Result<usize, Error> {
+    if chunk == 0 {
+        return Err(Error::Param(
+            "--chunk 0: a chunk holds 1 to 16,777,216 samples".into(),
+        ));
+    }
+    Ok(chunk.min(MAX_CHUNK))
 }
 
 pub(super) fn is_xy(path: &Path) -> bool {
@@ -263,6 +294,7 @@ pub(super) fn run_apply(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_output_format(input, output)?;
     let bar = Bar::new(quiet);
     let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
     if !quiet {
@@ -293,6 +325,7 @@ pub(super) fn run_solve(
     for input in inputs {
         refuse_overwrite(input, field)?;
     }
+    let chunk = chunk_len(chunk)?;
     let spec = read_spec::<3>(edit)?;
     let params = cells.deform_params(transfer)?;
     let bar = Bar::new(quiet);
