@@ -56,7 +56,7 @@ pub(super) fn run_cells(
         shown.len(),
         info.boundary_cells,
         info.interior_cells,
-        shown.grid.finest_size()
+        rigidcells::human::length(shown.grid.finest_size(), shown.grid.finest_size())
     );
     Ok(())
 }
@@ -185,13 +185,13 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             eprintln!("warning: {w}");
         }
         println!(
-            "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {:.3e}",
+            "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {}",
             args.input.display(),
             args.output.display(),
             points,
             solution.complex.len(),
             solution.info.iterations,
-            solution.info.energies.last().copied().unwrap_or(0.0)
+            rigidcells::human::figure(solution.info.energies.last().copied().unwrap_or(0.0))
         );
         print_control_points(&info.control_points);
     }
@@ -339,14 +339,13 @@ pub(super) fn run_solve(
         }
         let s = &solution.info;
         println!(
-            "{} files, {} samples -> {}: {} cells, {} Gauss-Newton iterations, energy {:.3e}, \
-             {:.2} s",
+            "{} files, {} samples -> {}: {} cells, {} Gauss-Newton iterations, energy {}, {:.2} s",
             inputs.len(),
             info.samples,
             field.display(),
             s.cells_final,
             s.iterations,
-            s.energies.last().copied().unwrap_or(0.0),
+            rigidcells::human::figure(s.energies.last().copied().unwrap_or(0.0)),
             s.seconds
         );
         print_control_points(&info.deform.control_points);
