@@ -305,8 +305,14 @@ fn an_output_that_cannot_be_written_exits_1_naming_the_users_path() {
     let dir = tempfile::tempdir().unwrap();
     let (input, edit, field) = bar(dir.path());
     let out = dir.path().join("no such folder").join("out.ply");
+    // Refused before any work: a memory limit that any work would exceed is not what is said.
     for r in [
-        deform(&input, &out, &edit, &["--cell-size", "0.5"]),
+        deform(
+            &input,
+            &out,
+            &edit,
+            &["--cell-size", "0.5", "--memory-limit", "1K"],
+        ),
         run(&["apply", arg(&field), arg(&input), "-o", arg(&out), "-q"]),
     ] {
         assert_eq!(r.code, 1, "{}", r.stderr);

@@ -22,6 +22,7 @@ pub(super) fn run_cells(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
     let ply = output
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
@@ -79,6 +80,7 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     .filter_map(|(option, path)| Some((option, path?.as_path())))
     .collect();
     rigidcells::io::refuse_same_outputs(&outputs)?;
+    check_folders(outputs.iter().map(|(_, path)| *path))?;
     check_output_format(&args.input, &args.output)?;
     let chunk = chunk_len(args.chunk)?;
     if is_xy(&args.input) {
@@ -145,6 +147,26 @@ pub(super) fn check_output_format(input: &Path, output: &Path) -> Result<(), Err
         output.display(),
         names.join(" or ")
     )))
+}
+
+/// Refuses outputs whose folder does not exist, before any work: the write would fail only at
+/// the end, after the solve.
+pub(super) fn check_folders<'a>(outputs: impl IntoIterator<Item = &'a Path>) -> Result<(), Error> {
+    for output in outputs {
+        let folder = match output.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        match std::fs::metadata(folder) {
+            Ok(m) if m.is_dir() => {}
+            Ok(_) => {
+                let e = std::io::Error::from(std::io::ErrorKind::NotADirectory);
+                return Err(Error::write(output, e));
+            }
+            Err(e) => return Err(Error::write(output, e)),
+        }
+    }
+    Ok(())
 }
 
 /// `--chunk` checked: 1 sample or more (more than [`MAX_CHUNK`] is taken as that many).
@@ -222,6 +244,7 @@ pub(super) fn image_job(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
     rigidcells::render::png_path(output)?;
     let background = background.map(parse_color).transpose()?;
     let spec = read_spec::<2>(edit)?;
@@ -272,6 +295,7 @@ pub(super) fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
 
 pub(super) fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
     rigidcells::render::png_path(output)?;
     let image = render::render_file(input, view)?;
     image.write_png(output)?;
@@ -294,6 +318,7 @@ pub(super) fn run_apply(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
     check_output_format(input, output)?;
     let bar = Bar::new(quiet);
     let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
@@ -325,6 +350,7 @@ pub(super) fn run_solve(
     for input in inputs {
         refuse_overwrite(input, field)?;
     }
+    check_folders([field])?;
     let chunk = chunk_len(chunk)?;
     let spec = read_spec::<3>(edit)?;
     let params = cells.deform_params(transfer)?;
