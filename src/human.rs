@@ -1,7 +1,9 @@
 //! Numbers printed for people carry the precision they were measured with, not the 17 digits
 //! of a 64-bit float: a coordinate to its file's step (a LAS scale of 0.01 keeps two
-//! decimals), a length the cells decided (a margin, a chosen cell size, a field's bounds) to a
-//! thousandth of the finest cell.
+//! decimals), a length the cells decided (a margin, a chosen cell size, a field's bounds) or
+//! measured on them (a residual) to a thousandth of the finest cell, a figure with no step of
+//! its own (an energy, a time per iteration) to three significant digits. All in plain
+//! notation: people read `37.4`, not `3.740e1`.
 
 /// The decimals that resolve `step`: 0.01 → 2, 0.001 → 3, 0.5 → 1, 1 or more → 0 (6 for a step
 /// that is not a positive number, at most 12).
@@ -28,6 +30,31 @@ pub fn length(v: f64, cell: f64) -> String {
     }
 }
 
+/// A figure with no step of its own (an energy, milliseconds per iteration) in plain notation:
+/// every digit before the point and at least three significant ones, without trailing zeros
+/// (37.396 → `37.4`, 0.012345 → `0.0123`, 1641.2 → `1641`); a figure that needs more than 12
+/// decimals for its first digit prints as `0`.
+pub fn figure(v: f64) -> String {
+    if !v.is_finite() {
+        return format!("{v}");
+    }
+    let magnitude = v.abs().log10().floor();
+    let decimals = if v == 0.0 {
+        0
+    } else {
+        (2.0 - magnitude).clamp(0.0, 12.0) as usize
+    };
+    let text = format!("{v:.decimals$}");
+    let text = match text.contains('.') {
+        true => text.trim_end_matches('0').trim_end_matches('.'),
+        false => &text,
+    };
+    match text {
+        "-0" => "0".into(),
+        t => t.into(),
+    }
+}
+
 /// A point's coordinates with the decimals that resolve `step`, as `(x, y, z)`.
 pub fn point(p: &[f64], step: f64) -> String {
     let parts: Vec<String> = p.iter().map(|&v| to_step(v, step)).collect();
@@ -50,5 +77,18 @@ mod tests {
         assert_eq!(length(2.0, 2.0), "2");
         assert_eq!(to_step(484639.54500000016, 0.001), "484639.545");
         assert_eq!(point(&[1.23456, -2.0], 0.01), "(1.23, -2.00)");
+    }
+
+    #[test]
+    fn figures_are_plain_to_three_digits() {
+        assert_eq!(figure(37.396), "37.4");
+        assert_eq!(figure(37.0), "37");
+        assert_eq!(figure(0.012345), "0.0123");
+        assert_eq!(figure(1641.2), "1641");
+        assert_eq!(figure(9.9996), "10");
+        assert_eq!(figure(0.0), "0");
+        assert_eq!(figure(-2.5e-20), "0");
+        assert_eq!(figure(-0.5), "-0.5");
+        assert_eq!(length(0.0, 0.25), "0");
     }
 }

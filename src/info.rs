@@ -499,10 +499,13 @@ fn wkt_epsg(wkt: &str) -> Option<u32> {
             b'"' => quoted = !quoted,
             b'[' | b'(' if !quoted => {
                 depth += 1;
-                // The keyword before this bracket.
-                let start = wkt[..i]
-                    .rfind(|c: char| !c.is_ascii_alphanumeric() && c != '_')
-                    .map_or(0, |k| k + 1);
+                // The keyword before this bracket: the ASCII word that ends there (`i` and the
+                // word's start lie on character boundaries, whatever the text before holds).
+                let start = i - bytes[..i]
+                    .iter()
+                    .rev()
+                    .take_while(|b| b.is_ascii_alphanumeric() || **b == b'_')
+                    .count();
                 let keyword = wkt[start..i].to_ascii_uppercase();
                 if (keyword == "AUTHORITY" || keyword == "ID")
                     && depth <= 3

@@ -39,6 +39,8 @@ pub struct Report {
     pub cells: usize,
     /// Cells before refinement.
     pub cells_initial: usize,
+    /// The finest cells' edge length, in input units.
+    pub cell_size: f64,
     /// Cells per octree level (level 0 the finest), after refinement.
     pub cell_levels: BTreeMap<u8, usize>,
     /// Cells of each role: `free`, `fixed`, `handle`, `pin`, `rest`.
@@ -206,6 +208,7 @@ impl Report {
             points: file.samples,
             cells: s.cells_final,
             cells_initial: s.cells_initial,
+            cell_size: complex.grid.finest_size(),
             cell_levels,
             cell_roles,
             iterations: s.iterations,
@@ -291,6 +294,8 @@ fn peak_memory() -> Option<u64> {
 /// The summary `deform` prints on stdout, as a Rust or Python caller can print it too: the
 /// notes, what was made, the solve, the timings, the fold-overs, the control points' table and
 /// the constraints' residuals. The warnings are apart ([`Report::warnings`], on stderr).
+/// Figures are in plain notation ([`crate::human`]): the residuals to a thousandth of the
+/// finest cell, the energy and the time per iteration to three digits.
 pub struct Summary<'a> {
     /// The report of the deformation.
     pub report: &'a Report,
@@ -327,25 +332,26 @@ impl std::fmt::Display for Summary<'_> {
                 s.cells_initial, s.cells_final
             )?;
         }
-        writeln!(
-            f,
-            "\n  solve: {} load steps, {} Gauss-Newton iterations, energy {:.3e}, {:.2} s \
-             ({:.1} ms/iteration){}",
-            s.load_steps,
-            s.iterations,
-            s.energies.last().copied().unwrap_or(0.0),
-            s.seconds,
-            1e3 * s.seconds_per_iteration(),
-            if s.converged {
-                ""
-            } else {
-                ", stopped at the iteration limit"
-            }
-        )?;
         write!(
             f,
-            "  cells {:.2} s, transfer {:.2} s",
-            d.build.seconds, d.seconds_transfer
+            "\n  solve: {} load steps, {} Gauss-Newton iterations, energy {}, {:.2} s",
+            s.load_steps,
+            s.iterations,
+            crate::human::figure(s.energies.last().copied().unwrap_or(0.0)),
+            s.seconds,
+        )?;
+        if s.iterations > 0 {
+            let ms = crate::human::figure(1e3 * s.seconds_per_iteration());
+            write!(f, " ({ms} ms/iteration)")?;
+        }
+        if !s.converged {
+            write!(f, ", stopped at the iteration limit")?;
+        }
+        let t = &r.timings_s;
+        write!(
+            f,
+            "\n  cells {:.2} s, transfer {:.2} s, write {:.2} s",
+            t.voxelize, t.transfer, t.write
         )?;
         if d.seconds_check > 0.0 {
             write!(f, ", leave-one-out check {:.2} s", d.seconds_check)?;
@@ -360,11 +366,14 @@ impl std::fmt::Display for Summary<'_> {
             writeln!(f, "{table}")?;
         }
         if r.residual_samples > 0 {
+            let length = |v: f64| crate::human::length(v, r.cell_size);
             write!(
                 f,
-                "  constraints: fixed samples within {:.3e} of their rest positions, handle \
-                 samples within {:.3e} of where they were sent ({} checked);",
-                r.residual_fixed_max, r.residual_handle_max, r.residual_samples,
+                "  constraints: fixed samples within {} of their rest positions, handle \
+                 samples within {} of where they were sent ({} checked);",
+                length(r.residual_fixed_max),
+                length(r.residual_handle_max),
+                r.residual_samples,
             )?;
         } else {
             write!(f, " ")?;

@@ -471,3 +471,68 @@ fn rbf_tolerance_is_checked_and_kept() {
         assert!(!refused.exists());
     }
 }
+
+/// The summary's figures are for people, in plain notation: the residuals to a thousandth of
+/// the finest cell, the energy to three digits, a time per iteration only when there was one.
+#[test]
+fn the_summary_prints_plain_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, output, edit) = common::lifted_bar(dir.path(), 4.0);
+    let summary = |edit: &str| {
+        std::fs::write(dir.path().join("edit.toml"), edit).unwrap();
+        let _ = std::fs::remove_file(&output);
+        let r = common::deform_verbose(
+            &input,
+            &output,
+            &dir.path().join("edit.toml"),
+            &["--cell-size", "0.25"],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let line = |key: &str| {
+            let l = r.stdout.lines().find(|l| l.contains(key));
+            l.unwrap_or_else(|| panic!("no {key} in {}", r.stdout))
+                .to_string()
+        };
+        (line("solve:"), line("constraints:"))
+    };
+    let plain = |text: &str, after: &str| -> f64 {
+        let figure = text
+            .split(after)
+            .nth(1)
+            .unwrap()
+            .split([',', ' '])
+            .next()
+            .unwrap();
+        assert!(!figure.contains('e'), "{text}");
+        figure
+            .parse()
+            .unwrap_or_else(|_| panic!("{figure} in {text}"))
+    };
+    let (solve, constraints) = summary(&std::fs::read_to_string(&edit).unwrap());
+    assert!(plain(&solve, "energy ") > 0.0, "{solve}");
+    assert!(
+        plain(&solve, "(") > 0.0 && solve.contains("ms/iteration"),
+        "{solve}"
+    );
+    assert!(
+        plain(&constraints, "fixed samples within ") < 0.25,
+        "{constraints}"
+    );
+    assert!(
+        plain(&constraints, "handle samples within ") < 0.25,
+        "{constraints}"
+    );
+    // The whole bar moved by one handle: no iteration, nothing off.
+    let (solve, constraints) = summary(
+        "[[handle]]\nbox = { min = [-1, -1, -1], max = [11, 2, 2] }\ntranslate = [0, 0, 1]\n",
+    );
+    assert!(
+        solve.contains(" 0 Gauss-Newton iterations, energy 0, "),
+        "{solve}"
+    );
+    assert!(!solve.contains("ms/iteration"), "{solve}");
+    assert!(
+        constraints.contains("handle samples within 0 of where they were sent"),
+        "{constraints}"
+    );
+}

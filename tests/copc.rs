@@ -253,3 +253,43 @@ fn copc_out_states_a_legacy_crs_as_wkt() {
     assert_ne!(u16::from_le_bytes([bytes[6], bytes[7]]) & 0x10, 0);
     assert_eq!(wkt_of(&copc), wkt_of(&input));
 }
+
+/// A COPC of a waveform file (point format 4, whose packets COPC's formats cannot hold) keeps
+/// none of the records that describe or hold wave packets: the input's waveform packet
+/// descriptor goes with the packets, and the other records stay.
+#[test]
+fn copc_of_a_waveform_file_keeps_no_waveform_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/fwf.laz");
+    let edit = dir.path().join("edit.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [433960, 103960, 0], max = [433985, 104040, 100] }\n\
+         [[handle]]\nbox = { min = [434015, 103960, 0], max = [434040, 104040, 100] }\n\
+         translate = [0, 0, 1]\n",
+    )
+    .unwrap();
+    let waveform = |r: &&rigidcells::io::VlrRecord| r.user_id == "LASF_Spec" && r.record_id >= 100;
+    let before = LasSource::open(&input).unwrap().vlr_records();
+    assert!(before.iter().any(|r| r.is("LASF_Spec", 100)));
+    let copc = dir.path().join("o.copc.laz");
+    let r = common::deform_verbose(&input, &copc, &edit, &["--cells", "300"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout
+            .contains("the wave packets of format 4 are dropped"),
+        "{}",
+        r.stdout
+    );
+    let after = LasSource::open(&copc).unwrap().vlr_records();
+    let left: Vec<_> = after.iter().filter(waveform).collect();
+    assert!(left.is_empty(), "{left:?}");
+    for kept in before.iter().filter(|r| r.user_id == "LeicaGeo") {
+        assert!(
+            after.contains(kept),
+            "{} {} kept",
+            kept.user_id,
+            kept.record_id
+        );
+    }
+}

@@ -195,6 +195,74 @@ fn outputs_that_name_the_same_file_are_refused_before_work() {
     }
 }
 
+/// An output of another format than the input's is refused before any work: here a memory
+/// limit that the first estimate of any work would exceed is not what the run reports, and
+/// nothing is written (the writer's own refusal came after the solve: 11.7 s on a scan).
+#[test]
+fn an_output_of_another_format_is_refused_before_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, edit, field) = bar(dir.path());
+    for name in ["o.las", "o.xyz", "o.copc.laz"] {
+        let out = dir.path().join(name);
+        let r = deform(&input, &out, &edit, &["--memory-limit", "1K"]);
+        assert_eq!(r.code, 4, "{name}: {}", r.stderr);
+        assert!(
+            r.stderr
+                .contains("the output must have the input's format (.ply)"),
+            "{name}: {}",
+            r.stderr
+        );
+        assert!(!r.stderr.contains("memory limit"), "{name}: {}", r.stderr);
+        assert!(!out.exists(), "{name}");
+        let r = run(&["apply", arg(&field), arg(&input), "-o", arg(&out)]);
+        assert_eq!(r.code, 4, "{name}: {}", r.stderr);
+        assert!(
+            r.stderr.contains("the input's format (.ply)"),
+            "{name}: {}",
+            r.stderr
+        );
+        assert!(!out.exists(), "{name}");
+    }
+    let las = common::shared("las/autzen_trim.laz");
+    let out = dir.path().join("o.ply");
+    let r = deform(&las, &out, &edit, &["--memory-limit", "1K"]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("the input's format (.las or .laz)"),
+        "{}",
+        r.stderr
+    );
+}
+
+/// Fewer octree levels than the default make the largest cells smaller than the shape, and
+/// the inside takes as many of them as the box holds: `cells --max-level 1 --cell-size 1e-3`
+/// on a 4 × 1 × 1 bar wrote 3.5M cells in 32 s. Their count is known before any sample is
+/// read, and a run past the budget is refused at once, naming `--max-level`.
+#[test]
+fn few_levels_over_a_large_box_are_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([4.0, 1.0, 1.0], 3.0), true).unwrap();
+    let out = dir.path().join("cells.ply");
+    let started = std::time::Instant::now();
+    let r = common::cells(
+        &input,
+        &out,
+        &[
+            "--max-level",
+            "1",
+            "--cell-size",
+            "1e-3",
+            "--memory-limit",
+            "3G",
+        ],
+    );
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("--max-level"), "{}", r.stderr);
+    assert!(started.elapsed().as_secs() < 5, "took too long");
+    assert!(!out.exists());
+}
+
 /// A saved field with one number replaced, at `at` bytes past the first cell's record.
 fn damaged(field: &Path, at: usize, value: f64, out: &Path) {
     let mut bytes = std::fs::read(field).unwrap();
@@ -237,8 +305,14 @@ fn an_output_that_cannot_be_written_exits_1_naming_the_users_path() {
     let dir = tempfile::tempdir().unwrap();
     let (input, edit, field) = bar(dir.path());
     let out = dir.path().join("no such folder").join("out.ply");
+    // Refused before any work: a memory limit that any work would exceed is not what is said.
     for r in [
-        deform(&input, &out, &edit, &["--cell-size", "0.5"]),
+        deform(
+            &input,
+            &out,
+            &edit,
+            &["--cell-size", "0.5", "--memory-limit", "1K"],
+        ),
         run(&["apply", arg(&field), arg(&input), "-o", arg(&out), "-q"]),
     ] {
         assert_eq!(r.code, 1, "{}", r.stderr);
@@ -668,6 +742,25 @@ fn parameters_past_their_range_are_refused_or_capped() {
     let r = deform(&input, &out, &edit, &["--chunk", "18446744073709551615"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     std::fs::remove_file(&out).unwrap();
+    // A chunk of no samples is a parameter value out of its range, for both commands.
+    let r = deform(&input, &out, &edit, &["--chunk", "0"]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("--chunk 0"), "{}", r.stderr);
+    assert!(!out.exists());
+    let field = dir.path().join("s.field");
+    let r = run(&[
+        "solve",
+        arg(&input),
+        "--edit",
+        arg(&edit),
+        "--save-field",
+        arg(&field),
+        "--chunk",
+        "0",
+    ]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("--chunk 0"), "{}", r.stderr);
+    assert!(!field.exists());
     for flag in ["--cell-size", "--min-cell-size"] {
         let r = deform(&input, &out, &edit, &[flag, "1e300"]);
         assert_eq!(r.code, 4, "{flag}: {}", r.stderr);

@@ -272,3 +272,25 @@ fn lengths_the_cells_decided_print_to_their_precision() {
         assert!(decimals_in(l).iter().all(|&d| d <= 2), "{l}");
     }
 }
+
+/// A WKT is the file's text, not ours: a character of several bytes right before a keyword's
+/// bracket (here `GEOGCS[` damaged into `GEOGé[`) is read past, not sliced through, and the
+/// system is still named with its own code.
+#[test]
+fn a_damaged_wkt_is_read_without_slicing_a_character() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = std::fs::read(shared("las/test1_4.las")).unwrap();
+    let at = bytes
+        .windows(7)
+        .position(|w| w == b"GEOGCS[")
+        .expect("a WKT in the file");
+    bytes[at..at + 6].copy_from_slice("GEOGé".as_bytes());
+    let path = dir.path().join("damaged.las");
+    std::fs::write(&path, bytes).unwrap();
+    let t = info(&path);
+    let crs = line(&t, "CRS:");
+    assert!(
+        crs.contains("NAD83(HARN) / New Mexico Central (ftUS), EPSG:2903 (from the WKT)"),
+        "{crs}"
+    );
+}

@@ -123,7 +123,23 @@ fn entries_combine_and_errors_say_why() {
             "none.geojson",
         ),
         ("[[fixed]]\npolygon_file = \"bad.geojson\"\n", "bad.geojson"),
+        // Indices past the samples, or not indices at all, in the spec's words with its line.
+        (
+            "[[fixed]]\nindices = [0, 99999999]\n",
+            "edit.toml: line 2: `indices` lists sample 99999999, but the input has 110000 \
+             samples, numbered 0 to 109999",
+        ),
+        (
+            "[[fixed]]\nbox = { min = [0, 0, 0], max = [1, 1, 1] }\n[[handle]]\n\
+             indices = \"ids.txt\"\ntranslate = [0, 0, 1]\n",
+            "line 4: `indices` lists sample 110000,",
+        ),
+        (
+            "[[fixed]]\nindices = [-1]\n",
+            "line 2: `indices` lists -1: a sample index is a whole number, 0 or more",
+        ),
     ];
+    std::fs::write(dir.path().join("ids.txt"), "5, 109999\n110000\n").unwrap();
     std::fs::write(dir.path().join("bad.geojson"), "{\"type\": \"Point\"").unwrap();
     for (text, what) in cases {
         std::fs::write(&edit, text).unwrap();

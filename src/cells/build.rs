@@ -21,22 +21,28 @@
 //! 4. Leaves: every occupied finest cell is a boundary leaf, every inside block an interior
 //!    leaf at its own level (the coarsest where it is all inside); outside blocks are dropped.
 //!
-//! Nothing is sized by the bounding box's volume or extent: occupied finest cells are sorted
-//! Morton codes, the coarser levels their shifted codes, the blocks at most `2^D − 1` per
-//! occupied cell plus, at the coarsest level, the empty cells beside occupied ones (the others
-//! are outside: see `empty_blocks`). Four samples 21 × 42 km apart at 0.3 m cells make four
-//! cells and a few hundred blocks. Memory is checked against the budget as the codes grow
-//! ([`BYTES_PER_OCCUPIED`]), and the triangles' candidate cells before they are enumerated. A
-//! dense byte grid of the finest level would need 1024³ bytes (3.4 GB at the peak) for a
+//! With the default levels nothing is sized by the bounding box's volume or extent: occupied
+//! finest cells are sorted Morton codes, the coarser levels their shifted codes, the blocks at
+//! most `2^D − 1` per occupied cell plus, at the coarsest level, the empty cells beside occupied
+//! ones (the others are outside: see `empty_blocks`). Four samples 21 × 42 km apart at 0.3 m
+//! cells make four cells and a few hundred blocks. A `max_level` below the default makes the
+//! level-0 cells smaller than the box's shortest extent: the inside then reaches level-0 cells
+//! beside no occupied one, and every level-0 cell is a block (`root_blocks`), as many as the
+//! box holds: a 4 × 1 × 1 bar at 1 mm cells with one level has 5·10⁸. Memory is checked against
+//! the budget before the grid is filled (those level-0 cells), as the codes grow
+//! ([`BYTES_PER_OCCUPIED`]), and for the triangles' candidate cells before they are enumerated.
+//! A dense byte grid of the finest level would need 1024³ bytes (3.4 GB at the peak) for a
 //! 257-point diagonal line 256 units long at 0.5 cells, of which 257 are occupied. The 64-bit
 //! codes bound the finest cells along an axis to 2²¹ in 3D (2³¹ in 2D), which
-//! [`crate::cells::build`] checks up front ([`Error::GridTooLarge`]).
+//! [`crate::cells::build`] checks up front ([`Error::GridTooLarge`]); the complex's 32-bit cell
+//! indices bound its cells to [`MAX_CELLS`].
 
 use std::time::Instant;
 
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 
+use super::blocks::{classify_flood, classify_winding, empty_blocks, pyramid, root_blocks};
 use super::morton::{coords, morton};
 use super::size::finest;
 use super::winding::Winding;
@@ -61,6 +67,10 @@ const fn max_axis(d: usize) -> i64 {
 /// passed a 1.5 GB budget and peaked at 2.3 GB.
 pub(crate) const BYTES_PER_OCCUPIED: u64 = 1 << 10;
 
+/// The most cells a complex holds: its cells are numbered in 32 bits, and the transfer keeps
+/// the two highest numbers for "none".
+pub(crate) const MAX_CELLS: u64 = u32::MAX as u64 - 2;
+
 /// The finest-level occupancy of a shape, filled a batch of samples at a time: the first pass
 /// of the streaming pipeline, which never holds all samples. [`Occupancy::finish`] classifies
 /// the empty cells and emits the adaptive complex.
@@ -75,6 +85,9 @@ pub struct Occupancy<const D: usize> {
     /// Morton codes of occupied finest cells: sorted and unique up to `sorted`.
     occupied: Vec<u64>,
     sorted: usize,
+    /// Level-0 cells that are blocks of the empty space whether or not an occupied cell is
+    /// beside them (0 with the default levels: see `root_blocks`).
+    roots: u64,
     limit: u64,
     inside: Inside,
     /// The triangles seen so far (local frame), for winding numbers.
@@ -92,7 +105,8 @@ impl<const D: usize> Occupancy<D> {
     pub fn new(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams, budget: Budget) -> Result<Self> {
         let grid = frame(lo, hi, params)?;
         let dims = grid.dims(grid.max_level);
-        Ok(Self {
+        let occupancy = Self {
+            roots: root_blocks(&grid, &(hi - lo), params.inside),
             grid,
             dims,
             occupied: Vec::new(),
@@ -103,7 +117,10 @@ impl<const D: usize> Occupancy<D> {
             oriented: FxHashMap::default(),
             glued: 0,
             start: Instant::now(),
-        })
+        };
+        // The level-0 cells enumerated whole are known before any sample.
+        occupancy.check_cells()?;
+        Ok(occupancy)
     }
 
     /// The grid (its origin is the local frame's).
@@ -146,16 +163,46 @@ impl<const D: usize> Occupancy<D> {
         self.occupied.par_sort_unstable();
         self.occupied.dedup();
         self.sorted = self.occupied.len();
-        crate::memory::check(
-            &format!(
-                "the cells of {} occupied finest cells of size {}",
-                self.sorted,
-                crate::human::length(self.grid.finest_size(), self.grid.finest_size())
+        self.check_cells()
+    }
+
+    /// Checks the cells the build will make of the occupied cells so far and of the level-0
+    /// cells enumerated whole against the budget and [`MAX_CELLS`].
+    fn check_cells(&self) -> Result<()> {
+        let size = |s: f64| crate::human::length(s, s);
+        let occupied = format!(
+            "{} occupied finest cells of size {}",
+            self.sorted,
+            size(self.grid.finest_size())
+        );
+        let (what, advice) = match self.roots {
+            0 => (
+                format!("the cells of {occupied}"),
+                "use a larger --cell-size or --min-cell-size (or fewer --cells)",
             ),
-            self.sorted as f64 * BYTES_PER_OCCUPIED as f64,
-            self.limit,
-            "use a larger --cell-size or --min-cell-size (or fewer --cells)",
-        )
+            roots => (
+                format!(
+                    "the cells of {}the {roots} cells of size {} that tile the box at \
+                     --max-level {}",
+                    match self.sorted {
+                        0 => String::new(),
+                        _ => format!("{occupied} and of "),
+                    },
+                    size(self.grid.size0),
+                    self.grid.max_level
+                ),
+                "use a larger --max-level (or leave it out: by default the largest cells are as \
+                 large as the shape's thinnest extent), or a larger --cell-size",
+            ),
+        };
+        let cells = self.sorted as f64 + self.roots as f64;
+        crate::memory::check(&what, cells * BYTES_PER_OCCUPIED as f64, self.limit, advice)?;
+        if cells > MAX_CELLS as f64 {
+            return Err(Error::Param(format!(
+                "{what} are more than the {MAX_CELLS} cells a complex numbers: {advice}"
+            )));
+        }
+        Ok(())
     }
 
     /// Marks the cells of world-coordinate samples with unit `normals` and, unless the
@@ -262,6 +309,7 @@ impl<const D: usize> Occupancy<D> {
             oriented,
             glued,
             start,
+            roots,
             ..
         } = self;
         let winding = winding.or_else(|| {
@@ -281,7 +329,7 @@ impl<const D: usize> Occupancy<D> {
         });
         let occupied_count = occupied.len();
         let levels = pyramid::<D>(&grid, occupied);
-        let blocks = empty_blocks(&grid, &levels);
+        let blocks = empty_blocks(&grid, &levels, roots > 0);
         let (inside, winding_queries, is_inside) = match (inside, winding) {
             (Inside::Auto | Inside::Winding, Some(w)) => {
                 let is_inside = classify_winding(&grid, &blocks, &w);
@@ -489,179 +537,6 @@ fn triangle_cells<const D: usize>(
     Ok(cells)
 }
 
-/// The occupied cells of every level, coarsest first, as sorted Morton codes: a cell is
-/// occupied when one of its finest descendants is.
-fn pyramid<const D: usize>(grid: &Grid<D>, finest: Vec<u64>) -> Vec<Vec<u64>> {
-    let mut levels = vec![finest];
-    for _ in 0..grid.max_level {
-        let fine = levels.last().expect("finest level present");
-        // A parent's code is its child's shifted right: the order is kept.
-        let mut coarse: Vec<u64> = fine.iter().map(|c| c >> D).collect();
-        coarse.dedup();
-        levels.push(coarse);
-    }
-    levels.reverse();
-    levels
-}
-
-/// The maximal empty cells near the shape: every cell of level 0 that is not occupied but
-/// touches an occupied one (edges and corners included), and every child that is not occupied
-/// of an occupied cell above the finest level. With the level-0 cells far from the shape,
-/// which are outside, they tile the grid's empty space, and each is wholly inside or wholly
-/// outside the shape (the surface lies in occupied cells). Returned as `(level, code)`.
-fn empty_blocks<const D: usize>(grid: &Grid<D>, levels: &[Vec<u64>]) -> Vec<(u8, u64)> {
-    // Level 0: the empty cells among the 3^D around each occupied one. A level-0 cell is at
-    // least as large as the box's shortest extent, so one with no occupied neighbor can hold
-    // neither the surface nor any inside: it is outside, and is not enumerated (a grid of
-    // 35,000 × 70,000 of them around four samples was 2.45e9 blocks).
-    let mut near: Vec<u64> = levels[0]
-        .iter()
-        .flat_map(|&code| {
-            let c = coords::<D>(code);
-            (0..3usize.pow(D as u32)).filter_map(move |k| {
-                let mut n = c;
-                for (a, v) in n.iter_mut().enumerate() {
-                    *v += (k / 3usize.pow(a as u32) % 3) as i64 - 1;
-                    if *v < 0 || *v >= grid.dims0[a] {
-                        return None;
-                    }
-                }
-                Some(morton(&n))
-            })
-        })
-        .filter(|code| levels[0].binary_search(code).is_err())
-        .collect();
-    near.sort_unstable();
-    near.dedup();
-    let mut blocks: Vec<(u8, u64)> = near.into_iter().map(|code| (0, code)).collect();
-    for level in 1..levels.len() {
-        let (parents, children) = (&levels[level - 1], &levels[level]);
-        // Both are sorted and the children of a parent are the codes `p << D ..`: one merge.
-        let mut j = 0;
-        for &p in parents {
-            for child in p << D..(p + 1) << D {
-                while j < children.len() && children[j] < child {
-                    j += 1;
-                }
-                if children.get(j) != Some(&child) {
-                    blocks.push((level as u8, child));
-                }
-            }
-        }
-    }
-    blocks
-}
-
-/// Classifies the empty blocks by the winding number of `winding`: the surface lies in
-/// occupied cells only, so the winding number cannot cross ½ inside a block, and one
-/// evaluation at its center classifies it.
-fn classify_winding<const D: usize>(
-    grid: &Grid<D>,
-    blocks: &[(u8, u64)],
-    winding: &Winding,
-) -> Vec<bool> {
-    blocks
-        .par_iter()
-        .map(|&(level, code)| {
-            let c = grid.center(&CellKey {
-                level,
-                coord: coords(code),
-            });
-            winding
-                .at(&Vect::<3>::from_fn(|a, _| if a < D { c[a] } else { 0.0 }))
-                .abs()
-                >= 0.5
-        })
-        .collect()
-}
-
-/// Classifies the empty blocks by the exterior flood fill: a block is outside when a path of
-/// empty face-adjacent cells leads from it to the grid's border. The blocks are joined by a
-/// union-find: each block looks across each face at the cell of its own level there; an empty
-/// block there, or the coarser empty block that holds that cell, is joined to it, and an
-/// occupied one is left to its own finer empty blocks, which find this block from their side.
-/// So every pair of blocks sharing a face is joined once, as the finest cells of a dense grid
-/// would be, and the work goes with the blocks.
-fn classify_flood<const D: usize>(
-    grid: &Grid<D>,
-    levels: &[Vec<u64>],
-    blocks: &[(u8, u64)],
-) -> Vec<bool> {
-    let mut index: Vec<FxHashMap<u64, u32>> = vec![FxHashMap::default(); levels.len()];
-    for (k, &(level, code)) in blocks.iter().enumerate() {
-        index[level as usize].insert(code, k as u32);
-    }
-    let outside = blocks.len() as u32;
-    let mut parent: Vec<u32> = (0..=outside).collect();
-    fn root(parent: &mut [u32], mut i: u32) -> u32 {
-        while parent[i as usize] != i {
-            parent[i as usize] = parent[parent[i as usize] as usize];
-            i = parent[i as usize];
-        }
-        i
-    }
-    // The joins are found in parallel and applied in order, a bounded batch of blocks at a
-    // time.
-    const BATCH: usize = 1 << 18;
-    for (b, batch) in blocks.chunks(BATCH).enumerate() {
-        let joins: Vec<(u32, u32)> = batch
-            .par_iter()
-            .enumerate()
-            .fold(Vec::new, |mut out, (i, &(level, code))| {
-                let k = (b * BATCH + i) as u32;
-                let dims = grid.dims(level);
-                let c = coords::<D>(code);
-                for a in 0..D {
-                    for step in [-1i64, 1] {
-                        let mut n = c;
-                        n[a] += step;
-                        if n[a] < 0 || n[a] >= dims[a] {
-                            out.push((k, outside));
-                            continue;
-                        }
-                        let (mut l, mut m) = (level as usize, morton(&n));
-                        loop {
-                            if let Some(&other) = index[l].get(&m) {
-                                out.push((k, other));
-                                break;
-                            }
-                            if levels[l].binary_search(&m).is_ok() {
-                                break;
-                            }
-                            if l == 0 {
-                                // An empty level-0 cell far from the shape: outside.
-                                out.push((k, outside));
-                                break;
-                            }
-                            l -= 1;
-                            m >>= D;
-                        }
-                    }
-                }
-                out
-            })
-            .reduce(Vec::new, |mut a, b| {
-                a.extend(b);
-                a
-            });
-        for (a, b) in joins {
-            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
-            // The outside node stays a root, so a block is outside when its root is.
-            if ra != rb {
-                if ra == outside {
-                    parent[rb as usize] = ra;
-                } else {
-                    parent[ra as usize] = rb;
-                }
-            }
-        }
-    }
-    drop(index);
-    (0..outside)
-        .map(|k| root(&mut parent, k) != outside)
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -833,6 +708,86 @@ mod tests {
         // The cells cover the box volume (boundary cells overhang by up to one layer).
         let vol: f64 = complex.cells.iter().map(|c| c.volume()).sum();
         assert!(vol > 64.0 && vol < 4.6f64.powi(3), "volume {vol}");
+    }
+
+    /// Fewer levels than the default (`max_level` given) make level-0 cells smaller than the
+    /// box: the inside away from the surface is filled all the same, the same finest cells as
+    /// with the default levels, by the flood fill and by winding numbers.
+    #[test]
+    fn few_levels_fill_the_same_inside() {
+        let pts = box_surface_points(60, [2.0, 1.0, 1.0]);
+        let normals: Vec<Vect<3>> = pts
+            .iter()
+            .map(|p| {
+                let d = Vect::<3>::from_fn(|a, _| {
+                    let s = [2.0, 1.0, 1.0][a];
+                    if p[a] == 0.0 {
+                        -1.0
+                    } else if p[a] == s {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                });
+                d.normalize()
+            })
+            .collect();
+        for oriented in [false, true] {
+            let volume = |max_level: Option<u8>| {
+                let params = BuildParams {
+                    cell_size: Some(0.07),
+                    max_level,
+                    ..Default::default()
+                };
+                let (lo, hi) = crate::cells::bounds(&pts).unwrap();
+                let mut occupancy = Occupancy::new(&lo, &hi, &params, Budget::default()).unwrap();
+                match oriented {
+                    true => occupancy.add_oriented_points(&pts, &normals).unwrap(),
+                    false => occupancy.add_points(&pts).unwrap(),
+                };
+                let (complex, info) = occupancy.finish().unwrap();
+                complex.validate().unwrap();
+                let want = if oriented {
+                    Inside::Winding
+                } else {
+                    Inside::Flood
+                };
+                assert_eq!(info.inside, want);
+                complex.cells.iter().map(|c| c.volume()).sum::<f64>()
+            };
+            let whole = volume(None);
+            assert!(whole > 2.0, "{whole}");
+            // One level or more keeps the finest grid's alignment (an even number of cells
+            // along each axis, centered on the box), so the cells are the same.
+            for levels in [1, 2] {
+                let v = volume(Some(levels));
+                assert!(
+                    (v - whole).abs() <= 1e-9 * whole,
+                    "{levels}: {v} against {whole}"
+                );
+            }
+        }
+    }
+
+    /// The level-0 cells that fewer levels make are counted against the budget before any
+    /// sample, with the advice to raise `--max-level`.
+    #[test]
+    fn few_levels_are_refused_past_the_budget() {
+        let (lo, hi) = (Vect::<3>::zeros(), Vect::<3>::new(4.0, 1.0, 1.0));
+        let params = BuildParams {
+            cell_size: Some(1e-3),
+            max_level: Some(1),
+            ..Default::default()
+        };
+        let e = Occupancy::new(&lo, &hi, &params, Budget::bytes(1 << 30)).unwrap_err();
+        assert!(matches!(e, Error::Memory { .. }), "{e}");
+        assert!(e.to_string().contains("--max-level"), "{e}");
+        // Without an inside to fill, nothing beside the shape is enumerated.
+        let shell = BuildParams {
+            inside: Inside::None,
+            ..params
+        };
+        assert!(Occupancy::new(&lo, &hi, &shell, Budget::bytes(1 << 30)).is_ok());
     }
 
     #[test]

@@ -17,6 +17,7 @@
 //! their precision.
 
 mod adjacency;
+mod blocks;
 mod build;
 mod decimate;
 mod export;

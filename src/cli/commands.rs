@@ -22,6 +22,7 @@ pub(super) fn run_cells(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
     let ply = output
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
@@ -56,7 +57,7 @@ pub(super) fn run_cells(
         shown.len(),
         info.boundary_cells,
         info.interior_cells,
-        shown.grid.finest_size()
+        rigidcells::human::length(shown.grid.finest_size(), shown.grid.finest_size())
     );
     Ok(())
 }
@@ -79,6 +80,9 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     .filter_map(|(option, path)| Some((option, path?.as_path())))
     .collect();
     rigidcells::io::refuse_same_outputs(&outputs)?;
+    check_folders(outputs.iter().map(|(_, path)| *path))?;
+    check_output_format(&args.input, &args.output)?;
+    let chunk = chunk_len(args.chunk)?;
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
@@ -89,7 +93,6 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         report: args.report.as_deref(),
         preview: args.preview.as_deref().map(|p| (p, view, args.strain)),
     };
-    let chunk = args.chunk.clamp(1, MAX_CHUNK);
     let files = (
         args.input.as_path(),
         args.output.as_path(),
@@ -126,6 +129,56 @@ fn deform_file(
     Ok(())
 }
 
+/// Refuses an `output` that cannot have the format of `input` (LAS and LAZ write each other,
+/// every other format its own), before any work: the writer would refuse it only once the
+/// field is solved. An input of a format rigidcells does not read is left to its reader.
+pub(super) fn check_output_format(input: &Path, output: &Path) -> Result<(), Error> {
+    let formats: &[&str] = match is_xy(input) {
+        true => &["xy"],
+        false => rigidcells::io::output_extensions(input),
+    };
+    let ext = rigidcells::io::extension(output).unwrap_or_default();
+    if formats.is_empty() || formats.contains(&ext.as_str()) {
+        return Ok(());
+    }
+    let names: Vec<String> = formats.iter().map(|e| format!(".{e}")).collect();
+    Err(Error::Param(format!(
+        "{}: the output must have the input's format ({})",
+        output.display(),
+        names.join(" or ")
+    )))
+}
+
+/// Refuses outputs whose folder does not exist, before any work: the write would fail only at
+/// the end, after the solve.
+pub(super) fn check_folders<'a>(outputs: impl IntoIterator<Item = &'a Path>) -> Result<(), Error> {
+    for output in outputs {
+        let folder = match output.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        match std::fs::metadata(folder) {
+            Ok(m) if m.is_dir() => {}
+            Ok(_) => {
+                let e = std::io::Error::from(std::io::ErrorKind::NotADirectory);
+                return Err(Error::write(output, e));
+            }
+            Err(e) => return Err(Error::write(output, e)),
+        }
+    }
+    Ok(())
+}
+
+/// `--chunk` checked: 1 sample or more (more than [`MAX_CHUNK`] is taken as that many).
+pub(super) fn chunk_len(chunk: usize) -> Result<usize, Error> {
+    if chunk == 0 {
+        return Err(Error::Param(
+            "--chunk 0: a chunk holds 1 to 16,777,216 samples".into(),
+        ));
+    }
+    Ok(chunk.min(MAX_CHUNK))
+}
+
 pub(super) fn is_xy(path: &Path) -> bool {
     path.extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("xy"))
@@ -154,13 +207,13 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             eprintln!("warning: {w}");
         }
         println!(
-            "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {:.3e}",
+            "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {}",
             args.input.display(),
             args.output.display(),
             points,
             solution.complex.len(),
             solution.info.iterations,
-            solution.info.energies.last().copied().unwrap_or(0.0)
+            rigidcells::human::figure(solution.info.energies.last().copied().unwrap_or(0.0))
         );
         print_control_points(&info.control_points);
     }
@@ -191,6 +244,7 @@ pub(super) fn image_job(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
     rigidcells::render::png_path(output)?;
     let background = background.map(parse_color).transpose()?;
     let spec = read_spec::<2>(edit)?;
@@ -241,6 +295,7 @@ pub(super) fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
 
 pub(super) fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
     rigidcells::render::png_path(output)?;
     let image = render::render_file(input, view)?;
     image.write_png(output)?;
@@ -263,6 +318,8 @@ pub(super) fn run_apply(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
+    check_folders([output])?;
+    check_output_format(input, output)?;
     let bar = Bar::new(quiet);
     let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
     if !quiet {
@@ -293,6 +350,8 @@ pub(super) fn run_solve(
     for input in inputs {
         refuse_overwrite(input, field)?;
     }
+    check_folders([field])?;
+    let chunk = chunk_len(chunk)?;
     let spec = read_spec::<3>(edit)?;
     let params = cells.deform_params(transfer)?;
     let bar = Bar::new(quiet);
@@ -306,14 +365,13 @@ pub(super) fn run_solve(
         }
         let s = &solution.info;
         println!(
-            "{} files, {} samples -> {}: {} cells, {} Gauss-Newton iterations, energy {:.3e}, \
-             {:.2} s",
+            "{} files, {} samples -> {}: {} cells, {} Gauss-Newton iterations, energy {}, {:.2} s",
             inputs.len(),
             info.samples,
             field.display(),
             s.cells_final,
             s.iterations,
-            s.energies.last().copied().unwrap_or(0.0),
+            rigidcells::human::figure(s.energies.last().copied().unwrap_or(0.0)),
             s.seconds
         );
         print_control_points(&info.deform.control_points);

@@ -14,7 +14,7 @@ use rigidcells::Error;
 use rigidcells::cells::Inside;
 use rigidcells::field::{Outside, Transfer};
 use rigidcells::memory::Budget;
-use rigidcells::pipeline::{self, CHUNK, DeformParams, MAX_CHUNK};
+use rigidcells::pipeline::{self, CHUNK, DeformParams};
 use rigidcells::render::{self, View};
 use rigidcells::solve::{LooseParts, Method};
 
@@ -133,7 +133,7 @@ enum Command {
         /// The transfer `apply` will use (and the field is made for).
         #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Pu)]
         transfer: Transfer,
-        /// Samples per streamed chunk.
+        /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
         #[arg(long, default_value_t = CHUNK)]
         chunk: usize,
         /// Print nothing but errors.
@@ -335,7 +335,8 @@ struct CellArgs {
     #[arg(long, value_name = "S", conflicts_with_all = ["cell_size", "cells"])]
     min_cell_size: Option<f64>,
     /// Octree levels above the finest cells [default: enough for the largest cell that fits the
-    /// input's shortest extent].
+    /// input's shortest extent]. Fewer make the largest cells smaller than the shape, and its
+    /// inside takes as many of them as its box holds (counted against --memory-limit first).
     #[arg(long)]
     max_level: Option<u8>,
     /// Keep only cells that hold samples (a shell; no interior cells); same as `--inside none`.
@@ -450,15 +451,7 @@ pub(crate) fn main() -> ExitCode {
             transfer,
             chunk,
             quiet,
-        } => run_solve(
-            &inputs,
-            &edit,
-            &save_field,
-            &cells,
-            transfer,
-            chunk.clamp(1, MAX_CHUNK),
-            quiet,
-        ),
+        } => run_solve(&inputs, &edit, &save_field, &cells, transfer, chunk, quiet),
         Command::Image {
             input,
             edit,

@@ -160,7 +160,7 @@ fn first_pass(
 ) -> Result<FirstPass> {
     source.rewind()?;
     let mut occupancy = Occupancy::new(&lo, &hi, &params.build, params.memory)?;
-    let mut selections = Selections::new(spec, source.has_classes())?;
+    let mut selections = Selections::new(spec, source.has_classes(), source.len())?;
     let keep = fill && !source.triangles().is_empty();
     let mut positions = Vec::new();
     let mut proxy = (proxy_max > 0).then(|| Proxy::new(source.len(), proxy_max));

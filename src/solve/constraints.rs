@@ -323,9 +323,10 @@ struct RegionSamples<const D: usize> {
 }
 
 impl<const D: usize> Selections<D> {
-    /// Empty selections for `spec`. Fails when a region selects by LAS class and the input has
-    /// no classes.
-    pub fn new(spec: &EditSpec<D>, has_classes: bool) -> Result<Self> {
+    /// Empty selections for `spec` over an input of `samples` samples. Fails when a region
+    /// selects by LAS class and the input has no classes, or lists an index past its samples.
+    pub fn new(spec: &EditSpec<D>, has_classes: bool, samples: u64) -> Result<Self> {
+        spec.check_indices(samples)?;
         let regions: Vec<&Region<D>> = regions(spec).collect();
         if !has_classes && regions.iter().any(|r| r.uses_classes()) {
             return Err(Error::Param(
@@ -449,7 +450,7 @@ pub fn resolve<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let mut selections = Selections::new(spec, classes.is_some())?;
+    let mut selections = Selections::new(spec, classes.is_some(), points.len() as u64)?;
     selections.add(spec, &complex.grid, 0, points, classes);
     resolve_selected(complex, spec, &selections)
 }

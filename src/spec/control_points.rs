@@ -219,7 +219,10 @@ fn by_header<const D: usize>(
                 "id" | "name" | "point" | "label" | "gcp" => Some(Column::Id),
                 "weight" | "w" => Some(Column::Weight),
                 _ => {
-                    let (prefix, a) = lower.split_at(lower.len().saturating_sub(1));
+                    // The last character is the axis (a header is the user's text: the split
+                    // falls on a character boundary, whatever the name holds).
+                    let last = lower.char_indices().last().map_or(0, |(i, _)| i);
+                    let (prefix, a) = lower.split_at(last);
                     match prefix {
                         "from_" | "from" | "src_" => axis(a).map(Column::From),
                         "to_" | "to" | "dst_" => axis(a).map(Column::To),
@@ -305,5 +308,8 @@ mod tests {
             .to_string();
         assert!(e.contains("line 2") && e.contains("7 columns"), "{e}");
         assert!(read("# nothing\n").unwrap().is_empty());
+        // A name ending in a character of several bytes is an unknown column.
+        let e = read("id,x,y,X,Yé\nA,1,2,3,4\n").unwrap_err().to_string();
+        assert!(e.contains("unknown column `Yé`"), "{e}");
     }
 }

@@ -2,7 +2,10 @@
 //! motion, pins, soft targets (control points) and stiffness regions, gathered in
 //! [`EditSpec`].
 
+use std::path::PathBuf;
+
 use super::region::Region;
+use crate::error::{Error, Result};
 use crate::rigid::{Dim, Mat, Rigid, Vect};
 
 /// How a handle moves: `A(x) = R·P·(x − pivot) + pivot + translate`, with `R` a rotation and `P`
@@ -155,6 +158,8 @@ pub struct EditSpec<const D: usize> {
     pub targets: Vec<Target<D>>,
     /// Stiffness regions with their scale.
     pub stiffness: Vec<Entry<D, f64>>,
+    /// The spec's name in messages (its file; empty for a spec made in code).
+    pub name: PathBuf,
 }
 
 impl<const D: usize> EditSpec<D> {
@@ -164,5 +169,33 @@ impl<const D: usize> EditSpec<D> {
             && self.handles.is_empty()
             && self.pins.is_empty()
             && self.targets.is_empty())
+    }
+
+    /// Refuses a region that lists a sample index past the input's `samples`, naming the
+    /// spec's line: such an index selects nothing, and is a mistake (an index file of another
+    /// input, a count from 1).
+    pub fn check_indices(&self, samples: u64) -> Result<()> {
+        let largest = self
+            .fixed
+            .iter()
+            .map(|e| &e.region)
+            .chain(self.handles.iter().map(|e| &e.region))
+            .chain(self.stiffness.iter().map(|e| &e.region))
+            .filter_map(Region::largest_index)
+            .find(|&(index, _)| index >= samples);
+        let Some((index, line)) = largest else {
+            return Ok(());
+        };
+        let range = match samples {
+            0 => String::new(),
+            n => format!(", numbered 0 to {}", n - 1),
+        };
+        Err(Error::Spec {
+            path: self.name.clone(),
+            message: format!(
+                "line {line}: `indices` lists sample {index}, but the input has {samples} \
+                 samples{range}"
+            ),
+        })
     }
 }

@@ -31,8 +31,13 @@ pub enum Region<const D: usize> {
         /// The outward normal of the half-space.
         normal: Vect<D>,
     },
-    /// Samples by index.
-    Indices(HashSet<u64>),
+    /// Samples by index (0-based).
+    Indices {
+        /// The indices.
+        samples: HashSet<u64>,
+        /// The line of the spec that lists them (1-based), for messages.
+        line: usize,
+    },
     /// Samples by LAS classification.
     Classification(HashSet<u8>),
     /// The prism over a polygon in the first two coordinates (x, y), between heights `z`
@@ -115,7 +120,7 @@ impl<const D: usize> Region<D> {
         match self {
             Self::Box { .. } | Self::Sphere { .. } | Self::Plane { .. } | Self::Polygon(_) => true,
             Self::Screen { visible, .. } => !visible,
-            Self::Indices(_) | Self::Classification(_) => false,
+            Self::Indices { .. } | Self::Classification(_) => false,
             Self::All(parts) => parts.iter().all(Self::is_geometric),
             Self::Not(r) => r.is_geometric(),
         }
@@ -128,6 +133,17 @@ impl<const D: usize> Region<D> {
             Self::All(parts) => parts.iter().any(Self::uses_classes),
             Self::Not(r) => r.uses_classes(),
             _ => false,
+        }
+    }
+
+    /// The largest index this region lists (alone or among the parts of an entry), with the
+    /// line that lists it; `None` when it selects no sample by index.
+    pub fn largest_index(&self) -> Option<(u64, usize)> {
+        match self {
+            Self::Indices { samples, line } => samples.iter().max().map(|&i| (i, *line)),
+            Self::All(parts) => parts.iter().filter_map(Self::largest_index).max(),
+            Self::Not(r) => r.largest_index(),
+            _ => None,
         }
     }
 
@@ -157,14 +173,14 @@ impl<const D: usize> Region<D> {
             Self::Screen { view, polygon, .. } => on_screen(view, polygon, x),
             Self::All(parts) => parts.iter().all(|r| r.contains_point(x)),
             Self::Not(r) => r.is_geometric() && !r.contains_point(x),
-            Self::Indices(_) | Self::Classification(_) => false,
+            Self::Indices { .. } | Self::Classification(_) => false,
         }
     }
 
     /// Whether the region selects sample `index` at `x` with LAS class `class`.
     pub fn selects(&self, index: u64, x: &Vect<D>, class: Option<u8>) -> bool {
         match self {
-            Self::Indices(set) => set.contains(&index),
+            Self::Indices { samples, .. } => samples.contains(&index),
             Self::Classification(set) => class.is_some_and(|c| set.contains(&c)),
             Self::All(parts) => parts.iter().all(|r| r.selects(index, x, class)),
             Self::Not(r) => !r.selects(index, x, class),

@@ -93,9 +93,16 @@ impl CopcSink {
         };
         if matches!(input.format, 4 | 5 | 9 | 10) {
             notes.push(format!(
-                "COPC holds point formats 6-8: the wave packets of format {} are dropped",
+                "COPC holds point formats 6-8: the wave packets of format {} are dropped, with \
+                 the records that describe them",
                 input.format
             ));
+        } else if records.iter().any(is_waveform) {
+            notes.push(
+                "COPC holds point formats 6-8, without wave packets: the records that describe \
+                 them are dropped"
+                    .into(),
+            );
         }
         if input.format < 6 {
             notes.push(format!(
@@ -118,7 +125,9 @@ impl CopcSink {
             }
         }
         let extra = (input.record_len as usize).saturating_sub(standard_record_len(input.format));
-        let keep = |r: &VlrRecord| !(r.user_id == "copc" || r.is("laszip encoded", 22204));
+        let keep = |r: &VlrRecord| {
+            !(r.user_id == "copc" || r.is("laszip encoded", 22204) || is_waveform(r))
+        };
         let (evlrs, vlrs) = records.into_iter().filter(keep).partition(|r| r.extended);
         let spill_name = output.with_file_name(format!(
             "{}.points",
@@ -245,6 +254,13 @@ impl Sink for CopcSink {
         drop(spill);
         Ok(std::mem::take(&mut self.notes))
     }
+}
+
+/// Whether `r` describes or holds wave packets: a waveform packet descriptor (LASF_Spec 100 to
+/// 354) or the waveform data packets (LASF_Spec 65535). COPC's point formats hold no wave
+/// packets, so a COPC output keeps neither.
+fn is_waveform(r: &VlrRecord) -> bool {
+    r.user_id == "LASF_Spec" && matches!(r.record_id, 100..=354 | 65535)
 }
 
 /// The WKT VLR (LASF_Projection 2112) of the EPSG code that the GeoTIFF keys among `records`

@@ -1,8 +1,10 @@
 //! The writer of LAZ outputs, and of LAS outputs from a LAZ input, through the `las` crate
 //! (its parallel LAZ codec): the header and VLRs are rebuilt by the crate from the input's,
 //! without the LASzip VLR (the writer adds its own) and without COPC VLRs/EVLRs (a rewritten
-//! file is no longer COPC-ordered); the global encoding word, which the crate reduces, is
-//! restored after writing.
+//! file is no longer COPC-ordered); the global encoding word, which the crate reduces, and the
+//! bounds, which the crate rounds outwards to a whole step of the scale (a step past the
+//! records where the division by the scale falls short of the record's integer), are set after
+//! writing: the bounds to those of the records as stored.
 
 use std::fs::OpenOptions;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
@@ -29,6 +31,9 @@ pub(super) struct CrateSink {
     slab: PointData,
     scale: [f64; 3],
     offset: [f64; 3],
+    /// The bounds of the records written, as they decode.
+    lo: [f64; 3],
+    hi: [f64; 3],
     global_encoding: u16,
     /// The header is LAS 1.0–1.3, whose return counts stop at 5: a record with return 6 or 7
     /// makes the writer fail at the end ([`Accepted::Restart`] at once instead).
@@ -105,6 +110,8 @@ impl CrateSink {
             slab,
             scale,
             offset,
+            lo: [f64::INFINITY; 3],
+            hi: [f64::NEG_INFINITY; 3],
             global_encoding: header.global_encoding,
             legacy_returns,
             notes,
@@ -152,8 +159,7 @@ impl Sink for CrateSink {
         let start = self.pending.len();
         self.pending.extend_from_slice(&chunk.raw);
         self.record_len = chunk.record_len;
-        // The writer computes its header bounds itself.
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let (mut lo, mut hi) = (self.lo, self.hi);
         let accepted = encode(
             &mut self.pending[start..],
             chunk.record_len,
@@ -161,7 +167,11 @@ impl Sink for CrateSink {
             &(self.scale, self.offset),
             (&mut lo, &mut hi),
         );
-        if accepted == Accepted::Yes && self.pending.len() >= LAZ_BATCH * chunk.record_len {
+        if accepted != Accepted::Yes {
+            return Ok(accepted);
+        }
+        (self.lo, self.hi) = (lo, hi);
+        if self.pending.len() >= LAZ_BATCH * chunk.record_len {
             self.flush()?;
         }
         Ok(accepted)
@@ -176,7 +186,9 @@ impl Sink for CrateSink {
             return Err(Error::format(&target, format!("{e}")));
         }
         drop(writer);
-        // Restore the global encoding word (waveform bits) that the crate reduces.
+        // Restore the global encoding word (waveform bits) that the crate reduces, and set the
+        // bounds of the records as stored.
+        let written = self.lo[0] <= self.hi[0];
         let restore = || -> std::io::Result<()> {
             let path = self.tmp.as_ref().expect("open until finish").path();
             let mut file = OpenOptions::new().read(true).write(true).open(path)?;
@@ -184,6 +196,9 @@ impl Sink for CrateSink {
             (&mut file).take(HEADER_1_4 as u64).read_to_end(&mut head)?;
             let mut raw = RawHeader::from_bytes(&head).ok_or(std::io::ErrorKind::UnexpectedEof)?;
             raw.global_encoding = self.global_encoding;
+            if written {
+                (raw.min, raw.max) = (self.lo, self.hi);
+            }
             file.seek(SeekFrom::Start(0))?;
             file.write_all(&raw.to_bytes())
         };

@@ -79,7 +79,10 @@ where
             format!("unknown section `{k}` (expected fixed, handle, pin, target or stiffness)"),
         ));
     }
-    let mut spec = EditSpec::default();
+    let mut spec = EditSpec {
+        name: name.to_path_buf(),
+        ..EditSpec::default()
+    };
     for t in &raw.fixed {
         let line = ctx.line(t);
         ctx.allow(t.get_ref(), &[], line)?;
@@ -337,7 +340,23 @@ mod tests {
         let err = parse("[[fixed]]\nindices = [0, -5]\n")
             .unwrap_err()
             .to_string();
-        assert!(err.contains("line 2") && err.contains("indices"), "{err}");
+        assert!(
+            err.contains("edit.toml: line 2: `indices` lists -5: a sample index is a whole number"),
+            "{err}"
+        );
+        // An index past the input's samples is refused with the spec's line.
+        let spec = parse(
+            "[[fixed]]\nbox = { min = [0, 0, 0], max = [1, 1, 1] }\n\n[[handle]]\n\
+                          translate = [1, 0, 0]\ninvert = true\nindices = [3, 99999]\n",
+        )
+        .unwrap();
+        assert!(spec.check_indices(100_000).is_ok());
+        let err = spec.check_indices(3000).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "edit.toml: line 7: `indices` lists sample 99999, but the input has 3000 samples, \
+             numbered 0 to 2999"
+        );
     }
 
     #[test]

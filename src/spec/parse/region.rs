@@ -137,16 +137,36 @@ impl Ctx<'_> {
                 }
             }
             // A list of indices, or the file that holds them.
-            "indices" => match t.get(key) {
-                Some(toml::Value::Array(_)) => {
-                    let list: Vec<u64> = self.field(t, key, line)?;
-                    Region::Indices(list.into_iter().collect())
+            "indices" => {
+                let samples = match t.get(key) {
+                    Some(toml::Value::Array(list)) => list
+                        .iter()
+                        .map(|v| {
+                            match v {
+                                toml::Value::Integer(i) => u64::try_from(*i).ok(),
+                                _ => None,
+                            }
+                            .ok_or_else(|| {
+                                self.error(
+                                    self.at(line, key),
+                                    format!(
+                                        "`indices` lists {v}: a sample index is a whole number, 0 \
+                                     or more"
+                                    ),
+                                )
+                            })
+                        })
+                        .collect::<Result<_>>()?,
+                    _ => {
+                        let file: String = self.field(t, key, line)?;
+                        self.read_indices(&file, line)?
+                    }
+                };
+                Region::Indices {
+                    samples,
+                    line: self.at(line, key).unwrap_or(line),
                 }
-                _ => {
-                    let file: String = self.field(t, key, line)?;
-                    Region::Indices(self.read_indices(&file, line)?)
-                }
-            },
+            }
             "polygon" | "polygon_file" => {
                 let rings = if key == "polygon" {
                     let ring: Vec<Vec<f64>> = self.field(t, key, line)?;
