@@ -6,7 +6,7 @@ use anyhow::Context;
 use rigidcells::Error;
 use rigidcells::field::Transfer;
 use rigidcells::io::refuse_overwrite;
-use rigidcells::pipeline::{self, CHUNK, DeformParams, MAX_CHUNK};
+use rigidcells::pipeline::{self, CHUNK, DeformParams};
 use rigidcells::render::{self, View};
 use rigidcells::report::Summary;
 use rigidcells::spec::read_spec;
@@ -22,7 +22,7 @@ pub(super) fn run_cells(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    check_folders([output])?;
+    rigidcells::io::check_folders([output])?;
     let ply = output
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
@@ -80,9 +80,9 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
     .filter_map(|(option, path)| Some((option, path?.as_path())))
     .collect();
     rigidcells::io::refuse_same_outputs(&outputs)?;
-    check_folders(outputs.iter().map(|(_, path)| *path))?;
-    check_output_format(&args.input, &args.output)?;
-    let chunk = chunk_len(args.chunk)?;
+    rigidcells::io::check_folders(outputs.iter().map(|(_, path)| *path))?;
+    rigidcells::io::check_output_format(&args.input, &args.output)?;
+    let chunk = pipeline::check_chunk(args.chunk)?;
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
@@ -127,56 +127,6 @@ fn deform_file(
         );
     }
     Ok(())
-}
-
-/// Refuses an `output` that cannot have the format of `input` (LAS and LAZ write each other,
-/// every other format its own), before any work: the writer would refuse it only once the
-/// field is solved. An input of a format rigidcells does not read is left to its reader.
-pub(super) fn check_output_format(input: &Path, output: &Path) -> Result<(), Error> {
-    let formats: &[&str] = match is_xy(input) {
-        true => &["xy"],
-        false => rigidcells::io::output_extensions(input),
-    };
-    let ext = rigidcells::io::extension(output).unwrap_or_default();
-    if formats.is_empty() || formats.contains(&ext.as_str()) {
-        return Ok(());
-    }
-    let names: Vec<String> = formats.iter().map(|e| format!(".{e}")).collect();
-    Err(Error::Param(format!(
-        "{}: the output must have the input's format ({})",
-        output.display(),
-        names.join(" or ")
-    )))
-}
-
-/// Refuses outputs whose folder does not exist, before any work: the write would fail only at
-/// the end, after the solve.
-pub(super) fn check_folders<'a>(outputs: impl IntoIterator<Item = &'a Path>) -> Result<(), Error> {
-    for output in outputs {
-        let folder = match output.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        match std::fs::metadata(folder) {
-            Ok(m) if m.is_dir() => {}
-            Ok(_) => {
-                let e = std::io::Error::from(std::io::ErrorKind::NotADirectory);
-                return Err(Error::write(output, e));
-            }
-            Err(e) => return Err(Error::write(output, e)),
-        }
-    }
-    Ok(())
-}
-
-/// `--chunk` checked: 1 sample or more (more than [`MAX_CHUNK`] is taken as that many).
-pub(super) fn chunk_len(chunk: usize) -> Result<usize, Error> {
-    if chunk == 0 {
-        return Err(Error::Param(
-            "--chunk 0: a chunk holds 1 to 16,777,216 samples".into(),
-        ));
-    }
-    Ok(chunk.min(MAX_CHUNK))
 }
 
 pub(super) fn is_xy(path: &Path) -> bool {
@@ -244,7 +194,7 @@ pub(super) fn image_job(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    check_folders([output])?;
+    rigidcells::io::check_folders([output])?;
     rigidcells::render::png_path(output)?;
     let background = background.map(parse_color).transpose()?;
     let spec = read_spec::<2>(edit)?;
@@ -295,7 +245,7 @@ pub(super) fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
 
 pub(super) fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    check_folders([output])?;
+    rigidcells::io::check_folders([output])?;
     rigidcells::render::png_path(output)?;
     let image = render::render_file(input, view)?;
     image.write_png(output)?;
@@ -318,8 +268,8 @@ pub(super) fn run_apply(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    check_folders([output])?;
-    check_output_format(input, output)?;
+    rigidcells::io::check_folders([output])?;
+    rigidcells::io::check_output_format(input, output)?;
     let bar = Bar::new(quiet);
     let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
     if !quiet {
@@ -350,8 +300,8 @@ pub(super) fn run_solve(
     for input in inputs {
         refuse_overwrite(input, field)?;
     }
-    check_folders([field])?;
-    let chunk = chunk_len(chunk)?;
+    rigidcells::io::check_folders([field])?;
+    let chunk = pipeline::check_chunk(chunk)?;
     let spec = read_spec::<3>(edit)?;
     let params = cells.deform_params(transfer)?;
     let bar = Bar::new(quiet);

@@ -79,6 +79,47 @@ pub fn output_extensions(input: &Path) -> &'static [&'static str] {
     }
 }
 
+/// Refuses an `output` that cannot have the format of `input` (LAS and LAZ write each other, a
+/// `.xy` point set `.xy`, every other format its own), before any work: the writer would
+/// refuse it only once the field is solved. An input of a format rigidcells does not read is
+/// left to its reader.
+pub fn check_output_format(input: &Path, output: &Path) -> Result<()> {
+    let formats: &[&str] = match extension(input).as_deref() {
+        Some("xy") => &["xy"],
+        _ => output_extensions(input),
+    };
+    let ext = extension(output).unwrap_or_default();
+    if formats.is_empty() || formats.contains(&ext.as_str()) {
+        return Ok(());
+    }
+    let names: Vec<String> = formats.iter().map(|e| format!(".{e}")).collect();
+    Err(Error::Param(format!(
+        "{}: the output must have the input's format ({})",
+        output.display(),
+        names.join(" or ")
+    )))
+}
+
+/// Refuses outputs whose folder does not exist, before any work: the write would fail only at
+/// the end, after the solve.
+pub fn check_folders<'a>(outputs: impl IntoIterator<Item = &'a Path>) -> Result<()> {
+    for output in outputs {
+        let folder = match output.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        match std::fs::metadata(folder) {
+            Ok(m) if m.is_dir() => {}
+            Ok(_) => {
+                let e = std::io::Error::from(std::io::ErrorKind::NotADirectory);
+                return Err(Error::write(output, e));
+            }
+            Err(e) => return Err(Error::write(output, e)),
+        }
+    }
+    Ok(())
+}
+
 /// What a source checks as it opens.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Opening {

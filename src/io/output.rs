@@ -103,6 +103,9 @@ impl Seek for OutFile {
     }
 }
 
+/// The most bytes of a target's name that its temporary's name repeats.
+const NAME_MOST: usize = 200;
+
 /// A temporary file beside a target: created new under a random name in the target's folder,
 /// renamed over the target by [`ResultSet::commit`] (or [`TempFile::commit`], an output alone)
 /// and removed when dropped before. A target that is a regular file keeps its permission bits:
@@ -112,6 +115,9 @@ impl Seek for OutFile {
 pub struct TempFile {
     tmp: PathBuf,
     target: PathBuf,
+    /// A handle on the file created: synced and given its permissions through it, never
+    /// through its path, which someone with write access to the folder could swap for a link.
+    file: File,
     committed: bool,
 }
 
@@ -135,7 +141,14 @@ impl TempFile {
         let name = target
             .file_name()
             .ok_or_else(|| Error::Param(format!("{}: not a file name", target.display())))?;
-        let prefix = format!(".{}.", name.to_string_lossy());
+        // The target's name, cut on a character boundary so that the temporary's name (with
+        // its dots and random part, 18 bytes more) fits where the target's fits (255 bytes).
+        let name = name.to_string_lossy();
+        let mut cut = name.len().min(NAME_MOST);
+        while !name.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        let prefix = format!(".{}.", &name[..cut]);
         let (file, tmp) = crate::interrupt::create_registered(|| {
             let mut builder = tempfile::Builder::new();
             builder.prefix(&prefix).suffix(".tmp").rand_bytes(12);
@@ -149,10 +162,12 @@ impl TempFile {
             named.keep().map_err(|e| e.error)
         })
         .map_err(|e| Error::write(target, e))?;
+        let handle = file.try_clone().map_err(|e| Error::write(target, e))?;
         Ok((
             Self {
                 tmp,
                 target: target.to_path_buf(),
+                file: handle,
                 committed: false,
             },
             BufWriter::with_capacity(1 << 20, OutFile::new(file, write_back)),
@@ -169,6 +184,14 @@ impl TempFile {
         &self.target
     }
 
+    /// Another handle on the file created (sharing its position with the writer's), to
+    /// read or rewrite what was written without opening the path again.
+    pub fn handle(&self) -> Result<File> {
+        self.file
+            .try_clone()
+            .map_err(|e| Error::write(&self.target, e))
+    }
+
     /// Flushes `out` (the writer [`TempFile::create`] gave).
     fn flush(&self, out: BufWriter<OutFile>) -> Result<()> {
         out.into_inner()
@@ -179,13 +202,13 @@ impl TempFile {
     /// Syncs the temporary file to the disk and gives it the target's permission bits when
     /// the target is a regular file already: ready to be renamed.
     fn complete(&self) -> Result<()> {
-        let sync = File::open(&self.tmp).and_then(|f| f.sync_all());
+        let sync = self.file.sync_all();
         let mode = match std::fs::symlink_metadata(&self.target) {
             Ok(m) if m.is_file() => Some(m.permissions()),
             _ => None,
         };
         sync.and_then(|_| match mode {
-            Some(p) => std::fs::set_permissions(&self.tmp, p),
+            Some(p) => self.file.set_permissions(p),
             None => Ok(()),
         })
         .map_err(|e| Error::write(&self.target, e))
@@ -223,12 +246,21 @@ impl Drop for TempFile {
 #[derive(Debug, Default)]
 pub struct ResultSet {
     staged: Mutex<Vec<TempFile>>,
+    /// The output renamed after every other ([`ResultSet::last`]).
+    last: Mutex<Option<PathBuf>>,
 }
 
 impl ResultSet {
     /// An empty set for one run.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Renames the output `target` after every other at the commit: the run's main output,
+    /// whose presence then says that its field, report and preview are in place too, should
+    /// the process be killed between two renames.
+    pub fn last(&self, target: &Path) {
+        *self.last.lock().unwrap_or_else(|e| e.into_inner()) = Some(target.to_path_buf());
     }
 
     /// Takes `tmp`, complete: synced now, renamed over its target by [`ResultSet::commit`].
@@ -259,12 +291,17 @@ impl ResultSet {
         self.stage_writer(tmp, out)
     }
 
-    /// Renames every staged output over its target, in the order they were staged, with no
-    /// interrupt between the renames ([`crate::interrupt::commit_registered`]). Should a rename
-    /// fail, the outputs already renamed are removed again and the error names the output that
+    /// Renames every staged output over its target, in the order they were staged (the one
+    /// named by [`ResultSet::last`] last), with no interrupt between the renames
+    /// ([`crate::interrupt::commit_registered`]). Should a rename fail (renames within a
+    /// folder fail only when the folder changed under the run), the outputs already renamed
+    /// are removed again, files they replaced included, and the error names the output that
     /// failed: the run leaves none of its outputs.
     pub fn commit(self) -> Result<()> {
         let mut staged = self.staged.into_inner().unwrap_or_else(|e| e.into_inner());
+        if let Some(last) = self.last.into_inner().unwrap_or_else(|e| e.into_inner()) {
+            staged.sort_by_key(|t| t.target == last);
+        }
         let pairs: Vec<(&Path, &Path)> = staged
             .iter()
             .map(|t| (t.tmp.as_path(), t.target.as_path()))

@@ -16,7 +16,7 @@ use super::checks::check_foldovers;
 use super::first_pass::first_pass_cells;
 use super::stages::{self, Cells, Selected, Staged, control_results};
 use super::transfer_pass::transfer_pass;
-use super::{DeformInfo, DeformParams, PROXY_SAMPLES, Proxy};
+use super::{DeformInfo, DeformParams, FOLDOVER_SAMPLES, Proxy};
 
 /// Samples per streamed chunk by default: measured on a 20M-point LAS, 64k-sample chunks ran
 /// 3.8 s against 6.5 s for 1M (the chunk in flight stays in cache) and LAZ was the same either
@@ -26,6 +26,17 @@ pub const CHUNK: usize = 1 << 16;
 /// The largest chunk a caller may ask for: a chunk's buffers are sized by what it holds, but
 /// 2⁶⁴ − 1 overflowed the index arithmetic of the readers.
 pub const MAX_CHUNK: usize = 1 << 24;
+
+/// A chunk's length checked: 1 sample or more (more than [`MAX_CHUNK`] is taken as that
+/// many).
+pub fn check_chunk(chunk: usize) -> Result<usize> {
+    if chunk == 0 {
+        return Err(Error::Param(
+            "--chunk 0: a chunk holds 1 to 16,777,216 samples".into(),
+        ));
+    }
+    Ok(chunk.min(MAX_CHUNK))
+}
 
 /// What [`deform_file`] and [`apply_file`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -99,9 +110,10 @@ pub fn deform_file(
     Ok(done)
 }
 
-/// Refuses `outputs` (each with what it is, for the message) that would replace one of
-/// `inputs` or each other: before any work, in every face.
+/// Refuses, before any work and in every face, `outputs` (each with what it is, for the
+/// message) that would replace one of `inputs` or each other, or whose folder is missing.
 pub(super) fn refuse_clobbering(inputs: &[&Path], outputs: &[(&str, &Path)]) -> Result<()> {
+    io::check_folders(outputs.iter().map(|(_, path)| *path))?;
     for (_, output) in outputs {
         for input in inputs {
             io::refuse_overwrite(input, output)?;
@@ -123,6 +135,9 @@ pub(super) fn deform_in(
     let mut outputs = vec![("the output", output)];
     outputs.extend(save_field.map(|f| ("the saved field", f)));
     refuse_clobbering(&[input], &outputs)?;
+    io::check_output_format(input, output)?;
+    let chunk = check_chunk(chunk)?;
+    set.last(output);
     let mut source = io::open(input)?;
     let mut info = FileInfo::default();
     let (
@@ -219,7 +234,7 @@ fn solve_source(
 ) -> Result<(Staged<3>, Proxy)> {
     let t0 = Instant::now();
     info.samples = source.len();
-    let proxy_max = params.proxy_samples.unwrap_or(PROXY_SAMPLES);
+    let proxy_max = params.proxy_samples.unwrap_or(FOLDOVER_SAMPLES);
     let (complex, build, selections, proxy) = first_pass_cells(
         source,
         spec,
@@ -258,6 +273,7 @@ pub fn solve_files(
 ) -> Result<(Solution<3>, FileInfo)> {
     let inputs_: Vec<&Path> = inputs.iter().map(|p| p.as_path()).collect();
     refuse_clobbering(&inputs_, &[("the saved field", save_field)])?;
+    let chunk = check_chunk(chunk)?;
     let mut tiles = io::Tiles::open(inputs)?;
     let set = ResultSet::new();
     let mut info = FileInfo::default();
@@ -312,6 +328,8 @@ pub fn apply_file(
 ) -> Result<FileInfo> {
     params.check()?;
     refuse_clobbering(&[input, field], &[("the output", output)])?;
+    io::check_output_format(input, output)?;
+    let chunk = check_chunk(chunk)?;
     let mut source = io::open(input)?;
     // Beyond the margin, `--outside extend` takes the nearest patch of the whole field.
     let hint = match (params.transfer, params.outside) {

@@ -26,6 +26,8 @@ pub(super) fn first_pass_cells(
     notes: &mut Vec<String>,
     observer: &dyn Observer,
 ) -> Result<(CellComplex<3>, BuildInfo, Selections<3>, Proxy)> {
+    // What the spec asks of the input (its classes, its samples' indices), before any pass.
+    Selections::new(spec, source.has_classes(), source.len())?;
     let (lo, hi) = match source.bounds_hint() {
         Some(b) => b,
         None => scan_bounds(source, chunk)?,

@@ -17,8 +17,8 @@ mod transfer_pass;
 pub(crate) use checks::check_moved;
 pub use checks::{FOLDOVER_SAMPLES, check_foldovers};
 pub use files::{
-    ApplyParams, CHUNK, FileInfo, MAX_CHUNK, apply_file, deform_file, file_cells, solve_files,
-    write_cells,
+    ApplyParams, CHUNK, FileInfo, MAX_CHUNK, apply_file, check_chunk, deform_file, file_cells,
+    solve_files, write_cells,
 };
 pub use live::{Live, Step};
 pub use options::Options;
@@ -55,8 +55,9 @@ pub struct DeformParams {
     /// With the RBF transfer: evaluate positions through its far field, each coordinate
     /// within this length of the exact sum's ([`crate::field::Rbf::with_tolerance`]).
     pub(crate) rbf_tolerance: Option<f64>,
-    /// The most samples in the preview proxy of [`deform_file`] (`None`: [`PROXY_SAMPLES`];
-    /// `Some(0)`: no proxy, for a run that moves no samples).
+    /// The most samples in the proxy of [`deform_file`], for its fold-over check, its report's
+    /// residuals and a preview (`None`: [`FOLDOVER_SAMPLES`], as the command line checks a
+    /// run without a preview; `Some(0)`: no proxy, for a run that moves no samples).
     pub(crate) proxy_samples: Option<usize>,
     /// Run the control points' leave-one-out check ([`crate::control::leave_one_out`]).
     pub(crate) check_control_points: bool,

@@ -6,7 +6,6 @@
 //! records where the division by the scale falls short of the record's integer), are set after
 //! writing: the bounds to those of the records as stored.
 
-use std::fs::OpenOptions;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
@@ -190,8 +189,9 @@ impl Sink for CrateSink {
         // bounds of the records as stored.
         let written = self.lo[0] <= self.hi[0];
         let restore = || -> std::io::Result<()> {
-            let path = self.tmp.as_ref().expect("open until finish").path();
-            let mut file = OpenOptions::new().read(true).write(true).open(path)?;
+            let tmp = self.tmp.as_ref().expect("open until finish");
+            let mut file = tmp.handle().map_err(std::io::Error::other)?;
+            file.seek(SeekFrom::Start(0))?;
             let mut head = Vec::with_capacity(HEADER_1_4);
             (&mut file).take(HEADER_1_4 as u64).read_to_end(&mut head)?;
             let mut raw = RawHeader::from_bytes(&head).ok_or(std::io::ErrorKind::UnexpectedEof)?;
