@@ -5,7 +5,10 @@
 //!
 //! Coordinates are printed to the file's precision: a LAS file's scale (0.01 → two decimals),
 //! single precision where the file holds `float` vertices, else the shortest text that reads
-//! back as the number. The centroid takes the bounds' decimals.
+//! back as the number. The centroid takes the bounds' decimals, and, where the file has no
+//! step (floats, text), at least those that resolve a thousandth of its largest size: a mean
+//! lies between the samples, and bounds of whole numbers say nothing of the decimals between
+//! them (a 10 × 1 × 1 bar's centroid is (5, 0.5, 0.5), not (5, 0, 0)).
 
 use std::fmt;
 use std::path::Path;
@@ -84,7 +87,22 @@ impl FileInfo {
         }
     }
 
-    /// Decimals of the bounds as printed, per axis (for the centroid).
+    /// Decimals of the centroid, per axis: the bounds', and with no step of the file's own at
+    /// least those that resolve a thousandth of the largest size (module docs).
+    fn centroid_decimals(&self) -> Vec<usize> {
+        let bounds = self.bound_decimals();
+        let (Some((lo, hi)), None) = (&self.bounds, &self.decimals) else {
+            return bounds;
+        };
+        let size = (0..lo.len()).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
+        let fine = match size > 0.0 {
+            true => crate::human::decimals(size / 1000.0).min(9),
+            false => 0,
+        };
+        bounds.into_iter().map(|d| d.max(fine)).collect()
+    }
+
+    /// Decimals of the bounds as printed, per axis.
     fn bound_decimals(&self) -> Vec<usize> {
         let Some((lo, hi)) = &self.bounds else {
             return Vec::new();
@@ -136,7 +154,7 @@ impl fmt::Display for FileInfo {
             writeln!(f, "  size: {}", size.join(" × "))?;
         }
         if let Some(c) = &self.centroid {
-            let d = self.bound_decimals();
+            let d = self.centroid_decimals();
             let v: Vec<String> = c
                 .iter()
                 .enumerate()

@@ -105,8 +105,15 @@ fn meshes_and_point_sets_have_bounds_and_centroids() {
     let t = info(&xy);
     assert!(line(&t, "points:").contains('2'), "{t}");
     assert!(line(&t, "bounds:").contains("x [1, 3]  y [2, 4.5]"), "{t}");
-    // (2, 3.25) to the bounds' decimals: none for x, one for y (3.25 is a tie, printed even).
-    assert_eq!(line(&t, "centroid:"), "  centroid: [2, 3.2]");
+    // (2, 3.25) to a thousandth of the largest size, 2.5: the bounds' decimals (none for x,
+    // one for y) would print 3.25 as 3.2.
+    assert_eq!(line(&t, "centroid:"), "  centroid: [2.000, 3.250]");
+    // Single-precision vertices of whole-numbered bounds: a bar's centroid between them.
+    let bar = dir.path().join("bar.ply");
+    data_gen::write_ply(&bar, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    let t = info(&bar);
+    assert!(line(&t, "bounds:").contains("x [0, 10]  y [0, 1]"), "{t}");
+    assert_eq!(line(&t, "centroid:"), "  centroid: [5.00, 0.50, 0.50]");
     let xyz = dir.path().join("p.xyz");
     std::fs::write(&xyz, "1 2 3\n3 4.5 5\n").unwrap();
     let t = info(&xyz);
