@@ -110,29 +110,25 @@ fn result_sets_of_two_runs_are_independent() {
     assert_eq!(names(dir.path()), ["a.txt", "c.txt"]);
 }
 
-/// Two threads deform at once, one failing after its first pass (its spec selects nothing
-/// there), the other with a saved field and a report: the other's outputs are all there, the
-/// failing one's are not. Two threads writing one output path both succeed.
+/// Two threads deform at once, one failing at its very end (its preview's name is taken by a
+/// folder, so the rename of its complete preview fails after its field was renamed into
+/// place), the other with a saved field and a report: the other's outputs are all there, the
+/// failing one's are not, its field taken back. Two threads writing one output path both
+/// succeed.
 #[test]
 fn concurrent_runs_keep_each_others_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let (input, _, edit) = common::lifted_bar(dir.path(), 4.0);
-    let empty = dir.path().join("empty.toml");
-    std::fs::write(
-        &empty,
-        "[[fixed]]\nbox = { min = [50, 50, 50], max = [51, 51, 51] }\n",
-    )
-    .unwrap();
-    let (good, bad) = (
-        read_spec::<3>(&edit).unwrap(),
-        read_spec::<3>(&empty).unwrap(),
-    );
+    let good = read_spec::<3>(&edit).unwrap();
     for round in 0..4 {
         let out = dir.path().join(format!("good{round}.ply"));
         let field = dir.path().join(format!("good{round}.field"));
         let report = dir.path().join(format!("good{round}.json"));
         let failed = dir.path().join(format!("bad{round}.ply"));
         let failed_field = dir.path().join(format!("bad{round}.field"));
+        let taken = dir.path().join(format!("bad{round}.png"));
+        std::fs::create_dir(&taken).unwrap();
+        std::fs::write(taken.join("inside"), b"x").unwrap();
         std::thread::scope(|s| {
             let ok = s.spawn(|| {
                 let outputs = Outputs {
@@ -145,12 +141,14 @@ fn concurrent_runs_keep_each_others_outputs() {
             let err = s.spawn(|| {
                 let outputs = Outputs {
                     save_field: Some(&failed_field),
-                    ..Default::default()
+                    report: None,
+                    preview: Some((&taken, Default::default(), false)),
                 };
-                pipeline::deform_file_with(&input, &failed, &bad, &params(), 97, &outputs, &Silent)
+                pipeline::deform_file_with(&input, &failed, &good, &params(), 97, &outputs, &Silent)
             });
             ok.join().unwrap().unwrap();
-            err.join().unwrap().unwrap_err();
+            let e = err.join().unwrap().unwrap_err();
+            assert!(e.to_string().contains("bad"), "{e}");
         });
         for path in [&out, &field, &report] {
             assert!(
@@ -159,7 +157,15 @@ fn concurrent_runs_keep_each_others_outputs() {
                 path.display()
             );
         }
-        assert!(!failed.exists() && !failed_field.exists());
+        assert!(
+            !failed.exists(),
+            "round {round}: the failed run's output is in place"
+        );
+        assert!(
+            !failed_field.exists(),
+            "round {round}: the failed run's field is in place"
+        );
+        assert!(taken.join("inside").exists());
     }
     // One output path, two writers at once: neither collides with the other's temporary.
     let same = dir.path().join("same.ply");
@@ -213,6 +219,39 @@ fn the_library_never_writes_over_its_input() {
     refused(apply(&field));
     assert_eq!(std::fs::read(&input).unwrap(), bytes);
     assert_eq!(std::fs::read(&field).unwrap(), field_bytes);
+}
+
+/// The library checks what the command line checks, before any work (under a memory budget of
+/// 1 KiB, any work would fail on the budget first): an output of another format, an output in
+/// a missing folder, a chunk of 0 samples; and a target name of 255 bytes gets a temporary.
+#[test]
+fn the_library_checks_its_arguments_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out, edit) = common::lifted_bar(dir.path(), 4.0);
+    let spec = read_spec::<3>(&edit).unwrap();
+    let tiny = Options {
+        cell_size: Some(0.5),
+        memory_limit: Some(1024),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let run = |output: &Path, chunk: usize| {
+        pipeline::deform_file(&input, output, &spec, &tiny, chunk, None, &Silent)
+            .map(|_| ())
+            .unwrap_err()
+    };
+    let e = run(&dir.path().join("out.las"), CHUNK);
+    assert!(matches!(e, rigidcells::Error::Param(_)), "{e}");
+    assert!(e.to_string().contains("the input's format (.ply)"), "{e}");
+    let e = run(&dir.path().join("missing").join("out.ply"), CHUNK);
+    assert!(matches!(e, rigidcells::Error::Write { .. }), "{e}");
+    let e = run(&out, 0);
+    assert!(e.to_string().contains("--chunk 0"), "{e}");
+    let long = dir.path().join(format!("{}.ply", "é".repeat(125)));
+    assert_eq!(long.file_name().unwrap().len(), 254);
+    pipeline::deform_file(&input, &long, &spec, &params(), CHUNK, None, &Silent).unwrap();
+    assert!(long.exists());
 }
 
 /// SIGKILL while the output is being written: the field and the report, complete by then, are

@@ -91,6 +91,9 @@ where
             triangles,
             classes,
         } => {
+            // What the spec asks of the samples (their classes, their indices), before the
+            // cells are built.
+            crate::solve::Selections::new(spec, classes.is_some(), points.len() as u64)?;
             let (complex, info) = build(points, triangles, &params.build, params.memory)?;
             sizing = crate::cells::shortfall(params.build.target_cells, complex.len());
             let selected = Selected::Samples { points, classes };
