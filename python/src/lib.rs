@@ -6,8 +6,7 @@
 //! structured arrays. The live `Session` is in `session.rs`.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -22,7 +21,6 @@ use rigidcells::io;
 use rigidcells::names::{Named, UnknownName};
 use rigidcells::pipeline::Options;
 use rigidcells::pipeline::{self, DeformInfo, DeformParams};
-use rigidcells::progress::Observer;
 use rigidcells::render::View;
 use rigidcells::report::Timings;
 use rigidcells::rigid::Vect;
@@ -30,7 +28,9 @@ use rigidcells::solve::Solution;
 use rigidcells::solve::{LooseParts, Method};
 use rigidcells::spec::{EditSpec, parse_spec};
 
+mod observer;
 mod session;
+use observer::PyObserver;
 use session::Session;
 
 create_exception!(
@@ -135,106 +135,6 @@ fn python_terms(text: &str) -> String {
 /// Messages for the user in the package's terms.
 fn said(messages: &[String]) -> Vec<String> {
     messages.iter().map(|m| python_terms(m)).collect()
-}
-
-/// Reports progress to a Python callable `(stage, done, total)` and asks Python's signal
-/// handlers between the library's steps: Ctrl-C (`KeyboardInterrupt`), or an exception the
-/// callable raises, stops the call at the next step and is raised in its place.
-struct PyObserver {
-    progress: Option<Py<PyAny>>,
-    stopped: Mutex<Option<PyErr>>,
-    /// The stage's name, units done and its length (0: unknown).
-    at: Mutex<(String, u64, u64)>,
-    reported: Mutex<Instant>,
-}
-
-/// Progress is reported at most this often (and at each stage's start and end).
-const REPORT_EVERY: Duration = Duration::from_millis(100);
-
-impl PyObserver {
-    fn new(progress: Option<Py<PyAny>>) -> Self {
-        Self {
-            progress,
-            stopped: Mutex::new(None),
-            at: Mutex::new((String::new(), 0, 0)),
-            reported: Mutex::new(Instant::now()),
-        }
-    }
-
-    /// Calls the progress callable with where the work is (always with `now`, else at most
-    /// every [`REPORT_EVERY`]).
-    fn report(&self, now: bool) {
-        let Some(progress) = &self.progress else {
-            return;
-        };
-        {
-            let mut last = self.reported.lock().expect("not poisoned");
-            if !now && last.elapsed() < REPORT_EVERY {
-                return;
-            }
-            *last = Instant::now();
-        }
-        let (stage, done, len) = self.at.lock().expect("not poisoned").clone();
-        Python::attach(|py| {
-            let total = (len > 0).then_some(len);
-            if let Err(e) = progress.call1(py, (stage, done, total)) {
-                self.stop(e);
-            }
-        });
-    }
-
-    fn stop(&self, e: PyErr) {
-        let mut stopped = self.stopped.lock().expect("not poisoned");
-        if stopped.is_none() {
-            *stopped = Some(e);
-        }
-    }
-
-    /// The library's result, with the exception that stopped it in place of its
-    /// `Cancelled`.
-    fn result<T>(&self, result: rigidcells::Result<T>) -> PyResult<T> {
-        match result {
-            Err(Error::Cancelled) => Err(self
-                .stopped
-                .lock()
-                .expect("not poisoned")
-                .take()
-                .unwrap_or_else(|| PyRuntimeError::new_err("cancelled"))),
-            other => other.map_err(py_err),
-        }
-    }
-}
-
-impl Observer for PyObserver {
-    fn stage(&self, name: &str, len: u64) {
-        *self.at.lock().expect("not poisoned") = (name.to_string(), 0, len);
-        self.report(true);
-    }
-
-    fn advance(&self, n: u64) {
-        self.at.lock().expect("not poisoned").1 += n;
-        self.report(false);
-    }
-
-    fn finish(&self) {
-        {
-            let mut at = self.at.lock().expect("not poisoned");
-            at.1 = at.1.max(at.2);
-        }
-        self.report(true);
-    }
-
-    fn cancelled(&self) -> bool {
-        if self.stopped.lock().expect("not poisoned").is_some() {
-            return true;
-        }
-        // Python runs signal handlers on its main thread only; elsewhere this asks nothing.
-        if let Err(e) = Python::attach(|py| py.check_signals()) {
-            self.stop(e);
-            return true;
-        }
-        false
-    }
 }
 
 /// An `(n, 3)` array of coordinates as points.
@@ -524,7 +424,7 @@ fn deform<'py>(
         let residuals = residuals(Some(&solution), &s.points, &moved);
         Ok((moved, turned, residuals, info))
     });
-    let (moved, moved_normals, residuals, info) = observer.result(result)?;
+    let (moved, moved_normals, residuals, info) = observer.finished(result)?;
     let seconds = start.elapsed().as_secs_f64();
     let d = deformed_dict(py, &info, residuals, s.points.len(), seconds)?;
     if normals.is_some() {
@@ -725,7 +625,7 @@ fn solve<'py>(
             &observer,
         )
     });
-    let (saved, solution, info) = observer.result(result)?;
+    let (saved, solution, info) = observer.finished(result)?;
     let d = info_dict(py, &info, s.points.len() as u64)?;
     d.set_item("cell_size", solution.complex.grid.finest_size())?;
     let seconds = start.elapsed().as_secs_f64();
@@ -994,6 +894,7 @@ fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(apply_file, m)?)?;
     m.add_function(wrap_pyfunction!(solve_files, m)?)?;
     m.add_function(wrap_pyfunction!(toml_from_json, m)?)?;
+    m.add_function(wrap_pyfunction!(observer::py_caller, m)?)?;
     m.add_function(wrap_pyfunction!(decode_las, m)?)?;
     m.add_function(wrap_pyfunction!(encode_las, m)?)?;
     Ok(())
