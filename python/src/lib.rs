@@ -190,8 +190,9 @@ fn spec(text: &str, base: &str) -> PyResult<EditSpec<3>> {
     parse_spec(text, Path::new(base), Path::new("spec")).map_err(py_err)
 }
 
-/// A choice named by the user (`transfer="rbf"`), or its default.
+/// A choice named by the user for the argument `arg` (`transfer="rbf"`), or its default.
 fn named<T: std::str::FromStr<Err = UnknownName> + Named>(
+    arg: &'static str,
     name: Option<String>,
     default: T,
 ) -> PyResult<T> {
@@ -199,7 +200,14 @@ fn named<T: std::str::FromStr<Err = UnknownName> + Named>(
         None => Ok(default),
         Some(name) => name.parse().map_err(|e: UnknownName| {
             let expected = T::ALL.iter().map(|v| v.name()).collect();
-            PyValueError::new_err(UnknownName { expected, ..e }.to_string())
+            PyValueError::new_err(
+                UnknownName {
+                    what: arg,
+                    expected,
+                    ..e
+                }
+                .to_string(),
+            )
         }),
     }
 }
@@ -251,15 +259,15 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
             "min_cell_size" => o.min_cell_size = Some(number()?),
             "max_level" => o.max_level = Some(level(whole("a whole number of levels")?, 30)?),
             "shell" => o.shell = flag()?,
-            "inside" => o.inside = named(name()?, Inside::Auto)?,
-            "solver" => o.solver = named(name()?, Method::Auto)?,
+            "inside" => o.inside = named("inside", name()?, Inside::Auto)?,
+            "solver" => o.solver = named("solver", name()?, Method::Auto)?,
             "tolerance" => o.tolerance = number()?,
             "coarse_levels" => {
                 o.coarse_levels = Some(level(whole("a whole number of levels")?, 8)?)
             }
-            "loose_parts" => o.loose_parts = named(name()?, LooseParts::Carry)?,
+            "loose_parts" => o.loose_parts = named("loose_parts", name()?, LooseParts::Carry)?,
             "refine_strain" => o.refine_strain = Some(number()?),
-            "transfer" => o.transfer = named(name()?, Transfer::Pu)?,
+            "transfer" => o.transfer = named("transfer", name()?, Transfer::Pu)?,
             "rbf_tolerance" => o.rbf_tolerance = Some(number()?),
             "check_gcp" => o.check_control_points = flag()?,
             "memory_limit" => o.memory_limit = Some(memory_limit(&value)?),
@@ -513,7 +521,7 @@ impl Field {
         normals: Option<PyReadonlyArray2<'py, f64>>,
         outside: Option<String>,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
-        let outside = named(outside, Outside::Refuse)?;
+        let outside = named("outside", outside, Outside::Refuse)?;
         let pts = self::points(&points)?;
         let nrm = match &normals {
             Some(n) => self::points(n)?,
@@ -687,13 +695,18 @@ fn deform_file<'py>(
     Ok(d)
 }
 
-/// Samples per streamed chunk (default: the command line's), as the command line bounds them.
+/// Samples per streamed chunk (default: the command line's): 1 to [`pipeline::MAX_CHUNK`].
 fn chunk(chunk: Option<Bound<'_, PyAny>>) -> PyResult<usize> {
-    Ok(match chunk {
-        None => pipeline::CHUNK,
-        Some(c) => whole(&c, "chunk", "a number of samples, 1 or more")?
-            .clamp(1, pipeline::MAX_CHUNK as u64) as usize,
-    })
+    const WHAT: &str = "a number of samples from 1 to 16,777,216";
+    let Some(c) = chunk else {
+        return Ok(pipeline::CHUNK);
+    };
+    match whole(&c, "chunk", WHAT)? {
+        n @ 1.. if n <= pipeline::MAX_CHUNK as u64 => Ok(n as usize),
+        n => Err(PyValueError::new_err(format!(
+            "chunk must be {WHAT}, got {n}"
+        ))),
+    }
 }
 
 /// `rigidcells solve`: the field of the edit over several files taken as one (the tiles of a
@@ -807,9 +820,11 @@ fn apply_file<'py>(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let params = pipeline::ApplyParams {
-        transfer: transfer.map(|t| named(Some(t), Transfer::Pu)).transpose()?,
+        transfer: transfer
+            .map(|t| named("transfer", Some(t), Transfer::Pu))
+            .transpose()?,
         rbf_tolerance,
-        outside: named(outside, Outside::Refuse)?,
+        outside: named("outside", outside, Outside::Refuse)?,
         memory: rigidcells::memory::Budget::given(
             memory_limit.map(|m| self::memory_limit(&m)).transpose()?,
         ),
