@@ -6,8 +6,7 @@
 //! structured arrays. The live `Session` is in `session.rs`.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -22,7 +21,6 @@ use rigidcells::io;
 use rigidcells::names::{Named, UnknownName};
 use rigidcells::pipeline::Options;
 use rigidcells::pipeline::{self, DeformInfo, DeformParams};
-use rigidcells::progress::Observer;
 use rigidcells::render::View;
 use rigidcells::report::Timings;
 use rigidcells::rigid::Vect;
@@ -30,7 +28,9 @@ use rigidcells::solve::Solution;
 use rigidcells::solve::{LooseParts, Method};
 use rigidcells::spec::{EditSpec, parse_spec};
 
+mod observer;
 mod session;
+use observer::PyObserver;
 use session::Session;
 
 create_exception!(
@@ -137,106 +137,6 @@ fn said(messages: &[String]) -> Vec<String> {
     messages.iter().map(|m| python_terms(m)).collect()
 }
 
-/// Reports progress to a Python callable `(stage, done, total)` and asks Python's signal
-/// handlers between the library's steps: Ctrl-C (`KeyboardInterrupt`), or an exception the
-/// callable raises, stops the call at the next step and is raised in its place.
-struct PyObserver {
-    progress: Option<Py<PyAny>>,
-    stopped: Mutex<Option<PyErr>>,
-    /// The stage's name, units done and its length (0: unknown).
-    at: Mutex<(String, u64, u64)>,
-    reported: Mutex<Instant>,
-}
-
-/// Progress is reported at most this often (and at each stage's start and end).
-const REPORT_EVERY: Duration = Duration::from_millis(100);
-
-impl PyObserver {
-    fn new(progress: Option<Py<PyAny>>) -> Self {
-        Self {
-            progress,
-            stopped: Mutex::new(None),
-            at: Mutex::new((String::new(), 0, 0)),
-            reported: Mutex::new(Instant::now()),
-        }
-    }
-
-    /// Calls the progress callable with where the work is (always with `now`, else at most
-    /// every [`REPORT_EVERY`]).
-    fn report(&self, now: bool) {
-        let Some(progress) = &self.progress else {
-            return;
-        };
-        {
-            let mut last = self.reported.lock().expect("not poisoned");
-            if !now && last.elapsed() < REPORT_EVERY {
-                return;
-            }
-            *last = Instant::now();
-        }
-        let (stage, done, len) = self.at.lock().expect("not poisoned").clone();
-        Python::attach(|py| {
-            let total = (len > 0).then_some(len);
-            if let Err(e) = progress.call1(py, (stage, done, total)) {
-                self.stop(e);
-            }
-        });
-    }
-
-    fn stop(&self, e: PyErr) {
-        let mut stopped = self.stopped.lock().expect("not poisoned");
-        if stopped.is_none() {
-            *stopped = Some(e);
-        }
-    }
-
-    /// The library's result, with the exception that stopped it in place of its
-    /// `Cancelled`.
-    fn result<T>(&self, result: rigidcells::Result<T>) -> PyResult<T> {
-        match result {
-            Err(Error::Cancelled) => Err(self
-                .stopped
-                .lock()
-                .expect("not poisoned")
-                .take()
-                .unwrap_or_else(|| PyRuntimeError::new_err("cancelled"))),
-            other => other.map_err(py_err),
-        }
-    }
-}
-
-impl Observer for PyObserver {
-    fn stage(&self, name: &str, len: u64) {
-        *self.at.lock().expect("not poisoned") = (name.to_string(), 0, len);
-        self.report(true);
-    }
-
-    fn advance(&self, n: u64) {
-        self.at.lock().expect("not poisoned").1 += n;
-        self.report(false);
-    }
-
-    fn finish(&self) {
-        {
-            let mut at = self.at.lock().expect("not poisoned");
-            at.1 = at.1.max(at.2);
-        }
-        self.report(true);
-    }
-
-    fn cancelled(&self) -> bool {
-        if self.stopped.lock().expect("not poisoned").is_some() {
-            return true;
-        }
-        // Python runs signal handlers on its main thread only; elsewhere this asks nothing.
-        if let Err(e) = Python::attach(|py| py.check_signals()) {
-            self.stop(e);
-            return true;
-        }
-        false
-    }
-}
-
 /// An `(n, 3)` array of coordinates as points.
 fn points(a: &PyReadonlyArray2<f64>) -> PyResult<Vec<Vect<3>>> {
     let v = a.as_array();
@@ -290,8 +190,9 @@ fn spec(text: &str, base: &str) -> PyResult<EditSpec<3>> {
     parse_spec(text, Path::new(base), Path::new("spec")).map_err(py_err)
 }
 
-/// A choice named by the user (`transfer="rbf"`), or its default.
+/// A choice named by the user for the argument `arg` (`transfer="rbf"`), or its default.
 fn named<T: std::str::FromStr<Err = UnknownName> + Named>(
+    arg: &'static str,
     name: Option<String>,
     default: T,
 ) -> PyResult<T> {
@@ -299,7 +200,14 @@ fn named<T: std::str::FromStr<Err = UnknownName> + Named>(
         None => Ok(default),
         Some(name) => name.parse().map_err(|e: UnknownName| {
             let expected = T::ALL.iter().map(|v| v.name()).collect();
-            PyValueError::new_err(UnknownName { expected, ..e }.to_string())
+            PyValueError::new_err(
+                UnknownName {
+                    what: arg,
+                    expected,
+                    ..e
+                }
+                .to_string(),
+            )
         }),
     }
 }
@@ -351,15 +259,15 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
             "min_cell_size" => o.min_cell_size = Some(number()?),
             "max_level" => o.max_level = Some(level(whole("a whole number of levels")?, 30)?),
             "shell" => o.shell = flag()?,
-            "inside" => o.inside = named(name()?, Inside::Auto)?,
-            "solver" => o.solver = named(name()?, Method::Auto)?,
+            "inside" => o.inside = named("inside", name()?, Inside::Auto)?,
+            "solver" => o.solver = named("solver", name()?, Method::Auto)?,
             "tolerance" => o.tolerance = number()?,
             "coarse_levels" => {
                 o.coarse_levels = Some(level(whole("a whole number of levels")?, 8)?)
             }
-            "loose_parts" => o.loose_parts = named(name()?, LooseParts::Carry)?,
+            "loose_parts" => o.loose_parts = named("loose_parts", name()?, LooseParts::Carry)?,
             "refine_strain" => o.refine_strain = Some(number()?),
-            "transfer" => o.transfer = named(name()?, Transfer::Pu)?,
+            "transfer" => o.transfer = named("transfer", name()?, Transfer::Pu)?,
             "rbf_tolerance" => o.rbf_tolerance = Some(number()?),
             "check_gcp" => o.check_control_points = flag()?,
             "memory_limit" => o.memory_limit = Some(memory_limit(&value)?),
@@ -524,7 +432,7 @@ fn deform<'py>(
         let residuals = residuals(Some(&solution), &s.points, &moved);
         Ok((moved, turned, residuals, info))
     });
-    let (moved, moved_normals, residuals, info) = observer.result(result)?;
+    let (moved, moved_normals, residuals, info) = observer.finished(result)?;
     let seconds = start.elapsed().as_secs_f64();
     let d = deformed_dict(py, &info, residuals, s.points.len(), seconds)?;
     if normals.is_some() {
@@ -613,7 +521,7 @@ impl Field {
         normals: Option<PyReadonlyArray2<'py, f64>>,
         outside: Option<String>,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Option<Bound<'py, PyArray2<f64>>>)> {
-        let outside = named(outside, Outside::Refuse)?;
+        let outside = named("outside", outside, Outside::Refuse)?;
         let pts = self::points(&points)?;
         let nrm = match &normals {
             Some(n) => self::points(n)?,
@@ -725,7 +633,7 @@ fn solve<'py>(
             &observer,
         )
     });
-    let (saved, solution, info) = observer.result(result)?;
+    let (saved, solution, info) = observer.finished(result)?;
     let d = info_dict(py, &info, s.points.len() as u64)?;
     d.set_item("cell_size", solution.complex.grid.finest_size())?;
     let seconds = start.elapsed().as_secs_f64();
@@ -787,13 +695,18 @@ fn deform_file<'py>(
     Ok(d)
 }
 
-/// Samples per streamed chunk (default: the command line's), as the command line bounds them.
+/// Samples per streamed chunk (default: the command line's): 1 to [`pipeline::MAX_CHUNK`].
 fn chunk(chunk: Option<Bound<'_, PyAny>>) -> PyResult<usize> {
-    Ok(match chunk {
-        None => pipeline::CHUNK,
-        Some(c) => whole(&c, "chunk", "a number of samples, 1 or more")?
-            .clamp(1, pipeline::MAX_CHUNK as u64) as usize,
-    })
+    const WHAT: &str = "a number of samples from 1 to 16,777,216";
+    let Some(c) = chunk else {
+        return Ok(pipeline::CHUNK);
+    };
+    match whole(&c, "chunk", WHAT)? {
+        n @ 1.. if n <= pipeline::MAX_CHUNK as u64 => Ok(n as usize),
+        n => Err(PyValueError::new_err(format!(
+            "chunk must be {WHAT}, got {n}"
+        ))),
+    }
 }
 
 /// `rigidcells solve`: the field of the edit over several files taken as one (the tiles of a
@@ -907,9 +820,11 @@ fn apply_file<'py>(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let params = pipeline::ApplyParams {
-        transfer: transfer.map(|t| named(Some(t), Transfer::Pu)).transpose()?,
+        transfer: transfer
+            .map(|t| named("transfer", Some(t), Transfer::Pu))
+            .transpose()?,
         rbf_tolerance,
-        outside: named(outside, Outside::Refuse)?,
+        outside: named("outside", outside, Outside::Refuse)?,
         memory: rigidcells::memory::Budget::given(
             memory_limit.map(|m| self::memory_limit(&m)).transpose()?,
         ),
@@ -994,6 +909,7 @@ fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(apply_file, m)?)?;
     m.add_function(wrap_pyfunction!(solve_files, m)?)?;
     m.add_function(wrap_pyfunction!(toml_from_json, m)?)?;
+    m.add_function(wrap_pyfunction!(observer::py_caller, m)?)?;
     m.add_function(wrap_pyfunction!(decode_las, m)?)?;
     m.add_function(wrap_pyfunction!(encode_las, m)?)?;
     Ok(())

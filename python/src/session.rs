@@ -1,9 +1,12 @@
 //! The live `Session` of the Python extension: a [`Live`] deformation behind a lock, so that
 //! calls from several Python threads wait their turn (each with the GIL released) instead of
-//! failing on a borrowed object.
+//! failing on a borrowed object. A call from within a call (a progress callback that touches
+//! its session) would wait for itself: the lock knows the caller that holds it
+//! ([`crate::observer::caller`]) and refuses it with a `RuntimeError`.
 
 use std::path::Path;
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -14,6 +17,7 @@ use rigidcells::pipeline::{Live, Step};
 use rigidcells::rigid::Vect;
 use rigidcells::spec::parse_poses;
 
+use crate::observer::caller;
 use crate::{
     PyObserver, classes, deformed_dict, moved_array, options, points, py_err, residuals, said,
     spec, triangles,
@@ -26,6 +30,8 @@ use crate::{
 #[pyclass(module = "rigidcells._rigidcells", frozen)]
 pub(crate) struct Session {
     live: Mutex<Live>,
+    /// The caller whose call holds `live` ([`caller`]; 0: none).
+    holder: AtomicU64,
     /// The points' normals (one a point, or none), turned by the release.
     normals: Vec<Vect<3>>,
     /// The number of cells and the finest cells' edge (the cells never change).
@@ -33,19 +39,41 @@ pub(crate) struct Session {
     cell_size: f64,
 }
 
+/// Said when a call on a session comes from within a call on it.
+const NESTED: &str = "this Session is busy with the call that runs this code (a progress \
+    callback, or code it runs): use the session after that call returns";
+
+/// Clears a session's holder when its call ends (also when it unwinds).
+struct Held<'a>(&'a AtomicU64);
+
+impl Drop for Held<'_> {
+    fn drop(&mut self) {
+        self.0.store(0, Ordering::SeqCst);
+    }
+}
+
 impl Session {
-    /// `f` on the live deformation, with the GIL released, once no other call holds it.
+    /// `f` on the live deformation, with the GIL released, once no other call holds it; a
+    /// call from within the holding call is refused, as it would wait for itself. Only the
+    /// holder stores its own token in `holder`, so a caller finds its token there exactly
+    /// while its own call holds the lock.
     fn with<T: Send>(
         &self,
         py: Python<'_>,
         f: impl FnOnce(&mut Live, &[Vect<3>]) -> T + Send,
     ) -> PyResult<T> {
+        let me = caller();
+        if self.holder.load(Ordering::SeqCst) == me {
+            return Err(PyRuntimeError::new_err(NESTED));
+        }
         py.detach(|| {
             let mut live = self.live.lock().map_err(|_| {
                 PyRuntimeError::new_err(
                     "an earlier call on this session stopped in the middle: start a new Session",
                 )
             })?;
+            self.holder.store(me, Ordering::SeqCst);
+            let _held = Held(&self.holder);
             Ok(f(&mut live, &self.normals))
         })
     }
@@ -101,6 +129,7 @@ impl Session {
             cells: live.complex().len(),
             cell_size: live.complex().grid.finest_size(),
             live: Mutex::new(live),
+            holder: AtomicU64::new(0),
             normals,
         })
     }
@@ -122,7 +151,7 @@ impl Session {
             let most = iterations.unwrap_or(live.params().solve().max_iterations);
             live.solve(spec, most, &observer)
         })?;
-        let step = observer.result(solved)?;
+        let step = observer.finished(solved)?;
         step_dict(py, step.as_ref())
     }
 
@@ -200,7 +229,7 @@ impl Session {
             let residuals = residuals(solution.as_ref(), live.points(), &moved);
             Ok((moved, turned, residuals, info))
         })?;
-        let (moved, turned, residuals, info) = observer.result(released)?;
+        let (moved, turned, residuals, info) = observer.finished(released)?;
         let seconds = start.elapsed().as_secs_f64();
         let d = deformed_dict(py, &info, residuals, moved.len(), seconds)?;
         if !self.normals.is_empty() {

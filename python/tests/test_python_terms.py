@@ -190,6 +190,82 @@ def test_options_are_checked_by_name():
         rigidcells.deform_file("no--such--file.laz", "out.laz", BEND)
 
 
+BAD_OPTIONS = [
+    ({"cell_size": -1}, "cell_size"),
+    ({"cell_size": 1e-9, "memory_limit": "64M"}, "cell_size"),
+    ({"cells": 0}, "cells"),
+    ({"cells": 100, "cell_size": 0.5}, "cells"),
+    ({"min_cell_size": -1}, "min_cell_size"),
+    ({"max_level": 99}, "max_level"),
+    ({"shell": True, "inside": "winding"}, "inside"),
+    ({"inside": "outside"}, "inside"),
+    ({"solver": "fast"}, "solver"),
+    ({"tolerance": -1}, "tolerance"),
+    ({"coarse_levels": 9}, "coarse_levels"),
+    ({"loose_parts": "drift"}, "loose_parts"),
+    ({"refine_strain": -1}, "refine_strain"),
+    ({"transfer": "smooth"}, "transfer"),
+    ({"transfer": "blend", "rbf_tolerance": 0.1}, "rbf_tolerance"),
+    ({"transfer": "rbf", "rbf_tolerance": -1}, "rbf_tolerance"),
+    ({"memory_limit": "lots"}, "memory_limit"),
+    ({"memory_limit": -5}, "memory_limit"),
+    ({"chunk": 0}, "chunk"),
+    ({"chunk": 16_777_217}, "chunk"),
+    ({"chunk": -1}, "chunk"),
+    ({"outside": "sideways"}, "outside"),
+]
+
+
+def _faces(tmp_path):
+    """Each face of the package, called with keyword options on the bar."""
+    pts = bar_points()
+    xyz = tmp_path / "bar.xyz"
+    xyz.write_text("".join(f"{x:.17e} {y:.17e} {z:.17e}\n" for x, y, z in pts))
+    field = tmp_path / "bar.field"
+    rigidcells.solve(pts, BEND, cell_size=0.5, progress=False).save(field)
+    out = tmp_path / "out"
+    out.mkdir()
+    return {
+        "deform": lambda **o: rigidcells.deform(pts, BEND, progress=False, **o),
+        "deform_file": lambda **o: rigidcells.deform_file(
+            xyz, out / "d.xyz", BEND, progress=False, **o
+        ),
+        "apply_file": lambda **o: rigidcells.apply_file(
+            field, xyz, out / "a.xyz", progress=False, **o
+        ),
+        "solve_files": lambda **o: rigidcells.solve_files(
+            xyz, BEND, out / "s.field", progress=False, **o
+        ),
+        "Session": lambda **o: rigidcells.Session(pts, BEND, **o),
+    }, {
+        "deform": rigidcells.deform,
+        "deform_file": rigidcells.deform_file,
+        "apply_file": rigidcells.apply_file,
+        "solve_files": rigidcells.solve_files,
+        "Session": rigidcells.Session.__init__,
+    }, out
+
+
+def test_bad_arguments_are_named_as_arguments_on_every_face(tmp_path):
+    import inspect
+
+    faces, signatures, out = _faces(tmp_path)
+    checked = 0
+    for name, call in faces.items():
+        takes = inspect.signature(signatures[name]).parameters
+        for options, arg in BAD_OPTIONS:
+            if not all(k in takes for k in options):
+                continue
+            with pytest.raises((ValueError, TypeError)) as e:
+                call(**options)
+            said = str(e.value)
+            where = f"{name}(**{options}): {said}"
+            assert arg in said and "--" not in said, where
+            checked += 1
+    assert checked > 60, checked
+    assert os.listdir(out) == []
+
+
 def test_inputs_python_would_misread_are_refused():
     pts = bar_points()
     for bad, kind in ((pts.astype(complex), "complex"), (pts > 1, "bool")):

@@ -202,6 +202,51 @@ def test_calls_from_two_threads_wait_their_turn():
     assert np.isfinite(moved).all()
 
 
+def test_a_progress_callback_that_uses_its_session_is_refused():
+    pts = bar_points()
+    live = rigidcells.Session(pts, bar_spec(pts), cell_size=0.25)
+    other = bar_spec(pts, lift=1.0)
+    other["fixed"] = [{"indices": np.nonzero(pts[:, 0] < 2.0)[0]}]
+    seen = []
+
+    def touching(use):
+        def progress(stage, done, total):
+            try:
+                use()
+            except RuntimeError as e:
+                seen.append(str(e))
+                raise
+        return progress
+
+    def run():
+        # The native session (`converged`), and the package's lock (`preview`, `drag`).
+        for use in (lambda: live.converged, live.preview, lambda: live.drag({})):
+            # Other regions: a solve from rest, which reports its progress.
+            with pytest.raises(RuntimeError, match="busy with the call that runs this code"):
+                live.solve(other, progress=touching(use))
+            with pytest.raises(RuntimeError, match="busy with the call that runs this code"):
+                live.release(progress=touching(use))
+
+    # Run aside, so that a call that waits for itself fails the test instead of hanging it.
+    errors = []
+    worker = threading.Thread(target=lambda: _reported(run, errors), daemon=True)
+    worker.start()
+    worker.join(timeout=120)
+    assert not worker.is_alive(), "a callback's call on its session waits for itself"
+    assert errors == [] and len(seen) >= 6, (errors, seen)
+    # The refused calls leave the session to the next caller.
+    assert live.solve(other).converged
+    moved, _ = live.release()
+    assert np.isfinite(moved).all()
+
+
+def _reported(f, errors):
+    try:
+        f()
+    except BaseException as e:  # noqa: BLE001 - what the test reports
+        errors.append(e)
+
+
 def test_float32_points_and_normals_come_back_float32():
     pts = bar_points().astype(np.float32)
     normals = np.tile(np.array([0, 0, 1], np.float32), (len(pts), 1))

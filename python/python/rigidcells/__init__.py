@@ -41,6 +41,7 @@ Ctrl-C stops them within a step (``KeyboardInterrupt``), leaving no output file 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -49,7 +50,7 @@ import threading
 import warnings
 from pathlib import Path
 from dataclasses import dataclass
-from typing import Any, List, Optional, Sequence, Tuple, Union
+from typing import Any, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -584,6 +585,14 @@ def _iterations(iterations: Any) -> int:
     return int(iterations)
 
 
+_NESTED = (
+    "this Session is busy with the call that runs this code (a progress callback, or code it "
+    "runs): use the session after that call returns"
+)
+"""Said when a call on a session comes from within a call on it (the native session says it
+alike)."""
+
+
 def _poses_path(path: str) -> str:
     """A pose's key path said from the ``poses`` given to ``Session.drag``."""
     return path.replace('spec["handle"]', "poses", 1)
@@ -602,6 +611,8 @@ class Session:
 
     Every call but the light properties releases the GIL: a face may run the session on a
     thread of its own. Calls from several threads run one at a time, each waiting for the last.
+    A call's progress callback cannot use its session (``RuntimeError``): the session is busy
+    with that call until it returns.
     """
 
     def __init__(
@@ -642,6 +653,7 @@ class Session:
         # The spec's key paths and the last step go with the native session's state: one call
         # at a time changes them together.
         self._lock = threading.Lock()
+        self._holder: Optional[int] = None
         self.last: Step = self.solve(spec, progress=progress)
 
     def solve(self, spec: Spec, iterations: Optional[int] = None, progress: Any = None) -> Step:
@@ -651,7 +663,7 @@ class Session:
         if iterations is not None:
             iterations = _iterations(iterations)
         text, base, paths = _spec(spec)
-        with self._lock:
+        with self._turn():
             info = _with_progress(
                 progress, lambda cb: _call(paths, self._native.solve, text, base, iterations, cb)
             )
@@ -676,7 +688,7 @@ class Session:
             raise type(e)(_poses_path(str(e))) from None
         text = _rigidcells.toml_from_json(json.dumps(plain))
         to = None if pins is None else _plain3(pins, "pins")
-        with self._lock:
+        with self._turn():
             try:
                 info = self._native.pose(text, iterations, to)
             except ValueError as e:
@@ -692,7 +704,7 @@ class Session:
     def refine(self) -> bool:
         """One more iteration on the current pose when its solve stopped short; whether one
         ran (False once converged)."""
-        with self._lock:
+        with self._turn():
             return self._native.refine()
 
     @property
@@ -714,7 +726,7 @@ class Session:
         """The points ((n, 3), float32 for float32 points, else float64) moved by the cells'
         current motions, blended: the shape of the current pose, without the transfer's exact
         constraints."""
-        with self._lock:
+        with self._turn():
             return self._native.preview().astype(self._points.dtype, copy=False)
 
     def release(self, progress: Any = None) -> Tuple[Any, Report]:
@@ -722,7 +734,7 @@ class Session:
         points moved through the transfer (fixed points keep their coordinates, handle points
         follow their handle), in the form they came in, and a ``Report`` (its warnings also
         emitted as ``RigidCellsWarning`` warnings)."""
-        with self._lock:
+        with self._turn():
             moved, info = _with_progress(progress, lambda cb: self._native.release(cb))
             paths = self._paths
         turned = _turned(info, self._normals_dtype)
@@ -730,6 +742,21 @@ class Session:
         report = Report._of(info, notes, paths)
         _warn(report.warnings)
         return out, report
+
+    @contextlib.contextmanager
+    def _turn(self) -> Iterator[None]:
+        """The session, one call at a time: a call from another thread waits its turn; a call
+        from within the call that holds it (its progress callback) is refused, as it would
+        wait for itself."""
+        me = _rigidcells.caller()
+        if self._holder == me:
+            raise RuntimeError(_NESTED)
+        with self._lock:
+            self._holder = me
+            try:
+                yield
+            finally:
+                self._holder = None
 
     def _step(self, info: dict) -> Step:
         return Step(
