@@ -22,14 +22,14 @@ use super::stages::{self, Selected};
 use crate::cells::{BuildInfo, CellComplex};
 use crate::error::Error;
 use crate::error::Result;
-use crate::field::{Blend, Field, Outside, Prescribed, Weights, apply_into};
+use crate::field::{Blend, Field, Prescribed, Weights};
 use crate::progress::{Observer, Silent};
 use crate::rigid::{Motion, Vect};
 use crate::solve::{Session, Solution, SolverInfo};
 use crate::spec::EditSpec;
 use crate::spec::HandleMotion;
 
-use super::{DeformInfo, check_foldovers, check_moved};
+use super::DeformInfo;
 
 /// Gauss-Newton iterations per pose while dragging: one, at about 40 ms for 5,000 cells on two
 /// cores, so that the shape follows the hand at 20 updates a second; the next pose goes on from
@@ -437,13 +437,7 @@ impl Live {
         normals: &[Vect<3>],
         observer: &dyn Observer,
     ) -> Result<(Vec<Vect<3>>, Vec<Vect<3>>, Option<Solution<3>>, DeformInfo)> {
-        if !normals.is_empty() && normals.len() != self.points.len() {
-            return Err(Error::Param(format!(
-                "{} normals for {} points: give one per point, or none",
-                normals.len(),
-                self.points.len()
-            )));
-        }
+        super::check_normals(self.points.len(), normals)?;
         let Some(session) = self.session.as_mut() else {
             let info = DeformInfo {
                 build: self.build.clone(),
@@ -462,12 +456,6 @@ impl Live {
         let solution = session.solution(self.info.clone());
         let transfer_start = Instant::now();
         let saved = stages::field(&solution, &self.params, observer)?;
-        let origin = saved.field.origin;
-        let deformer = saved.deformer(None, self.params.rbf_tolerance, Outside::Extend)?;
-        let (mut moved, mut turned) = (Vec::new(), Vec::new());
-        let points = &self.points;
-        apply_into(&deformer, &origin, points, normals, &mut moved, &mut turned);
-        check_moved(0, &moved)?;
         let mut warnings = stages::warnings(
             &self.build,
             &solution.complex,
@@ -478,17 +466,17 @@ impl Live {
             self.params.build.target_cells,
             self.complex.len(),
         ));
-        let foldovers = check_foldovers(&deformer, &solution, &self.points, &mut warnings);
-        let spec = self.spec.as_ref().expect("a session has its spec");
-        let controls = stages::control_results(spec, &solution, &deformer, &self.params, observer)?;
-        let info = DeformInfo::of(
-            self.build.clone(),
-            &solution.info,
-            transfer_start,
-            foldovers,
-            controls,
+        let staged = stages::Staged {
+            solution,
+            saved,
+            build: self.build.clone(),
             warnings,
-        );
+            transfer_start,
+        };
+        let spec = self.spec.as_ref().expect("a session has its spec");
+        let points = (&self.points[..], normals);
+        let (moved, turned, solution, info) =
+            stages::transfer_samples(staged, points, spec, &self.params, observer)?;
         Ok((moved, turned, Some(solution), info))
     }
 }

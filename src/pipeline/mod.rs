@@ -233,48 +233,25 @@ pub fn deform_oriented<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    if !normals.is_empty() && normals.len() != points.len() {
-        return Err(Error::Param(format!(
-            "{} normals for {} points: give one per point, or none",
-            normals.len(),
-            points.len()
-        )));
-    }
+    check_normals(points.len(), normals)?;
     let samples = Cells::Samples {
         points,
         triangles,
         classes: classes_of(points.len(), classes)?,
     };
-    let Staged {
-        solution,
-        saved,
-        build,
-        mut warnings,
-        transfer_start,
-    } = stages::run(samples, spec, params, observer)?;
-    let origin = saved.field.origin;
-    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
-    let (mut moved, mut moved_normals) = (Vec::new(), Vec::new());
-    apply_into(
-        &deformer,
-        &origin,
-        points,
-        normals,
-        &mut moved,
-        &mut moved_normals,
-    );
-    check_moved(0, &moved)?;
-    let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
-    let controls = control_results(spec, &solution, &deformer, params, observer)?;
-    let info = DeformInfo::of(
-        build,
-        &solution.info,
-        transfer_start,
-        foldovers,
-        controls,
-        warnings,
-    );
-    Ok((moved, moved_normals, solution, info))
+    let staged = stages::run(samples, spec, params, observer)?;
+    stages::transfer_samples(staged, (points, normals), spec, params, observer)
+}
+
+/// Refuses `normals` unless there is one for each of `points` samples, or none.
+pub(crate) fn check_normals<const D: usize>(points: usize, normals: &[Vect<D>]) -> Result<()> {
+    if !normals.is_empty() && normals.len() != points {
+        return Err(Error::Param(format!(
+            "{} normals for {points} points: give one per point, or none",
+            normals.len(),
+        )));
+    }
+    Ok(())
 }
 
 /// The LAS classes of `samples` samples in memory, one each or none (`None`): a count that

@@ -20,13 +20,13 @@ use std::time::Instant;
 use crate::cells::{BuildInfo, CellComplex, build};
 use crate::control::ControlPoint;
 use crate::error::Result;
-use crate::field::{Field, Rbf, SavedField, Transfer, Warp, apply};
+use crate::field::{Field, Outside, Rbf, SavedField, Transfer, Warp, apply, apply_into};
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
 use crate::solve::{self, Constraints, Selections, Solution, SolverInfo};
 use crate::spec::EditSpec;
 
-use super::DeformParams;
+use super::{DeformInfo, DeformParams, check_foldovers, check_moved};
 
 /// Where a run's cells come from, and what the spec's regions select on them. (Made once
 /// per run and moved straight into [`run`]: its size does not matter.)
@@ -256,4 +256,45 @@ where
         observer,
     )?;
     Ok((points, start.elapsed().as_secs_f64()))
+}
+
+/// The end of a deformation of samples in memory, after its stages ([`run`], or a live
+/// session's solve): the field's map (the chosen transfer with its exact constraints) applied
+/// to `points` and their `normals` (one each, or none), the moved samples checked, the
+/// fold-over check and the control points' results. What [`super::deform`] and
+/// [`super::Live::release`] return.
+#[allow(clippy::type_complexity)]
+pub(crate) fn transfer_samples<const D: usize>(
+    staged: Staged<D>,
+    (points, normals): (&[Vect<D>], &[Vect<D>]),
+    spec: &EditSpec<D>,
+    params: &DeformParams,
+    observer: &dyn Observer,
+) -> Result<(Vec<Vect<D>>, Vec<Vect<D>>, Solution<D>, DeformInfo)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let Staged {
+        solution,
+        saved,
+        build,
+        mut warnings,
+        transfer_start,
+    } = staged;
+    let origin = saved.field.origin;
+    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    let (mut moved, mut turned) = (Vec::new(), Vec::new());
+    apply_into(&deformer, &origin, points, normals, &mut moved, &mut turned);
+    check_moved(0, &moved)?;
+    let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
+    let controls = control_results(spec, &solution, &deformer, params, observer)?;
+    let info = DeformInfo::of(
+        build,
+        &solution.info,
+        transfer_start,
+        foldovers,
+        controls,
+        warnings,
+    );
+    Ok((moved, turned, solution, info))
 }
