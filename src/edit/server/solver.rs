@@ -456,13 +456,11 @@ mod tests {
             up: 2,
             ..Default::default()
         };
-        let params = crate::pipeline::Options {
+        let options = crate::pipeline::Options {
             cell_size: Some(0.5),
             ..Default::default()
-        }
-        .params()
-        .unwrap();
-        Editor::new(scene, params).unwrap()
+        };
+        Editor::new(scene, options).unwrap()
     }
 
     /// The bar's left corner pinned, its right end a handle lifted by `lift`.
