@@ -14,14 +14,9 @@ use std::time::Duration;
 
 use rigidcells::edit::server::Server;
 use rigidcells::edit::{Editor, Scene};
-use rigidcells::pipeline::{DeformParams, Options};
+use rigidcells::pipeline::Options;
 use serde_json::json;
 use tungstenite::Message;
-
-/// The parameters of `options`, checked as every face checks them.
-fn options(options: Options) -> DeformParams {
-    options.params().unwrap()
-}
 
 /// The editor of the 10×1×1 bar (cells of 0.5), served on a free port, writing into the bar's
 /// folder.
@@ -34,13 +29,13 @@ fn serve_into(dir: &Path, out_dir: Option<&Path>) -> (Server, std::path::PathBuf
     let input = dir.join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
-    let params = options(Options {
+    let options = Options {
         cell_size: Some(0.5),
         transfer: rigidcells::field::Transfer::Pu,
         ..Default::default()
-    });
+    };
     (
-        Server::bind(Editor::new(scene, params).unwrap(), 0, out_dir).unwrap(),
+        Server::bind(Editor::new(scene, options).unwrap(), 0, out_dir).unwrap(),
         input,
     )
 }
@@ -458,10 +453,10 @@ fn a_class_selection_fixes_the_ground() {
     let input = common::shared("las/autzen_trim.las");
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
     assert!(scene.classes.contains(&2));
-    let params = options(Options {
+    let options = Options {
         cells: Some(800),
         ..Default::default()
-    });
+    };
     let (lo, hi) = (scene.bounds.0 - scene.center, scene.bounds.1 - scene.center);
     let view = json!([
         [2.0 / (hi[0] - lo[0]), 0, 0, 0],
@@ -469,7 +464,7 @@ fn a_class_selection_fixes_the_ground() {
         [0, 0, 0, 0],
         [0, 0, 0, 1]
     ]);
-    let mut editor = Editor::new(scene, params).unwrap();
+    let mut editor = Editor::new(scene, options).unwrap();
     let edit: rigidcells::edit::Edit = serde_json::from_value(json!({
         "fixed": [
             {"classification": [2]},
@@ -509,13 +504,13 @@ fn the_editor_refuses_an_rbf_beyond_the_budget_as_deform_does() {
     let input = common::shared("las/autzen_trim.las");
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
     let limit = 2u64 << 20;
-    let params = options(Options {
+    let options = Options {
         cells: Some(800),
         memory_limit: Some(limit),
         transfer: rigidcells::field::Transfer::Rbf,
         ..Default::default()
-    });
-    let mut editor = Editor::new(scene, params).unwrap();
+    };
+    let mut editor = Editor::new(scene, options).unwrap();
     let cells = editor.complex().len();
     assert!(
         rigidcells::memory::rbf_bytes(cells, 3) > limit as f64,
@@ -812,12 +807,12 @@ fn a_box_selects_what_is_visible_unless_xray() {
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
     let c = scene.center;
     let x: Vec<f64> = scene.points.iter().map(|p| p[0] - c[0]).collect();
-    let params = options(Options {
+    let options = Options {
         cell_size: Some(0.25),
         transfer: rigidcells::field::Transfer::Pu,
         ..Default::default()
-    });
-    let mut editor = Editor::new(scene, params).unwrap();
+    };
+    let mut editor = Editor::new(scene, options).unwrap();
     let end_on = camera([20.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]);
 
     let all = editor.selected(&square(end_on, 0.3, false)).unwrap();
@@ -887,11 +882,11 @@ fn a_box_over_the_horse_head_takes_the_head_alone() {
     let c = scene.center;
     // The horse faces +y, z up; its head is at y > 0.03.
     let y: Vec<f64> = scene.points.iter().map(|p| p[1] - c[1]).collect();
-    let params = options(Options {
+    let options = Options {
         cells: Some(4000),
         ..Default::default()
-    });
-    let editor = Editor::new(scene, params).unwrap();
+    };
+    let editor = Editor::new(scene, options).unwrap();
     let front = camera([0.0, 1.0, 0.04], [0.0, 0.0, 0.04], [0.0, 0.0, 1.0]);
     let head = rigidcells::edit::Selection {
         polygon: Some(vec![
@@ -924,14 +919,13 @@ fn the_editor_keeps_min_cell_size_for_apply() {
     let input = dir.path().join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
-    let params = rigidcells::pipeline::Options {
+    let options = Options {
         min_cell_size: Some(0.25),
         ..Default::default()
-    }
-    .params()
-    .unwrap();
+    };
+    let params = options.params().unwrap();
     assert!(params.solve().refine_fraction.is_some());
-    let editor = Editor::new(scene, params).unwrap();
+    let editor = Editor::new(scene, options).unwrap();
     assert_eq!(editor.params(), &params);
     assert!(!editor.complex().is_empty());
 }
@@ -1098,14 +1092,12 @@ fn apply_writes_what_the_cli_writes_for_the_saved_spec() {
     let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
     let (lo, hi) = scene.bounds;
     let half = (hi - lo) * 0.5;
-    let params = rigidcells::pipeline::Options {
+    let options = Options {
         cells: Some(3000),
         transfer: rigidcells::field::Transfer::Pu,
         ..Default::default()
-    }
-    .params()
-    .unwrap();
-    let editor = Editor::new(scene, params).unwrap();
+    };
+    let editor = Editor::new(scene, options).unwrap();
     let server = Server::bind(editor, 0, Some(dir.path())).unwrap();
     let (port, token) = (server.port(), server.token().to_string());
     std::thread::spawn(move || server.run());
@@ -1146,11 +1138,11 @@ fn apply_writes_what_the_cli_writes_for_the_saved_spec() {
 
     let spec = dir.path().join("d.edit.toml");
     let text = std::fs::read_to_string(&spec).unwrap();
-    let canonical = std::fs::canonicalize(&input).unwrap();
+    let absolute = std::path::absolute(&input).unwrap();
     let command = text.lines().nth(1).unwrap().trim_start_matches('#').trim();
     let words: Vec<&str> = command.split_whitespace().collect();
     assert_eq!(words[..2], ["rigidcells", "deform"], "{command}");
-    assert_eq!(Path::new(words[2]), canonical, "{command}");
+    assert_eq!(Path::new(words[2]), absolute, "{command}");
     let out = dir.path().join("cli.ply");
     let args: Vec<&str> = words[1..]
         .iter()
@@ -1182,8 +1174,8 @@ fn apply_writes_what_the_cli_writes_for_the_saved_spec() {
     assert!(said.iter().any(|w| w.contains("fold")), "{said:?}");
 }
 
-/// The saved spec's comment names the input by its absolute path (links resolved), whatever
-/// path the editor was given and whatever its working folder.
+/// The saved spec's comment names the input by its absolute path as given (`..` and links
+/// kept: the path the user typed, from any folder), whatever its working folder.
 #[test]
 fn the_saved_spec_names_the_input_absolute() {
     let dir = tempfile::tempdir().unwrap();
@@ -1195,16 +1187,139 @@ fn the_saved_spec_names_the_input_absolute() {
     let given = Path::new(&up).join(dir.path().join("sub/../bar.ply").strip_prefix("/").unwrap());
     assert!(given.is_relative() && given.exists(), "{}", given.display());
     let scene = Scene::load(&given, 1 << 20, &rigidcells::progress::Silent).unwrap();
-    let editor = Editor::new(scene, DeformParams::default()).unwrap();
+    let editor = Editor::new(scene, Options::default()).unwrap();
     let text = editor.spec_text(&serde_json::from_value(ends([0.0; 3], 0.0)).unwrap());
-    let canonical = std::fs::canonicalize(&input).unwrap();
+    let named = cwd.join(&given);
+    let canonical = |p: &Path| std::fs::canonicalize(p).unwrap();
+    assert!(named.is_absolute() && canonical(&named) == canonical(&input));
     let first = text.lines().next().unwrap();
     assert_eq!(
         first,
         format!(
             "# rigidcells edit of {}: the CLI reproduces it with",
-            canonical.display()
+            named.display()
         )
     );
-    assert!(!text.contains(".."), "{text}");
+}
+
+/// An input named through a symbolic link: *Save edit* and *Apply* write into the folder of
+/// the link (the folder the user named), never into the folder it points to, and the saved
+/// spec names the input as the link.
+#[cfg(unix)]
+#[test]
+fn the_files_of_a_linked_input_go_beside_the_link() {
+    let dir = tempfile::tempdir().unwrap();
+    let (real, project) = (dir.path().join("real"), dir.path().join("project"));
+    std::fs::create_dir(&real).unwrap();
+    std::fs::create_dir(&project).unwrap();
+    let target = real.join("bar.ply");
+    data_gen::write_ply(&target, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
+    let link = project.join("scan.ply");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let scene = Scene::load(&link, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let options = Options {
+        cell_size: Some(0.5),
+        ..Default::default()
+    };
+    let server = Server::bind(Editor::new(scene, options).unwrap(), 0, None).unwrap();
+    assert_eq!(server.out_dir(), std::fs::canonicalize(&project).unwrap());
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let mut ws = connect(port, &token);
+    let edit = ends([0.0, 0.0, 1.0], 0.0);
+    send(
+        &mut ws,
+        json!({"type": "save", "name": "s.toml", "edit": edit}),
+    );
+    assert_eq!(next_text(&mut ws)["type"], "saved");
+    send(
+        &mut ws,
+        json!({"type": "apply", "name": "out.ply", "edit": edit}),
+    );
+    loop {
+        let m = next_text(&mut ws);
+        match m["type"].as_str() {
+            Some("progress") => {}
+            Some("applied") => break,
+            _ => panic!("{m}"),
+        }
+    }
+    assert!(project.join("s.toml").exists() && project.join("out.ply").exists());
+    let written: Vec<_> = std::fs::read_dir(&real).unwrap().flatten().collect();
+    assert_eq!(written.len(), 1, "{written:?}");
+    let text = std::fs::read_to_string(project.join("s.toml")).unwrap();
+    assert!(
+        text.starts_with(&format!("# rigidcells edit of {}:", link.display())),
+        "{text}"
+    );
+}
+
+/// The saved spec's command names every option the editor was given, as `deform` reads them
+/// (the control points' check and the memory limit included, the adaptive cells as
+/// `--min-cell-size`), and that command writes what *Apply* writes.
+#[test]
+fn the_saved_command_carries_every_option() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let options = Options {
+        min_cell_size: Some(0.5),
+        max_level: Some(2),
+        tolerance: 0.05,
+        coarse_levels: Some(0),
+        loose_parts: rigidcells::solve::LooseParts::Rest,
+        transfer: rigidcells::field::Transfer::Blend,
+        check_control_points: true,
+        memory_limit: Some(2 << 30),
+        ..Default::default()
+    };
+    let server = Server::bind(Editor::new(scene, options).unwrap(), 0, None).unwrap();
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let mut ws = connect(port, &token);
+    let edit = ends([0.0, 0.0, 1.0], 20.0);
+    send(
+        &mut ws,
+        json!({"type": "save", "name": "s.toml", "edit": edit}),
+    );
+    assert_eq!(next_text(&mut ws)["type"], "saved");
+    send(
+        &mut ws,
+        json!({"type": "apply", "name": "applied.ply", "edit": edit}),
+    );
+    loop {
+        let m = next_text(&mut ws);
+        match m["type"].as_str() {
+            Some("progress") => {}
+            Some("applied") => break,
+            _ => panic!("{m}"),
+        }
+    }
+    let spec = dir.path().join("s.toml");
+    let text = std::fs::read_to_string(&spec).unwrap();
+    let command = text.lines().nth(1).unwrap().trim_start_matches('#').trim();
+    let flags = command.split_once(" THIS.toml ").unwrap().1;
+    assert_eq!(
+        flags,
+        "--min-cell-size 0.5 --max-level 2 --tolerance 0.05 --coarse-levels 0 \
+         --loose-parts rest --transfer blend --check-gcp --memory-limit 2G"
+    );
+    let out = dir.path().join("cli.ply");
+    let args: Vec<&str> = command
+        .split_whitespace()
+        .skip(1)
+        .map(|w| match w {
+            "OUT" => out.to_str().unwrap(),
+            "THIS.toml" => spec.to_str().unwrap(),
+            w => w,
+        })
+        .collect();
+    let cli = common::run(&args);
+    assert_eq!(cli.code, 0, "{command}: {}", cli.stderr);
+    assert_eq!(
+        std::fs::read(dir.path().join("applied.ply")).unwrap(),
+        std::fs::read(&out).unwrap(),
+        "{command}"
+    );
 }

@@ -383,9 +383,10 @@ pub(super) fn run_edit(
     if let Some(dir) = out_dir {
         rigidcells::edit::server::Outputs::new(input, Some(dir))?;
     }
-    let params = cells.deform_params(transfer)?;
+    let options = cells.options(transfer);
+    options.params()?;
     let scene = rigidcells::edit::Scene::load(input, proxy, &Bar::new(quiet))?;
-    let editor = rigidcells::edit::Editor::new(scene, params)?;
+    let editor = rigidcells::edit::Editor::new(scene, options)?;
     let server = rigidcells::edit::server::Server::bind(editor, port, out_dir)?;
     println!("{}", server.url());
     if open {

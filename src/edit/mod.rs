@@ -39,7 +39,7 @@ use serde::Deserialize;
 
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
-use crate::pipeline::{DeformParams, Live, Step};
+use crate::pipeline::{DeformParams, Live, Options, Step};
 use crate::progress::{Observer, Silent};
 use crate::rigid::Vect;
 use crate::solve;
@@ -48,8 +48,9 @@ use crate::spec::EditSpec;
 /// The proxy of the input the editor shows and solves on.
 #[derive(Debug, Clone, Default)]
 pub struct Scene {
-    /// The input file, absolute (links resolved): what the saved spec's comment names, the
-    /// same whatever folder the editor was started in.
+    /// The input file as the user named it, made absolute (links not resolved): the saved
+    /// spec's comment names it, the same whatever folder the editor was started in, and the
+    /// editor's files go into its folder, not into the folder a link points to.
     pub input: PathBuf,
     /// Samples (world coordinates).
     pub points: Vec<Vect<3>>,
@@ -117,7 +118,7 @@ impl Scene {
         let Some(bounds) = crate::render::bounds(&scene.points) else {
             return Err(Error::format(input, "no samples to edit"));
         };
-        scene.input = std::fs::canonicalize(input).map_err(|e| Error::io(input, e))?;
+        scene.input = std::path::absolute(input).map_err(|e| Error::io(input, e))?;
         scene.center = (bounds.0 + bounds.1) * 0.5;
         scene.bounds = bounds;
         scene.up = crate::render::up_of(input);
@@ -234,7 +235,9 @@ pub struct Released {
 /// ([`crate::pipeline::Live`]: the cells, the current spec and its session).
 pub struct Editor {
     scene: Scene,
-    /// The parameters, as *Apply* deforms the file with them.
+    /// The user's options: the saved spec's comment writes them as `deform`'s flags.
+    options: Options,
+    /// The parameters of [`Editor::options`], as *Apply* deforms the file with them.
     params: DeformParams,
     /// The live deformation of the proxy, on cells that are not refined
     /// ([`crate::pipeline::Live::new`]).
@@ -246,13 +249,16 @@ pub struct Editor {
 pub use crate::pipeline::live::DRAG_ITERATIONS;
 
 impl Editor {
-    /// Builds the cells of `scene` with `params` (cell size or count as `deform` takes them).
-    /// With `--min-cell-size` or `--refine-strain` the page's cells are those the first
-    /// solve starts on (a live session keeps its cells); *Apply* refines as `deform` does.
-    pub fn new(scene: Scene, params: DeformParams) -> Result<Self> {
+    /// Builds the cells of `scene` with the parameters of `options` ([`Options::params`],
+    /// checked as `deform` checks them). With `--min-cell-size` or `--refine-strain` the
+    /// page's cells are those the first solve starts on (a live session keeps its cells);
+    /// *Apply* refines as `deform` does.
+    pub fn new(scene: Scene, options: Options) -> Result<Self> {
+        let params = options.params()?;
         let live = live(&scene, &params)?;
         Ok(Self {
             scene,
+            options,
             params,
             live,
             text: None,
@@ -287,7 +293,12 @@ impl Editor {
         self.live.complex()
     }
 
-    /// The parameters (those *Apply* deforms with).
+    /// The user's options.
+    pub fn options(&self) -> &Options {
+        &self.options
+    }
+
+    /// The parameters of [`Editor::options`] (those *Apply* deforms with).
     pub fn params(&self) -> &DeformParams {
         &self.params
     }
@@ -318,11 +329,11 @@ impl Editor {
         spec_text(edit, &self.scene, &self.flags())
     }
 
-    /// The `deform` options of [`Editor::params`], as the command line writes them (those left
-    /// at their defaults left out): with them, `deform` of the input under a saved spec writes
-    /// what *Apply* writes.
+    /// The user's options as `deform`'s flags ([`Options::to_args`]: those at their defaults
+    /// left out): with them, `deform` of the input under a saved spec writes what *Apply*
+    /// writes. Each value is one shell word (a number or a name).
     pub fn flags(&self) -> String {
-        flags(&self.params).join(" ")
+        self.options.to_args().join(" ")
     }
 
     /// Solves `edit`: warm from the current motions when only the poses changed since the
@@ -549,46 +560,6 @@ fn live(scene: &Scene, params: &DeformParams) -> Result<Live> {
     )
 }
 
-/// The command line's options that give `params` (as [`crate::pipeline::Options::params`]
-/// makes them), each with its value; options at their defaults are left out, the transfer is
-/// always named.
-fn flags(params: &DeformParams) -> Vec<String> {
-    let (build, solve) = (&params.build, &params.solve);
-    let mut out = Vec::new();
-    match (solve.refine_fraction, build.target_cells, build.cell_size) {
-        (Some(_), _, Some(size)) => out.push(format!("--min-cell-size {size:?}")),
-        (_, Some(cells), _) => out.push(format!("--cells {cells}")),
-        (_, None, Some(size)) => out.push(format!("--cell-size {size:?}")),
-        _ => {}
-    }
-    if let Some(levels) = build.max_level {
-        out.push(format!("--max-level {levels}"));
-    }
-    if build.inside != crate::cells::Inside::Auto {
-        out.push(format!("--inside {}", build.inside));
-    }
-    if solve.method != crate::solve::Method::Auto {
-        out.push(format!("--solver {}", solve.method));
-    }
-    if solve.move_tolerance != solve::MOVE_TOLERANCE {
-        out.push(format!("--tolerance {:?}", solve.move_tolerance));
-    }
-    if let Some(levels) = solve.coarse_levels {
-        out.push(format!("--coarse-levels {levels}"));
-    }
-    if !solve.carry_loose {
-        out.push(format!("--loose-parts {}", solve::LooseParts::Rest));
-    }
-    if let Some(strain) = solve.refine_strain {
-        out.push(format!("--refine-strain {strain:?}"));
-    }
-    out.push(format!("--transfer {}", params.transfer));
-    if let Some(tolerance) = params.rbf_tolerance {
-        out.push(format!("--rbf-tolerance {tolerance:?}"));
-    }
-    out
-}
-
 /// `path` as one word of a POSIX shell, on one line: as it is when it needs no quoting, else in
 /// single quotes, and with bash's `$'…'` escapes when it holds a control character (a comment
 /// line of TOML holds none).
@@ -707,29 +678,5 @@ mod tests {
         assert_eq!(word("/data/it's.las"), r"'/data/it'\''s.las'");
         assert_eq!(word("/data/a\nb.las"), r"$'/data/a\u000ab.las'");
         assert!(!word("/x/'\r\n\t'").contains(char::is_control));
-    }
-
-    #[test]
-    fn flags_name_the_options_as_given() {
-        let params = |o: crate::pipeline::Options| o.params().unwrap();
-        let given = params(crate::pipeline::Options {
-            cells: Some(5000),
-            loose_parts: solve::LooseParts::Rest,
-            transfer: crate::field::Transfer::Blend,
-            ..Default::default()
-        });
-        assert_eq!(
-            flags(&given).join(" "),
-            "--cells 5000 --loose-parts rest --transfer blend"
-        );
-        let adaptive = params(crate::pipeline::Options {
-            min_cell_size: Some(0.25),
-            max_level: Some(3),
-            ..Default::default()
-        });
-        assert_eq!(
-            flags(&adaptive).join(" "),
-            "--min-cell-size 0.25 --max-level 3 --transfer pu"
-        );
     }
 }

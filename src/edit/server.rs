@@ -32,8 +32,10 @@
 //! never replaced, nor the input. Writes go to a temporary file renamed over the target, which
 //! keeps the replaced file's permission bits.
 //!
-//! The solver runs on its own thread ([`solver`]) and takes commands in order; a failure
-//! there is the page's message and the session starts again, never a dead session.
+//! The solver runs on its own thread ([`solver`]) and takes commands in order from a bounded
+//! queue ([`queue`]: at most [`MAX_QUEUED`] wait, one more is refused with a message, a
+//! newer pose replaces one waiting); a failure there is the page's message and the session
+//! starts again, never a dead session.
 //!
 //! ## Wire format
 //! Page → server: text JSON `{"type": "edit", "seq": n, "edit": Edit}`, `{"type": "release",
@@ -50,6 +52,7 @@
 
 #![cfg(feature = "editor")]
 
+mod queue;
 mod solver;
 
 use std::collections::HashSet;
@@ -57,7 +60,7 @@ use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::mpsc::{self, Receiver, Sender};
+use std::sync::mpsc::{self, Receiver};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -66,6 +69,8 @@ use tungstenite::{Message, WebSocket};
 
 use super::Editor;
 use crate::error::{Error, Result};
+pub use queue::MAX_QUEUED;
+use queue::{Commands, Refused};
 use solver::{Command, Request};
 
 /// The page's markup; `__TOKEN__` stands for the session's token in the addresses of its
@@ -244,7 +249,7 @@ pub struct Server {
     token: String,
     port: u16,
     assets: Arc<Assets>,
-    commands: Sender<Request>,
+    commands: Commands<Request>,
     out_dir: PathBuf,
 }
 
@@ -262,7 +267,7 @@ impl Server {
             .port();
         let token = token()?;
         let assets = Arc::new(assets(&editor, &outputs, &token)?);
-        let (commands, queue) = mpsc::channel();
+        let (commands, queue) = queue::queue();
         let out_dir = outputs.dir().to_path_buf();
         std::thread::spawn(move || solver::run(editor, outputs, queue));
         Ok(Self {
@@ -531,7 +536,7 @@ fn connection(
     mut stream: TcpStream,
     gate: &Gate,
     assets: &Assets,
-    commands: &Sender<Request>,
+    commands: &Commands<Request>,
 ) -> std::io::Result<()> {
     stream.set_write_timeout(Some(WRITE_TIME))?;
     let port = gate.port;
@@ -666,7 +671,7 @@ fn websocket(
     mut stream: TcpStream,
     key: &str,
     rest: Vec<u8>,
-    commands: &Sender<Request>,
+    commands: &Commands<Request>,
 ) -> std::io::Result<()> {
     write!(
         stream,
@@ -694,11 +699,13 @@ fn websocket(
     loop {
         match reader.read() {
             Ok(Message::Text(text)) => match Command::parse(text.as_str()) {
-                Ok(command) => {
-                    if commands.send((command, answers.clone())).is_err() {
-                        break;
+                Ok(command) => match commands.send((command, answers.clone())) {
+                    Ok(()) => {}
+                    Err(Refused::Full(request)) => {
+                        let _ = answers.send(solver::busy(&request.0));
                     }
-                }
+                    Err(Refused::Closed) => break,
+                },
                 Err(refusal) => {
                     let _ = answers.send(refusal);
                 }

@@ -124,6 +124,63 @@ impl Options {
         })
     }
 
+    /// These options as the words of `rigidcells deform`'s command line, each flag then its
+    /// value: options at their defaults are left out, the transfer is always named (it is what
+    /// the user reads first). Numbers are written as the shortest text that reads back to the
+    /// same value; a memory limit in the largest unit that divides it (`8G`).
+    pub fn to_args(&self) -> Vec<String> {
+        let d = Self::default();
+        let mut out: Vec<String> = Vec::new();
+        let mut flag = |name: &str, value: Option<String>| {
+            out.push(format!("--{name}"));
+            out.extend(value);
+        };
+        if let Some(size) = self.cell_size {
+            flag("cell-size", Some(format!("{size:?}")));
+        }
+        if let Some(cells) = self.cells {
+            flag("cells", Some(cells.to_string()));
+        }
+        if let Some(size) = self.min_cell_size {
+            flag("min-cell-size", Some(format!("{size:?}")));
+        }
+        if let Some(levels) = self.max_level {
+            flag("max-level", Some(levels.to_string()));
+        }
+        if self.shell {
+            flag("shell", None);
+        }
+        if self.inside != d.inside {
+            flag("inside", Some(self.inside.to_string()));
+        }
+        if self.solver != d.solver {
+            flag("solver", Some(self.solver.to_string()));
+        }
+        if self.tolerance != d.tolerance {
+            flag("tolerance", Some(format!("{:?}", self.tolerance)));
+        }
+        if let Some(levels) = self.coarse_levels {
+            flag("coarse-levels", Some(levels.to_string()));
+        }
+        if self.loose_parts != d.loose_parts {
+            flag("loose-parts", Some(self.loose_parts.to_string()));
+        }
+        if let Some(strain) = self.refine_strain {
+            flag("refine-strain", Some(format!("{strain:?}")));
+        }
+        flag("transfer", Some(self.transfer.to_string()));
+        if let Some(tolerance) = self.rbf_tolerance {
+            flag("rbf-tolerance", Some(format!("{tolerance:?}")));
+        }
+        if self.check_control_points {
+            flag("check-gcp", None);
+        }
+        if let Some(bytes) = self.memory_limit {
+            flag("memory-limit", Some(size_words(bytes)));
+        }
+        out
+    }
+
     /// The parameters these options give, before the checks of [`Options::params`] and without
     /// the adaptive cells of `min_cell_size`.
     pub(super) fn unchecked(&self) -> DeformParams {
@@ -155,6 +212,17 @@ impl Options {
             memory: Budget::given(self.memory_limit),
         }
     }
+}
+
+/// `bytes` in the largest of the units `--memory-limit` reads (K, M, G, T) that divides it.
+fn size_words(bytes: u64) -> String {
+    [("T", 40), ("G", 30), ("M", 20), ("K", 10)]
+        .iter()
+        .find(|&&(_, shift)| bytes >= 1 << shift && bytes.is_multiple_of(1 << shift))
+        .map_or_else(
+            || bytes.to_string(),
+            |&(unit, shift)| format!("{}{unit}", bytes >> shift),
+        )
 }
 
 /// Refuses an RBF far-field `tolerance` that is not a length, or that comes with a `transfer`
@@ -216,5 +284,78 @@ mod tests {
         let params = DeformParams::default();
         assert!(params.with_proxy_samples(0).is_err());
         assert_eq!(params.with_proxy_samples(5).unwrap().proxy_samples, Some(5));
+    }
+
+    /// `words` read back as the command line reads them: each flag the inverse of
+    /// [`Options::to_args`]'s, the rest at its default.
+    fn read_back(words: &[String]) -> Options {
+        let mut o = Options::default();
+        let mut words = words.iter().map(String::as_str);
+        while let Some(flag) = words.next() {
+            let mut value = || words.next().unwrap();
+            match flag {
+                "--cell-size" => o.cell_size = Some(value().parse().unwrap()),
+                "--cells" => o.cells = Some(value().parse().unwrap()),
+                "--min-cell-size" => o.min_cell_size = Some(value().parse().unwrap()),
+                "--max-level" => o.max_level = Some(value().parse().unwrap()),
+                "--shell" => o.shell = true,
+                "--inside" => o.inside = value().parse().unwrap(),
+                "--solver" => o.solver = value().parse().unwrap(),
+                "--tolerance" => o.tolerance = value().parse().unwrap(),
+                "--coarse-levels" => o.coarse_levels = Some(value().parse().unwrap()),
+                "--loose-parts" => o.loose_parts = value().parse().unwrap(),
+                "--refine-strain" => o.refine_strain = Some(value().parse().unwrap()),
+                "--transfer" => o.transfer = value().parse().unwrap(),
+                "--rbf-tolerance" => o.rbf_tolerance = Some(value().parse().unwrap()),
+                "--check-gcp" => o.check_control_points = true,
+                "--memory-limit" => {
+                    o.memory_limit = Some(crate::memory::parse_size(value()).unwrap());
+                }
+                other => panic!("{other}: not a flag of deform"),
+            }
+        }
+        o
+    }
+
+    /// The command line's words of the options read back to the same options; only the
+    /// transfer is named at the defaults.
+    #[test]
+    fn options_as_words_read_back() {
+        assert_eq!(Options::default().to_args(), ["--transfer", "pu"]);
+        let every = Options {
+            min_cell_size: Some(0.1 + 0.2),
+            max_level: Some(3),
+            shell: true,
+            solver: Method::Multilevel,
+            tolerance: 0.05,
+            coarse_levels: Some(0),
+            loose_parts: LooseParts::Rest,
+            refine_strain: Some(1e-3),
+            transfer: Transfer::Rbf,
+            rbf_tolerance: Some(0.01),
+            check_control_points: true,
+            memory_limit: Some(3 << 30),
+            ..Default::default()
+        };
+        let words = every.to_args();
+        assert_eq!(read_back(&words), every, "{words:?}");
+        assert_eq!(words[words.len() - 2..], ["--memory-limit", "3G"]);
+        for other in [
+            Options {
+                cell_size: Some(0.25),
+                inside: Inside::Flood,
+                memory_limit: Some(1000),
+                ..Default::default()
+            },
+            Options {
+                cells: Some(5000),
+                transfer: Transfer::Blend,
+                memory_limit: Some(1536 << 20),
+                ..Default::default()
+            },
+        ] {
+            let words = other.to_args();
+            assert_eq!(read_back(&words), other, "{words:?}");
+        }
     }
 }

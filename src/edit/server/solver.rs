@@ -1,6 +1,7 @@
 //! The editor's solver thread: the page's commands in order, each answered on the connection
 //! that sent it; of several pose updates waiting only the newest is solved (a drag sends one
-//! per frame; the solver answers as fast as it can and the page always sees the latest pose).
+//! per frame; the solver answers as fast as it can and the page always sees the latest pose:
+//! [`super::queue`], which also bounds the commands waiting).
 //! While no pose comes, the last one is converged an iteration at a time. *Apply* runs on a
 //! thread of its own and reports progress.
 //!
@@ -12,13 +13,14 @@
 use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Receiver, Sender};
+use std::sync::mpsc::{self, Sender};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use serde::Deserialize;
 use tungstenite::Message;
 
+use super::queue::{Inbox, MAX_QUEUED};
 use super::{Outputs, Refusal, f32_bytes, u32_bytes};
 use crate::edit::{Edit, Editor, Motions, Released, Selection};
 use crate::error::{Error, Result};
@@ -55,6 +57,16 @@ pub(super) enum Command {
 /// A command with where its answers go.
 pub(super) type Request = (Command, Sender<Message>);
 
+impl super::queue::Newest for Request {
+    /// An edit carries the whole state: it makes an edit waiting before it stale.
+    fn replaces(&self, older: &Self) -> bool {
+        matches!(
+            (&self.0, &older.0),
+            (Command::Edit { .. }, Command::Edit { .. })
+        )
+    }
+}
+
 impl Command {
     /// The command in the page's message `text`, within the page's limits ([`Edit::check`],
     /// [`Selection::check`]); else the error to answer, sent before any work.
@@ -80,6 +92,19 @@ impl Command {
 /// An error for the page to show.
 pub(super) fn error(text: &str) -> Message {
     Message::text(serde_json::json!({"type": "error", "message": text}).to_string())
+}
+
+/// The answer to `command` when [`MAX_QUEUED`] commands already wait: the command is not
+/// taken (for a selection, an error the page pairs with it).
+pub(super) fn busy(command: &Command) -> Message {
+    let e = Error::Param(format!(
+        "the editor is busy: {MAX_QUEUED} commands wait for the solver; this one was not \
+         taken, try it again when the editor answers"
+    ));
+    match command {
+        Command::Select { seq, .. } => select_error(*seq, &e),
+        _ => error(&e.to_string()),
+    }
 }
 
 /// An error answering the selection `seq` (the page stops waiting for its samples).
@@ -130,15 +155,15 @@ pub(super) fn guarded<T>(
     }
 }
 
-/// The solver thread: commands in order; of consecutive edits only the newest is solved.
-pub(super) fn run(mut editor: Editor, outputs: Arc<Outputs>, queue: Receiver<Request>) {
+/// The solver thread: commands in order (of consecutive edits the queue keeps the newest).
+pub(super) fn run(mut editor: Editor, outputs: Arc<Outputs>, queue: Inbox<Request>) {
     let applying = Arc::new(AtomicBool::new(false));
     // Where the last edit's answer went: the idle solver's iterations go there too.
     let mut last: Option<(u32, Sender<Message>)> = None;
     // Whether no pose came for [`IDLE`]: then the solver iterates until converged.
     let mut idle = false;
     loop {
-        let first = match (&last, editor.converged()) {
+        let (command, reply) = match (&last, editor.converged()) {
             (Some((seq, reply)), false) => match next(&queue, idle) {
                 Ok(c) => {
                     idle = false;
@@ -157,31 +182,16 @@ pub(super) fn run(mut editor: Editor, outputs: Arc<Outputs>, queue: Receiver<Req
                 }
                 Err(mpsc::RecvTimeoutError::Disconnected) => return,
             },
-            _ => match queue.recv() {
+            _ => match queue.next(None) {
                 Ok(c) => c,
                 Err(_) => return,
             },
         };
-        let mut pending = vec![first];
-        pending.extend(queue.try_iter());
-        // An edit followed at once by another is stale: edits carry the whole state.
-        let stale: Vec<bool> = (0..pending.len())
-            .map(|i| {
-                matches!(pending[i].0, Command::Edit { .. })
-                    && matches!(pending.get(i + 1), Some((Command::Edit { .. }, _)))
-            })
-            .collect();
-        for ((command, reply), stale) in pending.into_iter().zip(stale) {
-            if stale {
-                continue;
-            }
-            if let Command::Edit { seq, .. } = &command {
-                last = Some((*seq, reply.clone()));
-            }
-            let answer = answer(&mut editor, command, &reply, &outputs, &applying);
-            for m in answer {
-                let _ = reply.send(m);
-            }
+        if let Command::Edit { seq, .. } = &command {
+            last = Some((*seq, reply.clone()));
+        }
+        for m in answer(&mut editor, command, &reply, &outputs, &applying) {
+            let _ = reply.send(m);
         }
     }
 }
@@ -315,17 +325,10 @@ const IDLE: Duration = Duration::from_millis(150);
 
 /// The next command: at once when `idle` (or a timeout), else within [`IDLE`].
 fn next(
-    queue: &Receiver<Request>,
+    queue: &Inbox<Request>,
     idle: bool,
 ) -> std::result::Result<Request, mpsc::RecvTimeoutError> {
-    if idle {
-        queue.try_recv().map_err(|e| match e {
-            mpsc::TryRecvError::Empty => mpsc::RecvTimeoutError::Timeout,
-            mpsc::TryRecvError::Disconnected => mpsc::RecvTimeoutError::Disconnected,
-        })
-    } else {
-        queue.recv_timeout(IDLE)
-    }
+    queue.next(Some(if idle { Duration::ZERO } else { IDLE }))
 }
 
 /// Reports *Apply*'s progress to the page, at most every 100 ms.
@@ -456,13 +459,11 @@ mod tests {
             up: 2,
             ..Default::default()
         };
-        let params = crate::pipeline::Options {
+        let options = crate::pipeline::Options {
             cell_size: Some(0.5),
             ..Default::default()
-        }
-        .params()
-        .unwrap();
-        Editor::new(scene, params).unwrap()
+        };
+        Editor::new(scene, options).unwrap()
     }
 
     /// The bar's left corner pinned, its right end a handle lifted by `lift`.
@@ -539,5 +540,25 @@ mod tests {
         assert!(said.contains("at most"), "{said}");
         let ok = serde_json::json!({"type": "edit", "seq": 1, "edit": {"pins": [[0, 0, 0]]}});
         assert!(Command::parse(&ok.to_string()).is_ok());
+    }
+
+    /// A command past the queue's bound is answered, a selection with its `seq` (the page
+    /// stops waiting for its samples).
+    #[test]
+    fn a_command_past_the_queue_is_answered_busy() {
+        let select = r#"{"type": "select", "seq": 4, "selection": {"classification": [2]}}"#;
+        for (text, seq) in [
+            (select, Some(4)),
+            (r#"{"type": "release", "seq": 5}"#, None),
+        ] {
+            let command = Command::parse(text).unwrap_or_else(|_| panic!("{text}"));
+            let Message::Text(said) = busy(&command) else {
+                panic!("not text");
+            };
+            let said: serde_json::Value = serde_json::from_str(said.as_str()).unwrap();
+            assert_eq!(said["type"], "error");
+            assert!(said["message"].as_str().unwrap().contains("busy"), "{said}");
+            assert_eq!(said["select"].as_u64(), seq, "{said}");
+        }
     }
 }

@@ -55,12 +55,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let input = PathBuf::from(args.next().ok_or("usage: editor FILE [CELLS] [UPDATES]")?);
     let cells: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(5000);
     let updates: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(30);
-    let params = Options {
+    let options = Options {
         cells: Some(cells),
         transfer: rigidcells::field::Transfer::Pu,
         ..Default::default()
-    }
-    .params()?;
+    };
 
     let t = Instant::now();
     let scene = Scene::load(&input, PROXY_SAMPLES, &rigidcells::progress::Silent)?;
@@ -68,7 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (samples, total) = (scene.points.len(), scene.total);
     let extent = (scene.bounds.1 - scene.bounds.0).amax();
     let t2 = Instant::now();
-    let editor = Editor::new(scene.clone(), params)?;
+    let editor = Editor::new(scene.clone(), options)?;
     let cells_s = t2.elapsed().as_secs_f64();
     let n_cells = editor.complex().len();
     let t3 = Instant::now();
@@ -82,7 +81,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
 
     // Warm updates in the library, as the solver thread runs them.
-    let mut editor = Editor::new(scene.clone(), params)?;
+    let mut editor = Editor::new(scene.clone(), options)?;
     let t = Instant::now();
     let first = editor
         .solve(&ends(&scene, 0.0))?
