@@ -131,6 +131,31 @@ fn next_text(ws: &mut tungstenite::WebSocket<TcpStream>) -> serde_json::Value {
     }
 }
 
+/// Asks the server to save `edit` as the spec `name` and waits for its answer.
+fn save(ws: &mut tungstenite::WebSocket<TcpStream>, name: &str, edit: &serde_json::Value) {
+    send(ws, json!({"type": "save", "name": name, "edit": edit}));
+    assert_eq!(next_text(ws)["type"], "saved");
+}
+
+/// Asks the server to apply `edit` into `name` and waits for the answer: the `applied`
+/// message and how many progress messages came before it.
+fn apply(
+    ws: &mut tungstenite::WebSocket<TcpStream>,
+    name: &str,
+    edit: &serde_json::Value,
+) -> (serde_json::Value, usize) {
+    send(ws, json!({"type": "apply", "name": name, "edit": edit}));
+    let mut progress = 0;
+    loop {
+        let m = next_text(ws);
+        match m["type"].as_str() {
+            Some("progress") => progress += 1,
+            Some("applied") => return (m, progress),
+            _ => panic!("{m}"),
+        }
+    }
+}
+
 fn u32_at(b: &[u8], i: usize) -> u32 {
     u32::from_le_bytes(b[4 * i..4 * i + 4].try_into().unwrap())
 }
@@ -409,19 +434,7 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
 
     // Apply: the whole file deformed by the server, with progress, as the CLI does it.
     let applied = dir.path().join("applied.ply");
-    send(
-        &mut ws,
-        json!({"type": "apply", "name": "applied.ply", "edit": ends([0.0, 0.0, 2.0], 20.0)}),
-    );
-    let mut progress = 0;
-    let done = loop {
-        let m = next_text(&mut ws);
-        match m["type"].as_str() {
-            Some("progress") => progress += 1,
-            Some("applied") => break m,
-            _ => panic!("{m}"),
-        }
-    };
+    let (done, progress) = apply(&mut ws, "applied.ply", &ends([0.0, 0.0, 2.0], 20.0));
     assert!(progress > 0 && done["samples"] == n, "{done}");
     assert_eq!(
         std::fs::read(&applied).unwrap(),
@@ -1118,23 +1131,8 @@ fn apply_writes_what_the_cli_writes_for_the_saved_spec() {
         "handles": [{"selections": [strip(0.6, 1.1)], "translate": [0, half.y, 0],
             "axis": [0, 0, 1], "degrees": 150.0, "pivot": [0.8 * half.x, 0, 0]}]
     });
-    send(
-        &mut ws,
-        json!({"type": "save", "name": "d.edit.toml", "edit": edit}),
-    );
-    assert_eq!(next_text(&mut ws)["type"], "saved");
-    send(
-        &mut ws,
-        json!({"type": "apply", "name": "applied.ply", "edit": edit}),
-    );
-    let applied = loop {
-        let m = next_text(&mut ws);
-        match m["type"].as_str() {
-            Some("progress") => {}
-            Some("applied") => break m,
-            _ => panic!("{m}"),
-        }
-    };
+    save(&mut ws, "d.edit.toml", &edit);
+    let (applied, _) = apply(&mut ws, "applied.ply", &edit);
 
     let spec = dir.path().join("d.edit.toml");
     let text = std::fs::read_to_string(&spec).unwrap();
@@ -1227,23 +1225,8 @@ fn the_files_of_a_linked_input_go_beside_the_link() {
     std::thread::spawn(move || server.run());
     let mut ws = connect(port, &token);
     let edit = ends([0.0, 0.0, 1.0], 0.0);
-    send(
-        &mut ws,
-        json!({"type": "save", "name": "s.toml", "edit": edit}),
-    );
-    assert_eq!(next_text(&mut ws)["type"], "saved");
-    send(
-        &mut ws,
-        json!({"type": "apply", "name": "out.ply", "edit": edit}),
-    );
-    loop {
-        let m = next_text(&mut ws);
-        match m["type"].as_str() {
-            Some("progress") => {}
-            Some("applied") => break,
-            _ => panic!("{m}"),
-        }
-    }
+    save(&mut ws, "s.toml", &edit);
+    apply(&mut ws, "out.ply", &edit);
     assert!(project.join("s.toml").exists() && project.join("out.ply").exists());
     let written: Vec<_> = std::fs::read_dir(&real).unwrap().flatten().collect();
     assert_eq!(written.len(), 1, "{written:?}");
@@ -1279,23 +1262,8 @@ fn the_saved_command_carries_every_option() {
     std::thread::spawn(move || server.run());
     let mut ws = connect(port, &token);
     let edit = ends([0.0, 0.0, 1.0], 20.0);
-    send(
-        &mut ws,
-        json!({"type": "save", "name": "s.toml", "edit": edit}),
-    );
-    assert_eq!(next_text(&mut ws)["type"], "saved");
-    send(
-        &mut ws,
-        json!({"type": "apply", "name": "applied.ply", "edit": edit}),
-    );
-    loop {
-        let m = next_text(&mut ws);
-        match m["type"].as_str() {
-            Some("progress") => {}
-            Some("applied") => break,
-            _ => panic!("{m}"),
-        }
-    }
+    save(&mut ws, "s.toml", &edit);
+    apply(&mut ws, "applied.ply", &edit);
     let spec = dir.path().join("s.toml");
     let text = std::fs::read_to_string(&spec).unwrap();
     let command = text.lines().nth(1).unwrap().trim_start_matches('#').trim();
