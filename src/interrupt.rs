@@ -61,13 +61,20 @@ pub(crate) fn create_registered<T>(
 /// Renames each temporary of `pairs` over its target, in order, under the registry's lock: an
 /// interrupt comes before the first rename (and removes every temporary) or after the last
 /// (and the run's outputs are all in place), never between. The renamed temporaries are
-/// forgotten. On an error, how many were renamed before it, and the error.
+/// forgotten. With `keep`, no existing target is replaced: the temporary is linked under the
+/// target's name, which fails when the name is taken, then unlinked. On an error, how many
+/// were renamed before it, and the error.
 pub(crate) fn commit_registered(
     pairs: &[(&Path, &Path)],
+    keep: bool,
 ) -> std::result::Result<(), (usize, std::io::Error)> {
     let mut t = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
     for (done, &(tmp, target)) in pairs.iter().enumerate() {
-        std::fs::rename(tmp, target).map_err(|e| (done, e))?;
+        let moved = match keep {
+            true => std::fs::hard_link(tmp, target).and_then(|_| std::fs::remove_file(tmp)),
+            false => std::fs::rename(tmp, target),
+        };
+        moved.map_err(|e| (done, e))?;
         if let Some(i) = t.iter().position(|p| p == tmp) {
             t.swap_remove(i);
         }

@@ -56,6 +56,7 @@ fn a_link_planted_beside_the_output_is_never_followed() {
         save_field: Some(&field),
         report: Some(&report),
         preview: None,
+        keep_existing: false,
     };
     pipeline::deform_file_with(&input, &out, &spec, &params(), CHUNK, &outputs, &Silent).unwrap();
     assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
@@ -110,6 +111,31 @@ fn result_sets_of_two_runs_are_independent() {
     assert_eq!(names(dir.path()), ["a.txt", "c.txt"]);
 }
 
+/// A set that keeps existing files (the editor's *Apply* to a name that was free) replaces no
+/// file that appeared under an output's name while it worked: the commit fails naming it, that
+/// file keeps its bytes, and the outputs renamed before it are taken back.
+#[test]
+fn a_set_that_keeps_existing_files_replaces_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.txt"), dir.path().join("b.txt"));
+    let set = ResultSet::new();
+    set.keep_existing();
+    set.write(&a, b"ours").unwrap();
+    set.write(&b, b"ours").unwrap();
+    std::fs::write(&b, b"theirs").unwrap();
+    let e = set.commit().unwrap_err();
+    assert!(e.to_string().contains("b.txt"), "{e}");
+    assert_eq!(std::fs::read(&b).unwrap(), b"theirs");
+    assert_eq!(names(dir.path()), ["b.txt"]);
+    // Without anything in the way, it commits as any set does.
+    let set = ResultSet::new();
+    set.keep_existing();
+    set.write(&a, b"ours").unwrap();
+    set.commit().unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), b"ours");
+    assert_eq!(names(dir.path()), ["a.txt", "b.txt"]);
+}
+
 /// Two threads deform at once, one failing at its very end (its preview's name is taken by a
 /// folder, so the rename of its complete preview fails after its field was renamed into
 /// place), the other with a saved field and a report: the other's outputs are all there, the
@@ -135,6 +161,7 @@ fn concurrent_runs_keep_each_others_outputs() {
                     save_field: Some(&field),
                     report: Some(&report),
                     preview: None,
+                    keep_existing: false,
                 };
                 pipeline::deform_file_with(&input, &out, &good, &params(), 97, &outputs, &Silent)
             });
@@ -143,6 +170,7 @@ fn concurrent_runs_keep_each_others_outputs() {
                     save_field: Some(&failed_field),
                     report: None,
                     preview: Some((&taken, Default::default(), false)),
+                    keep_existing: false,
                 };
                 pipeline::deform_file_with(&input, &failed, &good, &params(), 97, &outputs, &Silent)
             });

@@ -671,6 +671,7 @@ fn deform_file<'py>(
         save_field: save_field.as_deref(),
         report: report.as_deref(),
         preview: preview.as_deref().map(|p| (p, view, strain)),
+        keep_existing: false,
     };
     let observer = PyObserver::new(progress);
     let result = py.detach(|| -> rigidcells::Result<_> {

@@ -92,6 +92,7 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         save_field: args.save_field.as_deref(),
         report: args.report.as_deref(),
         preview: args.preview.as_deref().map(|p| (p, view, args.strain)),
+        keep_existing: false,
     };
     let files = (
         args.input.as_path(),

@@ -248,6 +248,8 @@ pub struct ResultSet {
     staged: Mutex<Vec<TempFile>>,
     /// The output renamed after every other ([`ResultSet::last`]).
     last: Mutex<Option<PathBuf>>,
+    /// Whether the commit refuses to replace existing files ([`ResultSet::keep_existing`]).
+    keep: std::sync::atomic::AtomicBool,
 }
 
 impl ResultSet {
@@ -261,6 +263,12 @@ impl ResultSet {
     /// the process be killed between two renames.
     pub fn last(&self, target: &Path) {
         *self.last.lock().unwrap_or_else(|e| e.into_inner()) = Some(target.to_path_buf());
+    }
+
+    /// Replaces no existing file at the commit: an output whose name was taken meanwhile fails
+    /// the commit (as a rename that fails does), and the file under that name is left as it is.
+    pub fn keep_existing(&self) {
+        self.keep.store(true, std::sync::atomic::Ordering::SeqCst);
     }
 
     /// Takes `tmp`, complete: synced now, renamed over its target by [`ResultSet::commit`].
@@ -306,7 +314,8 @@ impl ResultSet {
             .iter()
             .map(|t| (t.tmp.as_path(), t.target.as_path()))
             .collect();
-        let renamed = crate::interrupt::commit_registered(&pairs);
+        let keep = self.keep.load(std::sync::atomic::Ordering::SeqCst);
+        let renamed = crate::interrupt::commit_registered(&pairs, keep);
         let done = match &renamed {
             Ok(()) => staged.len(),
             Err((done, _)) => *done,

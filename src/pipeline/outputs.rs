@@ -27,6 +27,10 @@ pub struct Outputs<'a> {
     /// A PNG of the input and the output side by side, seen from the view, with the strained
     /// cells beside them when the flag is set ([`crate::preview::preview`]).
     pub preview: Option<(&'a Path, View, bool)>,
+    /// Replace no file that appears under the output's or another output's name while the run
+    /// works (the editor's *Apply* to a name that was free when its user asked): the run then
+    /// fails at its end, naming the file, and leaves it as it is.
+    pub keep_existing: bool,
 }
 
 /// [`deform_file`] of `input` into `output` with the `outputs` beside it: the proxy is the
@@ -64,6 +68,9 @@ pub fn deform_file_with(
         ..*params
     };
     let set = ResultSet::new();
+    if outputs.keep_existing {
+        set.keep_existing();
+    }
     let (solution, info) = deform_in(
         &set,
         input,

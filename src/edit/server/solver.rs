@@ -231,9 +231,13 @@ fn answer(
             let extensions = crate::io::output_extensions(&input);
             match outputs.target(&name, extensions, overwrite) {
                 Ok(output) => {
+                    // A name free now is kept free of other writers' files: Apply replaces
+                    // only what its user agreed to replace.
+                    let keep_existing = std::fs::symlink_metadata(&output).is_err();
                     let job = Job {
                         input,
                         output,
+                        keep_existing,
                         name,
                         spec: editor.spec_text(&edit),
                         params: *editor.params(),
@@ -369,6 +373,9 @@ struct Job {
     name: String,
     spec: String,
     params: crate::pipeline::DeformParams,
+    /// The output's name was free when Apply was asked: no file that appears there meanwhile
+    /// is replaced.
+    keep_existing: bool,
 }
 
 /// Clears the flag of a running *Apply* when its thread ends, however it ends.
@@ -427,7 +434,10 @@ fn deform(job: &Job, progress: &Progress) -> Result<(u64, Vec<String>)> {
         &spec,
         &job.params,
         crate::pipeline::CHUNK,
-        &crate::pipeline::Outputs::default(),
+        &crate::pipeline::Outputs {
+            keep_existing: job.keep_existing,
+            ..Default::default()
+        },
         progress,
     )?;
     Ok((info.samples, report.warnings))
