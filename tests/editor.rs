@@ -18,6 +18,14 @@ use rigidcells::pipeline::Options;
 use serde_json::json;
 use tungstenite::Message;
 
+/// A server on the bar in `dir`, running on a thread of its own: its port and token.
+fn running(dir: &Path) -> (u16, String) {
+    let (server, _) = serve(dir);
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    (port, token)
+}
+
 /// The editor of the 10×1×1 bar (cells of 0.5), served on a free port, writing into the bar's
 /// folder.
 fn serve(dir: &Path) -> (Server, std::path::PathBuf) {
@@ -169,9 +177,7 @@ fn f32s(b: &[u8]) -> Vec<f32> {
 #[test]
 fn the_token_host_and_origin_are_enforced() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let host = format!("127.0.0.1:{port}");
     let page = format!("/?t={token}");
     let (status, body) = get(port, &page, &host, None);
@@ -205,9 +211,7 @@ fn the_token_host_and_origin_are_enforced() {
 #[test]
 fn a_websocket_needs_this_origin_and_the_page_is_not_framed_or_referred() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let e = connect_with(port, &token, None).expect_err("no Origin");
     assert!(e.contains("403"), "{e}");
     let e = connect_with(port, &token, Some("http://evil.example")).expect_err("foreign");
@@ -239,9 +243,7 @@ fn a_websocket_needs_this_origin_and_the_page_is_not_framed_or_referred() {
 #[test]
 fn the_page_runs_no_inline_code_and_connects_only_to_its_server() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let host = format!("127.0.0.1:{port}");
     let (status, head, body) = get_head(port, &format!("/?t={token}"), &host, None);
     assert_eq!(status, 200);
@@ -302,9 +304,7 @@ fn websocket_messages_are_capped() {
     use rigidcells::edit::server::MAX_MESSAGE;
     const { assert!(MAX_MESSAGE <= 4 << 20) };
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
 
     // 10 lassos of the page's most vertices (4,096, 6 decimals): within the cap.
     let lasso: Vec<[f64; 2]> = (0..4096)
@@ -598,9 +598,7 @@ fn a_mesh_larger_than_the_proxy_is_decimated() {
 fn files_are_written_only_into_the_folder_under_plain_names() {
     use std::os::unix::fs::PermissionsExt;
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let mut ws = connect(port, &token);
     let edit = ends([0.0, 0.0, 1.0], 0.0);
     let unique = format!("rigidcells-editor-{}.toml", std::process::id());
@@ -1031,9 +1029,7 @@ fn handle_of(boxes: &[(f64, f64)], lift: f64) -> serde_json::Value {
 #[test]
 fn undo_and_clear_after_a_two_box_handle_are_solved() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let mut ws = connect(port, &token);
     let two = [(0.8, 1.1), (0.9, 1.1)];
     let steps = [
@@ -1065,9 +1061,7 @@ fn undo_and_clear_after_a_two_box_handle_are_solved() {
 #[test]
 fn a_failed_solve_is_said_and_the_next_edit_solved() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let mut ws = connect(port, &token);
     send(
         &mut ws,
@@ -1141,22 +1135,7 @@ fn apply_writes_what_the_cli_writes_for_the_saved_spec() {
     let words: Vec<&str> = command.split_whitespace().collect();
     assert_eq!(words[..2], ["rigidcells", "deform"], "{command}");
     assert_eq!(Path::new(words[2]), absolute, "{command}");
-    let out = dir.path().join("cli.ply");
-    let args: Vec<&str> = words[1..]
-        .iter()
-        .map(|&w| match w {
-            "OUT" => out.to_str().unwrap(),
-            "THIS.toml" => spec.to_str().unwrap(),
-            w => w,
-        })
-        .collect();
-    let cli = common::run(&args);
-    assert_eq!(cli.code, 0, "{command}: {}", cli.stderr);
-    assert_eq!(
-        std::fs::read(dir.path().join("applied.ply")).unwrap(),
-        std::fs::read(&out).unwrap(),
-        "{command}"
-    );
+    let cli = the_saved_command_writes_what_apply_wrote(dir.path(), command, &spec);
     let said: Vec<&str> = cli
         .stderr
         .lines()
@@ -1273,7 +1252,18 @@ fn the_saved_command_carries_every_option() {
         "--min-cell-size 0.5 --max-level 2 --tolerance 0.05 --coarse-levels 0 \
          --loose-parts rest --transfer blend --check-gcp --memory-limit 2G"
     );
-    let out = dir.path().join("cli.ply");
+    the_saved_command_writes_what_apply_wrote(dir.path(), command, &spec);
+}
+
+/// Runs the saved spec's `command` (`rigidcells deform …`, its output `OUT` and spec
+/// `THIS.toml` put in as `dir`'s `cli.ply` and `spec`) and checks that it writes the bytes
+/// *Apply* wrote into `dir`'s `applied.ply`; returns the run.
+fn the_saved_command_writes_what_apply_wrote(
+    dir: &Path,
+    command: &str,
+    spec: &Path,
+) -> common::Run {
+    let out = dir.join("cli.ply");
     let args: Vec<&str> = command
         .split_whitespace()
         .skip(1)
@@ -1286,8 +1276,9 @@ fn the_saved_command_carries_every_option() {
     let cli = common::run(&args);
     assert_eq!(cli.code, 0, "{command}: {}", cli.stderr);
     assert_eq!(
-        std::fs::read(dir.path().join("applied.ply")).unwrap(),
+        std::fs::read(dir.join("applied.ply")).unwrap(),
         std::fs::read(&out).unwrap(),
         "{command}"
     );
+    cli
 }

@@ -328,41 +328,14 @@ fn an_output_that_cannot_be_written_exits_1_naming_the_users_path() {
 #[test]
 fn an_interrupted_run_leaves_no_temporary_file() {
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("terrain.las");
-    data_gen::write_las_terrain(&input, 1_500_000, false).unwrap();
-    let edit = lift_spec(
-        dir.path(),
-        [499990.0, 500300.0, 501700.0, 502010.0],
-        [4999990.0, 5002010.0],
-    );
-    let out = dir.path().join("out.las");
-    let field = dir.path().join("lift.field");
-    let report = dir.path().join("lift.json");
-    let mut child = common::bin()
-        .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&edit)])
-        .args(["--cell-size", "40", "--transfer", "rbf", "-q"])
-        .args(["--save-field", arg(&field), "--report", arg(&report)])
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    // Wait for the temporary output to appear, then interrupt.
+    let (mut child, [out, field, report]) = common::long_run(dir.path());
     let temporary = || {
         std::fs::read_dir(dir.path())
             .unwrap()
             .any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".tmp"))
     };
-    let started = std::time::Instant::now();
-    while !temporary() {
-        assert!(
-            started.elapsed().as_secs() < 120,
-            "no temporary output appeared"
-        );
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "the run finished before its output appeared: give it more work to interrupt"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
+    // Wait for the temporary output to appear, then interrupt.
+    common::wait_for_file(dir.path(), &mut child, ".out.las.");
     let kill = std::process::Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()

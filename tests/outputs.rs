@@ -7,7 +7,6 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::arg;
 use rigidcells::io::{ResultSet, TempFile};
 use rigidcells::pipeline::{self, ApplyParams, CHUNK, Options, Outputs};
 use rigidcells::progress::Silent;
@@ -288,39 +287,12 @@ fn the_library_checks_its_arguments_before_any_work() {
 #[test]
 fn a_killed_run_leaves_no_output_under_its_name() {
     let dir = tempfile::tempdir().unwrap();
-    let input = dir.path().join("terrain.las");
-    data_gen::write_las_terrain(&input, 1_500_000, false).unwrap();
-    let edit = dir.path().join("lift.toml");
-    std::fs::write(
-        &edit,
-        "[[fixed]]\nbox = { min = [499990, 4999990, -1e4], max = [500300, 5002010, 1e4] }\n\
-         [[handle]]\nbox = { min = [501700, 4999990, -1e4], max = [502010, 5002010, 1e4] }\n\
-         translate = [0, 0, 10]\n",
-    )
-    .unwrap();
-    let out = dir.path().join("out.las");
-    let field = dir.path().join("lift.field");
-    let report = dir.path().join("lift.json");
-    let mut child = common::bin()
-        .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&edit)])
-        .args(["--cell-size", "40", "--transfer", "rbf", "-q"])
-        .args(["--save-field", arg(&field), "--report", arg(&report)])
-        .spawn()
-        .unwrap();
+    let (mut child, outputs) = common::long_run(dir.path());
     // The output's temporary appears when pass 2 starts, after the field was written.
-    let writing = || names(dir.path()).iter().any(|n| n.starts_with(".out.las."));
-    let started = std::time::Instant::now();
-    while !writing() {
-        assert!(started.elapsed().as_secs() < 120, "no output was started");
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "the run finished before its output was started: give it more work"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(2));
-    }
+    common::wait_for_file(dir.path(), &mut child, ".out.las.");
     child.kill().unwrap();
     child.wait().unwrap();
-    for path in [&out, &field, &report] {
+    for path in &outputs {
         assert!(
             !path.exists(),
             "{} is in place after a kill",

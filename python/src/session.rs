@@ -69,7 +69,7 @@ impl Session {
         py.detach(|| {
             let mut live = self.live.lock().map_err(|_| {
                 PyRuntimeError::new_err(
-                    "an earlier call on this session stopped in the middle: start a new Session",
+                    "this Session is unusable: a call on it panicked: start a new Session",
                 )
             })?;
             self.holder.store(me, Ordering::SeqCst);

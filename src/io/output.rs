@@ -150,12 +150,15 @@ impl TempFile {
         }
         let prefix = format!(".{}.", &name[..cut]);
         let (file, tmp) = crate::interrupt::create_registered(|| {
+            // `.NAME.` and 12 random characters: opened with O_CREAT | O_EXCL, so it is a new
+            // file (never through a link or a file already there), under a name nobody can
+            // guess; `tempfile` draws another name when one is taken.
             let mut builder = tempfile::Builder::new();
             builder.prefix(&prefix).suffix(".tmp").rand_bytes(12);
             #[cfg(unix)]
             {
                 use std::os::unix::fs::PermissionsExt;
-                // As `File::create` makes a file: 0666 less the umask.
+                // The mode a new output gets: 0666 less the umask.
                 builder.permissions(std::fs::Permissions::from_mode(0o666));
             }
             let named = builder.tempfile_in(&dir)?;

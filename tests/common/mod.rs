@@ -98,3 +98,48 @@ pub fn records(path: &Path) -> (LasHeader, Vec<u8>, Vec<Vect<3>>, usize) {
     }
     (src.header().clone(), raw, pos, chunk.record_len)
 }
+
+/// `rigidcells deform` long enough to be stopped while it writes: a 1.5M-point terrain in `dir`
+/// with its west end fixed and its east end lifted, through the RBF transfer, with a saved
+/// field and a report. The running child (its stderr piped) and its output, field and report.
+pub fn long_run(dir: &Path) -> (std::process::Child, [PathBuf; 3]) {
+    let input = dir.join("terrain.las");
+    data_gen::write_las_terrain(&input, 1_500_000, false).unwrap();
+    let edit = dir.join("lift.toml");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [499990, 4999990, 0], max = [500300, 5002010, 1000] }\n\
+         [[handle]]\nbox = { min = [501700, 4999990, 0], max = [502010, 5002010, 1000] }\n\
+         translate = [0, 0, 20]\n",
+    )
+    .unwrap();
+    let out = dir.join("out.las");
+    let field = dir.join("lift.field");
+    let report = dir.join("lift.json");
+    let child = bin()
+        .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&edit)])
+        .args(["--cell-size", "40", "--transfer", "rbf", "-q"])
+        .args(["--save-field", arg(&field), "--report", arg(&report)])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    (child, [out, field, report])
+}
+
+/// Waits, while `child` runs, until a file whose name starts with `prefix` is in `dir`.
+pub fn wait_for_file(dir: &Path, child: &mut std::process::Child, prefix: &str) {
+    let there = || {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .any(|e| e.unwrap().file_name().to_string_lossy().starts_with(prefix))
+    };
+    let started = std::time::Instant::now();
+    while !there() {
+        assert!(started.elapsed().as_secs() < 120, "no {prefix}* appeared");
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run finished before {prefix}* appeared: give it more work"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+}

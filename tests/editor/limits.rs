@@ -11,7 +11,7 @@ use rigidcells::edit::{MAX_HANDLES, MAX_PINS, MAX_POLYGON, MAX_SELECTIONS};
 use serde_json::json;
 use tungstenite::Message;
 
-use super::{connect, flat_view, get, next_binary, next_text, send, serve, strip, u32_at};
+use super::{connect, flat_view, get, next_binary, next_text, running, send, strip, u32_at};
 
 /// The error the server answers next (after any other message).
 fn next_error(ws: &mut tungstenite::WebSocket<TcpStream>) -> serde_json::Value {
@@ -29,9 +29,7 @@ fn next_error(ws: &mut tungstenite::WebSocket<TcpStream>) -> serde_json::Value {
 #[test]
 fn edits_past_the_pages_limits_are_refused_before_any_work() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let host = format!("127.0.0.1:{port}");
     let (_, scene) = get(port, &format!("/scene.json?t={token}"), &host, None);
     let scene: serde_json::Value = serde_json::from_slice(&scene).unwrap();
@@ -146,9 +144,7 @@ fn a_spec_of_many_pins_is_read_in_linear_time() {
 fn connections_are_capped() {
     use rigidcells::edit::server::MAX_CONNECTIONS;
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let host = format!("127.0.0.1:{port}");
     let page = format!("/?t={token}");
     // Connections that send nothing hold their threads (until the head's time runs out).
@@ -190,9 +186,7 @@ fn sleeps(name: &str) -> Option<u64> {
 #[test]
 fn an_idle_page_wakes_no_thread() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, _) = serve(dir.path());
-    let (port, token) = (server.port(), server.token().to_string());
-    std::thread::spawn(move || server.run());
+    let (port, token) = running(dir.path());
     let mut ws = connect(port, &token);
     send(&mut ws, json!({"type": "edit", "seq": 1, "edit": {}}));
     assert_eq!(u32_at(&next_binary(&mut ws), 1), 1);
