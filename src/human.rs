@@ -55,6 +55,19 @@ pub fn figure(v: f64) -> String {
     }
 }
 
+/// A count with its thousands grouped as people write it: 1255256001 → `1,255,256,001`.
+pub fn count(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::with_capacity(digits.len() + digits.len() / 3);
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
 /// A point's coordinates with the decimals that resolve `step`, as `(x, y, z)`.
 pub fn point(p: &[f64], step: f64) -> String {
     let parts: Vec<String> = p.iter().map(|&v| to_step(v, step)).collect();
@@ -64,6 +77,14 @@ pub fn point(p: &[f64], step: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn counts_group_their_thousands() {
+        assert_eq!(count(0), "0");
+        assert_eq!(count(999), "999");
+        assert_eq!(count(1000), "1,000");
+        assert_eq!(count(1_255_256_001), "1,255,256,001");
+    }
 
     #[test]
     fn lengths_carry_the_cells_precision() {

@@ -172,7 +172,7 @@ impl<const D: usize> Occupancy<D> {
         let size = |s: f64| crate::human::length(s, s);
         let occupied = format!(
             "{} occupied finest cells of size {}",
-            self.sorted,
+            crate::human::count(self.sorted as u64),
             size(self.grid.finest_size())
         );
         let (what, advice) = match self.roots {
@@ -182,12 +182,12 @@ impl<const D: usize> Occupancy<D> {
             ),
             roots => (
                 format!(
-                    "the cells of {}the {roots} cells of size {} that tile the box at \
-                     --max-level {}",
+                    "{}{} cells of size {} that tile the box at --max-level {}",
                     match self.sorted {
                         0 => String::new(),
-                        _ => format!("{occupied} and of "),
+                        _ => format!("{occupied} and the "),
                     },
+                    crate::human::count(roots as u64),
                     size(self.grid.size0),
                     self.grid.max_level
                 ),
