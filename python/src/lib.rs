@@ -698,12 +698,14 @@ fn deform_file<'py>(
 
 /// Samples per streamed chunk (default: the command line's): 1 to [`pipeline::MAX_CHUNK`].
 fn chunk(chunk: Option<Bound<'_, PyAny>>) -> PyResult<usize> {
-    const WHAT: &str = "a number of samples from 1 to 16,777,216";
+    const WHAT: &str =
+        "a number of samples, 1 or more (more than 16,777,216 is taken as 16,777,216)";
     let Some(c) = chunk else {
         return Ok(pipeline::CHUNK);
     };
+    // As the command line takes `--chunk`: the library's bound on larger values.
     match whole(&c, "chunk", WHAT)? {
-        n @ 1.. if n <= pipeline::MAX_CHUNK as u64 => Ok(n as usize),
+        n @ 1.. => Ok(n.min(pipeline::MAX_CHUNK as u64) as usize),
         n => Err(PyValueError::new_err(format!(
             "chunk must be {WHAT}, got {n}"
         ))),
