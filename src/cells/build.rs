@@ -187,7 +187,7 @@ impl<const D: usize> Occupancy<D> {
                         0 => String::new(),
                         _ => format!("{occupied} and the "),
                     },
-                    crate::human::count(roots as u64),
+                    crate::human::count(roots),
                     size(self.grid.size0),
                     self.grid.max_level
                 ),
