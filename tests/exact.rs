@@ -222,6 +222,82 @@ fn exact_regions_blend_smoothly_into_the_field() {
     }
 }
 
+/// The field takes a twist up from a fixed region's border without a collar: along an edge of a
+/// bar twisted between a fixed end and a turned one, the map turns at most 1.6 times as fast as
+/// the transfer alone does anywhere (it must catch up the half step by which the transfer leads
+/// the region where the region's cells end: 1.5 here), and half a cell past the fixed cells it
+/// has already begun to turn. A smoothstep band of one cell, held exact for part of its width,
+/// turned 0° there and 2.7 times the field's rate just beyond.
+#[test]
+fn the_border_takes_a_twist_up_without_a_collar() {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let points: Vec<Vect<3>> = bar
+        .vertices
+        .iter()
+        .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
+        .collect();
+    let spec = parse_spec::<3>(
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [2.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [7.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         rotate = { axis = [1.0, 0.0, 0.0], degrees = 60.0 }\npivot = [8.75, 0.5, 0.5]\n",
+        Path::new("."),
+        Path::new("edit.toml"),
+    )
+    .unwrap();
+    let cell = 0.25;
+    let params = Options {
+        cell_size: Some(cell),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let (_, solution, _) =
+        pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
+    let field = Field::from_solution(&solution);
+    for transfer in [Transfer::Pu, Transfer::Rbf, Transfer::Blend] {
+        let map = Constrained::new(
+            &field,
+            Deformer::new(&field, transfer).unwrap(),
+            Outside::Extend,
+        )
+        .unwrap();
+        // The turn about the bar's axis of the point at `x` on its edge y = z = 0.
+        let turn = |warp: &dyn Fn(&Vect<3>) -> Vect<3>, x: f64| {
+            let q = warp(&(Vect::<3>::new(x, 0.0, 0.0) - field.origin)) + field.origin;
+            (q.z - 0.5).atan2(q.y - 0.5) - (-0.5f64).atan2(-0.5)
+        };
+        let step = 1e-3;
+        let rate = |warp: &dyn Fn(&Vect<3>) -> Vect<3>, x: f64| {
+            (turn(warp, x + step) - turn(warp, x)).abs() / step
+        };
+        let fastest = |warp: &dyn Fn(&Vect<3>) -> Vect<3>| {
+            (0..6000)
+                .map(|k| rate(warp, 2.0 + k as f64 * step))
+                .fold(0.0f64, f64::max)
+        };
+        let whole = fastest(&|p| map.warp(p));
+        let inner = fastest(&|p| map.inner().warp(p));
+        assert!(
+            whole <= 1.6 * inner,
+            "{transfer:?}: the map turns at {whole:.3} rad per unit, the transfer at most {inner:.3}"
+        );
+        // The fixed cells' end: the last point the map keeps as it is.
+        let border = (0..2000)
+            .map(|k| 2.0 + k as f64 * step)
+            .take_while(|&x| {
+                let p = Vect::<3>::new(x, 0.0, 0.0) - field.origin;
+                map.warp(&p) == p
+            })
+            .last()
+            .unwrap();
+        let beyond = turn(&|p| map.warp(p), border + 0.5 * cell).to_degrees();
+        assert!(
+            beyond > 0.2,
+            "{transfer:?}: half a cell past the fixed cells (x {border:.3}) the bar turned {beyond:.3}°"
+        );
+    }
+}
+
 /// The turn of each cross-section of the bar about its axis, from the fixed end to the handle,
 /// unwrapped from section to section.
 fn section_turns(before: &[Vect<3>], after: &[Vect<3>]) -> Vec<f64> {

@@ -6,35 +6,56 @@
 //! (or anywhere inside it, with the RBF) moved a little, and a handle's samples missed its
 //! transform. [`Constrained`] adds, for every region `r` of cells that follow one prescribed map
 //! `A_r` (the fixed cells and the cells kept at rest follow the identity; each handle its
-//! transform; the cells of a loose part carried along, their carrier's rigid motion), a C²
-//! indicator `w_r`:
+//! transform; a pinned cell and the cells of a loose part carried along, their own rigid
+//! motion), a weight `w_r` that is 1 on the region's cells and falls to 0 over a band of two of
+//! the smallest cells around them:
 //!
 //! ```text
 //! x' = F(x) + Σ_r w_r(x) (A_r(x) − F(x))          F: the transfer (blend or RBF)
-//! w_r = s(min(1, Σ_{i ∈ r} ψ_i)),   ψ_i(x) = Π_a b((|x_a − c_i,a| − h_i) / δ_i)
-//! b(t) = 1 − s(t) on [0, 1], 1 below, 0 above;   s(t) = 10t³ − 15t⁴ + 6t⁵
+//! w_r = 1 − σ(s⁻¹(v_r)),   v_r = 1 − (K * 1_{R_r ⊕ e})(x)
 //! ```
 //!
-//! `ψ_i` is 1 on cell `i`'s box and falls to 0 within `δ_i` of it; `s` has zero first and
-//! second derivatives at 0 and 1, so `w_r` is C² and the map is C² wherever `F` is. Inside a
-//! prescribed cell `w_r = 1` and the sample goes to `A_r(x)` itself: a fixed sample keeps its
-//! coordinates bit for bit, a handle sample follows the handle's transform to rounding. The
-//! band `δ_i` is the smallest cell's edge, and at most half the gap (along the axis that
-//! separates them most) to a cell of another region, so the bands of two regions never overlap
-//! and a sample is exact for at most one. Regions that touch get no band between them (`δ = 0`):
-//! the user asked for two motions there, and the map follows each up to the shared face.
-//! Pins and soft targets are points, not regions, and are left to the transfer.
+//! **Where the weight comes from.** `R_r ⊕ e` is the region grown by one voxel of the smallest
+//! cells' edge `e`: its cells and the voxels around them. `K` is the kernel `Π_a s'(·)` of
+//! half-width `e`, with `s(t) = 10t³ − 15t⁴ + 6t⁵`, so `K * 1_{R ⊕ e}` is C² (the kernel is C¹ and vanishes
+//! at its ends), is 1 wherever the kernel's support lies in the grown region — on every cell of
+//! the region — and 0 two voxels away. At a flat border it is `1 − s(d / 2e)` at a distance
+//! `d`, and elsewhere (corners, steps of the cells' staircase) it rounds that off smoothly: the
+//! region's cells and the voxels around them are disjoint boxes, so the convolution is a sum of
+//! products of the kernel's one-dimensional masses over the `3^D` voxels around the sample's.
+//! `Bands` keeps the voxels around each region; which of a sample's neighbors lie in a grown
+//! region is found when a sample meets the voxel (and kept for the next samples of a run), so
+//! the work grows with the samples near the regions, not with the regions' surface.
 //!
-//! The band is where the transfer's misfit to a region's map is paid: the Jacobian there gains
-//! `(A − F) ∇wᵀ`, with `|∇w|` up to `1.875/δ`. Where the transfer already compresses space and
-//! misses the map by a good part of a cell, that can fold space over. Measured on the decimated
-//! dragon (11,429 vertices, 5 m cells) with its base fixed and its head turned 40° and lifted:
-//! the RBF alone folds at 25 vertices, with the band of one cell at 44 (the new ones have
-//! determinants of 0.01–0.8 under the RBF alone), with half a cell at 37, with two cells at 54,
-//! and with bands widened to four times the misfit beside each cell (up to four cells) at 75:
-//! a wider band takes in more of the space the transfer compresses, so one cell was kept. The
-//! fold-over check of `deform` reports them; on the demo's bend and on twists up to 720° there
-//! are none.
+//! **Why the profile `σ`.** Near a region the field leaves the region's map at the rate `c` it
+//! keeps beyond (the cells turn steadily from the fixed ones on), and it leads the map already
+//! where the region's cells end: the transfer interpolates between the cells' centers, and the
+//! first free cell has moved one step `c·e` from the last prescribed one, so at the border the
+//! transfer is half that step ahead. So `A − F ≈ c (d + d₀)` at a distance `d`, with
+//! `d₀ ≈ e / 2`, and a weight `1 − σ(d / L)` gives the map the rate `c ((u + a) σ(u))'` with
+//! `a = d₀ / L`. Its average over the band is `1 + a` (the band must catch the head start up);
+//! the smoothstep `σ = s` peaks at 2.1 times the field's rate — a collar — while the `σ` used
+//! here makes `((u + a) σ)'` rise as `s` to its least possible peak over the first tenth of the
+//! band, hold it and ease back to 1 over the last: 1.33 for the band of two cells
+//! (`a = 1/4`). `σ` is C² with `σ(0) = 0`, `σ(1) = 1` and zero slopes at both ends. A wider band
+//! lowers the peak (1.19 for four cells, `a = 1/8`: on a bust with its neck fixed and its head
+//! turned 30°, the largest edge strain 1.44 against 1.51) at the cost of `5^D` neighbors a
+//! voxel and more space blended.
+//! Measured on a tube twisted 30° between a fixed and a turned end (`tools/python/border_strain.py`;
+//! BENCHMARKS.md): the largest edge strain 1.47 with the smoothstep over one cell (and the sum
+//! of the cells' bumps capped at 1, which held the band exact for half its width), 1.29 with
+//! this band, and 1.20 for the transfer alone (which is not exact).
+//!
+//! Inside a prescribed cell the sample goes to `A_r(x)` itself: a fixed sample keeps its
+//! coordinates bit for bit, a handle sample follows the handle's transform to rounding. Where the
+//! bands of two regions meet, their weights are scaled down together to sum to at most 1
+//! (continuous, with a kink where the sum reaches 1); regions that touch blend into each other
+//! only through the field between them, and a sample is exact for the cell that holds it.
+//! Soft targets are points, not regions, and are left to the transfer.
+//!
+//! The band is where the transfer's misfit to a region's map is paid: where the transfer
+//! compresses space and misses the map by a good part of a cell, the band can fold space over.
+//! The fold-over check of `deform` reports them.
 //!
 //! **A field knows its domain.** A sample counts as inside when a cell holds it or it lies
 //! within the margin of the cells: one voxel (of the size of the largest cell on the complex's
@@ -158,26 +179,29 @@ enum Class {
     Exact(u32),
     /// Among the cells, beyond every band.
     Free,
-    /// Among the cells or within the margin, in the bands of the prescribed cells
-    /// `band[start..start + len]`.
-    Band(u32, u32),
+    /// Among the cells or within the margin, within two voxels of a prescribed cell.
+    Band,
     /// Beyond the margin.
     Outside,
 }
 
-/// Bands of prescribed cells: for each voxel that one meets outside every prescribed cell, the
-/// cells, with each cell's band width.
+/// The regions grown by one voxel (see the module docs): for each voxel around a prescribed
+/// cell, `maps[start..start + len]`, the maps of the prescribed cells it touches (itself
+/// possibly inside another prescribed cell).
 struct Bands<const D: usize> {
-    voxels: FxHashMap<[i64; D], (u32, u32)>,
-    cells: Vec<u32>,
-    width: Vec<f64>,
+    shell: FxHashMap<[i64; D], (u32, u32)>,
+    maps: Vec<u32>,
 }
+
+/// For a voxel near a region: up to four maps, each with the mask of the voxel's neighbors that
+/// lie in the map's grown region (bit `k` for neighbor `k`, offsets `o ∈ {−1, 0, 1}^D`,
+/// `k = Σ_a (o_a + 1)·3^a`).
+type Masks = ([(u32, u32); 4], usize);
 
 /// The transfer `inner` with exact constraints and a guarded domain; see the module docs.
 pub struct Constrained<const D: usize> {
     inner: Deformer<D>,
     origin: Vect<D>,
-    centers: Vec<Vect<D>>,
     halves: Vec<f64>,
     prescribed: Prescribed<D>,
     /// The inverse transposes of the maps' linear parts (normals).
@@ -221,7 +245,7 @@ impl<const D: usize> Frame<D> {
     pub fn reach(&self) -> f64 {
         3.0 * self.edge * f64::from(1u32 << self.margin_shift.min(31))
             + 2.0 * self.largest_half
-            + 2.0 * self.edge
+            + (2 * GROW + 1) as f64 * self.edge
     }
 }
 
@@ -229,6 +253,71 @@ impl<const D: usize> Frame<D> {
 #[inline]
 fn smooth(t: f64) -> f64 {
     t * t * t * (10.0 + t * (-15.0 + 6.0 * t))
+}
+
+/// Where the transfer meets a region it has already left the region's map by about half the
+/// first free cell's motion: its rate times this fraction of the band (see the module docs).
+const HEAD_START: f64 = 0.5 / (2 * GROW) as f64;
+
+/// The band's profile takes the field up over this fraction of it at each end (see the module
+/// docs).
+const EASE: f64 = 0.1;
+
+/// `∫₀ᵗ smooth`.
+#[inline]
+fn smooth_integral(t: f64) -> f64 {
+    t * t * t * t * (2.5 + t * (-3.0 + t))
+}
+
+/// The `t` in `[0, 1]` with `smooth(t) = v`.
+fn smooth_inverse(v: f64) -> f64 {
+    if v <= 0.0 {
+        return 0.0;
+    }
+    if v >= 1.0 {
+        return 1.0;
+    }
+    // Near its ends `smooth` is cubic; Newton's method from there converges in a few steps.
+    let mut t = if v < 0.5 {
+        (0.1 * v).cbrt()
+    } else {
+        1.0 - (0.1 * (1.0 - v)).cbrt()
+    };
+    for _ in 0..8 {
+        let slope = 30.0 * t * t * (1.0 - t) * (1.0 - t);
+        if slope < 1e-12 {
+            break;
+        }
+        t = (t - (smooth(t) - v) / slope).clamp(0.0, 1.0);
+    }
+    t
+}
+
+/// How much of the field a sample takes where the kernel puts `v` of its mass outside a region:
+/// `σ(u)` at `u = smooth⁻¹(v)`, the fraction of the band crossed at a flat border. `σ` makes the
+/// map's rate `h = ((u + a) σ(u))'` for a field that leads the region's map by `a` of the band
+/// ([`HEAD_START`]) and grows at a steady rate: `h` rises as `smooth` to its peak over the first
+/// [`EASE`] of the band, holds it, and eases back to the field's own rate over the last.
+fn fall(v: f64) -> f64 {
+    let u = smooth_inverse(v);
+    if u <= 0.0 {
+        return 0.0;
+    }
+    if u >= 1.0 {
+        return 1.0;
+    }
+    let (a, e) = (HEAD_START, EASE);
+    // The peak that makes `∫₀¹ h = 1 + a`.
+    let peak = (1.0 + a - 0.5 * e) / (1.0 - e);
+    let integral = if u <= e {
+        peak * e * smooth_integral(u / e)
+    } else if u <= 1.0 - e {
+        peak * (0.5 * e + u - e)
+    } else {
+        let t = (u - 1.0 + e) / e;
+        peak * (1.0 - 1.5 * e) + e * (peak * t - (peak - 1.0) * smooth_integral(t))
+    };
+    (integral / (u + a)).clamp(0.0, 1.0)
 }
 
 impl<const D: usize> Constrained<D>
@@ -305,12 +394,11 @@ where
             .iter()
             .map(|m| *m == Affine::identity())
             .collect();
-        let bands = bands(&leaves, field, &prescribed);
+        let bands = bands(&leaves, &prescribed);
         let (margin_voxels, margin_shift) = margin(&leaves, margin_shift);
         Ok(Self {
             inner,
             origin: field.origin,
-            centers: field.centers.clone(),
             halves: field.halves.clone(),
             prescribed,
             normal_maps,
@@ -402,9 +490,12 @@ where
     }
 
     fn classify(&self, v: &[i64; D]) -> Class {
-        let band = || match self.bands.voxels.get(v) {
-            Some(&(start, len)) => Class::Band(start, len),
-            None => Class::Free,
+        let band = || {
+            if (0..NEIGHBORS[D] as usize).any(|k| self.bands.shell.contains_key(&neighbor(v, k))) {
+                Class::Band
+            } else {
+                Class::Free
+            }
         };
         match self.leaves.leaf(v) {
             Some(c) => match self.prescribed.cells.get(c) {
@@ -432,40 +523,72 @@ where
         }
     }
 
-    /// The regions' weights at `x` from the band cells `start..start + len`: up to `D + 1`
-    /// regions with a positive weight (bands of two regions do not overlap, so one in practice).
-    fn weights(&self, x: &Vect<D>, start: u32, len: u32) -> ([(u32, f64); 4], usize) {
-        let mut sums = [(0u32, 0.0f64); 4];
+    /// The maps whose grown regions meet the neighbors of voxel `v` (outside every prescribed
+    /// cell), with the neighbors in each.
+    fn masks(&self, v: &[i64; D]) -> Masks {
+        let mut out = [(0u32, 0u32); 4];
         let mut n = 0;
-        for &c in &self.bands.cells[start as usize..(start + len) as usize] {
-            let c = c as usize;
-            let delta = self.bands.width[c];
-            let (center, h) = (&self.centers[c], self.halves[c]);
-            let mut psi = 1.0;
-            for a in 0..D {
-                let out = (x[a] - center[a]).abs() - h;
-                if out > 0.0 {
-                    if out >= delta {
-                        psi = 0.0;
-                        break;
-                    }
-                    psi *= 1.0 - smooth(out / delta);
-                }
+        let mut add = |m: u32, k: usize| match out[..n].iter_mut().find(|e| e.0 == m) {
+            Some(e) => e.1 |= 1 << k,
+            None if n < 4 => {
+                out[n] = (m, 1 << k);
+                n += 1;
             }
-            if psi > 0.0 {
+            None => {}
+        };
+        for k in 0..NEIGHBORS[D] as usize {
+            let u = neighbor(v, k);
+            let held = self.leaves.leaf(&u).and_then(|c| {
                 let m = self.prescribed.cells[c];
-                match sums[..n].iter_mut().find(|s| s.0 == m) {
-                    Some(s) => s.1 += psi,
-                    None if n < 4 => {
-                        sums[n] = (m, psi);
-                        n += 1;
-                    }
-                    None => {}
+                (m != FREE).then_some(m)
+            });
+            if let Some(m) = held {
+                add(m, k);
+            }
+            if let Some(&(start, len)) = self.bands.shell.get(&u) {
+                for &m in &self.bands.maps[start as usize..(start + len) as usize] {
+                    add(m, k);
                 }
             }
         }
-        for s in &mut sums[..n] {
-            s.1 = smooth(s.1.min(1.0));
+        (out, n)
+    }
+
+    /// The regions' weights at `x` in voxel `v` from its masks (see the module docs): up to four
+    /// regions with a positive weight, scaled down together where they add up to more than 1.
+    fn weights(&self, x: &Vect<D>, masks: &Masks) -> ([(u32, f64); 4], usize) {
+        let v = self.leaves.voxel(x);
+        // The kernel's mass over the voxel below, this one and the one above, per axis.
+        let mass: [[f64; SIDE]; D] = std::array::from_fn(|a| {
+            let t = ((x[a] - self.leaves.lower[a]) / self.leaves.edge - v[a] as f64).clamp(0.0, 1.0);
+            let (below, above) = (smooth(0.5 * (1.0 - t)), smooth(0.5 * t));
+            [below, 1.0 - below - above, above]
+        });
+        let full = (1u32 << NEIGHBORS[D]) - 1;
+        let mut sums = [(0u32, 0.0f64); 4];
+        let mut n = 0;
+        for &(m, mask) in &masks.0[..masks.1] {
+            let w = if mask == full {
+                1.0
+            } else {
+                let mut w = 0.0;
+                let mut bits = mask;
+                while bits != 0 {
+                    let mut k = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let mut product = 1.0;
+                    for axis in &mass {
+                        product *= axis[k % SIDE];
+                        k /= SIDE;
+                    }
+                    w += product;
+                }
+                1.0 - fall(1.0 - w.min(1.0))
+            };
+            if w > 0.0 {
+                sums[n] = (m, w);
+                n += 1;
+            }
         }
         let total: f64 = sums[..n].iter().map(|s| s.1).sum();
         if total > 1.0 {
@@ -485,8 +608,8 @@ where
     }
 
     /// `F(x) + Σ w_r (A_r(x) − F(x))` for the band weights at `x`, given `F(x)`.
-    fn banded(&self, x: &Vect<D>, start: u32, len: u32, f: Vect<D>) -> Vect<D> {
-        let (w, n) = self.weights(x, start, len);
+    fn banded(&self, x: &Vect<D>, masks: &Masks, f: Vect<D>) -> Vect<D> {
+        let (w, n) = self.weights(x, masks);
         if let Some(m) = self.whole(&w[..n]) {
             return self.prescribed.maps[m as usize].apply(x);
         }
@@ -507,8 +630,8 @@ where
     }
 
     /// The normal in a band: the transfer's and the maps' blended by the weights.
-    fn banded_normal(&self, x: &Vect<D>, start: u32, len: u32, f: Vect<D>, n: &Vect<D>) -> Vect<D> {
-        let (w, k) = self.weights(x, start, len);
+    fn banded_normal(&self, x: &Vect<D>, masks: &Masks, f: Vect<D>, n: &Vect<D>) -> Vect<D> {
+        let (w, k) = self.weights(x, masks);
         if let Some(m) = self.whole(&w[..k]) {
             return self.exact_normal(m, n);
         }
@@ -534,7 +657,7 @@ where
             Class::Exact(m) if self.identity[m as usize] => *x,
             Class::Exact(m) => self.prescribed.maps[m as usize].apply(x),
             Class::Free => self.inner.warp(x),
-            Class::Band(s, l) => self.banded(x, s, l, self.inner.warp(x)),
+            Class::Band => self.banded(x, &self.masks(&self.leaves.voxel(x)), self.inner.warp(x)),
             Class::Outside => match self.outside {
                 Outside::Extend => self.inner.warp(x),
                 _ => *x,
@@ -546,7 +669,10 @@ where
         match self.class_of(x) {
             Class::Exact(m) => self.exact_normal(m, n),
             Class::Free => self.inner.warp_normal(x, n),
-            Class::Band(s, l) => self.banded_normal(x, s, l, self.inner.warp_normal(x, n), n),
+            Class::Band => {
+                let masks = self.masks(&self.leaves.voxel(x));
+                self.banded_normal(x, &masks, self.inner.warp_normal(x, n), n)
+            }
             Class::Outside => match self.outside {
                 Outside::Extend => self.inner.warp_normal(x, n),
                 _ => *n,
@@ -559,11 +685,12 @@ where
         match class {
             Class::Exact(_) => (self.warp(x), self.warp_normal(x, n)),
             Class::Free => self.inner.warp_with_normal(x, n),
-            Class::Band(s, l) => {
+            Class::Band => {
+                let masks = self.masks(&self.leaves.voxel(x));
                 let (f, fnormal) = self.inner.warp_with_normal(x, n);
                 (
-                    self.banded(x, s, l, f),
-                    self.banded_normal(x, s, l, fnormal, n),
+                    self.banded(x, &masks, f),
+                    self.banded_normal(x, &masks, fnormal, n),
                 )
             }
             Class::Outside => {
@@ -599,8 +726,8 @@ where
             let class = self.class_of(&x);
             let still = match class {
                 Class::Exact(m) => self.identity[m as usize],
-                Class::Band(s, l) => {
-                    let (w, k) = self.weights(&x, s, l);
+                Class::Band => {
+                    let (w, k) = self.weights(&x, &self.masks(&self.leaves.voxel(&x)));
                     self.whole(&w[..k])
                         .is_some_and(|m| self.identity[m as usize])
                 }
@@ -625,6 +752,8 @@ where
         self.check_window(origin, points);
         let mut tally = OutsideTally::default();
         let mut last: Option<([i64; D], Class)> = None;
+        // The last band voxel's masks.
+        let mut near: Option<([i64; D], Masks)> = None;
         let mut run = 0;
         let extend = self.outside == Outside::Extend;
         for i in 0..points.len() {
@@ -658,12 +787,21 @@ where
             out[i] = match class {
                 Class::Exact(m) if self.identity[m as usize] => *p,
                 Class::Exact(m) => self.prescribed.maps[m as usize].apply(&x) + origin,
-                Class::Band(s, l) => {
-                    let (w, n) = self.weights(&x, s, l);
+                Class::Band => {
+                    let v = self.leaves.voxel(&x);
+                    let masks = match &near {
+                        Some((nv, m)) if *nv == v => *m,
+                        _ => {
+                            let m = self.masks(&v);
+                            near = Some((v, m));
+                            m
+                        }
+                    };
+                    let (w, n) = self.weights(&x, &masks);
                     match self.whole(&w[..n]) {
                         // A sample the identity has whole keeps its bits.
                         Some(m) if self.identity[m as usize] => *p,
-                        _ => self.banded(&x, s, l, self.inner.warp(&x)) + origin,
+                        _ => self.banded(&x, &masks, self.inner.warp(&x)) + origin,
                     }
                 }
                 _ => {
@@ -681,22 +819,29 @@ where
     }
 }
 
-/// The bands of the prescribed cells (see the module docs).
-fn bands<const D: usize>(
-    leaves: &Leaves<D>,
-    field: &Field<D>,
-    prescribed: &Prescribed<D>,
-) -> Bands<D> {
-    let n = field.centers.len();
-    let mut width = vec![leaves.edge; n];
-    let mut entries: Vec<([i64; D], u32)> = Vec::new();
-    if prescribed.cells.is_empty() {
-        return Bands {
-            voxels: FxHashMap::default(),
-            cells: Vec::new(),
-            width,
-        };
-    }
+/// A region grows by this many voxels, and the kernel reaches this many voxels each way: the
+/// band is `2·GROW` of the smallest cells wide (the masks and the masses are written for 1).
+const GROW: usize = 1;
+
+/// The neighbors along one axis, the voxel itself included.
+const SIDE: usize = 2 * GROW + 1;
+
+/// How many neighbors a voxel has, itself included (`SIDE^D`), by dimension.
+const NEIGHBORS: [u32; 4] = [1, SIDE as u32, (SIDE * SIDE) as u32, (SIDE * SIDE * SIDE) as u32];
+
+/// The voxel `v` moved by neighbor `k`'s offsets (see [`Bands`]).
+fn neighbor<const D: usize>(v: &[i64; D], mut k: usize) -> [i64; D] {
+    std::array::from_fn(|a| {
+        let o = (k % SIDE) as i64 - GROW as i64;
+        k /= SIDE;
+        v[a] + o
+    })
+}
+
+/// The regions of the prescribed cells grown by one voxel (see the module docs).
+fn bands<const D: usize>(leaves: &Leaves<D>, prescribed: &Prescribed<D>) -> Bands<D> {
+    use rayon::prelude::*;
+    let mut shell: Vec<([i64; D], u32)> = Vec::new();
     for (c, &m) in prescribed.cells.iter().enumerate() {
         if m == FREE {
             continue;
@@ -704,68 +849,28 @@ fn bands<const D: usize>(
         let (shift, coord) = leaves.keys[c];
         let lo = coord.map(|k| k << shift);
         let hi = coord.map(|k| ((k + 1) << shift) - 1);
-        let from = lo.map(|k| k - 1);
-        let to = hi.map(|k| k + 1);
-        for_each_shell(from, to, Some((lo, hi)), |v| {
-            let outside_prescribed = match leaves.leaf(&v) {
-                Some(j) => prescribed.cells[j] == FREE,
-                None => true,
-            };
-            if outside_prescribed {
-                entries.push((v, c as u32));
-            }
+        for_each_shell(lo.map(|k| k - 1), hi.map(|k| k + 1), Some((lo, hi)), |v| {
+            shell.push((v, m));
         });
     }
-    entries.sort_unstable();
-    // Bands of different regions must not overlap: at most half the gap between the cells.
-    let mut start = 0;
-    while start < entries.len() {
-        let mut end = start + 1;
-        while end < entries.len() && entries[end].0 == entries[start].0 {
-            end += 1;
-        }
-        let group = &entries[start..end];
-        for (k, &(_, i)) in group.iter().enumerate() {
-            for &(_, j) in &group[k + 1..] {
-                let (i, j) = (i as usize, j as usize);
-                if prescribed.cells[i] == prescribed.cells[j] {
-                    continue;
-                }
-                let gap = (0..D)
-                    .map(|a| {
-                        (field.centers[i][a] - field.centers[j][a]).abs()
-                            - field.halves[i]
-                            - field.halves[j]
-                    })
-                    .fold(0.0f64, f64::max);
-                width[i] = width[i].min(0.5 * gap);
-                width[j] = width[j].min(0.5 * gap);
-            }
-        }
-        start = end;
-    }
+    shell.par_sort_unstable();
+    shell.dedup();
     let mut voxels = FxHashMap::default();
-    let mut cells = Vec::with_capacity(entries.len());
+    voxels.reserve(shell.len());
+    let mut maps = Vec::with_capacity(shell.len());
     let mut start = 0;
-    while start < entries.len() {
-        let v = entries[start].0;
-        let first = cells.len() as u32;
-        while start < entries.len() && entries[start].0 == v {
-            let c = entries[start].1;
-            if width[c as usize] > 0.0 {
-                cells.push(c);
-            }
+    while start < shell.len() {
+        let v = shell[start].0;
+        let first = maps.len() as u32;
+        while start < shell.len() && shell[start].0 == v {
+            maps.push(shell[start].1);
             start += 1;
         }
-        let len = cells.len() as u32 - first;
-        if len > 0 {
-            voxels.insert(v, (first, len));
-        }
+        voxels.insert(v, (first, maps.len() as u32 - first));
     }
     Bands {
-        voxels,
-        cells,
-        width,
+        shell: voxels,
+        maps,
     }
 }
 
@@ -839,5 +944,40 @@ mod tests {
         assert_eq!(d(1.0), 0.0);
         let e = 1e-6;
         assert!(((smooth(0.5 + e) - smooth(0.5 - e)) / (2.0 * e) - d(0.5)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_smoothstep_inverts() {
+        for k in 0..=1000 {
+            let t = k as f64 / 1000.0;
+            assert!((smooth_inverse(smooth(t)) - t).abs() < 1e-9, "at {t}");
+        }
+    }
+
+    /// The band's profile: 0 at the region, 1 at the band's end, rising, with zero slope at
+    /// both ends, and a field that leads the region by its head start taken up at a rate at
+    /// most 1.35 times its own (`((u + a) σ)' ≤ 1.35`; the smoothstep's peaks at 2.1).
+    #[test]
+    fn the_band_takes_the_field_up_at_a_steady_rate() {
+        let sigma = |u: f64| fall(smooth(u));
+        assert_eq!(sigma(0.0), 0.0);
+        assert_eq!(sigma(1.0), 1.0);
+        let h = 1e-5;
+        let slope = |f: &dyn Fn(f64) -> f64, u: f64| (f(u + h) - f(u - h)) / (2.0 * h);
+        assert!(slope(&sigma, h).abs() < 1e-3 && slope(&sigma, 1.0 - h).abs() < 1e-3);
+        let rate = |f: &dyn Fn(f64) -> f64| {
+            let mut last = 0.0;
+            let mut peak = 0.0f64;
+            for k in 1..1000 {
+                let u = k as f64 / 1000.0;
+                assert!(f(u) >= last, "falls back at {u}");
+                last = f(u);
+                peak = peak.max(slope(&|u| (u + HEAD_START) * f(u), u));
+            }
+            peak
+        };
+        let peak = rate(&sigma);
+        assert!(peak > 1.0 && peak <= 1.35, "takes the field up {peak} times faster");
+        assert!(rate(&smooth) > 2.0);
     }
 }
