@@ -3,11 +3,19 @@ and vertex-only scans with the rigidcells library, into a shape key.
 
 The add-on turns Blender's data into the library's inputs and back and nothing more: the
 vertices of the base shape, the triangles, the vertex groups as `indices` regions, each handle
-Empty's motion since it was assigned as a `matrix`, pins (a vertex group's center, moved by its
-Empty) and a stiffness group go to `rigidcells.deform`; the moved vertices come back as the
-shape key `RigidCells`, which the artist can blend, animate or apply. Vertices of the fixed
-group keep their coordinates bit for bit; vertices of a handle group land where its Empty
-sends them (to Blender's single precision).
+Empty's motion since it was assigned, pins (a vertex group's center, moved by its Empty) and a
+stiffness group go to `rigidcells.deform`; the moved vertices come back as the shape key
+`RigidCells`, which the artist can blend, animate or apply. Vertices of the fixed group keep
+their coordinates bit for bit; vertices of a handle group land where its Empty sends them (to
+Blender's single precision).
+
+A handle's turn is the rotation typed on its Empty, with its winding (`handle_pose`): 360°
+typed is a whole turn, not none, and 270° is not −90°. A matrix cannot say how many turns it
+makes, so the add-on reads the Empty's rotation values (Euler, axis-angle or quaternion, as
+keyed when animated) against those it had when assigned, and hands the library the Empty's
+motion as `rotate` (axis and degrees, of any size) about the Empty's rest origin, `translate`
+and `scale`: the same map as the Empty's matrices, with the typed turn. Deform and Live read
+the poses alike, so the same typed pose gives the same shape.
 
 Deform solves on a thread of its own (`work.DeformJob`) while Blender stays responsive; Live
 keeps a `rigidcells.Session` on a thread (`work.LiveWorker`) that follows the handle and pin
@@ -21,6 +29,7 @@ from __future__ import annotations
 from typing import Any, List, Optional, Tuple
 
 import bpy
+import mathutils
 import numpy as np
 from bpy.props import (
     CollectionProperty,
@@ -48,17 +57,46 @@ def _flat(matrix: Any) -> List[float]:
     return [v for row in matrix for v in row]
 
 
+EULER_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+ROTATION_MODES = EULER_ORDERS + ("AXIS_ANGLE", "QUATERNION")
+
+
+def _rotation_values(empty: bpy.types.Object) -> List[float]:
+    """The Empty's rotation as typed (the keyed value at the current frame when animated),
+    four numbers for its `rotation_mode`: Euler (x, y, z, 0) in radians, axis-angle
+    (angle, x, y, z), quaternion (w, x, y, z)."""
+    mode = empty.rotation_mode
+    if mode == "QUATERNION":
+        return list(empty.rotation_quaternion)
+    if mode == "AXIS_ANGLE":
+        return list(empty.rotation_axis_angle)
+    return list(empty.rotation_euler) + [0.0]
+
+
+def _scale_values(empty: bpy.types.Object) -> List[float]:
+    """The Empty's own scale as its matrix applies it: `scale` times `delta_scale`."""
+    return [a * b for a, b in zip(empty.scale, empty.delta_scale)]
+
+
 def _take_rest(settings: "RigidCellsSettings", _context: Any) -> None:
-    """The handle Empty's pose when it is assigned: its motion from here is the handle's."""
+    """The handle Empty's pose when it is assigned: its matrix, and its rotation values and
+    scale as typed; its motion from here is the handle's."""
     empty = settings.handle_object
     if empty is not None:
         settings.handle_rest = _flat(empty.matrix_world)
+        settings.handle_rest_mode = empty.rotation_mode
+        settings.handle_rest_rotation = _rotation_values(empty)
+        settings.handle_rest_scale = _scale_values(empty)
 
 
 def _take_item_rest(item: "RigidCellsMover", _context: Any) -> None:
-    """An extra handle's or a pin's Empty pose when it is assigned."""
-    if item.object is not None:
-        item.rest = _flat(item.object.matrix_world)
+    """An extra handle's or a pin's Empty pose when it is assigned (as `_take_rest`)."""
+    empty = item.object
+    if empty is not None:
+        item.rest = _flat(empty.matrix_world)
+        item.rest_mode = empty.rotation_mode
+        item.rest_rotation = _rotation_values(empty)
+        item.rest_scale = _scale_values(empty)
 
 
 def _is_empty(_self: Any, obj: bpy.types.Object) -> bool:
@@ -78,6 +116,10 @@ class RigidCellsMover(bpy.types.PropertyGroup):
         description="An Empty: its motion since it was assigned moves the group",
     )
     rest: FloatVectorProperty(size=16, options={"HIDDEN"})
+    # The Empty's rotation values, their mode and its scale when assigned (`_take_rest`).
+    rest_mode: StringProperty(options={"HIDDEN"})
+    rest_rotation: FloatVectorProperty(size=4, options={"HIDDEN"})
+    rest_scale: FloatVectorProperty(size=3, default=(1.0, 1.0, 1.0), options={"HIDDEN"})
 
 
 class RigidCellsSettings(bpy.types.PropertyGroup):
@@ -97,6 +139,10 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
         description="An Empty: its motion since it was assigned moves the handle group",
     )
     handle_rest: FloatVectorProperty(size=16, options={"HIDDEN"})
+    # The handle Empty's rotation values, their mode and its scale when assigned.
+    handle_rest_mode: StringProperty(options={"HIDDEN"})
+    handle_rest_rotation: FloatVectorProperty(size=4, options={"HIDDEN"})
+    handle_rest_scale: FloatVectorProperty(size=3, default=(1.0, 1.0, 1.0), options={"HIDDEN"})
     handles: CollectionProperty(type=RigidCellsMover, name="More handles")
     pins: CollectionProperty(type=RigidCellsMover, name="Pins")
     stiffness_group: StringProperty(
@@ -179,12 +225,260 @@ def _motion(obj: bpy.types.Object, empty: bpy.types.Object, rest: Any) -> np.nda
     return local
 
 
-def handle_matrix(obj: bpy.types.Object, settings: RigidCellsSettings) -> List[List[float]]:
-    """The handle's affine map in the object's own coordinates: the Empty's motion since its
-    rest pose (world), seen from the object."""
-    if settings.handle_object is None:
-        raise InputError("Rigid Cells: choose the handle Empty")
-    return _motion(obj, settings.handle_object, settings.handle_rest).tolist()
+# How far the typed motion may differ from the Empty's matrices and still be taken as theirs,
+# relative to the motion's scale: Blender's matrices are single precision (about 6e-8), and
+# the products through a parent and the object compound it (1.4e-7 in the tests).
+_SAME_MAP = 1e-6
+
+
+def _elemental(axis: int, angle: float) -> np.ndarray:
+    """The rotation by `angle` about the coordinate axis `axis` (0, 1, 2: x, y, z)."""
+    c, s = np.cos(angle), np.sin(angle)
+    i, j = (axis + 1) % 3, (axis + 2) % 3
+    m = np.eye(3)
+    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+    return m
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """The rotation by `angle` about the unit vector `axis` (Rodrigues), as the library makes
+    `rotate`'s."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+def _unit(v: Any) -> Optional[np.ndarray]:
+    """`v` scaled to length 1, or None for a zero vector."""
+    v = np.asarray(v, dtype=np.float64)
+    n = np.linalg.norm(v)
+    return v / n if n > 0.0 else None
+
+
+def _rotation(mode: str, values: Any) -> np.ndarray:
+    """The rotation matrix of typed rotation values (`_rotation_values`), as Blender makes it
+    (Euler `XYZ` turns about x first: Rz·Ry·Rx; a quaternion normalized; a zero axis or
+    quaternion turns nothing), in double precision."""
+    if mode == "QUATERNION":
+        q = _unit(values)
+        if q is None:
+            return np.eye(3)
+        w, x, y, z = q
+        return np.array(
+            [
+                [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+            ]
+        )
+    if mode == "AXIS_ANGLE":
+        axis = _unit(values[1:])
+        return np.eye(3) if axis is None else _axis_rotation(axis, values[0])
+    m = np.eye(3)
+    for c in mode:
+        m = _elemental("XYZ".index(c), values["XYZ".index(c)]) @ m
+    return m
+
+
+def _axis_angle(r: np.ndarray) -> Tuple[np.ndarray, float]:
+    """A rotation matrix's unit axis and angle in [0, π], through its quaternion (exact also
+    near a half turn, where the matrix's antisymmetric part vanishes): Shepperd's method, from
+    the largest of the quaternion's components."""
+    k = int(np.argmax([np.trace(r), r[0, 0], r[1, 1], r[2, 2]]))
+    if k == 0:
+        w = 0.5 * np.sqrt(max(1.0 + np.trace(r), 0.0))
+        v = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / (4 * w)
+    else:
+        i = k - 1
+        j, l = (i + 1) % 3, (i + 2) % 3
+        v = np.zeros(3)
+        v[i] = 0.5 * np.sqrt(max(1.0 + r[i, i] - r[j, j] - r[l, l], 0.0))
+        v[j] = (r[j, i] + r[i, j]) / (4 * v[i])
+        v[l] = (r[l, i] + r[i, l]) / (4 * v[i])
+        w = (r[l, j] - r[j, l]) / (4 * v[i])
+    if w < 0.0:
+        w, v = -w, -v
+    n = np.linalg.norm(v)
+    if n == 0.0:
+        return np.array([1.0, 0.0, 0.0]), 0.0
+    return v / n, 2.0 * np.arctan2(n, w)
+
+
+def _in_mode(mode: str, rest_mode: str, rest: Any, now: Any) -> List[float]:
+    """Rest rotation values typed in `rest_mode`, given in `mode` (the Empty's mode changed
+    since it was assigned): the same rotation, with no winding of its own (no rotation gives
+    zero angles, the unit quaternion, or a zero angle about the current axis `now` has)."""
+    r = _rotation(rest_mode, rest)
+    if np.allclose(r, np.eye(3), rtol=0.0, atol=1e-12):
+        if mode == "QUATERNION":
+            return [1.0, 0.0, 0.0, 0.0]
+        return [0.0, *now[1:]] if mode == "AXIS_ANGLE" else [0.0] * 4
+    m = mathutils.Matrix(r.tolist())
+    if mode == "QUATERNION":
+        return list(m.to_quaternion())
+    if mode == "AXIS_ANGLE":
+        axis, angle = _axis_angle(r)
+        return [angle, *axis]
+    return list(m.to_euler(mode)) + [0.0]
+
+
+def typed_turn(
+    mode: str, now: Any, rest_mode: str, rest: Any
+) -> Optional[Tuple[Optional[np.ndarray], float]]:
+    """The turn the rotation values typed on an Empty make from `rest` to `now` (four numbers
+    each, `_rotation_values`; `rest_mode` is the mode they were typed in), in the frame the
+    Empty's rotation acts in (its parent's, through the parent inverse and the delta
+    rotation): `(axis, radians)`, a unit axis and a signed angle of any size, `(None, 0.0)`
+    for no turn, or None where the values imply no winding of their own and the matrix's
+    rotation is the turn:
+
+    - Euler (any order): when one angle changed, the turn is about that angle's axis as the
+      rotations after it in the order carry it, by the change as typed (0° → 360° is a whole
+      turn). When several changed, None: their composition has no single axis that carries a
+      winding (a whole turn about x then 10° about z is 10° about z), and the library's
+      `rotate` has one axis, so the matrix's rotation (at most 180°) is the honest turn.
+    - Axis-angle: the axis unchanged (or reversed, or either angle 0), the typed angle's
+      difference; the axis changed, None, as for several Euler angles.
+    - Quaternion: the relative quaternion `q·q₀⁻¹`, its angle `2·atan2(|v|, w)` in [0°, 360°]
+      about its vector's direction: a quaternion holds a turn modulo 720°, so this is its
+      whole range (a turn beyond ±360° cannot be typed, and +360° and −360° are the same
+      quaternion, `w = −1`). That whole turn names no axis when its vector is exactly zero,
+      and is refused (`InputError`); turned there with Blender's tools, the vector keeps the
+      axis in its rounding.
+
+    A rest in another mode (the mode changed since the Empty was assigned) is converted into
+    the current mode first, with no winding (`_in_mode`). An unknown rest mode (an Empty
+    assigned before the add-on kept the values) gives None."""
+    if rest_mode not in ROTATION_MODES or mode not in ROTATION_MODES:
+        return None
+    now = [float(v) for v in now]
+    rest = [float(v) for v in rest]
+    if rest_mode != mode:
+        rest = _in_mode(mode, rest_mode, rest, now)
+    if mode == "QUATERNION":
+        q1, q0 = _unit(now), _unit(rest)
+        q1 = np.array([1.0, 0, 0, 0]) if q1 is None else q1
+        q0 = np.array([1.0, 0, 0, 0]) if q0 is None else q0
+        w0, v0 = q0[0], -q0[1:]  # q0's inverse (conjugate, q0 being a unit)
+        w1, v1 = q1[0], q1[1:]
+        w = w1 * w0 - v1 @ v0
+        v = w1 * v0 + w0 * v1 + np.cross(v1, v0)
+        n = np.linalg.norm(v)
+        if n == 0.0:
+            if w >= 0.0:
+                return None, 0.0
+            raise InputError(
+                "Rigid Cells: the handle Empty's quaternion makes a whole turn from its rest "
+                "(W −1, X, Y and Z 0), which names no axis to turn about: type the turn in "
+                "Axis Angle or Euler rotation mode"
+            )
+        return v / n, 2.0 * np.arctan2(n, w)
+    if mode == "AXIS_ANGLE":
+        a1, a0 = _unit(now[1:]), _unit(rest[1:])
+        t1 = now[0] if a1 is not None else 0.0
+        t0 = rest[0] if a0 is not None else 0.0
+        if t0 == 0.0:
+            return (a1, t1) if t1 != 0.0 else (None, 0.0)
+        if t1 == 0.0:
+            return a0, -t0
+        if np.abs(a1 - a0).max() <= 1e-6:
+            return (a1, t1 - t0) if t1 != t0 else (None, 0.0)
+        if np.abs(a1 + a0).max() <= 1e-6:
+            return a1, t1 + t0
+        return None
+    change = np.array(now[:3]) - np.array(rest[:3])
+    changed = [k for k in range(3) if abs(change[k]) > 1e-6]
+    if not changed:
+        return None, 0.0
+    if len(changed) > 1:
+        return None
+    k = changed[0]
+    carry = np.eye(3)
+    for c in mode[mode.index("XYZ"[k]) + 1 :]:
+        carry = _elemental("XYZ".index(c), now["XYZ".index(c)]) @ carry
+    return carry[:, k], float(change[k])
+
+
+def handle_pose(
+    obj: bpy.types.Object,
+    empty: bpy.types.Object,
+    rest: Any,
+    rest_mode: str = "",
+    rest_rotation: Any = (0.0, 0.0, 0.0, 0.0),
+    rest_scale: Any = (1.0, 1.0, 1.0),
+) -> dict:
+    """A handle's pose for the library, in the object's own coordinates: the Empty's motion
+    since its rest (the world matrix `rest`, and the rotation values `rest_rotation` typed in
+    `rest_mode` and scale `rest_scale` it had then), as a handle dict of the spec.
+
+    The map is the Empty's motion seen from the object, `_motion`, and the pose says it as
+    `A(x) = s·R·(x − pivot) + pivot + translate`: `pivot` is the Empty's rest origin (the
+    load steps of a solve from rest turn the handle about it, as the Empty turned), `translate`
+    takes it to the Empty's origin now, `R` is `rotate = {axis, degrees}` with the typed turn
+    (`typed_turn`: its axis carried into the object's coordinates through the Empty's parent,
+    parent inverse, delta rotation and the object's matrix; the Empty's own scale, unchanged,
+    drops out) and `s` is `scale` where the Empty's scale changed alike on its three axes.
+    The typed motion is taken where it is the matrices' map (to Blender's single precision);
+    where it is not (the Empty's parent moved, or a constraint turns it), the turn is the
+    matrices' rotation with the winding nearest the typed turn, so the map stays the
+    matrices' exactly.
+
+    A motion that stretches unevenly (an Empty scaled differently on its axes, a parent or
+    object scaled unevenly) goes as its `matrix`, whose turn the library takes in [0°, 180°]:
+    the spec's `rotate` takes only a uniform `scale` beside it, so a `rotate` could carry the
+    winding or the stretch exactly, not both, and the map must be exact."""
+    local = _motion(obj, empty, rest)
+    lin = local[:3, :3]
+    to_obj = np.linalg.inv(np.array(obj.matrix_world, dtype=np.float64))
+    now = np.array(empty.matrix_world, dtype=np.float64)
+    rest_m = np.array(rest, dtype=np.float64).reshape(4, 4)
+    pivot = (to_obj @ rest_m[:, 3])[:3]
+    translate = (to_obj @ now[:, 3])[:3] - pivot
+    mode, values = empty.rotation_mode, _rotation_values(empty)
+    turn = typed_turn(mode, values, rest_mode, rest_rotation)
+    scale_now, scale_rest = np.array(_scale_values(empty)), np.array(rest_scale, dtype=np.float64)
+    # The typed turn in the object's coordinates: its axis through the frame the Empty's
+    # rotation acts in (the matrix with the Empty's own rotation and scale taken off).
+    typed = None
+    if turn is not None and np.all(scale_now != 0.0):
+        axis, angle = turn
+        if axis is not None:
+            frame = to_obj[:3, :3] @ now[:3, :3] @ np.diag(1.0 / scale_now)
+            frame = frame @ _rotation(mode, values).T
+            axis = _unit(np.sign(np.linalg.det(frame)) * (frame @ axis))
+        typed = (axis, angle) if axis is not None else (None, 0.0)
+    ratio = scale_now / scale_rest if np.all(scale_rest != 0.0) else None
+    size = max(1.0, np.abs(lin).max())
+    chosen = None
+    if typed is not None and ratio is not None and np.ptp(ratio) <= 1e-6 * np.abs(ratio).max():
+        s = 1.0 if np.all(scale_now == scale_rest) else float(ratio.mean())
+        axis, angle = typed
+        r = np.eye(3) if axis is None else _axis_rotation(axis, angle)
+        if np.abs(s * r - lin).max() <= _SAME_MAP * size:
+            chosen = (axis, angle, s)
+    if chosen is None:
+        u, sv, vt = np.linalg.svd(lin)
+        if np.linalg.det(lin) <= 0.0 or np.ptp(sv) > _SAME_MAP * sv.max():
+            return {"matrix": local.tolist()}
+        s = float(sv.mean())
+        s = 1.0 if abs(s - 1.0) <= _SAME_MAP else s
+        axis, angle = _axis_angle(u @ vt)
+        # The winding nearest the typed turn (none: the matrix's own, at most 180°).
+        want = np.zeros(3) if typed is None or typed[0] is None else typed[0] * typed[1]
+        along = axis @ want
+        angle = min(
+            (a + 2 * np.pi * round((along - a) / (2 * np.pi)) for a in (angle, -angle)),
+            key=lambda a: abs(a - along),
+        )
+        if along < 0.0:
+            axis, angle = -axis, -angle
+        chosen = (axis if angle != 0.0 else None, angle, s)
+    axis, angle, s = chosen
+    pose: dict = {"pivot": pivot.tolist(), "translate": translate.tolist()}
+    if axis is not None and angle != 0.0:
+        pose["rotate"] = {"axis": axis.tolist(), "degrees": float(np.degrees(angle))}
+    if s != 1.0:
+        pose["scale"] = s
+    return pose
 
 
 def _movers(settings: RigidCellsSettings, kind: str) -> List[RigidCellsMover]:
@@ -198,13 +492,29 @@ def _movers(settings: RigidCellsSettings, kind: str) -> List[RigidCellsMover]:
 
 
 def poses(obj: bpy.types.Object) -> List[dict]:
-    """Each handle's pose, in the spec's order (the handle, then the extra ones): what Live
-    hands the session as the Empties move."""
+    """Each handle's pose (`handle_pose`), in the spec's order (the handle, then the extra
+    ones): what Deform puts in the spec and Live hands the session as the Empties move, so
+    that both give the same shape for the same typed pose."""
     settings = obj.rigidcells
-    moves = [handle_matrix(obj, settings)]
+    if settings.handle_object is None:
+        raise InputError("Rigid Cells: choose the handle Empty")
+    moves = [
+        handle_pose(
+            obj,
+            settings.handle_object,
+            settings.handle_rest,
+            settings.handle_rest_mode,
+            settings.handle_rest_rotation,
+            settings.handle_rest_scale,
+        )
+    ]
     for item in _movers(settings, "handles"):
-        moves.append(_motion(obj, item.object, item.rest).tolist())
-    return [{"matrix": m} for m in moves]
+        moves.append(
+            handle_pose(
+                obj, item.object, item.rest, item.rest_mode, item.rest_rotation, item.rest_scale
+            )
+        )
+    return moves
 
 
 def _pins(obj: bpy.types.Object, rest: np.ndarray) -> List[dict]:
@@ -310,7 +620,13 @@ class LiveState:
     """Live on one object, driven by the main thread: `tick` hands the session the handles'
     poses and the pins' places when an Empty moved and writes the newest shape into the shape
     key; `finish` ends
-    on the exact shape of the last pose; `cancel` puts the shape key back as it was."""
+    on the exact shape of the last pose; `cancel` puts the shape key back as it was.
+
+    The poses are `poses`', as Deform's spec has them, so that the same typed pose gives the
+    same shape. Each goes on warm from the last shape, which winds a turn as the Empty turns;
+    a turn that jumps by half a turn or more between two poses is taken the short way (the
+    session steps to the pose without load steps) and the release warns that the shape did
+    not turn as asked."""
 
     def __init__(self, obj: bpy.types.Object, settle: float = 0.25) -> None:
         points, triangles, spec = inputs(obj)

@@ -2,7 +2,8 @@
 unregisters cleanly, its shape key is `rigidcells.deform` of the same vertices, a soup of loose
 cubes bends with every cube carried, bad input leaves the mesh as it was, Deform runs off the
 main thread, Live follows scripted Empty moves to the converged shape and Esc restores the
-shape key, and more handles, pins and a stiffness group reach the library.
+shape key, more handles, pins and a stiffness group reach the library, and a handle turns as
+its Empty's rotation was typed, whole turns included, in every rotation mode and as keyed.
 
 Blender without a window runs no modal operators: the tests drive the pieces the modal
 operators call on each timer tick and key press (`DeformJob`, `LiveState`);
@@ -31,14 +32,15 @@ def registered():
     addon.unregister()
 
 
-def grid_bar(nx=41, ny=5, nz=5, length=10.0):
-    """A bar of vertices, `length` × 1 × 1, with faces on its outside (a closed box mesh)."""
+def grid_bar(nx=41, ny=5, nz=5, length=10.0, cuts=8):
+    """A bar of vertices, `length` × 1 × 1, with faces on its outside (a closed box mesh),
+    each face cut `cuts` times along each side."""
     bpy.ops.mesh.primitive_cube_add(size=1.0)
     obj = bpy.context.active_object
     obj.scale = (length, 1.0, 1.0)
     bpy.ops.object.transform_apply(scale=True)
     bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.subdivide(number_cuts=8)
+    bpy.ops.mesh.subdivide(number_cuts=cuts)
     bpy.ops.object.mode_set(mode="OBJECT")
     return obj
 
@@ -374,3 +376,239 @@ def test_a_scan_of_vertices_and_a_non_manifold_mesh_bend(kind):
     rise = (bent - rest)[:, 2]
     middle = np.abs(rest[:, 0]) < 0.2
     assert 0.3 < rise[middle].mean() < 1.7, rise[middle].mean()
+
+
+def turns_along(rest, bent):
+    """How far each cross-section of a bar along x turned about x from the fixed end (x = −5)
+    on, in degrees, by x: its vertices' turn about their center, unwrapped section by section
+    (neighbors turn by far less than a half turn), so that a whole turn is 360, not 0."""
+    turns, last = {}, 0.0
+    for x in np.unique(np.round(rest[:, 0], 4)):
+        on = np.abs(rest[:, 0] - x) < 1e-3
+        a = rest[on][:, 1:] - rest[on][:, 1:].mean(axis=0)
+        b = bent[on][:, 1:] - bent[on][:, 1:].mean(axis=0)
+        cross, dot = (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]).sum(), (a * b).sum()
+        degrees = math.degrees(math.atan2(cross, dot))
+        last += (degrees - last + 180.0) % 360.0 - 180.0
+        turns[float(x)] = last
+    return turns
+
+
+def twist_bar(cell_size=0.4):
+    """The 10-unit bar along x with a cross-section at its middle (x = 0), fixed at x = −5,
+    its handle the end at x = 5 with an Empty there (assigned at rest), in coarse cells: 0.4,
+    which lie alike at both ends, so that a twist turns the middle by half of it (180.0° of
+    360°; at 0.5 the ends' cells differ, and the middle turns by 170°)."""
+    obj = grid_bar(cuts=9)
+    group(obj, "fixed", lambda co: co.x < -4.4)
+    group(obj, "handle", lambda co: co.x > 4.4)
+    empty = handle_empty(obj)
+    s = obj.rigidcells
+    s.fixed_group, s.handle_group, s.cell_size = "fixed", "handle", cell_size
+    s.handle_object = empty
+    return obj, empty
+
+
+def typed(empty, degrees, mode="XYZ"):
+    """`degrees` about x typed on the Empty in rotation mode `mode`."""
+    empty.rotation_mode = mode
+    half = math.radians(degrees) / 2.0
+    if mode == "QUATERNION":
+        empty.rotation_quaternion = (math.cos(half), math.sin(half), 0.0, 0.0)
+    elif mode == "AXIS_ANGLE":
+        empty.rotation_axis_angle = (math.radians(degrees), 1.0, 0.0, 0.0)
+    else:
+        empty.rotation_euler = (math.radians(degrees), 0.0, 0.0)
+    bpy.context.view_layer.update()
+
+
+def deformed_turns(obj):
+    """Deform, and the bar's turn along x (`turns_along`)."""
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    return turns_along(vertices(obj), vertices(obj, "RigidCells"))
+
+
+def test_a_whole_turn_typed_twists_the_bar_a_whole_turn():
+    """360° typed about the bar's axis: a whole twist, the middle turned by half of it (the
+    matrix of a whole turn is the identity, which bends nothing). Live, following the Empty
+    as it turns to the same typed pose, ends on Deform's shape."""
+    obj, empty = twist_bar()
+    typed(empty, 360.0)
+    (pose,) = addon.poses(obj)
+    assert pose["rotate"]["axis"] == [1.0, 0.0, 0.0]
+    assert abs(pose["rotate"]["degrees"] - 360.0) < 1e-4, pose
+    turns = deformed_turns(obj)
+    assert abs(turns[5.0] - 360.0) < 0.01 and turns[-5.0] == 0.0, turns
+    assert abs(turns[0.0] - 180.0) < 5.0, turns
+    want = vertices(obj, "RigidCells")
+    # Live from the rest pose, the Empty turned 30° at a time up to the typed 360°.
+    obj.shape_key_clear()
+    typed(empty, 0.0)
+    state = addon.LiveState(obj)
+    for k in range(1, 13):
+        typed(empty, 30.0 * k)
+        steps = state.worker.steps
+        state.tick(obj)
+        wait_for(lambda: state.worker.steps > steps)
+        wait_for(lambda: state.tick(obj) is not None)
+    # Enter: the exact shape of the last pose. Converged from the dragged cells, not from
+    # rest by load steps, it stops at the solver's move test (a thousandth of a cell) from
+    # another start: 2.5 to 2.8 thousandths of a cell apart in runs here, so allow ten (0.004
+    # on the 10-unit bar), and the turns along the bar within a tenth of a degree.
+    state.finish()
+    wait_for(lambda: (state.tick(obj), state.worker.done)[1])
+    state.tick(obj)
+    assert state.kind == "released" and state.worker.error is None
+    live = vertices(obj, "RigidCells")
+    assert np.abs(live - want).max() < 1e-2 * obj.rigidcells.cell_size
+    live_turns = turns_along(vertices(obj), live)
+    assert max(abs(live_turns[x] - turns[x]) for x in turns) < 0.1, (live_turns, turns)
+
+
+def test_three_quarters_typed_turn_three_quarters_not_back_a_quarter():
+    """270° typed is +270° (its matrix is −90°'s): the middle turns by 135°, not −45°."""
+    obj, empty = twist_bar()
+    typed(empty, 270.0)
+    turns = deformed_turns(obj)
+    assert abs(turns[5.0] - 270.0) < 0.01, turns
+    assert abs(turns[0.0] - 135.0) < 5.0, turns
+
+
+@pytest.mark.parametrize("mode", ["ZYX", "AXIS_ANGLE", "QUATERNION"])
+def test_every_rotation_mode_gives_the_typed_turn(mode):
+    """270° about x typed in another Euler order, as an axis-angle or as a quaternion (which
+    holds turns up to 720°) is the same pose as in XYZ, and turns the bar alike."""
+    obj, empty = twist_bar()
+    typed(empty, 270.0)
+    (want,) = addon.poses(obj)
+    typed(empty, 0.0, mode)
+    typed(empty, 270.0, mode)
+    (pose,) = addon.poses(obj)
+    assert pose.keys() == want.keys()
+    assert np.allclose(pose["rotate"]["axis"], want["rotate"]["axis"], atol=1e-9), pose
+    assert abs(pose["rotate"]["degrees"] - want["rotate"]["degrees"]) < 1e-4, pose
+    turns = deformed_turns(obj)
+    assert abs(turns[5.0] - 270.0) < 0.01 and abs(turns[0.0] - 135.0) < 5.0, turns
+
+
+def test_an_animated_empty_turns_as_keyed():
+    """Keys of 0° and 360° about x: the value between is the F-curve's, unwrapped (180° half
+    way, a half turn, not none), and at the last key the bar twists a whole turn."""
+    obj, empty = twist_bar()
+    scene = bpy.context.scene
+    for frame, degrees in ((1, 0.0), (11, 360.0)):
+        empty.rotation_euler = (math.radians(degrees), 0.0, 0.0)
+        empty.keyframe_insert("rotation_euler", index=0, frame=frame)
+    for frame, degrees in ((6, 180.0), (11, 360.0)):
+        scene.frame_set(frame)
+        (pose,) = addon.poses(obj)
+        assert abs(pose["rotate"]["degrees"] - degrees) < 1e-3, (frame, pose)
+        assert np.allclose(pose["rotate"]["axis"], [1.0, 0.0, 0.0], atol=1e-9), pose
+    turns = deformed_turns(obj)
+    assert abs(turns[5.0] - 360.0) < 0.01 and abs(turns[0.0] - 180.0) < 5.0, turns
+
+
+def test_a_half_turn_about_an_empty_beside_the_bar_bends_it_into_a_u():
+    """The bar from x = 0 to 10 (the object moved there), fixed at x < 1, its handle the end
+    at x > 9 with an Empty beside its middle, at (5, 2, 0), turned 180° about z: the handle
+    end comes back to x ≈ 0 at y ≈ 4, turning about the Empty the way it was typed, and the
+    bar's middle bulges out at x ≈ 4 between the two legs."""
+    obj = grid_bar()
+    obj.location = (5.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    group(obj, "fixed", lambda co: co.x < -4.0)
+    group(obj, "handle", lambda co: co.x > 4.0)
+    empty = handle_empty(obj, at=(5.0, 2.0, 0.0))
+    s = obj.rigidcells
+    s.fixed_group, s.handle_group, s.cell_size = "fixed", "handle", 0.5
+    s.handle_object = empty
+    empty.rotation_euler = (0.0, 0.0, math.radians(180.0))
+    bpy.context.view_layer.update()
+    (pose,) = addon.poses(obj)
+    # The pivot is the Empty's rest origin in the object's coordinates.
+    assert np.allclose(pose["pivot"], [0.0, 2.0, 0.0]) and pose["rotate"]["axis"] == [0.0, 0.0, 1.0]
+    start = time.monotonic()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    seconds = time.monotonic() - start
+    rest, bent = vertices(obj) + [5.0, 0.0, 0.0], vertices(obj, "RigidCells") + [5.0, 0.0, 0.0]
+    end = rest[:, 0] > 9.0
+    assert np.abs(bent[end] - (rest[end] * [-1.0, -1.0, 1.0] + [10.0, 4.0, 0.0])).max() < 1e-5
+    assert np.all(bent[end][:, 0] < 1.0) and np.all(np.abs(bent[end][:, 1] - 4.0) < 0.6)
+    middle = bent[np.abs(rest[:, 0] - 5.0) < 0.6].mean(axis=0)
+    assert 3.0 < middle[0] < 4.5 and abs(middle[1] - 2.0) < 0.5, middle
+    assert obj.rigidcells.foldovers == 0 and seconds < 30.0, seconds
+
+
+def pose_map(pose):
+    """The affine map (4 × 4) a handle dict of the spec gives."""
+    if "matrix" in pose:
+        return np.array(pose["matrix"])
+    axis, degrees = pose.get("rotate", {}).get("axis", [1.0, 0.0, 0.0]), 0.0
+    if "rotate" in pose:
+        degrees = pose["rotate"]["degrees"]
+    linear = pose.get("scale", 1.0) * addon._axis_rotation(np.array(axis), math.radians(degrees))
+    pivot = np.array(pose["pivot"])
+    m = np.eye(4)
+    m[:3, :3] = linear
+    m[:3, 3] = pivot - linear @ pivot + pose["translate"]
+    return m
+
+
+def test_the_turn_reaches_the_objects_coordinates_through_parents_and_scales():
+    """The mesh object turned, moved and scaled, the Empty under a turned and scaled parent
+    and scaled unevenly itself: the typed 270° about the Empty's own x arrives as 270° about
+    that axis in the object's coordinates, the same map as the Empty's matrices. Its scale
+    changed alike on three axes is the pose's `scale`; changed unevenly, the pose is the
+    matrix; a parent turned since the rest turns the handle as the matrices do, with the
+    winding nearest the typed one."""
+    obj, empty = twist_bar()
+    obj.location, obj.rotation_euler, obj.scale = (1.0, 2.0, 3.0), (0.3, 0.2, 1.1), (2.0,) * 3
+    bpy.ops.object.empty_add(location=(-1.0, 0.5, 2.0), rotation=(0.4, -0.7, 0.2))
+    parent = bpy.context.active_object
+    parent.scale = (1.5,) * 3
+    bpy.context.view_layer.update()
+    empty.parent = parent
+    empty.rotation_mode = "XZY"
+    empty.location, empty.rotation_euler = (0.5, 1.0, 0.0), (0.1, 0.6, -0.4)
+    empty.scale = (1.0, 3.0, 0.5)
+    bpy.context.view_layer.update()
+    obj.rigidcells.handle_object = empty  # the rest, under its parent
+    rest = np.array(empty.matrix_world)
+    local_x = rest[:3, 0] / np.linalg.norm(rest[:3, 0])  # the Empty's own x, in the world
+
+    def pose_now():
+        bpy.context.view_layer.update()
+        (pose,) = addon.poses(obj)
+        motion = addon._motion(obj, empty, obj.rigidcells.handle_rest)
+        assert np.abs(pose_map(pose) - motion).max() < 1e-5, (pose, motion)
+        return pose
+
+    # In XZY, x turns first (Ry·Rz·Rx): its axis is the Empty's own x, wherever z and y turn
+    # it.
+    empty.rotation_euler = (0.1 + math.radians(270.0), 0.6, -0.4)
+    pose = pose_now()
+    assert abs(pose["rotate"]["degrees"] - 270.0) < 1e-3 and "scale" not in pose, pose
+    world = np.array(obj.matrix_world)[:3, :3] @ pose["rotate"]["axis"]
+    assert np.abs(world / np.linalg.norm(world) - local_x).max() < 1e-6, world
+    empty.scale = (2.0, 6.0, 1.0)
+    pose = pose_now()
+    assert abs(pose["scale"] - 2.0) < 1e-9 and abs(pose["rotate"]["degrees"] - 270.0) < 1e-3, pose
+    empty.scale = (2.0, 3.0, 1.0)
+    assert "matrix" in pose_now()
+    empty.scale = (1.0, 3.0, 0.5)
+    # The parent turned a little since the rest: the map is the matrices', its turn the
+    # winding nearest the typed one.
+    parent.rotation_euler = (0.4, -0.7, 0.3)
+    pose = pose_now()
+    assert 260.0 < pose["rotate"]["degrees"] < 280.0, pose
+    parent.rotation_euler = (0.4, -0.7, 0.2)
+    # A quaternion's whole turn names no axis: refused, not taken as none.
+    empty.rotation_mode = "QUATERNION"
+    empty.rotation_quaternion = (-1.0, 0.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    obj.rigidcells.handle_object = None
+    obj.rigidcells.handle_object = empty
+    empty.rotation_quaternion = (1.0, 0.0, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    with pytest.raises(addon.InputError, match="names no axis"):
+        addon.poses(obj)
