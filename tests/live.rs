@@ -328,3 +328,43 @@ fn las_classes_select_in_a_live_session_as_in_deform() {
     let message = short.err().unwrap().to_string();
     assert!(message.contains("LAS classes for"), "{message}");
 }
+
+/// A pose that turns a handle by more than a load step from the last one is solved from rest in
+/// load steps, with its winding: a twist typed at 360° straight from rest turns the bar a whole
+/// turn, as `deform` does, where a warm step would have taken the identity the short way.
+#[test]
+fn a_pose_a_whole_turn_from_the_last_keeps_its_winding() {
+    let (points, triangles) = bar();
+    let params = params();
+    let twist = |degrees: f64| {
+        let text = format!(
+            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [2.0, 1.1, 1.1] }}\n\
+             [[handle]]\nbox = {{ min = [8.0, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
+             rotate = {{ axis = [1.0, 0.0, 0.0], degrees = {degrees:?} }}\npivot = [9.0, 0.5, 0.5]\n"
+        );
+        parse_spec::<3>(&text, Path::new("."), Path::new("live.toml")).unwrap()
+    };
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+    live.solve(twist(0.0), 1, &Silent).unwrap().unwrap();
+    let step = live.solve(twist(360.0), 1, &Silent).unwrap().unwrap();
+    assert!(step.from_rest, "a whole turn from the last pose was stepped warm");
+    while live.refine().unwrap().is_some() {}
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+    let (expected, _, _) =
+        pipeline::deform(&points, &triangles, &twist(360.0), &params, &Silent).unwrap();
+    let off = farthest(&moved, &expected);
+    assert!(off < 1e-3, "the release is {off} from deform's whole turn");
+    // The middle turned half a turn: its corners went to the opposite ones.
+    let corner = points
+        .iter()
+        .position(|p| p.x == 5.0 && p.y == 0.0 && p.z == 0.0)
+        .unwrap();
+    let q = moved[corner];
+    assert!(
+        (q.y - 1.0).abs() < 0.15 && (q.z - 1.0).abs() < 0.15,
+        "the middle's corner went to {q:?}"
+    );
+    // Small steps on from there stay warm.
+    let on = live.solve(twist(370.0), 1, &Silent).unwrap().unwrap();
+    assert!(!on.from_rest);
+}

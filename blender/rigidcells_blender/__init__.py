@@ -624,9 +624,8 @@ class LiveState:
 
     The poses are `poses`', as Deform's spec has them, so that the same typed pose gives the
     same shape. Each goes on warm from the last shape, which winds a turn as the Empty turns;
-    a turn that jumps by half a turn or more between two poses is taken the short way (the
-    session steps to the pose without load steps) and the release warns that the shape did
-    not turn as asked."""
+    a pose that turns a handle by more than a load step from the last one is solved from rest
+    by the session, in load steps, with its winding."""
 
     def __init__(self, obj: bpy.types.Object, settle: float = 0.25) -> None:
         points, triangles, spec = inputs(obj)

@@ -24,7 +24,7 @@ use crate::error::Error;
 use crate::error::Result;
 use crate::field::{Blend, Field, Prescribed, Weights};
 use crate::progress::{Observer, Silent};
-use crate::rigid::{Motion, Vect};
+use crate::rigid::{Dim, Motion, Rigid, Vect};
 use crate::solve::{Session, Solution, SolverInfo};
 use crate::spec::EditSpec;
 use crate::spec::HandleMotion;
@@ -190,7 +190,9 @@ impl Live {
             .collect();
         let warm = match (&mut self.session, &self.spec, pivots) {
             (Some(session), Some(last), Some(pivots))
-                if same_but_poses(last, &spec) && still_tied(&spec) =>
+                if same_but_poses(last, &spec)
+                    && still_tied(&spec)
+                    && !turns_past_a_step(last, &spec, self.params.solve.max_step_degrees) =>
             {
                 let mut constraints = session.constraints().clone();
                 for ((handle, entry), pivot) in constraints
@@ -484,6 +486,23 @@ impl Live {
 /// Whether `b` is `a` with only its handles' poses and its pins' destinations changed: the
 /// same regions, pinned points, targets and stiffness, so that the resolved constraints hold
 /// with new handle maps and pin destinations.
+/// Whether a handle of `b` turns from its pose in `a` by more than `step` degrees: a warm
+/// step from there would take the short way round (a pose typed at 360° from rest is the
+/// identity to a rotation matrix), so the pose is solved from rest in load steps, with its
+/// winding.
+fn turns_past_a_step(a: &EditSpec<3>, b: &EditSpec<3>, step: f64) -> bool {
+    a.handles.iter().zip(&b.handles).any(|(h, k)| {
+        let ((axis_a, angle_a), (axis_b, angle_b)) = (h.value.turn, k.value.turn);
+        let apart = if axis_a.dot(&axis_b) >= 1.0 - 1e-9 {
+            (angle_b - angle_a).abs()
+        } else {
+            <Dim<3> as Rigid<3>>::angle(&(k.value.rotation * h.value.rotation.transpose()))
+                .max((angle_b.abs() - angle_a.abs()).abs())
+        };
+        apart.to_degrees() > step
+    })
+}
+
 fn same_but_poses(a: &EditSpec<3>, b: &EditSpec<3>) -> bool {
     a.fixed == b.fixed
         && a.pins.len() == b.pins.len()
