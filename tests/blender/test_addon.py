@@ -465,6 +465,33 @@ def test_a_whole_turn_typed_twists_the_bar_a_whole_turn():
     assert max(abs(live_turns[x] - turns[x]) for x in turns) < 0.1, (live_turns, turns)
 
 
+def test_live_winds_a_whole_turn_typed_at_once():
+    """360° typed into the Empty at once while Live runs: the session solves that pose from
+    rest in load steps, and Enter ends on Deform's whole twist (a warm step would have taken the
+    identity the short way)."""
+    obj, empty = twist_bar()
+    typed(empty, 360.0)
+    turns = deformed_turns(obj)
+    want = vertices(obj, "RigidCells")
+    obj.shape_key_clear()
+    typed(empty, 0.0)
+    state = addon.LiveState(obj)
+    typed(empty, 360.0)
+    steps = state.worker.steps
+    state.tick(obj)
+    wait_for(lambda: state.worker.steps > steps)
+    wait_for(lambda: state.tick(obj) is not None)
+    state.finish()
+    wait_for(lambda: (state.tick(obj), state.worker.done)[1])
+    state.tick(obj)
+    assert state.kind == "released" and state.worker.error is None
+    live = vertices(obj, "RigidCells")
+    live_turns = turns_along(vertices(obj), live)
+    assert abs(live_turns[0.0] - 180.0) < 5.0, live_turns
+    assert np.abs(live - want).max() < 1e-2 * obj.rigidcells.cell_size
+    assert max(abs(live_turns[x] - turns[x]) for x in turns) < 0.1, (live_turns, turns)
+
+
 def test_three_quarters_typed_turn_three_quarters_not_back_a_quarter():
     """270° typed is +270° (its matrix is −90°'s): the middle turns by 135°, not −45°."""
     obj, empty = twist_bar()
