@@ -101,12 +101,21 @@ impl<const D: usize> Prescribed<D> {
         }
     }
 
-    /// Gives cell `c` the map `map`, sharing the index of an equal map.
+    /// Gives cell `c` the map `map`, sharing the index of an equal map: equal to a billionth of
+    /// its linear part's entries and of its translation. Parts carried along by one carrier
+    /// have the same motion, solved to rounding; sharing one index makes them one region, whose
+    /// band blends them as one whatever the last bits (and so whatever the order of the input's
+    /// records).
     pub fn set(&mut self, c: usize, n: usize, map: Affine<D>) {
         if self.cells.is_empty() {
             self.cells = vec![FREE; n];
         }
-        let k = match self.maps.iter().position(|m| *m == map) {
+        let near = |m: &Affine<D>| {
+            (m.linear - map.linear).amax() <= 1e-9
+                && (m.translation - map.translation).amax()
+                    <= 1e-9 * (1.0 + map.translation.amax())
+        };
+        let k = match self.maps.iter().position(near) {
             Some(k) => k,
             None => {
                 self.maps.push(map);
