@@ -159,11 +159,9 @@ fn fixed_and_handle_samples_are_exact_on_copc() {
     );
 }
 
-/// The map is continuous across a fixed region's border and a handle's: along lines through
-/// both, no small step moves the image much more than the step (the RBF is smooth; the blend
-/// has steps of its own at the corners of its cells, which the exact regions do not add to).
-#[test]
-fn exact_regions_blend_smoothly_into_the_field() {
+/// The field of a 10 × 1 × 1 bar solved at cells of `cell`, its end x < 2.5 fixed and its end
+/// x > 7.5 a handle moved by `motion` (the handle's lines of a spec).
+fn solved_bar(motion: &str, cell: f64) -> Field<3> {
     let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
     let points: Vec<Vect<3>> = bar
         .vertices
@@ -171,22 +169,34 @@ fn exact_regions_blend_smoothly_into_the_field() {
         .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
         .collect();
     let spec = parse_spec::<3>(
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [2.5, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [7.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-         translate = [0.0, 0.0, 3.0]\nrotate = { axis = [0.0, 1.0, 0.0], degrees = -20.0 }\n",
+        &format!(
+            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [2.5, 1.1, 1.1] }}\n\
+             [[handle]]\nbox = {{ min = [7.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n{motion}"
+        ),
         Path::new("."),
         Path::new("edit.toml"),
     )
     .unwrap();
     let params = Options {
-        cell_size: Some(0.25),
+        cell_size: Some(cell),
         ..Default::default()
     }
     .params()
     .unwrap();
     let (_, solution, _) =
         pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
-    let field = Field::from_solution(&solution);
+    Field::from_solution(&solution)
+}
+
+/// The map is continuous across a fixed region's border and a handle's: along lines through
+/// both, no small step moves the image much more than the step (the RBF is smooth; the blend
+/// has steps of its own at the corners of its cells, which the exact regions do not add to).
+#[test]
+fn exact_regions_blend_smoothly_into_the_field() {
+    let field = solved_bar(
+        "translate = [0.0, 0.0, 3.0]\nrotate = { axis = [0.0, 1.0, 0.0], degrees = -20.0 }\n",
+        0.25,
+    );
     for transfer in [Transfer::Rbf, Transfer::Pu, Transfer::Blend] {
         let map = Constrained::new(
             &field,
@@ -230,30 +240,11 @@ fn exact_regions_blend_smoothly_into_the_field() {
 /// turned 0° there and 2.7 times the field's rate just beyond.
 #[test]
 fn the_border_takes_a_twist_up_without_a_collar() {
-    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
-    let points: Vec<Vect<3>> = bar
-        .vertices
-        .iter()
-        .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
-        .collect();
-    let spec = parse_spec::<3>(
-        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [2.5, 1.1, 1.1] }\n\
-         [[handle]]\nbox = { min = [7.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
-         rotate = { axis = [1.0, 0.0, 0.0], degrees = 60.0 }\npivot = [8.75, 0.5, 0.5]\n",
-        Path::new("."),
-        Path::new("edit.toml"),
-    )
-    .unwrap();
     let cell = 0.25;
-    let params = Options {
-        cell_size: Some(cell),
-        ..Default::default()
-    }
-    .params()
-    .unwrap();
-    let (_, solution, _) =
-        pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
-    let field = Field::from_solution(&solution);
+    let field = solved_bar(
+        "rotate = { axis = [1.0, 0.0, 0.0], degrees = 60.0 }\npivot = [8.75, 0.5, 0.5]\n",
+        cell,
+    );
     for transfer in [Transfer::Pu, Transfer::Rbf, Transfer::Blend] {
         let map = Constrained::new(
             &field,
