@@ -7,8 +7,11 @@
 //! full load from its parents' motions ([`prolong`]): a fine cell takes the rigid motion of
 //! the coarse cell holding it. The coarse stages stop at a looser tolerance
 //! ([`COARSE_TOLERANCE`]): their minimum is not the fine one, they only have to bring the
-//! motions near it. A twist that a coarse stage gives way to (a part a coarse cell or two
-//! thick untwists sooner) is solved from rest on the cells themselves.
+//! motions near it.
+//!
+//! A turn that a coarse stage gives way to (a part a coarse cell or two thick untwists sooner)
+//! is solved from rest on the cells themselves, except a half turn still to be tried the other
+//! way round, whose coarse refusal is final.
 //!
 //! The first iteration on the fine cells still moves corners by about half a cell on the
 //! vegetation scans of BENCHMARKS.md: the fine minimum holds detail the parents could not.
@@ -73,9 +76,11 @@ pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
 /// The solve of `complex` coarse to fine over `levels` coarse stages: the coarsest
 /// ([`coarsen`] by `levels`) from rest through the load steps, each finer one (by one level
 /// fewer, down to `complex` itself) from the last one's motions at full load. `None` where no
-/// coarsening merges a cell, or where a coarse stage gives way to a twist
-/// ([`Error::TurnNotHeld`]): the caller then solves from rest. The returned [`SolverInfo`] holds
-/// every stage's iterations (the load steps are the coarsest's).
+/// coarsening merges a cell, or where a coarse stage gives way to a turn
+/// ([`Error::TurnNotHeld`]): the caller then solves from rest. For a handle marked in
+/// `either_way` (a half turn still to be tried the other way round), the coarse stage's
+/// refusal is the error. The returned
+/// [`SolverInfo`] holds every stage's iterations (the load steps are the coarsest's).
 #[allow(clippy::type_complexity)]
 pub(super) fn coarse_to_fine<const D: usize>(
     complex: &CellComplex<D>,
@@ -84,6 +89,7 @@ pub(super) fn coarse_to_fine<const D: usize>(
     params: &SolveParams,
     budget: Budget,
     observer: &dyn Observer,
+    either_way: &[bool],
 ) -> Result<Option<(System<D>, Vec<Motion<D>>, SolverInfo)>>
 where
     Dim<D>: Rigid<D>,
@@ -107,7 +113,7 @@ where
         }
         let at = (&parents, &on_parents);
         let done = match solved.take() {
-            None => from_rest(at.0, at.1, &stage_params, budget, observer)
+            None => from_rest(at.0, at.1, &stage_params, budget, observer, &[])
                 .map(|(_, motions, info)| (motions, info)),
             Some((coarse, motions, mut info)) => {
                 let coarse = (&coarse, motions.as_slice());
@@ -117,9 +123,12 @@ where
         };
         match done {
             Ok((motions, info)) => solved = Some((parents, motions, info)),
+            Err(Error::TurnNotHeld(r)) if either_way.get(r.handle) == Some(&true) => {
+                return Err(Error::TurnNotHeld(r));
+            }
             // Coarse cells give way to a twist sooner (a part a cell or two thick): the cells
             // themselves are solved from rest, and say for themselves whether they hold it.
-            Err(Error::TurnNotHeld { .. }) => return Ok(None),
+            Err(Error::TurnNotHeld(_)) => return Ok(None),
             Err(e) => return Err(e),
         }
     }
