@@ -5,11 +5,13 @@
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use common::{arg as s, deform};
+use rigidcells::Error;
 use rigidcells::io::Document;
 use rigidcells::pipeline::{self, Options};
-use rigidcells::progress::Silent;
+use rigidcells::progress::{Observer, Silent};
 use rigidcells::rigid::Vect;
 use rigidcells::solve::TurnKind;
 use rigidcells::spec::parse_spec;
@@ -270,4 +272,76 @@ fn a_bar_bends_into_a_u_by_a_half_turn_written_either_way() {
         let y = middle.iter().map(|q| q.y).sum::<f64>() / middle.len() as f64;
         assert!(y > 1.0 && y < 3.0, "{motion}: the middle at y = {y}");
     }
+}
+
+/// Counts what a solve spends: the runs of load steps from rest (`solving` stages, one for
+/// each complex solved from rest), those that check a refusal on coarser cells, and the
+/// Gauss-Newton iterations.
+#[derive(Default)]
+struct Spent(Mutex<(usize, usize, usize)>);
+
+impl Observer for Spent {
+    fn stage(&self, name: &str, _len: u64) {
+        let mut spent = self.0.lock().unwrap();
+        match name {
+            "solving" => spent.0 += 1,
+            n if n.starts_with("checking where the shape gives way") => spent.1 += 1,
+            _ => {}
+        }
+    }
+    fn message(&self, text: &str) {
+        if text.starts_with("iteration ") {
+            self.0.lock().unwrap().2 += 1;
+        }
+    }
+}
+
+/// A bar twice as long as it is thick twisted by a whole turn gives way on its coarse cells
+/// past 200° or so, on cells coarser still near there too, and on the cells themselves as well
+/// (`solve/coarse.rs`): the run is refused from the coarse cells' load steps, checked on the
+/// coarser ones, never solving the cells themselves from rest, in the words of a twist, the
+/// angle as typed and the spec's line.
+#[test]
+fn a_whole_turn_of_a_short_bar_is_refused_from_its_coarse_cells() {
+    let (points, triangles) = bar([2.0, 1.0, 1.0]);
+    let text = "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.2, 1.1, 1.1] }\n\
+                [[handle]]\nbox = { min = [1.8, -0.1, -0.1], max = [2.1, 1.1, 1.1] }\n\
+                rotate = { axis = [1, 0, 0], degrees = 360 }\n";
+    let spec = parse_spec::<3>(text, ".".as_ref(), "twist.toml".as_ref()).unwrap();
+    let params = Options {
+        cell_size: Some(0.2),
+        coarse_levels: Some(1),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let spent = Spent::default();
+    let e = pipeline::deform(&points, &triangles, &spec, &params, &spent).unwrap_err();
+    let (runs, checks, iterations) = *spent.0.lock().unwrap();
+    let Error::TurnNotHeld(refusal) = &e else {
+        panic!("{e}");
+    };
+    assert_eq!(
+        (refusal.handle, refusal.line, refusal.kind),
+        (0, 3, TurnKind::Twist)
+    );
+    assert_eq!(refusal.asked_degrees, 360.0);
+    assert!(
+        refusal.held_degrees > 150.0 && refusal.held_degrees < 300.0,
+        "{e}"
+    );
+    assert_eq!(runs, 1, "the cells themselves were solved from rest: {e}");
+    assert_eq!(
+        checks, 1,
+        "the refusal was not checked on coarser cells: {e}"
+    );
+    assert!(iterations < 90, "{iterations} iterations");
+    let text = e.to_string();
+    assert!(
+        text.starts_with("the handle on line 3 of the edit spec twists by 360°, but")
+            && text.contains(&format!("gives way past {}°", refusal.held_degrees))
+            && text.contains("twist a longer span")
+            && !text.contains("bend"),
+        "{text}"
+    );
 }

@@ -19,7 +19,9 @@
 //! not planar too); a step that leaves that turn a quarter turn off the handle's, or ends a
 //! cell a quarter turn from its prediction, is taken again in halves, down to a sixteenth of a
 //! step (about 2°). A turn that still gives way there is refused ([`Error::TurnNotHeld`], exit
-//! 4) rather than returned untwisted.
+//! 4) rather than returned untwisted; a large complex's coarse cells refuse it before the
+//! cells themselves are solved where the turn asked is far past what they held (the `coarse`
+//! module).
 //!
 //! **Half turns.** A bend by a half turn has two answers too: the part bent one way round or
 //! the other, both reaching the handle's pose. Written as `rotate`, the sign says which; a
