@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+use crate::solve::turns::TurnRefusal;
+
 /// Everything that can go wrong in rigidcells.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -121,25 +123,11 @@ pub enum Error {
         /// That sample (input coordinates), as text.
         at: String,
     },
-    /// A handle's turn that the cells give way under: past `held_degrees`, the shape between
-    /// the handle and the fixed cells untwists the short way round at every load step the
-    /// solver tries.
-    #[error(
-        "the handle on line {line} of the edit spec turns by {asked_degrees}°, but the shape \
-         between it and the fixed cells gives way past {held_degrees:.0}° and untwists the \
-         short way round: rigid cells glued face to face hold a twist only so far over a span \
-         this short for its width, and smaller or larger cells do not change that. Turn it by \
-         at most {held_degrees:.0}°, twist a longer span (fixed and handle regions farther \
-         apart), or turn in several runs, each deforming the last output"
-    )]
-    TurnNotHeld {
-        /// The handle's line in the spec.
-        line: usize,
-        /// The turn asked, in degrees.
-        asked_degrees: f64,
-        /// The largest turn the load path held, in degrees.
-        held_degrees: f64,
-    },
+    /// A handle's turn that the cells give way under ([`TurnRefusal`]): its message names the
+    /// handle by its line in the edit spec, as the command line does; another face names it
+    /// its own way before [`TurnRefusal::said`].
+    #[error("{0}")]
+    TurnNotHeld(TurnRefusal),
     /// A numerical failure that damping could not repair.
     #[error("solver failure: {0}")]
     Solver(String),
@@ -170,7 +158,7 @@ impl Error {
             | Error::GridTooLarge { .. }
             | Error::Memory { .. }
             | Error::Outside { .. }
-            | Error::TurnNotHeld { .. } => 4,
+            | Error::TurnNotHeld(_) => 4,
             _ => 1,
         }
     }

@@ -55,6 +55,21 @@ pub fn figure(v: f64) -> String {
     }
 }
 
+/// An angle in degrees as people write it, with its sign: to a thousandth of a degree at
+/// most, without trailing zeros (180.00000000000003 → `180°`, 22.25 → `22.25°`, −90 → `-90°`).
+/// Round an angle measured more coarsely before (a matrix's turn to 0.1°, a held turn to 1°).
+pub fn degrees(v: f64) -> String {
+    let text = format!("{v:.3}");
+    let text = match text.contains('.') {
+        true => text.trim_end_matches('0').trim_end_matches('.'),
+        false => &text,
+    };
+    match text {
+        "-0" => "0°".into(),
+        t => format!("{t}°"),
+    }
+}
+
 /// A count with its thousands grouped as people write it: 1255256001 → `1,255,256,001`.
 pub fn count(n: u64) -> String {
     let digits = n.to_string();
@@ -98,6 +113,16 @@ mod tests {
         assert_eq!(length(2.0, 2.0), "2");
         assert_eq!(to_step(484639.54500000016, 0.001), "484639.545");
         assert_eq!(point(&[1.23456, -2.0], 0.01), "(1.23, -2.00)");
+    }
+
+    #[test]
+    fn angles_read_as_typed() {
+        assert_eq!(degrees(180.0f64.to_radians().to_degrees()), "180°");
+        assert_eq!(degrees(179.9999950954438), "180°");
+        assert_eq!(degrees(22.25), "22.25°");
+        assert_eq!(degrees(-90.0), "-90°");
+        assert_eq!(degrees(-0.0001), "0°");
+        assert_eq!(degrees(720.0), "720°");
     }
 
     #[test]

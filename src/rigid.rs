@@ -13,7 +13,7 @@
 //! - the rotation nearest to a general linear map (polar decomposition; SVD in 3D, closed form
 //!   in 2D), used for handles with scale or a general affine matrix.
 
-use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, Vector3};
+use nalgebra::{Matrix2, Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// A point or vector in `D` dimensions (f64).
 pub type Vect<const D: usize> = SVector<f64, D>;
@@ -56,7 +56,17 @@ pub trait Rigid<const D: usize>: Send + Sync + 'static {
     fn determinant(m: &Mat<D>) -> f64;
 
     /// An axis and a signed angle with `axis_angle(axis, angle) == r` (2D: the axis is unused).
+    /// In 3D the angle is in `[0, π]`; past a quarter turn the axis comes from the symmetric
+    /// part of `r`, which rounding does not blur as it blurs the antisymmetric part near a half
+    /// turn (there `2 sin θ` is of the order of the matrix's rounding), and the antisymmetric
+    /// part only gives its sign. At a half turn the sign is a free choice.
     fn axis_angle_of(r: &Mat<D>) -> (Vect<D>, f64);
+
+    /// `r` as a unit quaternion, either sign (2D: a turn about z).
+    fn quaternion(r: &Mat<D>) -> UnitQuaternion<f64>;
+
+    /// `axis` as a unit vector in 3D (2D: z, the axis of every turn). Zero for a zero axis.
+    fn axis_3d(axis: &Vect<D>) -> Vector3<f64>;
 
     /// The signed angle in (−π, π] by which `r` turns about `axis`: the twist of its
     /// swing-twist decomposition (2D: the rotation's angle; the axis is unused).
@@ -105,6 +115,14 @@ impl Rigid<2> for Dim<2> {
 
     fn twist(r: &Mat<2>, _axis: &Vect<2>) -> f64 {
         r[(1, 0)].atan2(r[(0, 0)])
+    }
+
+    fn quaternion(r: &Mat<2>) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_axis_angle(&Vector3::z_axis(), r[(1, 0)].atan2(r[(0, 0)]))
+    }
+
+    fn axis_3d(_axis: &Vect<2>) -> Vector3<f64> {
+        Vector3::z()
     }
 }
 
@@ -170,11 +188,26 @@ impl Rigid<3> for Dim<3> {
     }
 
     fn axis_angle_of(r: &Mat<3>) -> (Vect<3>, f64) {
-        let rot = nalgebra::Rotation3::from_matrix_unchecked(*r);
-        match rot.axis_angle() {
-            Some((axis, angle)) => (axis.into_inner(), angle),
-            None => (Vector3::x(), 0.0),
+        // r − rᵀ = 2 sin θ [n]×, and r + rᵀ − (tr r − 1) I = 2 (1 − cos θ) n nᵀ.
+        let w = Vector3::new(
+            r[(2, 1)] - r[(1, 2)],
+            r[(0, 2)] - r[(2, 0)],
+            r[(1, 0)] - r[(0, 1)],
+        );
+        let (sin2, cos2) = (w.norm(), r.trace() - 1.0);
+        let angle = sin2.atan2(cos2);
+        if angle == 0.0 || !angle.is_finite() {
+            return (Vector3::x(), 0.0);
         }
+        if cos2 >= 0.0 {
+            return (w / sin2, angle);
+        }
+        let b = r + r.transpose() - Matrix3::identity() * cos2;
+        let k = (0..3)
+            .max_by(|&i, &j| b[(i, i)].total_cmp(&b[(j, j)]))
+            .unwrap_or(0);
+        let n = b.column(k).normalize();
+        (if n.dot(&w) < 0.0 { -n } else { n }, angle)
     }
 
     fn twist(r: &Mat<3>, axis: &Vect<3>) -> f64 {
@@ -182,9 +215,7 @@ impl Rigid<3> for Dim<3> {
         if n == 0.0 {
             return 0.0;
         }
-        let q = nalgebra::UnitQuaternion::from_rotation_matrix(
-            &nalgebra::Rotation3::from_matrix_unchecked(*r),
-        );
+        let q = Self::quaternion(r);
         let along = q.i * axis.x + q.j * axis.y + q.k * axis.z;
         // The quaternion's sign is free: ±q give angles 2π apart, the same after wrapping.
         let t = 2.0 * (along / n).atan2(q.w);
@@ -195,6 +226,14 @@ impl Rigid<3> for Dim<3> {
         } else {
             t
         }
+    }
+
+    fn quaternion(r: &Mat<3>) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(*r))
+    }
+
+    fn axis_3d(axis: &Vect<3>) -> Vector3<f64> {
+        axis.try_normalize(0.0).unwrap_or_else(Vector3::zeros)
     }
 }
 
@@ -318,6 +357,32 @@ mod tests {
         assert!((<Dim<3> as Rigid<3>>::twist(&r, &axis).to_degrees() + 90.0).abs() < 1e-9);
         let r2 = rotation_2d(2.0);
         assert!((<Dim<2> as Rigid<2>>::twist(&r2, &Vect::<2>::zeros()) - 2.0).abs() < 1e-12);
+    }
+
+    /// Near a half turn the axis comes from the symmetric part: an exact half turn keeps its
+    /// angle, and one rounded to single precision (as Blender's matrices are) keeps its axis.
+    #[test]
+    fn axis_and_angle_survive_a_half_turn() {
+        let of = <Dim<3> as Rigid<3>>::axis_angle_of;
+        let at = <Dim<3> as Rigid<3>>::axis_angle;
+        for axis in [
+            Vector3::z(),
+            Vector3::new(1.0, 2.0, -0.5).normalize(),
+            Vector3::new(-0.3, 0.1, 0.9).normalize(),
+        ] {
+            for degrees in [0.5, 30.0, 89.0, 91.0, 150.0, 179.0, 179.999, 180.0] {
+                let r = at(&axis, f64::to_radians(degrees));
+                let (a, angle) = of(&r);
+                assert!((at(&a, angle) - r).norm() < 1e-12, "{degrees}");
+                assert!((angle.to_degrees() - degrees).abs() < 1e-9, "{degrees}");
+                assert!(a.dot(&axis).abs() > 1.0 - 1e-9, "{degrees}: {a}");
+                // Rounded to single precision: the axis stays, the angle within its rounding.
+                let single = r.map(|v| v as f32 as f64);
+                let (a, angle) = of(&<Dim<3> as Rigid<3>>::nearest_rotation(&single));
+                assert!(a.dot(&axis).abs() > 1.0 - 1e-6, "{degrees}: {a}");
+                assert!((angle.to_degrees() - degrees).abs() < 1e-4, "{degrees}");
+            }
+        }
     }
 
     #[test]

@@ -1,13 +1,19 @@
-//! Whole turns of bulky parts: a part turns by the angle written or the run refuses, the report
-//! carries the turn asked and the turn taken, and the spec bounds the turn.
+//! Whole turns of bulky parts and half turns of long ones: a part turns by the angle written
+//! or the run refuses, soon and in the user's words; the report carries the turn asked and the
+//! turn taken, and the spec bounds the turn.
 
 mod common;
 
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use common::{arg as s, deform};
+use rigidcells::Error;
 use rigidcells::io::Document;
+use rigidcells::pipeline::{self, Options};
+use rigidcells::progress::{Observer, Silent};
 use rigidcells::rigid::Vect;
+use rigidcells::solve::TurnKind;
 use rigidcells::spec::parse_spec;
 
 /// A closed cylinder of diameter 1 and `height` along y, its base at y = 0, in `dir`.
@@ -168,4 +174,174 @@ fn more_than_ten_whole_turns_is_a_spec_error() {
             "{bad}: {text}"
         );
     }
+}
+
+/// The vertices and triangles of the `size` box bar, 10 vertices a unit.
+fn bar(size: [f64; 3]) -> (Vec<Vect<3>>, Vec<[u32; 3]>) {
+    let mesh = data_gen::bar(size, 10.0);
+    let points = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+    (points, mesh.triangles)
+}
+
+/// The 10 × 1 × 1 bar's left end fixed and its right end moved by `motion` (spec lines).
+fn u_bend(motion: &str) -> String {
+    format!(
+        "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [1.0, 1.1, 1.1] }}\n\
+         [[handle]]\nbox = {{ min = [9.0, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n{motion}\n"
+    )
+}
+
+/// Where a handle's map sends a point.
+type Map = dyn Fn(&Vect<3>) -> Vect<3>;
+
+/// The 10 × 1 × 1 bar's right end turned by a half turn about z around (5, 2, 0), written as a
+/// rotation and as matrices (exact, and rounded to single precision as Blender's are, which
+/// makes it 179.99999° about −z): the bar bends into a U by 180°, its right end beside its
+/// left, the handle's vertices where the map sends them and its middle between the arms; the
+/// report says 180° asked and taken. So does 179°.
+#[test]
+fn a_bar_bends_into_a_u_by_a_half_turn_written_either_way() {
+    let (points, triangles) = bar([10.0, 1.0, 1.0]);
+    const SINGLE: f64 = 8.742277657347586e-8;
+    let u = |x: &Vect<3>| Vect::<3>::new(10.0 - x.x, 4.0 - x.y, x.z);
+    let rounded = |x: &Vect<3>| {
+        Vect::<3>::new(
+            -x.x + SINGLE * x.y + 9.999999825154447,
+            -SINGLE * x.x - x.y + 4.000000437113883,
+            x.z,
+        )
+    };
+    let by_179 = |x: &Vect<3>| {
+        let (s, c) = 179f64.to_radians().sin_cos();
+        let (dx, dy) = (x.x - 5.0, x.y - 2.0);
+        Vect::<3>::new(5.0 + c * dx - s * dy, 2.0 + s * dx + c * dy, x.z)
+    };
+    let cases: [(&str, f64, &Map); 4] = [
+        (
+            "rotate = { axis = [0, 0, 1], degrees = 180 }\npivot = [5, 2, 0]",
+            180.0,
+            &u,
+        ),
+        (
+            "matrix = [[-1, 0, 0, 10], [0, -1, 0, 4], [0, 0, 1, 0], [0, 0, 0, 1]]",
+            180.0,
+            &u,
+        ),
+        (
+            "matrix = [[-1, 8.742277657347586e-8, 0, 9.999999825154447], \
+             [-8.742277657347586e-8, -1, 0, 4.000000437113883], [0, 0, 1, 0], [0, 0, 0, 1]]",
+            180.0,
+            &rounded,
+        ),
+        (
+            "rotate = { axis = [0, 0, 1], degrees = 179 }\npivot = [5, 2, 0]",
+            179.0,
+            &by_179,
+        ),
+    ];
+    let params = Options {
+        cell_size: Some(0.5),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    for (motion, degrees, map) in cases {
+        let spec = parse_spec::<3>(&u_bend(motion), ".".as_ref(), "u.toml".as_ref()).unwrap();
+        let (moved, _, info) = pipeline::deform(&points, &triangles, &spec, &params, &Silent)
+            .unwrap_or_else(|e| panic!("{motion}: {e}"));
+        let turn = &info.solver.turns[0];
+        assert_eq!(turn.kind, TurnKind::Bend, "{motion}");
+        assert_eq!(turn.asked_degrees, degrees, "{motion}");
+        let taken = turn.taken_degrees.unwrap();
+        assert!((taken - degrees).abs() < 1e-3, "{motion}: taken {taken}°");
+        for (p, q) in points.iter().zip(&moved) {
+            if p.x > 9.0 {
+                assert!((q - map(p)).norm() < 1e-9, "{motion}: {p} went to {q}");
+            }
+            assert!(
+                q.z > -0.05 && q.z < 1.05,
+                "{motion}: {p} left the plane for {q}"
+            );
+        }
+        let middle: Vec<&Vect<3>> = points
+            .iter()
+            .zip(&moved)
+            .filter(|(p, _)| (p.x - 5.0).abs() < 0.01)
+            .map(|(_, q)| q)
+            .collect();
+        let y = middle.iter().map(|q| q.y).sum::<f64>() / middle.len() as f64;
+        assert!(y > 1.0 && y < 3.0, "{motion}: the middle at y = {y}");
+    }
+}
+
+/// Counts what a solve spends: the runs of load steps from rest (`solving` stages, one for
+/// each complex solved from rest), those that check a refusal on coarser cells, and the
+/// Gauss-Newton iterations.
+#[derive(Default)]
+struct Spent(Mutex<(usize, usize, usize)>);
+
+impl Observer for Spent {
+    fn stage(&self, name: &str, _len: u64) {
+        let mut spent = self.0.lock().unwrap();
+        match name {
+            "solving" => spent.0 += 1,
+            n if n.starts_with("checking where the shape gives way") => spent.1 += 1,
+            _ => {}
+        }
+    }
+    fn message(&self, text: &str) {
+        if text.starts_with("iteration ") {
+            self.0.lock().unwrap().2 += 1;
+        }
+    }
+}
+
+/// A bar twice as long as it is thick twisted by a whole turn gives way on its coarse cells
+/// past 200° or so, on cells coarser still near there too, and on the cells themselves as well
+/// (`solve/coarse.rs`): the run is refused from the coarse cells' load steps, checked on the
+/// coarser ones, never solving the cells themselves from rest, in the words of a twist, the
+/// angle as typed and the spec's line.
+#[test]
+fn a_whole_turn_of_a_short_bar_is_refused_from_its_coarse_cells() {
+    let (points, triangles) = bar([2.0, 1.0, 1.0]);
+    let text = "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.2, 1.1, 1.1] }\n\
+                [[handle]]\nbox = { min = [1.8, -0.1, -0.1], max = [2.1, 1.1, 1.1] }\n\
+                rotate = { axis = [1, 0, 0], degrees = 360 }\n";
+    let spec = parse_spec::<3>(text, ".".as_ref(), "twist.toml".as_ref()).unwrap();
+    let params = Options {
+        cell_size: Some(0.2),
+        coarse_levels: Some(1),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let spent = Spent::default();
+    let e = pipeline::deform(&points, &triangles, &spec, &params, &spent).unwrap_err();
+    let (runs, checks, iterations) = *spent.0.lock().unwrap();
+    let Error::TurnNotHeld(refusal) = &e else {
+        panic!("{e}");
+    };
+    assert_eq!(
+        (refusal.handle, refusal.line, refusal.kind),
+        (0, 3, TurnKind::Twist)
+    );
+    assert_eq!(refusal.asked_degrees, 360.0);
+    assert!(
+        refusal.held_degrees > 150.0 && refusal.held_degrees < 300.0,
+        "{e}"
+    );
+    assert_eq!(runs, 1, "the cells themselves were solved from rest: {e}");
+    assert_eq!(
+        checks, 1,
+        "the refusal was not checked on coarser cells: {e}"
+    );
+    assert!(iterations < 90, "{iterations} iterations");
+    let text = e.to_string();
+    assert!(
+        text.starts_with("the handle on line 3 of the edit spec twists by 360°, but")
+            && text.contains(&format!("gives way past {}°", refusal.held_degrees))
+            && text.contains("twist a longer span")
+            && !text.contains("bend"),
+        "{text}"
+    );
 }

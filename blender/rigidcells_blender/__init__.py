@@ -701,6 +701,16 @@ def _mesh_active(context: Any) -> bool:
 ERRORS = (ValueError, TypeError, OSError, RuntimeError, Cancelled)
 
 
+def _said(error: BaseException) -> str:
+    """The error as the panel names things: a refused turn (`rigidcells.TurnNotHeldError`)
+    names its handle "the handle Empty" or "handle 2", not by the spec the add-on wrote."""
+    handle, said = getattr(error, "handle", None), getattr(error, "said", None)
+    if isinstance(handle, int) and isinstance(said, str):
+        name = "the handle Empty" if handle == 0 else f"handle {handle + 1}"
+        return f"Rigid Cells: {name} {said}"
+    return str(error)
+
+
 def _status(context: Any, text: Optional[str]) -> None:
     if context.workspace is not None:
         context.workspace.status_text_set(text)
@@ -735,7 +745,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         try:
             report = deform(obj, progress=progress)
         except ERRORS as e:
-            self.report({"ERROR"}, str(e))
+            self.report({"ERROR"}, _said(e))
             return {"CANCELLED"}
         finally:
             wm.progress_end()
@@ -752,7 +762,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         try:
             points, triangles, spec = inputs(obj)
         except ERRORS as e:
-            self.report({"ERROR"}, str(e))
+            self.report({"ERROR"}, _said(e))
             return {"CANCELLED"}
         self._name = obj.name
         self._job = DeformJob(points, spec, triangles, options(obj.rigidcells)).start()
@@ -792,7 +802,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
             self.report({"INFO"}, str(e))
             return {"CANCELLED"}
         except Exception as e:  # the library's errors and Blender's: the mesh as it was
-            self.report({"ERROR"}, str(e))
+            self.report({"ERROR"}, _said(e))
             return {"CANCELLED"}
         self._done(report)
         return {"FINISHED"}
@@ -835,7 +845,7 @@ class OBJECT_OT_rigidcells_live(bpy.types.Operator):
         try:
             self._state = LiveState(context.active_object)
         except ERRORS as e:
-            self.report({"ERROR"}, str(e))
+            self.report({"ERROR"}, _said(e))
             return {"CANCELLED"}
         _live[self._state.name] = self._state
         self._finishing = False
@@ -869,7 +879,7 @@ class OBJECT_OT_rigidcells_live(bpy.types.Operator):
             state.tick(obj)
         except Exception as e:  # a deleted Empty, a failed solve: the mesh as it was
             state.cancel(obj)
-            self.report({"ERROR"}, str(e))
+            self.report({"ERROR"}, _said(e))
             return self._end(context, {"CANCELLED"})
         if self._finishing and done:
             return self._end(context, {"FINISHED"})

@@ -1,7 +1,8 @@
 //! The Python extension of rigidcells (`rigidcells._rigidcells`): thin wrappers over the
 //! library's `pipeline` functions, numpy arrays in and out, the GIL released around every
 //! heavy call, and the library's errors as Python exceptions (`ValueError` for a bad spec or
-//! parameter, `OSError` for I/O, `rigidcells.FormatError` for malformed files). The Python
+//! parameter, `OSError` for I/O, `rigidcells.FormatError` for malformed files,
+//! `rigidcells.TurnNotHeldError` for a turn the shape gives way under). The Python
 //! package (`python/python/rigidcells/__init__.py`) adds specs as dicts or paths and numpy
 //! structured arrays. The live `Session` is in `session.rs`.
 
@@ -40,9 +41,19 @@ create_exception!(
     "A malformed or unreadable input file."
 );
 
+create_exception!(
+    _rigidcells,
+    TurnNotHeldError,
+    PyValueError,
+    "A handle's turn that the shape gives way under."
+);
+
 /// The library's error as a Python exception, by its exit code's class, in the package's
 /// terms (keyword arguments, not the command line's flags).
 fn py_err(e: Error) -> PyErr {
+    if let Error::TurnNotHeld(r) = &e {
+        return turn_not_held(r);
+    }
     // A bad argument or array is a ValueError that says what is wrong, without the command
     // line's "invalid parameter:" (a malformed file is a FormatError).
     let text = match &e {
@@ -56,6 +67,30 @@ fn py_err(e: Error) -> PyErr {
         (_, 4) => PyValueError::new_err(text),
         _ => PyRuntimeError::new_err(text),
     }
+}
+
+/// A refused turn as a `TurnNotHeldError` with the refusal's fields, so that a face names the
+/// handle its own way without reading the message: `handle` (its index in the spec's
+/// handles), `line`, `kind` ("bend" or "twist"), `asked_degrees`, `held_degrees`,
+/// `other_way_degrees` (or None) and `said` (the message after the handle's name).
+fn turn_not_held(r: &rigidcells::solve::TurnRefusal) -> PyErr {
+    Python::attach(|py| {
+        let err = TurnNotHeldError::new_err(r.to_string());
+        let value = err.value(py);
+        let fields = || -> PyResult<()> {
+            value.setattr("handle", r.handle)?;
+            value.setattr("line", r.line)?;
+            value.setattr("kind", r.kind.name())?;
+            value.setattr("asked_degrees", r.asked_degrees)?;
+            value.setattr("held_degrees", r.held_degrees)?;
+            value.setattr("other_way_degrees", r.other_way_degrees)?;
+            value.setattr("said", r.said())
+        };
+        match fields() {
+            Ok(()) => err,
+            Err(e) => e,
+        }
+    })
 }
 
 /// The command line's flags in a message as the package's keyword arguments: `--cell-size`
@@ -903,6 +938,7 @@ fn toml_from_json(json: &str) -> PyResult<String> {
 #[pymodule]
 fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", m.py().get_type::<FormatError>())?;
+    m.add("TurnNotHeldError", m.py().get_type::<TurnNotHeldError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<Field>()?;
     m.add_class::<Session>()?;

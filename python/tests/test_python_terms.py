@@ -489,3 +489,38 @@ def test_a_chunk_past_the_largest_is_taken_as_the_largest_as_the_cli_takes_it(tm
         rigidcells.deform_file(xyz, out, BEND, cell_size=0.5, chunk=chunk, progress=False)
         outs.append(out.read_bytes())
     assert outs[0] == outs[1]
+
+
+def test_a_refused_turn_names_the_handle_as_the_spec_was_written():
+    """A turn the shape gives way under is a ``TurnNotHeldError`` (a ``ValueError``) whose
+    fields say which handle, a bend or a twist, and the degrees; its message names the handle
+    as the spec was written: a dict's key path, a TOML spec's line."""
+    import json
+
+    g = np.linspace(0.0, 1.0, 11)
+    cube = np.ascontiguousarray(np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3))
+    spec = {
+        "fixed": [{"box": {"min": [-1, -1, -1], "max": [2, 2, 0.1]}}],
+        "handle": [
+            {"box": {"min": [-1, -1, 0.9], "max": [2, 2, 2]}, "rotate": {"axis": [0, 0, 1], "degrees": 360}},
+        ],
+    }
+    with pytest.raises(rigidcells.TurnNotHeldError) as raised:
+        rigidcells.deform(cube, spec, cell_size=0.1, progress=False)
+    e = raised.value
+    assert isinstance(e, ValueError)
+    assert str(e).startswith('spec["handle"][0] twists by 360°, but the shape'), str(e)
+    assert "line" not in str(e) and "edit spec" not in str(e) and "bend" not in str(e), str(e)
+    text = rigidcells._rigidcells.toml_from_json(json.dumps(spec))
+    line = text.splitlines().index("[[handle]]") + 1
+    assert (e.handle, e.line, e.kind, e.asked_degrees) == (0, line, "twist", 360.0)
+    assert 90.0 < e.held_degrees < 300.0 and f"past {e.held_degrees:g}°" in str(e), str(e)
+    assert e.other_way_degrees is None and str(e).endswith(e.said)
+    with pytest.raises(rigidcells.TurnNotHeldError, match=rf"^the handle on line {line} of the edit spec twists by 360°"):
+        rigidcells.deform(cube, text, cell_size=0.1, progress=False)
+    # The second handle is spec["handle"][1], whatever line of TOML it became.
+    still = {"box": {"min": [-1, -1, 0.45], "max": [2, 2, 0.55]}, "translate": [0, 0, 0]}
+    spec["handle"].insert(0, still)
+    with pytest.raises(rigidcells.TurnNotHeldError, match=r'^spec\["handle"\]\[1\] twists by 360°') as raised:
+        rigidcells.deform(cube, spec, cell_size=0.1, progress=False)
+    assert raised.value.handle == 1

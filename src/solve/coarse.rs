@@ -7,8 +7,39 @@
 //! full load from its parents' motions ([`prolong`]): a fine cell takes the rigid motion of
 //! the coarse cell holding it. The coarse stages stop at a looser tolerance
 //! ([`COARSE_TOLERANCE`]): their minimum is not the fine one, they only have to bring the
-//! motions near it. A twist that a coarse stage gives way to (a part a coarse cell or two
-//! thick untwists sooner) is solved from rest on the cells themselves.
+//! motions near it.
+//!
+//! **A turn the coarse cells give way under** ([`Error::TurnNotHeld`]) is refused there, before
+//! the cells themselves are solved, where two cell sizes agree that the shape cannot hold it
+//! ([`confirmed`]): the turn asked lies more than [`COARSE_REFUSAL_MARGIN`] past the turn the
+//! coarse cells held, and cells one level coarser give way to it too, no more than that
+//! sooner. Else the cells themselves are solved from rest and say for themselves whether they
+//! hold it. Cells that resolve the part give way at about the same turn whatever their size
+//! (measured through the load steps, in release builds):
+//!
+//! | shape, turn | cell size | cells: held | coarse cells: held |
+//! |---|---|---|---|
+//! | bar 2 × 1 × 1, one end twisted 360° | 0.125 | 1,632: 217° | – |
+//! | | 0.0625 | 7,320: 212° | 2,126: 225° |
+//! | | 0.05 | 9,210: 240° | 1,823: 240° |
+//! | dragon (11k vertices), head twisted 360° about its neck | 4.85 | 3,342: 210° | 824: 188° |
+//! | | 3 | 10,245: 212° | 2,216: 197° |
+//! | dragon, head bent −180° about its neck | 4.85 | 3,342: −163° | 824: −163° |
+//! | bust (`mannequin.ply`), head bent −180° | 0.047 | 4,200: −174° | 1,049: −174° |
+//!
+//! Cells that do not resolve the part give way much sooner: the 10 × 1 × 1 bar at cells of
+//! 0.25 twisted by 720° holds, but gives way past 570° on its parents' parents (cells of 1, one
+//! across the bar). That is why one coarse stage's refusal alone is not trusted (it refused the
+//! bar's 720°); the check on coarser cells costs a quarter of the coarse stage's load steps.
+//! Refusing from the coarse cells refuses a whole turn of the short bar at cells of 0.05 after
+//! 2 s instead of 28 s, and the dragon's at cells of 3 after 3 s instead of 33 s (BENCHMARKS.md,
+//! "Half turns, and refusing early"). Extrapolating the held turn from the first load steps was
+//! not an option: the turn the cells carry follows the handle's exactly until the step where
+//! the shape snaps back, and the energy gives no warning of it. Going on from where the coarse
+//! cells gave way, on the cells themselves, was tried and not kept: from the bar's coarse
+//! cells at 570° its cells gave way too, where from rest they hold 720°. A turn refused within
+//! the margin (the bust's head bent −180°, held to −174° on coarse and fine cells alike) still
+//! costs the solve of the cells themselves up to where they give way.
 //!
 //! The first iteration on the fine cells still moves corners by about half a cell on the
 //! vegetation scans of BENCHMARKS.md: the fine minimum holds detail the parents could not.
@@ -23,6 +54,7 @@ use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid};
 
 use super::system::System;
+use super::turns::TurnRefusal;
 use super::{
     CELLS_ADVICE, Constraints, SolveParams, SolverInfo, coarsen, from_rest, minimize_with,
     prescribe, targets_at, timed,
@@ -41,6 +73,12 @@ pub const COARSE_STAGE: usize = 20_000;
 
 /// Coarse stages at most.
 pub const MAX_COARSE_LEVELS: u8 = 3;
+
+/// A coarse stage's refusal of a turn is the solve's where the turn asked is more than this
+/// many degrees past the turn the coarse cells held, and cells one level coarser give way no
+/// more than this sooner (the module docs: cells that resolve the part gave way within 45° of
+/// each other).
+pub const COARSE_REFUSAL_MARGIN: f64 = 60.0;
 
 /// The energy tolerance of a coarse stage (its move tolerance is a hundred times the fine
 /// one's: a tenth of a finest cell by default).
@@ -73,9 +111,11 @@ pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
 /// The solve of `complex` coarse to fine over `levels` coarse stages: the coarsest
 /// ([`coarsen`] by `levels`) from rest through the load steps, each finer one (by one level
 /// fewer, down to `complex` itself) from the last one's motions at full load. `None` where no
-/// coarsening merges a cell, or where a coarse stage gives way to a twist
-/// ([`Error::TurnNotHeld`]): the caller then solves from rest. The returned [`SolverInfo`] holds
-/// every stage's iterations (the load steps are the coarsest's).
+/// coarsening merges a cell, or where a coarse stage gives way to a turn
+/// ([`Error::TurnNotHeld`]) that is not [`confirmed`]: the caller then solves from rest. A
+/// confirmed refusal, or one of a handle marked in `either_way` (a half turn still to be tried
+/// the other way round), is the error. The returned
+/// [`SolverInfo`] holds every stage's iterations (the load steps are the coarsest's).
 #[allow(clippy::type_complexity)]
 pub(super) fn coarse_to_fine<const D: usize>(
     complex: &CellComplex<D>,
@@ -84,6 +124,7 @@ pub(super) fn coarse_to_fine<const D: usize>(
     params: &SolveParams,
     budget: Budget,
     observer: &dyn Observer,
+    either_way: &[bool],
 ) -> Result<Option<(System<D>, Vec<Motion<D>>, SolverInfo)>>
 where
     Dim<D>: Rigid<D>,
@@ -107,7 +148,7 @@ where
         }
         let at = (&parents, &on_parents);
         let done = match solved.take() {
-            None => from_rest(at.0, at.1, &stage_params, budget, observer)
+            None => from_rest(at.0, at.1, &stage_params, budget, observer, &[])
                 .map(|(_, motions, info)| (motions, info)),
             Some((coarse, motions, mut info)) => {
                 let coarse = (&coarse, motions.as_slice());
@@ -117,9 +158,18 @@ where
         };
         match done {
             Ok((motions, info)) => solved = Some((parents, motions, info)),
-            // Coarse cells give way to a twist sooner (a part a cell or two thick): the cells
-            // themselves are solved from rest, and say for themselves whether they hold it.
-            Err(Error::TurnNotHeld { .. }) => return Ok(None),
+            Err(Error::TurnNotHeld(r)) => {
+                let coarse = (parents.len(), k, &r);
+                let at = (complex, constraints);
+                let refused = either_way.get(r.handle) == Some(&true)
+                    || confirmed(at, coarse, &stage_params, budget, observer)?;
+                // Else the cells themselves are solved from rest, and say for themselves
+                // whether they hold the turn.
+                return match refused {
+                    true => Err(Error::TurnNotHeld(r)),
+                    false => Ok(None),
+                };
+            }
             Err(e) => return Err(e),
         }
     }
@@ -130,6 +180,62 @@ where
     let (system, motions) = stage(at, (&coarse, &motions), params, budget, &mut info, observer)?;
     info.cells_initial = complex.len();
     Ok(Some((system, motions, info)))
+}
+
+/// Whether the refusal `r` of the cells of `at` coarsened by `k` levels (`cells` of them) is the
+/// solve's: the turn asked lies more than [`COARSE_REFUSAL_MARGIN`] past the turn they held,
+/// and the cells coarsened by one level more give way to it too, no more than that sooner — two
+/// cell sizes agree, so the cells' size does not decide where the shape gives way (where the
+/// coarser cells give way much sooner, or cannot be merged further, it may).
+fn confirmed<const D: usize>(
+    at: (&CellComplex<D>, &Constraints<D>),
+    (cells, k, r): (usize, u8, &TurnRefusal),
+    params: &SolveParams,
+    budget: Budget,
+    observer: &dyn Observer,
+) -> Result<bool>
+where
+    Dim<D>: Rigid<D>,
+{
+    if r.asked_degrees.abs() - r.held_degrees.abs() <= COARSE_REFUSAL_MARGIN {
+        return Ok(false);
+    }
+    let (coarser, on_coarser) = coarsen(at.0, at.1, k + 1);
+    if coarser.len() >= cells {
+        return Ok(false);
+    }
+    let checking = Checking(observer, coarser.len());
+    match from_rest(&coarser, &on_coarser, params, budget, &checking, &[]) {
+        Err(Error::TurnNotHeld(c)) => Ok(c.handle == r.handle
+            && c.held_degrees.abs() >= r.held_degrees.abs() - COARSE_REFUSAL_MARGIN),
+        Ok(_) => Ok(false),
+        Err(e) => Err(e),
+    }
+}
+
+/// The observer of [`confirmed`]'s load steps, which names their stage for what it does.
+struct Checking<'a>(&'a dyn Observer, usize);
+
+impl Observer for Checking<'_> {
+    fn stage(&self, _name: &str, len: u64) {
+        let name = format!(
+            "checking where the shape gives way on {} coarser cells",
+            self.1
+        );
+        self.0.stage(&name, len);
+    }
+    fn advance(&self, n: u64) {
+        self.0.advance(n);
+    }
+    fn message(&self, text: &str) {
+        self.0.message(text);
+    }
+    fn finish(&self) {
+        self.0.finish();
+    }
+    fn cancelled(&self) -> bool {
+        self.0.cancelled()
+    }
 }
 
 /// One finer stage: the cells of `at` start at the `coarse` solution carried down

@@ -141,6 +141,49 @@ where
         (parts < count).then_some(c)
     }
 
+    /// The direction from the fixed cells to handle `k`'s cells: the difference of the means
+    /// of their centers. `None` without fixed cells or cells of the handle.
+    pub fn arm(&self, complex: &CellComplex<D>, k: usize) -> Option<Vect<D>> {
+        Some(
+            self.mean_center(complex, Role::Handle(k as u32))?
+                - self.mean_center(complex, Role::Fixed)?,
+        )
+    }
+
+    /// The mean of the centers of the cells of `role`, if any.
+    fn mean_center(&self, complex: &CellComplex<D>, role: Role) -> Option<Vect<D>> {
+        let (sum, n) = self
+            .roles
+            .iter()
+            .zip(&complex.cells)
+            .filter(|(r, _)| **r == role)
+            .fold((Vect::<D>::zeros(), 0usize), |(s, n), (_, c)| {
+                (s + c.center, n + 1)
+            });
+        (n > 0).then(|| sum / n as f64)
+    }
+
+    /// Handle `k`'s motion, its half turn taken the way round the handle moves where the
+    /// matrix does not say ([`HandleMotion::undirected`]): the turn that carries the handle,
+    /// seen from the fixed cells, the way its map moves its cells' center — a bar's end brought
+    /// back beside its fixed end bends round into a U, not into a loop the other way.
+    fn directed(&self, complex: &CellComplex<D>, k: usize) -> HandleMotion<D> {
+        let motion = self.handles[k].motion;
+        let (true, Some(arm), Some(center)) = (
+            motion.undirected(),
+            self.arm(complex, k),
+            self.mean_center(complex, Role::Handle(k as u32)),
+        ) else {
+            return motion;
+        };
+        let moved = self.handle_map(k, 1.0).apply(&center) - center;
+        let turn = <Dim<D> as Rigid<D>>::axis_3d(&motion.turn.0) * motion.turn.1.signum();
+        match turn.dot(&in_3d(&arm).cross(&in_3d(&moved))) < 0.0 {
+            true => motion.the_other_way(),
+            false => motion,
+        }
+    }
+
     /// The affine map of handle `k` at load fraction `f`, in the local frame.
     pub fn handle_map(&self, k: usize, f: f64) -> Affine<D> {
         let h = &self.handles[k];
@@ -646,7 +689,7 @@ where
         return Err(Error::NoConstraints);
     }
     warnings.extend(loose);
-    Ok(Constraints {
+    let mut constraints = Constraints {
         roles,
         handles,
         pins,
@@ -654,7 +697,16 @@ where
         stiffness,
         origin,
         warnings,
-    })
+    };
+    for k in 0..constraints.handles.len() {
+        constraints.handles[k].motion = constraints.directed(complex, k);
+    }
+    Ok(constraints)
+}
+
+/// `v` in 3D (a 2D vector in the plane z = 0).
+pub(crate) fn in_3d<const D: usize>(v: &Vect<D>) -> nalgebra::Vector3<f64> {
+    nalgebra::Vector3::from_fn(|i, _| if i < D { v[i] } else { 0.0 })
 }
 
 /// The end of the warning [`anchor`] gives.

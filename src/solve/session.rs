@@ -14,7 +14,7 @@ use super::system::System;
 use super::turns::TurnGauge;
 use super::{
     CELLS_ADVICE, Constraints, Role, Solution, SolveParams, SolverInfo, carry_loose, coarsen,
-    from_rest, minimize_with, prescribe, targets_at, timed,
+    from_rest_either_way, minimize_with, prescribe, targets_at, timed,
 };
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
@@ -107,16 +107,16 @@ where
     /// session's cells stay those of `complex`).
     pub fn new(
         complex: CellComplex<D>,
-        constraints: Constraints<D>,
+        mut constraints: Constraints<D>,
         params: &SolveParams,
         budget: Budget,
         observer: &dyn Observer,
     ) -> Result<(Self, SolverInfo)> {
         let start = Instant::now();
         let (system, motions, mut info) =
-            from_rest(&complex, &constraints, params, budget, observer)?;
+            from_rest_either_way(&complex, &mut constraints, params, budget, observer)?;
         observer.finish();
-        info.turns = TurnGauge::new(&complex).turns(&constraints, &motions);
+        info.turns = TurnGauge::new(&complex).turns(&complex, &constraints, &motions);
         let mut session = Self {
             complex,
             constraints,
@@ -336,7 +336,7 @@ where
     /// The turn the cells carry from the fixed cells to each turning handle, as they are now
     /// (what a solve from rest reports in its info).
     pub fn turns(&self) -> Vec<super::HandleTurn> {
-        TurnGauge::new(&self.complex).turns(&self.constraints, &self.motions)
+        TurnGauge::new(&self.complex).turns(&self.complex, &self.constraints, &self.motions)
     }
 
     /// The session's state as a [`Solution`] with `info`: what [`super::solve`] gives for these

@@ -1,31 +1,101 @@
 //! How far each handle's turn reached through the cells: the solver's check that a load path
-//! stayed on its branch, and the report's `turn_asked_degrees` / `turn_taken_degrees`.
+//! stayed on its branch, the report's `turn_asked_degrees` / `turn_taken_degrees`, and how a
+//! turn is said to people (a bend or a twist, in degrees as typed).
 //!
 //! A rotation matrix cannot say how many whole turns it makes: a cell turned by 270° and one
 //! turned by −90° have the same motion. What tells a twisted part from an untwisted one is the
-//! chain of cells between the fixed cells and the handle: neighbors turn by little relative to
-//! each other, so the turn about the handle's axis can be summed pair by pair without
-//! ambiguity, and the sum is the turn the shape carries from its fixed cells to its handle.
-//! `TurnGauge::taken` sums it over a breadth-first tree from the fixed cells (each pair adds
-//! the twist about the axis of `R_j R_iᵀ`, which lies in (−180°, 180°]) and gives the median
-//! over the handle's cells. On the asked branch it equals the handle's turn (up to the
-//! difference between summed twists and a composed rotation, a fraction of a degree on a
-//! twisted or bent bar); after the part untwisted the short way round it is a whole turn off.
+//! chain of cells between the fixed cells and the handle, along which neighbors turn by little
+//! relative to each other. `TurnGauge::taken` follows it over a breadth-first tree from the
+//! fixed cells and gives the median over the handle's cells of two things carried along it:
+//!
+//! - each cell's rotation *lifted* along the chain: its unit quaternion, of the sign nearest
+//!   its parent's. Rotations form a space with two kinds of paths between two poses, told apart
+//!   by the lifted quaternion's sign at the end, whatever the path (a half turn bent forwards
+//!   ends at `q`, bent backwards at `−q`; a whole turn twisted in ends at `−1`, untwisted at
+//!   `1`). Its turn about the handle's axis, `2 atan2(q⃗ · n, q_w)`, is therefore exact up to
+//!   whole double turns (720°): on the asked branch it is the handle's turn itself, after the
+//!   part gave way it is a whole turn off;
+//! - the twists about the handle's axis summed pair by pair (each the twist of `R_j R_iᵀ`, in
+//!   (−180°, 180°]), which only picks the number of double turns. A sum alone drifts where
+//!   neighbors turn about other axes too — the relative rotations of a bend that is not planar
+//!   do not commute: the dragon's head bent 180° about its neck summed to 165°, and a chain
+//!   that reaches a half turn about z by turning about x and y sums to 0°.
+//!
+//! A turn is a bend or a twist ([`TurnKind`]) by the angle between its axis and the direction
+//! from the fixed cells to the handle; its messages ([`TurnRefusal::said`],
+//! [`HandleTurn::said`]) print angles with [`crate::human::degrees`] and name the handle as
+//! the command line does, or leave the name to the face (Python names `spec["handle"][0]`,
+//! Blender "the handle Empty").
+
+use nalgebra::UnitQuaternion;
 
 use crate::cells::CellComplex;
+use crate::human::degrees;
 use crate::rigid::{Dim, Motion, Rigid};
 
-use super::constraints::{Constraints, Role};
+use super::constraints::{Constraints, Role, in_3d};
+
+/// What a handle's turn does to the shape between it and the fixed cells, as its messages say.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TurnKind {
+    /// The handle turns about an axis across the direction from the fixed cells to it.
+    Bend,
+    /// The handle turns about an axis along that direction.
+    Twist,
+}
+
+/// A turn is a twist where its axis lies within this angle (45°) of the direction from the fixed
+/// cells to the handle's cells, else a bend.
+pub const TWIST_WITHIN_DEGREES: f64 = 45.0;
+
+impl TurnKind {
+    /// The kind of handle `k`'s turn: by the angle between its axis and the direction from the
+    /// fixed cells to its cells ([`Constraints::arm`]; a bend without fixed cells, and in 2D,
+    /// where every turn is about the plane's normal).
+    pub fn of<const D: usize>(
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        k: usize,
+    ) -> Self
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let axis = <Dim<D> as Rigid<D>>::axis_3d(&constraints.handles[k].motion.turn.0);
+        let arm = constraints.arm(complex, k).map(|a| in_3d(&a).normalize());
+        match arm {
+            Some(arm) if axis.dot(&arm).abs() >= TWIST_WITHIN_DEGREES.to_radians().cos() => {
+                TurnKind::Twist
+            }
+            _ => TurnKind::Bend,
+        }
+    }
+
+    /// The word: `bend` or `twist`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TurnKind::Bend => "bend",
+            TurnKind::Twist => "twist",
+        }
+    }
+}
 
 /// A handle's turn: as asked by the spec and as carried by the cells.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HandleTurn {
+    /// The handle's index among the spec's handles (0 for the first).
+    pub handle: usize,
     /// The handle's line in the edit spec.
     pub line: usize,
-    /// The turn asked, in degrees: signed, of any size (720 is two whole turns).
+    /// A bend or a twist.
+    pub kind: TurnKind,
+    /// The turn asked, in degrees, as the user would write it
+    /// ([`crate::spec::HandleMotion::asked_degrees`]): signed, of any size (720 is two whole
+    /// turns). A matrix's half turn, which the solver may take either way round, is said
+    /// about the axis that makes it positive.
     pub asked_degrees: f64,
-    /// The turn the cells carry from the fixed cells to the handle, in degrees; `None` when no
-    /// chain of cells joins the handle to a fixed cell (nothing to turn against).
+    /// The turn the cells carry from the fixed cells to the handle, in degrees (about the
+    /// axis of `asked_degrees`); `None` when no chain of cells joins the handle to a fixed
+    /// cell (nothing to turn against).
     pub taken_degrees: Option<f64>,
 }
 
@@ -36,18 +106,130 @@ impl HandleTurn {
             .is_some_and(|t| (t - self.asked_degrees).abs() > 0.1 * self.asked_degrees.abs())
     }
 
-    /// The warning for a turn that [`HandleTurn::differs`].
+    /// The warning for a turn that [`HandleTurn::differs`], naming the handle as the command
+    /// line does.
     pub fn warning(&self) -> Option<String> {
+        self.said()
+            .map(|said| format!("{} {said}", handle_on_line(self.line)))
+    }
+
+    /// The warning for a turn that [`HandleTurn::differs`] after the handle's name (a face
+    /// names the handle its own way): `bends by 180°, but the cells …`.
+    pub fn said(&self) -> Option<String> {
         let taken = self.taken_degrees?;
+        let word = self.kind.name();
         self.differs().then(|| {
             format!(
-                "the handle on line {} of the edit spec asked for a turn of {}°, but the cells \
-                 between it and the fixed cells carry {taken:.0}°: the shape did not turn as \
-                 asked",
-                self.line, self.asked_degrees
+                "{word}s by {}, but the cells between it and the fixed cells carry {}: the \
+                 shape did not {word} as asked",
+                degrees(self.asked_degrees),
+                degrees(taken.round()),
             )
         })
     }
+}
+
+/// The command line's name for the handle on `line` of the edit spec.
+pub fn handle_on_line(line: usize) -> String {
+    format!("the handle on line {line} of the edit spec")
+}
+
+/// A turn the shape gives way under ([`crate::Error::TurnNotHeld`]): past `held_degrees` the
+/// shape between the handle and the fixed cells turns back the short way round at every load
+/// step the solver tries.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TurnRefusal {
+    /// The handle's index among the spec's handles (0 for the first).
+    pub handle: usize,
+    /// The handle's line in the edit spec.
+    pub line: usize,
+    /// A bend or a twist.
+    pub kind: TurnKind,
+    /// The turn asked, in degrees, as in [`HandleTurn::asked_degrees`].
+    pub asked_degrees: f64,
+    /// The largest turn the load path held, in whole degrees, of the sign of `asked_degrees`.
+    pub held_degrees: f64,
+    /// The turn that reaches the same pose the other way round, offered for a half turn
+    /// typed in a spec (a matrix's is taken both ways before it is refused).
+    pub other_way_degrees: Option<f64>,
+}
+
+impl TurnRefusal {
+    /// The refusal of handle `k`'s turn, held to the load fraction `held`.
+    pub(crate) fn new<const D: usize>(
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        k: usize,
+        held: f64,
+    ) -> Self
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let h = &constraints.handles[k];
+        let (sign, asked) = asked(constraints, k);
+        let other_way_degrees = (!h.motion.from_matrix && (asked.abs() - 180.0).abs() <= 1.0)
+            .then(|| asked - 360f64.copysign(asked));
+        Self {
+            handle: k,
+            line: h.line,
+            kind: TurnKind::of(complex, constraints, k),
+            asked_degrees: asked,
+            held_degrees: (sign * held * h.motion.turn.1.to_degrees()).round(),
+            other_way_degrees,
+        }
+    }
+
+    /// The message after the handle's name (a face names the handle its own way):
+    /// `twists by 360°, but the shape …`.
+    pub fn said(&self) -> String {
+        let (word, back, across) = match self.kind {
+            TurnKind::Bend => ("bend", "turns back", "thickness"),
+            TurnKind::Twist => ("twist", "untwists", "width"),
+        };
+        let held = degrees(self.held_degrees);
+        let mut advice = Vec::new();
+        if let Some(other) = self.other_way_degrees {
+            let other = degrees(other);
+            advice.push(format!(
+                "{word} it the other way round instead (by {other}, to the same pose)"
+            ));
+        }
+        advice.push(format!("{word} it less (by {held} at most)"));
+        if self.kind == TurnKind::Twist {
+            advice.push("twist a longer span (the fixed and handle regions farther apart)".into());
+        }
+        advice.push(format!(
+            "{word} it in several runs, each deforming the last output"
+        ));
+        let last = advice.pop().unwrap_or_default();
+        let mut advice = format!("{}, or {last}", advice.join(", "));
+        advice[..1].make_ascii_uppercase();
+        format!(
+            "{word}s by {}, but the shape between it and the fixed cells gives way past {held} \
+             and {back} the short way round: rigid cells glued face to face hold a {word} only \
+             so far over a part this short for its {across}, and smaller or larger cells change \
+             that little. {advice}",
+            degrees(self.asked_degrees),
+        )
+    }
+}
+
+impl std::fmt::Display for TurnRefusal {
+    /// The message as the command line says it: the handle named by its line.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} {}", handle_on_line(self.line), self.said())
+    }
+}
+
+/// Handle `k`'s turn as asked, in degrees, with the sign that makes a matrix's turn positive
+/// (the sign, and the turn).
+fn asked<const D: usize>(constraints: &Constraints<D>, k: usize) -> (f64, f64) {
+    let motion = &constraints.handles[k].motion;
+    let sign = match motion.from_matrix && motion.turn.1 < 0.0 {
+        true => -1.0,
+        false => 1.0,
+    };
+    (sign, sign * motion.asked_degrees())
 }
 
 /// The face adjacency of a complex, for summing turns along chains of cells.
@@ -92,12 +274,20 @@ impl TurnGauge {
         Dim<D>: Rigid<D>,
     {
         let axis = constraints.handles.get(k)?.motion.turn.0;
+        let unit = <Dim<D> as Rigid<D>>::axis_3d(&axis);
         let handle = Role::Handle(k as u32);
+        // Per cell: the twists summed along the chain, and its rotation lifted along the chain
+        // (a quaternion of the sign nearest its parent's).
         let mut phi = vec![f64::NAN; motions.len()];
+        let mut lift = vec![UnitQuaternion::identity(); motions.len()];
         let mut queue = std::collections::VecDeque::new();
         for (c, role) in constraints.roles.iter().enumerate() {
             if *role == Role::Fixed {
                 phi[c] = 0.0;
+                lift[c] = <Dim<D> as Rigid<D>>::quaternion(&motions[c].rot);
+                if lift[c].w < 0.0 {
+                    lift[c] = UnitQuaternion::new_unchecked(-lift[c].into_inner());
+                }
                 queue.push_back(c);
             }
         }
@@ -112,8 +302,18 @@ impl TurnGauge {
                 }
                 let relative = motions[n].rot * motions[c].rot.transpose();
                 phi[n] = phi[c] + <Dim<D> as Rigid<D>>::twist(&relative, &axis);
+                let q = <Dim<D> as Rigid<D>>::quaternion(&motions[n].rot).into_inner();
+                lift[n] = match q.coords.dot(&lift[c].coords) < 0.0 {
+                    true => UnitQuaternion::new_unchecked(-q),
+                    false => UnitQuaternion::new_unchecked(q),
+                };
                 if constraints.roles[n] == handle {
-                    reached.push(phi[n]);
+                    // The lifted rotation's turn about the axis, in (−2π, 2π], with as many
+                    // double turns as bring it nearest the summed twists.
+                    let q = &lift[n];
+                    let turn = 2.0 * q.imag().dot(&unit).atan2(q.w);
+                    let tau = 2.0 * std::f64::consts::TAU;
+                    reached.push(turn + tau * ((phi[n] - turn) / tau).round());
                 } else {
                     queue.push_back(n);
                 }
@@ -129,6 +329,7 @@ impl TurnGauge {
     /// Every turning handle's turn, asked and taken, at full load.
     pub fn turns<const D: usize>(
         &self,
+        complex: &CellComplex<D>,
         constraints: &Constraints<D>,
         motions: &[Motion<D>],
     ) -> Vec<HandleTurn>
@@ -137,11 +338,14 @@ impl TurnGauge {
     {
         turning(constraints)
             .map(|k| {
-                let h = &constraints.handles[k];
+                let (sign, asked) = asked(constraints, k);
+                let taken = self.taken(constraints, motions, k);
                 HandleTurn {
-                    line: h.line,
-                    asked_degrees: h.motion.turn.1.to_degrees(),
-                    taken_degrees: self.taken(constraints, motions, k).map(f64::to_degrees),
+                    handle: k,
+                    line: constraints.handles[k].line,
+                    kind: TurnKind::of(complex, constraints, k),
+                    asked_degrees: asked,
+                    taken_degrees: taken.map(|t| sign * t.to_degrees()),
                 }
             })
             .collect()
@@ -153,4 +357,115 @@ pub(crate) fn turning<const D: usize>(
     constraints: &Constraints<D>,
 ) -> impl Iterator<Item = usize> + '_ {
     (0..constraints.handles.len()).filter(|&k| constraints.handles[k].motion.turn.1 != 0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cells::{BuildParams, build};
+    use crate::memory::Budget;
+    use crate::rigid::{Mat, Vect};
+    use crate::solve::resolve;
+    use crate::spec::parse_spec;
+
+    /// A row of cells along x from 0 to 12, the first fixed, the last a handle turned by
+    /// `motion`: the complex and its constraints.
+    fn row(motion: &str) -> (CellComplex<3>, Constraints<3>) {
+        let pts: Vec<Vect<3>> = (0..=240)
+            .map(|i| Vect::<3>::new(0.05 * i as f64, 0.1, 0.1))
+            .collect();
+        let params = BuildParams {
+            cell_size: Some(0.25),
+            ..Default::default()
+        };
+        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
+        let text = format!(
+            "[[fixed]]\nbox = {{ min = [-1, -1, -1], max = [1, 1, 1] }}\n\
+             [[handle]]\nbox = {{ min = [11, -1, -1], max = [13, 1, 1] }}\n{motion}\n"
+        );
+        let spec = parse_spec::<3>(&text, ".".as_ref(), "t.toml".as_ref()).unwrap();
+        let constraints = resolve(&complex, &spec, &pts, None).unwrap();
+        (complex, constraints)
+    }
+
+    fn turn(axis: Vect<3>, degrees: f64) -> Mat<3> {
+        <Dim<3> as Rigid<3>>::axis_angle(&axis, degrees.to_radians())
+    }
+
+    /// A chain that reaches a half turn about z by turning about x, then about y, then about
+    /// its own x the other way: it carries +180° about z, though no pair of neighbors twists
+    /// about z at all (the summed twists say 0°). The turn taken is the chain's lifted
+    /// rotation, not the sum.
+    #[test]
+    fn a_chain_turning_about_other_axes_carries_its_half_turn() {
+        let (x, y, z) = (Vect::<3>::x(), Vect::<3>::y(), Vect::<3>::z());
+        let (complex, constraints) = row("rotate = { axis = [0, 0, 1], degrees = 180 }");
+        let motions: Vec<Motion<3>> = complex
+            .cells
+            .iter()
+            .zip(&constraints.roles)
+            .map(|(c, role)| {
+                let along = c.center.x + constraints.origin.x;
+                let s = ((along - 1.0) / 10.0).clamp(0.0, 1.0);
+                let rot = match role {
+                    Role::Fixed => Mat::<3>::identity(),
+                    Role::Handle(_) => turn(z, 180.0),
+                    _ if s < 1.0 / 3.0 => turn(x, 270.0 * s),
+                    _ if s < 2.0 / 3.0 => turn(y, 540.0 * (s - 1.0 / 3.0)) * turn(x, 90.0),
+                    _ => turn(y, 180.0) * turn(x, 90.0) * turn(x, -810.0 * (s - 2.0 / 3.0)),
+                };
+                Motion { rot, pos: c.center }
+            })
+            .collect();
+        assert!((motions.last().unwrap().rot - turn(z, 180.0)).norm() < 1e-9);
+        let taken = TurnGauge::new(&complex)
+            .taken(&constraints, &motions, 0)
+            .unwrap();
+        assert!(
+            (taken.to_degrees() - 180.0).abs() < 1e-6,
+            "{}",
+            taken.to_degrees()
+        );
+    }
+
+    /// The messages say a bend or a twist, the angles as typed (a matrix's to a tenth of a
+    /// degree), and the handle's line.
+    #[test]
+    fn messages_say_a_bend_or_a_twist_in_rounded_degrees() {
+        let (complex, constraints) =
+            row("rotate = { axis = [0, 0, 1], degrees = 180 }\npivot = [6, 2, 0]");
+        assert_eq!(TurnKind::of(&complex, &constraints, 0), TurnKind::Bend);
+        let refusal = TurnRefusal::new(&complex, &constraints, 0, 0.9);
+        let text = refusal.to_string();
+        assert!(
+            text.starts_with("the handle on line 3 of the edit spec bends by 180°")
+                && text.contains("gives way past 162°")
+                && text.contains("by -180°, to the same pose")
+                && !text.contains("twist"),
+            "{text}"
+        );
+        let (complex, constraints) = row("rotate = { axis = [1, 0.2, 0], degrees = 33.25 }");
+        assert_eq!(TurnKind::of(&complex, &constraints, 0), TurnKind::Twist);
+        let turn = HandleTurn {
+            handle: 0,
+            line: 3,
+            kind: TurnKind::Twist,
+            asked_degrees: 33.25,
+            taken_degrees: Some(-326.7499),
+        };
+        assert_eq!(
+            turn.warning().unwrap(),
+            "the handle on line 3 of the edit spec twists by 33.25°, but the cells between it \
+             and the fixed cells carry -327°: the shape did not twist as asked"
+        );
+        let matrix = "matrix = [[-1, 1e-7, 0, 12], [-1e-7, -1, 0, 4], [0, 0, 1, 0], [0, 0, 0, 1]]";
+        let (complex, constraints) = row(matrix);
+        let refusal = TurnRefusal::new(&complex, &constraints, 0, 0.5);
+        let text = refusal.to_string();
+        assert!(
+            text.contains("bends by 180°, but") && text.contains("past 90°"),
+            "{text}"
+        );
+        assert_eq!(refusal.other_way_degrees, None);
+    }
 }

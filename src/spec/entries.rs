@@ -20,8 +20,9 @@ pub struct HandleMotion<const D: usize> {
     pub rotation: Mat<D>,
     /// The rotation as written: its axis (unused in 2D) and signed angle in radians, of any
     /// size (720° is two whole turns). Load steps interpolate this angle, so a whole turn is
-    /// not the identity. For a `matrix` it is the angle of `R` in `[0, π]`: a matrix cannot
-    /// say how many turns it makes.
+    /// not the identity. For a `matrix` it is the angle of `R` in `[0, π]` (2D: `(−π, π]`): a
+    /// matrix cannot say how many turns it makes, nor, at a half turn, which way round
+    /// ([`HandleMotion::undirected`]).
     pub turn: (Vect<D>, f64),
     /// The stretch `P`.
     pub stretch: Mat<D>,
@@ -32,7 +33,38 @@ pub struct HandleMotion<const D: usize> {
     pub from_matrix: bool,
 }
 
+/// A matrix whose rotation is within this many radians (0.06°) of a half turn does not say
+/// which way round it turns ([`HandleMotion::undirected`]): its antisymmetric part, which would
+/// tell, is `2 sin θ` there, of the order of its rounding (a half turn about z made in single
+/// precision, as Blender's matrices are, has `sin θ` of 9e-8, of either sign).
+pub const HALF_TURN_SLACK: f64 = 1e-3;
+
 impl<const D: usize> HandleMotion<D> {
+    /// Whether the motion is a `matrix` turning by a half turn, which reaches the same pose
+    /// turned either way round: the solver turns it one way and, where the shape gives way,
+    /// the other ([`HandleMotion::the_other_way`]).
+    pub fn undirected(&self) -> bool {
+        self.from_matrix && (std::f64::consts::PI - self.turn.1.abs()).abs() < HALF_TURN_SLACK
+    }
+
+    /// The same map, its turn taken the other way round about the same axis (an angle a
+    /// whole turn less, or more for a negative one): 180° becomes −180°.
+    pub fn the_other_way(&self) -> Self {
+        let (axis, angle) = self.turn;
+        Self {
+            turn: (axis, angle - std::f64::consts::TAU.copysign(angle)),
+            ..*self
+        }
+    }
+
+    /// The turn in degrees as the user would write it: as typed in a spec, and a matrix's to a
+    /// tenth of a degree (its rounding makes a half turn 179.99999°).
+    pub fn asked_degrees(&self) -> f64 {
+        let degrees = self.turn.1.to_degrees();
+        let step = if self.from_matrix { 10.0 } else { 1e9 };
+        (degrees * step).round() / step
+    }
+
     /// The affine map at load fraction `f ∈ [0, 1]` about the pivot `pivot` (used when the
     /// motion has none of its own): rotation angle, stretch and translation grow linearly from
     /// the identity, so `f = 1` gives the full motion.

@@ -35,7 +35,10 @@ A deformation returns a ``Report`` (a dataclass: cells, cell size, iterations, e
 residuals, fold-overs, warnings, timings); its warnings are also emitted through Python's
 ``warnings`` module as ``rigidcells.RigidCellsWarning``. Errors are exceptions that name the
 argument: ``TypeError`` or ``ValueError`` for a bad argument, spec or parameter, ``OSError`` for
-I/O, ``rigidcells.FormatError`` (a ``ValueError``) for malformed files. Heavy calls release the GIL;
+I/O, ``rigidcells.FormatError`` (a ``ValueError``) for malformed files,
+``rigidcells.TurnNotHeldError`` (a ``ValueError``) for a handle's turn the shape gives way under,
+with its fields (``handle``: the handle's index in ``spec["handle"]``, ``kind``, the degrees asked
+and held, ``said``: the message after the handle's name). Heavy calls release the GIL;
 Ctrl-C stops them within a step (``KeyboardInterrupt``), leaving no output file behind.
 """
 
@@ -56,11 +59,11 @@ import numpy as np
 
 from . import _rigidcells, dask
 from ._points import Frame, _float_dtype, _Points, _plain3, _triangles
-from ._rigidcells import FormatError
+from ._rigidcells import FormatError, TurnNotHeldError
 
 __all__ = [
     "deform", "solve", "deform_file", "apply_file", "solve_files", "Field", "Report",
-    "Session", "Step", "FormatError", "RigidCellsWarning", "__version__",
+    "Session", "Step", "FormatError", "TurnNotHeldError", "RigidCellsWarning", "__version__",
 ]
 
 __version__: str = _rigidcells.__version__
@@ -191,7 +194,8 @@ def _in_dict_terms(error: ValueError, paths: Optional[List[str]]) -> ValueError:
 
 
 def _lines_said(texts: List[str], paths: Optional[List[str]]) -> List[str]:
-    """Messages that name a dict spec's TOML lines (`line 7`), with its key paths instead."""
+    """Messages that name a dict spec's TOML lines (`line 7`, `the handle on line 7 of the edit
+    spec`), with its key paths instead."""
     if paths is None:
         return texts
 
@@ -199,18 +203,29 @@ def _lines_said(texts: List[str], paths: Optional[List[str]]) -> List[str]:
         n = int(m.group(1))
         return paths[n - 1] if 0 < n <= len(paths) and paths[n - 1] else m.group(0)
 
-    return [re.sub(r"\bline (\d+)", said, t) for t in texts]
+    return [re.sub(r"(?:the handle on )?\bline (\d+)(?: of the edit spec)?", said, t) for t in texts]
 
 
 def _call(paths: Optional[List[str]], f: Any, *args: Any) -> Any:
     """``f(*args)``, a dict spec's errors said by key path."""
     try:
         return f(*args)
+    except TurnNotHeldError as e:
+        if paths is None:
+            raise
+        raise _turn_said(e, _key_path(["handle", e.handle])) from None
     except ValueError as e:
         raised = _in_dict_terms(e, paths)
         if raised is e:
             raise
         raise raised from None
+
+
+def _turn_said(error: TurnNotHeldError, name: str) -> TurnNotHeldError:
+    """The refusal with the handle called ``name`` (``spec["handle"][0]``), its fields kept."""
+    said = TurnNotHeldError(f"{name} {error.said}")
+    said.__dict__.update(error.__dict__)
+    return said
 
 
 @dataclass

@@ -19,6 +19,19 @@ Progress = Union[Callable[[str, int, Optional[int]], Any], bool, None]
 class FormatError(ValueError):
     """A malformed or unreadable input file."""
 
+class TurnNotHeldError(ValueError):
+    """A handle's turn that the shape gives way under: `handle` is its index in the spec's
+    handles (`spec["handle"][handle]`), `line` its line in a TOML spec, `kind` "bend" or
+    "twist", `said` the message after the handle's name."""
+
+    handle: int
+    line: int
+    kind: Literal["bend", "twist"]
+    asked_degrees: float
+    held_degrees: float
+    other_way_degrees: Optional[float]
+    said: str
+
 class RigidCellsWarning(UserWarning):
     """A warning of a deformation (also in `report.warnings`), or a note of `Field.apply`."""
 

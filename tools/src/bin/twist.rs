@@ -69,9 +69,9 @@ fn row(height: f64, cell: f64, degrees: f64) -> Result<(), Box<dyn std::error::E
                 ),
             )
         }
-        Err(Error::TurnNotHeld { held_degrees, .. }) => (
+        Err(Error::TurnNotHeld(r)) => (
             "–".into(),
-            format!("refused: gives way past {held_degrees:.0}°"),
+            format!("refused: gives way past {:.0}°", r.held_degrees),
         ),
         Err(e) => return Err(e.into()),
     };
