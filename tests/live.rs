@@ -347,7 +347,10 @@ fn a_pose_a_whole_turn_from_the_last_keeps_its_winding() {
     let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
     live.solve(twist(0.0), 1, &Silent).unwrap().unwrap();
     let step = live.solve(twist(360.0), 1, &Silent).unwrap().unwrap();
-    assert!(step.from_rest, "a whole turn from the last pose was stepped warm");
+    assert!(
+        step.from_rest,
+        "a whole turn from the last pose was stepped warm"
+    );
     while live.refine().unwrap().is_some() {}
     let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
     let (expected, _, _) =

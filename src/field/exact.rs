@@ -112,8 +112,7 @@ impl<const D: usize> Prescribed<D> {
         }
         let near = |m: &Affine<D>| {
             (m.linear - map.linear).amax() <= 1e-9
-                && (m.translation - map.translation).amax()
-                    <= 1e-9 * (1.0 + map.translation.amax())
+                && (m.translation - map.translation).amax() <= 1e-9 * (1.0 + map.translation.amax())
         };
         let k = match self.maps.iter().position(near) {
             Some(k) => k,
@@ -569,7 +568,8 @@ where
         let v = self.leaves.voxel(x);
         // The kernel's mass over the voxel below, this one and the one above, per axis.
         let mass: [[f64; SIDE]; D] = std::array::from_fn(|a| {
-            let t = ((x[a] - self.leaves.lower[a]) / self.leaves.edge - v[a] as f64).clamp(0.0, 1.0);
+            let t =
+                ((x[a] - self.leaves.lower[a]) / self.leaves.edge - v[a] as f64).clamp(0.0, 1.0);
             let (below, above) = (smooth(0.5 * (1.0 - t)), smooth(0.5 * t));
             [below, 1.0 - below - above, above]
         });
@@ -836,7 +836,12 @@ const GROW: usize = 1;
 const SIDE: usize = 2 * GROW + 1;
 
 /// How many neighbors a voxel has, itself included (`SIDE^D`), by dimension.
-const NEIGHBORS: [u32; 4] = [1, SIDE as u32, (SIDE * SIDE) as u32, (SIDE * SIDE * SIDE) as u32];
+const NEIGHBORS: [u32; 4] = [
+    1,
+    SIDE as u32,
+    (SIDE * SIDE) as u32,
+    (SIDE * SIDE * SIDE) as u32,
+];
 
 /// The voxel `v` moved by neighbor `k`'s offsets (see [`Bands`]).
 fn neighbor<const D: usize>(v: &[i64; D], mut k: usize) -> [i64; D] {
@@ -986,7 +991,10 @@ mod tests {
             peak
         };
         let peak = rate(&sigma);
-        assert!(peak > 1.0 && peak <= 1.35, "takes the field up {peak} times faster");
+        assert!(
+            peak > 1.0 && peak <= 1.35,
+            "takes the field up {peak} times faster"
+        );
         assert!(rate(&smooth) > 2.0);
     }
 }
