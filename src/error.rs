@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use crate::solve::turns::TurnRefusal;
+use crate::human::degrees;
 
 /// Everything that can go wrong in rigidcells.
 #[derive(Debug, thiserror::Error)]
@@ -197,5 +197,92 @@ impl Error {
             path: path.into(),
             message: message.into(),
         }
+    }
+}
+
+/// What a handle's turn does to the shape between it and the fixed cells, as its messages say.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TurnKind {
+    /// The handle turns about an axis across the direction from the fixed cells to it.
+    Bend,
+    /// The handle turns about an axis along that direction.
+    Twist,
+}
+
+impl TurnKind {
+    /// The word: `bend` or `twist`.
+    pub fn name(self) -> &'static str {
+        match self {
+            TurnKind::Bend => "bend",
+            TurnKind::Twist => "twist",
+        }
+    }
+}
+
+/// The command line's name for the handle on `line` of the edit spec.
+pub fn handle_on_line(line: usize) -> String {
+    format!("the handle on line {line} of the edit spec")
+}
+
+/// A turn the shape gives way under ([`crate::Error::TurnNotHeld`]): past `held_degrees` the
+/// shape between the handle and the fixed cells turns back the short way round at every load
+/// step the solver tries.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TurnRefusal {
+    /// The handle's index among the spec's handles (0 for the first).
+    pub handle: usize,
+    /// The handle's line in the edit spec.
+    pub line: usize,
+    /// A bend or a twist.
+    pub kind: TurnKind,
+    /// The turn asked, in degrees, as in [`crate::solve::HandleTurn::asked_degrees`].
+    pub asked_degrees: f64,
+    /// The largest turn the load path held, in whole degrees, of the sign of `asked_degrees`.
+    pub held_degrees: f64,
+    /// The turn that reaches the same pose the other way round, offered for a half turn
+    /// typed in a spec (a matrix's is taken both ways before it is refused).
+    pub other_way_degrees: Option<f64>,
+}
+
+impl TurnRefusal {
+    /// The message after the handle's name (a face names the handle its own way):
+    /// `twists by 360°, but the shape …`.
+    pub fn said(&self) -> String {
+        let (word, back, across) = match self.kind {
+            TurnKind::Bend => ("bend", "turns back", "thickness"),
+            TurnKind::Twist => ("twist", "untwists", "width"),
+        };
+        let held = degrees(self.held_degrees);
+        let mut advice = Vec::new();
+        if let Some(other) = self.other_way_degrees {
+            let other = degrees(other);
+            advice.push(format!(
+                "{word} it the other way round instead (by {other}, to the same pose)"
+            ));
+        }
+        advice.push(format!("{word} it less (by {held} at most)"));
+        if self.kind == TurnKind::Twist {
+            advice.push("twist a longer span (the fixed and handle regions farther apart)".into());
+        }
+        advice.push(format!(
+            "{word} it in several runs, each deforming the last output"
+        ));
+        let last = advice.pop().unwrap_or_default();
+        let mut advice = format!("{}, or {last}", advice.join(", "));
+        advice[..1].make_ascii_uppercase();
+        format!(
+            "{word}s by {}, but the shape between it and the fixed cells gives way past {held} \
+             and {back} the short way round: rigid cells glued face to face hold a {word} only \
+             so far over a part this short for its {across}, and smaller or larger cells change \
+             that little. {advice}",
+            degrees(self.asked_degrees),
+        )
+    }
+}
+
+impl std::fmt::Display for TurnRefusal {
+    /// The message as the command line says it: the handle named by its line.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} {}", handle_on_line(self.line), self.said())
     }
 }

@@ -88,6 +88,7 @@ mod multilevel;
 mod positions;
 mod session;
 mod sight;
+mod steps;
 mod system;
 pub mod turns;
 
@@ -109,6 +110,8 @@ use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid, Vect};
+pub use steps::MAX_TRAVEL;
+use steps::load_steps;
 use system::System;
 use turns::TurnGauge;
 pub use turns::{HandleTurn, TurnKind, TurnRefusal};
@@ -937,87 +940,6 @@ fn prescribe<const D: usize>(
         }
     }
 }
-
-/// The number of load steps: enough that no handle turns by more than `max_step_degrees` and
-/// no handle cell, pin or target moves by more than `max_step_fraction` of the extent per step,
-/// relative to the fixed cells (or, without any, to the constraints' common motion: a shape
-/// moved whole needs no steps). A spread of motions past [`MAX_TRAVEL`] extents is refused: it
-/// tears the shape apart and would cost thousands of load steps (a control point sent 4e9 away
-/// from a shape 2 wide, a unit or coordinate mistake).
-fn load_steps<const D: usize>(
-    complex: &CellComplex<D>,
-    constraints: &Constraints<D>,
-    params: &SolveParams,
-) -> Result<usize>
-where
-    Dim<D>: Rigid<D>,
-{
-    let mut lo = Vect::<D>::repeat(f64::MAX);
-    let mut hi = Vect::<D>::repeat(f64::MIN);
-    for c in &complex.cells {
-        lo = lo.inf(&(c.center.add_scalar(-c.half)));
-        hi = hi.sup(&(c.center.add_scalar(c.half)));
-    }
-    let extent = (hi - lo).max().max(f64::MIN_POSITIVE);
-    let mut turn = 0.0f64;
-    // Every constrained motion with what it belongs to, for the message.
-    let mut moves: Vec<(Vect<D>, String)> = Vec::new();
-    for (k, h) in constraints.handles.iter().enumerate() {
-        turn = turn.max(h.motion.turn.1.abs().to_degrees());
-        let map = constraints.handle_map(k, 1.0);
-        for (c, role) in constraints.roles.iter().enumerate() {
-            if *role == Role::Handle(k as u32) {
-                let x = complex.cells[c].center;
-                moves.push((map.apply(&x) - x, format!("the handle on line {}", h.line)));
-            }
-        }
-    }
-    for (k, p) in constraints.pins.iter().enumerate() {
-        moves.push((p.to - p.point, format!("pin #{}", k + 1)));
-    }
-    for (k, t) in constraints.targets.iter().enumerate() {
-        moves.push((t.to - t.from, format!("target #{}", k + 1)));
-    }
-    let fixed = constraints.roles.contains(&Role::Fixed);
-    let (mut dlo, mut dhi) = match fixed {
-        true => (Vect::<D>::zeros(), Vect::<D>::zeros()),
-        false => (Vect::<D>::repeat(f64::MAX), Vect::<D>::repeat(f64::MIN)),
-    };
-    for (d, _) in &moves {
-        dlo = dlo.inf(d);
-        dhi = dhi.sup(d);
-    }
-    // How far each motion takes its cells from the fixed ones, or from the middle of the
-    // motions when nothing is fixed.
-    let reference = if fixed {
-        Vect::<D>::zeros()
-    } else {
-        (dlo + dhi) * 0.5
-    };
-    let farthest = moves
-        .iter()
-        .map(|(d, what)| ((d - reference).norm(), what))
-        .max_by(|a, b| a.0.total_cmp(&b.0));
-    let travel = farthest.map_or(0.0, |f| f.0);
-    if travel > MAX_TRAVEL * extent {
-        let farthest = farthest.map_or("a constraint", |f| f.1.as_str());
-        return Err(Error::Param(format!(
-            "{farthest} of the edit spec moves {} relative to the rest of the edit, {:.0} times \
-             the shape's size of {}: more than {MAX_TRAVEL} times is refused (it tears the shape \
-             apart); check the spec's units and coordinates",
-            crate::human::length(travel, extent),
-            travel / extent,
-            crate::human::length(extent, extent),
-        )));
-    }
-    let by_turn = (turn / params.max_step_degrees.max(1e-3)).ceil();
-    let by_travel = (travel / (params.max_step_fraction.max(1e-6) * extent)).ceil();
-    Ok(by_turn.max(by_travel).clamp(1.0, 1000.0) as usize)
-}
-
-/// The most the constraints' motions may spread, in extents of the cells (at most 100 load
-/// steps of a quarter extent).
-pub const MAX_TRAVEL: f64 = 25.0;
 
 /// What to change when the cells do not fit the memory budget.
 const CELLS_ADVICE: &str = "use a larger --cell-size (or fewer --cells)";
