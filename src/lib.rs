@@ -57,6 +57,7 @@ pub mod control;
 pub mod demo;
 pub mod edit;
 pub mod error;
+pub mod estimate;
 pub mod field;
 pub mod human;
 pub mod image;

@@ -13,17 +13,28 @@
 //!   the occupied cells grow; 24 bytes per cell of the coarsest level, which is enumerated
 //!   whole; 8 bytes per candidate cell of the triangles' boxes, counted before they are
 //!   rasterized. Nothing is sized by the bounding box's volume;
+//! - the run's cells, forecast once the occupied cells are known and the empty space tiled,
+//!   before it is classified (`cells::Forecast`): a run that will solve them is refused there
+//!   when no solver path can fit them ([`crate::estimate::check_forecast`], 6 KB a cell at
+//!   least), before the build spends its time and memory on them;
+//! - the whole solve, once the cells and the roles are known and before its first (coarse)
+//!   stage ([`crate::solve::forecast`], priced by [`crate::estimate`]): the direct path's
+//!   factor and the multilevel hierarchy's coarsest factor from symbolic analyses of the
+//!   cells' graph, every stage coarse to fine; within 0.8–1.1 times the measured peak on the
+//!   bar, the paper's meshes and a scan (BENCHMARKS.md, "What a run will take");
 //! - with `--solver auto` (the default) the direct path where its factor fits, else the
 //!   multilevel one;
-//! - the solver: [`SOLVER_BYTES_PER_CELL`] per cell before anything is built (the motions, the
-//!   energies, the position system), then, for the direct path, the assembled system's entries
-//!   before they are allocated, and the sparse Cholesky factor exactly, from its symbolic
-//!   analysis, before its values are (the factor's fill depends on the shape: 12–13 KB per
-//!   cell on a terrain, up to 25 KB on a solid; a flat per-cell estimate refused a 1.1M-cell
-//!   terrain that ran in 14.4 GB);
-//! - the multilevel solver ([`crate::solve::Method::Multilevel`]): about
+//! - the solver, again at each stage: [`SOLVER_BYTES_PER_CELL`] per cell before anything is
+//!   built (the motions, the energies, the position system), then, for the direct path, the
+//!   assembled system's entries before they are allocated, and the sparse Cholesky factor
+//!   exactly, from its symbolic analysis, before its values are (the factor's fill depends on
+//!   the shape: 12–13 KB per cell on a terrain, 27 KB on the 10 × 1 × 1 bar at 0.02; a flat
+//!   per-cell estimate refused a 1.1M-cell terrain that ran in 14.4 GB);
+//! - the multilevel solver ([`crate::solve::Method::Multilevel`]): at least
 //!   [`MULTILEVEL_BYTES_PER_CELL`] (the normal equations' blocks, the smoothed prolongation,
-//!   the coarse level's factor; 10.4 KB per cell of process peak measured at 342k cells);
+//!   the coarse level's factor; 10.4 KB per cell of process peak measured at 342k cells of a
+//!   terrain, but 41 KB on the bar, whose coarsest level factors as a solid: the whole
+//!   solve's estimate above counts it);
 //! - the dense RBF: its `n × n` factor and the kernel sums ([`rbf_bytes`]).
 
 use crate::error::{Error, Result};

@@ -14,6 +14,9 @@ pub trait Observer: Sync {
     fn message(&self, _text: &str) {}
     /// The stage is done.
     fn finish(&self) {}
+    /// What the solve about to start will take ([`crate::estimate`]): its cells, memory and
+    /// seconds, estimated before its first stage.
+    fn estimate(&self, _estimate: &crate::estimate::Estimate) {}
     /// Whether the caller wants the work stopped: long loops ask between their steps (a
     /// solver iteration, a chunk read or written) and end with [`Error::Cancelled`].
     fn cancelled(&self) -> bool {

@@ -91,6 +91,11 @@ pub struct Report {
     pub timings_s: Timings,
     /// The process's peak resident memory in bytes (`VmHWM`; absent where unknown).
     pub peak_memory_bytes: Option<u64>,
+    /// What the solve was estimated to take before it started ([`crate::estimate`]): its
+    /// `cells`, peak memory in `bytes`, `seconds` (the solve and the transfer's construction)
+    /// and `solver`; beside `peak_memory_bytes` and `timings_s` it says how near the estimate
+    /// came.
+    pub estimate: Option<EstimateReport>,
     /// Warnings, as printed.
     pub warnings: Vec<String>,
     /// Every control point (`[[target]]`): id, where it was given, from (after snapping),
@@ -101,6 +106,30 @@ pub struct Report {
     pub control_rmse: Option<f64>,
     /// The root mean square of their leave-one-out prediction errors (with `--check-gcp`).
     pub control_rmse_left_out: Option<f64>,
+}
+
+/// The solve's estimate in the report.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct EstimateReport {
+    /// Cells.
+    pub cells: usize,
+    /// Peak memory, in bytes.
+    pub bytes: u64,
+    /// Seconds of the solve and the transfer's construction.
+    pub seconds: f64,
+    /// The linear solver: `direct` or `multilevel`.
+    pub solver: &'static str,
+}
+
+impl From<&crate::estimate::Estimate> for EstimateReport {
+    fn from(e: &crate::estimate::Estimate) -> Self {
+        Self {
+            cells: e.cells,
+            bytes: e.bytes,
+            seconds: e.seconds,
+            solver: e.solver.name(),
+        }
+    }
 }
 
 /// One turning handle's turn in the report.
@@ -230,6 +259,7 @@ impl Report {
             foldovers_checked: d.foldovers.0,
             timings_s: Timings::of(d, file.seconds_read, file.seconds_write, total),
             peak_memory_bytes: peak_memory(),
+            estimate: s.estimate.as_ref().map(EstimateReport::from),
             warnings: d.warnings.clone(),
             control_points: d.control_points.clone(),
             control_rmse: crate::control::rmse(&d.control_points),

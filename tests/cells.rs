@@ -492,3 +492,21 @@ fn oriented_points_with_a_hole_keep_their_interior() {
         "holed {winding} vs closed {whole} interior cells"
     );
 }
+
+/// A box mesh whose faces lie on cell faces (a 10 × 1 × 1 bar at 0.1: whole numbers of cells)
+/// marks the cells on both sides of each face, whatever the rounding of the cells' centers: one
+/// connected complex, two layers of boundary cells (the rounding had marked one side, the other
+/// or neither, triangle by triangle: 3,539 boundary cells in 22 parts joined by edges only).
+#[test]
+fn a_surface_on_cell_faces_marks_both_sides() {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let points: Vec<Vect<3>> = bar.vertices.iter().map(|&v| Vect::<3>::from(v)).collect();
+    let params = BuildParams {
+        cell_size: Some(0.1),
+        ..Default::default()
+    };
+    let (complex, info) = build(&points, &bar.triangles, &params, Budget::default()).unwrap();
+    assert_eq!(complex.components().1, 1);
+    // Two layers over the 42 square units of the surface, 100 cells a unit.
+    assert!(info.boundary_cells >= 2 * 4200, "{info:?}");
+}

@@ -144,8 +144,8 @@ fn a_cells_target_the_shape_cannot_reach_is_said_quickly() {
 
 /// The build's estimate covers the complex it hands on: at 160 B per occupied cell a soup at
 /// `--min-cell-size` 1 mm passed a 1.5 GB budget and peaked at 2.3 GB (an abort under
-/// `ulimit -v`). Here a build of ~250k occupied cells (the bar at 4 mm) is refused under 100 MB before it
-/// starts.
+/// `ulimit -v`). Here a build of 210,016 occupied cells (the bar at 2 cm, two layers on each
+/// face) is refused under 100 MB before it starts.
 #[test]
 fn the_cell_build_is_refused_when_its_complex_would_not_fit() {
     let dir = tempfile::tempdir().unwrap();
@@ -154,14 +154,14 @@ fn the_cell_build_is_refused_when_its_complex_would_not_fit() {
     let r = common::cells(
         &input,
         &out,
-        &["--cell-size", "0.004", "--memory-limit", "100M"],
+        &["--cell-size", "0.02", "--memory-limit", "100M"],
     );
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(r.stderr.contains("occupied finest cells"), "{}", r.stderr);
     assert!(r.stderr.contains("--cell-size"), "{}", r.stderr);
     assert!(!out.exists());
     // Without the limit it builds, and has the cells the old estimate passed under 100 MB.
-    let r = common::cells(&input, &out, &["--cell-size", "0.004"]);
+    let r = common::cells(&input, &out, &["--cell-size", "0.02"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let boundary: usize = r
         .stdout

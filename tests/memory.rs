@@ -111,21 +111,30 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
         }
         assert!(!out.exists());
     };
-    // 1,512 cells: the dense RBF needs about 18 MiB; the solver 6 MiB before anything is built,
-    // then its sparse factor 20.5 MiB, known exactly from the symbolic analysis.
+    // 1,512 cells: the dense RBF needs about 18 MiB; any solver 8.7 MiB at least, known from
+    // the cells' forecast before they are built, then the direct path's sparse factor
+    // 20.5 MiB, known exactly from the symbolic analysis.
     refused("10M", &["--transfer", "rbf"], &["RBF", "--transfer pu"]);
-    refused("5M", &["--transfer", "blend"], &["solving 1512 cells"]);
+    refused(
+        "5M",
+        &["--transfer", "blend"],
+        &["solving about 1,512 cells of size 0.25", "--cell-size"],
+    );
     refused(
         "16M",
         &["--transfer", "blend", "--solver", "direct"],
         &["factoring the solver's system of 1512 cells", "--cell-size"],
     );
-    // The default solver falls back to the multilevel one (12 KB a cell, 17.7 MiB) where the
-    // factor does not fit, and says so in the report; below that, both are refused.
+    // The default solver falls back to the multilevel one (19.2 MiB, its coarsest level the
+    // cells themselves) where the factor does not fit (19.7 MiB with the pattern), and says so
+    // in the report; below that, both are refused.
     refused(
         "16M",
         &["--transfer", "blend"],
-        &["solving 1512 cells by the multilevel solver", "--cell-size"],
+        &[
+            "solving 1,512 cells by the multilevel solver",
+            "--cell-size",
+        ],
     );
     let report = dir.path().join("r.json");
     let r = deform(
@@ -136,7 +145,7 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
             "--cell-size",
             "0.25",
             "--memory-limit",
-            "19M",
+            "19.5M",
             "--transfer",
             "blend",
             "--report",
@@ -173,4 +182,134 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
         "lots",
     ]);
     assert_eq!(r.code, 2, "{}", r.stderr);
+}
+
+/// The 10 × 1 × 1 bar fixed at one end and turned at the other (the README's bend) in `dir`:
+/// its input (8 vertices a unit), output and edit paths.
+fn turned_bar(
+    dir: &std::path::Path,
+) -> (std::path::PathBuf, std::path::PathBuf, std::path::PathBuf) {
+    let input = dir.join("bar.ply");
+    data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
+    let spec = edit(
+        dir,
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-3.4, 0.0, 5.9]\n",
+    );
+    (input, dir.join("out.ply"), spec)
+}
+
+/// Cells that no solver path fits in the budget are refused from their forecast, once the
+/// occupied cells are known and before the empty space is classified or a cell is made: the
+/// bar at 0.005 (5.4 million cells, some 30 GiB) under 16 GiB, and at 0.02 (216,016 cells)
+/// under 1 GiB, which the per-cell checks had let through its coarse stages to the cells'
+/// own factorization (the refusal came after a build of 216,016 cells and the coarse solves).
+/// The forecast's words ("solving about N cells of size S") say where it stopped.
+#[test]
+fn cells_no_solver_fits_are_refused_before_they_are_built() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out, spec) = turned_bar(dir.path());
+    for (size, limit, cells) in [("0.005", "16G", "5,4"), ("0.02", "1G", "21")] {
+        let start = std::time::Instant::now();
+        let r = deform(
+            &input,
+            &out,
+            &spec,
+            &["--cell-size", size, "--memory-limit", limit],
+        );
+        assert_eq!(r.code, 4, "{size}: {}", r.stderr);
+        let about = format!("solving about {cells}");
+        for needle in [&about[..], size, "--cell-size", "--memory-limit"] {
+            assert!(r.stderr.contains(needle), "{size}: {needle}: {}", r.stderr);
+        }
+        assert!(!out.exists());
+        // Seconds in a debug build on a busy machine: the classification of the bar's 10M
+        // blocks alone takes a minute at 0.005 (release).
+        let took = start.elapsed().as_secs_f64();
+        assert!(took < 30.0, "{size}: {took} s");
+    }
+}
+
+/// A solve expected to take longer than 10 seconds is announced on stderr before it starts,
+/// with its cells, time and memory; a short one is not.
+#[test]
+fn a_long_solve_is_announced_before_it_starts() {
+    use std::io::{BufRead, BufReader};
+    let dir = tempfile::tempdir().unwrap();
+    let (input, out, spec) = turned_bar(dir.path());
+    // 47,816 cells: some 40 s of solve (release).
+    let mut child = common::bin()
+        .args(["deform", arg(&input), "-o", arg(&out), "--edit", arg(&spec)])
+        .args(["--cell-size", "0.05", "--memory-limit", "8G"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let line = BufReader::new(stderr)
+        .lines()
+        .map(|l| l.unwrap())
+        .find(|l| l.contains("the solve:"));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let line = line.expect("no announcement");
+    assert!(
+        line.contains("about 47,816 cells") && line.contains("GiB"),
+        "{line}"
+    );
+    // 1,512 cells: under a second.
+    let r = deform(&input, &out, &spec, &["--cell-size", "0.25"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(!r.stderr.contains("the solve:"), "{}", r.stderr);
+}
+
+/// `pipeline::estimate` counts the cells a deformation makes (it builds them), and its
+/// estimate is of the solve's path and fits the budget the run fits; cells it refuses to
+/// build are forecast within 3 % of those a build makes.
+#[test]
+fn the_estimate_counts_the_cells_of_a_run() {
+    use rigidcells::pipeline::{self, Options};
+    use rigidcells::rigid::Vect;
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let points: Vec<Vect<3>> = bar.vertices.iter().map(|&v| Vect::<3>::from(v)).collect();
+    let spec = rigidcells::spec::parse_spec::<3>(
+        "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+         [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
+         translate = [0, 0, 1]\n",
+        std::path::Path::new("."),
+        std::path::Path::new("edit.toml"),
+    )
+    .unwrap();
+    let params = |size: f64, limit: Option<u64>| {
+        Options {
+            cell_size: Some(size),
+            memory_limit: limit,
+            ..Default::default()
+        }
+        .params()
+        .unwrap()
+    };
+    let at = params(0.25, None);
+    let e = pipeline::estimate(&points, &bar.triangles, &[], &spec, &at).unwrap();
+    let silent = rigidcells::progress::Silent;
+    let (_, solution, info) =
+        pipeline::deform(&points, &bar.triangles, &spec, &at, &silent).unwrap();
+    assert_eq!(e.cells, solution.complex.len());
+    assert!(e.complete && e.fits(), "{e:?}");
+    assert_eq!(info.solver.estimate.map(|s| s.cells), Some(e.cells));
+    // At 0.05 in 100 MiB: refused, forecast and not built.
+    let tight = params(0.05, Some(100 << 20));
+    let e = pipeline::estimate(&points, &bar.triangles, &[], &spec, &tight).unwrap();
+    assert!(!e.complete && !e.fits(), "{e:?}");
+    let built = rigidcells::cells::build(
+        &points,
+        &bar.triangles,
+        tight.build(),
+        rigidcells::memory::Budget::default(),
+    )
+    .unwrap()
+    .0
+    .len();
+    let off = e.cells as f64 / built as f64 - 1.0;
+    assert!(off.abs() < 0.03, "forecast {} against {built}", e.cells);
 }

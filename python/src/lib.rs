@@ -676,6 +676,46 @@ fn solve<'py>(
     Ok((Field { saved }, d))
 }
 
+/// What `deform` or `solve` of `points` under the TOML `spec` with the `options` will take,
+/// without solving (`rigidcells::pipeline::estimate`): a dict of its `cells`, peak memory in
+/// `bytes`, `seconds` (the whole run: the cells as built, the solve and the transfer as
+/// estimated), `solve_seconds`, `solver` (`direct` or `multilevel`), `limit` (the memory
+/// budget), `fits` and `complete` (false where the cells were only forecast, because they
+/// cannot fit the budget: the least the run takes).
+#[pyfunction]
+#[pyo3(signature = (points, spec_text, base, triangles=None, options=None, classes=None))]
+fn estimate<'py>(
+    py: Python<'py>,
+    points: PyReadonlyArray2<'py, f64>,
+    spec_text: &str,
+    base: &str,
+    triangles: Option<PyReadonlyArray2<'py, i64>>,
+    options: Option<Bound<'py, PyDict>>,
+    classes: Option<PyReadonlyArray1<'py, u8>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (s, spec, params) = inputs(
+        &points,
+        triangles.as_ref(),
+        classes.as_ref(),
+        spec_text,
+        base,
+        options.as_ref(),
+    )?;
+    let e = py
+        .detach(|| pipeline::estimate(&s.points, &s.triangles, &s.classes, &spec, &params))
+        .map_err(py_err)?;
+    let d = PyDict::new(py);
+    d.set_item("cells", e.cells)?;
+    d.set_item("bytes", e.bytes)?;
+    d.set_item("seconds", e.seconds)?;
+    d.set_item("solve_seconds", e.solve_seconds)?;
+    d.set_item("solver", e.solver.name())?;
+    d.set_item("limit", e.limit)?;
+    d.set_item("fits", e.fits())?;
+    d.set_item("complete", e.complete)?;
+    Ok(d)
+}
+
 /// `rigidcells deform` on a file: streams `input` into `output` (atomically), with the field
 /// saved to `save_field`, the JSON report written to `report` and the preview picture to
 /// `preview` (seen as the `view` dict says: `azimuth`, `elevation`, `size`, `up`, `zoom`,
@@ -944,6 +984,7 @@ fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Session>()?;
     m.add_function(wrap_pyfunction!(deform, m)?)?;
     m.add_function(wrap_pyfunction!(solve, m)?)?;
+    m.add_function(wrap_pyfunction!(estimate, m)?)?;
     m.add_function(wrap_pyfunction!(deform_file, m)?)?;
     m.add_function(wrap_pyfunction!(apply_file, m)?)?;
     m.add_function(wrap_pyfunction!(solve_files, m)?)?;

@@ -92,6 +92,22 @@ def test_deform_file_writes_the_command_lines_bytes(tmp_path):
     assert again.read_bytes() == theirs.read_bytes()
 
 
+def test_estimate_counts_the_cells_a_deformation_makes():
+    pts = bar_points()
+    e = rigidcells.estimate(pts, BEND, cell_size=0.25)
+    assert isinstance(e, rigidcells.Estimate)
+    _, report = rigidcells.deform(pts, BEND, cell_size=0.25, progress=False)
+    assert e.cells == report.cells
+    assert e.complete and e.fits and e.solver == "direct"
+    assert 0 < e.bytes <= e.limit and e.seconds > 0
+    # Cells that cannot fit the budget are forecast, not built: the least they take.
+    tight = rigidcells.estimate(pts, BEND, cell_size=0.25, memory_limit="2M")
+    assert not tight.complete and not tight.fits and tight.bytes > tight.limit
+    assert abs(tight.cells / e.cells - 1) < 0.03
+    with pytest.raises(ValueError, match="memory_limit"):
+        rigidcells.deform(pts, BEND, cell_size=0.25, memory_limit="2M", progress=False)
+
+
 def test_normals_turn_with_the_bend():
     pts = bar_points()
     up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))

@@ -28,7 +28,7 @@ pub(crate) use export::BOX_QUADS;
 mod tri_box;
 mod winding;
 
-pub use build::Occupancy;
+pub use build::{Forecast, Occupancy};
 pub(crate) use decimate::Decimation;
 pub use export::{Pose, write_cells_ply};
 pub use size::{DEFAULT_DIVISIONS, cell_size_for};
@@ -120,6 +120,20 @@ pub fn build<const D: usize>(
     params: &BuildParams,
     budget: Budget,
 ) -> Result<(CellComplex<D>, BuildInfo)> {
+    build_checked(points, triangles, params, budget, &|_| Ok(()))
+}
+
+/// [`build`], handing `check` the [`Forecast`] of the cells before the empty space is
+/// classified or any leaf is made ([`Occupancy::finish_checked`]): what a run that will solve
+/// the cells calls, so that one which cannot is refused before the build's time and memory are
+/// spent. (A `--cells N` search's trial builds are not checked: only the size it settles on.)
+pub fn build_checked<const D: usize>(
+    points: &[Vect<D>],
+    triangles: &[[u32; 3]],
+    params: &BuildParams,
+    budget: Budget,
+    check: &dyn Fn(&Forecast) -> Result<()>,
+) -> Result<(CellComplex<D>, BuildInfo)> {
     let (lo, hi) = bounds(points)?;
     // A point cloud is sized on the decimated samples a file of the same points is sized on
     // (`Decimation`); a mesh on all its vertices, which its triangles need.
@@ -141,7 +155,7 @@ pub fn build<const D: usize>(
     let mut occupancy = Occupancy::new(&lo, &hi, &params, budget)?;
     occupancy.add_points(points)?;
     occupancy.add_triangles(points, triangles)?;
-    occupancy.finish()
+    occupancy.finish_checked(check)
 }
 
 /// The bounding box of `points`; an error for no points or a coordinate that is not finite.

@@ -4,12 +4,16 @@
 use std::io::IsTerminal;
 
 use indicatif::{ProgressBar, ProgressStyle};
+use rigidcells::estimate::Estimate;
 use rigidcells::progress::Observer;
 
 /// A progress bar on a terminal (a spinner for stages of unknown length), a new one for each
 /// stage (a finished bar draws no more); silent otherwise.
+/// A solve expected to take longer than `estimate::LONG_RUN_SECONDS` is announced on stderr
+/// before it starts, with its cells, time and memory (not with `-q`).
 pub(super) struct Bar {
     shown: bool,
+    quiet: bool,
     bar: std::sync::Mutex<Option<ProgressBar>>,
 }
 
@@ -17,6 +21,7 @@ impl Bar {
     pub(super) fn new(quiet: bool) -> Self {
         Self {
             shown: !quiet && std::io::stderr().is_terminal(),
+            quiet,
             bar: std::sync::Mutex::new(None),
         }
     }
@@ -57,6 +62,19 @@ impl Observer for Bar {
     fn finish(&self) {
         if let Some(b) = self.bar.lock().expect("not poisoned").take() {
             b.finish_and_clear();
+        }
+    }
+    fn estimate(&self, estimate: &Estimate) {
+        if self.quiet || !estimate.is_long() {
+            return;
+        }
+        let line = format!(
+            "the solve: {} (--cell-size or --cells trade detail for time)",
+            estimate.summary()
+        );
+        match self.bar.lock().expect("not poisoned").as_ref() {
+            Some(b) => b.suspend(|| eprintln!("{line}")),
+            None => eprintln!("{line}"),
         }
     }
 }

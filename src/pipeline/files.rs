@@ -241,6 +241,7 @@ fn solve_source(
         params,
         chunk,
         proxy_max,
+        true,
         &mut info.notes,
         observer,
     )?;
@@ -461,6 +462,7 @@ pub fn file_cells(
         params,
         chunk,
         0,
+        spec.is_some(),
         &mut notes,
         observer,
     )?;

@@ -17,12 +17,16 @@ use super::{DeformParams, Proxy};
 
 /// Pass 1 of [`deform_file`]: the cell complex of `source` (rerunning the pass with the
 /// samples' own bounds when they overflow the header's) and what the spec's regions select.
+/// With `solving`, the cells' forecast is checked against the solve's least memory
+/// ([`crate::estimate::check_forecast`]) before the empty space is classified.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn first_pass_cells(
     source: &mut dyn Source,
     spec: &EditSpec<3>,
     params: &DeformParams,
     chunk: usize,
     proxy_max: usize,
+    solving: bool,
     notes: &mut Vec<String>,
     observer: &dyn Observer,
 ) -> Result<(CellComplex<3>, BuildInfo, Selections<3>, Proxy)> {
@@ -91,7 +95,11 @@ pub(super) fn first_pass_cells(
     observer.stage("voxelizing", 0);
     occupancy.add_triangles(&positions, source.triangles())?;
     drop(positions);
-    let (complex, build_info) = occupancy.finish()?;
+    let check = |forecast: &crate::cells::Forecast| match solving {
+        true => params.check_forecast(forecast),
+        false => Ok(()),
+    };
+    let (complex, build_info) = occupancy.finish_checked(&check)?;
     observer.finish();
     notes.extend(crate::cells::shortfall(target, complex.len()));
     Ok((complex, build_info, selections, proxy))

@@ -98,8 +98,9 @@ impl Live {
             )));
         }
         super::classes_of(points.len(), &classes)?;
+        let check = |forecast: &crate::cells::Forecast| params.check_forecast(forecast);
         let (complex, build) =
-            crate::cells::build(&points, triangles, &params.build, params.memory)?;
+            crate::cells::build_checked(&points, triangles, &params.build, params.memory, &check)?;
         Ok(Self {
             points,
             classes,

@@ -103,6 +103,13 @@ impl DeformParams {
         self.memory
     }
 
+    /// [`crate::estimate::check_forecast`] of `forecast` for these parameters' solver and
+    /// budget: what a build of cells to be solved checks before it classifies them.
+    pub(crate) fn check_forecast(&self, forecast: &crate::cells::Forecast) -> Result<()> {
+        let direct = self.solve.method == crate::solve::Method::Direct;
+        crate::estimate::check_forecast(forecast, direct, self.memory)
+    }
+
     /// These parameters with at most `samples` samples in [`deform_file`]'s preview proxy
     /// (the fold-over check's and the report's samples among them): 1 or more.
     pub fn with_proxy_samples(self, samples: usize) -> Result<Self> {
@@ -378,4 +385,56 @@ pub fn solve_points(
         warnings,
     );
     Ok((saved, solution, info))
+}
+
+/// What deforming `points` (with `triangles`, and their LAS `classes`, one per point or
+/// none) under `spec` with `params` will take, without solving it ([`crate::estimate`]): the
+/// cells are built and the spec resolved on them, the solve's stages are counted and priced,
+/// not run. Its seconds are the whole run's: the build's as it took them, the solve's and the
+/// transfer's as estimated. Cells that cannot fit the budget by any path are not built: the
+/// estimate is then their forecast's least ([`crate::estimate::Estimate::floor`], `complete`
+/// false), made in about the time the occupied cells take to find. What the Python package's
+/// `estimate` returns; a caller compares [`crate::estimate::Estimate::fits`].
+pub fn estimate(
+    points: &[Vect<3>],
+    triangles: &[[u32; 3]],
+    classes: &[u8],
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+) -> Result<crate::estimate::Estimate> {
+    let classes = classes_of(points.len(), classes)?;
+    crate::solve::Selections::new(spec, classes.is_some(), points.len() as u64)?;
+    let start = Instant::now();
+    let seen = std::cell::Cell::new(None);
+    let check = |forecast: &crate::cells::Forecast| {
+        seen.set(Some(*forecast));
+        params.check_forecast(forecast)
+    };
+    let built =
+        crate::cells::build_checked(points, triangles, &params.build, params.memory, &check);
+    let (complex, _) = match (built, seen.get()) {
+        (Ok(built), _) => built,
+        (Err(Error::Memory { .. }), Some(forecast)) => {
+            let direct = params.solve.method == crate::solve::Method::Direct;
+            return Ok(crate::estimate::Estimate::floor(
+                &forecast,
+                direct,
+                params.memory,
+            ));
+        }
+        (Err(e), _) => return Err(e),
+    };
+    let constraints = crate::solve::resolve(&complex, spec, points, classes)?;
+    let (complex, constraints) = match params.solve.coarsen_levels {
+        0 => (complex, constraints),
+        levels => crate::solve::coarsen(&complex, &constraints, levels),
+    };
+    let mut estimate =
+        crate::solve::forecast(&complex, &constraints, &params.solve, params.memory)?;
+    if params.transfer == Transfer::Rbf {
+        let rbf = crate::memory::rbf_bytes(complex.len(), 3);
+        estimate.bytes = estimate.bytes.max(rbf as u64);
+    }
+    estimate.seconds += start.elapsed().as_secs_f64();
+    Ok(estimate)
 }

@@ -17,7 +17,7 @@
 
 use std::time::Instant;
 
-use crate::cells::{BuildInfo, CellComplex, build};
+use crate::cells::{BuildInfo, CellComplex, build_checked};
 use crate::control::ControlPoint;
 use crate::error::Result;
 use crate::field::{Field, Outside, Rbf, SavedField, Transfer, Warp, apply, apply_into};
@@ -94,7 +94,9 @@ where
             // What the spec asks of the samples (their classes, their indices), before the
             // cells are built.
             crate::solve::Selections::new(spec, classes.is_some(), points.len() as u64)?;
-            let (complex, info) = build(points, triangles, &params.build, params.memory)?;
+            let check = |forecast: &crate::cells::Forecast| params.check_forecast(forecast);
+            let (complex, info) =
+                build_checked(points, triangles, &params.build, params.memory, &check)?;
             sizing = crate::cells::shortfall(params.build.target_cells, complex.len());
             let selected = Selected::Samples { points, classes };
             let constraints = self::constraints(&complex, spec, selected, params)?;

@@ -3,7 +3,9 @@
 //! system's own symbolic analysis.
 
 use faer::Side;
-use faer::sparse::linalg::cholesky::{SymmetricOrdering, factorize_symbolic_cholesky};
+use faer::sparse::linalg::cholesky::{
+    SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
+};
 use faer::sparse::{Pair, SymbolicSparseColMat};
 
 use crate::cells::CellComplex;
@@ -37,35 +39,101 @@ pub(super) fn cell_fill<const D: usize>(
     pairs: &[u32],
     dof: usize,
 ) -> usize {
+    let nodes = free_cells.len();
+    let fill = graph_fill(nodes, &free_edges(complex, free_cells, pairs), dof);
+    fill.map_or(0, |f| (f.nodes_len as usize) * dof / nodes.max(1))
+}
+
+/// The pairs of `pairs` (indices into `complex.pairs`) whose two cells are both among
+/// `free_cells`, as pairs of positions in `free_cells`.
+pub(super) fn free_edges<const D: usize>(
+    complex: &CellComplex<D>,
+    free_cells: &[u32],
+    pairs: &[u32],
+) -> Vec<[u32; 2]> {
     let mut node = vec![u32::MAX; complex.len()];
     for (k, &c) in free_cells.iter().enumerate() {
         node[c as usize] = k as u32;
     }
-    let nodes = free_cells.len();
+    pairs
+        .iter()
+        .filter_map(|&p| {
+            let pr = &complex.pairs[p as usize];
+            let (a, b) = (node[pr.i as usize], node[pr.j as usize]);
+            (a != u32::MAX && b != u32::MAX).then_some([a, b])
+        })
+        .collect()
+}
+
+/// The Cholesky factor of a graph's matrix with a `dof × dof` block per node and per edge,
+/// from the symbolic analysis of the graph itself (AMD, as the system's own): what its
+/// numeric factorization stores and costs.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(crate) struct Fill {
+    /// Entries of the graph's own factor (a node each): its scalar Laplacian's, as the position
+    /// system factors it.
+    pub nodes_len: f64,
+    /// Entries of the factor of the `dof`-unknown system.
+    pub len: f64,
+    /// Multiply-adds of the system's numeric factorization.
+    pub flops: f64,
+    /// The largest dense update of the system's factorization (entries): faer's scratch.
+    pub largest_update: f64,
+}
+
+/// The [`Fill`] of the graph of `nodes` nodes and `edges` (either order, no self-edge), or
+/// `None` where faer cannot analyse it.
+pub(crate) fn graph_fill(nodes: usize, edges: &[[u32; 2]], dof: usize) -> Option<Fill> {
+    if nodes == 0 {
+        return Some(Fill::default());
+    }
     let mut indices: Vec<Pair<u32, u32>> =
         (0..nodes as u32).map(|k| Pair { row: k, col: k }).collect();
-    for &p in pairs {
-        let pr = &complex.pairs[p as usize];
-        let (a, b) = (node[pr.i as usize], node[pr.j as usize]);
-        if a != u32::MAX && b != u32::MAX {
-            indices.push(Pair {
-                row: a.max(b),
-                col: a.min(b),
-            });
+    indices.extend(edges.iter().map(|&[a, b]| Pair {
+        row: a.max(b),
+        col: a.min(b),
+    }));
+    let (sym, _) = SymbolicSparseColMat::try_new_from_indices(nodes, nodes, &indices).ok()?;
+    drop(indices);
+    let llt = crate::with_faer(|| {
+        factorize_symbolic_cholesky(
+            sym.as_ref(),
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            Default::default(),
+        )
+    })
+    .ok()?;
+    let d = dof as f64;
+    let mut fill = Fill {
+        nodes_len: llt.len_val() as f64,
+        ..Default::default()
+    };
+    match llt.raw() {
+        SymbolicCholeskyRaw::Supernodal(s) => {
+            let rows = s.col_ptr_for_row_idx();
+            for (k, (&begin, &end)) in s
+                .supernode_begin()
+                .iter()
+                .zip(s.supernode_end())
+                .enumerate()
+            {
+                let w = d * (end - begin) as f64;
+                let r = d * (rows[k + 1] - rows[k]) as f64;
+                fill.len += w * (w + r);
+                fill.flops += w * w * w / 3.0 + w * w * r + w * r * r;
+                fill.largest_update = fill.largest_update.max(r * r);
+            }
+        }
+        SymbolicCholeskyRaw::Simplicial(s) => {
+            // Each node's column stands for `dof` columns of `dof` times its entries.
+            let ptr = s.col_ptr();
+            for j in 0..nodes {
+                let c = d * (ptr[j + 1] - ptr[j]) as f64;
+                fill.len += d * c;
+                fill.flops += d * c * c;
+            }
         }
     }
-    let analysed = SymbolicSparseColMat::try_new_from_indices(nodes, nodes, &indices)
-        .ok()
-        .and_then(|(sym, _)| {
-            crate::with_faer(|| {
-                factorize_symbolic_cholesky(
-                    sym.as_ref(),
-                    Side::Lower,
-                    SymmetricOrdering::Amd,
-                    Default::default(),
-                )
-            })
-            .ok()
-        });
-    analysed.map_or(0, |llt| dof * llt.len_val() / nodes.max(1))
+    Some(fill)
 }

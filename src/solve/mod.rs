@@ -83,6 +83,7 @@ mod blocks;
 mod coarse;
 pub mod constraints;
 pub mod energy;
+mod forecast;
 mod iteration;
 mod multilevel;
 mod positions;
@@ -100,6 +101,7 @@ pub use constraints::{
     resolve_selected, sample_cell, seen,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
+pub use forecast::forecast;
 use iteration::largest_corner_move;
 pub use iteration::{IterationLog, MOVE_TOLERANCE};
 pub use session::{DRAG_COARSE_FROM, DRAG_FACTOR_MOST, Session};
@@ -251,6 +253,8 @@ pub struct SolverInfo {
     pub halvings: usize,
     /// Every turning handle's turn, asked and carried by the cells ([`turns`]).
     pub turns: Vec<HandleTurn>,
+    /// What the solve was estimated to take before it started ([`forecast()`]).
+    pub estimate: Option<crate::estimate::Estimate>,
 }
 
 impl SolverInfo {
@@ -309,8 +313,10 @@ where
         0 => (complex, constraints),
         levels => coarsen(&complex, &constraints, levels),
     };
+    let estimate = forecast::announce(&complex, &constraints, params, budget, observer)?;
     let (mut system, mut motions, mut info) =
         from_rest_either_way(&complex, &mut constraints, params, budget, observer)?;
+    info.estimate = Some(estimate);
     if params.refine_strain.is_some() || params.refine_fraction.is_some() {
         let limit = complex.grid.max_level + params.refine_levels;
         observer.stage("refining", params.max_refinements as u64);

@@ -365,6 +365,151 @@ fn largest_eigenvalue(a: &BlockMatrix, inverse: &[f64]) -> f64 {
     }
 }
 
+/// The hierarchy [`Hierarchy::new`] builds for nodes at `rest` coupled by `edges`, counted on
+/// the graph alone, before any matrix is assembled: what the multilevel solve's memory and
+/// work go with.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Shape {
+    /// Nodes and edges of every level, the finest first; the last is factored.
+    pub levels: Vec<(usize, usize)>,
+    /// Blocks of the first level's smoothed prolongation.
+    pub prolongation: usize,
+    /// The edges of the last level, which is factored.
+    pub coarsest_edges: Vec<[u32; 2]>,
+}
+
+/// The [`Shape`] of the hierarchy of nodes at `rest` (the free cells' rest centers) coupled by
+/// `edges`, for finest cells of `size`, under the limits [`Hierarchy::new`] takes: the same
+/// groups, and each coarse level's edges as its Galerkin product makes them (the first through
+/// the smoothed prolongation, whose coarse node reaches the members of its group and their
+/// neighbors; the others through the groups alone).
+pub(crate) fn shape<const D: usize>(
+    rest: Vec<Vect<D>>,
+    edges: &[[u32; 2]],
+    size: f64,
+    [coarsest, factored]: [usize; 2],
+) -> Shape {
+    let mut shape = Shape {
+        levels: vec![(rest.len(), edges.len())],
+        ..Default::default()
+    };
+    let (mut rest, mut edges, mut step) = (rest, edges.to_vec(), 2.0 * size);
+    while rest.len()
+        > if shape.levels.len() == 1 {
+            coarsest
+        } else {
+            factored
+        }
+    {
+        let n = rest.len();
+        let (group, count) = loop {
+            let (group, count) = group_by_grid(&rest, step);
+            if (count as f64) < 0.7 * n as f64 || step > 1e300 {
+                break (group, count);
+            }
+            step *= 2.0;
+        };
+        step *= 2.0;
+        let mut sum = vec![(Vect::<D>::zeros(), 0u32); count];
+        for (p, &g) in rest.iter().zip(&group) {
+            sum[g as usize].0 += p;
+            sum[g as usize].1 += 1;
+        }
+        rest = sum.into_iter().map(|(p, m)| p / m.max(1) as f64).collect();
+        let coarse = if shape.levels.len() == 1 {
+            let (coarse, blocks) = smoothed_pattern(n, &edges, &group);
+            shape.prolongation = blocks;
+            coarse
+        } else {
+            let mut coarse: Vec<u64> = edges
+                .iter()
+                .filter_map(|&[a, b]| {
+                    let (g, h) = (group[a as usize], group[b as usize]);
+                    (g != h).then(|| ((g.min(h) as u64) << 32) | g.max(h) as u64)
+                })
+                .collect();
+            coarse.par_sort_unstable();
+            coarse.dedup();
+            coarse
+        };
+        edges = coarse
+            .into_iter()
+            .map(|k| [(k >> 32) as u32, k as u32])
+            .collect();
+        shape.levels.push((count, edges.len()));
+    }
+    shape.coarsest_edges = edges;
+    shape
+}
+
+/// The coarse edges of the Galerkin product through the smoothed prolongation of `group`, as
+/// sorted keys `g << 32 | h` (`g < h`), and the prolongation's blocks: fine node `i` reaches
+/// the groups `S(i)` of itself and its neighbors, and the coarse matrix couples each group of
+/// `S(i)` with each group of `S(k)` for `k` = `i` and its neighbors. Counted a bounded chunk of
+/// fine nodes at a time.
+fn smoothed_pattern(n: usize, edges: &[[u32; 2]], group: &[u32]) -> (Vec<u64>, usize) {
+    let mut start = vec![0u32; n + 1];
+    for &[a, b] in edges {
+        start[a as usize + 1] += 1;
+        start[b as usize + 1] += 1;
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut adjacent = vec![0u32; start[n] as usize];
+    for &[a, b] in edges {
+        adjacent[fill[a as usize] as usize] = b;
+        fill[a as usize] += 1;
+        adjacent[fill[b as usize] as usize] = a;
+        fill[b as usize] += 1;
+    }
+    drop(fill);
+    let neighbors = |i: usize| &adjacent[start[i] as usize..start[i + 1] as usize];
+    let reach = |i: usize| -> Vec<u32> {
+        let mut s: Vec<u32> = std::iter::once(group[i])
+            .chain(neighbors(i).iter().map(|&j| group[j as usize]))
+            .collect();
+        s.sort_unstable();
+        s.dedup();
+        s
+    };
+    let blocks: usize = (0..n).into_par_iter().map(|i| reach(i).len()).sum();
+    let (mut coarse, mut sorted): (Vec<u64>, usize) = (Vec::new(), 0);
+    const CHUNK: usize = 1 << 14;
+    for from in (0..n).step_by(CHUNK) {
+        let mut keys: Vec<u64> = (from..(from + CHUNK).min(n))
+            .into_par_iter()
+            .flat_map_iter(|i| {
+                let own = reach(i);
+                let mut far: Vec<u32> = std::iter::once(i as u32)
+                    .chain(neighbors(i).iter().copied())
+                    .flat_map(|k| reach(k as usize))
+                    .collect();
+                far.sort_unstable();
+                far.dedup();
+                own.into_iter().flat_map(move |g| {
+                    far.iter()
+                        .filter(move |&&h| h > g)
+                        .map(move |&h| ((g as u64) << 32) | h as u64)
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        keys.par_sort_unstable();
+        keys.dedup();
+        coarse.extend(keys);
+        if coarse.len() > 2 * sorted + (1 << 20) {
+            coarse.par_sort_unstable();
+            coarse.dedup();
+            sorted = coarse.len();
+        }
+    }
+    coarse.par_sort_unstable();
+    coarse.dedup();
+    (coarse, blocks)
+}
+
 /// Groups the points by the cells of a grid of step `step`: the group of every point and the
 /// number of groups, numbered in the order they are first met.
 fn group_by_grid<const D: usize>(points: &[Vect<D>], step: f64) -> (Vec<u32>, usize) {
@@ -722,6 +867,30 @@ mod tests {
     /// Four levels (a smoothed one, unsmoothed ones, a factored one) solve a thin lattice
     /// plate to the tolerance in a bounded number of iterations; kept coarse levels with a
     /// renewed finest one still solve a changed matrix.
+    /// The hierarchy's shape counted on the graph alone is the hierarchy's: the same nodes
+    /// and edges on every level, the same smoothed prolongation.
+    #[test]
+    fn the_shape_counted_on_the_graph_is_the_hierarchys() {
+        let (matrix, nodes) = lattice(96, 24, 1.0);
+        let (rest, edges) = (nodes.rest.clone(), matrix.edges.clone());
+        let h = Hierarchy::new(matrix, nodes, 1.0, [100, 60], None);
+        let mut levels: Vec<(usize, usize)> = h
+            .levels
+            .iter()
+            .map(|l| (l.smoother.n, l.smoother.edges.len()))
+            .collect();
+        let coarsest = h.coarsest.as_ref().unwrap();
+        let nodes = h.levels.last().unwrap().prolongation.coarse;
+        levels.push((nodes, coarsest.edges.len()));
+        let shape = shape(rest, &edges, 1.0, [100, 60]);
+        assert!(levels.len() >= 4, "{levels:?}");
+        assert_eq!(shape.levels, levels);
+        assert_eq!(shape.prolongation, h.levels[0].prolongation.to.len());
+        let mut edges = coarsest.edges.clone();
+        edges.sort_unstable();
+        assert_eq!(shape.coarsest_edges, edges);
+    }
+
     #[test]
     fn deep_hierarchy_solves_and_survives_a_refresh() {
         let (matrix, nodes) = lattice(96, 24, 1.0);

@@ -53,7 +53,7 @@ import threading
 import warnings
 from pathlib import Path
 from dataclasses import dataclass
-from typing import Any, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import Any, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -62,8 +62,9 @@ from ._points import Frame, _float_dtype, _Points, _plain3, _triangles
 from ._rigidcells import FormatError, TurnNotHeldError
 
 __all__ = [
-    "deform", "solve", "deform_file", "apply_file", "solve_files", "Field", "Report",
-    "Session", "Step", "FormatError", "TurnNotHeldError", "RigidCellsWarning", "__version__",
+    "deform", "solve", "estimate", "deform_file", "apply_file", "solve_files", "Field",
+    "Report", "Estimate", "Session", "Step", "FormatError", "TurnNotHeldError",
+    "RigidCellsWarning", "__version__",
 ]
 
 __version__: str = _rigidcells.__version__
@@ -826,6 +827,64 @@ def solve(
     report = Report._of(info, paths=paths)
     _warn(report.warnings)
     return Field(field, report)
+
+
+class Estimate(NamedTuple):
+    """What a deformation will take, estimated without solving it (``estimate``).
+
+    ``cells``: the cells; ``bytes``: the run's peak memory; ``seconds``: the whole run (the
+    cells as built, the solve and the transfer as estimated, on the development machine's two
+    cores: scale by the cores); ``solve_seconds``: the solve alone; ``solver``: ``"direct"``
+    or ``"multilevel"``, the path the solve takes; ``limit``: the memory budget
+    (``memory_limit``, else three quarters of the machine's memory); ``fits``: whether
+    ``bytes`` fit it (a ``deform`` that does not is refused with a ``ValueError``);
+    ``complete``: False where the cells were only forecast, because they cannot fit the
+    budget (``bytes`` and ``seconds`` are then the least the run takes).
+    """
+
+    cells: int
+    bytes: int
+    seconds: float
+    solve_seconds: float
+    solver: str
+    limit: int
+    fits: bool
+    complete: bool
+
+
+def estimate(
+    points: Any,
+    spec: Spec,
+    *,
+    triangles: Any = None,
+    scale: Optional[Frame] = None,
+    offset: Optional[Frame] = None,
+    cell_size: Optional[float] = None,
+    cells: Optional[int] = None,
+    min_cell_size: Optional[float] = None,
+    max_level: Optional[int] = None,
+    shell: Optional[bool] = None,
+    inside: Optional[str] = None,
+    solver: Optional[str] = None,
+    tolerance: Optional[float] = None,
+    coarse_levels: Optional[int] = None,
+    loose_parts: Optional[str] = None,
+    refine_strain: Optional[float] = None,
+    transfer: Optional[str] = None,
+    rbf_tolerance: Optional[float] = None,
+    check_gcp: Optional[bool] = None,
+    memory_limit: Union[int, str, None] = None,
+) -> Estimate:
+    """What ``deform`` (or ``solve``) of ``points`` under ``spec`` with these options will
+    take, without solving: the cells are built and the spec resolved on them (cells that
+    cannot fit the budget are only forecast, in about the time their occupied cells take to
+    find), and the solve is counted, not run. Returns an ``Estimate``."""
+    options = _picked(locals())
+    p = _Points(points, scale, offset)
+    text, base, paths = _spec(spec)
+    tris = p.triangles if triangles is None else _triangles(triangles)
+    info = _call(paths, _rigidcells.estimate, p.xyz, text, base, tris, options, p.classes)
+    return Estimate(**info)
 
 
 def deform_file(

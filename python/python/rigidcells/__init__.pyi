@@ -1,6 +1,6 @@
 import os
 from dataclasses import dataclass
-from typing import Any, Callable, List, Literal, Optional, Sequence, Tuple, Union, overload
+from typing import Any, Callable, List, Literal, NamedTuple, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
 
@@ -237,6 +237,41 @@ def solve(
     memory_limit: Union[int, str, None] = ...,
     progress: Progress = ...,
 ) -> Field: ...
+class Estimate(NamedTuple):
+    """What a deformation will take, estimated without solving it."""
+
+    cells: int
+    bytes: int
+    seconds: float
+    solve_seconds: float
+    solver: Literal["direct", "multilevel"]
+    limit: int
+    fits: bool
+    complete: bool
+
+def estimate(
+    points: Any,
+    spec: Spec,
+    *,
+    triangles: Any = ...,
+    scale: Optional[Frame] = ...,
+    offset: Optional[Frame] = ...,
+    cell_size: Optional[float] = ...,
+    cells: Optional[int] = ...,
+    min_cell_size: Optional[float] = ...,
+    max_level: Optional[int] = ...,
+    shell: Optional[bool] = ...,
+    inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    tolerance: Optional[float] = ...,
+    coarse_levels: Optional[int] = ...,
+    loose_parts: Optional[Literal["carry", "rest"]] = ...,
+    refine_strain: Optional[float] = ...,
+    transfer: Optional[Transfer] = ...,
+    rbf_tolerance: Optional[float] = ...,
+    check_gcp: Optional[bool] = ...,
+    memory_limit: Union[int, str, None] = ...,
+) -> Estimate: ...
 def deform_file(
     input: PathLike,
     output: PathLike,

@@ -1,0 +1,418 @@
+//! What a solve will take, counted on the cells and their roles before anything is assembled
+//! ([`forecast`]; the prices are `crate::estimate`'s): the linear solver `--solver auto`
+//! takes for them, the memory at the solve's peak and its seconds.
+//!
+//! The counts are those of the structures the solver builds: the direct path's assembled
+//! entries and its Cholesky factor (the symbolic analysis of the free cells' graph, a node a
+//! cell: its entries within 6 % of the system's own analysis on the bar at 0.05), the position
+//! system's factor (the same analysis), and the multilevel hierarchy's levels, counted on the
+//! graph by `multilevel::shape`, with its coarsest level analysed the same way.
+
+use super::auto::{self, Fill, graph_fill};
+use super::constraints::{Constraints, Role, coarsen};
+use super::multilevel::{self, COARSEST, FACTORED};
+use super::{CELLS_ADVICE, Method, SolveParams, check_params, coarse, load_steps};
+use crate::cells::CellComplex;
+use crate::error::Result;
+use crate::estimate::*;
+use crate::memory::Budget;
+use crate::progress::Observer;
+use crate::rigid::{Dim, Rigid};
+
+/// The estimate of solving `complex` under `constraints` with `params` within `budget`: the
+/// stages coarse to fine as `coarse::coarse_to_fine` makes them (`coarsen`), each by the path
+/// `params.method` takes for it ([`Method::Auto`]: the direct path where its factor fits the
+/// budget, as `System::new` decides). Counted, not checked: [`Estimate::check`] refuses it.
+pub fn forecast<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    params: &SolveParams,
+    budget: Budget,
+) -> Result<Estimate>
+where
+    Dim<D>: Rigid<D>,
+{
+    let load_steps = load_steps(complex, constraints, params)? as f64;
+    let fine = stage(complex, constraints, params, budget);
+    let mut stages: Vec<(SolveCounts, Method)> = Vec::new();
+    for k in (1..=coarse::levels(complex.len(), params)).rev() {
+        let (parents, on_parents) = coarsen(complex, constraints, k);
+        let coarser = stages.last().map_or(0, |s| s.0.cells as usize);
+        if parents.len() >= complex.len() || parents.len() <= coarser {
+            continue;
+        }
+        stages.push(stage(&parents, &on_parents, params, budget));
+    }
+    Ok(solve_estimate(&stages, &fine, load_steps, budget.limit()))
+}
+
+/// [`forecast()`] of what `solve` is about to solve, refused past `budget` (the cells'
+/// parameters named) and handed to `observer`: what a solve does before its first stage.
+pub(super) fn announce<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    params: &SolveParams,
+    budget: Budget,
+    observer: &dyn Observer,
+) -> Result<Estimate>
+where
+    Dim<D>: Rigid<D>,
+{
+    check_params(params)?;
+    let estimate = forecast(complex, constraints, params, budget)?;
+    estimate.check(budget, CELLS_ADVICE)?;
+    observer.estimate(&estimate);
+    Ok(estimate)
+}
+
+/// The counts of one stage's solve and the path it takes: `params.method`, or for
+/// [`Method::Auto`] what `System::new` decides (the multilevel path for many cells of one
+/// size or a dense factor, else the direct path where it fits `budget`).
+fn stage<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    params: &SolveParams,
+    budget: Budget,
+) -> (SolveCounts, Method)
+where
+    Dim<D>: Rigid<D>,
+{
+    let (counts, uniform) = counts(complex, constraints);
+    let limit = budget.limit() as f64;
+    // `System::new`'s own tests, with the factor forecast: the assembled entries, then the
+    // factor, its scratch and the pattern (32 bytes an entry) against the whole budget.
+    let direct_fits = || {
+        let factor = 8.0 * counts.factor.len + 13.0 * counts.factor.largest_update;
+        counts.entries < (1u64 << 31) as f64
+            && counts.entries * 40.0 <= limit
+            && counts.factor.len < u32::MAX as f64
+            && factor + 32.0 * counts.entries <= limit
+    };
+    let fill = counts.factor.nodes_len * counts.dof / counts.free.max(1.0);
+    let free = counts.free as usize;
+    let method = match params.method {
+        Method::Direct => Method::Direct,
+        Method::Multilevel => Method::Multilevel,
+        Method::Auto if uniform && free > auto::MULTILEVEL_FROM => Method::Multilevel,
+        Method::Auto if uniform && free > COARSEST && fill > auto::MULTILEVEL_FILL as f64 => {
+            Method::Multilevel
+        }
+        Method::Auto if direct_fits() => Method::Direct,
+        Method::Auto => Method::Multilevel,
+    };
+    match method {
+        Method::Multilevel => (with_hierarchy(counts, complex, constraints), method),
+        _ => (counts, Method::Direct),
+    }
+}
+
+/// The counts of every path but the multilevel hierarchy's, and whether the cells are all of
+/// one size.
+fn counts<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+) -> (SolveCounts, bool)
+where
+    Dim<D>: Rigid<D>,
+{
+    let dof = <Dim<D> as Rigid<D>>::DOF;
+    let tri = dof * (dof + 1) / 2;
+    let has_unknowns = |c: u32| matches!(constraints.roles[c as usize], Role::Free | Role::Pin(_));
+    let free_cells: Vec<u32> = (0..complex.len() as u32)
+        .filter(|&c| has_unknowns(c))
+        .collect();
+    let pairs: Vec<u32> = (0..complex.pairs.len() as u32)
+        .filter(|&p| {
+            let pr = &complex.pairs[p as usize];
+            has_unknowns(pr.i) || has_unknowns(pr.j)
+        })
+        .collect();
+    let edges = auto::free_edges(complex, &free_cells, &pairs);
+    // A graph faer cannot analyse (past its indices) has no direct path: an infinite factor.
+    let factor = graph_fill(free_cells.len(), &edges, dof).unwrap_or(Fill {
+        len: f64::INFINITY,
+        flops: f64::INFINITY,
+        ..Default::default()
+    });
+    let level = complex.cells.first().map(|c| c.key.level);
+    let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);
+    let entries = free_cells.len() * tri + pairs.len() * (2 * tri + dof * dof);
+    let counts = SolveCounts {
+        cells: complex.len() as f64,
+        pairs: complex.pairs.len() as f64,
+        free: free_cells.len() as f64,
+        coupled: pairs.len() as f64,
+        dof: dof as f64,
+        entries: entries as f64,
+        factor,
+        fine_blocks: (free_cells.len() + edges.len()) as f64,
+        ..Default::default()
+    };
+    (counts, uniform)
+}
+
+/// `counts` with the multilevel hierarchy's: its levels counted on the free cells' graph
+/// (`multilevel::shape`) and its coarsest factor analysed.
+fn with_hierarchy<const D: usize>(
+    counts: SolveCounts,
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+) -> SolveCounts
+where
+    Dim<D>: Rigid<D>,
+{
+    let dof = <Dim<D> as Rigid<D>>::DOF;
+    let tri = dof * (dof + 1) / 2;
+    let free_cells: Vec<u32> = (0..complex.len() as u32)
+        .filter(|&c| matches!(constraints.roles[c as usize], Role::Free | Role::Pin(_)))
+        .collect();
+    let pairs: Vec<u32> = (0..complex.pairs.len() as u32).collect();
+    let edges = auto::free_edges(complex, &free_cells, &pairs);
+    let rest = free_cells
+        .iter()
+        .map(|&c| complex.cells[c as usize].center)
+        .collect();
+    let size = complex.grid.finest_size();
+    let shape = multilevel::shape(rest, &edges, size, [COARSEST, FACTORED]);
+    let &(nodes, coarse_edges) = shape.levels.last().expect("the finest level");
+    let coarsest = match shape.levels.len() {
+        1 => counts.factor,
+        _ => graph_fill(nodes, &shape.coarsest_edges, dof).unwrap_or_default(),
+    };
+    let coarse_blocks: usize = shape.levels[1..].iter().map(|&(n, e)| n + e).sum();
+    SolveCounts {
+        prolongation: shape.prolongation as f64,
+        coarse_blocks: coarse_blocks as f64,
+        coarsest_entries: (nodes * tri + coarse_edges * dof * dof) as f64,
+        coarsest,
+        first_coarse_edges: shape.levels.get(1).map_or(0.0, |l| l.1 as f64),
+        ..counts
+    }
+}
+
+/// The counts a solve's memory and time go with.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct SolveCounts {
+    /// Cells and face pairs of the complex.
+    pub cells: f64,
+    pub pairs: f64,
+    /// Cells with unknowns, and the pairs coupling at least one of them.
+    pub free: f64,
+    pub coupled: f64,
+    /// Unknowns a free cell.
+    pub dof: f64,
+    /// Entries of the direct path's assembled system (its value slots).
+    pub entries: f64,
+    /// The fine system's factor: `len`, `flops`, `largest_update` (scalar entries), and the
+    /// position system's (`nodes_len`).
+    pub factor: Fill,
+    /// The multilevel path: blocks of its finest level (diagonal and edges), of its smoothed
+    /// prolongation, of its coarse levels, and its coarsest factor.
+    pub fine_blocks: f64,
+    pub prolongation: f64,
+    pub coarse_blocks: f64,
+    pub coarsest_entries: f64,
+    pub coarsest: Fill,
+    /// The first coarse level's edges (the Galerkin product's partial sums).
+    pub first_coarse_edges: f64,
+}
+
+impl SolveCounts {
+    /// The complex alone: its cells, their index and its face pairs (what the cells of a
+    /// solve hold while its coarse stages are solved).
+    fn complex_bytes(&self) -> f64 {
+        self.cells * COMPLEX_BYTES_PER_CELL + self.pairs * 16.0
+    }
+
+    /// The process's bytes during a stage's solve beside the linear solver: the complex, the
+    /// motions, the layout, the position system's factor.
+    pub fn base_bytes(&self) -> f64 {
+        self.cells * BYTES_PER_CELL + self.pairs * BYTES_PER_PAIR + self.factor.nodes_len * 16.0
+    }
+
+    /// The direct path's bytes: its factor, faer's scratch (1.6 times the largest dense
+    /// update, measured), and the assembled system (values, argsort, pattern and the
+    /// iteration's matrix: 20 bytes an entry, measured; the entries' positions are freed before
+    /// the factor's pages are touched).
+    pub fn direct_bytes(&self) -> f64 {
+        8.0 * self.factor.len + 13.0 * self.factor.largest_update + 20.0 * self.entries
+    }
+
+    /// The multilevel path's bytes: its finest level (the matrix in `f64` and `f32`, the block
+    /// inverses, the assembled values), the smoothed prolongation, the Galerkin product's
+    /// partial sums, the coarse levels and the coarsest factor with its pattern.
+    pub fn multilevel_bytes(&self) -> f64 {
+        let bb = self.dof * self.dof;
+        let coarsest = 8.0 * self.coarsest.len
+            + 8.0 * self.coarsest.largest_update
+            + 40.0 * self.coarsest_entries;
+        if self.prolongation == 0.0 {
+            // Few enough cells to factor the finest level itself.
+            return self.fine_blocks * bb * 8.0 + self.entries * 8.0 + coarsest;
+        }
+        self.fine_blocks * bb * 12.0
+            + self.free * bb * 8.0
+            + self.entries * 8.0
+            + self.prolongation * (bb * 8.0 + 12.0)
+            + self.first_coarse_edges * bb * 8.0 * 3.0
+            + self.coarse_blocks * bb * 12.0
+            + coarsest
+    }
+
+    /// Seconds of one Gauss-Newton iteration on these cells by `method`, and of a multilevel
+    /// hierarchy's construction.
+    pub fn iteration_seconds(&self, method: Method) -> (f64, f64) {
+        let common = ITERATION_SECONDS_PER_ENTRY * (self.cells + self.coupled);
+        match method {
+            Method::Multilevel => {
+                let blocks = self.fine_blocks + self.prolongation;
+                let cg = CG_ITERATIONS
+                    * (CG_SECONDS_PER_BLOCK * blocks
+                        + CG_SECONDS_PER_COARSEST_ENTRY * self.coarsest.len);
+                let setup = self.coarsest.flops / COARSEST_FLOPS_PER_SECOND
+                    + HIERARCHY_SECONDS_PER_BLOCK * blocks;
+                (common + cg, setup)
+            }
+            _ => (
+                common
+                    + self.factor.flops / FLOPS_PER_SECOND
+                    + SOLVE_SECONDS_PER_FACTOR_ENTRY * self.factor.len,
+                0.0,
+            ),
+        }
+    }
+}
+
+/// The estimate of a solve coarse to fine: the `stages` (coarsest first) and the cells'
+/// own `fine` stage, each with its counts and the path it takes, through `load_steps` load
+/// steps on the coarsest. The peak is the largest stage's (a coarse stage's with the cells'
+/// complex held beside it: a coarse stage may have more free cells than the cells themselves,
+/// where it joins loose parts to the constrained ones); the seconds are every stage's
+/// iterations ([`ITERATIONS_PER_LOAD_STEP`] a load step on the coarsest stage,
+/// [`ITERATIONS_PER_STAGE`] on each finer one, one more on the cells' own), a multilevel
+/// hierarchy's construction on each (two on the coarsest), the symbolic analyses and the
+/// transfer's construction.
+fn solve_estimate(
+    stages: &[(SolveCounts, Method)],
+    (fine, method): &(SolveCounts, Method),
+    load_steps: f64,
+    limit: u64,
+) -> Estimate {
+    let bytes_of = |(c, m): &(SolveCounts, Method)| {
+        c.base_bytes()
+            + match m {
+                Method::Multilevel => c.multilevel_bytes(),
+                _ => c.direct_bytes(),
+            }
+    };
+    let seconds_of = |(c, m): &(SolveCounts, Method), iterations: f64, builds: f64| {
+        let (iteration, setup) = c.iteration_seconds(*m);
+        let symbolic = match m {
+            Method::Multilevel => 0.0,
+            _ => SYMBOLIC_SECONDS_PER_ENTRY * c.entries,
+        };
+        iterations * iteration + builds * setup + symbolic
+    };
+    let coarsest_iterations = ITERATIONS_PER_LOAD_STEP * load_steps + 1.0;
+    let mut bytes = bytes_of(&(*fine, *method));
+    let mut solve = 0.0;
+    for (k, stage) in stages.iter().enumerate() {
+        bytes = bytes.max(fine.complex_bytes() + bytes_of(stage));
+        solve += match k {
+            0 => seconds_of(stage, coarsest_iterations, 2.0),
+            _ => seconds_of(stage, ITERATIONS_PER_STAGE, 1.0),
+        };
+    }
+    solve += match stages.is_empty() {
+        true => seconds_of(&(*fine, *method), coarsest_iterations, 2.0),
+        false => seconds_of(&(*fine, *method), ITERATIONS_PER_STAGE + 1.0, 1.0),
+    };
+    let transfer = TRANSFER_SECONDS_PER_CELL * fine.cells;
+    Estimate {
+        cells: fine.cells as usize,
+        bytes: bytes as u64,
+        seconds: solve + transfer,
+        solve_seconds: solve,
+        solver: match method {
+            Method::Multilevel => Solver::Multilevel,
+            _ => Solver::Direct,
+        },
+        complete: true,
+        limit,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cells::{BuildParams, build};
+    use crate::rigid::Vect;
+    use crate::solve::system::System;
+
+    /// The direct path's factor as the forecast counts it is within 25 % of the system's own
+    /// symbolic analysis (AMD over the unknowns, where the forecast orders the cells: 19 %
+    /// fewer entries on these 1.5k cells of several sizes, 6 % more on the bar's 216k), and
+    /// the estimate is of the cells; a budget below it refuses it.
+    #[test]
+    fn the_forecast_factor_is_the_systems() {
+        // An ellipsoid's surface, 2 × 1 × 1: boundary cells and larger interior ones.
+        let pts: Vec<Vect<3>> = (0..20_000)
+            .map(|k| {
+                let (u, v) = (k as f64 * 0.618_034 % 1.0, k as f64 / 20_000.0);
+                let (theta, z) = (2.0 * std::f64::consts::PI * u, 2.0 * v - 1.0);
+                let r = (1.0 - z * z).sqrt();
+                Vect::<3>::new(2.0 * r * theta.cos(), r * theta.sin(), z)
+            })
+            .collect();
+        let params = BuildParams {
+            cell_size: Some(0.15),
+            ..Default::default()
+        };
+        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
+        let n = complex.len();
+        let mut roles = vec![Role::Free; n];
+        roles[0] = Role::Fixed;
+        let constraints = Constraints {
+            roles,
+            handles: vec![],
+            pins: vec![],
+            targets: vec![],
+            stiffness: vec![1.0; n],
+            origin: complex.grid.origin,
+            warnings: vec![],
+        };
+        let (counts, uniform) = counts(&complex, &constraints);
+        assert!(!uniform && counts.free as usize == n - 1);
+        let system = System::new(
+            &complex,
+            &constraints,
+            Method::Direct,
+            Budget::default(),
+            "",
+        )
+        .unwrap();
+        let len = system.factor_len().unwrap() as f64;
+        assert!(
+            (counts.factor.len / len - 1.0).abs() < 0.25,
+            "forecast {} against {len}",
+            counts.factor.len
+        );
+        // Auto takes the direct path for these cells, and the estimate is of them.
+        let e = forecast(
+            &complex,
+            &constraints,
+            &SolveParams::default(),
+            Budget::default(),
+        )
+        .unwrap();
+        assert_eq!((e.cells, e.solver, e.complete), (n, Solver::Direct, true));
+        assert!(e.fits() && e.bytes > 8 * len as u64, "{e:?}");
+        // A budget below the estimate refuses it, naming the cells.
+        let tight = Budget::bytes(e.bytes / 10);
+        let refused = forecast(&complex, &constraints, &SolveParams::default(), tight).unwrap();
+        let error = refused
+            .check(tight, "use a larger --cell-size")
+            .unwrap_err();
+        assert!(error.to_string().contains("--cell-size"), "{error}");
+    }
+}
