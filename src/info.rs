@@ -605,6 +605,12 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
     ));
     info.details
         .push(("transfer".into(), saved.transfer.to_string()));
+    if f.heights_kept {
+        info.details.push((
+            "heights".into(),
+            "kept: the field moves x and y only (2D control points)".into(),
+        ));
+    }
     let moved = f
         .motions
         .iter()

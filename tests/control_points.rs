@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{Run, deform_verbose, shared};
+use common::{Run, arg, deform_verbose, records, run, shared};
 use std::path::Path;
 
 fn autzen() -> std::path::PathBuf {
@@ -142,8 +142,47 @@ fn two_d_points_pull_horizontally_and_keep_the_heights() {
         // Pulled horizontally; the height kept (it was free, not pulled up or down).
         assert!(p["residual"].as_f64().unwrap() < 0.15, "{p}");
         assert!((got[0] - wanted[0]).hypot(got[1] - wanted[1]) < 0.15, "{p}");
-        assert!((got[2] - from[2]).abs() < 0.1, "{p}");
+        assert_eq!(got[2], from[2], "{p}");
     }
+}
+
+/// 2D points say nothing of heights, so no height moves: every record's Z comes out as it went
+/// in, from `deform` and from `apply` of the field it saved, while x and y follow the pull.
+#[test]
+fn two_d_points_move_no_height() {
+    let dir = tempfile::tempdir().unwrap();
+    let field = dir.path().join("f.field");
+    let (r, _) = gcp(
+        dir.path(),
+        "gcp.csv",
+        "id,x,y,X,Y\nP1,636200,849000,636201,849000\nP2,637000,849400,637000,849401.5\n\
+         P3,636600,849200,636600,849200\n",
+        "weight = 10\n",
+        &["--save-field", arg(&field)],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (_, _, rest, _) = records(&autzen());
+    let (_, raw, moved, _) = records(&dir.path().join("o.laz"));
+    assert_eq!(rest.len(), moved.len());
+    let mut horizontal: f64 = 0.0;
+    for (a, b) in rest.iter().zip(&moved) {
+        assert_eq!(a.z, b.z, "{a:?} -> {b:?}");
+        horizontal = horizontal.max((b.x - a.x).hypot(b.y - a.y));
+    }
+    assert!(horizontal > 0.5, "pulled {horizontal}");
+    let applied = dir.path().join("a.laz");
+    let applying = run(&[
+        "apply",
+        arg(&field),
+        arg(&autzen()),
+        "-o",
+        arg(&applied),
+        "-q",
+    ]);
+    assert_eq!(applying.code, 0, "{}", applying.stderr);
+    assert!(records(&applied).1 == raw, "apply gives deform's records");
+    let info = run(&["info", arg(&field)]);
+    assert!(info.stdout.contains("heights: kept"), "{}", info.stdout);
 }
 
 #[test]

@@ -40,6 +40,7 @@ fn field(n: usize, seed: u64) -> Field<3> {
         centers,
         motions,
         prescribed: Default::default(),
+        heights_kept: false,
     }
 }
 
@@ -182,6 +183,7 @@ fn octree_field() -> Field<3> {
         halves,
         motions,
         prescribed: Default::default(),
+        heights_kept: false,
     }
 }
 

@@ -137,6 +137,7 @@ fn fields_and_pictures() {
     assert!(line(&t, "format:").contains("saved field, 3D"), "{t}");
     assert!(line(&t, "levels:").contains("cell sizes 0.25"), "{t}");
     assert!(line(&t, "transfer:").contains("pu"), "{t}");
+    assert!(!t.contains("heights:"), "a bend moves heights: {t}");
     let cells: usize = line(&t, "cells:")[9..].trim().parse().unwrap();
     assert!(cells > 100, "{t}");
     assert!(line(&t, "bounds:").contains("x [-0.25, 10.25]"), "{t}");

@@ -174,6 +174,7 @@ fn sparse_cells_far_apart_are_fitted() {
         centers,
         motions,
         prescribed: Default::default(),
+        heights_kept: false,
     };
     let pu = PuRbf::new(&f).unwrap();
     let worst = center_error(&pu, &f);

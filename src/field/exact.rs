@@ -57,6 +57,12 @@
 //! compresses space and misses the map by a good part of a cell, the band can fold space over.
 //! The fold-over check of `deform` reports them.
 //!
+//! **Heights a field does not move.** A field of 2D control points alone
+//! ([`Field::heights_kept`]) gives every sample its own last coordinate back, bit for bit, and
+//! its normals turn with the map's horizontal part (the Jacobian whose last row is the height's
+//! own): the points say nothing of heights, and the cells' slight turns about horizontal axes
+//! under a sideways pull would move them.
+//!
 //! **A field knows its domain.** A sample counts as inside when a cell holds it or it lies
 //! within the margin of the cells: one voxel (of the size of the largest cell on the complex's
 //! outer boundary, aligned with the cells) around each voxel that such a cell meets. So every
@@ -229,6 +235,8 @@ pub struct Constrained<const D: usize> {
     /// samples must lie in, and how many did not.
     window: Option<(Vect<D>, Vect<D>)>,
     beyond_window: std::sync::atomic::AtomicUsize,
+    /// Every sample keeps its last coordinate ([`Field::heights_kept`]).
+    heights_kept: bool,
 }
 
 /// What a window of a field's cells needs from the whole field to treat samples as the whole
@@ -420,6 +428,7 @@ where
             tally: Mutex::new(OutsideTally::default()),
             window,
             beyond_window: Default::default(),
+            heights_kept: field.heights_kept,
         })
     }
 
@@ -651,6 +660,26 @@ where
         normal_like(out, n)
     }
 
+    /// A field that keeps heights gives each sample of a run its own last coordinate back,
+    /// bit for bit (not through the local frame's round trip).
+    fn keep_heights(&self, points: &[Vect<D>], out: &mut [Vect<D>]) {
+        if self.heights_kept {
+            for (o, p) in out.iter_mut().zip(points) {
+                o[D - 1] = p[D - 1];
+            }
+        }
+    }
+
+    /// The normal under a field that keeps heights: the transpose of the inverse of its
+    /// Jacobian, whose last row is the height's own.
+    fn level_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
+        let j = self.jacobian(x, 1e-3 * self.leaves.edge);
+        match j.try_inverse() {
+            Some(inverse) => normal_like(inverse.transpose() * n, n),
+            None => *n,
+        }
+    }
+
     fn count_outside(&self, x: &Vect<D>) {
         let d = self.distance(x);
         self.tally.lock().expect("not poisoned").add(x, d);
@@ -662,7 +691,7 @@ where
     Dim<D>: Rigid<D>,
 {
     fn warp(&self, x: &Vect<D>) -> Vect<D> {
-        match self.class_of(x) {
+        let mut y = match self.class_of(x) {
             Class::Exact(m) if self.identity[m as usize] => *x,
             Class::Exact(m) => self.prescribed.maps[m as usize].apply(x),
             Class::Free => self.inner.warp(x),
@@ -671,10 +700,17 @@ where
                 Outside::Extend => self.inner.warp(x),
                 _ => *x,
             },
+        };
+        if self.heights_kept {
+            y[D - 1] = x[D - 1];
         }
+        y
     }
 
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
+        if self.heights_kept {
+            return self.level_normal(x, n);
+        }
         match self.class_of(x) {
             Class::Exact(m) => self.exact_normal(m, n),
             Class::Free => self.inner.warp_normal(x, n),
@@ -690,6 +726,9 @@ where
     }
 
     fn warp_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
+        if self.heights_kept {
+            return (self.warp(x), self.level_normal(x, n));
+        }
         let class = self.class_of(x);
         match class {
             Class::Exact(_) => (self.warp(x), self.warp_normal(x, n)),
@@ -713,11 +752,17 @@ where
     }
 
     fn jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
-        match self.class_of(x) {
+        let mut j = match self.class_of(x) {
             Class::Exact(m) => self.prescribed.maps[m as usize].linear,
             Class::Free => self.inner.jacobian(x, h),
             _ => super::central_jacobian(self, x, h),
+        };
+        if self.heights_kept {
+            for a in 0..D {
+                j[(D - 1, a)] = if a == D - 1 { 1.0 } else { 0.0 };
+            }
         }
+        j
     }
 
     /// Samples of cells that the identity holds keep their position and normal bits.
@@ -753,6 +798,7 @@ where
                 (*o, *on) = (y + origin, m);
             }
         }
+        self.keep_heights(points, out);
     }
 
     /// Runs of samples the transfer moves alone go to its own `warp_run`; samples of prescribed
@@ -825,6 +871,7 @@ where
         if tally.count > 0 {
             self.tally.lock().expect("not poisoned").merge(&tally);
         }
+        self.keep_heights(points, out);
     }
 }
 

@@ -4,8 +4,9 @@
 //! output bit for bit:
 //!
 //! ```text
-//! "RCFIELD\0"  u32 version (2)  u32 D
-//! u8 transfer                        0 blend, 1 blend-idw, 2 rbf, 3 pu (version 2)
+//! "RCFIELD\0"  u32 version (4)  u32 D
+//! u8 transfer                        0 blend, 1 blend-idw, 2 rbf, 3 pu (version 2),
+//!                                    + 128 when the field keeps heights (version 4)
 //! f64[D] origin                                  world position of the local frame
 //! u64 n, then n × (f64[D] center, f64 half, f64[D·D] rotation (row-major), f64[D] position)
 //! u64 r, then r × (f64[D·D] linear (row-major), f64[D] translation)   prescribed maps (v2)
@@ -35,6 +36,9 @@
 //! The RBF coefficients are stored rather than recomputed, because a parallel dense
 //! factorization need not give the same last bits on another machine or thread count.
 //!
+//! Version 4 added the flag of a field that keeps every sample's height
+//! ([`Field::heights_kept`]); earlier files keep none.
+//!
 //! Version 2 added the transfer `deform` used (what `apply` uses unless told otherwise) and the
 //! maps that fixed and handle cells follow exactly ([`super::Constrained`]). Version 1 files
 //! still load: their transfer is the RBF (the one they were saved for) and they prescribe no
@@ -50,7 +54,10 @@ use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
 use crate::spec::LARGEST;
 
 const MAGIC: &[u8; 8] = b"RCFIELD\0";
-const VERSION: u32 = 3;
+const VERSION: u32 = 4;
+
+/// The transfer byte's flag of a field that keeps heights (version 4).
+const HEIGHTS_KEPT: u8 = 128;
 
 /// A field with its transfer and the RBF coefficients it was saved with, if any.
 pub struct SavedField<const D: usize> {
@@ -222,12 +229,13 @@ where
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&VERSION.to_le_bytes());
         out.extend_from_slice(&(D as u32).to_le_bytes());
-        out.push(match self.transfer {
+        let transfer = match self.transfer {
             Transfer::Blend => 0,
             Transfer::BlendIdw => 1,
             Transfer::Rbf => 2,
             Transfer::Pu => 3,
-        });
+        };
+        out.push(transfer | if f.heights_kept { HEIGHTS_KEPT } else { 0 });
         let put = |out: &mut Vec<u8>, v: f64| out.extend_from_slice(&v.to_le_bytes());
         f.origin.iter().for_each(|&v| put(&mut out, v));
         out.extend_from_slice(&(f.centers.len() as u64).to_le_bytes());
@@ -348,9 +356,17 @@ where
                 format!("a {dim}D field cannot deform {D}D samples"),
             ));
         }
+        let (byte, heights_kept) = match version {
+            1 => (2, false),
+            2 | 3 => (r.take(1)?[0], false),
+            _ => {
+                let byte = r.take(1)?[0];
+                (byte & !HEIGHTS_KEPT, byte & HEIGHTS_KEPT != 0)
+            }
+        };
         let transfer = match version {
             1 => Transfer::Rbf,
-            _ => match r.take(1)?[0] {
+            _ => match byte {
                 0 => Transfer::Blend,
                 1 => Transfer::BlendIdw,
                 2 => Transfer::Rbf,
@@ -482,6 +498,7 @@ where
             halves: Vec::new(),
             motions: Vec::new(),
             prescribed: Default::default(),
+            heights_kept,
         };
         field.prescribed.maps = maps.clone();
         for i in chosen {
@@ -809,6 +826,7 @@ mod tests {
             centers,
             motions,
             prescribed,
+            heights_kept: true,
         }
     }
 
@@ -833,6 +851,7 @@ mod tests {
         let path = dir.path().join("v2.field");
         let mut f = field();
         f.prescribed = Default::default();
+        f.heights_kept = false;
         let rbf = Rbf::new(&f).unwrap();
         SavedField::new(f.clone(), Transfer::Rbf, Some(rbf))
             .save(&path)
@@ -850,9 +869,9 @@ mod tests {
         assert_eq!(back.transfer, Transfer::Rbf);
         assert_eq!(back.field, f);
         assert!(back.rbf.is_some());
-        bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
+        bytes[8..12].copy_from_slice(&5u32.to_le_bytes());
         std::fs::write(&v1, &bytes).unwrap();
         let e = SavedField::<3>::load(&v1).err().unwrap().to_string();
-        assert!(e.contains("version 4"), "{e}");
+        assert!(e.contains("version 5"), "{e}");
     }
 }

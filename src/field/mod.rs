@@ -52,6 +52,10 @@ pub struct Field<const D: usize> {
     pub motions: Vec<Motion<D>>,
     /// The maps that the fixed and handle cells follow exactly ([`Constrained`]).
     pub prescribed: Prescribed<D>,
+    /// The field moves the horizontal coordinates only: every sample keeps its last
+    /// coordinate (its height) as it came ([`Constrained`]). So it is for a scan pulled by 2D
+    /// control points alone ([`Field::from_solution`]), which prescribe no height.
+    pub heights_kept: bool,
 }
 
 impl<const D: usize> Field<D> {
@@ -120,8 +124,23 @@ impl<const D: usize> Field<D> {
             halves: solution.complex.cells.iter().map(|c| c.half).collect(),
             motions: solution.motions.clone(),
             prescribed,
+            heights_kept: keeps_heights(constraints),
         }
     }
+}
+
+/// Whether the edit prescribes no height: 3D samples whose only constraints besides fixed
+/// regions are 2D control points (`x, y → X, Y`), which say nothing of the heights. The
+/// solve still holds their heights lightly (so that the cells do not tilt to shorten
+/// horizontal distances), but the cells' motions turn a little about horizontal axes wherever
+/// the pull bends the scan, and that would move heights nobody asked to move (up to 9 cm
+/// under a 0.3 m pull on a forest scan): such a field keeps every height as it came.
+fn keeps_heights<const D: usize>(constraints: &crate::solve::Constraints<D>) -> bool {
+    D == 3
+        && constraints.handles.is_empty()
+        && constraints.pins.is_empty()
+        && !constraints.targets.is_empty()
+        && constraints.targets.iter().all(|t| t.mask[D - 1] < 1.0)
 }
 
 /// Which transfer to use.

@@ -375,6 +375,7 @@ impl<const D: usize> PuRbf<D> {
                 halves: field.halves.clone(),
                 motions: field.motions.clone(),
                 prescribed: Default::default(),
+                heights_kept: false,
             }),
             ..self
         }
@@ -560,6 +561,7 @@ fn patch_field<const D: usize>(field: &Field<D>, members: &[u32]) -> Field<D> {
         halves: members.iter().map(|&i| field.halves[i as usize]).collect(),
         motions: members.iter().map(|&i| field.motions[i as usize]).collect(),
         prescribed: Default::default(),
+        heights_kept: false,
     };
     let k = members.len() as f64;
     let mean = sub.centers.iter().fold(Vect::<D>::zeros(), |s, c| s + c) / k;

@@ -676,6 +676,7 @@ mod tests {
                 .collect(),
             centers,
             prescribed: Default::default(),
+            heights_kept: false,
         }
     }
 

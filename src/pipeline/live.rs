@@ -371,6 +371,7 @@ impl Live {
                 .map(|c| Motion::rest(&c.center))
                 .collect(),
             prescribed: Prescribed::default(),
+            heights_kept: false,
         };
         let blend = Blend::new(&field, Weights::Continuous)?;
         let origin = self.complex.grid.origin;

@@ -45,7 +45,7 @@ def read_ply(path):
 def read_cells(path):
     """The cell centers and their displacements (world coordinates) of a saved 3D field."""
     data = open(path, "rb").read()
-    assert data[:8] == b"RCFIELD\0" and np.frombuffer(data, "<u4", 1, 12)[0] == 3
+    assert data[:8] == b"RCFIELD\0" and np.frombuffer(data, "<u4", 1, 12)[0] in (3, 4)
     origin = np.frombuffer(data, "<f8", 3, 17)
     n = int(np.frombuffer(data, "<u8", 1, 41)[0])
     cells = np.frombuffer(data, "<f8", 16 * n, 49).reshape(n, 16)

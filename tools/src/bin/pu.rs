@@ -131,6 +131,7 @@ fn terrain(n: usize) -> Field<3> {
         centers,
         motions,
         prescribed: Default::default(),
+        heights_kept: false,
     }
 }
 
