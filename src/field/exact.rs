@@ -411,7 +411,7 @@ where
             .map(|m| *m == Affine::identity())
             .collect();
         let bands = bands(&leaves, &prescribed);
-        let (margin_voxels, margin_shift) = margin(&leaves, margin_shift);
+        let (margin_voxels, margin_shift) = super::domain::margin(&leaves, margin_shift);
         Ok(Self {
             inner,
             origin: field.origin,
@@ -935,113 +935,6 @@ fn bands<const D: usize>(leaves: &Leaves<D>, prescribed: &Prescribed<D>) -> Band
     }
 }
 
-/// The margin voxels and their size (as a shift of the voxels): the size of the largest cell
-/// on the complex's outer boundary (a cell with a face that no leaf of its size or larger
-/// covers), and every margin voxel within one of a voxel that such a cell meets.
-/// The [`Frame`] of the whole `field` (for saving it).
-pub(crate) fn frame_of<const D: usize>(field: &Field<D>) -> Result<Frame<D>> {
-    let leaves = Leaves::new(&field.centers, &field.halves).map_err(Error::Solver)?;
-    let (_, margin_shift) = margin(&leaves, None);
-    let mut lo = Vect::<D>::repeat(f64::INFINITY);
-    let mut hi = Vect::<D>::repeat(f64::NEG_INFINITY);
-    for (c, h) in field.centers.iter().zip(&field.halves) {
-        lo = lo.inf(&c.add_scalar(-h));
-        hi = hi.sup(&c.add_scalar(*h));
-    }
-    Ok(Frame {
-        lower: leaves.lower,
-        edge: leaves.edge,
-        margin_shift,
-        bounds: (lo, hi),
-        largest_half: field.halves.iter().cloned().fold(0.0, f64::max),
-    })
-}
-
-fn margin<const D: usize>(leaves: &Leaves<D>, fixed: Option<u32>) -> (FxHashSet<[i64; D]>, u32) {
-    let boundary: Vec<usize> = (0..leaves.keys.len())
-        .filter(|&c| {
-            let (shift, coord) = leaves.keys[c];
-            // In a window, a cell larger than the whole field's margin voxel is not on its
-            // boundary (it only looks so where the window cuts its neighbors away).
-            fixed.is_none_or(|f| shift <= f)
-                && (0..D).any(|a| {
-                    [-1i64, 1].iter().any(|&side| {
-                        let mut next = coord;
-                        next[a] += side;
-                        !leaves.covered(shift, &next)
-                    })
-                })
-        })
-        .collect();
-    let shift = fixed.unwrap_or_else(|| {
-        boundary
-            .iter()
-            .map(|&c| leaves.keys[c].0)
-            .max()
-            .unwrap_or(0)
-    });
-    let mut set = FxHashSet::default();
-    for &c in &boundary {
-        let (s, coord) = leaves.keys[c];
-        // Every boundary cell is at most the margin voxel's size: it lies in one.
-        let v = coord.map(|k| k >> (shift - s));
-        for_each_shell(v.map(|k| k - 1), v.map(|k| k + 1), None, |u| {
-            set.insert(u);
-        });
-    }
-    (set, shift)
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn smooth_step_is_c2() {
-        assert_eq!(smooth(0.0), 0.0);
-        assert_eq!(smooth(1.0), 1.0);
-        let d = |t: f64| 30.0 * t * t * (1.0 - t) * (1.0 - t);
-        assert_eq!(d(0.0), 0.0);
-        assert_eq!(d(1.0), 0.0);
-        let e = 1e-6;
-        assert!(((smooth(0.5 + e) - smooth(0.5 - e)) / (2.0 * e) - d(0.5)).abs() < 1e-6);
-    }
-
-    #[test]
-    fn the_smoothstep_inverts() {
-        for k in 0..=1000 {
-            let t = k as f64 / 1000.0;
-            assert!((smooth_inverse(smooth(t)) - t).abs() < 1e-9, "at {t}");
-        }
-    }
-
-    /// The band's profile: 0 at the region, 1 at the band's end, rising, with zero slope at
-    /// both ends, and a field that leads the region by its head start taken up at a rate at
-    /// most 1.35 times its own (`((u + a) σ)' ≤ 1.35`; the smoothstep's peaks at 2.1).
-    #[test]
-    fn the_band_takes_the_field_up_at_a_steady_rate() {
-        let sigma = |u: f64| fall(smooth(u));
-        assert_eq!(sigma(0.0), 0.0);
-        assert_eq!(sigma(1.0), 1.0);
-        let h = 1e-5;
-        let slope = |f: &dyn Fn(f64) -> f64, u: f64| (f(u + h) - f(u - h)) / (2.0 * h);
-        assert!(slope(&sigma, h).abs() < 1e-3 && slope(&sigma, 1.0 - h).abs() < 1e-3);
-        let rate = |f: &dyn Fn(f64) -> f64| {
-            let mut last = 0.0;
-            let mut peak = 0.0f64;
-            for k in 1..1000 {
-                let u = k as f64 / 1000.0;
-                assert!(f(u) >= last, "falls back at {u}");
-                last = f(u);
-                peak = peak.max(slope(&|u| (u + HEAD_START) * f(u), u));
-            }
-            peak
-        };
-        let peak = rate(&sigma);
-        assert!(
-            peak > 1.0 && peak <= 1.35,
-            "takes the field up {peak} times faster"
-        );
-        assert!(rate(&smooth) > 2.0);
-    }
-}
+#[path = "exact_tests.rs"]
+mod tests;

@@ -283,7 +283,7 @@ where
         }
         if self.transfer == Transfer::Pu && self.window.is_none() {
             out.push(1);
-            let frame = super::exact::frame_of(f)?;
+            let frame = super::domain::frame_of(f)?;
             frame.lower.iter().for_each(|&v| put(&mut out, v));
             put(&mut out, frame.edge);
             out.extend_from_slice(&frame.margin_shift.to_le_bytes());

@@ -14,6 +14,7 @@
 //! identical results.
 
 mod blend;
+mod domain;
 mod exact;
 pub mod far;
 mod file;
