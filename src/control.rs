@@ -6,8 +6,9 @@
 //! there to where it was wanted, horizontally for a 2D control point (its height is free).
 //!
 //! The leave-one-out check solves again without each point in turn, starting from the solution
-//! with all of them (Gauss-Newton on the same cells, no load steps, no refinement), and
-//! predicts the point by its cell's rigid motion; the *prediction error* is that prediction's
+//! with all of them (Gauss-Newton on the same cells, no load steps, no refinement; the trend
+//! fitted again to the others), and predicts the point by its cell's rigid motion and the
+//! others' trend; the *prediction error* is that prediction's
 //! distance from where the point was wanted. A small residual with a large prediction error is
 //! a point the others do not support: a blunder, or a place that needs more control.
 
@@ -56,7 +57,7 @@ pub fn control_points<const D: usize>(
         .zip(got)
         .map(|((t, local), got)| {
             let from = local.from + origin;
-            let wanted = local.to + origin;
+            let wanted = local.wanted + origin;
             let moved = t.pulled(from - t.from).norm();
             ControlPoint {
                 id: t.id.clone(),
@@ -127,8 +128,10 @@ where
                 solve::minimize_from(complex, &without, &solution.motions, &params, budget)?;
             let t = &constraints.targets[i];
             let c = t.cell as usize;
-            let predicted = motions[c].apply(&complex.cells[c].center, &t.from);
-            point.left_out = Some(spec.targets[i].pulled(predicted - t.to).norm());
+            let moved = motions[c].apply(&complex.cells[c].center, &t.from);
+            // The others' trend, refitted without the point, then the cells' motion.
+            let predicted = without.trend.apply(&moved);
+            point.left_out = Some(spec.targets[i].pulled(predicted - t.wanted).norm());
         }
         observer.advance(1);
         crate::progress::check(observer)?;

@@ -303,6 +303,37 @@ impl<const D: usize> Affine<D> {
             pos: self.apply(center),
         }
     }
+
+    /// `self ∘ other`: `other` first.
+    pub fn after(&self, other: &Self) -> Self {
+        Self {
+            linear: self.linear * other.linear,
+            translation: self.linear * other.translation + self.translation,
+        }
+    }
+
+    /// The inverse map (`None` when the linear part is singular).
+    pub fn inverse(&self) -> Option<Self> {
+        let linear = self.linear.try_inverse()?;
+        Some(Self {
+            linear,
+            translation: -(linear * self.translation),
+        })
+    }
+
+    /// The map a fraction `f` of the way from the identity to this one (entry by entry).
+    pub fn towards(&self, f: f64) -> Self {
+        let identity = Mat::<D>::identity();
+        Self {
+            linear: identity + (self.linear - identity) * f,
+            translation: self.translation * f,
+        }
+    }
+
+    /// Whether this is exactly the identity.
+    pub fn is_identity(&self) -> bool {
+        *self == Self::identity()
+    }
 }
 
 #[cfg(test)]

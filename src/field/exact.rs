@@ -237,6 +237,9 @@ pub struct Constrained<const D: usize> {
     beyond_window: std::sync::atomic::AtomicUsize,
     /// Every sample keeps its last coordinate ([`Field::heights_kept`]).
     heights_kept: bool,
+    /// The trend applied to the transfer's values, with the inverse transpose of its linear
+    /// part for normals ([`Field::trend`]; `None`: the identity).
+    trend: Option<(Affine<D>, Mat<D>)>,
 }
 
 /// What a window of a field's cells needs from the whole field to treat samples as the whole
@@ -429,6 +432,10 @@ where
             window,
             beyond_window: Default::default(),
             heights_kept: field.heights_kept,
+            trend: (!field.trend.is_identity()).then(|| {
+                let t = field.trend.linear;
+                (field.trend, t.try_inverse().map_or(t, |i| i.transpose()))
+            }),
         })
     }
 
@@ -660,6 +667,52 @@ where
         normal_like(out, n)
     }
 
+    /// The transfer's value at `x`, after the trend.
+    fn field(&self, x: &Vect<D>) -> Vect<D> {
+        let y = self.inner.warp(x);
+        match &self.trend {
+            Some((t, _)) => t.apply(&y),
+            None => y,
+        }
+    }
+
+    /// The transfer's normal at `x`, after the trend.
+    fn field_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
+        let m = self.inner.warp_normal(x, n);
+        match &self.trend {
+            Some((_, normals)) => normal_like(normals * m, n),
+            None => m,
+        }
+    }
+
+    /// [`Self::field`] and [`Self::field_normal`] together.
+    fn field_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
+        let (y, m) = self.inner.warp_with_normal(x, n);
+        match &self.trend {
+            Some((t, normals)) => (t.apply(&y), normal_like(normals * m, n)),
+            None => (y, m),
+        }
+    }
+
+    /// The transfer's Jacobian at `x`, after the trend.
+    fn field_jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
+        let j = self.inner.jacobian(x, h);
+        match &self.trend {
+            Some((t, _)) => t.linear * j,
+            None => j,
+        }
+    }
+
+    /// The transfer's run of samples (world coordinates), after the trend.
+    fn field_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
+        self.inner.warp_run(origin, points, out);
+        if let Some((t, _)) = &self.trend {
+            for o in out.iter_mut() {
+                *o = t.apply(&(*o - origin)) + origin;
+            }
+        }
+    }
+
     /// A field that keeps heights gives each sample of a run its own last coordinate back,
     /// bit for bit (not through the local frame's round trip).
     fn keep_heights(&self, points: &[Vect<D>], out: &mut [Vect<D>]) {
@@ -694,10 +747,10 @@ where
         let mut y = match self.class_of(x) {
             Class::Exact(m) if self.identity[m as usize] => *x,
             Class::Exact(m) => self.prescribed.maps[m as usize].apply(x),
-            Class::Free => self.inner.warp(x),
-            Class::Band => self.banded(x, &self.masks(&self.leaves.voxel(x)), self.inner.warp(x)),
+            Class::Free => self.field(x),
+            Class::Band => self.banded(x, &self.masks(&self.leaves.voxel(x)), self.field(x)),
             Class::Outside => match self.outside {
-                Outside::Extend => self.inner.warp(x),
+                Outside::Extend => self.field(x),
                 _ => *x,
             },
         };
@@ -713,13 +766,13 @@ where
         }
         match self.class_of(x) {
             Class::Exact(m) => self.exact_normal(m, n),
-            Class::Free => self.inner.warp_normal(x, n),
+            Class::Free => self.field_normal(x, n),
             Class::Band => {
                 let masks = self.masks(&self.leaves.voxel(x));
-                self.banded_normal(x, &masks, self.inner.warp_normal(x, n), n)
+                self.banded_normal(x, &masks, self.field_normal(x, n), n)
             }
             Class::Outside => match self.outside {
-                Outside::Extend => self.inner.warp_normal(x, n),
+                Outside::Extend => self.field_normal(x, n),
                 _ => *n,
             },
         }
@@ -732,10 +785,10 @@ where
         let class = self.class_of(x);
         match class {
             Class::Exact(_) => (self.warp(x), self.warp_normal(x, n)),
-            Class::Free => self.inner.warp_with_normal(x, n),
+            Class::Free => self.field_with_normal(x, n),
             Class::Band => {
                 let masks = self.masks(&self.leaves.voxel(x));
-                let (f, fnormal) = self.inner.warp_with_normal(x, n);
+                let (f, fnormal) = self.field_with_normal(x, n);
                 (
                     self.banded(x, &masks, f),
                     self.banded_normal(x, &masks, fnormal, n),
@@ -744,7 +797,7 @@ where
             Class::Outside => {
                 self.count_outside(x);
                 match self.outside {
-                    Outside::Extend => self.inner.warp_with_normal(x, n),
+                    Outside::Extend => self.field_with_normal(x, n),
                     _ => (*x, *n),
                 }
             }
@@ -754,7 +807,7 @@ where
     fn jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
         let mut j = match self.class_of(x) {
             Class::Exact(m) => self.prescribed.maps[m as usize].linear,
-            Class::Free => self.inner.jacobian(x, h),
+            Class::Free => self.field_jacobian(x, h),
             _ => super::central_jacobian(self, x, h),
         };
         if self.heights_kept {
@@ -835,8 +888,7 @@ where
                 continue;
             }
             if run < i {
-                self.inner
-                    .warp_run(origin, &points[run..i], &mut out[run..i]);
+                self.field_run(origin, &points[run..i], &mut out[run..i]);
             }
             run = i + 1;
             out[i] = match class {
@@ -856,7 +908,7 @@ where
                     match self.whole(&w[..n]) {
                         // A sample the identity has whole keeps its bits.
                         Some(m) if self.identity[m as usize] => *p,
-                        _ => self.banded(&x, &masks, self.inner.warp(&x)) + origin,
+                        _ => self.banded(&x, &masks, self.field(&x)) + origin,
                     }
                 }
                 _ => {
@@ -866,7 +918,7 @@ where
             };
         }
         if run < points.len() {
-            self.inner.warp_run(origin, &points[run..], &mut out[run..]);
+            self.field_run(origin, &points[run..], &mut out[run..]);
         }
         if tally.count > 0 {
             self.tally.lock().expect("not poisoned").merge(&tally);

@@ -6,7 +6,9 @@
 //! ```text
 //! "RCFIELD\0"  u32 version (4)  u32 D
 //! u8 transfer                        0 blend, 1 blend-idw, 2 rbf, 3 pu (version 2),
-//!                                    + 128 when the field keeps heights (version 4)
+//!                                    + 128 when the field keeps heights (version 4),
+//!                                    + 64 when a trend follows (version 4):
+//!   f64[D·D] linear (row-major), f64[D] translation      the trend (local frame)
 //! f64[D] origin                                  world position of the local frame
 //! u64 n, then n × (f64[D] center, f64 half, f64[D·D] rotation (row-major), f64[D] position)
 //! u64 r, then r × (f64[D·D] linear (row-major), f64[D] translation)   prescribed maps (v2)
@@ -37,7 +39,8 @@
 //! factorization need not give the same last bits on another machine or thread count.
 //!
 //! Version 4 added the flag of a field that keeps every sample's height
-//! ([`Field::heights_kept`]); earlier files keep none.
+//! ([`Field::heights_kept`]) and the control points' trend ([`Field::trend`]); earlier files
+//! keep no height and have no trend.
 //!
 //! Version 2 added the transfer `deform` used (what `apply` uses unless told otherwise) and the
 //! maps that fixed and handle cells follow exactly ([`super::Constrained`]). Version 1 files
@@ -58,6 +61,8 @@ const VERSION: u32 = 4;
 
 /// The transfer byte's flag of a field that keeps heights (version 4).
 const HEIGHTS_KEPT: u8 = 128;
+/// The transfer byte's flag of a field with a trend, which follows the byte (version 4).
+const HAS_TREND: u8 = 64;
 
 /// A field with its transfer and the RBF coefficients it was saved with, if any.
 pub struct SavedField<const D: usize> {
@@ -235,8 +240,21 @@ where
             Transfer::Rbf => 2,
             Transfer::Pu => 3,
         };
-        out.push(transfer | if f.heights_kept { HEIGHTS_KEPT } else { 0 });
+        let trended = !f.trend.is_identity();
+        out.push(
+            transfer
+                | if f.heights_kept { HEIGHTS_KEPT } else { 0 }
+                | if trended { HAS_TREND } else { 0 },
+        );
         let put = |out: &mut Vec<u8>, v: f64| out.extend_from_slice(&v.to_le_bytes());
+        if trended {
+            for r in 0..D {
+                for k in 0..D {
+                    put(&mut out, f.trend.linear[(r, k)]);
+                }
+            }
+            f.trend.translation.iter().for_each(|&v| put(&mut out, v));
+        }
         f.origin.iter().for_each(|&v| put(&mut out, v));
         out.extend_from_slice(&(f.centers.len() as u64).to_le_bytes());
         for ((c, h), m) in f.centers.iter().zip(&f.halves).zip(&f.motions) {
@@ -356,14 +374,32 @@ where
                 format!("a {dim}D field cannot deform {D}D samples"),
             ));
         }
-        let (byte, heights_kept) = match version {
-            1 => (2, false),
-            2 | 3 => (r.take(1)?[0], false),
+        let (byte, heights_kept, trended) = match version {
+            1 => (2, false, false),
+            2 | 3 => (r.take(1)?[0], false, false),
             _ => {
                 let byte = r.take(1)?[0];
-                (byte & !HEIGHTS_KEPT, byte & HEIGHTS_KEPT != 0)
+                (
+                    byte & !(HEIGHTS_KEPT | HAS_TREND),
+                    byte & HEIGHTS_KEPT != 0,
+                    byte & HAS_TREND != 0,
+                )
             }
         };
+        let mut trend = Affine::identity();
+        if trended {
+            for row in 0..D {
+                for k in 0..D {
+                    trend.linear[(row, k)] = r.f64()?;
+                }
+            }
+            trend.translation = r.vect::<D>()?;
+            let usable = trend.linear.iter().chain(trend.translation.iter()).all(|v| in_range(*v))
+                && trend.inverse().is_some();
+            if !usable {
+                return Err(Error::format(path, "the trend is not an invertible finite map"));
+            }
+        }
         let transfer = match version {
             1 => Transfer::Rbf,
             _ => match byte {
@@ -499,6 +535,7 @@ where
             motions: Vec::new(),
             prescribed: Default::default(),
             heights_kept,
+            trend,
         };
         field.prescribed.maps = maps.clone();
         for i in chosen {
@@ -827,6 +864,10 @@ mod tests {
             motions,
             prescribed,
             heights_kept: true,
+            trend: Affine {
+                linear: Mat::<3>::new(1.0001, 0.0002, 0.0, -0.0002, 1.0001, 0.0, 0.0, 0.0, 1.0),
+                translation: Vect::<3>::new(0.5, -0.25, 0.0),
+            },
         }
     }
 
@@ -852,6 +893,7 @@ mod tests {
         let mut f = field();
         f.prescribed = Default::default();
         f.heights_kept = false;
+        f.trend = Affine::identity();
         let rbf = Rbf::new(&f).unwrap();
         SavedField::new(f.clone(), Transfer::Rbf, Some(rbf))
             .save(&path)

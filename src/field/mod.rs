@@ -57,6 +57,10 @@ pub struct Field<const D: usize> {
     /// coordinate (its height) as it came ([`Constrained`]). So it is for a scan pulled by 2D
     /// control points alone ([`Field::from_solution`]), which prescribe no height.
     pub heights_kept: bool,
+    /// The control points' trend `T` (local frame; `crate::solve::trend`): the transfer's
+    /// values go through it, while the prescribed maps are the edit's own (the cells' motions
+    /// are those of `F` in the edit `T ∘ F`). The identity without a trend.
+    pub trend: Affine<D>,
 }
 
 impl<const D: usize> Field<D> {
@@ -103,17 +107,18 @@ impl<const D: usize> Field<D> {
             match role {
                 Role::Fixed | Role::Rest => prescribed.set(c, n, Affine::identity()),
                 Role::Carried(_) | Role::Pin(_) => {
-                    // The cell's rigid motion, exactly: A(x) = R (x − c) + p.
+                    // The cell's rigid motion, exactly: A(x) = R (x − c) + p, after the trend.
                     let m = &solution.motions[c];
                     let center = solution.complex.cells[c].center;
-                    prescribed.set(
-                        c,
-                        n,
-                        Affine {
-                            linear: m.rot,
-                            translation: m.pos - m.rot * center,
-                        },
-                    );
+                    let own = Affine {
+                        linear: m.rot,
+                        translation: m.pos - m.rot * center,
+                    };
+                    let map = match constraints.trend.is_identity() {
+                        true => own,
+                        false => constraints.trend.after(&own),
+                    };
+                    prescribed.set(c, n, map);
                 }
                 Role::Handle(k) => prescribed.set(c, n, maps[*k as usize]),
                 Role::Free => {}
@@ -126,6 +131,7 @@ impl<const D: usize> Field<D> {
             motions: solution.motions.clone(),
             prescribed,
             heights_kept: keeps_heights(constraints),
+            trend: constraints.trend,
         }
     }
 }

@@ -372,6 +372,7 @@ impl Live {
                 .collect(),
             prescribed: Prescribed::default(),
             heights_kept: false,
+            trend: crate::rigid::Affine::identity(),
         };
         let blend = Blend::new(&field, Weights::Continuous)?;
         let origin = self.complex.grid.origin;

@@ -27,7 +27,8 @@ use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 use crate::cells::{CellComplex, CellKey, Grid};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Rigid, Vect};
-use crate::spec::{EditSpec, HandleMotion, Region};
+use super::trend::TrendPoint;
+use crate::spec::{EditSpec, HandleMotion, Region, Trend};
 
 use super::Sight;
 
@@ -87,8 +88,11 @@ pub struct Handle<const D: usize> {
 pub struct PinLocal<const D: usize> {
     /// The pinned point (local rest position).
     pub point: Vect<D>,
-    /// Where it goes at full load (local).
+    /// Where the cells send it at full load (local): `T⁻¹` of where the edit sends it, for the
+    /// trend `T` ([`Constraints::trend`]).
     pub to: Vect<D>,
+    /// Where the edit sends it (local).
+    pub wanted: Vect<D>,
     /// The cell holding it.
     pub cell: u32,
 }
@@ -98,8 +102,11 @@ pub struct PinLocal<const D: usize> {
 pub struct TargetLocal<const D: usize> {
     /// The point (local rest position).
     pub from: Vect<D>,
-    /// Where it should go at full load (local).
+    /// Where the cells should send it at full load (local): `T⁻¹` of where it is wanted, for
+    /// the trend `T` ([`Constraints::trend`]).
     pub to: Vect<D>,
+    /// Where it is wanted (local; a 2D point at its own height).
+    pub wanted: Vect<D>,
     /// The effective weight `λ · S^(D−1)`.
     pub weight: f64,
     /// The cell holding `from`.
@@ -126,6 +133,13 @@ pub struct Constraints<const D: usize> {
     pub origin: Vect<D>,
     /// Messages for the user (e.g. components kept at rest).
     pub warnings: Vec<String>,
+    /// The targets' global trend `T` (local frame; [`super::trend`]): the edit is `T ∘ F`,
+    /// and the cells solve `F`, their fixed and resting cells following `T⁻¹` and each handle
+    /// `T⁻¹ ∘ H`. The identity without targets or a trend.
+    pub trend: Affine<D>,
+    /// The kind of trend the spec asked for (fitted again without a point by
+    /// [`Constraints::without_target`]).
+    pub trend_kind: Trend,
 }
 
 impl<const D: usize> Constraints<D>
@@ -137,8 +151,54 @@ where
     pub fn without_target(&self, complex: &CellComplex<D>, i: usize) -> Option<Self> {
         let mut c = self.clone();
         c.targets.remove(i);
+        c.fit_trend(self.trend_kind);
         let (parts, count, _) = anchor(complex, &mut c.roles, &c.targets);
         (parts < count).then_some(c)
+    }
+
+    /// Fits the trend of `kind` to the targets ([`super::trend`]) and sets what the cells
+    /// solve for: each target's and pin's destination taken back by the trend. A trend that
+    /// cannot be inverted (points all at one place, scaled to nothing) is not used.
+    pub fn fit_trend(&mut self, kind: Trend) {
+        let points: Vec<TrendPoint<D>> = self
+            .targets
+            .iter()
+            .map(|t| TrendPoint {
+                from: t.from,
+                to: t.wanted,
+                weight: t.weight,
+                horizontal: t.mask[D - 1] < 1.0,
+            })
+            .collect();
+        let fitted = super::trend::fit(kind, &points);
+        let (trend, back) = match fitted.inverse() {
+            Some(back) if back.linear.iter().chain(back.translation.iter()).all(|v| v.is_finite()) => {
+                (fitted, back)
+            }
+            _ => (Affine::identity(), Affine::identity()),
+        };
+        for t in &mut self.targets {
+            let mut wanted = t.wanted;
+            if t.mask[D - 1] < 1.0 {
+                // A 2D point's height is the trend's, which its light hold keeps.
+                wanted[D - 1] = trend.apply(&t.from)[D - 1];
+            }
+            t.to = back.apply(&wanted);
+        }
+        for p in &mut self.pins {
+            p.to = back.apply(&p.wanted);
+        }
+        self.trend = trend;
+        self.trend_kind = kind;
+    }
+
+    /// The map that fixed and resting cells follow at load fraction `f`: the identity, or the
+    /// trend's inverse taken up with the load.
+    pub fn base_map(&self, f: f64) -> Affine<D> {
+        match self.trend.inverse() {
+            Some(back) if !self.trend.is_identity() => back.towards(f),
+            _ => Affine::identity(),
+        }
     }
 
     /// The direction from the fixed cells to handle `k`'s cells: the difference of the means
@@ -644,6 +704,7 @@ where
         pins.push(PinLocal {
             point: p.point - origin,
             to: p.to - origin,
+            wanted: p.to - origin,
             cell: cell as u32,
         });
     }
@@ -667,6 +728,7 @@ where
             Ok(TargetLocal {
                 from: from - origin,
                 to: to - origin,
+                wanted: to - origin,
                 weight: t.weight * glue,
                 cell: locate(&carrier, &what, hint)? as u32,
                 mask: t.mask(),
@@ -697,7 +759,10 @@ where
         stiffness,
         origin,
         warnings,
+        trend: Affine::identity(),
+        trend_kind: Trend::None,
     };
+    constraints.fit_trend(spec.trend);
     for k in 0..constraints.handles.len() {
         constraints.handles[k].motion = constraints.directed(complex, k);
     }
@@ -874,6 +939,8 @@ pub fn inherit<const D: usize>(
         stiffness,
         origin: old.origin,
         warnings: old.warnings.clone(),
+        trend: old.trend,
+        trend_kind: old.trend_kind,
     }
 }
 

@@ -380,6 +380,8 @@ mod tests {
             stiffness: vec![1.0; n],
             origin: complex.grid.origin,
             warnings: vec![],
+            trend: crate::rigid::Affine::identity(),
+            trend_kind: crate::spec::Trend::None,
         };
         let (counts, uniform) = counts(&complex, &constraints);
         assert!(!uniform && counts.free as usize == n - 1);

@@ -91,6 +91,7 @@ mod session;
 mod sight;
 mod steps;
 mod system;
+pub mod trend;
 pub mod turns;
 
 use std::time::Instant;
@@ -934,12 +935,15 @@ fn prescribe<const D: usize>(
 ) where
     Dim<D>: Rigid<D>,
 {
+    let base = constraints.base_map(f);
     let maps: Vec<_> = (0..constraints.handles.len())
-        .map(|k| constraints.handle_map(k, f))
+        .map(|k| base.after(&constraints.handle_map(k, f)))
         .collect();
+    let trended = !base.is_identity();
     for (c, role) in constraints.roles.iter().enumerate() {
         let center = &complex.cells[c].center;
         match role {
+            Role::Fixed | Role::Rest if trended => motions[c] = base.cell_motion(center),
             Role::Fixed | Role::Rest => motions[c] = Motion::rest(center),
             Role::Handle(k) => motions[c] = maps[*k as usize].cell_motion(center),
             _ => {}

@@ -205,6 +205,7 @@ mod tests {
         let target = TargetLocal {
             from: complex.cells[n / 2].center,
             to: complex.cells[n / 2].center + Vect::<3>::new(0.3, 0.0, 0.0),
+            wanted: complex.cells[n / 2].center + Vect::<3>::new(0.3, 0.0, 0.0),
             weight: 2.0,
             cell: (n / 2) as u32,
             mask: Vect::<3>::repeat(1.0),
@@ -217,6 +218,8 @@ mod tests {
             stiffness: (0..n).map(|k| 1.0 + (k % 3) as f64).collect(),
             origin: complex.grid.origin,
             warnings: vec![],
+            trend: crate::rigid::Affine::identity(),
+            trend_kind: crate::spec::Trend::None,
         };
         let mut motions: Vec<Motion<3>> = complex
             .cells

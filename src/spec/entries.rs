@@ -177,6 +177,44 @@ impl<const D: usize> Target<D> {
     }
 }
 
+/// The global trend fitted to the control points before the cells carry the rest
+/// (`trend = "…"` at the top of the spec; [`crate::solve::trend`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Trend {
+    /// No trend: the cells carry all of the control points' motion.
+    #[default]
+    None,
+    /// One shift, the weighted mean of the points' motions.
+    Shift,
+    /// A shift, a rotation and a uniform scale (a Helmert transformation; for 2D points, in
+    /// the horizontal plane).
+    Similarity,
+    /// A general affine map (for 2D points, of x and y; heights as they are).
+    Affine,
+}
+
+impl Trend {
+    /// The names the spec takes.
+    pub const NAMES: [&'static str; 4] = ["none", "shift", "similarity", "affine"];
+
+    /// The trend named `name` in a spec.
+    pub fn named(name: &str) -> Option<Self> {
+        match name {
+            "none" => Some(Self::None),
+            "shift" => Some(Self::Shift),
+            "similarity" => Some(Self::Similarity),
+            "affine" => Some(Self::Affine),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for Trend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(Self::NAMES[*self as usize])
+    }
+}
+
 /// A parsed and validated edit spec.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct EditSpec<const D: usize> {
@@ -190,6 +228,10 @@ pub struct EditSpec<const D: usize> {
     pub targets: Vec<Target<D>>,
     /// Stiffness regions with their scale.
     pub stiffness: Vec<Entry<D, f64>>,
+    /// The trend fitted to the targets before the cells carry the rest: as the spec says, else
+    /// [`Trend::Affine`] for control points read from a file and [`Trend::None`] for targets
+    /// written in the spec.
+    pub trend: Trend,
     /// The spec's name in messages (its file; empty for a spec made in code).
     pub name: PathBuf,
 }

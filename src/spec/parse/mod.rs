@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::entries::{EditSpec, Entry, HandleMotion, Pin};
+use super::entries::{EditSpec, Entry, HandleMotion, Pin, Trend};
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, Rigid, Vect};
 
@@ -70,13 +70,14 @@ where
     let ctx = Ctx::new(text, base, name);
     let raw: RawSpec = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
     let top: toml::Table = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
-    if let Some(k) = top
-        .keys()
-        .find(|k| !["fixed", "handle", "pin", "target", "stiffness"].contains(&k.as_str()))
-    {
+    if let Some(k) = top.keys().find(|k| {
+        !["fixed", "handle", "pin", "target", "stiffness", "trend"].contains(&k.as_str())
+    }) {
         return Err(ctx.error(
             None,
-            format!("unknown section `{k}` (expected fixed, handle, pin, target or stiffness)"),
+            format!(
+                "unknown section `{k}` (expected fixed, handle, pin, target, stiffness or trend)"
+            ),
         ));
     }
     let mut spec = EditSpec {
@@ -120,6 +121,19 @@ where
         let first = spec.targets.len();
         spec.targets.extend(ctx.targets(t.get_ref(), line, first)?);
     }
+    spec.trend = match top.get("trend") {
+        None if raw.target.iter().any(|t| t.get_ref().contains_key("file")) => Trend::Affine,
+        None => Trend::None,
+        Some(value) => value.as_str().and_then(Trend::named).ok_or_else(|| {
+            ctx.error(
+                ctx.at(0, "trend"),
+                format!(
+                    "trend {value} is not one of {}",
+                    Trend::NAMES.map(|n| format!("\"{n}\"")).join(", ")
+                ),
+            )
+        })?,
+    };
     for t in &raw.stiffness {
         let line = ctx.line(t);
         ctx.allow(t.get_ref(), &["scale"], line)?;
