@@ -149,7 +149,16 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
         return String::new();
     };
     let mut order: Vec<&ControlPoint> = points.iter().collect();
-    order.sort_by(|a, b| b.residual.total_cmp(&a.residual));
+    // Largest residual first as printed (to 0.1 mm), then the largest leave-one-out error:
+    // under a spline trend every residual is zero and the check is what tells.
+    let printed = |p: &ControlPoint| (p.residual * 1e4).round();
+    order.sort_by(|a, b| {
+        printed(b).total_cmp(&printed(a)).then(
+            b.left_out
+                .unwrap_or(0.0)
+                .total_cmp(&a.left_out.unwrap_or(0.0)),
+        )
+    });
     let loo = points.iter().any(|p| p.left_out.is_some());
     let width = order.iter().map(|p| p.id.len()).max().unwrap_or(2).max(2);
     let num = |v: &[f64]| {
@@ -162,8 +171,9 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
     let shown = rows.min(order.len());
     let _ = writeln!(
         s,
-        "control points: {} (largest residuals first{})",
+        "control points: {} (largest residuals first{}{})",
         points.len(),
+        if loo { ", then left out" } else { "" },
         if shown < order.len() {
             format!("; {shown} shown, all in --report")
         } else {

@@ -106,6 +106,8 @@ pub struct Report {
     pub control_rmse: Option<f64>,
     /// The root mean square of their leave-one-out prediction errors (with `--check-gcp`).
     pub control_rmse_left_out: Option<f64>,
+    /// The control points' trend (`"spline"`, `"affine"`, …; absent without one).
+    pub control_trend: Option<String>,
 }
 
 /// The solve's estimate in the report.
@@ -264,6 +266,7 @@ impl Report {
             control_points: d.control_points.clone(),
             control_rmse: crate::control::rmse(&d.control_points),
             control_rmse_left_out: crate::control::rmse_left_out(&d.control_points),
+            control_trend: d.solver.trend.map(|t| t.to_string()),
         }
     }
 
@@ -394,6 +397,12 @@ impl std::fmt::Display for Summary<'_> {
         let table = crate::control::table(&d.control_points, 10);
         if !table.is_empty() {
             writeln!(f, "{table}")?;
+            if let Some(trend) = d.solver.trend {
+                writeln!(
+                    f,
+                    "  trend: {trend} (the map through the control points; the cells carry the rest)"
+                )?;
+            }
         }
         if r.residual_samples > 0 {
             let length = |v: f64| crate::human::length(v, r.cell_size);

@@ -185,6 +185,60 @@ fn two_d_points_move_no_height() {
     assert!(info.stdout.contains("heights: kept"), "{}", info.stdout);
 }
 
+/// The trend carries a scan onto its control points while a fixed area keeps its bytes: the
+/// cells take the trend back there and blend into it beyond.
+#[test]
+fn a_fixed_area_keeps_its_bytes_under_the_trend() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("id,x,y,X,Y\n");
+    for (k, x) in [636300.0, 636700.0, 637100.0].iter().enumerate() {
+        for (j, y) in [849000.0, 849200.0, 849450.0].iter().enumerate() {
+            // A shift east and a slight stretch north.
+            csv += &format!(
+                "P{k}{j},{x},{y},{},{}\n",
+                x + 0.5,
+                y + 1e-3 * (y - 849000.0)
+            );
+        }
+    }
+    let (r, json) = gcp(
+        dir.path(),
+        "gcp.csv",
+        &csv,
+        "weight = 10\n\n[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636150, 849500, 1000] }\n",
+        &[],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(json["control_trend"], "spline", "{json}");
+    let (_, _, rest, _) = records(&autzen());
+    let (_, _, moved, _) = records(&dir.path().join("o.laz"));
+    let (mut fixed, mut far, mut worst, mut sum) = (0, 0, 0.0f64, 0.0);
+    for (a, b) in rest.iter().zip(&moved) {
+        if a.x <= 636150.0 {
+            assert_eq!(a, b, "a fixed sample moved");
+            fixed += 1;
+        } else if a.x > 636700.0 {
+            let wanted = a.y + 1e-3 * (a.y - 849000.0);
+            let off = (b.x - a.x - 0.5).hypot(b.y - wanted);
+            (worst, sum, far) = (worst.max(off), sum + off, far + 1);
+            assert_eq!(a.z, b.z);
+        }
+    }
+    // Far from the fixed area, the trend's motion, but for what the cells give up to hold it
+    // (they blend the fixed area into the trend across the scan: 7 cm at most, 2 cm on average).
+    assert!(fixed > 1000 && far > 10_000, "{fixed} fixed, {far} far");
+    assert!(
+        worst < 0.1 && sum / (far as f64) < 0.03,
+        "{worst}, {}",
+        sum / far as f64
+    );
+    for p in json["control_points"].as_array().unwrap() {
+        let residual = p["residual"].as_f64().unwrap();
+        let x = p["from"][0].as_f64().unwrap();
+        assert!(residual < if x > 637000.0 { 0.01 } else { 0.2 }, "{p}");
+    }
+}
+
 #[test]
 fn a_point_off_the_surface_needs_snap_and_errors_name_the_csv() {
     let dir = tempfile::tempdir().unwrap();
@@ -249,6 +303,8 @@ fn leave_one_out_finds_the_blunder() {
             csv += &format!("P{k},{x},{y},{},{}\n", x + 0.5, y + north);
         }
     }
+    // The default trend, a spline through every point: no residual says anything, the others
+    // predict P5 6 m off, and each other point closer.
     let (r, json) = gcp(
         dir.path(),
         "gcp.csv",
@@ -257,20 +313,50 @@ fn leave_one_out_finds_the_blunder() {
         &["--check-gcp"],
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
-    assert!(r.stdout.contains("leave-one-out RMSE"), "{}", r.stdout);
-    let left_out = |id: &str| point(&json, id)["left_out"].as_f64().unwrap();
-    // The others predict P5 6 m off; each other point is predicted closer (its neighbours,
-    // pulled by P5 when they are left out, the least well).
-    let blunder = left_out("P5");
-    assert!(blunder > 5.5, "{blunder}");
+    assert!(json["control_rmse"].as_f64().unwrap() < 1e-3, "{json}");
+    let left_out =
+        |json: &serde_json::Value, id: &str| point(json, id)["left_out"].as_f64().unwrap();
+    let blunder = left_out(&json, "P5");
+    assert!((blunder - 6.0).abs() < 0.01, "{blunder}");
     for k in [1, 2, 3, 4, 6, 7, 8, 9] {
         let id = format!("P{k}");
         assert!(
-            left_out(&id) < 0.7 * blunder,
-            "{id}: {} vs {blunder}",
-            left_out(&id)
+            left_out(&json, &id) < blunder,
+            "{id}: {}",
+            left_out(&json, &id)
         );
     }
+    // An affine trend and the cells alone spread the blunder less: each other point is
+    // predicted well within P5's error (its neighbours, pulled by P5 when they are left out,
+    // the least well).
+    for trend in ["affine", "none"] {
+        std::fs::write(
+            dir.path().join("edit.toml"),
+            format!("trend = \"{trend}\"\n[[target]]\nfile = \"gcp.csv\"\nweight = 10\n"),
+        )
+        .unwrap();
+        let (out, report) = (dir.path().join("o.laz"), dir.path().join("t.json"));
+        let args = ["--check-gcp", "--report", arg(&report)];
+        let r = deform_verbose(&autzen(), &out, &dir.path().join("edit.toml"), &args);
+        assert_eq!(r.code, 0, "{trend}: {}", r.stderr);
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let blunder = left_out(&json, "P5");
+        assert!(blunder > 5.5, "{trend}: {blunder}");
+        for k in [1, 2, 3, 4, 6, 7, 8, 9] {
+            let id = format!("P{k}");
+            let other = left_out(&json, &id);
+            assert!(other < 0.7 * blunder, "{trend}, {id}: {other} vs {blunder}");
+        }
+    }
+    let (r, json) = gcp(
+        dir.path(),
+        "gcp.csv",
+        &csv,
+        "weight = 10\n",
+        &["--check-gcp"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(json["control_rmse_left_out"].as_f64().unwrap() > 1.0);
     // The nine solves of the check are a stage of their own, not the transfer's.
     let timings = &json["timings_s"];

@@ -41,7 +41,7 @@ fn field(n: usize, seed: u64) -> Field<3> {
         motions,
         prescribed: Default::default(),
         heights_kept: false,
-        trend: rigidcells::rigid::Affine::identity(),
+        trend: Default::default(),
     }
 }
 
@@ -185,7 +185,7 @@ fn octree_field() -> Field<3> {
         motions,
         prescribed: Default::default(),
         heights_kept: false,
-        trend: rigidcells::rigid::Affine::identity(),
+        trend: Default::default(),
     }
 }
 

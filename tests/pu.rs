@@ -175,7 +175,7 @@ fn sparse_cells_far_apart_are_fitted() {
         motions,
         prescribed: Default::default(),
         heights_kept: false,
-        trend: rigidcells::rigid::Affine::identity(),
+        trend: Default::default(),
     };
     let pu = PuRbf::new(&f).unwrap();
     let worst = center_error(&pu, &f);

@@ -93,6 +93,8 @@ fn collapse_and_recover<const D: usize>(
         stiffness: vec![1.0; complex.len()],
         origin: complex.grid.origin,
         warnings: vec![],
+        trend: Default::default(),
+        trend_kind: Default::default(),
     };
     let mut rng = StdRng::seed_from_u64(11);
     let point = Vect::<D>::from_fn(|_, _| rng.random_range(-0.1..0.1));

@@ -391,6 +391,7 @@ fn info_dict<'py>(
         "control_rmse",
         rigidcells::control::rmse(&info.control_points),
     )?;
+    d.set_item("control_trend", info.solver.trend.map(|t| t.to_string()))?;
     Ok(d)
 }
 

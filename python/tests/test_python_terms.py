@@ -524,3 +524,29 @@ def test_a_refused_turn_names_the_handle_as_the_spec_was_written():
     with pytest.raises(rigidcells.TurnNotHeldError, match=r'^spec\["handle"\]\[1\] twists by 360°') as raised:
         rigidcells.deform(cube, spec, cell_size=0.1, progress=False)
     assert raised.value.handle == 1
+
+
+def test_control_points_take_the_trend_as_the_command_line_does(tmp_path):
+    """A scan pulled onto control points from a CSV with a dict spec and a chosen trend: the
+    command line's bytes, the trend in the report, and a bad trend named as the dict's key."""
+    scan = SHARED / "las" / "autzen_trim.laz"
+    rows = ["id,x,y,X,Y"]
+    for k, (x, y) in enumerate([(636200, 849000), (637000, 849000), (636600, 849450), (636300, 849300)]):
+        rows.append(f"P{k},{x},{y},{x + 0.5 + 2e-4 * (y - 849000)},{y - 0.3}")
+    (tmp_path / "gcp.csv").write_text("\n".join(rows) + "\n")
+    toml = tmp_path / "edit.toml"
+    toml.write_text('trend = "affine"\n[[target]]\nfile = "gcp.csv"\nweight = 10\n')
+    out, ours = tmp_path / "cli.laz", tmp_path / "py.laz"
+    subprocess.run([cli(), "deform", str(scan), "-o", str(out), "--edit", str(toml), "-q"], check=True)
+    spec = {"trend": "affine", "target": [{"file": str(tmp_path / "gcp.csv"), "weight": 10}]}
+    report = rigidcells.deform_file(scan, ours, spec, progress=False)
+    assert ours.read_bytes() == out.read_bytes()
+    assert report.control_trend == "affine" and report.control_rmse < 1e-3
+    # Without `trend`, control points from a file take the spline.
+    del spec["trend"]
+    assert rigidcells.deform_file(scan, ours, spec, progress=False).control_trend == "spline"
+    spec["trend"] = "helmert"
+    with pytest.raises(ValueError) as e:
+        rigidcells.deform_file(scan, ours, spec, progress=False)
+    assert str(e.value).startswith('spec["trend"]: '), e.value
+    assert '"similarity"' in str(e.value) and "line 1" not in str(e.value)

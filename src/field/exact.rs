@@ -85,6 +85,7 @@ use super::leaves::{Leaves, for_each_shell};
 use super::{Deformer, Field, Warp, normal_like};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Rigid, Vect};
+use crate::solve::trend::TrendMap;
 
 /// A cell that follows no prescribed map ([`Prescribed::cells`]).
 pub const FREE: u32 = u32::MAX;
@@ -237,9 +238,8 @@ pub struct Constrained<const D: usize> {
     beyond_window: std::sync::atomic::AtomicUsize,
     /// Every sample keeps its last coordinate ([`Field::heights_kept`]).
     heights_kept: bool,
-    /// The trend applied to the transfer's values, with the inverse transpose of its linear
-    /// part for normals ([`Field::trend`]; `None`: the identity).
-    trend: Option<(Affine<D>, Mat<D>)>,
+    /// The trend applied to the transfer's values ([`Field::trend`]; `None`: the identity).
+    trend: Option<TrendMap<D>>,
 }
 
 /// What a window of a field's cells needs from the whole field to treat samples as the whole
@@ -432,10 +432,7 @@ where
             window,
             beyond_window: Default::default(),
             heights_kept: field.heights_kept,
-            trend: (!field.trend.is_identity()).then(|| {
-                let t = field.trend.linear;
-                (field.trend, t.try_inverse().map_or(t, |i| i.transpose()))
-            }),
+            trend: (!field.trend.is_identity()).then(|| field.trend.clone()),
         })
     }
 
@@ -671,17 +668,27 @@ where
     fn field(&self, x: &Vect<D>) -> Vect<D> {
         let y = self.inner.warp(x);
         match &self.trend {
-            Some((t, _)) => t.apply(&y),
+            Some(t) => t.apply(&y),
             None => y,
+        }
+    }
+
+    /// A normal `m` at the transfer's value `y`, turned by the trend there.
+    fn trend_normal(t: &TrendMap<D>, y: &Vect<D>, m: Vect<D>, n: &Vect<D>) -> Vect<D> {
+        match t.jacobian(y).try_inverse() {
+            Some(inverse) => normal_like(inverse.transpose() * m, n),
+            None => m,
         }
     }
 
     /// The transfer's normal at `x`, after the trend.
     fn field_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
-        let m = self.inner.warp_normal(x, n);
         match &self.trend {
-            Some((_, normals)) => normal_like(normals * m, n),
-            None => m,
+            Some(t) => {
+                let (y, m) = self.inner.warp_with_normal(x, n);
+                Self::trend_normal(t, &y, m, n)
+            }
+            None => self.inner.warp_normal(x, n),
         }
     }
 
@@ -689,7 +696,7 @@ where
     fn field_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
         let (y, m) = self.inner.warp_with_normal(x, n);
         match &self.trend {
-            Some((t, normals)) => (t.apply(&y), normal_like(normals * m, n)),
+            Some(t) => (t.apply(&y), Self::trend_normal(t, &y, m, n)),
             None => (y, m),
         }
     }
@@ -698,7 +705,7 @@ where
     fn field_jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
         let j = self.inner.jacobian(x, h);
         match &self.trend {
-            Some((t, _)) => t.linear * j,
+            Some(t) => t.jacobian(&self.inner.warp(x)) * j,
             None => j,
         }
     }
@@ -706,7 +713,7 @@ where
     /// The transfer's run of samples (world coordinates), after the trend.
     fn field_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
         self.inner.warp_run(origin, points, out);
-        if let Some((t, _)) = &self.trend {
+        if let Some(t) = &self.trend {
             for o in out.iter_mut() {
                 *o = t.apply(&(*o - origin)) + origin;
             }

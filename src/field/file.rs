@@ -8,7 +8,8 @@
 //! u8 transfer                        0 blend, 1 blend-idw, 2 rbf, 3 pu (version 2),
 //!                                    + 128 when the field keeps heights (version 4),
 //!                                    + 64 when a trend follows (version 4):
-//!   f64[D·D] linear (row-major), f64[D] translation      the trend (local frame)
+//!   f64[D·D] linear (row-major), f64[D] translation      the trend's affine part (local),
+//!   u64 k, f64 L, k × (f64[2] center, f64[D] weight)       and its spline (k = 0: none)
 //! f64[D] origin                                  world position of the local frame
 //! u64 n, then n × (f64[D] center, f64 half, f64[D·D] rotation (row-major), f64[D] position)
 //! u64 r, then r × (f64[D·D] linear (row-major), f64[D] translation)   prescribed maps (v2)
@@ -54,6 +55,7 @@ use super::pu::{Layout, OVERLAP};
 use super::{Constrained, Deformer, FREE, Field, Frame, Outside, PuRbf, Rbf, Transfer};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
+use crate::solve::trend::TrendMap;
 use crate::spec::LARGEST;
 
 const MAGIC: &[u8; 8] = b"RCFIELD\0";
@@ -240,7 +242,8 @@ where
             Transfer::Rbf => 2,
             Transfer::Pu => 3,
         };
-        let trended = !f.trend.is_identity();
+        let trend = &f.trend;
+        let trended = !trend.is_identity();
         out.push(
             transfer
                 | if f.heights_kept { HEIGHTS_KEPT } else { 0 }
@@ -250,10 +253,19 @@ where
         if trended {
             for r in 0..D {
                 for k in 0..D {
-                    put(&mut out, f.trend.linear[(r, k)]);
+                    put(&mut out, trend.affine.linear[(r, k)]);
                 }
             }
-            f.trend.translation.iter().for_each(|&v| put(&mut out, v));
+            trend
+                .affine
+                .translation
+                .iter()
+                .for_each(|&v| put(&mut out, v));
+            out.extend_from_slice(&(trend.centers.len() as u64).to_le_bytes());
+            put(&mut out, trend.scale);
+            for (c, w) in trend.centers.iter().zip(&trend.weights) {
+                c.iter().chain(w.iter()).for_each(|&v| put(&mut out, v));
+            }
         }
         f.origin.iter().for_each(|&v| put(&mut out, v));
         out.extend_from_slice(&(f.centers.len() as u64).to_le_bytes());
@@ -386,18 +398,46 @@ where
                 )
             }
         };
-        let mut trend = Affine::identity();
+        let mut trend = TrendMap::default();
         if trended {
             for row in 0..D {
                 for k in 0..D {
-                    trend.linear[(row, k)] = r.f64()?;
+                    trend.affine.linear[(row, k)] = r.f64()?;
                 }
             }
-            trend.translation = r.vect::<D>()?;
-            let usable = trend.linear.iter().chain(trend.translation.iter()).all(|v| in_range(*v))
-                && trend.inverse().is_some();
+            trend.affine.translation = r.vect::<D>()?;
+            let k = r.u64()? as usize;
+            trend.scale = r.f64()?;
+            if k > bytes.len() / (8 * (2 + D)) {
+                return Err(Error::format(
+                    path,
+                    format!("spline center count {k} is wrong"),
+                ));
+            }
+            for _ in 0..k {
+                let (x, y) = (r.f64()?, r.f64()?);
+                trend.centers.push([x, y]);
+                trend.weights.push(r.vect::<D>()?);
+            }
+            let numbers = trend
+                .affine
+                .linear
+                .iter()
+                .chain(trend.affine.translation.iter());
+            let spline = trend
+                .centers
+                .iter()
+                .flatten()
+                .chain(trend.weights.iter().flatten());
+            let usable = numbers.chain(spline).all(|v| in_range(*v))
+                && trend.scale > 0.0
+                && in_range(trend.scale)
+                && trend.affine.inverse().is_some();
             if !usable {
-                return Err(Error::format(path, "the trend is not an invertible finite map"));
+                return Err(Error::format(
+                    path,
+                    "the trend is not a finite invertible map",
+                ));
             }
         }
         let transfer = match version {
@@ -864,9 +904,17 @@ mod tests {
             motions,
             prescribed,
             heights_kept: true,
-            trend: Affine {
-                linear: Mat::<3>::new(1.0001, 0.0002, 0.0, -0.0002, 1.0001, 0.0, 0.0, 0.0, 1.0),
-                translation: Vect::<3>::new(0.5, -0.25, 0.0),
+            trend: crate::solve::trend::TrendMap {
+                affine: Affine {
+                    linear: Mat::<3>::new(1.0001, 0.0002, 0.0, -0.0002, 1.0001, 0.0, 0.0, 0.0, 1.0),
+                    translation: Vect::<3>::new(0.5, -0.25, 0.0),
+                },
+                centers: vec![[0.0, 1.0], [2.0, -1.0]],
+                weights: vec![
+                    Vect::<3>::new(0.1, 0.0, -0.1),
+                    Vect::<3>::new(-0.1, 0.0, 0.1),
+                ],
+                scale: 3.0,
             },
         }
     }
@@ -893,7 +941,7 @@ mod tests {
         let mut f = field();
         f.prescribed = Default::default();
         f.heights_kept = false;
-        f.trend = Affine::identity();
+        f.trend = Default::default();
         let rbf = Rbf::new(&f).unwrap();
         SavedField::new(f.clone(), Transfer::Rbf, Some(rbf))
             .save(&path)

@@ -38,6 +38,7 @@ use rayon::prelude::*;
 
 use crate::error::Result;
 use crate::rigid::{Affine, Dim, Motion, Rigid, Vect};
+use crate::solve::trend::TrendMap;
 use crate::solve::{Role, Solution};
 
 /// The solved deformation: cells and their rigid motions, in the local frame.
@@ -60,7 +61,7 @@ pub struct Field<const D: usize> {
     /// The control points' trend `T` (local frame; `crate::solve::trend`): the transfer's
     /// values go through it, while the prescribed maps are the edit's own (the cells' motions
     /// are those of `F` in the edit `T ∘ F`). The identity without a trend.
-    pub trend: Affine<D>,
+    pub trend: TrendMap<D>,
 }
 
 impl<const D: usize> Field<D> {
@@ -114,9 +115,11 @@ impl<const D: usize> Field<D> {
                         linear: m.rot,
                         translation: m.pos - m.rot * center,
                     };
+                    // After a trend, its first order about the cell's new center (a part's cells
+                    // are small against the trend's curvature).
                     let map = match constraints.trend.is_identity() {
                         true => own,
-                        false => constraints.trend.after(&own),
+                        false => constraints.trend.linearized(&m.pos).after(&own),
                     };
                     prescribed.set(c, n, map);
                 }
@@ -131,7 +134,7 @@ impl<const D: usize> Field<D> {
             motions: solution.motions.clone(),
             prescribed,
             heights_kept: keeps_heights(constraints),
-            trend: constraints.trend,
+            trend: constraints.trend.clone(),
         }
     }
 }

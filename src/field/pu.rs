@@ -376,7 +376,7 @@ impl<const D: usize> PuRbf<D> {
                 motions: field.motions.clone(),
                 prescribed: Default::default(),
                 heights_kept: false,
-                trend: crate::rigid::Affine::identity(),
+                trend: Default::default(),
             }),
             ..self
         }
@@ -563,7 +563,7 @@ fn patch_field<const D: usize>(field: &Field<D>, members: &[u32]) -> Field<D> {
         motions: members.iter().map(|&i| field.motions[i as usize]).collect(),
         prescribed: Default::default(),
         heights_kept: false,
-        trend: crate::rigid::Affine::identity(),
+        trend: Default::default(),
     };
     let k = members.len() as f64;
     let mean = sub.centers.iter().fold(Vect::<D>::zeros(), |s, c| s + c) / k;

@@ -677,7 +677,7 @@ mod tests {
             centers,
             prescribed: Default::default(),
             heights_kept: false,
-            trend: crate::rigid::Affine::identity(),
+            trend: Default::default(),
         }
     }
 

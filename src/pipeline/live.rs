@@ -372,7 +372,7 @@ impl Live {
                 .collect(),
             prescribed: Prescribed::default(),
             heights_kept: false,
-            trend: crate::rigid::Affine::identity(),
+            trend: Default::default(),
         };
         let blend = Blend::new(&field, Weights::Continuous)?;
         let origin = self.complex.grid.origin;

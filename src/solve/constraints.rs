@@ -22,12 +22,11 @@
 //!
 //! Everything here is in the local frame of the complex.
 
-use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
-
-use crate::cells::{CellComplex, CellKey, Grid};
+use super::selections::Selections;
+use super::trend::{TrendMap, TrendPoint};
+use crate::cells::{CellComplex, CellKey};
 use crate::error::{Error, Result};
-use crate::rigid::{Affine, Dim, Rigid, Vect};
-use super::trend::TrendPoint;
+use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
 use crate::spec::{EditSpec, HandleMotion, Region, Trend};
 
 use super::Sight;
@@ -136,7 +135,7 @@ pub struct Constraints<const D: usize> {
     /// The targets' global trend `T` (local frame; [`super::trend`]): the edit is `T ∘ F`,
     /// and the cells solve `F`, their fixed and resting cells following `T⁻¹` and each handle
     /// `T⁻¹ ∘ H`. The identity without targets or a trend.
-    pub trend: Affine<D>,
+    pub trend: TrendMap<D>,
     /// The kind of trend the spec asked for (fitted again without a point by
     /// [`Constraints::without_target`]).
     pub trend_kind: Trend,
@@ -158,7 +157,8 @@ where
 
     /// Fits the trend of `kind` to the targets ([`super::trend`]) and sets what the cells
     /// solve for: each target's and pin's destination taken back by the trend. A trend that
-    /// cannot be inverted (points all at one place, scaled to nothing) is not used.
+    /// cannot be taken back at every destination (points all at one place, a scale of
+    /// nothing) is not used.
     pub fn fit_trend(&mut self, kind: Trend) {
         let points: Vec<TrendPoint<D>> = self
             .targets
@@ -170,34 +170,95 @@ where
                 horizontal: t.mask[D - 1] < 1.0,
             })
             .collect();
-        let fitted = super::trend::fit(kind, &points);
-        let (trend, back) = match fitted.inverse() {
-            Some(back) if back.linear.iter().chain(back.translation.iter()).all(|v| v.is_finite()) => {
-                (fitted, back)
+        let trend = super::trend::fit(kind, &points);
+        if kind == Trend::Spline && points.len() > super::trend::SPLINE_POINTS_MOST {
+            let warning = format!(
+                "trend \"spline\" takes at most {} control points, not {}: the trend is affine",
+                super::trend::SPLINE_POINTS_MOST,
+                points.len()
+            );
+            if !self.warnings.contains(&warning) {
+                self.warnings.push(warning);
             }
-            _ => (Affine::identity(), Affine::identity()),
-        };
-        for t in &mut self.targets {
+        }
+        let wanted = |t: &TargetLocal<D>| {
             let mut wanted = t.wanted;
             if t.mask[D - 1] < 1.0 {
                 // A 2D point's height is the trend's, which its light hold keeps.
                 wanted[D - 1] = trend.apply(&t.from)[D - 1];
             }
-            t.to = back.apply(&wanted);
+            wanted
+        };
+        let back: Option<(Vec<Vect<D>>, Vec<Vect<D>>)> = (|| {
+            let targets = self
+                .targets
+                .iter()
+                .map(|t| trend.back(&wanted(t)))
+                .collect::<Option<_>>()?;
+            let pins = self
+                .pins
+                .iter()
+                .map(|p| trend.back(&p.wanted))
+                .collect::<Option<_>>()?;
+            Some((targets, pins))
+        })();
+        let (trend, (targets, pins)) = match back {
+            Some(back) => (trend, back),
+            None => (
+                TrendMap::default(),
+                (
+                    self.targets.iter().map(wanted).collect(),
+                    self.pins.iter().map(|p| p.wanted).collect(),
+                ),
+            ),
+        };
+        for (t, to) in self.targets.iter_mut().zip(targets) {
+            t.to = to;
         }
-        for p in &mut self.pins {
-            p.to = back.apply(&p.wanted);
+        for (p, to) in self.pins.iter_mut().zip(pins) {
+            p.to = to;
         }
         self.trend = trend;
         self.trend_kind = kind;
     }
 
-    /// The map that fixed and resting cells follow at load fraction `f`: the identity, or the
-    /// trend's inverse taken up with the load.
-    pub fn base_map(&self, f: f64) -> Affine<D> {
-        match self.trend.inverse() {
-            Some(back) if !self.trend.is_identity() => back.towards(f),
-            _ => Affine::identity(),
+    /// The motion at load fraction `f` of a cell with rest center `center` that follows `map`
+    /// (`None`: the fixed and resting cells' identity) in the edit: in the cells' frame, `map`
+    /// then the trend taken back, the trend's part taken up with the load. Without a trend,
+    /// `map`'s own cell motion (the rest pose for `None`).
+    pub fn prescribed_motion(&self, map: Option<&Affine<D>>, center: &Vect<D>, f: f64) -> Motion<D>
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let Some(map) = map else {
+            if self.trend.is_identity() {
+                return Motion::rest(center);
+            }
+            return self.taken_back(&Affine::identity(), center, f);
+        };
+        if self.trend.is_identity() {
+            return map.cell_motion(center);
+        }
+        self.taken_back(map, center, f)
+    }
+
+    /// `T⁻¹ ∘ map` to first order about `center`, the trend's part scaled by `f`.
+    fn taken_back(&self, map: &Affine<D>, center: &Vect<D>, f: f64) -> Motion<D>
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let y = map.apply(center);
+        let back = self.trend.back(&y).unwrap_or(y);
+        let undo = self
+            .trend
+            .jacobian(&back)
+            .try_inverse()
+            .unwrap_or_else(Mat::<D>::identity);
+        let identity = Mat::<D>::identity();
+        let linear = (identity + (undo - identity) * f) * map.linear;
+        Motion {
+            rot: <Dim<D> as Rigid<D>>::nearest_rotation(&linear),
+            pos: y + (back - y) * f,
         }
     }
 
@@ -256,236 +317,6 @@ where
     }
 }
 
-/// What the samples select, region by region (in the order fixed, handles, stiffness), gathered
-/// a batch of samples at a time so that a streaming pass needs no sample twice: the finest grid
-/// cells holding selected samples, and their sum and count (a handle's default pivot is their
-/// centroid).
-#[derive(Debug, Clone)]
-pub struct Selections<const D: usize> {
-    regions: Vec<RegionSamples<D>>,
-    snaps: Snaps<D>,
-}
-
-/// The nearest sample of each target that asks to be snapped (`snap`, or a horizontal control
-/// point), within its distance: the targets sit in buckets of a hash grid twice the largest
-/// distance wide, so that each sample looks in one bucket (two with both kinds of target).
-#[derive(Debug, Clone, Default)]
-struct Snaps<const D: usize> {
-    /// Per target: the distance it looks within (`None`: not snapped), whether horizontally.
-    wanted: Vec<Option<(f64, bool)>>,
-    /// Per target: the squared distance and position of the nearest sample so far.
-    best: Vec<Option<(f64, Vect<D>)>>,
-    /// The bucket size (0 until the first samples come, when the finest cell size is known).
-    size: f64,
-    buckets: rustc_hash::FxHashMap<[i64; D], Vec<u32>>,
-    any_horizontal: bool,
-    any_spatial: bool,
-}
-
-impl<const D: usize> Snaps<D> {
-    fn new(spec: &EditSpec<D>) -> Self {
-        let wanted = spec
-            .targets
-            .iter()
-            .map(|t| match (t.snap, t.horizontal) {
-                (Some(d), h) => Some((d, h)),
-                // Filled in with the finest cell size when the grid is known.
-                (None, true) => Some((f64::NAN, true)),
-                (None, false) => None,
-            })
-            .collect::<Vec<_>>();
-        Self {
-            best: vec![None; wanted.len()],
-            any_horizontal: wanted.iter().flatten().any(|w| w.1),
-            any_spatial: wanted.iter().flatten().any(|w| !w.1),
-            wanted,
-            ..Default::default()
-        }
-    }
-
-    /// The bucket of `p` (horizontally: its last coordinate's key is `i64::MIN`).
-    fn key(&self, p: &Vect<D>, horizontal: bool) -> [i64; D] {
-        let mut k = [0i64; D];
-        for a in 0..D {
-            k[a] = (p[a] / self.size).floor() as i64;
-        }
-        if horizontal {
-            k[D - 1] = i64::MIN;
-        }
-        k
-    }
-
-    fn place(&mut self, spec: &EditSpec<D>, finest: f64) {
-        for w in self.wanted.iter_mut().flatten() {
-            if w.0.is_nan() {
-                w.0 = crate::spec::HORIZONTAL_SNAP * finest;
-            }
-        }
-        let largest = self.wanted.iter().flatten().fold(0.0f64, |m, w| m.max(w.0));
-        self.size = (2.0 * largest).max(f64::MIN_POSITIVE);
-        for (i, w) in self.wanted.iter().enumerate() {
-            let Some((r, horizontal)) = *w else { continue };
-            let p = spec.targets[i].from;
-            let axes = if horizontal { D - 1 } else { D };
-            // Every bucket the ball (or disc) of radius r about p meets: at most 2 per axis.
-            let lo = self.key(&p.map(|v| v - r), horizontal);
-            let hi = self.key(&p.map(|v| v + r), horizontal);
-            let mut k = lo;
-            'cells: loop {
-                self.buckets.entry(k).or_default().push(i as u32);
-                for a in 0..axes {
-                    if k[a] < hi[a] {
-                        k[a] += 1;
-                        continue 'cells;
-                    }
-                    k[a] = lo[a];
-                }
-                break;
-            }
-        }
-    }
-
-    fn add(&mut self, spec: &EditSpec<D>, finest: f64, points: &[Vect<D>]) {
-        if self.wanted.iter().all(Option::is_none) {
-            return;
-        }
-        if self.size == 0.0 {
-            self.place(spec, finest);
-        }
-        for p in points {
-            for horizontal in [false, true] {
-                if !(if horizontal {
-                    self.any_horizontal
-                } else {
-                    self.any_spatial
-                }) {
-                    continue;
-                }
-                let Some(list) = self.buckets.get(&self.key(p, horizontal)) else {
-                    continue;
-                };
-                for &i in list {
-                    let i = i as usize;
-                    let Some((r, h)) = self.wanted[i] else {
-                        continue;
-                    };
-                    if h != horizontal {
-                        continue;
-                    }
-                    let mut d = p - spec.targets[i].from;
-                    if h {
-                        d[D - 1] = 0.0;
-                    }
-                    let d2 = d.norm_squared();
-                    if d2 <= r * r && self.best[i].is_none_or(|(b, _)| d2 < b) {
-                        self.best[i] = Some((d2, *p));
-                    }
-                }
-            }
-        }
-    }
-
-    /// Where target `i` starts — snapped to its nearest sample, or as given — and the point
-    /// whose cell carries it: the sample (a horizontal point at the sample's height may lie in
-    /// no cell, on a steep slope), or the point itself. An error when it asked to be snapped
-    /// and no sample lies within its distance.
-    fn from(&self, i: usize, t: &crate::spec::Target<D>) -> Result<(Vect<D>, Vect<D>)> {
-        let Some((r, horizontal)) = self.wanted[i] else {
-            return Ok((t.from, t.from));
-        };
-        match self.best[i] {
-            Some((_, p)) if horizontal => {
-                let mut q = t.from;
-                q[D - 1] = p[D - 1];
-                Ok((q, p))
-            }
-            Some((_, p)) => Ok((p, p)),
-            None => Err(Error::Param(format!(
-                "control point {} ({}) at {:?}: no sample within {r:.6}{}; give it a larger \
-                 `snap` distance",
-                t.id,
-                t.place,
-                t.from
-                    .iter()
-                    .take(if horizontal { D - 1 } else { D })
-                    .collect::<Vec<_>>(),
-                if horizontal { " horizontally" } else { "" },
-            ))),
-        }
-    }
-}
-
-#[derive(Debug, Clone)]
-struct RegionSamples<const D: usize> {
-    cells: HashSet<[i64; D]>,
-    sum: Vect<D>,
-    count: u64,
-    /// For a region of the visible samples ([`Region::visible_from`]): the sum and count per
-    /// finest grid cell, so that those of the cells the camera does not see can be left out.
-    per_cell: Option<HashMap<[i64; D], (Vect<D>, u64)>>,
-}
-
-impl<const D: usize> Selections<D> {
-    /// Empty selections for `spec` over an input of `samples` samples. Fails when a region
-    /// selects by LAS class and the input has no classes, or lists an index past its samples.
-    pub fn new(spec: &EditSpec<D>, has_classes: bool, samples: u64) -> Result<Self> {
-        spec.check_indices(samples)?;
-        let regions: Vec<&Region<D>> = regions(spec).collect();
-        if !has_classes && regions.iter().any(|r| r.uses_classes()) {
-            return Err(Error::Param(
-                "a `classification` region needs an input with LAS classes".into(),
-            ));
-        }
-        Ok(Self {
-            regions: regions
-                .iter()
-                .map(|r| RegionSamples {
-                    cells: HashSet::default(),
-                    sum: Vect::<D>::zeros(),
-                    count: 0,
-                    per_cell: r.visible_from().map(|_| HashMap::default()),
-                })
-                .collect(),
-            snaps: Snaps::new(spec),
-        })
-    }
-
-    /// Adds the samples `points` (world coordinates), numbered from `first`, with their LAS
-    /// `classes` when the input has them; `grid` is the frame of the cells to come.
-    pub fn add(
-        &mut self,
-        spec: &EditSpec<D>,
-        grid: &Grid<D>,
-        first: u64,
-        points: &[Vect<D>],
-        classes: Option<&[u8]>,
-    ) {
-        self.snaps.add(spec, grid.finest_size(), points);
-        for (region, acc) in regions(spec).zip(&mut self.regions) {
-            // Consecutive samples of a scan mostly share a cell: one set insertion per run.
-            let mut last = None;
-            for (i, p) in points.iter().enumerate() {
-                if region.selects(first + i as u64, p, classes.map(|c| c[i])) {
-                    acc.sum += p;
-                    acc.count += 1;
-                    let key = grid.locate(&(p - grid.origin), grid.max_level);
-                    if let (Some(k), Some(per_cell)) = (key, acc.per_cell.as_mut()) {
-                        let e = per_cell.entry(k.coord).or_insert((Vect::<D>::zeros(), 0));
-                        e.0 += p;
-                        e.1 += 1;
-                    }
-                    if let Some(k) = key
-                        && last != Some(k.coord)
-                    {
-                        acc.cells.insert(k.coord);
-                        last = Some(k.coord);
-                    }
-                }
-            }
-        }
-    }
-}
-
 /// The cell of the complex holding the finest grid cell `coord`.
 fn finest_cell<const D: usize>(complex: &CellComplex<D>, coord: &[i64; D]) -> Option<usize> {
     let key = CellKey {
@@ -531,15 +362,6 @@ pub fn seen<const D: usize>(
         out[c] = s;
     }
     out
-}
-
-/// The sample-selecting regions of `spec`, in the order of [`Selections`].
-fn regions<const D: usize>(spec: &EditSpec<D>) -> impl Iterator<Item = &Region<D>> {
-    spec.fixed
-        .iter()
-        .map(|e| &e.region)
-        .chain(spec.handles.iter().map(|e| &e.region))
-        .chain(spec.stiffness.iter().map(|e| &e.region))
 }
 
 /// Resolves `spec` onto `complex`. `points` are the samples in input coordinates; `classes`
@@ -759,7 +581,7 @@ where
         stiffness,
         origin,
         warnings,
-        trend: Affine::identity(),
+        trend: TrendMap::default(),
         trend_kind: Trend::None,
     };
     constraints.fit_trend(spec.trend);
@@ -939,7 +761,7 @@ pub fn inherit<const D: usize>(
         stiffness,
         origin: old.origin,
         warnings: old.warnings.clone(),
-        trend: old.trend,
+        trend: old.trend.clone(),
         trend_kind: old.trend_kind,
     }
 }

@@ -380,7 +380,7 @@ mod tests {
             stiffness: vec![1.0; n],
             origin: complex.grid.origin,
             warnings: vec![],
-            trend: crate::rigid::Affine::identity(),
+            trend: Default::default(),
             trend_kind: crate::spec::Trend::None,
         };
         let (counts, uniform) = counts(&complex, &constraints);

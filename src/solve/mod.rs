@@ -87,6 +87,7 @@ mod forecast;
 mod iteration;
 mod multilevel;
 mod positions;
+mod selections;
 mod session;
 mod sight;
 mod steps;
@@ -98,13 +99,14 @@ use std::time::Instant;
 
 pub use coarse::{COARSE_FROM, COARSE_STAGE, MAX_COARSE_LEVELS};
 pub use constraints::{
-    Constraints, LooseParts, Role, Selections, carry_loose, coarsen, inherit, resolve,
-    resolve_selected, sample_cell, seen,
+    Constraints, LooseParts, Role, carry_loose, coarsen, inherit, resolve, resolve_selected,
+    sample_cell, seen,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
 pub use forecast::forecast;
 use iteration::largest_corner_move;
 pub use iteration::{IterationLog, MOVE_TOLERANCE};
+pub use selections::Selections;
 pub use session::{DRAG_COARSE_FROM, DRAG_FACTOR_MOST, Session};
 pub use sight::Sight;
 
@@ -256,6 +258,8 @@ pub struct SolverInfo {
     pub turns: Vec<HandleTurn>,
     /// What the solve was estimated to take before it started ([`forecast()`]).
     pub estimate: Option<crate::estimate::Estimate>,
+    /// The control points' trend ([`trend`]; `None` without one).
+    pub trend: Option<crate::spec::Trend>,
 }
 
 impl SolverInfo {
@@ -318,6 +322,7 @@ where
     let (mut system, mut motions, mut info) =
         from_rest_either_way(&complex, &mut constraints, params, budget, observer)?;
     info.estimate = Some(estimate);
+    info.trend = (!constraints.trend.is_identity()).then_some(constraints.trend_kind);
     if params.refine_strain.is_some() || params.refine_fraction.is_some() {
         let limit = complex.grid.max_level + params.refine_levels;
         observer.stage("refining", params.max_refinements as u64);
@@ -935,17 +940,18 @@ fn prescribe<const D: usize>(
 ) where
     Dim<D>: Rigid<D>,
 {
-    let base = constraints.base_map(f);
     let maps: Vec<_> = (0..constraints.handles.len())
-        .map(|k| base.after(&constraints.handle_map(k, f)))
+        .map(|k| constraints.handle_map(k, f))
         .collect();
-    let trended = !base.is_identity();
     for (c, role) in constraints.roles.iter().enumerate() {
         let center = &complex.cells[c].center;
         match role {
-            Role::Fixed | Role::Rest if trended => motions[c] = base.cell_motion(center),
-            Role::Fixed | Role::Rest => motions[c] = Motion::rest(center),
-            Role::Handle(k) => motions[c] = maps[*k as usize].cell_motion(center),
+            Role::Fixed | Role::Rest => {
+                motions[c] = constraints.prescribed_motion(None, center, f);
+            }
+            Role::Handle(k) => {
+                motions[c] = constraints.prescribed_motion(Some(&maps[*k as usize]), center, f);
+            }
             _ => {}
         }
     }

@@ -218,7 +218,7 @@ mod tests {
             stiffness: (0..n).map(|k| 1.0 + (k % 3) as f64).collect(),
             origin: complex.grid.origin,
             warnings: vec![],
-            trend: crate::rigid::Affine::identity(),
+            trend: Default::default(),
             trend_kind: crate::spec::Trend::None,
         };
         let mut motions: Vec<Motion<3>> = complex

@@ -191,11 +191,14 @@ pub enum Trend {
     Similarity,
     /// A general affine map (for 2D points, of x and y; heights as they are).
     Affine,
+    /// A thin-plate spline over the horizontal plane with its affine part, through every
+    /// point (each coordinate's displacement interpolated exactly).
+    Spline,
 }
 
 impl Trend {
     /// The names the spec takes.
-    pub const NAMES: [&'static str; 4] = ["none", "shift", "similarity", "affine"];
+    pub const NAMES: [&'static str; 5] = ["none", "shift", "similarity", "affine", "spline"];
 
     /// The trend named `name` in a spec.
     pub fn named(name: &str) -> Option<Self> {
@@ -204,6 +207,7 @@ impl Trend {
             "shift" => Some(Self::Shift),
             "similarity" => Some(Self::Similarity),
             "affine" => Some(Self::Affine),
+            "spline" => Some(Self::Spline),
             _ => None,
         }
     }
@@ -229,7 +233,7 @@ pub struct EditSpec<const D: usize> {
     /// Stiffness regions with their scale.
     pub stiffness: Vec<Entry<D, f64>>,
     /// The trend fitted to the targets before the cells carry the rest: as the spec says, else
-    /// [`Trend::Affine`] for control points read from a file and [`Trend::None`] for targets
+    /// [`Trend::Spline`] for control points read from a file and [`Trend::None`] for targets
     /// written in the spec.
     pub trend: Trend,
     /// The spec's name in messages (its file; empty for a spec made in code).

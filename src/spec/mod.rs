@@ -52,6 +52,8 @@ mod parse;
 mod region;
 
 pub use control_points::{ControlRow, read_control_points};
-pub use entries::{EditSpec, Entry, HEIGHT_HOLD, HORIZONTAL_SNAP, HandleMotion, Pin, Target, Trend};
+pub use entries::{
+    EditSpec, Entry, HEIGHT_HOLD, HORIZONTAL_SNAP, HandleMotion, Pin, Target, Trend,
+};
 pub use parse::{LARGEST, MAX_TURN_DEGREES, parse_poses, parse_spec, read_spec};
 pub use region::{Polygon, Region};

@@ -2,7 +2,7 @@
 and a thin-plate spline on the same points, as a surveyor would compare them.
 
     python tools/python/control_accuracy.py BIN SCAN.las [--points 12] [--checks 40]
-        [--weight 10] [--seed 1] [--trend none,affine] [--cells N]
+        [--weight 10] [--seed 1] [--trend none,affine,spline] [--cells N]
 
 SCAN is a LAS file (`cargo run --release -p data_gen --bin gen -- vegetation 300000 SCAN.las`
 makes a forest scan). Each scene moves the scan by a known field and gives `--points` of its
@@ -11,7 +11,9 @@ other samples, away from the control points, are the checkpoints, scored by wher
 puts them against where the field does:
 
 - **smooth**: a shift, a bilinear trend (0.1–0.25 m across the scan) and one bump of 0.25 m;
-- **local**: the bump alone, with the control points around it holding the rest still.
+- **local**: the bump alone, with the control points around it holding the rest still;
+- **affine**: a shift, a scale, a shear and a tilt (0.1–0.3 m across the scan) with the bump at
+  a third of its height.
 
 Each scene runs with 3D control points (`id,x,y,z,X,Y,Z`) and with 2D ones (`id,x,y,X,Y`,
 the field's horizontal part; scored horizontally, with the largest height change of any
@@ -41,6 +43,12 @@ def field(scene, xyz, lo, hi):
     d[:, 0] = 0.25 * bump
     d[:, 1] = -0.15 * bump
     d[:, 2] = 0.2 * bump
+    if scene == "affine":
+        d *= 0.3
+        x, y = xyz[:, 0] - lo[0], xyz[:, 1] - lo[1]
+        d[:, 0] += 0.4 + 2e-4 * x - 1.5e-4 * y
+        d[:, 1] += -0.3 + 1e-4 * x + 2.5e-4 * y
+        d[:, 2] += 0.05 + 1e-4 * x
     if scene == "smooth":
         d[:, 0] += 0.3 + 0.2 * u - 0.15 * v + 0.25 * u * v
         d[:, 1] += -0.2 + 0.1 * u + 0.2 * v - 0.2 * u * v
@@ -111,7 +119,7 @@ def main():
     p.add_argument("--checks", type=int, default=40)
     p.add_argument("--weight", type=float, default=10.0)
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--trend", default="none,affine")
+    p.add_argument("--trend", default="none,affine,spline")
     p.add_argument("--cells", type=int, default=0)
     a = p.parse_args()
 
@@ -125,7 +133,7 @@ def main():
     folder = tempfile.mkdtemp()
     print(f"{os.path.basename(a.scan)}: {len(xyz)} samples; {len(control)} control points, "
           f"{len(checks)} checkpoints (at least {gap:.0f} m from a control point)")
-    for scene in ["smooth", "local"]:
+    for scene in ["smooth", "local", "affine"]:
         for dims in ["3D", "2D"]:
             src, chk = xyz[control], xyz[checks]
             dst = src + field(scene, src, lo, hi)

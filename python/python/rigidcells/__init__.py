@@ -275,6 +275,9 @@ class Report:
     ``residual``."""
     control_rmse: Optional[float]
     """The control points' root mean square residual (None without any)."""
+    control_trend: Optional[str]
+    """The control points' trend (``"spline"``, ``"affine"``, …; None without one): the map
+    through them that carries what is global, the cells carrying the rest."""
     normals: Optional[np.ndarray] = None
     """The turned normals, when normals were given."""
 

@@ -70,9 +70,10 @@ where
     let ctx = Ctx::new(text, base, name);
     let raw: RawSpec = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
     let top: toml::Table = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
-    if let Some(k) = top.keys().find(|k| {
-        !["fixed", "handle", "pin", "target", "stiffness", "trend"].contains(&k.as_str())
-    }) {
+    if let Some(k) = top
+        .keys()
+        .find(|k| !["fixed", "handle", "pin", "target", "stiffness", "trend"].contains(&k.as_str()))
+    {
         return Err(ctx.error(
             None,
             format!(
@@ -122,7 +123,7 @@ where
         spec.targets.extend(ctx.targets(t.get_ref(), line, first)?);
     }
     spec.trend = match top.get("trend") {
-        None if raw.target.iter().any(|t| t.get_ref().contains_key("file")) => Trend::Affine,
+        None if raw.target.iter().any(|t| t.get_ref().contains_key("file")) => Trend::Spline,
         None => Trend::None,
         Some(value) => value.as_str().and_then(Trend::named).ok_or_else(|| {
             ctx.error(

@@ -155,6 +155,6 @@ fn random_field(complex: &rigidcells::cells::CellComplex<3>) -> Field<3> {
             .collect(),
         prescribed: Default::default(),
         heights_kept: false,
-        trend: rigidcells::rigid::Affine::identity(),
+        trend: Default::default(),
     }
 }

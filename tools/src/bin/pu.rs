@@ -132,7 +132,7 @@ fn terrain(n: usize) -> Field<3> {
         motions,
         prescribed: Default::default(),
         heights_kept: false,
-        trend: rigidcells::rigid::Affine::identity(),
+        trend: Default::default(),
     }
 }
 
