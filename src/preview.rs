@@ -55,12 +55,12 @@ pub fn preview(solution: &Solution<3>, proxy: &Proxy, view: &View, strain: bool)
     let pins: Vec<(Vect<3>, Vect<3>)> = c
         .pins
         .iter()
-        .map(|p| (p.point + origin, p.to + origin))
+        .map(|p| (p.point + origin, p.wanted + origin))
         .collect();
     let targets: Vec<(Vect<3>, Vect<3>)> = c
         .targets
         .iter()
-        .map(|t| (t.from + origin, t.to + origin))
+        .map(|t| (t.from + origin, t.wanted + origin))
         .collect();
     let side = |points: &[Vect<3>], after: bool| {
         let mut canvas = Canvas::new(camera);

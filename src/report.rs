@@ -11,9 +11,9 @@
 //! the largest distance of such a sample from there, in input units (zero when the proxy holds
 //! none). `residual_fixed_max` and `residual_handle_max` split it by role. Every transfer makes
 //! fixed and handle samples exact ([`crate::field::Constrained`]), so these are zero up to the
-//! rounding of the handle's transform. Soft targets are reported apart, as the distance of each target's point under its
-//! cell's motion from the target (`target_residual_max`): a soft target is not met exactly by
-//! design.
+//! rounding of the handle's transform. Soft targets are reported apart, as the distance of each
+//! target's point under its cell's motion (and the control points' trend) from the target
+//! (`target_residual_max`): a soft target is not met exactly by design.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -230,7 +230,8 @@ impl Report {
             .iter()
             .map(|t| {
                 let c = t.cell as usize;
-                (solution.motions[c].apply(&complex.cells[c].center, &t.from) - t.to).norm()
+                let moved = solution.motions[c].apply(&complex.cells[c].center, &t.from);
+                (solution.constraints.trend.apply(&moved) - t.wanted).norm()
             })
             .fold(0.0, f64::max);
         Self {

@@ -209,7 +209,8 @@ impl Live {
                 }
                 let origin = self.complex.grid.origin;
                 for (pin, entry) in constraints.pins.iter_mut().zip(&spec.pins) {
-                    pin.to = entry.to - origin;
+                    pin.wanted = entry.to - origin;
+                    pin.to = constraints.trend.back(&pin.wanted).unwrap_or(pin.wanted);
                 }
                 // A drag's step (which may move the cells' ancestors), or the whole solve.
                 let stepped = if max_iterations < self.params.solve.max_iterations {
