@@ -164,9 +164,10 @@ class LiveWorker:
                         self._wake.wait(None if released else max(0.0, self._settle - still))
                 if pose is not None:
                     session.drag(pose[0], pins=pose[1])
-                    self.steps += 1
                     released = False
+                    # Published before counted: a step counted has its shape waiting.
                     self._publish("preview", session.preview())
+                    self.steps += 1
                 elif not session.converged:
                     session.refine()
                     self._publish("preview", session.preview())
