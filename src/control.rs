@@ -41,6 +41,50 @@ pub struct ControlPoint {
     /// The leave-one-out prediction error (with `--check-gcp`; `None` when not asked for, or
     /// when nothing else constrains the point's part of the shape).
     pub left_out: Option<f64>,
+    /// A checkpoint: left out of the solve, scored apart ([`check_accuracy`]).
+    pub check: bool,
+}
+
+/// The checkpoints' accuracy, as ASPRS (2014) and the NSSDA state it: the RMSE per axis,
+/// horizontally (`RMSE_r = √(RMSE_x² + RMSE_y²)`) and in height, and the accuracy at 95 %
+/// confidence, `1.7308 × RMSE_r` and `1.96 × RMSE_z`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CheckAccuracy {
+    /// Checkpoints scored.
+    pub count: usize,
+    /// RMSE in x.
+    pub rmse_x: f64,
+    /// RMSE in y.
+    pub rmse_y: f64,
+    /// Horizontal RMSE.
+    pub rmse_r: f64,
+    /// RMSE in height, over the 3D checkpoints (`None` without any).
+    pub rmse_z: Option<f64>,
+    /// Horizontal accuracy at 95 % confidence.
+    pub accuracy_r_95: f64,
+    /// Vertical accuracy at 95 % confidence.
+    pub accuracy_z_95: Option<f64>,
+}
+
+/// The checkpoints' accuracy (`None` without checkpoints).
+pub fn check_accuracy(points: &[ControlPoint]) -> Option<CheckAccuracy> {
+    let checks: Vec<&ControlPoint> = points.iter().filter(|p| p.check).collect();
+    let axis = |a: usize| rms(checks.iter().map(|p| p.got[a] - p.wanted[a]));
+    let (rmse_x, rmse_y) = (axis(0)?, axis(1)?);
+    let rmse_z = rms(checks
+        .iter()
+        .filter(|p| !p.horizontal && p.got.len() == 3)
+        .map(|p| p.got[2] - p.wanted[2]));
+    let rmse_r = rmse_x.hypot(rmse_y);
+    Some(CheckAccuracy {
+        count: checks.len(),
+        rmse_x,
+        rmse_y,
+        rmse_r,
+        rmse_z,
+        accuracy_r_95: 1.7308 * rmse_r,
+        accuracy_z_95: rmse_z.map(|z| 1.96 * z),
+    })
 }
 
 /// The control points of `spec` solved in `solution`: `got[i]` is where the output puts the
@@ -69,6 +113,7 @@ pub fn control_points<const D: usize>(
                 snapped: moved,
                 horizontal: t.horizontal,
                 left_out: None,
+                check: t.check,
             }
         })
         .collect()
@@ -85,9 +130,10 @@ pub fn from_points<const D: usize>(solution: &Solution<D>) -> Vec<Vect<D>> {
         .collect()
 }
 
-/// The root mean square of the residuals (`None` without control points).
+/// The root mean square of the control points' residuals, checkpoints left out (`None`
+/// without control points).
 pub fn rmse(points: &[ControlPoint]) -> Option<f64> {
-    rms(points.iter().map(|p| p.residual))
+    rms(points.iter().filter(|p| !p.check).map(|p| p.residual))
 }
 
 /// The root mean square of the leave-one-out prediction errors that were computed.
@@ -123,6 +169,11 @@ where
     };
     observer.stage("leave-one-out", points.len() as u64);
     for (i, point) in points.iter_mut().enumerate() {
+        if point.check {
+            // A checkpoint is already left out.
+            observer.advance(1);
+            continue;
+        }
         if let Some(without) = constraints.without_target(complex, i) {
             let motions =
                 solve::minimize_from(complex, &without, &solution.motions, &params, budget)?;
@@ -141,8 +192,8 @@ where
 }
 
 /// The control points as a table for people: the `rows` largest residuals (all with
-/// `usize::MAX`), then the RMSE (and the leave-one-out RMSE when computed). Empty without
-/// control points.
+/// `usize::MAX`; checkpoints after the control points), then the RMSE (and the leave-one-out
+/// RMSE when computed), then the checkpoints' accuracy. Empty without control points.
 pub fn table(points: &[ControlPoint], rows: usize) -> String {
     use std::fmt::Write;
     let Some(rmse) = rmse(points) else {
@@ -152,12 +203,16 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
     // Largest residual first as printed (to 0.1 mm), then the largest leave-one-out error:
     // under a spline trend every residual is zero and the check is what tells.
     let printed = |p: &ControlPoint| (p.residual * 1e4).round();
+    // Checkpoints after the control points.
     order.sort_by(|a, b| {
-        printed(b).total_cmp(&printed(a)).then(
-            b.left_out
-                .unwrap_or(0.0)
-                .total_cmp(&a.left_out.unwrap_or(0.0)),
-        )
+        a.check
+            .cmp(&b.check)
+            .then(printed(b).total_cmp(&printed(a)))
+            .then(
+                b.left_out
+                    .unwrap_or(0.0)
+                    .total_cmp(&a.left_out.unwrap_or(0.0)),
+            )
     });
     let loo = points.iter().any(|p| p.left_out.is_some());
     let width = order.iter().map(|p| p.id.len()).max().unwrap_or(2).max(2);
@@ -168,13 +223,20 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
             .join(", ")
     };
     let mut s = String::new();
-    let shown = rows.min(order.len());
+    let checks = points.iter().filter(|p| p.check).count();
+    let controls = points.len() - checks;
+    // The largest control points' rows, and every checkpoint's.
+    let shown = rows.min(controls);
     let _ = writeln!(
         s,
-        "control points: {} (largest residuals first{}{})",
-        points.len(),
+        "control points: {controls}{} (largest residuals first{}{})",
+        if checks > 0 {
+            format!(", checkpoints: {checks}")
+        } else {
+            String::new()
+        },
         if loo { ", then left out" } else { "" },
-        if shown < order.len() {
+        if shown < controls {
             format!("; {shown} shown, all in --report")
         } else {
             String::new()
@@ -188,7 +250,7 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
         "snapped",
         if loo { "   left out" } else { "" },
     );
-    for p in order.iter().take(shown) {
+    for p in order.iter().take(shown).chain(&order[controls..]) {
         let _ = writeln!(
             s,
             "  {:<width$}  {:>10.4}  {:>10.4}{}  [{}] -> [{}] ([{}]){}",
@@ -203,12 +265,84 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
             num(&p.from),
             num(&p.wanted),
             num(&p.got),
-            if p.horizontal { " 2D" } else { "" },
+            match (p.horizontal, p.check) {
+                (true, true) => " 2D check",
+                (false, true) => " check",
+                (true, false) => " 2D",
+                (false, false) => "",
+            },
         );
     }
     let _ = write!(s, "  RMSE {rmse:.4}");
     if let Some(l) = rmse_left_out(points) {
         let _ = write!(s, ", leave-one-out RMSE {l:.4}");
     }
+    if let Some(a) = check_accuracy(points) {
+        let _ = write!(
+            s,
+            "\ncheckpoints: {} (not solved for): RMSE x {:.4}, y {:.4}, horizontal {:.4}",
+            a.count, a.rmse_x, a.rmse_y, a.rmse_r
+        );
+        if let Some(z) = a.rmse_z {
+            let _ = write!(s, ", height {z:.4}");
+        }
+        let _ = write!(
+            s,
+            "\n  accuracy at 95 % (ASPRS, NSSDA): horizontal {:.4}",
+            a.accuracy_r_95
+        );
+        if let Some(z) = a.accuracy_z_95 {
+            let _ = write!(s, ", vertical {z:.4}");
+        }
+    }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(check: bool, horizontal: bool, error: [f64; 3]) -> ControlPoint {
+        ControlPoint {
+            id: "C".into(),
+            place: "gcp.csv line 2".into(),
+            from: vec![0.0; 3],
+            wanted: vec![10.0, 20.0, 30.0],
+            got: vec![10.0 + error[0], 20.0 + error[1], 30.0 + error[2]],
+            residual: error[0].abs(),
+            snapped: 0.0,
+            horizontal,
+            left_out: None,
+            check,
+        }
+    }
+
+    /// ASPRS and the NSSDA: RMSE per axis over the checkpoints only, heights over the 3D
+    /// ones, and 1.7308 × RMSE_r, 1.96 × RMSE_z at 95 %.
+    #[test]
+    fn checkpoints_score_as_asprs_states() {
+        let points = [
+            point(false, false, [9.0, 9.0, 9.0]),
+            point(true, false, [0.03, 0.0, 0.1]),
+            point(true, false, [-0.03, 0.04, -0.1]),
+            point(true, true, [0.0, 0.04, 5.0]),
+        ];
+        let a = check_accuracy(&points).unwrap();
+        assert_eq!(a.count, 3);
+        assert!((a.rmse_x - (0.0018f64 / 3.0).sqrt()).abs() < 1e-12);
+        assert!((a.rmse_y - (0.0032f64 / 3.0).sqrt()).abs() < 1e-12);
+        assert!((a.rmse_r - a.rmse_x.hypot(a.rmse_y)).abs() < 1e-15);
+        assert!(
+            (a.rmse_z.unwrap() - 0.1).abs() < 1e-12,
+            "the 2D checkpoint's height is free"
+        );
+        assert!((a.accuracy_r_95 - 1.7308 * a.rmse_r).abs() < 1e-15);
+        assert!((a.accuracy_z_95.unwrap() - 0.196).abs() < 1e-12);
+        assert!(check_accuracy(&points[..1]).is_none());
+        assert_eq!(
+            rmse(&points),
+            Some(9.0),
+            "checkpoints are not in the control points' RMSE"
+        );
+    }
 }

@@ -108,6 +108,9 @@ pub struct Report {
     pub control_rmse_left_out: Option<f64>,
     /// The control points' trend (`"spline"`, `"affine"`, …; absent without one).
     pub control_trend: Option<String>,
+    /// The checkpoints' accuracy (rows marked `check`: RMSE x, y, horizontal and height, and
+    /// at 95 % as ASPRS and the NSSDA state it; absent without checkpoints).
+    pub checkpoints: Option<crate::control::CheckAccuracy>,
 }
 
 /// The solve's estimate in the report.
@@ -268,6 +271,7 @@ impl Report {
             control_rmse: crate::control::rmse(&d.control_points),
             control_rmse_left_out: crate::control::rmse_left_out(&d.control_points),
             control_trend: d.solver.trend.map(|t| t.to_string()),
+            checkpoints: crate::control::check_accuracy(&d.control_points),
         }
     }
 

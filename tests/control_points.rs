@@ -239,6 +239,69 @@ fn a_fixed_area_keeps_its_bytes_under_the_trend() {
     }
 }
 
+/// Rows marked as checks are left out of the solve and scored apart: the output is the one
+/// without them, and their RMSE and 95 % accuracy are those of their known errors.
+#[test]
+fn checkpoints_are_scored_not_solved_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("id,x,y,X,Y,type\n");
+    for x in [636200.0, 636600.0, 637000.0] {
+        for y in [849000.0, 849200.0, 849400.0] {
+            csv += &format!("P{x}{y},{x},{y},{},{y},gcp\n", x + 0.5);
+        }
+    }
+    let controls = csv.clone();
+    // Each checkpoint wanted 1–4 cm off the shift: those are the errors scored.
+    let checks = [
+        (636400.0, 849100.0, 0.01, 0.0),
+        (636800.0, 849300.0, -0.02, 0.04),
+    ];
+    for (k, (x, y, dx, dy)) in checks.iter().enumerate() {
+        csv += &format!("C{k},{x},{y},{},{},check\n", x + 0.5 + dx, y + dy);
+    }
+    let extra = "weight = 10\n";
+    let (r, json) = gcp(dir.path(), "gcp.csv", &csv, extra, &["--check-gcp"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let with = records(&dir.path().join("o.laz")).1;
+    let a = &json["checkpoints"];
+    assert_eq!(a["count"], 2, "{json}");
+    let close = |key: &str, want: f64| {
+        let got = a[key].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-3, "{key}: {got} vs {want}");
+    };
+    let (rx, ry) = ((0.0005f64 / 2.0).sqrt(), (0.0016f64 / 2.0).sqrt());
+    close("rmse_x", rx);
+    close("rmse_y", ry);
+    close("rmse_r", rx.hypot(ry));
+    close("accuracy_r_95", 1.7308 * rx.hypot(ry));
+    assert!(
+        a["rmse_z"].is_null() && a["accuracy_z_95"].is_null(),
+        "2D checkpoints: {a}"
+    );
+    assert!(json["control_rmse"].as_f64().unwrap() < 1e-3, "{json}");
+    assert!(point(&json, "C0")["left_out"].is_null() && point(&json, "C0")["check"] == true);
+    assert!(
+        r.stdout.contains("checkpoints: 2 (not solved for)"),
+        "{}",
+        r.stdout
+    );
+    let (r, _) = gcp(dir.path(), "gcp.csv", &controls, extra, &[]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        records(&dir.path().join("o.laz")).1 == with,
+        "the checkpoints moved the scan"
+    );
+    // A type the file cannot mean is named with its line and column.
+    let bad = controls + "C9,636400,849100,636400,849100,maybe\n";
+    let (r, _) = gcp(dir.path(), "gcp.csv", &bad, extra, &[]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("gcp.csv: line 11, column 6: `maybe`"),
+        "{}",
+        r.stderr
+    );
+}
+
 #[test]
 fn a_point_off_the_surface_needs_snap_and_errors_name_the_csv() {
     let dir = tempfile::tempdir().unwrap();

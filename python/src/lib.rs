@@ -384,6 +384,7 @@ fn info_dict<'py>(
         c.set_item("wanted", p.wanted.clone())?;
         c.set_item("got", p.got.clone())?;
         c.set_item("residual", p.residual)?;
+        c.set_item("check", p.check)?;
         points.append(c)?;
     }
     d.set_item("control_points", points)?;
@@ -392,6 +393,21 @@ fn info_dict<'py>(
         rigidcells::control::rmse(&info.control_points),
     )?;
     d.set_item("control_trend", info.solver.trend.map(|t| t.to_string()))?;
+    let checkpoints = match rigidcells::control::check_accuracy(&info.control_points) {
+        Some(a) => {
+            let c = PyDict::new(py);
+            c.set_item("count", a.count)?;
+            c.set_item("rmse_x", a.rmse_x)?;
+            c.set_item("rmse_y", a.rmse_y)?;
+            c.set_item("rmse_r", a.rmse_r)?;
+            c.set_item("rmse_z", a.rmse_z)?;
+            c.set_item("accuracy_r_95", a.accuracy_r_95)?;
+            c.set_item("accuracy_z_95", a.accuracy_z_95)?;
+            c.into_any()
+        }
+        None => py.None().into_bound(py),
+    };
+    d.set_item("checkpoints", checkpoints)?;
     Ok(d)
 }
 

@@ -550,3 +550,20 @@ def test_control_points_take_the_trend_as_the_command_line_does(tmp_path):
         rigidcells.deform_file(scan, ours, spec, progress=False)
     assert str(e.value).startswith('spec["trend"]: '), e.value
     assert '"similarity"' in str(e.value) and "line 1" not in str(e.value)
+
+
+def test_checkpoints_are_scored_in_the_report(tmp_path):
+    """Rows marked as checks: scored as the command line scores them, not solved for."""
+    scan = SHARED / "las" / "autzen_trim.laz"
+    rows = ["id,x,y,X,Y,type"]
+    for x in (636200, 636600, 637000):
+        for y in (849000, 849200, 849400):
+            rows.append(f"P{x}{y},{x},{y},{x + 0.5},{y},gcp")
+    rows.append("C1,636400,849100,636400.53,849100,check")
+    (tmp_path / "gcp.csv").write_text("\n".join(rows) + "\n")
+    spec = {"target": [{"file": str(tmp_path / "gcp.csv"), "weight": 10}]}
+    report = rigidcells.deform_file(scan, tmp_path / "out.laz", spec, progress=False)
+    a = report.checkpoints
+    assert a["count"] == 1 and abs(a["rmse_x"] - 0.03) < 1e-3 and a["rmse_z"] is None
+    assert abs(a["accuracy_r_95"] - 1.7308 * a["rmse_r"]) < 1e-12
+    assert [p["check"] for p in report.control_points].count(True) == 1

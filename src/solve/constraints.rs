@@ -551,7 +551,8 @@ where
                 from: from - origin,
                 to: to - origin,
                 wanted: to - origin,
-                weight: t.weight * glue,
+                // A checkpoint is scored, not solved for.
+                weight: if t.check { 0.0 } else { t.weight * glue },
                 cell: locate(&carrier, &what, hint)? as u32,
                 mask: t.mask(),
             })
@@ -699,7 +700,8 @@ fn anchor<const D: usize>(
     for (c, r) in roles.iter().enumerate() {
         anchored[component[c] as usize] |= !matches!(r, Role::Free | Role::Rest);
     }
-    for t in targets {
+    // A checkpoint (weight 0) pulls nothing.
+    for t in targets.iter().filter(|t| t.weight > 0.0) {
         anchored[component[t.cell as usize] as usize] = true;
     }
     let mut loose = 0;

@@ -44,7 +44,12 @@ where
     for (k, p) in constraints.pins.iter().enumerate() {
         moves.push((p.to - p.point, format!("pin #{}", k + 1)));
     }
-    for (k, t) in constraints.targets.iter().enumerate() {
+    for (k, t) in constraints
+        .targets
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| t.weight > 0.0)
+    {
         moves.push((t.to - t.from, format!("target #{}", k + 1)));
     }
     let fixed = constraints.roles.contains(&Role::Fixed);

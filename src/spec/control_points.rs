@@ -20,6 +20,8 @@ pub struct ControlRow<const D: usize> {
     pub weight: Option<f64>,
     /// Whether the file gives x and y only.
     pub horizontal: bool,
+    /// A checkpoint (the `check` or `type` column): scored, not solved for.
+    pub check: bool,
     /// The line in the file (1-based).
     pub line: usize,
 }
@@ -31,6 +33,17 @@ enum Column {
     From(usize),
     To(usize),
     Weight,
+    /// `check` (yes/no) or `type` (check/control): whether the row is a checkpoint.
+    Check,
+}
+
+/// Whether a `check` or `type` field marks a checkpoint (`None`: neither).
+fn checkpoint(field: &str) -> Option<bool> {
+    match field.trim().to_ascii_lowercase().as_str() {
+        "1" | "yes" | "y" | "true" | "x" | "check" | "checkpoint" | "cp" | "chk" => Some(true),
+        "" | "0" | "no" | "n" | "false" | "control" | "gcp" | "gcps" => Some(false),
+        _ => None,
+    }
 }
 
 /// Reads a control-point file (`[[target]] file = …`), naming `path` in errors with the line
@@ -133,11 +146,22 @@ pub fn read_control_points<const D: usize>(text: &str, path: &Path) -> Result<Ve
             to: Vect::<D>::zeros(),
             weight: None,
             horizontal,
+            check: false,
             line,
         };
         for (c, (field, col)) in fields.iter().zip(&layout).enumerate() {
             if *col == Column::Id {
                 r.id = Some(field.clone());
+                continue;
+            }
+            if *col == Column::Check {
+                r.check = checkpoint(field).ok_or_else(|| {
+                    fail(
+                        line,
+                        Some(c + 1),
+                        format!("`{field}` is neither a checkpoint (check, yes, 1) nor a control point (control, no, 0)"),
+                    )
+                })?;
                 continue;
             }
             let v = number(field).ok_or_else(|| {
@@ -158,7 +182,7 @@ pub fn read_control_points<const D: usize>(text: &str, path: &Path) -> Result<Ve
                         format!("weight {v} must be positive"),
                     ));
                 }
-                Column::Id => {}
+                Column::Id | Column::Check => {}
             }
         }
         out.push(r);
@@ -218,6 +242,7 @@ fn by_header<const D: usize>(
             _ => match lower.as_str() {
                 "id" | "name" | "point" | "label" | "gcp" => Some(Column::Id),
                 "weight" | "w" => Some(Column::Weight),
+                "check" | "type" | "use" => Some(Column::Check),
                 _ => {
                     // The last character is the axis (a header is the user's text: the split
                     // falls on a character boundary, whatever the name holds).
@@ -238,7 +263,7 @@ fn by_header<const D: usize>(
             (
                 c + 1,
                 format!(
-                    "unknown column `{name}` (expected id, x, y{z}, X, Y{Z}, weight)",
+                    "unknown column `{name}` (expected id, x, y{z}, X, Y{Z}, weight, check)",
                     z = if D == 3 { ", z" } else { "" },
                     Z = if D == 3 { ", Z" } else { "" },
                 ),

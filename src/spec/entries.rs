@@ -144,6 +144,9 @@ pub struct Target<const D: usize> {
     /// Move `from` to the nearest sample within this distance before solving (`None`: keep
     /// it where it was given).
     pub snap: Option<f64>,
+    /// A checkpoint (a control-point file's `check` column): left out of the solve and the
+    /// trend, and scored apart ([`crate::control`]).
+    pub check: bool,
 }
 
 /// The pull on a horizontal control point's height, relative to its horizontal pull

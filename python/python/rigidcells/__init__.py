@@ -272,12 +272,16 @@ class Report:
     ``turn_asked_degrees`` and ``turn_taken_degrees``."""
     control_points: List[dict]
     """Per control point (``[[target]]``): ``id``, ``from``, ``wanted``, ``got``,
-    ``residual``."""
+    ``residual``, ``check`` (a checkpoint, scored and not solved for)."""
     control_rmse: Optional[float]
     """The control points' root mean square residual (None without any)."""
     control_trend: Optional[str]
     """The control points' trend (``"spline"``, ``"affine"``, …; None without one): the map
     through them that carries what is global, the cells carrying the rest."""
+    checkpoints: Optional[dict]
+    """The checkpoints' accuracy (rows marked ``check``; None without any): ``count``,
+    ``rmse_x``, ``rmse_y``, ``rmse_r``, ``rmse_z``, and ``accuracy_r_95`` and
+    ``accuracy_z_95`` as ASPRS and the NSSDA state them."""
     normals: Optional[np.ndarray] = None
     """The turned normals, when normals were given."""
 

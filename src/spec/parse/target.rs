@@ -67,6 +67,7 @@ impl Ctx<'_> {
                     place,
                     horizontal: row.horizontal,
                     snap,
+                    check: row.check,
                 });
             }
             return Ok(out);
@@ -80,6 +81,7 @@ impl Ctx<'_> {
             place: format!("{} line {line}", file_name(self.name)),
             horizontal: false,
             snap,
+            check: false,
         }])
     }
 }
