@@ -47,11 +47,9 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import re
 import sys
 import threading
 import warnings
-from pathlib import Path
 from dataclasses import dataclass
 from typing import Any, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
 
@@ -60,6 +58,9 @@ import numpy as np
 from . import _rigidcells, dask
 from ._points import Frame, _float_dtype, _Points, _plain3, _triangles
 from ._rigidcells import FormatError, TurnNotHeldError
+from ._spec import (
+    Spec, _call, _in_dict_terms, _key_paths, _lines_said, _plain, _spec,
+)
 
 __all__ = [
     "deform", "solve", "estimate", "deform_file", "apply_file", "solve_files", "Field",
@@ -69,7 +70,6 @@ __all__ = [
 
 __version__: str = _rigidcells.__version__
 
-Spec = Union[str, "os.PathLike[str]", dict]
 
 
 class RigidCellsWarning(UserWarning):
@@ -85,148 +85,6 @@ def _warn(messages: Sequence[str]) -> None:
     calling this."""
     for message in messages:
         warnings.warn(message, RigidCellsWarning, stacklevel=3)
-
-
-def _plain(value: Any, path: List[Any]) -> Any:
-    """A dict spec's value as plain Python (numpy scalars and arrays as the numbers and lists
-    they hold, paths as text); a value no spec holds (None, NaN, a masked array, an object)
-    is an error naming its key path."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v, path + [str(k)]) for k, v in value.items()}
-    if isinstance(value, np.ma.MaskedArray):
-        raise TypeError(f"{_key_path(path)}: a masked array; pass the values themselves")
-    if isinstance(value, np.ndarray):
-        if value.dtype.kind not in "fiub":
-            raise TypeError(f"{_key_path(path)}: an array of {value.dtype}, not numbers")
-        value = value.tolist()
-    if isinstance(value, (list, tuple)):
-        return [_plain(v, path + [k]) for k, v in enumerate(value)]
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, os.PathLike):
-        return os.fspath(value)
-    if value is None:
-        raise ValueError(f"{_key_path(path)}: None is not a value (leave the key out)")
-    if isinstance(value, float) and not np.isfinite(value):
-        raise ValueError(f"{_key_path(path)}: {value} is not a finite number")
-    if not isinstance(value, (str, int, float, bool)):
-        raise TypeError(f"{_key_path(path)}: a {type(value).__name__} is not a number, text, list or dict")
-    return value
-
-
-def _key_paths(text: str) -> List[str]:
-    """For each line of TOML made from a dict spec, the dict's key path of what it holds
-    (``spec["handle"][0]["translate"]``), or "" for a blank line."""
-    paths: List[str] = []
-    counts: dict = {}
-    table: List[Any] = []
-    for line in text.splitlines():
-        t = line.strip()
-        if t.startswith("[["):
-            names = t.strip("[]").split(".")
-            counts[tuple(names)] = counts.get(tuple(names), -1) + 1
-            table = names[:-1] + [names[-1], counts[tuple(names)]]
-        elif t.startswith("["):
-            names = t.strip("[]").split(".")
-            table = []
-            for k, name in enumerate(names):
-                table.append(name)
-                if tuple(names[: k + 1]) in counts:
-                    table.append(counts[tuple(names[: k + 1])])
-        elif "=" in t:
-            paths.append(_key_path(table + [t.split("=", 1)[0].strip().strip('"')]))
-            continue
-        else:
-            paths.append("")
-            continue
-        paths.append(_key_path(table))
-    return paths
-
-
-def _key_path(parts: List[Any]) -> str:
-    """``["handle", 0, "box"]`` as ``spec["handle"][0]["box"]``."""
-    return "spec" + "".join(f"[{p}]" if isinstance(p, int) else f'["{p}"]' for p in parts)
-
-
-def _spec(spec: Spec) -> Tuple[str, str, Optional[List[str]]]:
-    """The spec's TOML text, the folder its relative file names are resolved against, and for
-    a dict the key path of each line of that text."""
-    if isinstance(spec, dict):
-        text = _rigidcells.toml_from_json(json.dumps(_plain(spec, [])))
-        return text, os.getcwd(), _key_paths(text)
-    if isinstance(spec, os.PathLike) or (
-        isinstance(spec, str) and "\n" not in spec and spec.strip().endswith(".toml")
-    ):
-        path = Path(spec)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError as e:
-            raise OSError(f"{path}: {e.strerror}") from e
-        return text, str(path.parent.resolve()), None
-    if isinstance(spec, str):
-        return spec, os.getcwd(), None
-    raise TypeError("spec must be TOML text, a path to a .toml file, or a dict")
-
-
-_LINE = re.compile(r"^spec: (?:TOML parse error at )?line (\d+)(?:, column \d+)?(?::|\n)\s*")
-# The TOML parser's picture of the line (`7 | [handle]`, `  | ^^^`), which a dict never had.
-_SNIPPET = re.compile(r"^\s*\d*\s*\|.*$\n?", re.M)
-_SERDE_TYPES = {"map": "a dict", "sequence": "a list", "a sequence": "a list", "string": "a str",
-                "a string": "a str", "floating point": "a float", "integer": "an int",
-                "boolean": "a bool", "a map": "a dict"}
-_INVALID_TYPE = re.compile(r"invalid type: ([\w ]+?)(?: `[^`]*`| \S+)?, expected ([\w ]+)")
-
-
-def _in_dict_terms(error: ValueError, paths: Optional[List[str]]) -> ValueError:
-    """A spec error of a dict spec, its TOML line said as the dict's key path, and the
-    parser's names of types as Python's."""
-    text = str(error)
-    m = _LINE.match(text)
-    if paths is None or m is None or not (0 < int(m.group(1)) <= len(paths)):
-        return error
-    path = paths[int(m.group(1)) - 1] or "spec"
-    what = _SNIPPET.sub("", text[m.end():]).strip()
-    what = _INVALID_TYPE.sub(
-        lambda t: f"expected {_SERDE_TYPES.get(t.group(2), t.group(2))}, got "
-        f"{_SERDE_TYPES.get(t.group(1).split(' ')[0], t.group(1))}",
-        what,
-    )
-    return type(error)(f"{path}: {what}")
-
-
-def _lines_said(texts: List[str], paths: Optional[List[str]]) -> List[str]:
-    """Messages that name a dict spec's TOML lines (`line 7`, `the handle on line 7 of the edit
-    spec`), with its key paths instead."""
-    if paths is None:
-        return texts
-
-    def said(m: "re.Match[str]") -> str:
-        n = int(m.group(1))
-        return paths[n - 1] if 0 < n <= len(paths) and paths[n - 1] else m.group(0)
-
-    return [re.sub(r"(?:the handle on )?\bline (\d+)(?: of the edit spec)?", said, t) for t in texts]
-
-
-def _call(paths: Optional[List[str]], f: Any, *args: Any) -> Any:
-    """``f(*args)``, a dict spec's errors said by key path."""
-    try:
-        return f(*args)
-    except TurnNotHeldError as e:
-        if paths is None:
-            raise
-        raise _turn_said(e, _key_path(["handle", e.handle])) from None
-    except ValueError as e:
-        raised = _in_dict_terms(e, paths)
-        if raised is e:
-            raise
-        raise raised from None
-
-
-def _turn_said(error: TurnNotHeldError, name: str) -> TurnNotHeldError:
-    """The refusal with the handle called ``name`` (``spec["handle"][0]``), its fields kept."""
-    said = TurnNotHeldError(f"{name} {error.said}")
-    said.__dict__.update(error.__dict__)
-    return said
 
 
 @dataclass
