@@ -43,6 +43,8 @@ pub struct ControlPoint {
     pub left_out: Option<f64>,
     /// A checkpoint: left out of the solve, scored apart ([`check_accuracy`]).
     pub check: bool,
+    /// An exact control point (`exact = true`): its cell is pinned to it.
+    pub exact: bool,
 }
 
 /// The checkpoints' accuracy, as ASPRS (2014) and the NSSDA state it: the RMSE per axis,
@@ -114,9 +116,24 @@ pub fn control_points<const D: usize>(
                 horizontal: t.horizontal,
                 left_out: None,
                 check: t.check,
+                exact: t.exact && !t.check,
             }
         })
         .collect()
+}
+
+/// `points` with `got` as the output stores it (`written`, one per point: rounded to the
+/// output's frame or precision) and their residuals measured from there, as a reader of the
+/// output would measure them.
+pub fn as_written<const D: usize>(points: &mut [ControlPoint], written: &[Vect<D>]) {
+    for (p, w) in points.iter_mut().zip(written) {
+        p.got = w.iter().copied().collect();
+        let along = p.got.len() - usize::from(p.horizontal);
+        p.residual = (0..along)
+            .map(|a| (p.got[a] - p.wanted[a]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+    }
 }
 
 /// The targets' `from` points in world coordinates (after snapping), in the spec's order.
@@ -193,8 +210,9 @@ where
 
 /// The control points as a table for people: the `rows` largest residuals (all with
 /// `usize::MAX`; checkpoints after the control points), then the RMSE (and the leave-one-out
-/// RMSE when computed), then the checkpoints' accuracy. Empty without control points.
-pub fn table(points: &[ControlPoint], rows: usize) -> String {
+/// RMSE when computed), then the checkpoints' accuracy; `rounding` says what the points were
+/// rounded to as written ([`as_written`]). Empty without control points.
+pub fn table(points: &[ControlPoint], rows: usize, rounding: Option<&str>) -> String {
     use std::fmt::Write;
     let Some(rmse) = rmse(points) else {
         return String::new();
@@ -229,11 +247,15 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
     let shown = rows.min(controls);
     let _ = writeln!(
         s,
-        "control points: {controls}{} (largest residuals first{}{})",
+        "control points: {controls}{} ({}largest residuals first{}{})",
         if checks > 0 {
             format!(", checkpoints: {checks}")
         } else {
             String::new()
+        },
+        match rounding {
+            Some(r) => format!("residuals as written, to {r}; "),
+            None => String::new(),
         },
         if loo { ", then left out" } else { "" },
         if shown < controls {
@@ -253,7 +275,7 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
     for p in order.iter().take(shown).chain(&order[controls..]) {
         let _ = writeln!(
             s,
-            "  {:<width$}  {:>10.4}  {:>10.4}{}  [{}] -> [{}] ([{}]){}",
+            "  {:<width$}  {:>10.4}  {:>10.4}{}  [{}] -> [{}] ([{}]){}{}{}",
             p.id,
             p.residual,
             p.snapped,
@@ -265,12 +287,9 @@ pub fn table(points: &[ControlPoint], rows: usize) -> String {
             num(&p.from),
             num(&p.wanted),
             num(&p.got),
-            match (p.horizontal, p.check) {
-                (true, true) => " 2D check",
-                (false, true) => " check",
-                (true, false) => " 2D",
-                (false, false) => "",
-            },
+            if p.horizontal { " 2D" } else { "" },
+            if p.check { " check" } else { "" },
+            if p.exact { " exact" } else { "" },
         );
     }
     let _ = write!(s, "  RMSE {rmse:.4}");
@@ -314,6 +333,7 @@ mod tests {
             horizontal,
             left_out: None,
             check,
+            exact: false,
         }
     }
 

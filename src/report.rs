@@ -102,6 +102,10 @@ pub struct Report {
     /// wanted, got (where the output puts it), residual, how far it was snapped, whether it is
     /// 2D, and its leave-one-out prediction error (`--check-gcp`).
     pub control_points: Vec<crate::control::ControlPoint>,
+    /// What the control points' `got` was rounded to before their residuals were measured:
+    /// the output's coordinates as written (`"the output's scale 0.01"`; absent where they are
+    /// the field's values).
+    pub control_rounding: Option<String>,
     /// The root mean square of the control points' residuals (absent without any).
     pub control_rmse: Option<f64>,
     /// The root mean square of their leave-one-out prediction errors (with `--check-gcp`).
@@ -268,6 +272,7 @@ impl Report {
             estimate: s.estimate.as_ref().map(EstimateReport::from),
             warnings: d.warnings.clone(),
             control_points: d.control_points.clone(),
+            control_rounding: d.control_rounding.clone(),
             control_rmse: crate::control::rmse(&d.control_points),
             control_rmse_left_out: crate::control::rmse_left_out(&d.control_points),
             control_trend: d.solver.trend.map(|t| t.to_string()),
@@ -399,7 +404,7 @@ impl std::fmt::Display for Summary<'_> {
         if checked > 0 {
             writeln!(f, "  fold-overs: {folded} of {checked} samples checked")?;
         }
-        let table = crate::control::table(&d.control_points, 10);
+        let table = crate::control::table(&d.control_points, 10, d.control_rounding.as_deref());
         if !table.is_empty() {
             writeln!(f, "{table}")?;
             if let Some(trend) = d.solver.trend {

@@ -247,9 +247,11 @@ fn info_dict<'py>(
         c.set_item("got", p.got.clone())?;
         c.set_item("residual", p.residual)?;
         c.set_item("check", p.check)?;
+        c.set_item("exact", p.exact)?;
         points.append(c)?;
     }
     d.set_item("control_points", points)?;
+    d.set_item("control_rounding", info.control_rounding.clone())?;
     d.set_item(
         "control_rmse",
         rigidcells::control::rmse(&info.control_points),

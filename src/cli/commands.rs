@@ -166,7 +166,7 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             solution.info.iterations,
             rigidcells::human::figure(solution.info.energies.last().copied().unwrap_or(0.0))
         );
-        print_control_points(&info.control_points);
+        print_control_points(&info);
     }
     Ok(())
 }
@@ -325,7 +325,7 @@ pub(super) fn run_solve(
             rigidcells::human::figure(s.energies.last().copied().unwrap_or(0.0)),
             s.seconds
         );
-        print_control_points(&info.deform.control_points);
+        print_control_points(&info.deform);
     }
     Ok(())
 }
@@ -337,8 +337,9 @@ pub(super) fn run_info(input: &Path) -> anyhow::Result<()> {
 }
 
 /// The control points' table: the ten largest residuals and the RMSE.
-pub(super) fn print_control_points(points: &[rigidcells::control::ControlPoint]) {
-    let table = rigidcells::control::table(points, 10);
+pub(super) fn print_control_points(info: &rigidcells::pipeline::DeformInfo) {
+    let table =
+        rigidcells::control::table(&info.control_points, 10, info.control_rounding.as_deref());
     if !table.is_empty() {
         println!("{table}");
     }

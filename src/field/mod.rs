@@ -140,15 +140,15 @@ impl<const D: usize> Field<D> {
 }
 
 /// Whether the edit prescribes no height: 3D samples whose only constraints besides fixed
-/// regions are 2D control points (`x, y → X, Y`), which say nothing of the heights. The
-/// solve still holds their heights lightly (so that the cells do not tilt to shorten
-/// horizontal distances), but the cells' motions turn a little about horizontal axes wherever
-/// the pull bends the scan, and that would move heights nobody asked to move (up to 9 cm
-/// under a 0.3 m pull on a forest scan): such a field keeps every height as it came.
+/// regions are 2D control points (`x, y → X, Y`, exact or not), which say nothing of the
+/// heights. The solve still holds their heights lightly (so that the cells do not tilt to
+/// shorten horizontal distances), but the cells' motions turn a little about horizontal axes
+/// wherever the pull bends the scan, and that would move heights nobody asked to move (up to
+/// 9 cm under a 0.3 m pull on a forest scan): such a field keeps every height as it came.
 fn keeps_heights<const D: usize>(constraints: &crate::solve::Constraints<D>) -> bool {
     D == 3
         && constraints.handles.is_empty()
-        && constraints.pins.is_empty()
+        && constraints.pins.iter().all(|p| p.target.is_some())
         && !constraints.targets.is_empty()
         && constraints.targets.iter().all(|t| t.mask[D - 1] < 1.0)
 }

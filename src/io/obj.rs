@@ -279,6 +279,14 @@ struct ObjSink {
 }
 
 impl Sink for ObjSink {
+    fn written(&self, p: &Vect<3>) -> Vect<3> {
+        Vect::<3>::from_fn(|k, _| self.file.precision.written(k, p[k], false))
+    }
+
+    fn rounding(&self) -> Option<String> {
+        Some("the output's decimals".into())
+    }
+
     fn write(
         &mut self,
         _chunk: &Chunk,

@@ -306,6 +306,18 @@ impl PlySink {
 }
 
 impl Sink for PlySink {
+    fn written(&self, p: &Vect<3>) -> Vect<3> {
+        Vect::<3>::from_fn(|k, _| match self.layout.xyz[k].double {
+            true => p[k],
+            false => p[k] as f32 as f64,
+        })
+    }
+
+    fn rounding(&self) -> Option<String> {
+        (!self.layout.xyz.iter().all(|s| s.double))
+            .then(|| "the output's single-precision floats".into())
+    }
+
     fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<Accepted> {
         let map = self.map.clone();
         let l = self.layout;

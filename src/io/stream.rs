@@ -147,6 +147,17 @@ pub trait Sink: Send {
     }
     /// The moved [`Source::loose_normals`], after every chunk.
     fn loose_normals(&mut self, _normals: Vec<Vect<3>>) {}
+    /// Where a reader of the output finds the moved point `p` (world coordinates): rounded to
+    /// the output's LAS frame, its single-precision floats or its decimals, as this sink writes
+    /// every sample. The default writes coordinates as they are.
+    fn written(&self, p: &Vect<3>) -> Vect<3> {
+        *p
+    }
+    /// What [`Sink::written`] rounds to, in words for a table's caption (`"the output's scale
+    /// 0.01"`); `None` where it writes coordinates as they are.
+    fn rounding(&self) -> Option<String> {
+        None
+    }
     /// Completes the file and hands it to `set`, which renames it over the target with the
     /// run's other outputs; returns notes for the user.
     fn finish(self: Box<Self>, set: &ResultSet) -> Result<Vec<String>>;

@@ -80,6 +80,16 @@ impl Precision {
         }
     }
 
+    /// The number a reader finds where [`Precision::write`] wrote `value`.
+    pub(crate) fn written(&self, column: usize, value: f64, single: bool) -> f64 {
+        let mut text = Vec::new();
+        self.write(&mut text, column, value, single);
+        std::str::from_utf8(&text)
+            .ok()
+            .and_then(|t| t.parse::<f64>().ok())
+            .unwrap_or(value)
+    }
+
     /// Writes `value`, a moved number of `column` (`single`: a float property).
     fn write(&self, out: &mut Vec<u8>, column: usize, value: f64, single: bool) {
         let decimals = self.decimals[column].map(usize::from);
@@ -262,6 +272,24 @@ impl SpanSink {
 }
 
 impl Sink for SpanSink {
+    fn written(&self, p: &Vect<3>) -> Vect<3> {
+        Vect::<3>::from_fn(|k, _| match self.numbers {
+            Numbers::Text(precision) => precision.written(k, p[k], self.singles[k]),
+            Numbers::Binary { .. } if self.singles[k] => p[k] as f32 as f64,
+            Numbers::Binary { .. } => p[k],
+        })
+    }
+
+    fn rounding(&self) -> Option<String> {
+        match self.numbers {
+            Numbers::Text(_) => Some("the output's decimals".into()),
+            Numbers::Binary { .. } if self.singles.contains(&true) => {
+                Some("the output's single-precision floats".into())
+            }
+            Numbers::Binary { .. } => None,
+        }
+    }
+
     fn write(&mut self, chunk: &Chunk, moved: &[Vect<3>], normals: &[Vect<3>]) -> Result<Accepted> {
         let with_normals = !chunk.normals.is_empty();
         let stride = if with_normals { 6 } else { 3 };

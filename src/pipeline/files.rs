@@ -184,15 +184,25 @@ pub(super) fn deform_in(
     // A proxy of every sample (a mesh's vertices, a small file) was moved above: the pass
     // writes those positions.
     let moved = (info.proxy.after.len() as u64 == source.len()).then_some(&info.proxy.after[..]);
-    info.notes.extend(transfer_pass(
+    let (mut controls, seconds_check) = controls;
+    let mut got: Vec<crate::rigid::Vect<3>> = controls
+        .iter()
+        .map(|p| crate::rigid::Vect::<3>::from_column_slice(&p.got))
+        .collect();
+    let (notes, rounding) = transfer_pass(
         source.as_mut(),
         (output, set),
         &deformer,
         &origin,
         moved,
+        &mut got,
         chunk,
         observer,
-    )?);
+    )?;
+    info.notes.extend(notes);
+    // The residuals of the coordinates as written, not of the field's values.
+    crate::control::as_written(&mut controls, &got);
+    let controls = (controls, seconds_check);
     // Every sample made the cells; one beyond their margin would be extrapolated, so say so.
     let outside = match moved {
         Some(_) => proxy_outside,
@@ -215,6 +225,7 @@ pub(super) fn deform_in(
         controls,
         warnings,
     );
+    info.deform.control_rounding = rounding;
     Ok((solution, info))
 }
 
@@ -407,7 +418,16 @@ fn apply_saved(
     observer.stage("transfer", 0);
     let deformer = field.tile_deformer(params.transfer, params.rbf_tolerance, params.outside)?;
     observer.finish();
-    let mut notes = transfer_pass(source, output, &deformer, &origin, None, chunk, observer)?;
+    let (mut notes, _) = transfer_pass(
+        source,
+        output,
+        &deformer,
+        &origin,
+        None,
+        &mut [],
+        chunk,
+        observer,
+    )?;
     if deformer.beyond_window() > 0 {
         return Ok(Applied::BeyondWindow(deformer.beyond_window()));
     }

@@ -178,6 +178,9 @@ pub struct DeformInfo {
     pub foldovers: (usize, usize),
     /// The control points (`[[target]]` entries): where each went, its residual.
     pub control_points: Vec<ControlPoint>,
+    /// What the control points' `got` was rounded to, as the output file stores its samples
+    /// ([`deform_file`]: `"the output's scale 0.01"`); `None` where they are the field's values.
+    pub control_rounding: Option<String>,
     /// Messages for the user.
     pub warnings: Vec<String>,
 }
@@ -201,6 +204,7 @@ impl DeformInfo {
             seconds_check,
             foldovers,
             control_points,
+            control_rounding: None,
             warnings,
         }
     }

@@ -42,15 +42,21 @@ const IN_FLIGHT: usize = 5;
 /// except in chunks with normals, which need the warp's Jacobian. The copied samples are not
 /// counted beyond the margin here (the caller counted them when it moved them), so `moved` is
 /// taken only where `warp` extends the transfer there, never where it refuses such samples.
+///
+/// `probe` (moved points, world coordinates: the control points) is rounded as the finished
+/// output stores its samples ([`Sink::written`]); returned with the notes is what they were
+/// rounded to, in words ([`Sink::rounding`]).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn transfer_pass(
     source: &mut dyn Source,
     (output, set): (&Path, &ResultSet),
     warp: &Constrained<3>,
     origin: &Vect<3>,
     moved: Option<&[Vect<3>]>,
+    probe: &mut [Vect<3>],
     chunk_len: usize,
     observer: &dyn Observer,
-) -> Result<Vec<String>> {
+) -> Result<(Vec<String>, Option<String>)> {
     let mut bounds = None;
     let mut restarted = false;
     let moved = moved.filter(|m| {
@@ -75,7 +81,7 @@ pub(super) fn transfer_pass(
                 if warp.beyond_window() > 0 {
                     // A window of the field met samples outside it: the caller reads the whole
                     // field and starts again; the abandoned output is removed.
-                    return Ok(Vec::new());
+                    return Ok((Vec::new(), None));
                 }
                 refuse_outside(source.path(), warp)?;
                 let loose: Vec<Vect<3>> = source
@@ -84,11 +90,15 @@ pub(super) fn transfer_pass(
                     .map(|(at, n)| warp.warp_normal(&(at - origin), n))
                     .collect();
                 s.loose_normals(loose);
+                for p in probe.iter_mut() {
+                    *p = s.written(p);
+                }
+                let rounding = s.rounding();
                 // Finishing may be long (a COPC sorts and compresses every point there).
                 observer.stage("finishing", 0);
                 let finished = s.finish(set);
                 observer.finish();
-                return finished;
+                return Ok((finished?, rounding));
             }
         }
     }

@@ -94,6 +94,9 @@ pub struct PinLocal<const D: usize> {
     pub wanted: Vect<D>,
     /// The cell holding it.
     pub cell: u32,
+    /// The control point it makes exact (an index into [`Constraints::targets`]; `None` for a
+    /// `[[pin]]`): its destination is the target's, and leaving the target out unpins it.
+    pub target: Option<u32>,
 }
 
 /// A soft target in the local frame.
@@ -150,6 +153,19 @@ where
     pub fn without_target(&self, complex: &CellComplex<D>, i: usize) -> Option<Self> {
         let mut c = self.clone();
         c.targets.remove(i);
+        // An exact control point left out frees its cell.
+        if let Some(k) = c.pins.iter().position(|p| p.target == Some(i as u32)) {
+            let pin = c.pins.remove(k);
+            c.roles[pin.cell as usize] = Role::Free;
+            for r in &mut c.roles {
+                if let Role::Pin(j) = r {
+                    *j -= u32::from(*j > k as u32);
+                }
+            }
+        }
+        for t in c.pins.iter_mut().filter_map(|p| p.target.as_mut()) {
+            *t -= u32::from(*t > i as u32);
+        }
         c.fit_trend(self.trend_kind);
         let (parts, count, _) = anchor(complex, &mut c.roles, &c.targets);
         (parts < count).then_some(c)
@@ -198,7 +214,10 @@ where
             let pins = self
                 .pins
                 .iter()
-                .map(|p| trend.back(&p.wanted))
+                .map(|p| match p.target {
+                    Some(t) => trend.back(&wanted(&self.targets[t as usize])),
+                    None => trend.back(&p.wanted),
+                })
                 .collect::<Option<_>>()?;
             Some((targets, pins))
         })();
@@ -208,7 +227,13 @@ where
                 TrendMap::default(),
                 (
                     self.targets.iter().map(wanted).collect(),
-                    self.pins.iter().map(|p| p.wanted).collect(),
+                    self.pins
+                        .iter()
+                        .map(|p| match p.target {
+                            Some(t) => wanted(&self.targets[t as usize]),
+                            None => p.wanted,
+                        })
+                        .collect(),
                 ),
             ),
         };
@@ -528,6 +553,7 @@ where
             to: p.to - origin,
             wanted: p.to - origin,
             cell: cell as u32,
+            target: None,
         });
     }
     let glue = complex.grid.finest_size().powi(D as i32 - 1);
@@ -558,6 +584,23 @@ where
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    // An exact control point pins the cell holding it: the cell turns about the point, which
+    // goes where it is wanted. A checkpoint stays a checkpoint.
+    for (i, (t, local)) in spec.targets.iter().zip(&targets).enumerate() {
+        if !t.exact || t.check {
+            continue;
+        }
+        let what = format!("exact control point {} ({})", t.id, t.place);
+        let cell = locate(&(local.from + origin), &what, "")?;
+        claim(cell, &what, Role::Pin(pins.len() as u32))?;
+        pins.push(PinLocal {
+            point: local.from,
+            to: local.wanted,
+            wanted: local.wanted,
+            cell: cell as u32,
+            target: Some(i as u32),
+        });
+    }
     for (k, e) in spec.stiffness.iter().enumerate() {
         let (hit, _, _) = select(nf + nh + k, &e.region);
         for c in (0..n).filter(|&c| hit[c]) {

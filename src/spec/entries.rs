@@ -147,6 +147,10 @@ pub struct Target<const D: usize> {
     /// A checkpoint (a control-point file's `check` column): left out of the solve and the
     /// trend, and scored apart ([`crate::control`]).
     pub check: bool,
+    /// An exact control point (`exact = true`): its cell is pinned, turning about the point,
+    /// which goes where it is wanted to the output's precision, not merely as close as the
+    /// solve pulls it. Still a control point: in the trend, the residuals and leave-one-out.
+    pub exact: bool,
 }
 
 /// The pull on a horizontal control point's height, relative to its horizontal pull

@@ -20,6 +20,7 @@
 //! to = [1.0, 0.5, 1.2]
 //! weight = 1.0          # or file = "gcp.csv": control points ([`read_control_points`])
 //! # snap = 5.0          # move `from` to the nearest sample within 5 units first
+//! # exact = true        # pin the point's cell: it lands where wanted, not only near
 //!
 //! [[stiffness]]
 //! box = { min = [4.0, 0.0, 0.0], max = [6.0, 1.0, 1.0] }

@@ -130,7 +130,11 @@ class Report:
     ``turn_asked_degrees`` and ``turn_taken_degrees``."""
     control_points: List[dict]
     """Per control point (``[[target]]``): ``id``, ``from``, ``wanted``, ``got``,
-    ``residual``, ``check`` (a checkpoint, scored and not solved for)."""
+    ``residual``, ``check`` (a checkpoint, scored and not solved for), ``exact`` (its cell
+    pinned to it)."""
+    control_rounding: Optional[str]
+    """What ``got`` was rounded to before the residuals were measured, as the output file
+    stores it (``"the output's scale 0.01"``; None for arrays, whose values are the field's)."""
     control_rmse: Optional[float]
     """The control points' root mean square residual (None without any)."""
     control_trend: Optional[str]

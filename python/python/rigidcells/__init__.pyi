@@ -56,6 +56,7 @@ class Report:
     timings_s: dict
     handle_turns: List[dict]
     control_points: List[dict]
+    control_rounding: Optional[str]
     control_rmse: Optional[float]
     control_trend: Optional[str]
     checkpoints: Optional[dict]

@@ -49,6 +49,28 @@ pub(super) fn reframe(
 /// A scale and an offset per axis.
 pub(super) type Frame = ([f64; 3], [f64; 3]);
 
+/// `p` as a LAS reader finds it once written in `frame` (rounded as [`encode`] rounds; a
+/// coordinate that does not fit is left as it is: such a sink is refused before the end).
+pub(super) fn on_frame((scale, offset): &Frame, p: &Vect<3>) -> Vect<3> {
+    Vect::<3>::from_fn(|a, _| match round_to_i32((p[a] - offset[a]) / scale[a]) {
+        Some(v) => v as f64 * scale[a] + offset[a],
+        None => p[a],
+    })
+}
+
+/// The frame's scale in words, for a table's caption: `the output's scale 0.01` (one figure
+/// when the axes share it, else x, y, z).
+pub(super) fn frame_words((scale, _): &Frame) -> String {
+    if scale[0] == scale[1] && scale[1] == scale[2] {
+        format!("the output's scale {}", scale[0])
+    } else {
+        format!(
+            "the output's scale {}, {}, {}",
+            scale[0], scale[1], scale[2]
+        )
+    }
+}
+
 /// Records encoded per parallel task.
 const ENCODE_RUN: usize = 8192;
 

@@ -33,7 +33,7 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use super::coords::{Frame, encode};
+use super::coords::{Frame, encode, frame_words, on_frame};
 use super::header::{LasHeader, SOFTWARE, VlrRecord, standard_record_len};
 use super::raw::{EVLR_HEADER, HEADER_1_4, RawHeader, RawVlrHeader, VLR_HEADER, text_field};
 use crate::error::{Error, Result};
@@ -213,6 +213,14 @@ impl CopcSink {
 }
 
 impl Sink for CopcSink {
+    fn written(&self, p: &Vect<3>) -> Vect<3> {
+        on_frame(&self.frame, p)
+    }
+
+    fn rounding(&self) -> Option<String> {
+        Some(frame_words(&self.frame))
+    }
+
     fn write(
         &mut self,
         chunk: &Chunk,

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use las::{Builder, LazParallelism, PointData, PointDataBuilder, WriterOptions};
 
-use super::coords::{Frame, encode};
+use super::coords::{Frame, encode, frame_words, on_frame};
 use super::header::{SOFTWARE, return_number};
 use super::raw::{HEADER_1_4, RawHeader};
 use super::{Input, LAZ_BATCH};
@@ -144,6 +144,14 @@ impl CrateSink {
 }
 
 impl Sink for CrateSink {
+    fn written(&self, p: &Vect<3>) -> Vect<3> {
+        on_frame(&(self.scale, self.offset), p)
+    }
+
+    fn rounding(&self) -> Option<String> {
+        Some(frame_words(&(self.scale, self.offset)))
+    }
+
     fn write(
         &mut self,
         chunk: &Chunk,

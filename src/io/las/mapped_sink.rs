@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use memmap2::Mmap;
 
-use super::coords::{Frame, encode};
+use super::coords::{Frame, encode, frame_words, on_frame};
 use super::header::{LasHeader, SOFTWARE};
 use super::raw::{RawHeader, text_field};
 use crate::error::{Error, Result};
@@ -64,6 +64,14 @@ impl MappedSink {
 }
 
 impl Sink for MappedSink {
+    fn written(&self, p: &Vect<3>) -> Vect<3> {
+        on_frame(&(self.raw.scale, self.raw.offset), p)
+    }
+
+    fn rounding(&self) -> Option<String> {
+        Some(frame_words(&(self.raw.scale, self.raw.offset)))
+    }
+
     fn write(
         &mut self,
         chunk: &Chunk,

@@ -118,7 +118,11 @@ where
     }
     for t in &raw.target {
         let line = ctx.line(t);
-        ctx.allow_only(t.get_ref(), &["from", "to", "weight", "file", "snap"], line)?;
+        ctx.allow_only(
+            t.get_ref(),
+            &["from", "to", "weight", "file", "snap", "exact"],
+            line,
+        )?;
         let first = spec.targets.len();
         spec.targets.extend(ctx.targets(t.get_ref(), line, first)?);
     }

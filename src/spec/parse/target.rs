@@ -1,5 +1,5 @@
 //! A `[[target]]` entry: one soft target (`from`, `to`), or the control points of a `file`,
-//! with the entry's `weight` and `snap`.
+//! with the entry's `weight`, `snap` and `exact`.
 
 use super::{Ctx, file_name};
 use crate::error::{Error, Result};
@@ -38,6 +38,10 @@ impl Ctx<'_> {
             }
             None => None,
         };
+        let exact: bool = match t.get("exact") {
+            Some(_) => self.field(t, "exact", line)?,
+            None => false,
+        };
         if let Some(file) = t.get("file") {
             if t.contains_key("from") || t.contains_key("to") {
                 return Err(self.error(
@@ -68,6 +72,7 @@ impl Ctx<'_> {
                     horizontal: row.horizontal,
                     snap,
                     check: row.check,
+                    exact,
                 });
             }
             return Ok(out);
@@ -82,6 +87,7 @@ impl Ctx<'_> {
             horizontal: false,
             snap,
             check: false,
+            exact,
         }])
     }
 }
