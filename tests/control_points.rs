@@ -536,3 +536,45 @@ fn exact_control_points_land_as_written() {
         r.stderr
     );
 }
+
+/// A trend that cannot be undone where the points go (an affine map that flattens the scan
+/// onto a line) is not used, and the run says so rather than solving against it.
+#[test]
+fn a_trend_that_folds_is_dropped_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut csv = String::from("id,x,y,X,Y\n");
+    for (k, (x, y)) in [
+        (636300.0, 849000.0),
+        (637000.0, 849000.0),
+        (636650.0, 849400.0),
+    ]
+    .iter()
+    .enumerate()
+    {
+        csv += &format!("P{k},{x},{y},{x},849000\n");
+    }
+    let (r, json) = gcp(dir.path(), "gcp.csv", &csv, "", &[]);
+    let edit = dir.path().join("edit.toml");
+    let text = std::fs::read_to_string(&edit).unwrap();
+    std::fs::write(&edit, format!("trend = \"affine\"\n{text}")).unwrap();
+    let _ = (r, json);
+    let json_path = dir.path().join("r.json");
+    let r = deform_verbose(
+        &autzen(),
+        &dir.path().join("o.laz"),
+        &edit,
+        &["--report", json_path.to_str().unwrap()],
+    );
+    assert!(
+        r.stderr
+            .contains("trend \"affine\" folds or collapses the plane")
+            && r.stderr.contains("no trend is used"),
+        "{}",
+        r.stderr
+    );
+    if r.code == 0 {
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json_path).unwrap()).unwrap();
+        assert!(json["control_trend"].is_null(), "{json}");
+    }
+}

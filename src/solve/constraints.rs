@@ -221,6 +221,24 @@ where
                 .collect::<Option<_>>()?;
             Some((targets, pins))
         })();
+        // A survey's trend scales areas by about 1: one that shrinks or grows them tenfold at
+        // a control point (points all on one line, a blunder of kilometres) is no trend.
+        let sane = self.targets.iter().all(|t| {
+            let j = trend.jacobian(&t.from);
+            let area = j[(0, 0)] * j[(1, 1)] - j[(0, 1)] * j[(1, 0)];
+            (0.1..=10.0).contains(&area)
+        });
+        let back = back.filter(|_| sane);
+        if back.is_none() {
+            let warning = format!(
+                "trend \"{kind}\" folds or collapses the plane where the control points want \
+                 to go (its areas scale by less than 0.1 or more than 10 there): no trend is \
+                 used, the cells carry the whole motion"
+            );
+            if !self.warnings.contains(&warning) {
+                self.warnings.push(warning);
+            }
+        }
         let (trend, (targets, pins)) = match back {
             Some(back) => (trend, back),
             None => (
