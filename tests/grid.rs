@@ -50,19 +50,15 @@ fn rubber_sheeted(dir: &Path) -> std::path::PathBuf {
     field
 }
 
-/// The number after `label` in `text` (`… 0.012 horizontal …`).
-fn figure_before(text: &str, label: &str) -> f64 {
+/// The figure after `label` on the deviation line of `text` (`… horizontal 0.012 at (…)`).
+fn figure_after(text: &str, label: &str) -> f64 {
     let line = text
         .lines()
         .find(|l| l.starts_with("largest deviation"))
         .unwrap_or_else(|| panic!("no deviation in {text}"));
-    let at = line.find(label).unwrap();
-    line[..at]
-        .split_whitespace()
-        .last()
-        .unwrap()
-        .parse()
-        .unwrap()
+    let at = line.find(label).unwrap() + label.len();
+    let figure = line[at..].split_whitespace().next().unwrap();
+    figure.trim_end_matches(',').parse().unwrap()
 }
 
 /// A Python with pyproj: `$RIGIDCELLS_PYTHON` (CI's venv, which must have it) or `python3`;
@@ -109,8 +105,8 @@ fn proj_moves_a_scan_as_apply_does_within_the_deviation() {
     let r = run(&["grid", arg(&field), "-o", arg(&tif), "--spacing", "10"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let (horizontal, vertical) = (
-        figure_before(&r.stdout, " horizontal"),
-        figure_before(&r.stdout, " vertical"),
+        figure_after(&r.stdout, "horizontal "),
+        figure_after(&r.stdout, "vertical "),
     );
     // The field is smooth: 10 ft between nodes gives it within a few hundredths.
     assert!(horizontal < 0.05 && vertical < 0.05, "{}", r.stdout);
@@ -171,6 +167,13 @@ fn proj_moves_a_scan_as_apply_does_within_the_deviation() {
     // and they went where `apply` puts them, to within the reported deviation and the
     // stored offsets' and the records' rounding (a LAS step of 0.01).
     assert!(moved_most > 1.0, "{moved_most}");
+    eprintln!(
+        "{done} points: PROJ {worst_h} horizontally, {worst_v} vertically from apply; {}",
+        r.stdout
+            .lines()
+            .find(|l| l.starts_with("largest deviation"))
+            .unwrap()
+    );
     let slack = 0.011;
     assert!(
         worst_h <= horizontal + slack && worst_v <= vertical + slack,
@@ -186,7 +189,7 @@ fn bad_parameters_exit_4_and_write_nothing() {
     let tif = dir.path().join("g.tif");
     for (args, says) in [
         (vec!["--spacing", "0"], "--spacing 0"),
-        (vec!["--spacing", "-1"], "--spacing -1"),
+        (vec!["--spacing=-1"], "--spacing -1"),
         (vec!["--extent", "1,2,3"], "--extent 1,2,3"),
         (vec!["--extent", "5,0,1,1"], "--extent 5,0,1,1"),
         (vec!["--epsg", "40000"], "--epsg 40000"),

@@ -326,6 +326,11 @@ pub(super) fn run_grid(
     }
     let length = |v: f64| rigidcells::human::length(v, info.cell);
     let place = |[x, y]: [f64; 2]| format!("{}, {}", length(x), length(y));
+    // A deviation that rounds to nothing at the cells' precision has no place worth naming.
+    let deviation = |d: rigidcells::field::grid::Deviation| match length(d.value) {
+        zero if zero == "0" => zero,
+        text => format!("{text} at ({})", place(d.at)),
+    };
     println!(
         "{} -> {}: {} × {} nodes {} apart, from ({}) to ({})",
         field.display(),
@@ -349,11 +354,9 @@ pub(super) fn run_grid(
         length(info.largest_vertical)
     );
     println!(
-        "largest deviation between nodes: {} horizontal (at {}), {} vertical (at {})",
-        length(info.horizontal.value),
-        place(info.horizontal.at),
-        length(info.vertical.value),
-        place(info.vertical.at)
+        "largest deviation between nodes: horizontal {}, vertical {}",
+        deviation(info.horizontal),
+        deviation(info.vertical)
     );
     let absolute = std::path::absolute(output).unwrap_or_else(|_| output.to_path_buf());
     println!(
