@@ -288,6 +288,84 @@ pub(super) fn run_apply(
     Ok(())
 }
 
+/// `--extent MINX,MINY,MAXX,MAXY` as four numbers.
+pub(super) fn parse_extent(text: Option<&str>) -> anyhow::Result<Option<[f64; 4]>> {
+    let Some(text) = text else {
+        return Ok(None);
+    };
+    let numbers: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .unwrap_or_default();
+    match <[f64; 4]>::try_from(numbers) {
+        Ok(extent) => Ok(Some(extent)),
+        Err(_) => Err(Error::Param(format!(
+            "--extent {text}: expected MINX,MINY,MAXX,MAXY, e.g. 636000,849000,637000,850000"
+        ))
+        .into()),
+    }
+}
+
+/// `grid`: a saved field as a GeoTIFF of offsets for PROJ.
+pub(super) fn run_grid(
+    field: &Path,
+    output: &Path,
+    params: &rigidcells::field::grid::GridParams,
+    epsg: Option<u32>,
+    quiet: bool,
+) -> anyhow::Result<()> {
+    let epsg = match epsg.map(u16::try_from) {
+        None => None,
+        Some(Ok(code)) => Some(code),
+        Some(Err(_)) => Some(u16::MAX),
+    };
+    let info = pipeline::grid_file(field, output, params, epsg)?;
+    if quiet {
+        return Ok(());
+    }
+    let length = |v: f64| rigidcells::human::length(v, info.cell);
+    let place = |[x, y]: [f64; 2]| format!("{}, {}", length(x), length(y));
+    // A deviation that rounds to nothing at the cells' precision has no place worth naming.
+    let deviation = |d: rigidcells::field::grid::Deviation| match length(d.value) {
+        zero if zero == "0" => zero,
+        text => format!("{text} at ({})", place(d.at)),
+    };
+    println!(
+        "{} -> {}: {} × {} nodes {} apart, from ({}) to ({})",
+        field.display(),
+        output.display(),
+        info.columns,
+        info.rows,
+        length(info.spacing),
+        place(info.south_west),
+        place(info.north_east)
+    );
+    if info.no_value > 0 {
+        println!(
+            "note: {} nodes lie beyond the field's margin and have no value; PROJ refuses \
+             points next to them",
+            rigidcells::human::count(info.no_value as u64)
+        );
+    }
+    println!(
+        "largest offset: {} horizontal, {} vertical",
+        length(info.largest_horizontal),
+        length(info.largest_vertical)
+    );
+    println!(
+        "largest deviation between nodes: horizontal {}, vertical {}",
+        deviation(info.horizontal),
+        deviation(info.vertical)
+    );
+    let absolute = std::path::absolute(output).unwrap_or_else(|_| output.to_path_buf());
+    println!(
+        "apply with PROJ: +proj=gridshift +grids={}",
+        absolute.display()
+    );
+    Ok(())
+}
+
 /// `solve`: the field of an edit over several files taken as one.
 pub(super) fn run_solve(
     inputs: &[std::path::PathBuf],

@@ -140,6 +140,41 @@ enum Command {
         #[arg(short, long)]
         quiet: bool,
     },
+    /// Write a saved field as a GeoTIFF grid of east, north and up offsets that PROJ applies
+    /// without rigidcells (`+proj=gridshift +grids=correction.tif`: PROJ 9.4 and later, and so
+    /// GDAL, PDAL and QGIS). The offsets are where `apply` moves a point minus where it was,
+    /// sampled at each node's ground (or --height); between nodes the tools interpolate
+    /// bilinearly, and the largest deviation of that from the field is printed: halve the
+    /// spacing to cut it about fourfold.
+    Grid {
+        /// The field file (`deform --save-field`, `solve --save-field`).
+        field: PathBuf,
+        /// The GeoTIFF to write (.tif).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Distance between the grid's nodes, in the field's units [default: the finest cells'
+        /// edge].
+        #[arg(long, value_name = "LENGTH")]
+        spacing: Option<f64>,
+        /// The area the grid covers, in the field's coordinates; the nodes lie at whole
+        /// multiples of the spacing [default: the field's cells].
+        #[arg(long, value_name = "MINX,MINY,MAXX,MAXY", allow_hyphen_values = true)]
+        extent: Option<String>,
+        /// Sample the field at this height everywhere [default: at each node, the middle of
+        /// the lowest cell over it, a scan's ground; nodes beside the cells take the nearest
+        /// such height].
+        #[arg(long, value_name = "Z", allow_hyphen_values = true)]
+        height: Option<f64>,
+        /// EPSG code of the projected CRS of the field's coordinates, written in the grid's
+        /// GeoKeys [default: none written; PROJ needs none].
+        #[arg(long, value_name = "CODE")]
+        epsg: Option<u32>,
+        #[command(flatten)]
+        memory: MemoryArg,
+        /// Print nothing but errors.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Describe a file (LAS/LAZ, PLY, OBJ, XYZ, .xy, .png, .field): format, counts, bounds and
     /// centroid to the file's precision, CRS by name and EPSG code, record fields, a saved
     /// field's cells, levels and transfer.
@@ -442,6 +477,24 @@ pub(crate) fn main() -> ExitCode {
             };
             run_apply(&field, &input, &output, &params, quiet)
         }
+        Command::Grid {
+            field,
+            output,
+            spacing,
+            extent,
+            height,
+            epsg,
+            memory,
+            quiet,
+        } => parse_extent(extent.as_deref()).and_then(|extent| {
+            let params = rigidcells::field::grid::GridParams {
+                spacing,
+                extent,
+                height,
+                memory: memory.budget(),
+            };
+            run_grid(&field, &output, &params, epsg, quiet)
+        }),
         Command::Info { input } => run_info(&input),
         Command::Solve {
             inputs,

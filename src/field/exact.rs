@@ -189,7 +189,7 @@ impl<const D: usize> OutsideTally<D> {
 
 /// What a voxel is.
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Class {
+pub(super) enum Class {
     /// Inside a cell that follows map `k` exactly.
     Exact(u32),
     /// Among the cells, beyond every band.
@@ -536,7 +536,7 @@ where
 
     /// The class of the local point `x`; non-finite points are outside.
     #[inline]
-    fn class_of(&self, x: &Vect<D>) -> Class {
+    pub(super) fn class_of(&self, x: &Vect<D>) -> Class {
         if x.iter().all(|v| v.is_finite()) {
             self.classify(&self.leaves.voxel(x))
         } else {

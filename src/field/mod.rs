@@ -18,6 +18,7 @@ mod domain;
 mod exact;
 pub mod far;
 mod file;
+pub mod grid;
 mod leaves;
 pub(crate) use leaves::floor;
 mod nearest;

@@ -11,6 +11,7 @@
 //! other outputs at its end ([`ResultSet`]): a failure never leaves a partial file under the
 //! output's name, and the input is never opened for writing.
 
+pub mod geotiff;
 mod las;
 pub(crate) mod mapped;
 mod obj;

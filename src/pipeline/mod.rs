@@ -8,6 +8,7 @@
 mod checks;
 mod files;
 mod first_pass;
+mod grid;
 pub mod live;
 mod options;
 mod outputs;
@@ -20,6 +21,7 @@ pub use files::{
     ApplyParams, CHUNK, FileInfo, MAX_CHUNK, apply_file, check_chunk, deform_file, file_cells,
     solve_files, write_cells,
 };
+pub use grid::grid_file;
 pub use live::{Live, Step};
 pub use options::Options;
 pub use outputs::{Outputs, deform_file_with};
