@@ -123,6 +123,20 @@ pub enum Error {
         /// That sample (input coordinates), as text.
         at: String,
     },
+    /// Two files in different coordinate reference systems, where one field must serve both
+    /// ([`crate::crs::check`]): tiles solved together, a field and the file it is applied to,
+    /// a GeoJSON polygon and the scan.
+    #[error("{what}: {first}, but {second}; {advice}")]
+    CrsMismatch {
+        /// What differs (`the tiles' coordinate systems differ`).
+        what: String,
+        /// The first system with its file (`EPSG:2903 (…) in a.las`).
+        first: String,
+        /// The second system with its file.
+        second: String,
+        /// What to do.
+        advice: String,
+    },
     /// A handle's turn that the cells give way under ([`TurnRefusal`]): its message names the
     /// handle by its line in the edit spec, as the command line does; another face names it
     /// its own way before [`TurnRefusal::said`].
@@ -158,6 +172,7 @@ impl Error {
             | Error::GridTooLarge { .. }
             | Error::Memory { .. }
             | Error::Outside { .. }
+            | Error::CrsMismatch { .. }
             | Error::TurnNotHeld(_) => 4,
             _ => 1,
         }

@@ -1,5 +1,6 @@
 //! What `rigidcells info` tells about a file, for every format it reads: counts, bounds and
-//! centroid, the coordinate reference system by name, the fields of the records, and the
+//! centroid, the coordinate reference system by name with its linear unit ([`crate::crs`]; a
+//! saved field's, of the input it was solved on), the fields of the records, and the
 //! format's own details (LAS header and VLRs, a PLY header, a saved field's cells, levels,
 //! transfer and domain, a picture's size and foreground).
 //!
@@ -13,6 +14,7 @@
 use std::fmt;
 use std::path::Path;
 
+pub use crate::crs::{Crs, of_records as crs};
 use crate::error::{Error, Result};
 use crate::io::{self, Chunk, LasHeader};
 use crate::progress::Observer;
@@ -44,38 +46,6 @@ pub struct FileInfo {
     pub fields: Vec<String>,
     /// Further lines: a label and its text.
     pub details: Vec<(String, String)>,
-}
-
-/// A coordinate reference system, as a file declares it.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Crs {
-    /// Its name (the WKT's, or the GeoTIFF citation).
-    pub name: Option<String>,
-    /// The EPSG code of the horizontal system.
-    pub epsg: Option<u32>,
-    /// The EPSG code of the vertical system (GeoTIFF keys).
-    pub vertical_epsg: Option<u32>,
-    /// Where it was found: `WKT` or `GeoTIFF keys`.
-    pub from: &'static str,
-}
-
-impl fmt::Display for Crs {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let mut parts = Vec::new();
-        if let Some(n) = &self.name {
-            parts.push(n.clone());
-        }
-        if let Some(e) = self.epsg {
-            parts.push(format!("EPSG:{e}"));
-        }
-        if let Some(e) = self.vertical_epsg {
-            parts.push(format!("vertical EPSG:{e}"));
-        }
-        if parts.is_empty() {
-            parts.push("present, unnamed".into());
-        }
-        write!(f, "{} (from the {})", parts.join(", "), self.from)
-    }
 }
 
 impl FileInfo {
@@ -163,8 +133,12 @@ impl fmt::Display for FileInfo {
             writeln!(f, "  centroid: [{}]", v.join(", "))?;
         }
         match &self.crs {
-            Some(c) => writeln!(f, "  CRS: {c}")?,
+            Some(c) => {
+                writeln!(f, "  CRS: {c}")?;
+                writeln!(f, "  unit: {}", c.unit_line())?;
+            }
             None if self.format.starts_with("LA") => writeln!(f, "  CRS: none")?,
+            None if self.samples_are == "cells" => writeln!(f, "  CRS: none recorded")?,
             None => {}
         }
         if !self.fields.is_empty() {
@@ -436,122 +410,6 @@ fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
     Ok(())
 }
 
-/// The CRS of a LAS file's (E)VLRs: the WKT's name and EPSG code, else the GeoTIFF keys'.
-pub fn crs(records: &[crate::io::VlrRecord]) -> Option<Crs> {
-    let find = |id: u16| {
-        records
-            .iter()
-            .find(|r| r.is("LASF_Projection", id))
-            .map(|r| r.data.as_slice())
-    };
-    let keys = find(34735);
-    if let Some(wkt) = find(2112) {
-        let text = String::from_utf8_lossy(wkt);
-        let text = text.trim_end_matches('\0');
-        let keys = keys.and_then(|k| geotiff(k, find(34737).unwrap_or(&[])));
-        return Some(Crs {
-            name: wkt_name(text),
-            // A WKT without a code of its own: the GeoTIFF keys' when the file has both.
-            epsg: wkt_epsg(text).or(keys.as_ref().and_then(|k| k.epsg)),
-            vertical_epsg: keys.and_then(|k| k.vertical_epsg),
-            from: "WKT",
-        });
-    }
-    geotiff(keys?, find(34737).unwrap_or(&[]))
-}
-
-/// The CRS of a GeoTIFF key directory (`keys`, LASF_Projection 34735) and its ASCII parameters
-/// (`ascii`, 34737).
-fn geotiff(keys: &[u8], ascii: &[u8]) -> Option<Crs> {
-    let words: Vec<u16> = keys
-        .chunks_exact(2)
-        .map(|b| u16::from_le_bytes([b[0], b[1]]))
-        .collect();
-    let mut crs = Crs {
-        from: "GeoTIFF keys",
-        ..Default::default()
-    };
-    let n = words.get(3).copied().unwrap_or(0) as usize;
-    let (mut projected, mut geographic, mut citation) = (None, None, None);
-    for e in words.get(4..).unwrap_or(&[]).chunks_exact(4).take(n) {
-        let (key, location, count, value) = (e[0], e[1], e[2] as usize, e[3] as usize);
-        let code = (location == 0 && value != 0 && value != 32767).then_some(value as u32);
-        match key {
-            3072 => projected = code,
-            2048 => geographic = code,
-            4096 => crs.vertical_epsg = code,
-            1026 | 3073 if location == 34737 => {
-                let s = ascii.get(value..value + count).unwrap_or(&[]);
-                let s = String::from_utf8_lossy(s)
-                    .trim_end_matches(['|', '\0'])
-                    .trim()
-                    .to_string();
-                if !s.is_empty() && (key == 3073 || citation.is_none()) {
-                    citation = Some(s);
-                }
-            }
-            _ => {}
-        }
-    }
-    crs.epsg = projected.or(geographic);
-    crs.name = citation;
-    Some(crs)
-}
-
-/// The name of a WKT's outermost object: its first quoted string.
-fn wkt_name(wkt: &str) -> Option<String> {
-    let start = wkt.find('"')? + 1;
-    let len = wkt[start..].find('"')?;
-    Some(wkt[start..start + len].to_string())
-}
-
-/// The EPSG code of a WKT's outermost object: its own `AUTHORITY["EPSG","n"]` (WKT 1) or
-/// `ID["EPSG",n]` (WKT 2), at depth 1 — not a unit's or a datum's deeper down. A compound
-/// system without one of its own gives its first component's.
-fn wkt_epsg(wkt: &str) -> Option<u32> {
-    let bytes = wkt.as_bytes();
-    let (mut depth, mut quoted) = (0usize, false);
-    let mut found: [Option<u32>; 3] = [None; 3];
-    for (i, &b) in bytes.iter().enumerate() {
-        match b {
-            b'"' => quoted = !quoted,
-            b'[' | b'(' if !quoted => {
-                depth += 1;
-                // The keyword before this bracket: the ASCII word that ends there (`i` and the
-                // word's start lie on character boundaries, whatever the text before holds).
-                let start = i - bytes[..i]
-                    .iter()
-                    .rev()
-                    .take_while(|b| b.is_ascii_alphanumeric() || **b == b'_')
-                    .count();
-                let keyword = wkt[start..i].to_ascii_uppercase();
-                if (keyword == "AUTHORITY" || keyword == "ID")
-                    && depth <= 3
-                    && found[depth - 1].is_none()
-                    && wkt[i + 1..]
-                        .trim_start()
-                        .to_ascii_uppercase()
-                        .starts_with("\"EPSG\"")
-                {
-                    let digits: String = wkt[i + 1..]
-                        .chars()
-                        .skip(6)
-                        .skip_while(|c| !c.is_ascii_digit())
-                        .take_while(|c| c.is_ascii_digit())
-                        .collect();
-                    found[depth - 1] = digits.parse().ok();
-                }
-            }
-            b']' | b')' if !quoted => depth = depth.saturating_sub(1),
-            _ => {}
-        }
-    }
-    // found[1]: depth 2 (the outermost object's own); found[2]: a compound's component's.
-    let compound = wkt.trim_start().to_ascii_uppercase();
-    let compound = compound.starts_with("COMPD_CS") || compound.starts_with("COMPOUNDCRS");
-    found[1].or(if compound { found[2] } else { None })
-}
-
 fn field(path: &Path, mut info: FileInfo) -> Result<FileInfo> {
     // "RCFIELD\0", u32 version, u32 dimension.
     let mut head = [0u8; 16];
@@ -570,6 +428,8 @@ fn field(path: &Path, mut info: FileInfo) -> Result<FileInfo> {
 fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedField<D>) {
     let f = &saved.field;
     info.format = format!("rigidcells saved field, {D}D");
+    // The system of the input the field was solved on.
+    info.crs = saved.crs.clone();
     info.samples_are = "cells";
     info.samples = f.centers.len() as u64;
     // The domain: the cells' cubes in world coordinates.

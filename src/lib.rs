@@ -53,6 +53,7 @@
 
 pub mod cells;
 pub mod control;
+pub mod crs;
 #[cfg(feature = "demo")]
 pub mod demo;
 pub mod edit;

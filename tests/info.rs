@@ -283,7 +283,7 @@ fn lengths_the_cells_decided_print_to_their_precision() {
 
 /// A WKT is the file's text, not ours: a character of several bytes right before a keyword's
 /// bracket (here `GEOGCS[` damaged into `GEOGé[`) is read past, not sliced through, and the
-/// system is still named with its own code.
+/// system is still named with its own code (and its vertical one, nested in it).
 #[test]
 fn a_damaged_wkt_is_read_without_slicing_a_character() {
     let dir = tempfile::tempdir().unwrap();
@@ -298,7 +298,9 @@ fn a_damaged_wkt_is_read_without_slicing_a_character() {
     let t = info(&path);
     let crs = line(&t, "CRS:");
     assert!(
-        crs.contains("NAD83(HARN) / New Mexico Central (ftUS), EPSG:2903 (from the WKT)"),
+        crs.contains(
+            "NAD83(HARN) / New Mexico Central (ftUS), EPSG:2903, vertical EPSG:5703 (from the WKT)"
+        ),
         "{crs}"
     );
 }

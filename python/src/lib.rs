@@ -670,9 +670,10 @@ fn chunk(chunk: Option<Bound<'_, PyAny>>) -> PyResult<usize> {
 
 /// `rigidcells solve`: the field of the edit over several files taken as one (the tiles of a
 /// scan), written to `save_field` for `apply_file` on each tile; together they give what
-/// `deform_file` gives on the merged file.
+/// `deform_file` gives on the merged file. Tiles in different coordinate systems are refused
+/// unless `same_crs`.
 #[pyfunction]
-#[pyo3(signature = (inputs, save_field, spec_text, base, chunk=None, options=None, progress=None))]
+#[pyo3(signature = (inputs, save_field, spec_text, base, chunk=None, options=None, progress=None, same_crs=false))]
 #[allow(clippy::too_many_arguments)]
 fn solve_files<'py>(
     py: Python<'py>,
@@ -683,6 +684,7 @@ fn solve_files<'py>(
     chunk: Option<Bound<'py, PyAny>>,
     options: Option<Bound<'py, PyDict>>,
     progress: Option<Py<PyAny>>,
+    same_crs: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let params = self::options(options.as_ref())?.params().map_err(py_err)?;
     let spec = self::spec(spec_text, base)?;
@@ -693,7 +695,14 @@ fn solve_files<'py>(
         for input in &inputs {
             rigidcells::io::refuse_overwrite(input, &save_field)?;
         }
-        pipeline::solve_files(&inputs, &spec, &params, chunk, &save_field, &observer)
+        pipeline::solve_files(
+            &inputs,
+            &spec,
+            &params,
+            chunk,
+            (&save_field, same_crs),
+            &observer,
+        )
     });
     let (solution, info) = observer.result(result)?;
     let d = info_dict(py, &info.deform, info.samples)?;
@@ -762,9 +771,10 @@ fn view(d: Option<&Bound<'_, PyDict>>, input: &Path) -> PyResult<(View, bool)> {
 
 /// `rigidcells apply` on a file: the field saved in `field` applied to `input`, written to
 /// `output` (atomically). `outside`: `refuse` (default), `keep` or `extend`; `transfer`
-/// (default: the field's own), `rbf_tolerance` and `memory_limit` as for `deform_file`.
+/// (default: the field's own), `rbf_tolerance` and `memory_limit` as for `deform_file`. A field
+/// solved in another coordinate system than the input's is refused unless `same_crs`.
 #[pyfunction]
-#[pyo3(signature = (field, input, output, outside=None, transfer=None, rbf_tolerance=None, memory_limit=None, chunk=None, progress=None))]
+#[pyo3(signature = (field, input, output, outside=None, transfer=None, rbf_tolerance=None, memory_limit=None, chunk=None, progress=None, same_crs=false))]
 #[allow(clippy::too_many_arguments)]
 fn apply_file<'py>(
     py: Python<'py>,
@@ -777,6 +787,7 @@ fn apply_file<'py>(
     memory_limit: Option<Bound<'py, PyAny>>,
     chunk: Option<Bound<'py, PyAny>>,
     progress: Option<Py<PyAny>>,
+    same_crs: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let params = pipeline::ApplyParams {
         transfer: transfer
@@ -787,6 +798,7 @@ fn apply_file<'py>(
         memory: rigidcells::memory::Budget::given(
             memory_limit.map(|m| self::memory_limit(&m)).transpose()?,
         ),
+        same_crs,
     };
     let chunk = self::chunk(chunk)?;
     let observer = PyObserver::new(progress);
@@ -798,6 +810,7 @@ fn apply_file<'py>(
     let d = PyDict::new(py);
     d.set_item("samples", info.samples)?;
     d.set_item("notes", PyList::new(py, said(&info.notes))?)?;
+    d.set_item("warnings", PyList::new(py, said(&info.deform.warnings))?)?;
     d.set_item("seconds", info.seconds_write)?;
     Ok(d)
 }

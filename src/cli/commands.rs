@@ -274,6 +274,9 @@ pub(super) fn run_apply(
     let bar = Bar::new(quiet);
     let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
     if !quiet {
+        for w in &info.deform.warnings {
+            eprintln!("warning: {w}");
+        }
         for n in &info.notes {
             println!("note: {n}");
         }
@@ -369,11 +372,10 @@ pub(super) fn run_grid(
 /// `solve`: the field of an edit over several files taken as one.
 pub(super) fn run_solve(
     inputs: &[std::path::PathBuf],
-    edit: &Path,
-    field: &Path,
+    (edit, field): (&Path, &Path),
     cells: &CellArgs,
     transfer: Transfer,
-    chunk: usize,
+    (chunk, same_crs): (usize, bool),
     quiet: bool,
 ) -> anyhow::Result<()> {
     for input in inputs {
@@ -384,7 +386,8 @@ pub(super) fn run_solve(
     let spec = read_spec::<3>(edit)?;
     let params = cells.deform_params(transfer)?;
     let bar = Bar::new(quiet);
-    let (solution, info) = pipeline::solve_files(inputs, &spec, &params, chunk, field, &bar)?;
+    let (solution, info) =
+        pipeline::solve_files(inputs, &spec, &params, chunk, (field, same_crs), &bar)?;
     if !quiet {
         for w in &info.deform.warnings {
             eprintln!("warning: {w}");

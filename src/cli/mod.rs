@@ -58,6 +58,11 @@ enum Command {
         /// linear part grows with the distance, the blend follows the nearest cells).
         #[arg(long, value_parser = choice::<Outside>(), default_value_t = Outside::Refuse)]
         outside: Outside,
+        /// Take the input to be in the coordinate system the field was solved in. Without it, a
+        /// field and an input that declare different systems (EPSG codes, else WKT texts) are
+        /// refused (exit 4); one that declares none beside one that does is a warning.
+        #[arg(long)]
+        same_crs: bool,
         #[command(flatten)]
         memory: MemoryArg,
         /// Print nothing but errors.
@@ -136,6 +141,11 @@ enum Command {
         /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
         #[arg(long, default_value_t = CHUNK)]
         chunk: usize,
+        /// Take the tiles to be in one coordinate system. Without it, tiles that declare
+        /// different systems (EPSG codes, else WKT texts) are refused (exit 4); one that
+        /// declares none beside one that does is a warning. The field records the system.
+        #[arg(long)]
+        same_crs: bool,
         /// Print nothing but errors.
         #[arg(short, long)]
         quiet: bool,
@@ -466,6 +476,7 @@ pub(crate) fn main() -> ExitCode {
             transfer,
             tolerance,
             outside,
+            same_crs,
             memory,
             quiet,
         } => {
@@ -474,6 +485,7 @@ pub(crate) fn main() -> ExitCode {
                 rbf_tolerance: tolerance.rbf_tolerance,
                 outside,
                 memory: memory.budget(),
+                same_crs,
             };
             run_apply(&field, &input, &output, &params, quiet)
         }
@@ -503,8 +515,16 @@ pub(crate) fn main() -> ExitCode {
             cells,
             transfer,
             chunk,
+            same_crs,
             quiet,
-        } => run_solve(&inputs, &edit, &save_field, &cells, transfer, chunk, quiet),
+        } => run_solve(
+            &inputs,
+            (&edit, &save_field),
+            &cells,
+            transfer,
+            (chunk, same_crs),
+            quiet,
+        ),
         Command::Image {
             input,
             edit,

@@ -4,7 +4,7 @@
 //! output bit for bit:
 //!
 //! ```text
-//! "RCFIELD\0"  u32 version (4)  u32 D
+//! "RCFIELD\0"  u32 version (5)  u32 D
 //! u8 transfer                        0 blend, 1 blend-idw, 2 rbf, 3 pu (version 2),
 //!                                    + 128 when the field keeps heights (version 4),
 //!                                    + 64 when a trend follows (version 4):
@@ -21,6 +21,9 @@
 //!     f64[D] bounds low, f64[D] bounds high, f64 largest half-size
 //!     f64[D] patch grid corner, f64 patch edge, u64 p,                      the PU's layout
 //!     p × i64[D] patch box, (p + 1) × u64 offsets into the members, u32[] members
+//! u8 has_crs (v5), then if 1: the CRS of the input the field was solved on
+//!     (crate::crs::Crs::to_bytes: u8 source, u32 EPSG, u32 vertical EPSG,
+//!      5 × (u32 length, UTF-8): name, WKT, unit, vertical unit, where the unit was read)
 //! ```
 //!
 //! **Applying to a tile reads what the tile needs** (version 3, for the PU transfer). The
@@ -39,6 +42,10 @@
 //! The RBF coefficients are stored rather than recomputed, because a parallel dense
 //! factorization need not give the same last bits on another machine or thread count.
 //!
+//! Version 5 added the coordinate reference system of the input the field was solved on
+//! ([`SavedField::crs`]; `apply` refuses a file in another, [`crate::crs::check`]): earlier
+//! files, and fields of inputs that declare none, record none.
+//!
 //! Version 4 added the flag of a field that keeps every sample's height
 //! ([`Field::heights_kept`]) and the control points' trend ([`Field::trend`]); earlier files
 //! keep no height and have no trend.
@@ -53,13 +60,14 @@ use std::path::Path;
 
 use super::pu::{Layout, OVERLAP};
 use super::{Constrained, Deformer, FREE, Field, Frame, Outside, PuRbf, Rbf, Transfer};
+use crate::crs::Crs;
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
 use crate::solve::trend::TrendMap;
 use crate::spec::LARGEST;
 
 const MAGIC: &[u8; 8] = b"RCFIELD\0";
-const VERSION: u32 = 4;
+const VERSION: u32 = 5;
 
 /// The transfer byte's flag of a field that keeps heights (version 4).
 const HEIGHTS_KEPT: u8 = 128;
@@ -76,6 +84,9 @@ pub struct SavedField<const D: usize> {
     /// For a window of the file's cells ([`SavedField::load_window`]): the whole field's
     /// frame, the PU's patches over the window's cells, and the samples' box (local).
     window: Option<Window<D>>,
+    /// The coordinate reference system of the input the field was solved on, when it declared
+    /// one (version 5).
+    pub crs: Option<Crs>,
 }
 
 /// When the PU transfer fits its patches: all at once, or each when a sample first needs it.
@@ -103,7 +114,13 @@ where
             transfer,
             rbf,
             window: None,
+            crs: None,
         }
+    }
+
+    /// The same field, recording `crs` as the system of the input it was solved on.
+    pub fn with_crs(self, crs: Option<Crs>) -> Self {
+        Self { crs, ..self }
     }
 
     /// Whether only a window of the file's cells was read ([`SavedField::load_window`]).
@@ -341,6 +358,13 @@ where
         } else {
             out.push(0);
         }
+        match &self.crs {
+            None => out.push(0),
+            Some(crs) => {
+                out.push(1);
+                out.extend_from_slice(&crs.to_bytes());
+            }
+        }
         Ok(out)
     }
 
@@ -511,6 +535,19 @@ where
         } else {
             None
         };
+        let crs = match version {
+            ..=4 => None,
+            _ => match r.take(1)?[0] {
+                0 => None,
+                1 => {
+                    let (crs, used) =
+                        Crs::from_bytes(&bytes[r.at..]).map_err(|m| Error::format(path, m))?;
+                    r.at += used;
+                    Some(crs)
+                }
+                b => return Err(Error::format(path, format!("the CRS flag is {b}"))),
+            },
+        };
         if r.at != bytes.len() {
             return Err(Error::format(path, "trailing bytes after the field"));
         }
@@ -600,6 +637,7 @@ where
                     layout,
                     samples: box_,
                 }),
+                crs,
             });
         }
         let mut r = Cursor {
@@ -656,6 +694,7 @@ where
             transfer,
             rbf,
             window: None,
+            crs,
         })
     }
 }
@@ -880,88 +919,5 @@ impl Cursor<'_> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Eight unit cells around the origin, each moved a little, the first fixed.
-    fn field() -> Field<3> {
-        let centers: Vec<Vect<3>> = (0..8)
-            .map(|k| Vect::<3>::from_fn(|a, _| if k >> a & 1 == 1 { 0.5 } else { -0.5 }))
-            .collect();
-        let motions = centers
-            .iter()
-            .map(|c| Motion {
-                rot: Mat::<3>::identity(),
-                pos: c + Vect::<3>::new(0.0, 0.0, 0.1 * c.x),
-            })
-            .collect();
-        let mut prescribed = super::super::Prescribed::default();
-        prescribed.set(0, 8, Affine::identity());
-        Field {
-            origin: Vect::<3>::new(1e6, 2e6, 0.0),
-            halves: vec![0.5; 8],
-            centers,
-            motions,
-            prescribed,
-            heights_kept: true,
-            trend: crate::solve::trend::TrendMap {
-                affine: Affine {
-                    linear: Mat::<3>::new(1.0001, 0.0002, 0.0, -0.0002, 1.0001, 0.0, 0.0, 0.0, 1.0),
-                    translation: Vect::<3>::new(0.5, -0.25, 0.0),
-                },
-                centers: vec![[0.0, 1.0], [2.0, -1.0]],
-                weights: vec![
-                    Vect::<3>::new(0.1, 0.0, -0.1),
-                    Vect::<3>::new(-0.1, 0.0, 0.1),
-                ],
-                scale: 3.0,
-            },
-        }
-    }
-
-    #[test]
-    fn saves_and_loads_the_transfer_and_the_prescribed_maps() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("f.field");
-        let f = field();
-        SavedField::new(f.clone(), Transfer::BlendIdw, None)
-            .save(&path)
-            .unwrap();
-        let back = SavedField::<3>::load(&path).unwrap();
-        assert_eq!(back.transfer, Transfer::BlendIdw);
-        assert_eq!(back.field, f);
-        assert!(back.rbf.is_none());
-    }
-
-    /// A version-1 file (no transfer, no maps) still loads, as a field for the RBF.
-    #[test]
-    fn loads_version_1_files() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("v2.field");
-        let mut f = field();
-        f.prescribed = Default::default();
-        f.heights_kept = false;
-        f.trend = Default::default();
-        let rbf = Rbf::new(&f).unwrap();
-        SavedField::new(f.clone(), Transfer::Rbf, Some(rbf))
-            .save(&path)
-            .unwrap();
-        let mut bytes = std::fs::read(&path).unwrap();
-        bytes[8..12].copy_from_slice(&1u32.to_le_bytes());
-        let cells = 16 + 1 + 3 * 8 + 8 + 8 * (3 + 1 + 9 + 3) * 8;
-        assert_eq!(bytes[cells..cells + 8], 0u64.to_le_bytes(), "no maps");
-        bytes.drain(cells..cells + 8);
-        bytes.remove(16);
-        assert_eq!(bytes.pop(), Some(0), "no window section (version 3)");
-        let v1 = dir.path().join("v1.field");
-        std::fs::write(&v1, &bytes).unwrap();
-        let back = SavedField::<3>::load(&v1).unwrap();
-        assert_eq!(back.transfer, Transfer::Rbf);
-        assert_eq!(back.field, f);
-        assert!(back.rbf.is_some());
-        bytes[8..12].copy_from_slice(&5u32.to_le_bytes());
-        std::fs::write(&v1, &bytes).unwrap();
-        let e = SavedField::<3>::load(&v1).err().unwrap().to_string();
-        assert!(e.contains("version 5"), "{e}");
-    }
-}
+#[path = "file_tests.rs"]
+mod tests;

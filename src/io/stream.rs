@@ -94,6 +94,10 @@ pub trait Source {
     fn has_classes(&self) -> bool {
         false
     }
+    /// The coordinate reference system the file declares (LAS/LAZ), if any.
+    fn crs(&self) -> Option<crate::crs::Crs> {
+        None
+    }
     /// Triangles over the samples (empty for point sets).
     fn triangles(&self) -> &[[u32; 3]] {
         &[]

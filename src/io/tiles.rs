@@ -46,6 +46,31 @@ impl Tiles {
         })
     }
 
+    /// Refuses, unless `same` (`--same-crs`), tiles whose coordinate systems differ
+    /// ([`crate::crs::check`]), each compared with the first that declares one; returns the
+    /// warnings of tiles that declare none beside one that does.
+    pub fn check_crs(&self, same: bool) -> Result<Vec<String>> {
+        let systems: Vec<_> = self.sources.iter().map(|s| (s.crs(), s.path())).collect();
+        let Some((first, first_path)) = systems.iter().find(|(c, _)| c.is_some()) else {
+            return Ok(Vec::new());
+        };
+        let mut warnings = Vec::new();
+        for (crs, path) in &systems {
+            if path == first_path {
+                continue;
+            }
+            warnings.extend(crate::crs::check(
+                "the tiles' coordinate systems differ",
+                (first.as_ref(), first_path),
+                (crs.as_ref(), path),
+                same,
+                "reproject the tiles into one system, or pass --same-crs if both describe the \
+                 same one",
+            )?);
+        }
+        Ok(warnings)
+    }
+
     fn next(&mut self, max: usize, chunk: &mut Chunk, samples: bool) -> Result<usize> {
         while self.current < self.sources.len() {
             let s = &mut self.sources[self.current];
@@ -88,6 +113,11 @@ impl Source for Tiles {
 
     fn has_classes(&self) -> bool {
         self.sources.iter().all(|s| s.has_classes())
+    }
+
+    /// The first file's that declares one ([`Tiles::check_crs`] checks that the others agree).
+    fn crs(&self) -> Option<crate::crs::Crs> {
+        self.sources.iter().find_map(|s| s.crs())
     }
 
     fn triangles(&self) -> &[[u32; 3]] {

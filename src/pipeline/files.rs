@@ -69,6 +69,10 @@ pub struct ApplyParams {
     pub outside: Outside,
     /// The memory budget, for an RBF that must be factored.
     pub memory: Budget,
+    /// Take the input to be in the coordinate system the field was solved in, whatever the
+    /// two declare (`--same-crs`); else a field and an input that declare different systems
+    /// are refused ([`crate::crs::check`]).
+    pub same_crs: bool,
 }
 
 impl ApplyParams {
@@ -245,6 +249,8 @@ fn solve_source(
 ) -> Result<(Staged<3>, Proxy)> {
     let t0 = Instant::now();
     info.samples = source.len();
+    let crs = source.crs();
+    let crs_warnings = spec.check_geojson_crs(crs.as_ref(), source.path())?;
     let proxy_max = params.proxy_samples.unwrap_or(FOLDOVER_SAMPLES);
     let (complex, build, selections, proxy) = first_pass_cells(
         source,
@@ -262,7 +268,9 @@ fn solve_source(
         build,
         selections,
     };
-    let staged = stages::run(cells, spec, params, observer)?;
+    let mut staged = stages::run(cells, spec, params, observer)?;
+    staged.warnings.splice(0..0, crs_warnings);
+    staged.saved.crs = crs;
     if let Some((path, set)) = save_field {
         set.write(path, &staged.saved.to_bytes()?)?;
     }
@@ -274,19 +282,22 @@ fn solve_source(
 /// deforms each tile on its own. The cells, and so the field, are those [`deform_file`] builds
 /// for the tiles merged in this order: each tile's `apply` writes, record for record, what
 /// `deform` writes for the merged file (with the union of the tiles' header bounds as its own).
-/// `info.deform.control_points` holds the control points as the field moves them.
+/// `info.deform.control_points` holds the control points as the field moves them. Tiles that
+/// declare different coordinate systems are refused before any pass, unless `same_crs` (the
+/// user's `--same-crs`; [`io::Tiles::check_crs`]); the field records the system.
 pub fn solve_files(
     inputs: &[std::path::PathBuf],
     spec: &EditSpec<3>,
     params: &DeformParams,
     chunk: usize,
-    save_field: &Path,
+    (save_field, same_crs): (&Path, bool),
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo)> {
     let inputs_: Vec<&Path> = inputs.iter().map(|p| p.as_path()).collect();
     refuse_clobbering(&inputs_, &[("the saved field", save_field)])?;
     let chunk = check_chunk(chunk)?;
     let mut tiles = io::Tiles::open(inputs)?;
+    let crs_warnings = tiles.check_crs(same_crs)?;
     let set = ResultSet::new();
     let mut info = FileInfo::default();
     let params = DeformParams {
@@ -306,9 +317,10 @@ pub fn solve_files(
         solution,
         saved,
         build,
-        warnings,
+        mut warnings,
         transfer_start,
     } = staged;
+    warnings.splice(0..0, crs_warnings);
     let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
     let controls = control_results(spec, &solution, &deformer, &params, observer)?;
     info.deform = DeformInfo::of(
@@ -329,7 +341,10 @@ pub fn solve_files(
 /// an input whose header gives its bounds (LAS/LAZ), only the part of the field those bounds
 /// need is read ([`SavedField::load_window`]; not with `--outside extend`, whose samples beyond
 /// the margin follow the nearest patch of the whole field); should a sample lie outside them,
-/// the pass runs again with the whole field.
+/// the pass runs again with the whole field. A field solved in one coordinate system is
+/// refused on an input that declares another, before the pass, unless `params.same_crs`
+/// ([`crate::crs::check`]); when only one of the two declares a system, the warning is in
+/// `info.deform.warnings`.
 pub fn apply_file(
     field: &Path,
     input: &Path,
@@ -361,6 +376,14 @@ pub fn apply_file(
             field.display()
         )));
     }
+    let crs_warning = crate::crs::check(
+        "the field's coordinate system differs from the input's",
+        (saved.crs.as_ref(), field),
+        (source.crs().as_ref(), input),
+        params.same_crs,
+        "apply the field to files in the system it was solved in, or pass --same-crs if both \
+         describe the same one",
+    )?;
     let windowed = saved.is_window();
     let set = ResultSet::new();
     let to = (output, &set);
@@ -388,6 +411,8 @@ pub fn apply_file(
         }
     };
     set.commit()?;
+    let mut info = info;
+    info.deform.warnings.extend(crs_warning);
     Ok(info)
 }
 

@@ -36,6 +36,11 @@ pub(super) fn first_pass_cells(
         Some(b) => b,
         None => scan_bounds(source, chunk)?,
     };
+    spec.check_polygons(
+        ([lo.x, lo.y], [hi.x, hi.y]),
+        source.crs().as_ref(),
+        source.path(),
+    )?;
     let target = params.build.target_cells;
     if target.is_some() {
         observer.stage("sizing", 0);

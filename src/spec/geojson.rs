@@ -3,12 +3,19 @@
 
 use std::path::Path;
 
+use crate::crs::Crs;
 use crate::error::{Error, Result};
 
+/// Rings of `[x, y]` positions.
+type Rings = Vec<Vec<[f64; 2]>>;
+
 /// The rings of every polygon in the GeoJSON file `path` (a FeatureCollection, a Feature or a
-/// bare geometry; Polygon and MultiPolygon, holes included; heights ignored). The coordinates
-/// must be those of the input.
-pub(super) fn read_rings(path: &Path) -> Result<Vec<Vec<[f64; 2]>>> {
+/// bare geometry; Polygon and MultiPolygon, holes included; heights ignored), with the system
+/// its top-level `crs` member names (the GeoJSON 2008 form, [`Crs::of_geojson`]). The
+/// coordinates must be those of the input: a `crs` is checked against the scan's where the
+/// spec meets it; without one, the coordinates are taken in the scan's system (RFC 7946 says
+/// longitude and latitude on WGS 84, but a polygon exported for a scan is in the scan's).
+pub(super) fn read_rings(path: &Path) -> Result<(Rings, Option<Crs>)> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::spec_file(path, e))?;
     let bad = |message: String| Error::Spec {
         path: path.to_path_buf(),
@@ -21,7 +28,13 @@ pub(super) fn read_rings(path: &Path) -> Result<Vec<Vec<[f64; 2]>>> {
     if rings.is_empty() {
         return Err(bad("holds no Polygon or MultiPolygon".into()));
     }
-    Ok(rings)
+    let crs = json
+        .get("crs")
+        .filter(|c| !c.is_null())
+        .map(Crs::of_geojson)
+        .transpose()
+        .map_err(bad)?;
+    Ok((rings, crs))
 }
 
 /// Adds the rings of the polygons in the GeoJSON value `v` to `out`.

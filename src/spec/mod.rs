@@ -44,13 +44,15 @@
 //!
 //! The types live in `region` (what an entry selects) and `entries` (what it does, and the
 //! [`EditSpec`] that holds them); `parse` reads the TOML into them, with `geojson` for
-//! `polygon_file` and `control_points` for a `[[target]]`'s `file`.
+//! `polygon_file` and `control_points` for a `[[target]]`'s `file`; `scan` checks the spec
+//! against the input it edits (a GeoJSON's `crs`, polygons outside the scan's bounds).
 
 mod control_points;
 mod entries;
 mod geojson;
 mod parse;
 mod region;
+mod scan;
 
 pub use control_points::{ControlRow, read_control_points};
 pub use entries::{

@@ -4,6 +4,9 @@
 //! visibility answers only for samples.
 
 use std::collections::HashSet;
+use std::path::PathBuf;
+
+use crate::crs::Crs;
 
 use crate::rigid::Vect;
 
@@ -69,6 +72,11 @@ pub struct Polygon {
     pub rings: Vec<Vec<[f64; 2]>>,
     /// The heights between which the prism lies (`None`: all).
     pub z: Option<[f64; 2]>,
+    /// The GeoJSON file the rings came from (`polygon_file`), for messages.
+    pub file: Option<PathBuf>,
+    /// The coordinate system that GeoJSON's `crs` member names, checked against the scan's
+    /// where the spec meets it ([`super::EditSpec::check_geojson_crs`]).
+    pub crs: Option<Crs>,
     lo: [f64; 2],
     hi: [f64; 2],
 }
@@ -84,7 +92,28 @@ impl Polygon {
                 hi[a] = hi[a].max(v[a]);
             }
         }
-        Self { rings, z, lo, hi }
+        Self {
+            rings,
+            z,
+            file: None,
+            crs: None,
+            lo,
+            hi,
+        }
+    }
+
+    /// The same polygon, read from the GeoJSON `file` whose `crs` member names `crs`.
+    pub fn from_file(self, file: PathBuf, crs: Option<Crs>) -> Self {
+        Self {
+            file: Some(file),
+            crs,
+            ..self
+        }
+    }
+
+    /// The rings' bounding box in x, y: the lowest and the highest corner.
+    pub fn extent(&self) -> ([f64; 2], [f64; 2]) {
+        (self.lo, self.hi)
     }
 
     /// Whether `(x, y)` lies inside (even–odd rule; points on an edge may go either way), at

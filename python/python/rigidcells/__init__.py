@@ -827,18 +827,22 @@ def apply_file(
     memory_limit: Union[int, str, None] = None,
     chunk: Optional[int] = None,
     progress: Any = None,
+    same_crs: bool = False,
 ) -> dict:
     """``rigidcells apply FIELD INPUT -o OUTPUT``: the same bytes as the command line.
     ``outside``: ``"refuse"`` (samples beyond the field's margin are an error), ``"keep"`` or
     ``"extend"``; ``transfer`` (default: the one the field was solved for), ``rbf_tolerance``,
-    ``memory_limit`` and ``chunk`` as for ``deform_file``. Returns ``samples``, ``notes`` and
-    ``seconds``."""
-    return _with_progress(
+    ``memory_limit`` and ``chunk`` as for ``deform_file``. A field solved in another coordinate
+    system than the input declares is a ``ValueError`` unless ``same_crs`` (``--same-crs``).
+    Returns ``samples``, ``notes``, ``warnings`` and ``seconds``."""
+    info = _with_progress(
         progress, lambda cb: _rigidcells.apply_file(
             os.fspath(field), os.fspath(input), os.fspath(output), outside, transfer,
-            rbf_tolerance, memory_limit, chunk, cb,
+            rbf_tolerance, memory_limit, chunk, cb, same_crs,
         )
     )
+    _warn(info["warnings"])
+    return info
 
 
 def solve_files(
@@ -860,11 +864,13 @@ def solve_files(
     transfer: Optional[str] = None,
     memory_limit: Union[int, str, None] = None,
     progress: Any = None,
+    same_crs: bool = False,
 ) -> Report:
     """``rigidcells solve INPUTS --edit SPEC --save-field FIELD``: the field of the edit over
     several files taken as one (the tiles of a scan), streamed, written to ``save_field``;
     ``apply_file`` of it to each tile gives what ``deform_file`` gives on the merged file,
-    record for record. Returns a ``Report`` of the solve."""
+    record for record. Tiles that declare different coordinate systems are a ``ValueError``
+    unless ``same_crs`` (``--same-crs``). Returns a ``Report`` of the solve."""
     options = _picked(locals())
     text, base, paths = _spec(spec)
     one = isinstance(inputs, (str, bytes, os.PathLike))
@@ -872,7 +878,7 @@ def solve_files(
     info = _with_progress(
         progress, lambda cb: _call(
             paths, _rigidcells.solve_files, files, os.fspath(save_field), text, base, chunk,
-            options, cb,
+            options, cb, same_crs,
         )
     )
     report = Report._of(info, paths=paths)

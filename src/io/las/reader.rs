@@ -157,6 +157,10 @@ impl Source for LasSource {
         ok.then(|| (Vect::<3>::from(h.min), Vect::<3>::from(h.max)))
     }
 
+    fn crs(&self) -> Option<crate::crs::Crs> {
+        crate::crs::of_records(&self.vlr_records())
+    }
+
     fn has_classes(&self) -> bool {
         true
     }

@@ -168,12 +168,14 @@ impl Ctx<'_> {
                 }
             }
             "polygon" | "polygon_file" => {
-                let rings = if key == "polygon" {
+                let (rings, file) = if key == "polygon" {
                     let ring: Vec<Vec<f64>> = self.field(t, key, line)?;
-                    vec![self.ring(&ring, "polygon", line)?]
+                    (vec![self.ring(&ring, "polygon", line)?], None)
                 } else {
                     let file: String = self.field(t, key, line)?;
-                    geojson::read_rings(&self.resolve(&file))?
+                    let path = self.resolve(&file);
+                    let (rings, crs) = geojson::read_rings(&path)?;
+                    (rings, Some((path, crs)))
                 };
                 if t.contains_key("view") {
                     return self.screen::<D>(t, rings, line);
@@ -196,7 +198,11 @@ impl Ctx<'_> {
                     }
                     None => None,
                 };
-                Region::Polygon(Polygon::new(rings, z))
+                let polygon = Polygon::new(rings, z);
+                Region::Polygon(match file {
+                    Some((path, crs)) => polygon.from_file(path, crs),
+                    None => polygon,
+                })
             }
             _ => {
                 let classes: Vec<u8> = self.field(t, key, line)?;
