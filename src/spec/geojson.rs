@@ -288,16 +288,11 @@ mod tests {
         let json: serde_json::Value = serde_json::from_str(text).unwrap();
         let e = collect_rings(&json, &mut Vec::new(), &mut Place::default()).unwrap_err();
         assert_eq!(e.message(text), "line 1: no `coordinates`");
-        let fc = format!(
-            "{{\"type\": \"FeatureCollection\", \"features\": [{{\"type\": \"Feature\", \"id\": 3, \
-             \"geometry\": {{\"type\": \"MultiPolygon\", \"coordinates\": [[[[0, 0], [1, 0], [1, 1e999]]]]}}}}]}}"
-        );
-        let e = serde_json::from_str::<serde_json::Value>(&fc);
-        assert!(e.is_err(), "1e999 is not a number serde_json reads");
-        let fc = fc.replace("1e999", "null");
+        let fc = r#"{"type": "FeatureCollection", "features": [{"type": "Feature", "id": 3,
+            "geometry": {"type": "MultiPolygon", "coordinates": [[[[0, 0], [1, 0], [1, null]]]]}}]}"#;
         assert_eq!(
-            message(&fc),
-            "line 1: feature 1 (id 3), polygon 1, ring 1, point 3: a position is two numbers, \
+            message(fc),
+            "line 2: feature 1 (id 3), polygon 1, ring 1, point 3: a position is two numbers, \
              not [1,null]"
         );
     }
