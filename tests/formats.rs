@@ -608,6 +608,28 @@ fn solve_over_tiles_reports_what_deform_reports_for_the_merged_file() {
     assert_eq!((picture.width, picture.height), (604, 150));
     // The same proxy, the same cells: the same picture.
     assert!(png == std::fs::read(&merged_preview).unwrap());
+    // Two outputs under one name, or a preview that is not a PNG, are refused before any work,
+    // and nothing is written.
+    let fresh = dir.path().join("fresh.field");
+    for (flag, path, said) in [
+        ("--report", arg(&fresh), "name the same file"),
+        ("--preview", "p.jpg", "p.jpg"),
+    ] {
+        let mut args = vec!["solve"];
+        args.extend(tiles.iter().map(|t| arg(t)));
+        args.extend([
+            "--edit",
+            arg(&spec),
+            "--save-field",
+            arg(&fresh),
+            flag,
+            path,
+        ]);
+        let r = common::run(&args);
+        assert_eq!(r.code, 4, "{}", r.stderr);
+        assert!(r.stderr.contains(said), "{}", r.stderr);
+        assert!(!fresh.exists());
+    }
 }
 
 /// Translates every sample of `source` by `T` into `out`, `chunk` samples at a time; returns
