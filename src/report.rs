@@ -1,4 +1,6 @@
-//! The machine-readable report of a deformation (`deform --report R.json`).
+//! The machine-readable report of a deformation (`deform --report R.json`), or of a solve over
+//! tiles (`solve --report R.json`: the same keys, with the tiles as `inputs`, the field as
+//! `output`, and a `write` time of 0; every figure what `deform` reports for the tiles merged).
 //!
 //! Scripts rely on these top-level keys, which keep their names and meanings: `points`,
 //! `cells`, `cells_initial`, `iterations`, `energy`, `residual_max`, `foldovers` and
@@ -29,9 +31,11 @@ use crate::solve::{Role, Solution};
 /// The report; see the module docs for the stable keys.
 #[derive(Debug, Clone, Serialize)]
 pub struct Report {
-    /// The input file.
+    /// The input file (for a solve over tiles, the files, joined by `, `).
     pub input: String,
-    /// The output file.
+    /// The input files: one for `deform`, the tiles in their order for `solve`.
+    pub inputs: Vec<String>,
+    /// The output file (for a solve, the field).
     pub output: String,
     /// Samples deformed.
     pub points: u64,
@@ -174,7 +178,8 @@ pub struct Timings {
     /// Building the transfer (the RBF's factorization, the blend's index), the proxy's
     /// deformation and the fold-over check.
     pub transfer: f64,
-    /// Pass 2: every sample read, moved through the transfer and written.
+    /// Pass 2: every sample read, moved through the transfer and written (0 for a solve, which
+    /// writes only the field).
     pub write: f64,
     /// The control points' leave-one-out check (`--check-gcp`; 0 without it): one solve per
     /// point.
@@ -201,9 +206,10 @@ impl Timings {
 }
 
 impl Report {
-    /// The report of `deform_file`'s result; `total` is the wall time the caller measured.
+    /// The report of `deform_file`'s result, or of `solve_files`' over the files `inputs`
+    /// (whose output is the field); `total` is the wall time the caller measured.
     pub fn new(
-        input: &Path,
+        inputs: &[&Path],
         output: &Path,
         solution: &Solution<3>,
         file: &FileInfo,
@@ -241,8 +247,10 @@ impl Report {
                 (solution.constraints.trend.apply(&moved) - t.wanted).norm()
             })
             .fold(0.0, f64::max);
+        let inputs: Vec<String> = inputs.iter().map(|p| p.display().to_string()).collect();
         Self {
-            input: input.display().to_string(),
+            input: inputs.join(", "),
+            inputs,
             output: output.display().to_string(),
             points: file.samples,
             cells: s.cells_final,
@@ -334,9 +342,9 @@ fn peak_memory() -> Option<u64> {
     Some(kb * 1024)
 }
 
-/// The summary `deform` prints on stdout, as a Rust or Python caller can print it too: the
-/// notes, what was made, the solve, the timings, the fold-overs, the control points' table and
-/// the constraints' residuals. The warnings are apart ([`Report::warnings`], on stderr).
+/// The summary `deform` and `solve` print on stdout, as a Rust or Python caller can print it
+/// too: the notes, what was made, the solve, the timings, the fold-overs, the control points'
+/// table and the constraints' residuals. The warnings are apart ([`Report::warnings`], on stderr).
 /// Figures are in plain notation ([`crate::human`]): the residuals to a thousandth of the
 /// finest cell, the energy and the time per iteration to three digits.
 pub struct Summary<'a> {
@@ -358,15 +366,14 @@ impl std::fmt::Display for Summary<'_> {
             crate::cells::Inside::Flood => "flood fill",
             _ => "none",
         };
+        let input = match r.inputs.len() {
+            1 => r.input.clone(),
+            n => format!("{n} files"),
+        };
         write!(
             f,
-            "{} -> {}: {} points, {} cells ({} boundary, {} interior by {inside})",
-            r.input,
-            r.output,
-            r.points,
-            s.cells_final,
-            d.build.boundary_cells,
-            d.build.interior_cells,
+            "{input} -> {}: {} points, {} cells ({} boundary, {} interior by {inside})",
+            r.output, r.points, s.cells_final, d.build.boundary_cells, d.build.interior_cells,
         )?;
         if !s.refinements.is_empty() {
             write!(
@@ -393,9 +400,13 @@ impl std::fmt::Display for Summary<'_> {
         let t = &r.timings_s;
         write!(
             f,
-            "\n  cells {:.2} s, transfer {:.2} s, write {:.2} s",
-            t.voxelize, t.transfer, t.write
+            "\n  cells {:.2} s, transfer {:.2} s",
+            t.voxelize, t.transfer
         )?;
+        // A solve writes no samples (its pass 2 is `apply`'s).
+        if self.file.seconds_write > 0.0 {
+            write!(f, ", write {:.2} s", t.write)?;
+        }
         if d.seconds_check > 0.0 {
             write!(f, ", leave-one-out check {:.2} s", d.seconds_check)?;
         }

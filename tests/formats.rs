@@ -5,7 +5,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{deform, records, run, shared};
+use common::{arg, deform, records, run, shared};
 use rigidcells::io::{
     Accepted, Chunk, Document, LasHeader, PlyRecordStream, PlyStream, Source, XyzStream,
 };
@@ -472,6 +472,164 @@ fn solve_over_tiles_then_apply_equals_deform_of_the_merged_file() {
     ]);
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(r.stderr.contains("bar.ply"), "{}", r.stderr);
+}
+
+/// The lines of a summary from the control points' table to the constraints' residuals.
+fn control_table(stdout: &str) -> String {
+    let from = stdout.find("control points:").expect(stdout);
+    let to = stdout[from..].find("  constraints:").expect(stdout);
+    stdout[from..from + to].to_string()
+}
+
+/// `solve --report --preview --strain --check-gcp` over two tiles reports what `deform` with the
+/// same options reports for the merged file — the counts, the residuals on the proxy, the
+/// fold-overs, the control points and their leave-one-out errors — prints the same
+/// control-point table, and draws the same preview, from a proxy across both tiles.
+#[test]
+fn solve_over_tiles_reports_what_deform_reports_for_the_merged_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = shared("las/autzen_trim.las");
+    std::fs::write(
+        dir.path().join("gcp.csv"),
+        "id,x,y,z,X,Y,Z\nP1,636500,849100,430,636500,849100,433\n\
+         P2,636700,849300,430,636700.5,849300,432\nP3,636600,849450,430,636600,849450,434\n",
+    )
+    .unwrap();
+    let spec = dir.path().join("bend.toml");
+    std::fs::write(
+        &spec,
+        "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n\
+         [[handle]]\nbox = { min = [636900, 848900, 0], max = [637200, 849600, 1000] }\n\
+         translate = [0, 0, 20]\n[[target]]\nfile = \"gcp.csv\"\nsnap = 60\nweight = 10\n",
+    )
+    .unwrap();
+    let (_, _, pos, _) = records(&input);
+    // Two tiles, west and east halves; the merged file is their records in tile order.
+    let q = quadrants(&pos);
+    let halves = [
+        [&q[0][..], &q[1][..]].concat(),
+        [&q[2][..], &q[3][..]].concat(),
+    ];
+    let mut tiles = Vec::new();
+    for (k, keep) in halves.iter().enumerate() {
+        let tile = dir.path().join(format!("half{k}.las"));
+        write_tile(&input, keep, bounds_of(&pos, keep), &tile);
+        tiles.push(tile);
+    }
+    let order = halves.concat();
+    let merged = dir.path().join("merged.las");
+    write_tile(&input, &order, bounds_of(&pos, &order), &merged);
+    let (deformed, solved) = (dir.path().join("d.json"), dir.path().join("s.json"));
+    let merged_preview = dir.path().join("merged.png");
+    let r = common::deform_verbose(
+        &merged,
+        &dir.path().join("merged_out.las"),
+        &spec,
+        &[
+            "--cells",
+            "3000",
+            "--check-gcp",
+            "--report",
+            arg(&deformed),
+            "--preview",
+            arg(&merged_preview),
+            "--strain",
+            "--size",
+            "200x150",
+        ],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let preview = dir.path().join("tiles.png");
+    let mut args = vec!["solve"];
+    args.extend(tiles.iter().map(|t| arg(t)));
+    let field = dir.path().join("tiles.field");
+    args.extend([
+        "--edit",
+        arg(&spec),
+        "--save-field",
+        arg(&field),
+        "--cells",
+        "3000",
+        "--check-gcp",
+        "--report",
+        arg(&solved),
+        "--preview",
+        arg(&preview),
+        "--strain",
+        "--size",
+        "200x150",
+    ]);
+    let s = common::run(&args);
+    assert_eq!(s.code, 0, "{}", s.stderr);
+    assert!(field.exists());
+    // The leave-one-out table, as deform prints it for the merged file.
+    assert!(s.stdout.contains("then left out"), "{}", s.stdout);
+    assert!(s.stdout.contains("leave-one-out RMSE"), "{}", s.stdout);
+    assert_eq!(control_table(&s.stdout), control_table(&r.stdout));
+    assert!(s.stdout.contains("2 files -> "), "{}", s.stdout);
+    let json = |p: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (d, s) = (json(&deformed), json(&solved));
+    for key in [
+        "points",
+        "cells",
+        "cells_initial",
+        "cell_size",
+        "cell_levels",
+        "cell_roles",
+        "iterations",
+        "energy",
+        "residual_max",
+        "residual_samples",
+        "target_residual_max",
+        "foldovers",
+        "foldovers_checked",
+        "control_points",
+        "control_rmse",
+        "control_rmse_left_out",
+        "control_trend",
+        "warnings",
+    ] {
+        assert_eq!(d[key], s[key], "{key}");
+    }
+    assert_eq!(d["points"], pos.len());
+    assert!(d["residual_samples"].as_u64().unwrap() > 0);
+    assert_eq!(s["control_points"].as_array().unwrap().len(), 3);
+    assert!(s["control_points"][0]["left_out"].is_f64(), "{s}");
+    let inputs: Vec<&str> = tiles.iter().map(|t| arg(t)).collect();
+    assert_eq!(s["inputs"], serde_json::json!(inputs));
+    assert_eq!(s["output"], arg(&field));
+    assert_eq!(s["timings_s"]["write"], 0.0);
+    // Three panels (before, after, strain) of 200×150 pixels, 2 pixels apart.
+    let png = std::fs::read(&preview).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    let picture = rigidcells::image::Raster::read_png(&preview).unwrap();
+    assert_eq!((picture.width, picture.height), (604, 150));
+    // The same proxy, the same cells: the same picture.
+    assert!(png == std::fs::read(&merged_preview).unwrap());
+    // Two outputs under one name, or a preview that is not a PNG, are refused before any work,
+    // and nothing is written.
+    let fresh = dir.path().join("fresh.field");
+    for (flag, path, said) in [
+        ("--report", arg(&fresh), "name the same file"),
+        ("--preview", "p.jpg", "p.jpg"),
+    ] {
+        let mut args = vec!["solve"];
+        args.extend(tiles.iter().map(|t| arg(t)));
+        args.extend([
+            "--edit",
+            arg(&spec),
+            "--save-field",
+            arg(&fresh),
+            flag,
+            path,
+        ]);
+        let r = common::run(&args);
+        assert_eq!(r.code, 4, "{}", r.stderr);
+        assert!(r.stderr.contains(said), "{}", r.stderr);
+        assert!(!fresh.exists());
+    }
 }
 
 /// Translates every sample of `source` by `T` into `out`, `chunk` samples at a time; returns

@@ -158,3 +158,164 @@ fn entries_combine_and_errors_say_why() {
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(r.stderr.contains("LAS classes"), "{}", r.stderr);
 }
+
+/// Runs `deform` on autzen_trim under the spec `text` (in `dir`), expecting exit 4 and an error
+/// that is exactly `error: edit.toml: …` as `want` gives it after the file's name.
+fn refused(dir: &std::path::Path, name: &str, text: &str, want: &str) {
+    let edit = dir.join(name);
+    std::fs::write(&edit, text).unwrap();
+    let r = deform(
+        &shared("las/autzen_trim.laz"),
+        &dir.join("o.laz"),
+        &edit,
+        &[],
+    );
+    assert_eq!(r.code, 4, "{text}: {}", r.stderr);
+    let line = r.stderr.lines().find(|l| l.starts_with("error:"));
+    let want = format!("error: {}: {want}", edit.display());
+    assert_eq!(line, Some(want.as_str()), "{text}");
+    assert!(!dir.join("o.laz").exists());
+}
+
+/// A bad element of an array written over many lines is named by its own line and its place in
+/// the array, not by the line its key starts on.
+#[test]
+fn spec_errors_name_the_line_of_the_element() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixed = "[[fixed]]\nbox = { min = [636000, 848900, 0], max = [636300, 849600, 1000] }\n";
+    let ring = |bad: &str| {
+        let mut points: Vec<String> = (0..9).map(|k| format!("  [{k}, {}],", k % 2)).collect();
+        points[7] = format!("  {bad},");
+        format!(
+            "# parcels\n[[handle]]\ntranslate = [0, 0, 1]\npolygon = [\n{}\n]\n{fixed}",
+            points.join("\n")
+        )
+    };
+    // The 8th point sits on line 12.
+    for (bad, want) in [
+        (
+            "[636100.5]",
+            "line 12: `polygon` point 8 is [636100.5]: a point is [x, y], two finite numbers",
+        ),
+        (
+            "\"a\"",
+            "line 12: `polygon` point 8 is \"a\", not a list of numbers",
+        ),
+        (
+            "[636100, nan]",
+            "line 12: `polygon` point 8 holds nan, which is not finite",
+        ),
+        (
+            "[636100, -inf]",
+            "line 12: `polygon` point 8 holds -inf, which is not finite",
+        ),
+        (
+            "[636100, \"849000\"]",
+            "line 12: `polygon` point 8 holds \"849000\", which is not a number",
+        ),
+    ] {
+        refused(dir.path(), "edit.toml", &ring(bad), want);
+    }
+    let matrix = |rows: [&str; 4]| {
+        format!(
+            "{fixed}[[handle]]\nbox = {{ min = [636900, 848900, 0], max = [637200, 849600, 1000] }}\n\
+             matrix = [\n  {},\n]\n",
+            rows.join(",\n  ")
+        )
+    };
+    let id = [
+        "[1, 0, 0, 0]",
+        "[0, 1, 0, 0]",
+        "[0, 0, 1, 0]",
+        "[0, 0, 0, 1]",
+    ];
+    for (row, bad, want) in [
+        (
+            1,
+            "[0, 1, 0]",
+            "line 7: `matrix` row 2 has 3 numbers: `matrix` is 4 rows of 4 numbers",
+        ),
+        (
+            2,
+            "[0, 0, 1, 1e20]",
+            "line 8: `matrix` reaches 1e20, beyond 1e15: a shape moved or scaled that far keeps \
+             no detail in 64-bit floats, and the solve fails",
+        ),
+        (
+            3,
+            "[0, 0, 1, 1]",
+            "line 9: `matrix` must be finite with last row [0 … 0 1], got [0.0, 0.0, 1.0, 1.0]",
+        ),
+    ] {
+        let mut rows = id;
+        rows[row] = bad;
+        refused(dir.path(), "edit.toml", &matrix(rows), want);
+    }
+    refused(
+        dir.path(),
+        "edit.toml",
+        &format!("{fixed}[[handle]]\ntranslate = [0, 0, 1]\nindices = [\n  1,\n  2,\n  -3,\n]\n"),
+        "line 8: `indices` lists -3: a sample index is a whole number, 0 or more",
+    );
+    refused(
+        dir.path(),
+        "edit.toml",
+        &format!("{fixed}[[handle]]\ntranslate = [0, 0, 1]\nclassification = [\n  2,\n  300,\n]\n"),
+        "line 7: `classification` lists 300: a LAS class is a whole number 0 to 255",
+    );
+}
+
+/// A bad position in a GeoJSON file is named by its feature (with its name or id), polygon,
+/// ring and point, and the line where it starts.
+#[test]
+fn geojson_errors_name_the_feature_ring_and_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let square = "[[636000, 848900], [636300, 848900], [636300, 849600], [636000, 848900]]";
+    let write = |bad: &str| {
+        let text = format!(
+            "{{\"type\": \"FeatureCollection\", \"features\": [\n\
+             {{\"type\": \"Feature\", \"properties\": {{\"name\": \"parcel 11\"}},\n\
+              \"geometry\": {{\"type\": \"Polygon\", \"coordinates\": [{square}]}}}},\n\
+             {{\"type\": \"Feature\", \"id\": 7,\n\
+              \"geometry\": {{\"type\": \"MultiPolygon\", \"coordinates\": [[{square}], [\n\
+             {square},\n\
+             [[636100, 849000],\n\
+              [636200, 849000],\n\
+              {bad},\n\
+              [636100, 849000]]]]}}}},\n\
+             {{\"type\": \"Feature\", \"properties\": {{\"name\": \"parcel 12\"}},\n\
+              \"geometry\": {{\"type\": \"Polygon\", \"coordinates\": [{square}, [\n\
+              [636100, 849000],\n\
+              {bad}]]}}}}\n\
+             ]}}\n"
+        );
+        std::fs::write(dir.path().join("area.geojson"), text).unwrap();
+    };
+    let edit = "[[fixed]]\npolygon_file = \"area.geojson\"\n";
+    let geojson = dir.path().join("area.geojson");
+    let refused_geojson = |want: &str| {
+        let path = dir.path().join("edit.toml");
+        std::fs::write(&path, edit).unwrap();
+        let r = deform(
+            &shared("las/autzen_trim.laz"),
+            &dir.path().join("o.laz"),
+            &path,
+            &[],
+        );
+        assert_eq!(r.code, 4, "{}", r.stderr);
+        let line = r.stderr.lines().find(|l| l.starts_with("error:"));
+        assert_eq!(
+            line,
+            Some(format!("error: {}: {want}", geojson.display()).as_str())
+        );
+    };
+    write("[636200, \"849100\"]");
+    refused_geojson(
+        "line 9: feature 2 (id 7), polygon 2, ring 2, point 3: a position is two numbers, \
+         not [636200,\"849100\"]",
+    );
+    write("[636200, 849100]");
+    refused_geojson(
+        "line 12: feature 3 (\"parcel 12\"), ring 2: a ring has 3 positions or more, this one 2",
+    );
+}

@@ -670,10 +670,12 @@ fn chunk(chunk: Option<Bound<'_, PyAny>>) -> PyResult<usize> {
 
 /// `rigidcells solve`: the field of the edit over several files taken as one (the tiles of a
 /// scan), written to `save_field` for `apply_file` on each tile; together they give what
-/// `deform_file` gives on the merged file. Tiles in different coordinate systems are refused
-/// unless `same_crs`.
+/// `deform_file` gives on the merged file. The JSON report and the preview (seen as the `view`
+/// dict says, as for `deform_file`) are written beside the field when given, all together or
+/// none; what they and the returned dict hold is what `deform_file` gives for the merged file.
+/// Tiles in different coordinate systems are refused unless `same_crs`.
 #[pyfunction]
-#[pyo3(signature = (inputs, save_field, spec_text, base, chunk=None, options=None, progress=None, same_crs=false))]
+#[pyo3(signature = (inputs, save_field, spec_text, base, report=None, preview=None, view=None, chunk=None, options=None, progress=None, same_crs=false))]
 #[allow(clippy::too_many_arguments)]
 fn solve_files<'py>(
     py: Python<'py>,
@@ -681,6 +683,9 @@ fn solve_files<'py>(
     save_field: PathBuf,
     spec_text: &str,
     base: &str,
+    report: Option<PathBuf>,
+    preview: Option<PathBuf>,
+    view: Option<Bound<'py, PyDict>>,
     chunk: Option<Bound<'py, PyAny>>,
     options: Option<Bound<'py, PyDict>>,
     progress: Option<Py<PyAny>>,
@@ -688,26 +693,32 @@ fn solve_files<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let params = self::options(options.as_ref())?.params().map_err(py_err)?;
     let spec = self::spec(spec_text, base)?;
+    let first = inputs.first().map_or(Path::new(""), PathBuf::as_path);
+    let (view, strain) = self::view(view.as_ref(), first)?;
     let chunk = self::chunk(chunk)?;
+    let outputs = pipeline::Outputs {
+        save_field: Some(&save_field),
+        report: report.as_deref(),
+        preview: preview.as_deref().map(|p| (p, view, strain)),
+        keep_existing: false,
+    };
     let observer = PyObserver::new(progress);
-    let start = Instant::now();
-    let result = py.detach(|| -> rigidcells::Result<_> {
-        for input in &inputs {
-            rigidcells::io::refuse_overwrite(input, &save_field)?;
-        }
+    let result = py.detach(|| {
         pipeline::solve_files(
             &inputs,
             &spec,
             &params,
             chunk,
-            (&save_field, same_crs),
+            (&outputs, same_crs),
             &observer,
         )
     });
-    let (solution, info) = observer.result(result)?;
+    let (solution, info, summary) = observer.result(result)?;
     let d = info_dict(py, &info.deform, info.samples)?;
+    d.set_item("residual_fixed_max", summary.residual_fixed_max)?;
+    d.set_item("residual_handle_max", summary.residual_handle_max)?;
     d.set_item("cell_size", solution.complex.grid.finest_size())?;
-    let seconds = start.elapsed().as_secs_f64();
+    let seconds = summary.timings_s.total;
     let t = timings(py, &info.deform, info.seconds_read, 0.0, seconds)?;
     d.set_item("timings", t)?;
     d.set_item("notes", PyList::new(py, said(&info.notes))?)?;

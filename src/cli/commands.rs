@@ -369,44 +369,54 @@ pub(super) fn run_grid(
     Ok(())
 }
 
-/// `solve`: the field of an edit over several files taken as one.
-pub(super) fn run_solve(
-    inputs: &[std::path::PathBuf],
-    (edit, field): (&Path, &Path),
-    cells: &CellArgs,
-    transfer: Transfer,
-    (chunk, same_crs): (usize, bool),
-    quiet: bool,
-) -> anyhow::Result<()> {
-    for input in inputs {
-        refuse_overwrite(input, field)?;
+/// `solve`: the field of an edit over several files taken as one, with the report and the
+/// preview beside it; prints the warnings and `deform`'s summary.
+pub(super) fn run_solve(args: &SolveArgs) -> anyhow::Result<()> {
+    let outputs: Vec<(&str, &Path)> = [
+        ("--save-field", Some(&args.save_field)),
+        ("--report", args.report.as_ref()),
+        ("--preview", args.preview.as_ref()),
+    ]
+    .into_iter()
+    .filter_map(|(option, path)| Some((option, path?.as_path())))
+    .collect();
+    for input in &args.inputs {
+        for (_, output) in &outputs {
+            refuse_overwrite(input, output)?;
+        }
     }
-    rigidcells::io::check_folders([field])?;
-    let chunk = pipeline::check_chunk(chunk)?;
-    let spec = read_spec::<3>(edit)?;
-    let params = cells.deform_params(transfer)?;
-    let bar = Bar::new(quiet);
-    let (solution, info) =
-        pipeline::solve_files(inputs, &spec, &params, chunk, (field, same_crs), &bar)?;
-    if !quiet {
-        for w in &info.deform.warnings {
+    rigidcells::io::refuse_same_outputs(&outputs)?;
+    rigidcells::io::check_folders(outputs.iter().map(|(_, path)| *path))?;
+    let chunk = pipeline::check_chunk(args.chunk)?;
+    let spec = read_spec::<3>(&args.edit)?;
+    let params = args.params()?;
+    let view = args.view.view(&args.inputs[0])?;
+    let outputs = pipeline::Outputs {
+        save_field: Some(&args.save_field),
+        report: args.report.as_deref(),
+        preview: args.preview.as_deref().map(|p| (p, view, args.strain)),
+        keep_existing: false,
+    };
+    let bar = Bar::new(args.quiet);
+    let (_, info, report) = pipeline::solve_files(
+        &args.inputs,
+        &spec,
+        &params,
+        chunk,
+        (&outputs, args.same_crs),
+        &bar,
+    )?;
+    if !args.quiet {
+        for w in &report.warnings {
             eprintln!("warning: {w}");
         }
-        for n in &info.notes {
-            println!("note: {n}");
-        }
-        let s = &solution.info;
-        println!(
-            "{} files, {} samples -> {}: {} cells, {} Gauss-Newton iterations, energy {}, {:.2} s",
-            inputs.len(),
-            info.samples,
-            field.display(),
-            s.cells_final,
-            s.iterations,
-            rigidcells::human::figure(s.energies.last().copied().unwrap_or(0.0)),
-            s.seconds
+        print!(
+            "{}",
+            Summary {
+                report: &report,
+                file: &info
+            }
         );
-        print_control_points(&info.deform);
     }
     Ok(())
 }

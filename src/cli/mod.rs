@@ -122,34 +122,9 @@ enum Command {
     },
     /// Solve an edit over several files taken as one (the tiles of a scan) and write only the
     /// field; `apply` it to each tile: together they give what `deform` gives on the merged
-    /// file, record for record.
-    Solve {
-        /// Input files (LAS/LAZ, XYZ, PLY point clouds), read in this order as one.
-        #[arg(required = true)]
-        inputs: Vec<PathBuf>,
-        /// Edit spec (TOML).
-        #[arg(long)]
-        edit: PathBuf,
-        /// The field to write, for `rigidcells apply`.
-        #[arg(long)]
-        save_field: PathBuf,
-        #[command(flatten)]
-        cells: CellArgs,
-        /// The transfer `apply` will use (and the field is made for).
-        #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Pu)]
-        transfer: Transfer,
-        /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
-        #[arg(long, default_value_t = CHUNK)]
-        chunk: usize,
-        /// Take the tiles to be in one coordinate system. Without it, tiles that declare
-        /// different systems (EPSG codes, else WKT texts) are refused (exit 4); one that
-        /// declares none beside one that does is a warning. The field records the system.
-        #[arg(long)]
-        same_crs: bool,
-        /// Print nothing but errors.
-        #[arg(short, long)]
-        quiet: bool,
-    },
+    /// file, record for record. The summary, `--report`, `--preview` and `--check-gcp` are what
+    /// `deform` gives for the merged file.
+    Solve(SolveArgs),
     /// Write a saved field as a GeoTIFF grid of east, north and up offsets that PROJ applies
     /// without rigidcells (`+proj=gridshift +grids=correction.tif`: PROJ 9.4 and later, and so
     /// GDAL, PDAL and QGIS). The offsets are where `apply` moves a point minus where it was,
@@ -287,6 +262,64 @@ impl DeformArgs {
         pipeline::Options {
             refine_strain: self.refine_strain,
             rbf_tolerance: self.tolerance.rbf_tolerance,
+            check_control_points: self.check_gcp,
+            ..self.cells.options(self.transfer)
+        }
+        .params()
+    }
+}
+
+#[derive(clap::Args)]
+struct SolveArgs {
+    /// Input files (LAS/LAZ, XYZ, PLY point clouds), read in this order as one.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    /// Edit spec (TOML).
+    #[arg(long)]
+    edit: PathBuf,
+    /// The field to write, for `rigidcells apply`.
+    #[arg(long)]
+    save_field: PathBuf,
+    #[command(flatten)]
+    cells: CellArgs,
+    /// The transfer `apply` will use (and the field is made for).
+    #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Pu)]
+    transfer: Transfer,
+    /// Also write a JSON report, as `deform --report` writes it for the merged file (the tiles
+    /// as `inputs`, the field as `output`, no write time).
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Also write a PNG of the tiles before and after, side by side (a decimated proxy across
+    /// all tiles: fixed regions gray, handles yellow, the rest blue).
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// Add a third panel to the preview: the deformed cells colored by strain, blue (none) to
+    /// red (the most).
+    #[arg(long, requires = "preview")]
+    strain: bool,
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
+    #[arg(long, default_value_t = CHUNK)]
+    chunk: usize,
+    /// Check the control points (`[[target]]`): solve again without each in turn and report
+    /// how far the others predict it (leave-one-out).
+    #[arg(long)]
+    check_gcp: bool,
+    /// Take the tiles to be in one coordinate system. Without it, tiles that declare
+    /// different systems (EPSG codes, else WKT texts) are refused (exit 4); one that declares
+    /// none beside one that does is a warning. The field records the system.
+    #[arg(long)]
+    same_crs: bool,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+impl SolveArgs {
+    /// The library's parameters for these arguments.
+    fn params(&self) -> Result<DeformParams, Error> {
+        pipeline::Options {
             check_control_points: self.check_gcp,
             ..self.cells.options(self.transfer)
         }
@@ -508,23 +541,7 @@ pub(crate) fn main() -> ExitCode {
             run_grid(&field, &output, &params, epsg, quiet)
         }),
         Command::Info { input } => run_info(&input),
-        Command::Solve {
-            inputs,
-            edit,
-            save_field,
-            cells,
-            transfer,
-            chunk,
-            same_crs,
-            quiet,
-        } => run_solve(
-            &inputs,
-            (&edit, &save_field),
-            &cells,
-            transfer,
-            (chunk, same_crs),
-            quiet,
-        ),
+        Command::Solve(args) => run_solve(&args),
         Command::Image {
             input,
             edit,

@@ -4,11 +4,13 @@ use std::path::Path;
 use std::time::Instant;
 
 use crate::cells::{BuildInfo, CellComplex};
+use crate::control::ControlPoint;
 use crate::error::{Error, Result};
-use crate::field::{Deformer, Outside, SavedField, Transfer, apply};
+use crate::field::{Constrained, Deformer, Outside, SavedField, Transfer, apply};
 use crate::io::{self, ResultSet, Source};
 use crate::memory::Budget;
 use crate::progress::Observer;
+use crate::rigid::Vect;
 use crate::solve::{self, Solution};
 use crate::spec::EditSpec;
 
@@ -144,16 +146,17 @@ pub(super) fn deform_in(
     set.last(output);
     let mut source = io::open(input)?;
     let mut info = FileInfo::default();
-    let (
-        Staged {
-            solution,
-            saved,
-            build,
-            mut warnings,
-            transfer_start,
-        },
-        proxy,
-    ) = solve_source(
+    let Solved {
+        solution,
+        deformer,
+        build,
+        warnings,
+        transfer_start,
+        foldovers,
+        controls,
+        proxy_outside,
+        origin,
+    } = solve_checked(
         source.as_mut(),
         spec,
         params,
@@ -162,28 +165,6 @@ pub(super) fn deform_in(
         &mut info,
         observer,
     )?;
-    let origin = saved.field.origin;
-    // Every sample made the cells, so none lies beyond the margin.
-    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
-    observer.stage("checking", 0);
-    let mut after = proxy.before.clone();
-    apply(&deformer, &origin, &mut after);
-    // When the proxy holds every sample, these are the output's positions, and the samples
-    // beyond the margin among them are all the output's (the checks below warp more points).
-    let proxy_outside = deformer.outside().count;
-    let triangles = if proxy.stride == 1 && proxy.before.len() as u64 == source.len() {
-        source.triangles().to_vec()
-    } else {
-        Vec::new()
-    };
-    info.proxy = Proxy {
-        after,
-        triangles,
-        ..proxy
-    };
-    let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
-    observer.finish();
-    let controls = control_results(spec, &solution, &deformer, params, observer)?;
     let t2 = Instant::now();
     // A proxy of every sample (a mesh's vertices, a small file) was moved above: the pass
     // writes those positions.
@@ -233,6 +214,86 @@ pub(super) fn deform_in(
     Ok((solution, info))
 }
 
+/// What a file's run holds once it is solved and checked, before anything is written but the
+/// field: what [`deform_file`] then streams through, and all that [`solve_files`] reports.
+struct Solved {
+    solution: Solution<3>,
+    /// The field's map (the chosen transfer with its exact regions), extended beyond the margin.
+    deformer: Constrained<3>,
+    /// The local frame's origin in world coordinates.
+    origin: Vect<3>,
+    build: BuildInfo,
+    warnings: Vec<String>,
+    /// When the field's construction began (the transfer's seconds count from there).
+    transfer_start: Instant,
+    /// Samples checked for fold-overs, and those folded.
+    foldovers: (usize, usize),
+    /// The control points as the map moves them, and the seconds of their leave-one-out check.
+    controls: (Vec<ControlPoint>, f64),
+    /// Samples of the proxy beyond the cells' margin.
+    proxy_outside: u64,
+}
+
+/// Pass 1 over `source`, the stages after it ([`solve_source`]), and the checks on what they
+/// made: the proxy moved through the field's map (into `info.proxy`, with the source's
+/// triangles when it holds every sample), the fold-over check on it and the control points'
+/// results ([`control_results`], with the leave-one-out check when `params` asks for it). The
+/// sequence [`deform_file`] runs before its transfer pass and [`solve_files`] runs whole, so
+/// that a solve over tiles reports what a deformation of the merged file reports.
+fn solve_checked(
+    source: &mut dyn Source,
+    spec: &EditSpec<3>,
+    params: &DeformParams,
+    chunk: usize,
+    save_field: Option<(&Path, &ResultSet)>,
+    info: &mut FileInfo,
+    observer: &dyn Observer,
+) -> Result<Solved> {
+    let (
+        Staged {
+            solution,
+            saved,
+            build,
+            mut warnings,
+            transfer_start,
+        },
+        proxy,
+    ) = solve_source(source, spec, params, chunk, save_field, info, observer)?;
+    let origin = saved.field.origin;
+    // Every sample made the cells, so none lies beyond the margin.
+    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
+    observer.stage("checking", 0);
+    let mut after = proxy.before.clone();
+    apply(&deformer, &origin, &mut after);
+    // When the proxy holds every sample, these are the output's positions, and the samples
+    // beyond the margin among them are all the output's (the checks below warp more points).
+    let proxy_outside = deformer.outside().count;
+    let triangles = if proxy.stride == 1 && proxy.before.len() as u64 == source.len() {
+        source.triangles().to_vec()
+    } else {
+        Vec::new()
+    };
+    info.proxy = Proxy {
+        after,
+        triangles,
+        ..proxy
+    };
+    let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
+    observer.finish();
+    let controls = control_results(spec, &solution, &deformer, params, observer)?;
+    Ok(Solved {
+        solution,
+        deformer,
+        origin,
+        build,
+        warnings,
+        transfer_start,
+        foldovers,
+        controls,
+        proxy_outside,
+    })
+}
+
 /// Pass 1 over `source` and the stages after it ([`stages::run`]): the field (with the RBF's
 /// factorization when that is the transfer), saved to `save_field` (staged in its set) when
 /// given, and the proxy
@@ -278,14 +339,17 @@ fn solve_source(
 }
 
 /// Solves `spec` over the files `inputs` taken as one (the tiles of a scan; pass 1 reads every
-/// one, [`Tiles`](crate::io::Tiles)) and writes only the field, to `save_field`; `apply` then
-/// deforms each tile on its own. The cells, and so the field, are those [`deform_file`] builds
-/// for the tiles merged in this order: each tile's `apply` writes, record for record, what
-/// `deform` writes for the merged file (with the union of the tiles' header bounds as its own).
-/// `info.deform.control_points` holds the control points as the field moves them. Tiles that
-/// declare different coordinate systems are refused before any pass, unless `same_crs` (the
-/// user's `--same-crs`; [`io::Tiles::check_crs`]); the field records the system.
-pub fn solve_files(
+/// one, [`Tiles`](crate::io::Tiles)) and writes only the field, to `save_field` (handed to
+/// `set`, renamed into place by the caller). The cells, and so the field, are those
+/// [`deform_file`] builds for the tiles merged in this order: each tile's `apply` writes, record
+/// for record, what `deform` writes for the merged file (with the union of the tiles' header
+/// bounds as its own); and what it reports — the proxy moved through the field, the fold-overs,
+/// the control points as the field moves them, the leave-one-out check — is what `deform`
+/// reports for the merged file. Tiles that declare different coordinate systems are refused
+/// before any pass, unless `same_crs` (the user's `--same-crs`; [`io::Tiles::check_crs`]); the
+/// field records the system. The public face is [`super::solve_files`].
+pub(super) fn solve_in(
+    set: &ResultSet,
     inputs: &[std::path::PathBuf],
     spec: &EditSpec<3>,
     params: &DeformParams,
@@ -293,46 +357,30 @@ pub fn solve_files(
     (save_field, same_crs): (&Path, bool),
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo)> {
-    let inputs_: Vec<&Path> = inputs.iter().map(|p| p.as_path()).collect();
-    refuse_clobbering(&inputs_, &[("the saved field", save_field)])?;
     let chunk = check_chunk(chunk)?;
     let mut tiles = io::Tiles::open(inputs)?;
     let crs_warnings = tiles.check_crs(same_crs)?;
-    let set = ResultSet::new();
     let mut info = FileInfo::default();
-    let params = DeformParams {
-        proxy_samples: Some(0),
-        ..*params
-    };
-    let (staged, _) = solve_source(
+    let solved = solve_checked(
         &mut tiles,
         spec,
-        &params,
+        params,
         chunk,
-        Some((save_field, &set)),
+        Some((save_field, set)),
         &mut info,
         observer,
     )?;
-    let Staged {
-        solution,
-        saved,
-        build,
-        mut warnings,
-        transfer_start,
-    } = staged;
+    let mut warnings = solved.warnings;
     warnings.splice(0..0, crs_warnings);
-    let deformer = saved.deformer(None, params.rbf_tolerance, Outside::Extend)?;
-    let controls = control_results(spec, &solution, &deformer, &params, observer)?;
     info.deform = DeformInfo::of(
-        build,
-        &solution.info,
-        transfer_start,
-        (0, 0),
-        controls,
+        solved.build,
+        &solved.solution.info,
+        solved.transfer_start,
+        solved.foldovers,
+        solved.controls,
         warnings,
     );
-    set.commit()?;
-    Ok((solution, info))
+    Ok((solved.solution, info))
 }
 
 /// Applies the field saved in `field` to the file `input`, writing `output` (one streaming

@@ -19,12 +19,12 @@ pub(crate) use checks::check_moved;
 pub use checks::{FOLDOVER_SAMPLES, check_foldovers};
 pub use files::{
     ApplyParams, CHUNK, FileInfo, MAX_CHUNK, apply_file, check_chunk, deform_file, file_cells,
-    solve_files, write_cells,
+    write_cells,
 };
 pub use grid::grid_file;
 pub use live::{Live, Step};
 pub use options::Options;
-pub use outputs::{Outputs, deform_file_with};
+pub use outputs::{Outputs, deform_file_with, solve_files};
 
 use std::path::Path;
 use std::time::Instant;

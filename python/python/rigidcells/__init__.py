@@ -850,6 +850,14 @@ def solve_files(
     spec: Spec,
     save_field: Union[str, "os.PathLike[str]"],
     *,
+    report: Union[str, "os.PathLike[str]", None] = None,
+    preview: Union[str, "os.PathLike[str]", None] = None,
+    strain: Optional[bool] = None,
+    azimuth: Optional[float] = None,
+    elevation: Optional[float] = None,
+    size: Optional[Tuple[int, int]] = None,
+    up: Optional[str] = None,
+    zoom: Optional[float] = None,
     chunk: Optional[int] = None,
     cell_size: Optional[float] = None,
     cells: Optional[int] = None,
@@ -862,6 +870,7 @@ def solve_files(
     coarse_levels: Optional[int] = None,
     loose_parts: Optional[str] = None,
     transfer: Optional[str] = None,
+    check_gcp: Optional[bool] = None,
     memory_limit: Union[int, str, None] = None,
     progress: Any = None,
     same_crs: bool = False,
@@ -869,16 +878,26 @@ def solve_files(
     """``rigidcells solve INPUTS --edit SPEC --save-field FIELD``: the field of the edit over
     several files taken as one (the tiles of a scan), streamed, written to ``save_field``;
     ``apply_file`` of it to each tile gives what ``deform_file`` gives on the merged file,
-    record for record. Tiles that declare different coordinate systems are a ``ValueError``
-    unless ``same_crs`` (``--same-crs``). Returns a ``Report`` of the solve."""
+    record for record. Beside the field, all together or none, as for ``deform_file``:
+    ``report`` (the JSON report) and ``preview`` (a PNG of a proxy across all tiles before and
+    after, with ``strain`` and the view's ``azimuth``, ``elevation``, ``size``, ``up``,
+    ``zoom``); ``check_gcp`` runs the control points' leave-one-out check. Tiles that declare
+    different coordinate systems are a ``ValueError`` unless ``same_crs`` (``--same-crs``).
+    Returns a ``Report`` of the solve: what ``deform_file`` returns for the merged file."""
     options = _picked(locals())
     text, base, paths = _spec(spec)
     one = isinstance(inputs, (str, bytes, os.PathLike))
     files = [os.fspath(inputs)] if one else [os.fspath(p) for p in inputs]
+    path = lambda p: None if p is None else os.fspath(p)
+    view = _options(
+        strain=strain, azimuth=azimuth, elevation=elevation, size=size, up=up, zoom=zoom
+    )
+    if view and preview is None:
+        raise ValueError(f"{next(iter(view))} applies to the preview: pass preview= too")
     info = _with_progress(
         progress, lambda cb: _call(
-            paths, _rigidcells.solve_files, files, os.fspath(save_field), text, base, chunk,
-            options, cb, same_crs,
+            paths, _rigidcells.solve_files, files, os.fspath(save_field), text, base,
+            path(report), path(preview), view, chunk, options, cb, same_crs,
         )
     )
     report = Report._of(info, paths=paths)

@@ -1,7 +1,10 @@
 //! The edit spec's TOML read into [`EditSpec`]: the sections and their keys checked (unknown
 //! keys are errors), every value validated, and every error naming the line of the value at
-//! fault. The entry's parts are read by the children: `region` (what it selects), `motion` (a
-//! handle's transform) and `target` (soft targets and control-point files).
+//! fault — in an array written over many lines (a `polygon`'s points, a `matrix`'s or `view`'s
+//! rows, `indices`, `classification`), the line of the element, found by the spans that
+//! `toml::de::DeTable` keeps, read only on the way to an error. The entry's parts are read by
+//! the children: `region` (what it selects), `motion` (a handle's transform) and `target` (soft
+//! targets and control-point files).
 
 mod motion;
 mod region;
@@ -11,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use toml::Spanned;
+use toml::de::{DeTable, DeValue};
 
 use super::entries::{EditSpec, Entry, HandleMotion, Pin, Trend};
 use crate::error::{Error, Result};
@@ -245,8 +249,89 @@ impl<'a> Ctx<'a> {
     }
 
     fn line<T>(&self, s: &Spanned<T>) -> usize {
-        let start = s.span().start.min(self.text.len());
-        self.newlines.partition_point(|&at| at < start) + 1
+        self.line_at(s.span().start)
+    }
+
+    /// The line of the byte `at` of the text.
+    fn line_at(&self, at: usize) -> usize {
+        let at = at.min(self.text.len());
+        self.newlines.partition_point(|&n| n < at) + 1
+    }
+
+    /// The line of the element at `path` (indices into nested arrays: a polygon's point, then
+    /// its coordinate; a matrix's row, then its column) of `key` (`box.min` for a key of an
+    /// inline table) in the entry whose header is on line `entry`: where an element's error is
+    /// reported, for arrays written over many lines. The key's line ([`Ctx::at`]) where the
+    /// element is not found. The spec is parsed again for the spans of its values, which
+    /// `toml::Table` does not keep: only on the way to an error.
+    fn at_element(&self, entry: usize, key: &str, path: &[usize]) -> Option<usize> {
+        self.element_start(entry, key, path)
+            .map(|at| self.line_at(at))
+            .or_else(|| self.at(entry, key))
+    }
+
+    fn element_start(&self, entry: usize, key: &str, path: &[usize]) -> Option<usize> {
+        let doc = DeTable::parse(self.text).ok()?;
+        let entries = doc.get_ref().values().filter_map(|v| match v.get_ref() {
+            DeValue::Array(a) => Some(a.iter()),
+            _ => None,
+        });
+        let table = entries
+            .flatten()
+            .find(|t| self.line_at(t.span().start) == entry)?;
+        let mut value = table;
+        for part in key.split('.') {
+            let DeValue::Table(t) = value.get_ref() else {
+                return None;
+            };
+            value = t.iter().find(|(k, _)| k.get_ref() == part)?.1;
+        }
+        for &i in path {
+            let DeValue::Array(a) = value.get_ref() else {
+                return None;
+            };
+            value = a.get(i)?;
+        }
+        Some(value.span().start)
+    }
+
+    /// The array of arrays of numbers under `key` (a polygon's points, a matrix's rows), each
+    /// number finite; `what` names a row in messages (`point`, `row`, counted from 1). An
+    /// error names the line of the row or the number at fault.
+    fn rows(&self, t: &toml::Table, key: &str, what: &str, line: usize) -> Result<Vec<Vec<f64>>> {
+        let Some(toml::Value::Array(rows)) = t.get(key) else {
+            return self.field(t, key, line);
+        };
+        let mut out = Vec::with_capacity(rows.len());
+        for (i, row) in rows.iter().enumerate() {
+            let toml::Value::Array(row) = row else {
+                return Err(self.error(
+                    self.at_element(line, key, &[i]),
+                    format!("`{key}` {what} {} is {row}, not a list of numbers", i + 1),
+                ));
+            };
+            let mut numbers = Vec::with_capacity(row.len());
+            for (j, v) in row.iter().enumerate() {
+                let x = match v {
+                    toml::Value::Float(x) => *x,
+                    toml::Value::Integer(i) => *i as f64,
+                    _ => f64::NAN,
+                };
+                if !x.is_finite() {
+                    let why = match v {
+                        toml::Value::Float(_) => "not finite",
+                        _ => "not a number",
+                    };
+                    return Err(self.error(
+                        self.at_element(line, key, &[i, j]),
+                        format!("`{key}` {what} {} holds {v}, which is {why}", i + 1),
+                    ));
+                }
+                numbers.push(x);
+            }
+            out.push(numbers);
+        }
+        Ok(out)
     }
 
     fn allow(&self, t: &toml::Table, extra: &[&str], line: usize) -> Result<()> {
@@ -305,14 +390,39 @@ impl<'a> Ctx<'a> {
         if magnitude <= LARGEST {
             Ok(())
         } else {
-            Err(self.error(
-                self.at(line, key),
-                format!(
-                    "`{key}` reaches {magnitude:e}, beyond {LARGEST:e}: a shape moved or \
-                     scaled that far keeps no detail in 64-bit floats, and the solve fails"
-                ),
-            ))
+            Err(self.error(self.at(line, key), self.beyond_range(magnitude, key)))
         }
+    }
+
+    /// The message of a number of `key` whose `magnitude` is beyond [`LARGEST`].
+    fn beyond_range(&self, magnitude: f64, key: &str) -> String {
+        format!(
+            "`{key}` reaches {magnitude:e}, beyond {LARGEST:e}: a shape moved or scaled that far \
+             keeps no detail in 64-bit floats, and the solve fails"
+        )
+    }
+
+    /// The `n` × `n` numbers of `key` ([`Ctx::rows`]: finite): a wrong count of rows names the
+    /// key's line, a row of the wrong length its own.
+    fn square(&self, t: &toml::Table, key: &str, n: usize, line: usize) -> Result<Vec<Vec<f64>>> {
+        let rows = self.rows(t, key, "row", line)?;
+        if let Some(i) = rows.iter().position(|r| r.len() != n) {
+            return Err(self.error(
+                self.at_element(line, key, &[i]),
+                format!(
+                    "`{key}` row {} has {} numbers: `{key}` is {n} rows of {n} numbers",
+                    i + 1,
+                    rows[i].len()
+                ),
+            ));
+        }
+        if rows.len() != n {
+            return Err(self.error(
+                self.at(line, key),
+                format!("`{key}` must be {n} rows of {n} numbers"),
+            ));
+        }
+        Ok(rows)
     }
 
     fn to_vect<const D: usize>(&self, v: &[f64], key: &str, line: usize) -> Result<Vect<D>> {

@@ -40,7 +40,7 @@ impl Ctx<'_> {
                     format!("`matrix` and `{k}` cannot be combined; give one or the other"),
                 ));
             }
-            let m: Vec<Vec<f64>> = self.field(t, "matrix", line)?;
+            let m = self.square(t, "matrix", D + 1, line)?;
             return self.matrix_motion(&m, line);
         }
         let translate = match t.get("translate") {
@@ -119,27 +119,25 @@ impl Ctx<'_> {
     where
         Dim<D>: Rigid<D>,
     {
-        let n = D + 1;
-        if m.len() != n || m.iter().any(|r| r.len() != n) {
+        if (0..D).any(|c| m[D][c] != 0.0) || m[D][D] != 1.0 {
             return Err(self.error(
-                self.at(line, "matrix"),
-                format!("`matrix` must be {n} rows of {n} numbers"),
-            ));
-        }
-        if m.iter().flatten().any(|v| !v.is_finite())
-            || (0..D).any(|c| m[D][c] != 0.0)
-            || m[D][D] != 1.0
-        {
-            return Err(self.error(
-                self.at(line, "matrix"),
+                self.at_element(line, "matrix", &[D]),
                 format!(
                     "`matrix` must be finite with last row [0 … 0 1], got {:?}",
                     m[D]
                 ),
             ));
         }
-        let largest = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
-        self.within_range(largest, "matrix", line)?;
+        let cells = m
+            .iter()
+            .enumerate()
+            .flat_map(|(r, row)| row.iter().enumerate().map(move |(c, v)| (r, c, v.abs())));
+        let (r, c, largest) = cells.fold((0, 0, 0.0f64), |a, b| if b.2 > a.2 { b } else { a });
+        if largest > super::LARGEST {
+            // Named by the line of its row.
+            let at = self.at_element(line, "matrix", &[r, c]);
+            return Err(self.error(at, self.beyond_range(largest, "matrix")));
+        }
         let linear = Mat::<D>::from_fn(|r, c| m[r][c]);
         if <Dim<D> as Rigid<D>>::determinant(&linear) <= 0.0 {
             return Err(self.error(

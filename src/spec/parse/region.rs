@@ -141,14 +141,15 @@ impl Ctx<'_> {
                 let samples = match t.get(key) {
                     Some(toml::Value::Array(list)) => list
                         .iter()
-                        .map(|v| {
+                        .enumerate()
+                        .map(|(k, v)| {
                             match v {
                                 toml::Value::Integer(i) => u64::try_from(*i).ok(),
                                 _ => None,
                             }
                             .ok_or_else(|| {
                                 self.error(
-                                    self.at(line, key),
+                                    self.at_element(line, key, &[k]),
                                     format!(
                                         "`indices` lists {v}: a sample index is a whole number, 0 \
                                      or more"
@@ -169,7 +170,7 @@ impl Ctx<'_> {
             }
             "polygon" | "polygon_file" => {
                 let (rings, file) = if key == "polygon" {
-                    let ring: Vec<Vec<f64>> = self.field(t, key, line)?;
+                    let ring = self.rows(t, key, "point", line)?;
                     (vec![self.ring(&ring, "polygon", line)?], None)
                 } else {
                     let file: String = self.field(t, key, line)?;
@@ -204,10 +205,7 @@ impl Ctx<'_> {
                     None => polygon,
                 })
             }
-            _ => {
-                let classes: Vec<u8> = self.field(t, key, line)?;
-                Region::Classification(classes.into_iter().collect())
-            }
+            _ => Region::Classification(self.classes(t, key, line)?.into_iter().collect()),
         })
     }
 
@@ -224,24 +222,10 @@ impl Ctx<'_> {
                 "`view` is for 3D inputs, without `z`".into(),
             ));
         }
-        let rows: Vec<Vec<f64>> = self.field(t, "view", line)?;
+        let rows = self.square(t, "view", 4, line)?;
         let mut view = [[0.0; 4]; 4];
-        if rows.len() != 4 || rows.iter().any(|r| r.len() != 4) {
-            return Err(self.error(
-                self.at(line, "view"),
-                "`view` must be 4 rows of 4 numbers".into(),
-            ));
-        }
         for (out, row) in view.iter_mut().zip(&rows) {
-            for (o, v) in out.iter_mut().zip(row) {
-                if !v.is_finite() {
-                    return Err(self.error(
-                        self.at(line, "view"),
-                        "`view` holds a number that is not finite".into(),
-                    ));
-                }
-                *o = *v;
-            }
+            out.copy_from_slice(row);
         }
         let visible = match t.get("visible") {
             Some(_) => self.field::<bool>(t, "visible", line)?,
@@ -260,18 +244,47 @@ impl Ctx<'_> {
         })
     }
 
-    /// A ring of `[x, y]` vertices: at least 3, finite.
+    /// A ring of `[x, y]` vertices ([`Ctx::rows`]: finite): at least 3. A point of another
+    /// length is named by its line.
     fn ring(&self, v: &[Vec<f64>], key: &str, line: usize) -> Result<Vec<[f64; 2]>> {
-        if v.len() < 3
-            || v.iter()
-                .any(|p| p.len() != 2 || !p.iter().all(|x| x.is_finite()))
-        {
+        if let Some(i) = v.iter().position(|p| p.len() != 2) {
+            return Err(self.error(
+                self.at_element(line, key, &[i]),
+                format!(
+                    "`{key}` point {} is {:?}: a point is [x, y], two finite numbers",
+                    i + 1,
+                    v[i]
+                ),
+            ));
+        }
+        if v.len() < 3 {
             return Err(self.error(
                 self.at(line, key),
                 format!("`{key}` must be at least 3 points [x, y] of finite numbers"),
             ));
         }
         Ok(v.iter().map(|p| [p[0], p[1]]).collect())
+    }
+
+    /// The LAS classes of `classification`: whole numbers 0 to 255, an error naming the line
+    /// of the one at fault.
+    fn classes(&self, t: &toml::Table, key: &str, line: usize) -> Result<Vec<u8>> {
+        let Some(toml::Value::Array(list)) = t.get(key) else {
+            return self.field(t, key, line);
+        };
+        list.iter()
+            .enumerate()
+            .map(|(k, v)| {
+                v.as_integer()
+                    .and_then(|c| u8::try_from(c).ok())
+                    .ok_or_else(|| {
+                        self.error(
+                            self.at_element(line, key, &[k]),
+                            format!("`{key}` lists {v}: a LAS class is a whole number 0 to 255"),
+                        )
+                    })
+            })
+            .collect()
     }
 
     /// The sample indices in `file`: whitespace or comma separated, 0-based.
