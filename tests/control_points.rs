@@ -86,9 +86,15 @@ fn semicolon_file_with_header_ids_and_decimal_commas() {
         assert!((d - p["residual"].as_f64().unwrap()).abs() < 1e-9, "{p}");
         assert!(d < 0.5, "{id}: {p}");
     }
-    // Under the spline trend each lands on its destination as written (to autzen's 0.01).
+    // The three points lie nearly on one line, and snapping moved them by 8–29 m: a trend
+    // through them would fold the plane, so the cells carry them alone, and say so.
+    assert!(
+        r.stderr.contains("folds or collapses the plane"),
+        "{}",
+        r.stderr
+    );
     let rmse = json["control_rmse"].as_f64().unwrap();
-    assert!(rmse < 0.01, "{rmse}");
+    assert!(rmse > 0.0 && rmse < 0.5, "{rmse}");
 }
 
 #[test]

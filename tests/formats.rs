@@ -483,8 +483,9 @@ fn control_table(stdout: &str) -> String {
 
 /// `solve --report --preview --strain --check-gcp` over two tiles reports what `deform` with the
 /// same options reports for the merged file — the counts, the residuals on the proxy, the
-/// fold-overs, the control points and their leave-one-out errors — prints the same
-/// control-point table, and draws the same preview, from a proxy across both tiles.
+/// fold-overs, the control points and their leave-one-out errors (but for the rounding of the
+/// output `deform` writes) — prints the same control-point table, and draws the same preview,
+/// from a proxy across both tiles.
 #[test]
 fn solve_over_tiles_reports_what_deform_reports_for_the_merged_file() {
     let dir = tempfile::tempdir().unwrap();
@@ -565,7 +566,24 @@ fn solve_over_tiles_reports_what_deform_reports_for_the_merged_file() {
     // The leave-one-out table, as deform prints it for the merged file.
     assert!(s.stdout.contains("then left out"), "{}", s.stdout);
     assert!(s.stdout.contains("leave-one-out RMSE"), "{}", s.stdout);
-    assert_eq!(control_table(&s.stdout), control_table(&r.stdout));
+    // The same rows in the same order; deform's residuals are measured on its output as
+    // written (to autzen's 0.01), solve's on the field (each tile's apply rounds to its own).
+    let ids = |t: String| -> Vec<String> {
+        t.lines()
+            .skip(2)
+            .map_while(|l| l.strip_prefix("  ").filter(|l| !l.starts_with("RMSE")))
+            .map(|l| l.split_whitespace().next().unwrap().to_string())
+            .collect()
+    };
+    let ids_deformed = ids(control_table(&r.stdout));
+    assert_eq!(ids(control_table(&s.stdout)), ids_deformed);
+    assert_eq!(ids_deformed.len(), 3, "{}", r.stdout);
+    assert!(
+        control_table(&r.stdout).contains("residuals as written, to the output's scale 0.01")
+            && !control_table(&s.stdout).contains("as written"),
+        "{}",
+        s.stdout
+    );
     assert!(s.stdout.contains("2 files -> "), "{}", s.stdout);
     let json = |p: &Path| -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
@@ -585,14 +603,32 @@ fn solve_over_tiles_reports_what_deform_reports_for_the_merged_file() {
         "target_residual_max",
         "foldovers",
         "foldovers_checked",
-        "control_points",
-        "control_rmse",
         "control_rmse_left_out",
         "control_trend",
         "warnings",
     ] {
         assert_eq!(d[key], s[key], "{key}");
     }
+    // The control points: the same but for the rounding of where the output puts them.
+    let (dp, sp) = (
+        d["control_points"].as_array().unwrap(),
+        s["control_points"].as_array().unwrap(),
+    );
+    assert_eq!(dp.len(), sp.len());
+    for (a, b) in dp.iter().zip(sp) {
+        for key in [
+            "id", "from", "wanted", "snapped", "left_out", "check", "exact",
+        ] {
+            assert_eq!(a[key], b[key], "{key}");
+        }
+        let residual = |p: &serde_json::Value| p["residual"].as_f64().unwrap();
+        assert!(
+            (residual(a) - residual(b)).abs() <= 0.005 * 3f64.sqrt(),
+            "{a} {b}"
+        );
+    }
+    let rmse = |j: &serde_json::Value| j["control_rmse"].as_f64().unwrap();
+    assert!((rmse(&d) - rmse(&s)).abs() <= 0.005 * 3f64.sqrt());
     assert_eq!(d["points"], pos.len());
     assert!(d["residual_samples"].as_u64().unwrap() > 0);
     assert_eq!(s["control_points"].as_array().unwrap().len(), 3);

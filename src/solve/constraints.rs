@@ -222,7 +222,8 @@ where
             Some((targets, pins))
         })();
         // A survey's trend scales areas by about 1: one that shrinks or grows them tenfold at
-        // a control point (points all on one line, a blunder of kilometres) is no trend.
+        // a control point, or folds them (points nearly on one line, where a few metres of
+        // snapping turn the fit into a shear; a blunder of kilometres), is no trend.
         let sane = self.targets.iter().all(|t| {
             let j = trend.jacobian(&t.from);
             let area = j[(0, 0)] * j[(1, 1)] - j[(0, 1)] * j[(1, 0)];
@@ -232,8 +233,8 @@ where
         if back.is_none() {
             let warning = format!(
                 "trend \"{kind}\" folds or collapses the plane where the control points want \
-                 to go (its areas scale by less than 0.1 or more than 10 there): no trend is \
-                 used, the cells carry the whole motion"
+                 to go (its areas scale by less than 0.1 or more than 10 there: points nearly on \
+                 one line, or a blunder): no trend is used, the cells carry the whole motion"
             );
             if !self.warnings.contains(&warning) {
                 self.warnings.push(warning);
