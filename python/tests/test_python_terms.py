@@ -137,6 +137,41 @@ def test_tiles_solved_and_applied_as_the_command_line_does(tmp_path):
         rigidcells.apply_file(py_field, tiles[0], tmp_path / "x.laz", transfer="pu", rbf_tolerance=0.01)
 
 
+def test_solve_files_reports_and_refuses_as_the_command_line_does(tmp_path):
+    import json
+
+    tiles = [SHARED / "las" / "autzen_trim.laz", SHARED / "las" / "autzen_trim.las"]
+    spec = dict(BEND_AUTZEN)
+    spec["target"] = [{"from": [636600.0, 849200.0, 430.0], "to": [636600.5, 849200.0, 430.0], "snap": 30.0}]
+    edit = tmp_path / "edit.toml"
+    edit.write_text(rigidcells._rigidcells.toml_from_json(json.dumps(spec)))
+    subprocess.run(
+        [cli(), "solve", *map(str, tiles), "--edit", str(edit), "--save-field", str(tmp_path / "c.field"),
+         "--cells", "2000", "--check-gcp", "--report", str(tmp_path / "c.json"), "-q"],
+        check=True,
+    )
+    report = rigidcells.solve_files(
+        tiles, spec, tmp_path / "p.field", cells=2000, check_gcp=True, report=tmp_path / "p.json",
+        progress=False,
+    )
+    assert (tmp_path / "p.field").read_bytes() == (tmp_path / "c.field").read_bytes()
+    a, b = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("c", "p"))
+    for key in ("control_rmse", "control_rmse_left_out", "cells", "energy"):
+        assert a[key] == b[key], key
+    # The same points; where each was given is named by the spec's file or the dict.
+    for p, q in zip(a["control_points"], b["control_points"]):
+        assert p.pop("place") == "edit.toml line 14" and q.pop("place") == "spec line 14"
+        assert p == q
+    assert report.control_points[0]["residual"] == a["control_points"][0]["residual"]
+    assert a["control_points"][0]["left_out"] is not None
+    # Tiles in two coordinate systems: a ValueError naming both and the argument that overrides.
+    other = SHARED / "las" / "1_4_w_evlr.las"
+    with pytest.raises(ValueError, match=r"EPSG:2903") as e:
+        rigidcells.solve_files([tiles[0], other], spec, tmp_path / "x.field", progress=False)
+    assert "same_crs" in str(e.value) or "same-crs" in str(e.value)
+    assert not (tmp_path / "x.field").exists()
+
+
 def test_the_report_is_typed_and_says_what_the_cli_report_says(tmp_path):
     pts = bar_points()
     moved, report = rigidcells.deform(pts, BEND, cells=600, progress=False)
