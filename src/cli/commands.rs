@@ -62,38 +62,34 @@ pub(super) fn run_cells(
     Ok(())
 }
 
-pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
-    refuse_overwrite(&args.input, &args.output)?;
-    for extra in [&args.save_field, &args.report, &args.preview]
-        .into_iter()
-        .flatten()
-    {
-        refuse_overwrite(&args.input, extra)?;
+/// Refuses, before any work, `outputs` (each with its option) that would replace one of
+/// `inputs` or each other, or that lie in no folder.
+fn refuse_clashes(inputs: &[PathBuf], outputs: &[(&str, &Path)]) -> anyhow::Result<()> {
+    for input in inputs {
+        for (_, output) in outputs {
+            refuse_overwrite(input, output)?;
+        }
     }
-    let outputs: Vec<(&str, &Path)> = [
-        ("-o", Some(&args.output)),
-        ("--save-field", args.save_field.as_ref()),
-        ("--report", args.report.as_ref()),
-        ("--preview", args.preview.as_ref()),
-    ]
-    .into_iter()
-    .filter_map(|(option, path)| Some((option, path?.as_path())))
-    .collect();
-    rigidcells::io::refuse_same_outputs(&outputs)?;
+    rigidcells::io::refuse_same_outputs(outputs)?;
     rigidcells::io::check_folders(outputs.iter().map(|(_, path)| *path))?;
+    Ok(())
+}
+
+pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
+    let outputs = args.reports.named(&[
+        ("-o", Some(&args.output)),
+        ("--save-field", args.save_field.as_deref()),
+    ]);
+    refuse_clashes(std::slice::from_ref(&args.input), &outputs)?;
     rigidcells::io::check_output_format(&args.input, &args.output)?;
     let chunk = pipeline::check_chunk(args.chunk)?;
     if is_xy(&args.input) {
         return run_deform_xy(args);
     }
     let params = args.params()?;
-    let view = args.view.view(&args.input)?;
-    let outputs = pipeline::Outputs {
-        save_field: args.save_field.as_deref(),
-        report: args.report.as_deref(),
-        preview: args.preview.as_deref().map(|p| (p, view, args.strain)),
-        keep_existing: false,
-    };
+    let outputs = args
+        .reports
+        .outputs(args.save_field.as_deref(), &args.input)?;
     let files = (
         args.input.as_path(),
         args.output.as_path(),
@@ -139,8 +135,8 @@ pub(super) fn is_xy(path: &Path) -> bool {
 pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
     for (flag, set) in [
         ("--save-field", args.save_field.is_some()),
-        ("--report", args.report.is_some()),
-        ("--preview", args.preview.is_some()),
+        ("--report", args.reports.report.is_some()),
+        ("--preview", args.reports.preview.is_some()),
     ] {
         if set {
             return Err(
@@ -372,31 +368,16 @@ pub(super) fn run_grid(
 /// `solve`: the field of an edit over several files taken as one, with the report and the
 /// preview beside it; prints the warnings and `deform`'s summary.
 pub(super) fn run_solve(args: &SolveArgs) -> anyhow::Result<()> {
-    let outputs: Vec<(&str, &Path)> = [
-        ("--save-field", Some(&args.save_field)),
-        ("--report", args.report.as_ref()),
-        ("--preview", args.preview.as_ref()),
-    ]
-    .into_iter()
-    .filter_map(|(option, path)| Some((option, path?.as_path())))
-    .collect();
-    for input in &args.inputs {
-        for (_, output) in &outputs {
-            refuse_overwrite(input, output)?;
-        }
-    }
-    rigidcells::io::refuse_same_outputs(&outputs)?;
-    rigidcells::io::check_folders(outputs.iter().map(|(_, path)| *path))?;
+    let outputs = args
+        .reports
+        .named(&[("--save-field", Some(&args.save_field))]);
+    refuse_clashes(&args.inputs, &outputs)?;
     let chunk = pipeline::check_chunk(args.chunk)?;
     let spec = read_spec::<3>(&args.edit)?;
     let params = args.params()?;
-    let view = args.view.view(&args.inputs[0])?;
-    let outputs = pipeline::Outputs {
-        save_field: Some(&args.save_field),
-        report: args.report.as_deref(),
-        preview: args.preview.as_deref().map(|p| (p, view, args.strain)),
-        keep_existing: false,
-    };
+    let outputs = args
+        .reports
+        .outputs(Some(&args.save_field), &args.inputs[0])?;
     let bar = Bar::new(args.quiet);
     let (_, info, report) = pipeline::solve_files(
         &args.inputs,

@@ -230,27 +230,11 @@ struct DeformArgs {
     /// Also write the solved field to this file, for `rigidcells apply`.
     #[arg(long)]
     save_field: Option<PathBuf>,
-    /// Also write a JSON report: counts, cell levels, iterations, energies, residuals,
-    /// fold-overs, timings per stage, peak memory.
-    #[arg(long)]
-    report: Option<PathBuf>,
-    /// Also write a PNG of the input and the output side by side (a decimated proxy of the
-    /// samples: fixed regions gray, handles yellow, the rest blue).
-    #[arg(long)]
-    preview: Option<PathBuf>,
-    /// Add a third panel to the preview: the deformed cells colored by strain, blue (none) to
-    /// red (the most).
-    #[arg(long, requires = "preview")]
-    strain: bool,
     #[command(flatten)]
-    view: ViewArgs,
+    reports: ReportArgs,
     /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
     #[arg(long, default_value_t = CHUNK)]
     chunk: usize,
-    /// Check the control points (`[[target]]`): solve again without each in turn and report
-    /// how far the others predict it (leave-one-out).
-    #[arg(long)]
-    check_gcp: bool,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
@@ -262,10 +246,70 @@ impl DeformArgs {
         pipeline::Options {
             refine_strain: self.refine_strain,
             rbf_tolerance: self.tolerance.rbf_tolerance,
-            check_control_points: self.check_gcp,
+            check_control_points: self.reports.check_gcp,
             ..self.cells.options(self.transfer)
         }
         .params()
+    }
+}
+
+/// What `deform` and `solve` write and check beside their result (for `solve`, what `deform`
+/// gives for the tiles merged: the tiles as the report's `inputs`, the field as its `output`).
+#[derive(clap::Args)]
+struct ReportArgs {
+    /// Also write a JSON report: counts, cell levels, iterations, energies, residuals,
+    /// fold-overs, control points, timings per stage, peak memory.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Also write a PNG of the input and the output side by side (a decimated proxy of the
+    /// samples, across all tiles for `solve`: fixed regions gray, handles yellow, the rest
+    /// blue).
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// Add a third panel to the preview: the deformed cells colored by strain, blue (none) to
+    /// red (the most).
+    #[arg(long, requires = "preview")]
+    strain: bool,
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Check the control points (`[[target]]`): solve again without each in turn and report
+    /// how far the others predict it (leave-one-out).
+    #[arg(long)]
+    check_gcp: bool,
+}
+
+impl ReportArgs {
+    /// The run's outputs beside `named` (the output, the field) with their options, for
+    /// refusing clashes before any work.
+    fn named<'a>(
+        &'a self,
+        named: &[(&'static str, Option<&'a Path>)],
+    ) -> Vec<(&'static str, &'a Path)> {
+        named
+            .iter()
+            .copied()
+            .chain([
+                ("--report", self.report.as_deref()),
+                ("--preview", self.preview.as_deref()),
+            ])
+            .filter_map(|(option, path)| Some((option, path?)))
+            .collect()
+    }
+
+    /// The library's outputs: these beside `save_field`, the preview seen as the view options
+    /// say for `input`'s bounds.
+    fn outputs<'a>(
+        &'a self,
+        save_field: Option<&'a Path>,
+        input: &Path,
+    ) -> anyhow::Result<pipeline::Outputs<'a>> {
+        let view = self.view.view(input)?;
+        Ok(pipeline::Outputs {
+            save_field,
+            report: self.report.as_deref(),
+            preview: self.preview.as_deref().map(|p| (p, view, self.strain)),
+            keep_existing: false,
+        })
     }
 }
 
@@ -285,27 +329,11 @@ struct SolveArgs {
     /// The transfer `apply` will use (and the field is made for).
     #[arg(long, value_parser = choice::<Transfer>(), default_value_t = Transfer::Pu)]
     transfer: Transfer,
-    /// Also write a JSON report, as `deform --report` writes it for the merged file (the tiles
-    /// as `inputs`, the field as `output`, no write time).
-    #[arg(long)]
-    report: Option<PathBuf>,
-    /// Also write a PNG of the tiles before and after, side by side (a decimated proxy across
-    /// all tiles: fixed regions gray, handles yellow, the rest blue).
-    #[arg(long)]
-    preview: Option<PathBuf>,
-    /// Add a third panel to the preview: the deformed cells colored by strain, blue (none) to
-    /// red (the most).
-    #[arg(long, requires = "preview")]
-    strain: bool,
     #[command(flatten)]
-    view: ViewArgs,
+    reports: ReportArgs,
     /// Samples per streamed chunk (1 to 16,777,216; larger values are taken as the largest).
     #[arg(long, default_value_t = CHUNK)]
     chunk: usize,
-    /// Check the control points (`[[target]]`): solve again without each in turn and report
-    /// how far the others predict it (leave-one-out).
-    #[arg(long)]
-    check_gcp: bool,
     /// Take the tiles to be in one coordinate system. Without it, tiles that declare
     /// different systems (EPSG codes, else WKT texts) are refused (exit 4); one that declares
     /// none beside one that does is a warning. The field records the system.
@@ -320,7 +348,7 @@ impl SolveArgs {
     /// The library's parameters for these arguments.
     fn params(&self) -> Result<DeformParams, Error> {
         pipeline::Options {
-            check_control_points: self.check_gcp,
+            check_control_points: self.reports.check_gcp,
             ..self.cells.options(self.transfer)
         }
         .params()
