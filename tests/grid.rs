@@ -213,3 +213,76 @@ fn bad_parameters_exit_4_and_write_nothing() {
     let r = run(&["grid", arg(&dir.path().join("edit.toml")), "-o", arg(&tif)]);
     assert_eq!(r.code, 3, "{}", r.stderr);
 }
+
+/// The grid declares the system the field records: Topography.laz's EPSG:2949 without being
+/// told, and an `--epsg` that contradicts it is refused; a field solved in longitude and
+/// latitude has no east and north offsets to give.
+#[test]
+fn the_grid_declares_the_fields_system() {
+    let dir = tempfile::tempdir().unwrap();
+    let edit = dir.path().join("lift.toml");
+    let field = dir.path().join("t.field");
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [273300, 5274300, 700], max = [273450, 5274700, 900] }\n\
+         [[handle]]\nbox = { min = [273550, 5274300, 700], max = [273700, 5274700, 900] }\n\
+         translate = [0, 0, 1]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("t.laz");
+    let r = run(&[
+        "deform",
+        arg(&shared("las/Topography.laz")),
+        "-o",
+        arg(&out),
+        "--edit",
+        arg(&edit),
+        "--save-field",
+        arg(&field),
+        "-q",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let tif = dir.path().join("t.tif");
+    let r = run(&["grid", arg(&field), "-o", arg(&tif), "--spacing", "20"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    // ProjectedCSTypeGeoKey (3072), in the key directory: no location, one value, 2949.
+    let key: Vec<u8> = [3072u16, 0, 1, 2949]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    let bytes = std::fs::read(&tif).unwrap();
+    assert!(bytes.windows(8).any(|w| w == key), "no EPSG:2949 key");
+    std::fs::remove_file(&tif).unwrap();
+    let r = run(&["grid", arg(&field), "-o", arg(&tif), "--epsg", "2992"]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("--epsg 2992") && r.stderr.contains("EPSG:2949"),
+        "{}",
+        r.stderr
+    );
+    assert!(!tif.exists());
+
+    std::fs::write(
+        &edit,
+        "[[fixed]]\nbox = { min = [-94.69, 31.03, 0], max = [-94.68, 31.05, 100] }\n\
+         [[handle]]\nbox = { min = [-94.665, 31.03, 0], max = [-94.66, 31.05, 100] }\n\
+         translate = [0, 0, 1]\n",
+    )
+    .unwrap();
+    let r = run(&[
+        "deform",
+        arg(&shared("las/epsg_4326.las")),
+        "-o",
+        arg(&dir.path().join("d.las")),
+        "--edit",
+        arg(&edit),
+        "--save-field",
+        arg(&field),
+        "-q",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let r = run(&["grid", arg(&field), "-o", arg(&tif)]);
+    assert_eq!(r.code, 4, "{}", r.stderr);
+    assert!(r.stderr.contains("longitude and latitude"), "{}", r.stderr);
+    assert!(!tif.exists());
+}

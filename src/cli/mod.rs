@@ -151,7 +151,8 @@ enum Command {
         #[arg(long, value_name = "Z", allow_hyphen_values = true)]
         height: Option<f64>,
         /// EPSG code of the projected CRS of the field's coordinates, written in the grid's
-        /// GeoKeys [default: none written; PROJ needs none].
+        /// GeoKeys [default: the code of the system the field records, else none; PROJ needs
+        /// none]. A code other than the field's is refused.
         #[arg(long, value_name = "CODE")]
         epsg: Option<u32>,
         #[command(flatten)]

@@ -3,14 +3,16 @@
 
 use std::path::Path;
 
+use crate::crs::{Crs, Unit};
 use crate::error::{Error, Result};
 use crate::field::SavedField;
 use crate::field::grid::{GridInfo, GridParams, sample};
 
 /// Writes the field saved in `field` as a GeoTIFF grid of east, north and up offsets at
 /// `output` (`.tif` or `.tiff`), for PROJ's `+proj=gridshift`; `epsg` is the CRS of the
-/// field's coordinates when known (a projected CRS's code). The output appears whole or not
-/// at all; an output that names the field is refused before any work.
+/// field's coordinates when the user names it (a projected CRS's code), else the one the field
+/// records ([`grid_epsg`]). The output appears whole or not at all; an output that names the
+/// field is refused before any work.
 pub fn grid_file(
     field: &Path,
     output: &Path,
@@ -35,6 +37,7 @@ pub fn grid_file(
         )));
     }
     let saved = SavedField::<3>::load(field)?;
+    let epsg = grid_epsg(field, saved.crs.as_ref(), epsg)?;
     let (grid, info) = sample(saved, params)?;
     let name = field.file_name().unwrap_or_default().to_string_lossy();
     let description = format!(
@@ -46,4 +49,31 @@ pub fn grid_file(
         &crate::io::geotiff::offsets_tiff(&grid, epsg, &description),
     )?;
     Ok(info)
+}
+
+/// The EPSG code the grid declares: `asked` (`--epsg`), else the code of the system the field
+/// records. A field solved in longitude and latitude is refused (the grid holds east and north
+/// offsets in lengths), and so is an `--epsg` other than the code the field records.
+fn grid_epsg(field: &Path, crs: Option<&Crs>, asked: Option<u16>) -> Result<Option<u16>> {
+    let Some(crs) = crs else {
+        return Ok(asked);
+    };
+    if crs.unit == Some(Unit::Degree) {
+        return Err(Error::Param(format!(
+            "{}: the field was solved in longitude and latitude ({crs}); a grid of east and \
+             north offsets needs projected coordinates: solve on the scan projected",
+            field.display()
+        )));
+    }
+    match (asked, crs.epsg) {
+        (Some(a), Some(recorded)) if u32::from(a) != recorded => Err(Error::Param(format!(
+            "--epsg {a}: {} was solved in EPSG:{recorded} ({crs}); leave --epsg out to \
+             declare that system",
+            field.display()
+        ))),
+        (Some(a), _) => Ok(Some(a)),
+        (None, recorded) => Ok(recorded
+            .and_then(|c| u16::try_from(c).ok())
+            .filter(|&c| c <= 32766)),
+    }
 }
