@@ -309,8 +309,7 @@ where
             break;
         }
     }
-    info.seconds_per_iteration =
-        loop_start.elapsed().as_secs_f64() / info.iterations.max(1) as f64;
+    info.seconds_per_iteration = loop_start.elapsed().as_secs_f64() / info.iterations.max(1) as f64;
     (motions, info)
 }
 
@@ -371,11 +370,8 @@ impl Anderson {
         };
         let fs: Vec<DVector<f64>> = (0..k).map(f).collect();
         let last = &fs[k - 1];
-        let df = DMatrix::from_columns(
-            &(0..k - 1)
-                .map(|i| &fs[i + 1] - &fs[i])
-                .collect::<Vec<_>>(),
-        );
+        let df =
+            DMatrix::from_columns(&(0..k - 1).map(|i| &fs[i + 1] - &fs[i]).collect::<Vec<_>>());
         // Normal equations of the least-squares fit, lightly regularized.
         let mut normal = df.transpose() * &df;
         let scale = normal.diagonal().max().max(f64::MIN_POSITIVE);
@@ -424,8 +420,11 @@ mod tests {
 
     /// Gauss-Newton's (Newton's) minimum from rest at full load, to rounding.
     fn newton_minimum(complex: &CellComplex<3>, constraints: &Constraints<3>) -> f64 {
-        let mut motions: Vec<Motion<3>> =
-            complex.cells.iter().map(|c| Motion::rest(&c.center)).collect();
+        let mut motions: Vec<Motion<3>> = complex
+            .cells
+            .iter()
+            .map(|c| Motion::rest(&c.center))
+            .collect();
         let params = SolveParams {
             max_iterations: 100,
             tolerance: 1e-14,
@@ -442,10 +441,21 @@ mod tests {
     #[test]
     fn monotone_and_reaches_the_newton_minimum() {
         let (complex, constraints) = bent_bar();
-        assert!(constraints.roles.iter().filter(|r| **r == Role::Free).count() > 100);
+        assert!(
+            constraints
+                .roles
+                .iter()
+                .filter(|r| **r == Role::Free)
+                .count()
+                > 100
+        );
         let best = newton_minimum(&complex, &constraints);
         assert!(best > 0.0);
-        let rest: Vec<Motion<3>> = complex.cells.iter().map(|c| Motion::rest(&c.center)).collect();
+        let rest: Vec<Motion<3>> = complex
+            .cells
+            .iter()
+            .map(|c| Motion::rest(&c.center))
+            .collect();
         let mut reached = Vec::new();
         for anderson in [0, 5] {
             let params = LocalGlobalParams {
@@ -455,7 +465,12 @@ mod tests {
             };
             let (motions, info) = minimize_local_global(&complex, &constraints, &rest, &params);
             for w in info.energies.windows(2) {
-                assert!(w[1] <= w[0], "m = {anderson}: the energy rose from {} to {}", w[0], w[1]);
+                assert!(
+                    w[1] <= w[0],
+                    "m = {anderson}: the energy rose from {} to {}",
+                    w[0],
+                    w[1]
+                );
             }
             let last = *info.energies.last().unwrap();
             let to = targets_at(&constraints, 1.0);
@@ -466,7 +481,10 @@ mod tests {
                 info.iterations
             );
             // Not below Newton's minimum by more than rounding: the same energy is minimized.
-            assert!(last >= best * (1.0 - 1e-9), "m = {anderson}: {last} below {best}");
+            assert!(
+                last >= best * (1.0 - 1e-9),
+                "m = {anderson}: {last} below {best}"
+            );
             let first = info.energies.iter().position(|&e| e <= best * (1.0 + 1e-3));
             reached.push(first.unwrap());
         }
