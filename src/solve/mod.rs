@@ -77,6 +77,9 @@
 //! `positions`). The energy never increases across accepted iterations; a step that cannot
 //! decrease the energy ends the load step. With `refine_strain`, cells whose strain exceeds the threshold are split after the last
 //! load step (children inherit motion and constraint) and the solve continues.
+//!
+//! [`minimize_local_global`] minimizes the same energy by local-global iterations on one constant
+//! matrix (the `local_global` module); `solve` does not use it yet (BENCHMARKS.md: where it wins).
 
 mod auto;
 mod blocks;
