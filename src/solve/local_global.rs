@@ -82,6 +82,12 @@ pub struct LocalGlobalInfo {
     pub seconds_per_iteration: f64,
     /// Iterations whose Anderson candidate was kept.
     pub accelerated: usize,
+    /// Seconds in the local steps (the Procrustes fits) over all iterations.
+    pub seconds_local: f64,
+    /// Seconds in the global steps (back substitutions) over all iterations.
+    pub seconds_global: f64,
+    /// Seconds evaluating the energy over all iterations.
+    pub seconds_energy: f64,
 }
 
 /// One side of a pair, seen from a rotating cell: the cell, the other cell, the pair's weight
@@ -264,9 +270,15 @@ where
         .iter()
         .map(|&c| motions[c as usize].rot)
         .collect();
+    let (global_time, energy_time) = (std::cell::Cell::new(0.0), std::cell::Cell::new(0.0));
     let step = |motions: &mut [Motion<D>], rots: &[Mat<D>]| {
+        let t = Instant::now();
         layout.global(complex, constraints, &positions, motions, rots, &targets_to);
-        total_energy(complex, constraints, motions, &targets_to)
+        global_time.set(global_time.get() + t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let e = total_energy(complex, constraints, motions, &targets_to);
+        energy_time.set(energy_time.get() + t.elapsed().as_secs_f64());
+        e
     };
     let mut energy = step(&mut motions, &start_rots);
     info.energies.push(energy);
@@ -275,7 +287,9 @@ where
     let mut history = Anderson::new(params.anderson);
     let mut x = flatten(&start_rots);
     while info.iterations < params.max_iterations && !layout.rotating.is_empty() {
+        let t = Instant::now();
         let g_rots = layout.local(complex, constraints, &motions, &targets_to);
+        info.seconds_local += t.elapsed().as_secs_f64();
         let g = flatten(&g_rots);
         let mut next = None;
         if let Some(candidate) = history.push(&x, &g) {
@@ -310,6 +324,8 @@ where
         }
     }
     info.seconds_per_iteration = loop_start.elapsed().as_secs_f64() / info.iterations.max(1) as f64;
+    info.seconds_global = global_time.get();
+    info.seconds_energy = energy_time.get();
     (motions, info)
 }
 

@@ -183,9 +183,19 @@ fn compare(
         };
         let (_, lg) = solve::minimize_local_global(complex, constraints, start, &params);
         let monotone = lg.energies.windows(2).all(|w| w[1] <= w[0]);
+        let per = |s: f64| s * 1e3 / lg.iterations.max(1) as f64;
+        let split = format!(
+            "local {:.1}, global {:.1}, energy {:.1} ms/iteration",
+            per(lg.seconds_local),
+            per(lg.seconds_global),
+            per(lg.seconds_energy)
+        );
         let name = match anderson {
-            0 => "local-global".to_string(),
-            m => format!("local-global + Anderson m={m} ({} kept)", lg.accelerated),
+            0 => format!("local-global ({split})"),
+            m => format!(
+                "local-global + Anderson m={m} ({} kept; {split})",
+                lg.accelerated
+            ),
         };
         row(
             scene,
