@@ -56,10 +56,7 @@ pub fn deform_file_with(
     let mut named = vec![("the output", output)];
     named.extend(outputs.save_field.map(|p| ("the saved field", p)));
     let params = prepare(&[input], named, outputs, params)?;
-    let set = ResultSet::new();
-    if outputs.keep_existing {
-        set.keep_existing();
-    }
+    let set = result_set(outputs);
     let (solution, info) = deform_in(
         &set,
         input,
@@ -69,15 +66,7 @@ pub fn deform_file_with(
         chunk,
         observer,
     )?;
-    let report = Report::new(
-        &[input],
-        output,
-        &solution,
-        &info,
-        start.elapsed().as_secs_f64(),
-    );
-    write_beside(&set, outputs, &report, &solution, &info)?;
-    set.commit()?;
+    let report = finish(set, outputs, (&[input], output), &solution, &info, start)?;
     Ok((solution, info, report))
 }
 
@@ -106,10 +95,7 @@ pub fn solve_files(
     };
     let paths: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     let params = prepare(&paths, vec![("the saved field", field)], outputs, params)?;
-    let set = ResultSet::new();
-    if outputs.keep_existing {
-        set.keep_existing();
-    }
+    let set = result_set(outputs);
     set.last(field);
     let (solution, info) = solve_in(
         &set,
@@ -120,15 +106,7 @@ pub fn solve_files(
         (field, same_crs),
         observer,
     )?;
-    let report = Report::new(
-        &paths,
-        field,
-        &solution,
-        &info,
-        start.elapsed().as_secs_f64(),
-    );
-    write_beside(&set, outputs, &report, &solution, &info)?;
-    set.commit()?;
+    let report = finish(set, outputs, (&paths, field), &solution, &info, start)?;
     Ok((solution, info, report))
 }
 
@@ -158,6 +136,39 @@ fn prepare<'a>(
         }),
         ..*params
     })
+}
+
+/// The set a run's files are staged in: it replaces nothing that appears meanwhile under their
+/// names when `outputs.keep_existing`.
+fn result_set(outputs: &Outputs) -> ResultSet {
+    let set = ResultSet::new();
+    if outputs.keep_existing {
+        set.keep_existing();
+    }
+    set
+}
+
+/// The end of a run that read `inputs` and made `output` (the deformed file, or the field) since
+/// `start`: its report, handed to `set` with the preview when `outputs` ask for them, and every
+/// file of the set renamed into place together.
+fn finish(
+    set: ResultSet,
+    outputs: &Outputs,
+    (inputs, output): (&[&Path], &Path),
+    solution: &Solution<3>,
+    info: &FileInfo,
+    start: Instant,
+) -> Result<Report> {
+    let report = Report::new(
+        inputs,
+        output,
+        solution,
+        info,
+        start.elapsed().as_secs_f64(),
+    );
+    write_beside(&set, outputs, &report, solution, info)?;
+    set.commit()?;
+    Ok(report)
 }
 
 /// Hands `set` the report and the preview that `outputs` ask for.
