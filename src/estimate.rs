@@ -38,6 +38,8 @@ pub enum Solver {
     Direct,
     /// Conjugate gradients with the multilevel preconditioner.
     Multilevel,
+    /// Local-global iterations on the position Laplacian, factored once.
+    LocalGlobal,
 }
 
 impl Solver {
@@ -46,6 +48,7 @@ impl Solver {
         match self {
             Solver::Direct => "direct",
             Solver::Multilevel => "multilevel",
+            Solver::LocalGlobal => "local-global",
         }
     }
 }
@@ -110,6 +113,7 @@ impl Estimate {
         let by = match self.solver {
             Solver::Multilevel => " by the multilevel solver",
             Solver::Direct => "",
+            Solver::LocalGlobal => " by local-global iterations",
         };
         budget.check(
             &format!(

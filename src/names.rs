@@ -124,6 +124,7 @@ named!(Method, "solver", {
     Auto => "auto",
     Direct => "direct",
     Multilevel => "multilevel",
+    LocalGlobal => "local-global",
 });
 
 named!(Outside, "outside", {

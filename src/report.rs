@@ -60,7 +60,8 @@ pub struct Report {
     /// the cells carry from the fixed cells to it (`turn_taken_degrees`, null when no chain of
     /// cells joins it to a fixed cell); see [`crate::solve::turns`].
     pub handle_turns: Vec<HandleTurnReport>,
-    /// How the linear systems were solved: `direct` or `multilevel`.
+    /// How the cells' last iterations were solved: `direct` or `multilevel` (Gauss-Newton's
+    /// linear systems), or `local-global`.
     pub linear_solver: &'static str,
     /// Conjugate-gradient iterations over all Gauss-Newton steps (multilevel; 0 when direct).
     pub linear_iterations: usize,
@@ -70,7 +71,8 @@ pub struct Report {
     pub energy: Vec<f64>,
     /// Whether the last load step met the tolerance.
     pub converged: bool,
-    /// Every Gauss-Newton iteration: its `load_step`, `energy`, the two stopping figures (the
+    /// Every iteration: its `method` (`gauss-newton`, `newton`, `local-global` or `anderson`,
+    /// a local-global iteration whose accelerated rotations were kept), `load_step`, `energy`, the two stopping figures (the
     /// energy's relative `decrease` and the `largest_move` of a cell corner in finest cell
     /// sizes), the line search's `step_length`, its `linear_iterations` (conjugate gradients),
     /// and its `seconds_assembly`, `seconds_setup` (factor or hierarchy), `seconds_linear`
@@ -262,7 +264,7 @@ impl Report {
             load_steps: s.load_steps,
             load_step_halvings: s.halvings,
             handle_turns: s.turns.iter().map(HandleTurnReport::from).collect(),
-            linear_solver: if s.levels > 0 { "multilevel" } else { "direct" },
+            linear_solver: s.linear_solver(),
             linear_iterations: s.linear_iterations,
             levels: s.levels,
             energy: s.energies.clone(),

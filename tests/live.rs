@@ -85,7 +85,13 @@ fn a_drag_of_small_steps_ends_where_deform_does() {
             .unwrap()
             .unwrap();
         assert!(!step.from_rest, "pose {k} was solved from rest");
-        assert!(step.solver.iterations <= 1, "pose {k}: {:?}", step.solver);
+        // One Gauss-Newton iteration, or a drag's few local-global ones.
+        let most = rigidcells::solve::DRAG_LOCAL_GLOBAL;
+        assert!(
+            step.solver.iterations <= most,
+            "pose {k}: {:?}",
+            step.solver
+        );
         previews.push(live.preview().unwrap());
     }
     assert_eq!(live.complex().len(), cells);

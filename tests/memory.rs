@@ -125,9 +125,10 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
         &["--transfer", "blend", "--solver", "direct"],
         &["factoring the solver's system of 1512 cells", "--cell-size"],
     );
-    // The default solver falls back to the multilevel one (19.2 MiB, its coarsest level the
-    // cells themselves) where the factor does not fit (19.7 MiB with the pattern), and says so
-    // in the report; below that, both are refused.
+    // The default solver's Gauss-Newton falls back to the multilevel path (19.2 MiB, its
+    // coarsest level the cells themselves) where the factor does not fit (19.7 MiB with the
+    // pattern), and the report says how the solve went (local-global iterations need less
+    // still); below that, both are refused.
     refused(
         "16M",
         &["--transfer", "blend"],
@@ -154,12 +155,24 @@ fn the_rbf_and_the_solver_are_refused_before_they_allocate() {
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let text = std::fs::read_to_string(&report).unwrap();
-    assert!(text.contains(r#""linear_solver": "multilevel""#), "{text}");
+    assert!(
+        text.contains(r#""linear_solver": "multilevel""#)
+            || text.contains(r#""linear_solver": "local-global""#),
+        "{text}"
+    );
     std::fs::remove_file(&out).unwrap();
-    // Refinement that would outgrow the budget names its threshold.
+    // Refinement whose factor would outgrow the budget names its threshold (local-global
+    // iterations, needing no factor of the motions' system, fit it).
     refused(
         "60M",
-        &["--transfer", "blend", "--refine-strain", "1e-9"],
+        &[
+            "--transfer",
+            "blend",
+            "--refine-strain",
+            "1e-9",
+            "--solver",
+            "direct",
+        ],
         &["--refine-strain"],
     );
     // With room, the same run works.

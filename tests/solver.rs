@@ -384,7 +384,11 @@ fn a_drag_on_the_parents_ends_where_the_cells_solve() {
     let (mut dragged, mut plain) = (session(), session());
     for lift in [0.85, 0.9] {
         let info = dragged.drag_on_parents(spec(lift), 1).unwrap();
-        assert!(!info.converged && info.iterations == 1, "{info:?}");
+        let most = solve::DRAG_LOCAL_GLOBAL;
+        assert!(
+            !info.converged && (1..=most).contains(&info.iterations),
+            "{info:?}"
+        );
     }
     // The cells of a parent share its rotation.
     let rotations: std::collections::BTreeSet<Vec<u64>> = dragged
@@ -567,6 +571,7 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
     let solved = |newton| {
         let params = SolveParams {
             newton,
+            method: solve::Method::Direct,
             ..Default::default()
         };
         let s = solve_bar(&complex, &constraints, &params).unwrap();
@@ -601,9 +606,12 @@ fn the_iteration_log_says_why_each_load_step_stopped() {
     let (complex, constraints) = bent_bar(
         "rotate = { axis = [0.0, 1.0, 0.0], degrees = -60.0 }\ntranslate = [-1.0, 0.0, 2.0]",
     );
+    // Gauss-Newton's: local-global iterations stop by the distance left to move, not by the
+    // last one.
     let run = |move_tolerance| {
         let params = SolveParams {
             move_tolerance,
+            method: solve::Method::Direct,
             ..Default::default()
         };
         solve_bar(&complex, &constraints, &params)

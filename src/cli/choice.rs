@@ -61,6 +61,10 @@ impl Help for Method {
             Method::Multilevel => {
                 "Conjugate gradients with a rigid-motion multigrid (memory linear in the cells)"
             }
+            Method::LocalGlobal => {
+                "Local-global iterations on one matrix factored once, Anderson-accelerated \
+                 (no Gauss-Newton system)"
+            }
         }
     }
 }

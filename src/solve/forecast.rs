@@ -65,6 +65,40 @@ where
     Ok(estimate)
 }
 
+/// Gauss-Newton iterations [`newton_seconds`] counts on: what a load step on warm motions
+/// takes (BENCHMARKS.md: 4–6 on the tube, the bar and the vegetation strip).
+const NEWTON_ITERATIONS: f64 = 4.0;
+
+/// What Gauss-Newton would take to finish a load step on `complex` from motions near its
+/// minimum, by the path [`Method::Auto`] takes (its symbolic analysis, a hierarchy's
+/// construction and [`NEWTON_ITERATIONS`] iterations), in accelerated local-global iterations
+/// on the same cells: what local-global iterations are measured against ([`Method::Auto`]).
+/// Estimated from the counts, not timed, so that a solve is the same every run.
+pub(super) fn newton_in_local_global<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    budget: Budget,
+) -> f64
+where
+    Dim<D>: Rigid<D>,
+{
+    let params = SolveParams::default();
+    let (counts, method) = stage(complex, constraints, &params, budget);
+    let (iteration, setup) = counts.iteration_seconds(method);
+    let symbolic = match method {
+        Method::Multilevel => 0.0,
+        _ => SYMBOLIC_SECONDS_PER_ENTRY * counts.entries,
+    };
+    let local_global =
+        LOCAL_GLOBAL_SHARE * ITERATION_SECONDS_PER_ENTRY * (counts.cells + counts.coupled);
+    (NEWTON_ITERATIONS * iteration + setup + symbolic) / local_global
+}
+
+/// An accelerated local-global iteration's time, as a share of the pass over the cells and
+/// pairs a Gauss-Newton iteration makes (`ITERATION_SECONDS_PER_ENTRY` each): measured 0.08–0.12
+/// from 1k to 5.5k cells of the tube, the bar and the vegetation strip.
+const LOCAL_GLOBAL_SHARE: f64 = 0.1;
+
 /// The counts of one stage's solve and the path it takes: `params.method`, or for
 /// [`Method::Auto`] what `System::new` decides (the multilevel path for many cells of one
 /// size or a dense factor, else the direct path where it fits `budget`).
@@ -93,6 +127,7 @@ where
     let method = match params.method {
         Method::Direct => Method::Direct,
         Method::Multilevel => Method::Multilevel,
+        Method::LocalGlobal => Method::LocalGlobal,
         Method::Auto if uniform && free > auto::MULTILEVEL_FROM => Method::Multilevel,
         Method::Auto if uniform && free > COARSEST && fill > auto::MULTILEVEL_FILL as f64 => {
             Method::Multilevel
@@ -102,6 +137,7 @@ where
     };
     match method {
         Method::Multilevel => (with_hierarchy(counts, complex, constraints), method),
+        Method::LocalGlobal => (counts, method),
         _ => (counts, Method::Direct),
     }
 }
@@ -238,6 +274,12 @@ impl SolveCounts {
         8.0 * self.factor.len + 13.0 * self.factor.largest_update + 20.0 * self.entries
     }
 
+    /// The local-global path's bytes: the position Laplacian's factor (the cell graph's, one
+    /// value an entry) and each pair's two sides' moments.
+    pub fn local_global_bytes(&self) -> f64 {
+        8.0 * self.factor.nodes_len + self.pairs * 2.0 * (self.dof * self.dof + 8.0) * 8.0
+    }
+
     /// The multilevel path's bytes: its finest level (the matrix in `f64` and `f32`, the block
     /// inverses, the assembled values), the smoothed prolongation, the Galerkin product's
     /// partial sums, the coarse levels and the coarsest factor with its pattern.
@@ -302,6 +344,7 @@ fn solve_estimate(
         c.base_bytes()
             + match m {
                 Method::Multilevel => c.multilevel_bytes(),
+                Method::LocalGlobal => c.local_global_bytes(),
                 _ => c.direct_bytes(),
             }
     };
@@ -335,6 +378,7 @@ fn solve_estimate(
         solve_seconds: solve,
         solver: match method {
             Method::Multilevel => Solver::Multilevel,
+            Method::LocalGlobal => Solver::LocalGlobal,
             _ => Solver::Direct,
         },
         complete: true,

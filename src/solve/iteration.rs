@@ -1,5 +1,5 @@
-//! One Gauss-Newton iteration as the solver reports it ([`IterationLog`]): where it ended, the
-//! two figures its stopping rule reads, and where its time went.
+//! One iteration as the solver reports it ([`IterationLog`]): which kind, where it ended, the
+//! figures its stopping rule reads, and where its time went.
 
 use rayon::prelude::*;
 
@@ -9,10 +9,41 @@ use crate::rigid::{Motion, Vect};
 /// The default [`super::SolveParams::move_tolerance`]: a thousandth of the finest cell.
 pub const MOVE_TOLERANCE: f64 = 1e-3;
 
-/// One accepted Gauss-Newton iteration: where it ended, why the solver went on or stopped,
-/// and where its time went.
+/// Which kind of iteration an [`IterationLog`] records.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum IterationMethod {
+    /// A Gauss-Newton step (the normal equations without the rotations' curvature).
+    #[default]
+    GaussNewton,
+    /// A Newton step: the rotations' second-order term added (or its positive part).
+    Newton,
+    /// A local-global iteration: Procrustes fits, then one back substitution.
+    LocalGlobal,
+    /// A local-global iteration whose Anderson-accelerated rotations were kept.
+    Anderson,
+}
+
+impl IterationMethod {
+    /// As the report writes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            IterationMethod::GaussNewton => "gauss-newton",
+            IterationMethod::Newton => "newton",
+            IterationMethod::LocalGlobal => "local-global",
+            IterationMethod::Anderson => "anderson",
+        }
+    }
+}
+
+/// One accepted iteration: which kind, where it ended, why the solver went on or stopped, and
+/// where its time went. A local-global iteration's `seconds_assembly` is its local step (the
+/// Procrustes fits and Anderson's), `seconds_linear` its global steps (back substitutions),
+/// `seconds_line_search` the energy's evaluations; its `step_length` is 1.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct IterationLog {
+    /// The kind of iteration.
+    pub method: IterationMethod,
     /// The load step (0 first; the stages of a solve coarse to fine, and refinement rounds,
     /// count on after the last load step): the index into
     /// [`super::SolverInfo::step_starts`].
@@ -69,8 +100,9 @@ impl std::fmt::Display for IterationLog {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "energy {:.4e} (-{:.1e}), largest move {:.1e} cells, step {}; assembly {:.0} ms, \
+            "{}: energy {:.4e} (-{:.1e}), largest move {:.1e} cells, step {}; assembly {:.0} ms, \
              setup {:.0} ms, solve {:.0} ms",
+            self.method.name(),
             self.energy,
             self.decrease,
             self.largest_move,

@@ -43,6 +43,7 @@ use super::energy::quadrature;
 use super::positions::Positions;
 use super::{prescribe, targets_at, total_energy};
 use crate::cells::CellComplex;
+use crate::error::{Error, Result};
 use crate::rigid::{Dim, Mat, Motion, Rigid, Vect};
 
 /// Parameters of [`minimize_local_global`].
@@ -102,11 +103,11 @@ struct Side<const D: usize> {
 }
 
 /// The problem's constant parts.
-struct Layout<const D: usize> {
+pub(crate) struct Layout<const D: usize> {
     /// Center of rotation of every cell (the rest center, or the pinned point).
     centers: Vec<Vect<D>>,
-    /// Where each pinned cell sends its point (`None` for the other cells).
-    pinned: Vec<Option<Vect<D>>>,
+    /// The pin of each pinned cell (`None` for the other cells).
+    pinned: Vec<Option<u32>>,
     /// Rotating cells (free or pinned).
     rotating: Vec<u32>,
     /// Sides of each rotating cell, in the order of `rotating`.
@@ -116,7 +117,9 @@ struct Layout<const D: usize> {
 }
 
 impl<const D: usize> Layout<D> {
-    fn new(complex: &CellComplex<D>, constraints: &Constraints<D>) -> Self {
+    /// The centers of rotation, the rotating cells and their sides' moments: what no motion
+    /// changes (nor a handle, pin or target moved).
+    pub(crate) fn new(complex: &CellComplex<D>, constraints: &Constraints<D>) -> Self {
         let n = complex.len();
         let mut centers: Vec<Vect<D>> = complex.cells.iter().map(|c| c.center).collect();
         let mut pinned = vec![None; n];
@@ -128,7 +131,7 @@ impl<const D: usize> Layout<D> {
                 Role::Pin(k) => {
                     let pin = &constraints.pins[*k as usize];
                     centers[c] = pin.point;
-                    pinned[c] = Some(pin.to);
+                    pinned[c] = Some(*k);
                 }
                 _ => continue,
             }
@@ -223,31 +226,342 @@ impl<const D: usize> Layout<D> {
             .collect()
     }
 
-    /// Sets the rotating cells' rotations to `rots`, the pinned cells' positions to keep their
-    /// points, and the free positions to their optimum (the global step).
+    /// Sets the rotating cells' rotations to `rots`, the pinned cells' positions to send their
+    /// points to `to.pins`, and the free positions to their optimum (the global step).
     fn global(
         &self,
-        complex: &CellComplex<D>,
-        constraints: &Constraints<D>,
-        positions: &Positions,
+        (complex, constraints, positions): (&CellComplex<D>, &Constraints<D>, &Positions),
         motions: &mut [Motion<D>],
         rots: &[Mat<D>],
-        targets_to: &[Vect<D>],
+        to: &Destinations<D>,
     ) {
         for (&c, rot) in self.rotating.iter().zip(rots) {
             let c = c as usize;
             motions[c].rot = *rot;
-            if let Some(to) = self.pinned[c] {
-                motions[c].pos = rot * (complex.cells[c].center - self.centers[c]) + to;
+            if let Some(k) = self.pinned[c] {
+                motions[c].pos =
+                    rot * (complex.cells[c].center - self.centers[c]) + to.pins[k as usize];
             }
         }
-        positions.project(complex, constraints, motions, targets_to);
+        positions.project(complex, constraints, motions, to.targets);
+    }
+}
+
+/// Where the pins and the soft targets pull at a load step.
+pub(crate) struct Destinations<'a, const D: usize> {
+    pub pins: &'a [Vect<D>],
+    pub targets: &'a [Vect<D>],
+}
+
+/// How a run of local-global iterations stops.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Stop {
+    /// Iterations at most.
+    pub max_iterations: usize,
+    /// Stop once the energy left to gain, estimated from how fast the decreases shrink, is
+    /// below this fraction of the energy; 0 runs all `max_iterations`.
+    pub tolerance: f64,
+    /// And once the distance any cell corner has left to move, estimated as the energy left
+    /// is, is below this many finest cell sizes; 0 keeps only the energy test.
+    pub move_tolerance: f64,
+    /// Stop at this energy or below (the cells rigid to rounding).
+    pub floor: f64,
+    /// Previous iterates of Anderson acceleration; 0 turns it off.
+    pub anderson: usize,
+}
+
+/// One iteration as [`iterate`] hands it to its caller.
+pub(crate) struct Iterate {
+    pub energy_before: f64,
+    pub energy: f64,
+    /// The largest distance a cell corner moved, in finest cell sizes.
+    pub largest_move: f64,
+    /// Whether Anderson's candidate was taken.
+    pub accelerated: bool,
+    /// Seconds in the local step (the Procrustes fits, and Anderson's fit).
+    pub seconds_local: f64,
+    /// Seconds in the global steps (back substitutions).
+    pub seconds_global: f64,
+    /// Seconds evaluating the energy.
+    pub seconds_energy: f64,
+    /// The run's rate of convergence so far, this iteration included.
+    pub rate: Rate,
+}
+
+/// Local-global iterations from `motions` (the prescribed cells already where the load step
+/// puts them, `energy` theirs) until `stop` says so or `each`, told of every iteration,
+/// answers `true`. Returns the iterations and whether they converged: stopped by the
+/// tolerance, the floor, a minimum to rounding or `each`. The energy never rises.
+///
+/// **The stopping rule.** The iteration converges linearly: the decrease over a window of
+/// [`RATE_WINDOW`] iterations is about `r` times the last window's, so the energy left to gain
+/// is about `S r / (1 − r)` after a window's decrease `S` ([`Rate`]). Windows, not single
+/// iterations: accelerated iterations' decreases jump by orders of magnitude from one to the
+/// next, and a ratio of two of them said the vegetation strip had converged while it was 5e-4
+/// above its minimum. A rule on the last decrease alone (Gauss-Newton's) stops a slowly
+/// converging run far from its minimum. The distance the cells have left to move is estimated
+/// the same way from the largest corner moves; a small energy left does not bound it (the
+/// energy is flat along a long part's soft modes).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn iterate<const D: usize>(
+    parts: (&CellComplex<D>, &Constraints<D>, &Positions, &Layout<D>),
+    motions: &mut [Motion<D>],
+    to: &Destinations<D>,
+    mut energy: f64,
+    stop: &Stop,
+    each: &mut dyn FnMut(&Iterate) -> Result<bool>,
+) -> Result<(usize, bool)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let (complex, constraints, positions, layout) = parts;
+    if layout.rotating.is_empty() {
+        return Ok((0, true));
+    }
+    let fixed = (complex, constraints, positions);
+    let (global_time, energy_time) = (std::cell::Cell::new(0.0), std::cell::Cell::new(0.0));
+    let step = |motions: &mut [Motion<D>], rots: &[Mat<D>]| {
+        let t = Instant::now();
+        layout.global(fixed, motions, rots, to);
+        global_time.set(global_time.get() + t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let e = total_energy(complex, constraints, motions, to.targets);
+        energy_time.set(energy_time.get() + t.elapsed().as_secs_f64());
+        e
+    };
+    let mut history = Anderson::new(stop.anderson);
+    let rots: Vec<Mat<D>> = layout
+        .rotating
+        .iter()
+        .map(|&c| motions[c as usize].rot)
+        .collect();
+    let mut x = flatten(&rots);
+    let (mut decreases, mut moves): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    let size = complex.grid.finest_size();
+    let mut iterations = 0;
+    while iterations < stop.max_iterations {
+        if energy <= stop.floor {
+            return Ok((iterations, true));
+        }
+        let (global0, energy0) = (global_time.get(), energy_time.get());
+        let t = Instant::now();
+        let g_rots = layout.local(complex, constraints, motions, to.targets);
+        let g = flatten(&g_rots);
+        let candidate = history.push(&x, &g);
+        let mut next = None;
+        if let Some(candidate) = candidate {
+            let rots = unflatten::<D>(&candidate);
+            let mut trial = motions.to_vec();
+            let e = step(&mut trial, &rots);
+            if e < energy {
+                next = Some((trial, e, flatten(&rots), true));
+            } else {
+                history.clear();
+                history.push(&x, &g);
+            }
+        }
+        let (trial, e, rots, accelerated) = next.unwrap_or_else(|| {
+            let mut trial = motions.to_vec();
+            let e = step(&mut trial, &g_rots);
+            (trial, e, g, false)
+        });
+        if !e.is_finite() {
+            return Err(Error::Solver("the energy became non-finite".into()));
+        }
+        // The plain step never raises the energy: a rise, or no fall, is rounding at the
+        // minimum.
+        if e >= energy {
+            return Ok((iterations, true));
+        }
+        iterations += 1;
+        decreases.push(energy - e);
+        let rate = Rate::of(&decreases);
+        let largest_move = super::largest_corner_move(complex, motions, &trial) / size;
+        moves.push(largest_move);
+        let (global, energy_spent) = (global_time.get() - global0, energy_time.get() - energy0);
+        let enough = each(&Iterate {
+            energy_before: energy,
+            energy: e,
+            largest_move,
+            accelerated,
+            seconds_local: t.elapsed().as_secs_f64() - global - energy_spent,
+            seconds_global: global,
+            seconds_energy: energy_spent,
+            rate,
+        })?;
+        motions.copy_from_slice(&trial);
+        x = rots;
+        energy = e;
+        let still =
+            stop.move_tolerance > 0.0 && Rate::of(&moves).left_to_gain() > stop.move_tolerance;
+        if enough || (rate.left_to_gain() <= stop.tolerance * energy && !still) {
+            return Ok((iterations, true));
+        }
+    }
+    Ok((iterations, false))
+}
+
+/// A run of local-global iterations at a load step of [`super::solve`] (or a session's
+/// update): at most `params.max_iterations` times `params.local_global_per_iteration` of them,
+/// stopped once
+/// the energy left to gain is below [`GAP_FRACTION`] of `params.tolerance` (the last
+/// Gauss-Newton step's rule leaves less than that ungained); each is logged in `info`
+/// and told to `observer`. With `newton`, what Gauss-Newton is estimated to take from here in
+/// local-global iterations, the run also stops where its rate says it would take more than
+/// half of that (then [`Outcome::Slower`]). Returns the iterations and how the run ended.
+#[allow(clippy::too_many_arguments)]
+pub(in crate::solve) fn logged<const D: usize>(
+    (positions, layout): (&Positions, &Layout<D>),
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    (motions, energy, floor): (&mut [Motion<D>], f64, f64),
+    to: &Destinations<D>,
+    (params, newton): (&super::SolveParams, Option<&dyn Fn() -> f64>),
+    info: &mut super::SolverInfo,
+    observer: &dyn crate::progress::Observer,
+) -> Result<(usize, Outcome)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let stop = Stop {
+        max_iterations: params
+            .max_iterations
+            .saturating_mul(params.local_global_per_iteration),
+        tolerance: params.tolerance * GAP_FRACTION,
+        move_tolerance: params.move_tolerance,
+        floor,
+        anderson: ANDERSON_DEPTH,
+    };
+    let load_step = info.step_starts.len() - 1;
+    let (mut done, mut newton_estimate) = (0usize, None);
+    let mut slower = false;
+    let mut each = |it: &Iterate| {
+        let log = super::IterationLog {
+            method: match it.accelerated {
+                true => super::IterationMethod::Anderson,
+                false => super::IterationMethod::LocalGlobal,
+            },
+            load_step,
+            cells: complex.len(),
+            energy: it.energy,
+            decrease: (it.energy_before - it.energy) / it.energy_before,
+            largest_move: it.largest_move,
+            step_length: 1.0,
+            linear_iterations: 0,
+            seconds_assembly: it.seconds_local,
+            seconds_setup: 0.0,
+            seconds_linear: it.seconds_global,
+            seconds_line_search: it.seconds_energy,
+        };
+        info.iterations += 1;
+        info.energies.push(it.energy);
+        info.seconds_factor += it.seconds_local + it.seconds_global;
+        info.log.push(log);
+        let n = info.log.len();
+        // A line every tenth iteration: a run takes tens to hundreds.
+        if n.is_multiple_of(10) {
+            observer.message(&format!("iteration {n}: {log}"));
+        }
+        crate::progress::check(observer)?;
+        done += 1;
+        // Once the rate is known, and then every window: would Gauss-Newton be sooner?
+        if let Some(newton) = newton
+            && done >= 2 * RATE_WINDOW
+            && done.is_multiple_of(RATE_WINDOW)
+        {
+            let left = it.rate.iterations_to(stop.tolerance * it.energy);
+            // Half: the early windows' rate is the fastest the run will see.
+            slower = left > 0.5 * *newton_estimate.get_or_insert_with(newton);
+        }
+        Ok(slower)
+    };
+    let parts = (complex, constraints, positions, layout);
+    let (iterations, converged) = iterate(parts, motions, to, energy, &stop, &mut each)?;
+    let outcome = match (slower, converged) {
+        (true, _) => Outcome::Slower,
+        (false, true) => Outcome::Converged,
+        (false, false) => Outcome::Unconverged,
+    };
+    info.converged = outcome == Outcome::Converged;
+    Ok((iterations, outcome))
+}
+
+/// How a run of [`logged`] iterations ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(in crate::solve) enum Outcome {
+    /// At the tolerance (or a minimum to rounding).
+    Converged,
+    /// At the iteration limit.
+    Unconverged,
+    /// Stopped where Gauss-Newton was estimated to finish sooner.
+    Slower,
+}
+
+/// The energy left to gain at which [`logged`] stops, as a fraction of
+/// [`super::SolveParams::tolerance`]: on the tube a tenth stopped 1.2e-6 of the energy above
+/// Newton's minimum (the estimate of what is left is rough), a hundredth within 1e-7.
+const GAP_FRACTION: f64 = 0.01;
+
+/// The default [`super::SolveParams::local_global_per_iteration`].
+pub const LOCAL_GLOBAL_PER_ITERATION: usize = 40;
+
+/// Previous iterates Anderson acceleration keeps (Peng et al. use 5 and 6).
+const ANDERSON_DEPTH: usize = 5;
+
+/// Iterations in a window of [`Rate`].
+pub(crate) const RATE_WINDOW: usize = 8;
+
+/// How fast a linearly converging run's energy falls: the decrease `last` over its last
+/// [`RATE_WINDOW`] iterations and its ratio `ratio` to the window's before.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Rate {
+    last: f64,
+    ratio: f64,
+}
+
+impl Rate {
+    /// The rate of a run of `decreases` (`ratio` infinite until there are two windows).
+    pub(crate) fn of(decreases: &[f64]) -> Self {
+        let k = decreases.len();
+        if k < 2 * RATE_WINDOW {
+            return Self {
+                last: f64::INFINITY,
+                ratio: f64::INFINITY,
+            };
+        }
+        let last: f64 = decreases[k - RATE_WINDOW..].iter().sum();
+        let before: f64 = decreases[k - 2 * RATE_WINDOW..k - RATE_WINDOW].iter().sum();
+        Self {
+            last,
+            ratio: last / before,
+        }
+    }
+
+    /// The energy left to gain: infinite while the windows' decreases do not shrink.
+    pub(crate) fn left_to_gain(&self) -> f64 {
+        match self.ratio.is_finite() && self.ratio < 1.0 {
+            true => self.last * self.ratio / (1.0 - self.ratio),
+            false => f64::INFINITY,
+        }
+    }
+
+    /// Iterations more until the energy left to gain is `goal` (infinite where the decreases
+    /// do not shrink).
+    pub(crate) fn iterations_to(&self, goal: f64) -> f64 {
+        let left = self.left_to_gain();
+        if left <= goal {
+            return 0.0;
+        }
+        match left.is_finite() && goal > 0.0 {
+            true => RATE_WINDOW as f64 * (goal / left).ln() / self.ratio.ln(),
+            false => f64::INFINITY,
+        }
     }
 }
 
 /// Minimizes the glue energy at full load by local-global iterations from `start` (the
-/// prescribed cells are set to their prescribed motions first). Returns the motions and what
-/// was done. See the module docs.
+/// prescribed cells are set to their prescribed motions first, the free positions to their
+/// optimum). Returns the motions and what was done. See the module docs.
 pub fn minimize_local_global<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
@@ -261,71 +575,49 @@ where
     let mut info = LocalGlobalInfo::default();
     let mut motions = start.to_vec();
     prescribe(complex, constraints, &mut motions, 1.0);
-    let targets_to = targets_at(constraints, 1.0);
+    let targets = targets_at(constraints, 1.0);
+    let pins: Vec<Vect<D>> = constraints.pins.iter().map(|p| p.to).collect();
+    let to = Destinations {
+        pins: &pins,
+        targets: &targets,
+    };
     let positions = Positions::new(complex, constraints);
     info.seconds_factor = clock.elapsed().as_secs_f64();
     let layout = Layout::new(complex, constraints);
-    let start_rots: Vec<Mat<D>> = layout
+    let rots: Vec<Mat<D>> = layout
         .rotating
         .iter()
         .map(|&c| motions[c as usize].rot)
         .collect();
-    let (global_time, energy_time) = (std::cell::Cell::new(0.0), std::cell::Cell::new(0.0));
-    let step = |motions: &mut [Motion<D>], rots: &[Mat<D>]| {
-        let t = Instant::now();
-        layout.global(complex, constraints, &positions, motions, rots, &targets_to);
-        global_time.set(global_time.get() + t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        let e = total_energy(complex, constraints, motions, &targets_to);
-        energy_time.set(energy_time.get() + t.elapsed().as_secs_f64());
-        e
-    };
-    let mut energy = step(&mut motions, &start_rots);
+    layout.global((complex, constraints, &positions), &mut motions, &rots, &to);
+    let energy = total_energy(complex, constraints, &motions, &targets);
     info.energies.push(energy);
     info.seconds.push(clock.elapsed().as_secs_f64());
     let loop_start = Instant::now();
-    let mut history = Anderson::new(params.anderson);
-    let mut x = flatten(&start_rots);
-    while info.iterations < params.max_iterations && !layout.rotating.is_empty() {
-        let t = Instant::now();
-        let g_rots = layout.local(complex, constraints, &motions, &targets_to);
-        info.seconds_local += t.elapsed().as_secs_f64();
-        let g = flatten(&g_rots);
-        let mut next = None;
-        if let Some(candidate) = history.push(&x, &g) {
-            let rots = unflatten::<D>(&candidate);
-            let mut trial = motions.clone();
-            let e = step(&mut trial, &rots);
-            if e < energy {
-                next = Some((trial, e, flatten(&rots)));
-                info.accelerated += 1;
-            } else {
-                history.clear();
-                history.push(&x, &g);
-            }
-        }
-        let (trial, e, rots) = next.unwrap_or_else(|| {
-            let mut trial = motions.clone();
-            let e = step(&mut trial, &g_rots);
-            (trial, e, g)
-        });
-        info.iterations += 1;
-        let decrease = energy - e;
-        // The plain step never raises the energy; a rise is rounding at the minimum.
-        if e <= energy {
-            motions = trial;
-            x = rots;
-            energy = e;
-        }
-        info.energies.push(energy);
+    let stop = Stop {
+        max_iterations: params.max_iterations,
+        tolerance: 0.0,
+        move_tolerance: 0.0,
+        floor: 0.0,
+        anderson: params.anderson,
+    };
+    let mut last = energy;
+    let mut each = |it: &Iterate| {
+        info.energies.push(it.energy);
         info.seconds.push(clock.elapsed().as_secs_f64());
-        if decrease <= params.tolerance * energy {
-            break;
-        }
-    }
+        info.accelerated += it.accelerated as usize;
+        info.seconds_local += it.seconds_local;
+        info.seconds_global += it.seconds_global;
+        info.seconds_energy += it.seconds_energy;
+        let stalled = last - it.energy <= params.tolerance * it.energy;
+        last = it.energy;
+        Ok(stalled)
+    };
+    let parts = (complex, constraints, &positions, &layout);
+    // Only `each` could fail, and it does not.
+    let _ = iterate(parts, &mut motions, &to, energy, &stop, &mut each);
+    info.iterations = info.energies.len() - 1;
     info.seconds_per_iteration = loop_start.elapsed().as_secs_f64() / info.iterations.max(1) as f64;
-    info.seconds_global = global_time.get();
-    info.seconds_energy = energy_time.get();
     (motions, info)
 }
 
@@ -558,5 +850,91 @@ mod tests {
                     rotate = { degrees = 30.0 }\ntranslate = [0.0, 0.5]\n";
         let (complex, constraints) = edited(&pts, &[], 0.125, spec);
         reaches_the_newton_minimum(&complex, &constraints);
+    }
+
+    /// `solve` of `complex` under `constraints` by `method`.
+    fn solved<const D: usize>(
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        method: crate::solve::Method,
+    ) -> crate::solve::Solution<D>
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let params = SolveParams {
+            method,
+            ..Default::default()
+        };
+        let (complex, constraints) = (complex.clone(), constraints.clone());
+        let silent = &crate::progress::Silent;
+        crate::solve::solve(complex, constraints, &params, Budget::default(), silent).unwrap()
+    }
+
+    /// Solved by local-global iterations through load steps, the bar ends within 1e-6 of
+    /// Newton's energy, its prescribed cells where they are sent, every iteration logged as
+    /// local-global; `auto` takes the same iterations here (a short bar), the same every run.
+    #[test]
+    fn a_solve_by_local_global_ends_at_newtons_minimum() {
+        use crate::solve::{IterationMethod, Method};
+        let mesh = data_gen::bar([4.0, 1.0, 1.0], 12.0);
+        let pts: Vec<Vect<3>> = mesh.vertices.iter().map(|v| Vect::<3>::from(*v)).collect();
+        let spec = "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
+                    [[handle]]\nbox = { min = [3.5, -0.1, -0.1], max = [4.1, 1.1, 1.1] }\n\
+                    rotate = { axis = [0.0, 1.0, 0.0], degrees = 60.0 }\n\
+                    translate = [0.0, 0.3, 0.5]\n";
+        let (complex, constraints) = edited(&pts, &mesh.triangles, 0.25, spec);
+        let newton = solved(&complex, &constraints, Method::Direct);
+        let lg = solved(&complex, &constraints, Method::LocalGlobal);
+        let energy = |s: &crate::solve::Solution<3>| *s.info.energies.last().unwrap();
+        let (en, el) = (energy(&newton), energy(&lg));
+        assert!(
+            (el - en).abs() <= 1e-6 * en,
+            "local-global {el}, Newton {en}"
+        );
+        assert!(lg.info.converged && lg.info.load_steps > 1, "{:?}", lg.info);
+        assert!(lg.info.log.iter().all(|l| matches!(
+            l.method,
+            IterationMethod::LocalGlobal | IterationMethod::Anderson
+        )));
+        assert!(newton.info.log.iter().all(|l| matches!(
+            l.method,
+            IterationMethod::GaussNewton | IterationMethod::Newton
+        )));
+        assert_eq!(lg.info.linear_solver(), "local-global");
+        let mut want = lg.motions.clone();
+        prescribe(&complex, &lg.constraints, &mut want, 1.0);
+        assert_eq!(want, lg.motions, "prescribed cells moved");
+        let auto = solved(&complex, &constraints, Method::Auto);
+        assert_eq!(auto.motions, lg.motions);
+        assert_eq!(
+            auto.motions,
+            solved(&complex, &constraints, Method::Auto).motions
+        );
+    }
+
+    /// On a strip 40 cells long `auto` starts with local-global iterations, finds Gauss-Newton
+    /// sooner and ends at its minimum.
+    #[test]
+    fn auto_takes_newton_where_local_global_would_be_slower() {
+        use crate::solve::{IterationMethod, Method};
+        let pts: Vec<Vect<2>> = (0..=400)
+            .flat_map(|i| (0..=10).map(move |j| Vect::<2>::new(i as f64 * 0.05, j as f64 * 0.05)))
+            .collect();
+        let spec = "[[fixed]]\nbox = { min = [-0.1, -0.1], max = [1.0, 1.1] }\n\
+                    [[handle]]\nbox = { min = [19.0, -0.1], max = [20.1, 1.1] }\n\
+                    translate = [0.0, 3.0]\n";
+        let (complex, constraints) = edited(&pts, &[], 0.5, spec);
+        let auto = solved(&complex, &constraints, Method::Auto);
+        assert!(auto.info.newton_sooner, "{:?}", auto.info.log);
+        let first = auto.info.log.first().unwrap().method;
+        assert_eq!(first, IterationMethod::LocalGlobal);
+        assert!(matches!(
+            auto.info.log.last().unwrap().method,
+            IterationMethod::Newton | IterationMethod::GaussNewton
+        ));
+        let newton = solved(&complex, &constraints, Method::Direct);
+        let energy = |s: &crate::solve::Solution<2>| *s.info.energies.last().unwrap();
+        let (ea, en) = (energy(&auto), energy(&newton));
+        assert!((ea - en).abs() <= 1e-6 * en, "auto {ea}, Newton {en}");
     }
 }

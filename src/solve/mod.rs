@@ -109,10 +109,12 @@ pub use constraints::{
 pub use energy::{cell_strain, glue_energy, pair_energy};
 pub use forecast::forecast;
 use iteration::largest_corner_move;
-pub use iteration::{IterationLog, MOVE_TOLERANCE};
-pub use local_global::{LocalGlobalInfo, LocalGlobalParams, minimize_local_global};
+pub use iteration::{IterationLog, IterationMethod, MOVE_TOLERANCE};
+pub use local_global::{
+    LOCAL_GLOBAL_PER_ITERATION, LocalGlobalInfo, LocalGlobalParams, minimize_local_global,
+};
 pub use selections::Selections;
-pub use session::{DRAG_COARSE_FROM, DRAG_FACTOR_MOST, Session};
+pub use session::{DRAG_COARSE_FROM, DRAG_FACTOR_MOST, DRAG_LOCAL_GLOBAL, Session};
 pub use sight::Sight;
 
 use crate::cells::CellComplex;
@@ -121,7 +123,7 @@ use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid, Vect};
 pub use steps::MAX_TRAVEL;
-use steps::load_steps;
+use steps::{load_steps, predict, prescribe, targets_at};
 use system::System;
 use turns::TurnGauge;
 pub use turns::{HandleTurn, TurnKind, TurnRefusal};
@@ -131,6 +133,10 @@ pub use turns::{HandleTurn, TurnKind, TurnRefusal};
 pub struct SolveParams {
     /// Gauss-Newton iterations per load step at most. Default 50.
     pub max_iterations: usize,
+    /// Local-global iterations a load step may take for each of `max_iterations` (an
+    /// accelerated one costs a fifteenth to a twentieth of a factored Gauss-Newton iteration:
+    /// BENCHMARKS.md). Default [`LOCAL_GLOBAL_PER_ITERATION`].
+    pub local_global_per_iteration: usize,
     /// Stop a load step when an iteration lowers the energy by less than this fraction of it.
     /// Default 1e-6.
     pub tolerance: f64,
@@ -159,7 +165,8 @@ pub struct SolveParams {
     /// them from rest; `None` (default): as many as the cells call for (none below
     /// [`COARSE_FROM`] cells).
     pub coarse_levels: Option<u8>,
-    /// How each Gauss-Newton system is solved. Default [`Method::Auto`].
+    /// How each Gauss-Newton system is solved, or local-global iterations instead. Default
+    /// [`Method::Auto`].
     pub method: Method,
     /// Parts of the shape without any constraint ride along rigidly with the nearest cell of
     /// a constrained part ([`carry_loose`]); `false` keeps them at rest. Default `true`.
@@ -184,12 +191,16 @@ pub enum Method {
     /// Conjugate gradients preconditioned by a rigid-motion aggregation multigrid
     /// (`multilevel` module; memory and work per iteration linear in the cells).
     Multilevel,
+    /// No Gauss-Newton system: local-global iterations on the constant position Laplacian,
+    /// factored once, with Anderson acceleration (the `local_global` module).
+    LocalGlobal,
 }
 
 impl Default for SolveParams {
     fn default() -> Self {
         Self {
             max_iterations: 50,
+            local_global_per_iteration: LOCAL_GLOBAL_PER_ITERATION,
             tolerance: 1e-6,
             move_tolerance: MOVE_TOLERANCE,
             max_step_degrees: 30.0,
@@ -265,6 +276,11 @@ pub struct SolverInfo {
     pub estimate: Option<crate::estimate::Estimate>,
     /// The control points' trend ([`trend`]; `None` without one).
     pub trend: Option<crate::spec::Trend>,
+    /// Whether a load step or stage stopped its local-global iterations where Gauss-Newton
+    /// was estimated to finish sooner ([`Method::Auto`]): the steps and stages after it take
+    /// Gauss-Newton from their start (a strip that converges slowly on its coarse cells
+    /// converges more slowly on its finer ones).
+    pub newton_sooner: bool,
 }
 
 impl SolverInfo {
@@ -277,6 +293,16 @@ impl SolverInfo {
             .cloned()
             .chain(turns)
             .collect()
+    }
+
+    /// How the last iterations were solved: `direct` or `multilevel` (Gauss-Newton's linear
+    /// systems), or `local-global`.
+    pub fn linear_solver(&self) -> &'static str {
+        match self.log.last().map(|l| l.method) {
+            Some(IterationMethod::LocalGlobal | IterationMethod::Anderson) => "local-global",
+            _ if self.levels > 0 => "multilevel",
+            _ => "direct",
+        }
     }
 
     /// Mean seconds per Gauss-Newton iteration.
@@ -630,43 +656,6 @@ const MAX_HALVINGS: u32 = 4;
 /// (a quarter turn, in radians).
 const BRANCH_JUMP: f64 = std::f64::consts::FRAC_PI_2;
 
-/// The predictor of a load step: every free or pinned cell turns on by `alpha` times the
-/// rotation it took over the last step (from `before` to `motions`), and moves on likewise (the
-/// caller then puts the free cells where the predicted rotations want them, by variable
-/// projection).
-/// Advancing only the handles leaves the cells between them where the last step ended, and a
-/// step that starts there may end on another branch (a part twisted past a half turn untwists
-/// the short way round).
-fn predict<const D: usize>(
-    constraints: &Constraints<D>,
-    motions: &mut [Motion<D>],
-    before: &[Motion<D>],
-    alpha: f64,
-) where
-    Dim<D>: Rigid<D>,
-{
-    for (c, role) in constraints.roles.iter().enumerate() {
-        if matches!(role, Role::Free | Role::Pin(_)) {
-            let m = motions[c];
-            let (axis, angle) =
-                <Dim<D> as Rigid<D>>::axis_angle_of(&(m.rot * before[c].rot.transpose()));
-            let next = Motion {
-                rot: <Dim<D> as Rigid<D>>::axis_angle(&axis, alpha * angle) * m.rot,
-                pos: m.pos + (m.pos - before[c].pos) * alpha,
-            };
-            // A rotation whose axis rounding loses (a half turn) keeps the cell where it is.
-            if next
-                .rot
-                .iter()
-                .chain(next.pos.iter())
-                .all(|v| v.is_finite())
-            {
-                motions[c] = next;
-            }
-        }
-    }
-}
-
 /// Levels an adaptive solve ([`adaptive`]) starts above its smallest cells.
 pub const ADAPTIVE_LEVELS: u8 = 3;
 /// An adaptive solve splits the cells whose strain exceeds this fraction of the largest.
@@ -829,6 +818,27 @@ where
     // The energy of every pair being off by 1e-12 of a cell: rigid to rounding.
     let size = complex.grid.finest_size();
     let floor = (1e-12 * size).powi(2) * complex.pairs.iter().map(|p| p.weight).sum::<f64>();
+    let to = local_global::Destinations {
+        pins: &pins_to,
+        targets: &targets_to,
+    };
+    let state = (&mut *motions, energy, floor);
+    let local_global = match system::first(
+        system,
+        complex,
+        constraints,
+        state,
+        &to,
+        params,
+        info,
+        observer,
+    )? {
+        (it, None) => return Ok(it),
+        (it, Some(e)) => {
+            energy = e;
+            it
+        }
+    };
     let mut iterations = 0;
     // Whether the last step lowered the energy by less than half: the multilevel path may
     // keep its hierarchy (coarse levels built at motions that have hardly moved since).
@@ -901,6 +911,10 @@ where
         info.iterations += 1;
         info.energies.push(energy);
         let log = IterationLog {
+            method: match newton {
+                true => IterationMethod::Newton,
+                false => IterationMethod::GaussNewton,
+            },
             load_step: info.step_starts.len() - 1,
             cells: complex.len(),
             energy,
@@ -924,42 +938,7 @@ where
             break;
         }
     }
-    Ok(iterations)
-}
-
-/// Where the soft targets pull at load fraction `f`.
-fn targets_at<const D: usize>(constraints: &Constraints<D>, f: f64) -> Vec<Vect<D>> {
-    constraints
-        .targets
-        .iter()
-        .map(|t| t.from + (t.to - t.from) * f)
-        .collect()
-}
-
-/// Sets the motions of fixed, rest and handle cells for load fraction `f`.
-fn prescribe<const D: usize>(
-    complex: &CellComplex<D>,
-    constraints: &Constraints<D>,
-    motions: &mut [Motion<D>],
-    f: f64,
-) where
-    Dim<D>: Rigid<D>,
-{
-    let maps: Vec<_> = (0..constraints.handles.len())
-        .map(|k| constraints.handle_map(k, f))
-        .collect();
-    for (c, role) in constraints.roles.iter().enumerate() {
-        let center = &complex.cells[c].center;
-        match role {
-            Role::Fixed | Role::Rest => {
-                motions[c] = constraints.prescribed_motion(None, center, f);
-            }
-            Role::Handle(k) => {
-                motions[c] = constraints.prescribed_motion(Some(&maps[*k as usize]), center, f);
-            }
-            _ => {}
-        }
-    }
+    Ok(local_global + iterations)
 }
 
 /// What to change when the cells do not fit the memory budget.

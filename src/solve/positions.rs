@@ -81,6 +81,12 @@ impl Positions {
         Self { row, n, factor }
     }
 
+    /// Whether the Laplacian was factored (it is singular where a free part has nothing
+    /// holding its translation).
+    pub fn is_factored(&self) -> bool {
+        self.factor.is_some()
+    }
+
     /// Sets the position of every free cell to its optimum for the current rotations (and the
     /// positions of the other cells). Leaves `motions` unchanged if the solve is not finite.
     pub fn project<const D: usize>(

@@ -48,6 +48,12 @@ pub struct Session<const D: usize> {
     carried: Option<(Constraints<D>, Vec<Motion<D>>)>,
 }
 
+/// Local-global iterations a drag's step takes for each Gauss-Newton iteration it is given
+/// (`pipeline::live::DRAG_ITERATIONS`, one): on 5k cells of the tube some 3–4 ms each, a
+/// fifth of the factorization of one Gauss-Newton step. The system is factored once per
+/// session (per structure of the constraints); a pose changes only the right-hand sides.
+pub const DRAG_LOCAL_GLOBAL: usize = 4;
+
 /// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels
 /// of coarsening reach that) and the cells follow them rigidly; the cells themselves are solved
 /// when the drag pauses or ends. At 50k cells of a terrain an update on the cells costs
@@ -352,7 +358,9 @@ where
 }
 
 /// At most `max_iterations` Gauss-Newton iterations of `params` at full load, from the motions
-/// as they are, into `info`.
+/// as they are, into `info`. A step short of the solver's limit (a drag's, or an idle
+/// refinement's) takes [`DRAG_LOCAL_GLOBAL`] local-global iterations for each where the system
+/// takes those.
 #[allow(clippy::type_complexity)]
 fn warm_steps<const D: usize>(
     (system, complex, constraints, motions): (
@@ -368,8 +376,13 @@ fn warm_steps<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
+    let short = max_iterations < params.max_iterations;
     let params = SolveParams {
         max_iterations,
+        local_global_per_iteration: match short {
+            true => DRAG_LOCAL_GLOBAL,
+            false => params.local_global_per_iteration,
+        },
         ..*params
     };
     let silent = &crate::progress::Silent;

@@ -1,10 +1,12 @@
-//! How many load steps an edit takes: enough that no handle turns by more than a step's angle
-//! and nothing moves by more than a step's share of the shape per step.
+//! How many load steps an edit takes (enough that no handle turns by more than a step's angle
+//! and nothing moves by more than a step's share of the shape per step), where each step
+//! starts ([`predict`]), and what it prescribes ([`prescribe`], [`targets_at`]).
 
 use super::SolveParams;
 use super::constraints::{Constraints, Role};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
+use crate::rigid::Motion;
 use crate::rigid::{Dim, Rigid, Vect};
 
 /// The number of load steps: enough that no handle turns by more than `max_step_degrees` and
@@ -92,3 +94,75 @@ where
 /// The most the constraints' motions may spread, in extents of the cells (at most 100 load
 /// steps of a quarter extent).
 pub const MAX_TRAVEL: f64 = 25.0;
+
+/// The predictor of a load step: every free or pinned cell turns on by `alpha` times the
+/// rotation it took over the last step (from `before` to `motions`), and moves on likewise (the
+/// caller then puts the free cells where the predicted rotations want them, by variable
+/// projection).
+/// Advancing only the handles leaves the cells between them where the last step ended, and a
+/// step that starts there may end on another branch (a part twisted past a half turn untwists
+/// the short way round).
+pub(super) fn predict<const D: usize>(
+    constraints: &Constraints<D>,
+    motions: &mut [Motion<D>],
+    before: &[Motion<D>],
+    alpha: f64,
+) where
+    Dim<D>: Rigid<D>,
+{
+    for (c, role) in constraints.roles.iter().enumerate() {
+        if matches!(role, Role::Free | Role::Pin(_)) {
+            let m = motions[c];
+            let (axis, angle) =
+                <Dim<D> as Rigid<D>>::axis_angle_of(&(m.rot * before[c].rot.transpose()));
+            let next = Motion {
+                rot: <Dim<D> as Rigid<D>>::axis_angle(&axis, alpha * angle) * m.rot,
+                pos: m.pos + (m.pos - before[c].pos) * alpha,
+            };
+            // A rotation whose axis rounding loses (a half turn) keeps the cell where it is.
+            if next
+                .rot
+                .iter()
+                .chain(next.pos.iter())
+                .all(|v| v.is_finite())
+            {
+                motions[c] = next;
+            }
+        }
+    }
+}
+
+/// Where the soft targets pull at load fraction `f`.
+pub(super) fn targets_at<const D: usize>(constraints: &Constraints<D>, f: f64) -> Vec<Vect<D>> {
+    constraints
+        .targets
+        .iter()
+        .map(|t| t.from + (t.to - t.from) * f)
+        .collect()
+}
+
+/// Sets the motions of fixed, rest and handle cells for load fraction `f`.
+pub(super) fn prescribe<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &mut [Motion<D>],
+    f: f64,
+) where
+    Dim<D>: Rigid<D>,
+{
+    let maps: Vec<_> = (0..constraints.handles.len())
+        .map(|k| constraints.handle_map(k, f))
+        .collect();
+    for (c, role) in constraints.roles.iter().enumerate() {
+        let center = &complex.cells[c].center;
+        match role {
+            Role::Fixed | Role::Rest => {
+                motions[c] = constraints.prescribed_motion(None, center, f);
+            }
+            Role::Handle(k) => {
+                motions[c] = constraints.prescribed_motion(Some(&maps[*k as usize]), center, f);
+            }
+            _ => {}
+        }
+    }
+}

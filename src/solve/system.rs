@@ -39,7 +39,8 @@ use rayon::prelude::*;
 use super::blocks::{BlockMatrix, CoarseFactor};
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
-use super::multilevel::{COARSEST, Hierarchy, Nodes};
+use super::local_global::Layout;
+use super::multilevel::{Hierarchy, Nodes};
 use super::positions::Positions;
 use super::{Method, auto};
 use crate::cells::CellComplex;
@@ -47,6 +48,9 @@ use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
 use std::sync::atomic::{AtomicUsize, Ordering};
+
+mod paths;
+pub(super) use paths::first;
 
 /// Degrees of freedom of a cell and where they start in the global vector.
 #[derive(Debug, Clone, Copy)]
@@ -71,8 +75,15 @@ pub(crate) struct System<const D: usize> {
     buffers: Buffers,
     /// Solve by the multilevel iteration instead of the sparse factorization.
     multilevel: Option<Multilevel>,
-    /// The position-only system, for variable projection.
+    /// The position-only system, for variable projection and local-global iterations.
     positions: Positions,
+    /// The local-global iterations' constant parts, made when they are first taken.
+    layout: std::sync::OnceLock<Layout<D>>,
+    /// Whether this system takes local-global iterations instead of Gauss-Newton steps.
+    local_global: bool,
+    /// The budget and advice Gauss-Newton's system is to be set up with, where
+    /// [`Method::Auto`] took local-global iterations first.
+    deferred: Option<(Budget, String)>,
 }
 
 /// Where one Gauss-Newton step's time went, in seconds (damping retries included).
@@ -199,9 +210,20 @@ where
             buffers: Buffers::default(),
             multilevel: None,
             positions: Positions::new(complex, constraints),
+            layout: std::sync::OnceLock::new(),
+            local_global: false,
+            deferred: None,
         };
         if n > 0 {
             match method {
+                // Without a factored position Laplacian (a free part nothing holds in place)
+                // the global step is not defined: Gauss-Newton, factored.
+                Method::LocalGlobal if system.positions.is_factored() => {
+                    system.local_global = true;
+                }
+                Method::LocalGlobal => {
+                    system.set_up_direct(complex, budget, advice, None)?;
+                }
                 Method::Multilevel => system.set_up_multilevel(complex),
                 Method::Direct => {
                     system.set_up_direct(complex, budget, advice, None)?;
@@ -210,31 +232,13 @@ where
                 // multilevel path (BENCHMARKS.md, "Which solver `auto` takes": faster from
                 // there, in half the memory). Otherwise the factorization where it fits, else
                 // the multilevel path (memory linear in the cells).
-                Method::Auto => {
-                    let level = complex.cells.first().map(|c| c.key.level);
-                    let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);
-                    let multilevel = |system: &mut Self| {
-                        let cells = complex.len();
-                        super::check_solver_memory(cells, Method::Multilevel, budget, advice)?;
-                        system.buffers = Buffers::default();
-                        system.set_up_multilevel(complex);
-                        Ok::<_, Error>(())
-                    };
-                    let cells = system.free_cells.len();
-                    if uniform && cells > auto::MULTILEVEL_FROM {
-                        multilevel(&mut system)?;
-                    } else {
-                        let most_fill =
-                            (uniform && cells > COARSEST).then_some(auto::MULTILEVEL_FILL);
-                        match system.set_up_direct(complex, budget, advice, most_fill) {
-                            Ok(true) => {}
-                            Ok(false) | Err(Error::Memory { .. } | Error::Solver(_)) => {
-                                multilevel(&mut system)?
-                            }
-                            Err(e) => return Err(e),
-                        }
-                    }
+                // Local-global iterations first, Gauss-Newton's system set up where their
+                // rate says it finishes sooner (`switch_to_gauss_newton`).
+                Method::Auto if system.positions.is_factored() => {
+                    system.local_global = true;
+                    system.deferred = Some((budget, advice.to_string()));
                 }
+                Method::Auto => system.set_up_auto(complex, budget, advice)?,
             }
         }
         Ok(system)

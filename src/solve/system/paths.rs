@@ -1,0 +1,148 @@
+//! Which path a [`System`] takes: local-global iterations first under [`Method::Auto`], and
+//! Gauss-Newton's system set up (factored or multilevel) where their rate says it finishes
+//! sooner.
+
+use super::{Buffers, System};
+use crate::cells::CellComplex;
+use crate::error::{Error, Result};
+use crate::memory::Budget;
+use crate::rigid::Motion;
+use crate::rigid::{Dim, Rigid};
+use crate::solve::constraints::Constraints;
+use crate::solve::local_global::{self, Destinations, Layout};
+use crate::solve::multilevel::COARSEST;
+use crate::solve::positions::Positions;
+use crate::solve::total_energy;
+use crate::solve::{Method, auto};
+
+impl<const D: usize> System<D>
+where
+    Dim<D>: Rigid<D>,
+{
+    /// What [`Method::Auto`] takes for Gauss-Newton's system: cells of one size (a scan, a
+    /// shell) past `MULTILEVEL_FROM` free cells, the multilevel path (BENCHMARKS.md, "Which
+    /// solver `auto` takes": faster from there, in half the memory); otherwise the
+    /// factorization where it fits, else the multilevel path (memory linear in the cells).
+    pub(super) fn set_up_auto(
+        &mut self,
+        complex: &CellComplex<D>,
+        budget: Budget,
+        advice: &str,
+    ) -> Result<()> {
+        let level = complex.cells.first().map(|c| c.key.level);
+        let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);
+        let multilevel = |system: &mut Self| {
+            let cells = complex.len();
+            crate::solve::check_solver_memory(cells, Method::Multilevel, budget, advice)?;
+            system.buffers = Buffers::default();
+            system.set_up_multilevel(complex);
+            Ok::<_, Error>(())
+        };
+        let cells = self.free_cells.len();
+        if uniform && cells > auto::MULTILEVEL_FROM {
+            return multilevel(self);
+        }
+        let most_fill = (uniform && cells > COARSEST).then_some(auto::MULTILEVEL_FILL);
+        match self.set_up_direct(complex, budget, advice, most_fill) {
+            Ok(true) => Ok(()),
+            Ok(false) | Err(Error::Memory { .. } | Error::Solver(_)) => multilevel(self),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Whether Gauss-Newton's system can still be set up in place of local-global iterations
+    /// ([`Method::Auto`] took those first).
+    pub fn can_switch(&self) -> bool {
+        self.local_global && self.deferred.is_some()
+    }
+
+    /// Gauss-Newton steps from here on, its system set up as [`Method::Auto`] sets it up.
+    pub fn switch_to_gauss_newton(&mut self, complex: &CellComplex<D>) -> Result<()> {
+        if let Some((budget, advice)) = self.deferred.take() {
+            self.set_up_auto(complex, budget, &advice)?;
+        }
+        self.local_global = false;
+        Ok(())
+    }
+
+    /// The factored position Laplacian and the constant parts of local-global iterations on
+    /// `complex` under `constraints` (which must be of the structure this system was made for:
+    /// the same roles, pins and targets' cells), or `None` where the Laplacian is singular.
+    pub fn local_global_parts(
+        &self,
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+    ) -> Option<(&Positions, &Layout<D>)> {
+        self.positions.is_factored().then(|| {
+            let layout = self
+                .layout
+                .get_or_init(|| Layout::new(complex, constraints));
+            (&self.positions, layout)
+        })
+    }
+
+    /// Whether this system takes local-global iterations ([`Method::LocalGlobal`]).
+    pub fn is_local_global(&self) -> bool {
+        self.local_global
+    }
+}
+
+/// The local-global iterations of a load step, where `system` takes them: to convergence
+/// (`(iterations, None)`: the step is done), or until Gauss-Newton is estimated to finish
+/// sooner (`Method::Auto`; then `system` is switched to it for this step and the next, and the
+/// answer is the iterations and the energy the motions are left at).
+#[allow(clippy::too_many_arguments)]
+pub(in crate::solve) fn first<const D: usize>(
+    system: &mut System<D>,
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    state: (&mut [Motion<D>], f64, f64),
+    to: &Destinations<D>,
+    params: &crate::solve::SolveParams,
+    info: &mut crate::solve::SolverInfo,
+    observer: &dyn crate::progress::Observer,
+) -> Result<(usize, Option<f64>)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let switch = |system: &mut System<D>, info: &mut crate::solve::SolverInfo| {
+        crate::solve::timed(&mut info.seconds_symbolic, || {
+            system.switch_to_gauss_newton(complex)
+        })
+    };
+    // A strip that converged slowly on coarser cells converges more slowly on these.
+    if info.newton_sooner && system.can_switch() {
+        switch(system, info)?;
+    }
+    let (motions, energy, floor) = state;
+    if !system.is_local_global() {
+        return Ok((0, Some(energy)));
+    }
+    let can_switch = system.can_switch();
+    let Some(parts) = system.local_global_parts(complex, constraints) else {
+        return Ok((0, Some(energy)));
+    };
+    let newton =
+        || crate::solve::forecast::newton_in_local_global(complex, constraints, Budget::default());
+    let newton = can_switch.then_some(&newton as &dyn Fn() -> f64);
+    let run = (&mut *motions, energy, floor);
+    let (it, outcome) = local_global::logged(
+        parts,
+        complex,
+        constraints,
+        run,
+        to,
+        (params, newton),
+        info,
+        observer,
+    )?;
+    if outcome != local_global::Outcome::Slower {
+        return Ok((it, None));
+    }
+    info.newton_sooner = true;
+    switch(system, info)?;
+    Ok((
+        it,
+        Some(total_energy(complex, constraints, motions, to.targets)),
+    ))
+}
