@@ -560,7 +560,7 @@ fn solve<'py>(
 /// What `deform` or `solve` of `points` under the TOML `spec` with the `options` will take,
 /// without solving (`rigidcells::pipeline::estimate`): a dict of its `cells`, peak memory in
 /// `bytes`, `seconds` (the whole run: the cells as built, the solve and the transfer as
-/// estimated), `solve_seconds`, `solver` (`direct` or `multilevel`), `limit` (the memory
+/// estimated), `solve_seconds`, `solver` (`direct`, `multilevel` or `local-global`), `limit` (the memory
 /// budget), `fits` and `complete` (false where the cells were only forecast, because they
 /// cannot fit the budget: the least the run takes).
 #[pyfunction]

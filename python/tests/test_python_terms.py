@@ -210,7 +210,7 @@ def test_options_are_checked_by_name():
     with pytest.raises(ValueError) as e:
         rigidcells.deform(pts, BEND, transfer="blend", rbf_tolerance=0.1)
     assert str(e.value) == 'rbf_tolerance applies to transfer="rbf" only'
-    with pytest.raises(ValueError, match=r"solver `fast`: expected auto, direct or multilevel"):
+    with pytest.raises(ValueError, match=r"solver `fast`: expected auto, direct, multilevel or local-global"):
         rigidcells.deform(pts, BEND, solver="fast")
     with pytest.raises(ValueError, match=r"^coarse_levels must be 0 to 8"):
         rigidcells.deform(pts, BEND, coarse_levels=9)

@@ -38,7 +38,8 @@ def test_a_drag_ends_on_the_shape_deform_gives():
         f = k / 12
         step = live.drag({"rotate": {"axis": [0, 1, 0], "degrees": -40 * f},
                           "translate": [0, 0, 3 * f], "pivot": [10.0, 0.5, 0.5]})
-        assert not step.from_rest and step.iterations <= 1
+        # A short step: one Gauss-Newton iteration, or four local-global ones.
+        assert not step.from_rest and 1 <= step.iterations <= 4
         rises.append(live.preview()[tip, 2] - pts[tip, 2])
     assert all(b > a for a, b in zip(rises, rises[1:])), rises
     while live.refine():

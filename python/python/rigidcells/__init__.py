@@ -285,8 +285,8 @@ _OPTIONS_DOC = """
     count; not with ``cell_size``), ``min_cell_size`` (adaptive cells
     down to this size), ``max_level`` (octree levels above the finest cells), ``shell`` (occupied
     cells only), ``inside`` (``"auto"``, ``"winding"``, ``"flood"``, ``"none"``), ``solver``
-    (``"auto"``, ``"direct"``, ``"multilevel"``), ``tolerance`` (the move test, in finest cell
-    sizes; default 1e-3; 0: the energy test only), ``coarse_levels`` (coarser complexes solved
+    (``"auto"``, ``"direct"``, ``"multilevel"``, ``"local-global"``), ``tolerance`` (the move
+    test, in finest cell sizes; default 1e-3; 0: the energy test only), ``coarse_levels`` (coarser complexes solved
     first, 0 to 8), ``loose_parts`` (``"carry"`` or ``"rest"``), ``refine_strain`` (split
     cells strained past this and solve again), ``transfer`` (``"pu"``, ``"rbf"``,
     ``"blend"``, ``"blend-idw"``), ``rbf_tolerance`` (with ``transfer="rbf"``: the far

@@ -137,7 +137,7 @@ class Session:
         max_level: Optional[int] = ...,
         shell: Optional[bool] = ...,
         inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
-        solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+        solver: Optional[Literal["auto", "direct", "multilevel", "local-global"]] = ...,
         tolerance: Optional[float] = ...,
         coarse_levels: Optional[int] = ...,
         loose_parts: Optional[Literal["carry", "rest"]] = ...,
@@ -179,7 +179,7 @@ def deform(
     max_level: Optional[int] = ...,
     shell: Optional[bool] = ...,
     inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
-    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel", "local-global"]] = ...,
     tolerance: Optional[float] = ...,
     coarse_levels: Optional[int] = ...,
     loose_parts: Optional[Literal["carry", "rest"]] = ...,
@@ -205,7 +205,7 @@ def deform(
     max_level: Optional[int] = ...,
     shell: Optional[bool] = ...,
     inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
-    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel", "local-global"]] = ...,
     tolerance: Optional[float] = ...,
     coarse_levels: Optional[int] = ...,
     loose_parts: Optional[Literal["carry", "rest"]] = ...,
@@ -229,7 +229,7 @@ def solve(
     max_level: Optional[int] = ...,
     shell: Optional[bool] = ...,
     inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
-    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel", "local-global"]] = ...,
     tolerance: Optional[float] = ...,
     coarse_levels: Optional[int] = ...,
     loose_parts: Optional[Literal["carry", "rest"]] = ...,
@@ -247,7 +247,7 @@ class Estimate(NamedTuple):
     bytes: int
     seconds: float
     solve_seconds: float
-    solver: Literal["direct", "multilevel"]
+    solver: Literal["direct", "multilevel", "local-global"]
     limit: int
     fits: bool
     complete: bool
@@ -265,7 +265,7 @@ def estimate(
     max_level: Optional[int] = ...,
     shell: Optional[bool] = ...,
     inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
-    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel", "local-global"]] = ...,
     tolerance: Optional[float] = ...,
     coarse_levels: Optional[int] = ...,
     loose_parts: Optional[Literal["carry", "rest"]] = ...,
@@ -296,7 +296,7 @@ def deform_file(
     max_level: Optional[int] = ...,
     shell: Optional[bool] = ...,
     inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
-    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel", "local-global"]] = ...,
     tolerance: Optional[float] = ...,
     coarse_levels: Optional[int] = ...,
     loose_parts: Optional[Literal["carry", "rest"]] = ...,
@@ -331,7 +331,7 @@ def solve_files(
     max_level: Optional[int] = ...,
     shell: Optional[bool] = ...,
     inside: Optional[Literal["auto", "winding", "flood", "none"]] = ...,
-    solver: Optional[Literal["auto", "direct", "multilevel"]] = ...,
+    solver: Optional[Literal["auto", "direct", "multilevel", "local-global"]] = ...,
     tolerance: Optional[float] = ...,
     coarse_levels: Optional[int] = ...,
     loose_parts: Optional[Literal["carry", "rest"]] = ...,
