@@ -31,10 +31,12 @@ use crate::spec::HandleMotion;
 
 use super::DeformInfo;
 
-/// Gauss-Newton iterations per pose while dragging: one, at about 40 ms for 5,000 cells on two
-/// cores, so that the shape follows the hand at 20 updates a second; the next pose goes on from
-/// there, the idle solver converges the last one ([`Live::refine`]), and a release converges
-/// before the final transfer. (Three iterations an update, to convergence, gave 7 a second.)
+/// Gauss-Newton iterations per pose while dragging: one (or, where the session's system takes
+/// local-global iterations, [`crate::solve::DRAG_LOCAL_GLOBAL`] of those), so that the shape
+/// follows the hand; the next pose goes on from there, the idle solver converges the last one
+/// ([`Live::refine`]), and a release converges before the final transfer. (One Gauss-Newton
+/// iteration is about 40 ms for 5,000 cells on two cores; three an update, to convergence,
+/// gave 7 updates a second.)
 pub const DRAG_ITERATIONS: usize = 1;
 
 /// Per sample, its four nearest cells and their blend weights ([`Live::blend_weights`]).

@@ -24,9 +24,9 @@ use crate::rigid::{Dim, Motion, Rigid};
 
 /// An editing session on fixed cells: the paper's interactive case. The first solve runs from
 /// rest with load steps, as [`super::solve`] does (without refinement); each
-/// [`Session::update`] then starts Gauss-Newton from the current motions, without load steps,
-/// and reuses the sparse system's symbolic factorization when only the handles, pins and
-/// targets moved. A handle dragged a little converges in a few iterations instead of a solve
+/// [`Session::update`] then starts from the current motions, without load steps, and reuses
+/// the system (the local-global iterations' factored Laplacian, the Gauss-Newton system's
+/// symbolic factorization) when only the handles, pins and targets moved. A handle dragged a little converges in a few iterations instead of a solve
 /// from rest. Each solve ends as `solve` ends, its loose parts carried.
 pub struct Session<const D: usize> {
     complex: CellComplex<D>,
@@ -49,10 +49,12 @@ pub struct Session<const D: usize> {
 }
 
 /// Local-global iterations a drag's step takes for each Gauss-Newton iteration it is given
-/// (`pipeline::live::DRAG_ITERATIONS`, one): on 5k cells of the tube some 3–4 ms each, a
-/// fifth of the factorization of one Gauss-Newton step. The system is factored once per
-/// session (per structure of the constraints); a pose changes only the right-hand sides.
-pub const DRAG_LOCAL_GLOBAL: usize = 4;
+/// (`pipeline::live::DRAG_ITERATIONS`, one): on 5k cells 4–8 ms each, against 30–90 ms for the
+/// factorization of one Gauss-Newton step. Their matrix is factored once per session (per
+/// structure of the constraints); a pose changes only the right-hand sides. Two a pose: 56
+/// shapes a second in Blender's Live on the 5k cells of the dragon soup, 71–97 updates a
+/// second in the editor at 5k cells; four gave 30–44, with a release sooner (BENCHMARKS.md).
+pub const DRAG_LOCAL_GLOBAL: usize = 2;
 
 /// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels
 /// of coarsening reach that) and the cells follow them rigidly; the cells themselves are solved
@@ -189,8 +191,10 @@ where
     }
 
     /// One step of a drag toward `constraints` (at most `max_iterations` Gauss-Newton
-    /// iterations). From [`DRAG_COARSE_FROM`] cells on, or with a factor of more than
-    /// [`DRAG_FACTOR_MOST`] nonzeros, the step is taken on the cells' ancestors (`coarsen` by
+    /// iterations, or [`DRAG_LOCAL_GLOBAL`] local-global ones for each). From
+    /// [`DRAG_COARSE_FROM`] cells on, or with a Gauss-Newton factor of more than
+    /// [`DRAG_FACTOR_MOST`] nonzeros (a session taking local-global iterations has none), the
+    /// step is taken on the cells' ancestors (`coarsen` by
     /// as many levels as bring them to a few thousand, made once for the drag's constraints
     /// and kept while only their handles, pins and targets move), and
     /// each cell then takes its ancestor's rigid motion, as a solve coarse to fine starts its
