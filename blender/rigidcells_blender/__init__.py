@@ -19,7 +19,7 @@ the poses alike, so the same typed pose gives the same shape.
 
 Deform solves on a thread of its own (`work.DeformJob`) while Blender stays responsive; Live
 keeps a `rigidcells.Session` on a thread (`work.LiveWorker`) that follows the handle and pin
-Empties as the artist moves them: one Gauss-Newton iteration and a blended preview a pose, the exact
+Empties as the artist moves them: a short solver step and a blended preview a pose, the exact
 transfer once they rest. Scripts and Blender without a window (`bpy` as a module) run Deform
 on the calling thread.
 """

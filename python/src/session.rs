@@ -24,7 +24,7 @@ use crate::{
 };
 
 /// A live deformation of samples in memory ([`Live`]): the cells built once, a spec solved
-/// from rest, then poses dragged a Gauss-Newton iteration at a time, previewed by the blend,
+/// from rest, then poses dragged a short solver step at a time, previewed by the blend,
 /// and released through the transfer. Every heavy call releases the GIL, so a face may run
 /// it on a thread of its own; calls from several threads run one at a time.
 #[pyclass(module = "rigidcells._rigidcells", frozen)]
@@ -134,8 +134,9 @@ impl Session {
         })
     }
 
-    /// Moves to the TOML `spec` with at most `iterations` Gauss-Newton iterations (all it
-    /// takes when None): warm when only its handles' poses changed, else from rest.
+    /// Moves to the TOML `spec` with at most `iterations` solver steps (each one Gauss-Newton
+    /// iteration or `DRAG_LOCAL_GLOBAL` local-global ones; all it takes when None): warm when
+    /// only its handles' poses changed, else from rest.
     #[pyo3(signature = (spec_text, base, iterations=None, progress=None))]
     fn solve<'py>(
         &self,
@@ -157,7 +158,7 @@ impl Session {
 
     /// The last spec with its handles posed as the TOML `poses` say (one `[[handle]]` table
     /// a handle, its motion alone) and its pins going to `pins` ((k, 3), one a pin, or none),
-    /// with at most `iterations` Gauss-Newton iterations.
+    /// with at most `iterations` solver steps.
     #[pyo3(signature = (poses_text, iterations, pins=None))]
     fn pose<'py>(
         &self,

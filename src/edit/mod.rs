@@ -337,7 +337,7 @@ impl Editor {
     }
 
     /// Solves `edit`: warm from the current motions when only the poses changed since the
-    /// last call, one Gauss-Newton iteration ([`DRAG_ITERATIONS`]), from rest when the
+    /// last call, a drag's step ([`DRAG_ITERATIONS`]), from rest when the
     /// selections did ([`Live::solve`]). `None` when the edit constrains nothing.
     pub fn solve(&mut self, edit: &Edit) -> Result<Option<Motions>> {
         edit.check()?;

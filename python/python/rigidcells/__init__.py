@@ -101,7 +101,7 @@ class Report:
     cell_size: float
     """The finest cells' edge length, in the points' units (the one ``cells=`` chose)."""
     iterations: int
-    """Gauss-Newton iterations in all."""
+    """Solver iterations in all (Gauss-Newton or local-global: ``iteration_log`` says which)."""
     energy: float
     """The energy at the end."""
     energies: List[float]
@@ -450,7 +450,7 @@ class Step:
     """What a step of a ``Session`` did."""
 
     iterations: int
-    """Gauss-Newton iterations of this step."""
+    """Solver iterations of this step (local-global ones, or Gauss-Newton's)."""
     converged: bool
     """Whether the pose is solved (a drag's step may stop short; ``refine`` goes on)."""
     from_rest: bool
@@ -462,7 +462,7 @@ class Step:
 
 
 def _iterations(iterations: Any) -> int:
-    """A number of Gauss-Newton iterations, 1 or more."""
+    """A number of solver steps, 1 or more."""
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)):
         raise TypeError(f"iterations must be a whole number, got {type(iterations).__name__}")
     if iterations < 1:
@@ -485,9 +485,9 @@ def _poses_path(path: str) -> str:
 
 class Session:
     """A live deformation, the paper's interactive setting: the cells of ``points`` are built
-    once and ``spec`` is solved; then each ``drag`` moves the handles to a new pose with one
-    Gauss-Newton iteration from where the cells are (tens of milliseconds at a few thousand
-    cells), ``preview`` blends the cells' motions at the points, ``refine`` goes on while the
+    once and ``spec`` is solved; then each ``drag`` moves the handles to a new pose with a short
+    step from where the cells are (two local-global iterations on a matrix factored once, or a
+    Gauss-Newton iteration: 10 to 20 milliseconds at a few thousand cells), ``preview`` blends the cells' motions at the points, ``refine`` goes on while the
     handles rest, and ``release`` converges and moves the points through the transfer with its
     exact constraints, as ``deform`` does. ``points``, ``triangles`` and the keyword options
     are ``deform``'s, but a session keeps the cells it built: ``min_cell_size`` and
@@ -544,7 +544,8 @@ class Session:
     def solve(self, spec: Spec, iterations: Optional[int] = None, progress: Any = None) -> Step:
         """Moves to the whole ``spec``: warm from the cells' current motions when only its
         handles' poses changed, else resolved and solved from rest; at most ``iterations``
-        Gauss-Newton iterations (all it takes when None)."""
+        steps (each one Gauss-Newton iteration or two local-global ones; all it takes when
+        None)."""
         if iterations is not None:
             iterations = _iterations(iterations)
         text, base, paths = _spec(spec)
@@ -561,8 +562,8 @@ class Session:
     ) -> Step:
         """Moves the handles to ``poses``: one dict a handle, in the spec's order (a dict alone
         for one handle), each with a handle's motion keys only (``translate``, ``rotate``,
-        ``scale``, ``pivot``, or ``matrix``), solved with ``iterations`` Gauss-Newton
-        iterations from where the cells are. ``pins`` ((k, 3), one point a pin of the spec):
+        ``scale``, ``pivot``, or ``matrix``), solved with ``iterations`` steps (each one
+        Gauss-Newton iteration or two local-global ones) from where the cells are. ``pins`` ((k, 3), one point a pin of the spec):
         where the pins go now (None: where they went)."""
         if isinstance(poses, dict):
             poses = [poses]

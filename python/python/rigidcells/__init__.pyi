@@ -118,8 +118,8 @@ class Step:
     warnings: List[str]
 
 class Session:
-    """A live deformation: the cells built once, the spec solved; drag the handles a
-    Gauss-Newton iteration a pose, preview the blend, release through the transfer."""
+    """A live deformation: the cells built once, the spec solved; drag the handles a short
+    solver step a pose, preview the blend, release through the transfer."""
 
     last: Step
     def __init__(
