@@ -349,7 +349,7 @@ impl Live {
         let Some(session) = self.session.as_mut() else {
             return Ok(None);
         };
-        let solver = session.update_with(session.constraints().clone(), DRAG_ITERATIONS)?;
+        let solver = session.refine()?;
         self.info = solver.clone();
         self.warm = true;
         Ok(Some(Step {

@@ -114,7 +114,9 @@ pub use local_global::{
     LOCAL_GLOBAL_PER_ITERATION, LocalGlobalInfo, LocalGlobalParams, minimize_local_global,
 };
 pub use selections::Selections;
-pub use session::{DRAG_COARSE_FROM, DRAG_FACTOR_MOST, DRAG_LOCAL_GLOBAL, Session};
+pub use session::{
+    DRAG_COARSE_FROM, DRAG_FACTOR_MOST, DRAG_LOCAL_GLOBAL, IDLE_LOCAL_GLOBAL, Session,
+};
 pub use sight::Sight;
 
 use crate::cells::CellComplex;

@@ -56,6 +56,12 @@ pub struct Session<const D: usize> {
 /// second in the editor at 5k cells; four gave 30–44, with a release sooner (BENCHMARKS.md).
 pub const DRAG_LOCAL_GLOBAL: usize = 2;
 
+/// Local-global iterations of an idle refinement's step ([`Session::refine`]): about the time
+/// of one Gauss-Newton iteration (30–40 ms at 5k cells), so that a pose coming meanwhile waits
+/// no longer than it did, and each step's Anderson history, which restarts, gets going (at two a
+/// step the bar of the tests needed more than 50 steps to converge).
+pub const IDLE_LOCAL_GLOBAL: usize = 8;
+
 /// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels
 /// of coarsening reach that) and the cells follow them rigidly; the cells themselves are solved
 /// when the drag pauses or ends. At 50k cells of a terrain an update on the cells costs
@@ -149,12 +155,30 @@ where
         self.update_with(constraints, self.params.max_iterations)
     }
 
-    /// [`Session::update`] with at most `max_iterations` Gauss-Newton iterations: a drag takes
-    /// one per pose and goes on from there with the next (the info says whether it converged).
+    /// [`Session::update`] with at most `max_iterations` Gauss-Newton iterations (or
+    /// [`DRAG_LOCAL_GLOBAL`] local-global ones for each): a drag takes one per pose and goes on
+    /// from there with the next (the info says whether it converged).
     pub fn update_with(
         &mut self,
         constraints: Constraints<D>,
         max_iterations: usize,
+    ) -> Result<SolverInfo> {
+        self.update_steps(constraints, (max_iterations, DRAG_LOCAL_GLOBAL))
+    }
+
+    /// One step more on the current constraints while nothing moves (an idle face's
+    /// refinement): one Gauss-Newton iteration, or [`IDLE_LOCAL_GLOBAL`] local-global ones.
+    pub fn refine(&mut self) -> Result<SolverInfo> {
+        let constraints = self.constraints.clone();
+        self.update_steps(constraints, (1, IDLE_LOCAL_GLOBAL))
+    }
+
+    /// [`Session::update_with`], a step short of the solver's limit taking `per_step`
+    /// local-global iterations for each of `max_iterations`.
+    fn update_steps(
+        &mut self,
+        constraints: Constraints<D>,
+        (max_iterations, per_step): (usize, usize),
     ) -> Result<SolverInfo> {
         if constraints.roles.len() != self.complex.len() {
             return Err(Error::Solver(format!(
@@ -186,7 +210,7 @@ where
             constraints,
             &mut self.motions[..],
         );
-        warm_steps(cells, &self.params, max_iterations, &mut info)?;
+        warm_steps(cells, &self.params, (max_iterations, per_step), &mut info)?;
         Ok(self.finished(info, start))
     }
 
@@ -264,7 +288,8 @@ where
             &stage.constraints,
             &mut stage.motions[..],
         );
-        warm_steps(cells, &self.params, max_iterations, &mut info)?;
+        let steps = (max_iterations, DRAG_LOCAL_GLOBAL);
+        warm_steps(cells, &self.params, steps, &mut info)?;
         info.converged = false;
         self.motions = prolong(&stage.complex, &stage.motions, &self.complex);
         prescribe(&self.complex, &constraints, &mut self.motions, 1.0);
@@ -363,8 +388,8 @@ where
 
 /// At most `max_iterations` Gauss-Newton iterations of `params` at full load, from the motions
 /// as they are, into `info`. A step short of the solver's limit (a drag's, or an idle
-/// refinement's) takes [`DRAG_LOCAL_GLOBAL`] local-global iterations for each where the system
-/// takes those.
+/// refinement's) takes `per_step` local-global iterations for each where the system takes
+/// those.
 #[allow(clippy::type_complexity)]
 fn warm_steps<const D: usize>(
     (system, complex, constraints, motions): (
@@ -374,7 +399,7 @@ fn warm_steps<const D: usize>(
         &mut [Motion<D>],
     ),
     params: &SolveParams,
-    max_iterations: usize,
+    (max_iterations, per_step): (usize, usize),
     info: &mut SolverInfo,
 ) -> Result<()>
 where
@@ -384,7 +409,7 @@ where
     let params = SolveParams {
         max_iterations,
         local_global_per_iteration: match short {
-            true => DRAG_LOCAL_GLOBAL,
+            true => per_step,
             false => params.local_global_per_iteration,
         },
         ..*params
