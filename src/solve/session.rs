@@ -56,11 +56,12 @@ pub struct Session<const D: usize> {
 /// second in the editor at 5k cells; four gave 30–44, with a release sooner (BENCHMARKS.md).
 pub const DRAG_LOCAL_GLOBAL: usize = 2;
 
-/// Local-global iterations of an idle refinement's step ([`Session::refine`]): about the time
-/// of one Gauss-Newton iteration (30–40 ms at 5k cells), so that a pose coming meanwhile waits
-/// no longer than it did, and each step's Anderson history, which restarts, gets going (at two a
-/// step the bar of the tests needed more than 50 steps to converge).
-pub const IDLE_LOCAL_GLOBAL: usize = 8;
+/// Local-global iterations of an idle refinement's step ([`Session::refine`]): a pose that
+/// comes meanwhile waits for it (Blender's Live between two poses: 47 shapes a second at four,
+/// 37 at eight), and each step's Anderson history restarts (at two a step the bar of the tests
+/// needed more than 50 steps to converge; the release after a drag in Live took 1.1–1.5 s at
+/// four, 0.8 s at eight, 3 s at two).
+pub const IDLE_LOCAL_GLOBAL: usize = 4;
 
 /// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels
 /// of coarsening reach that) and the cells follow them rigidly; the cells themselves are solved

@@ -588,8 +588,8 @@ class Session:
             return self.last
 
     def refine(self) -> bool:
-        """One more iteration on the current pose when its solve stopped short; whether one
-        ran (False once converged)."""
+        """One more step on the current pose when its solve stopped short (a Gauss-Newton
+        iteration, or four local-global ones); whether one ran (False once converged)."""
         with self._turn():
             return self._native.refine()
 
