@@ -112,8 +112,10 @@ pub struct ImageInfo {
     pub pixels: (usize, usize),
     /// Cells.
     pub cells: usize,
-    /// Gauss-Newton iterations.
+    /// Solver iterations (local-global and Gauss-Newton).
     pub iterations: usize,
+    /// The iterations in words, by kind ([`crate::solve::SolverInfo::iterations_in_words`]).
+    pub iterations_in_words: String,
     /// Warped pixel corners outside the picture.
     pub clipped: usize,
     /// Pixel triangles the field turned over (the map folds the picture over itself there).
@@ -165,6 +167,7 @@ pub fn deform_image(
         warnings: staged.warnings.clone(),
         cells: solution.complex.len(),
         iterations: solution.info.iterations,
+        iterations_in_words: solution.info.iterations_in_words(),
         ..Default::default()
     };
 

@@ -386,9 +386,9 @@ impl std::fmt::Display for Summary<'_> {
         }
         write!(
             f,
-            "\n  solve: {} load steps, {} Gauss-Newton iterations, energy {}, {:.2} s",
+            "\n  solve: {} load steps, {}, energy {}, {:.2} s",
             s.load_steps,
-            s.iterations,
+            s.iterations_in_words(),
             crate::human::figure(s.energies.last().copied().unwrap_or(0.0)),
             s.seconds,
         )?;

@@ -1,4 +1,4 @@
-//! A live deformation (`pipeline::Live`): poses dragged one Gauss-Newton iteration at a time,
+//! A live deformation (`pipeline::Live`): poses dragged a short solver step at a time,
 //! previewed by the blend, and released onto what `deform` gives for the last pose.
 
 use std::path::Path;

@@ -1,4 +1,4 @@
-"""The live session: poses dragged one Gauss-Newton iteration at a time, previewed, and
+"""The live session: poses dragged a short solver step at a time, previewed, and
 released onto what `deform` gives for the last pose; its errors in Python's terms; its calls
 free of the GIL, so that a face can run it on a thread of its own."""
 
@@ -38,7 +38,7 @@ def test_a_drag_ends_on_the_shape_deform_gives():
         f = k / 12
         step = live.drag({"rotate": {"axis": [0, 1, 0], "degrees": -40 * f},
                           "translate": [0, 0, 3 * f], "pivot": [10.0, 0.5, 0.5]})
-        # A short step: one Gauss-Newton iteration, or four local-global ones.
+        # A short step: one Gauss-Newton iteration, or two local-global ones.
         assert not step.from_rest and 1 <= step.iterations <= 4
         rises.append(live.preview()[tip, 2] - pts[tip, 2])
     assert all(b > a for a, b in zip(rises, rises[1:])), rises

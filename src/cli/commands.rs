@@ -154,12 +154,12 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             eprintln!("warning: {w}");
         }
         println!(
-            "{} -> {}: {} points, {} cells, {} Gauss-Newton iterations, energy {}",
+            "{} -> {}: {} points, {} cells, {}, energy {}",
             args.input.display(),
             args.output.display(),
             points,
             solution.complex.len(),
-            solution.info.iterations,
+            solution.info.iterations_in_words(),
             rigidcells::human::figure(solution.info.energies.last().copied().unwrap_or(0.0))
         );
         print_control_points(&info);
@@ -216,13 +216,13 @@ pub(super) fn image_job(
             );
         }
         println!(
-            "{} -> {}: {} foreground pixels ({} after), {} cells, {} Gauss-Newton iterations",
+            "{} -> {}: {} foreground pixels ({} after), {} cells, {}",
             input.display(),
             output.display(),
             info.pixels.0,
             info.pixels.1,
             info.cells,
-            info.iterations
+            info.iterations_in_words
         );
     }
     Ok(())

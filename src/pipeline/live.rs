@@ -3,8 +3,8 @@
 //!
 //! [`Live`] builds the cells once. Each [`Live::solve`] takes the whole edit spec: when only
 //! the handles' poses and the pins' destinations changed since the last one, the session goes
-//! on warm from its current motions for a few Gauss-Newton iterations ([`Session::drag`], one
-//! per pose while dragging); otherwise the spec is resolved again and solved from rest.
+//! on warm from its current motions for a few iterations ([`Session::drag`], a short step per
+//! pose while dragging); otherwise the spec is resolved again and solved from rest.
 //! [`Live::preview`] blends the cells' current motions at the samples (cheap, for every pose);
 //! [`Live::release`] converges and runs the chosen transfer with its exact constraints, as
 //! [`super::deform`] does.

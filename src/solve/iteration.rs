@@ -72,6 +72,25 @@ pub struct IterationLog {
     pub seconds_line_search: f64,
 }
 
+/// `iterations` solver iterations in words, by the kinds `log` holds: `34 local-global
+/// iterations`, `32 local-global and 6 Gauss-Newton iterations`, `6 Gauss-Newton iterations`.
+pub fn iterations_in_words(iterations: usize, log: &[IterationLog]) -> String {
+    let local_global = log
+        .iter()
+        .filter(|l| {
+            matches!(
+                l.method,
+                IterationMethod::LocalGlobal | IterationMethod::Anderson
+            )
+        })
+        .count();
+    match (local_global, log.len() - local_global) {
+        (0, _) => format!("{iterations} Gauss-Newton iterations"),
+        (n, 0) => format!("{n} local-global iterations"),
+        (n, m) => format!("{n} local-global and {m} Gauss-Newton iterations"),
+    }
+}
+
 /// The largest distance a corner of a cell moves from `from` to `to`.
 pub(super) fn largest_corner_move<const D: usize>(
     complex: &CellComplex<D>,

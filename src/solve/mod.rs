@@ -307,6 +307,11 @@ impl SolverInfo {
         }
     }
 
+    /// The iterations in words, by kind (`34 local-global iterations`).
+    pub fn iterations_in_words(&self) -> String {
+        iteration::iterations_in_words(self.iterations, &self.log)
+    }
+
     /// Mean seconds per Gauss-Newton iteration.
     pub fn seconds_per_iteration(&self) -> f64 {
         self.seconds / self.iterations.max(1) as f64

@@ -487,8 +487,8 @@ class Session:
     """A live deformation, the paper's interactive setting: the cells of ``points`` are built
     once and ``spec`` is solved; then each ``drag`` moves the handles to a new pose with a short
     step from where the cells are (two local-global iterations on a matrix factored once, or a
-    Gauss-Newton iteration: 10 to 20 milliseconds at a few thousand cells), ``preview`` blends the cells' motions at the points, ``refine`` goes on while the
-    handles rest, and ``release`` converges and moves the points through the transfer with its
+    Gauss-Newton iteration: 10 to 20 milliseconds at a few thousand cells), ``preview`` blends
+    the cells' motions at the points, ``refine`` goes on while the handles rest, and ``release`` converges and moves the points through the transfer with its
     exact constraints, as ``deform`` does. ``points``, ``triangles`` and the keyword options
     are ``deform``'s, but a session keeps the cells it built: ``min_cell_size`` and
     ``refine_strain`` (which refine them) are refused. ``release`` gives the points back in
