@@ -614,7 +614,8 @@ where
         Ok(stalled)
     };
     let parts = (complex, constraints, &positions, &layout);
-    // Only `each` could fail, and it does not.
+    // `each` does not fail; a non-finite energy ends the run at the last finite motions, which
+    // are what is returned.
     let _ = iterate(parts, &mut motions, &to, energy, &stop, &mut each);
     info.iterations = info.energies.len() - 1;
     info.seconds_per_iteration = loop_start.elapsed().as_secs_f64() / info.iterations.max(1) as f64;

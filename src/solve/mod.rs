@@ -228,7 +228,7 @@ pub const REFINE_GROWTH: usize = 8;
 /// What [`solve`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SolverInfo {
-    /// Accepted Gauss-Newton iterations over all load steps and refinements.
+    /// Accepted iterations (Gauss-Newton and local-global) over all load steps and refinements.
     pub iterations: usize,
     /// Load steps.
     pub load_steps: usize,
@@ -312,7 +312,7 @@ impl SolverInfo {
         iteration::iterations_in_words(self.iterations, &self.log)
     }
 
-    /// Mean seconds per Gauss-Newton iteration.
+    /// Mean seconds per iteration, of either kind.
     pub fn seconds_per_iteration(&self) -> f64 {
         self.seconds / self.iterations.max(1) as f64
     }
