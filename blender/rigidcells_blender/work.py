@@ -62,9 +62,11 @@ class DeformJob:
 
 class LiveWorker:
     """A `rigidcells.Session` on a thread, following the handles' poses (and the pins'
-    places) as the main thread hands them over (`move`): each new pose is one Gauss-Newton
-    iteration and a blended preview; while the poses rest the solve goes on to convergence,
-    and once converged and at rest for `settle` seconds the exact transfer is released. `take` gives the newest
+    places) as the main thread hands them over (`move`): each new pose is a drag step (a few
+    local-global iterations) and a blended preview. Once the poses have rested for `idle`
+    seconds the solve goes on to convergence a refinement step at a time (not between the
+    poses of a drag, where a step would delay the next pose's shape), and once converged and
+    at rest for `settle` seconds the exact transfer is released. `take` gives the newest
     shape not yet taken, `("preview" | "released", positions)`. `finish` ends on the last
     pose's exact shape; `stop` ends at once."""
 
@@ -75,10 +77,11 @@ class LiveWorker:
         triangles: Any,
         options: dict,
         settle: float = 0.25,
+        idle: float = 0.05,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._args = (points, spec, triangles, options)
-        self._settle, self._clock = settle, clock
+        self._settle, self._idle, self._clock = settle, min(idle, settle), clock
         self._wake = threading.Condition()
         self._pose: Optional[Tuple[List[dict], Optional[List[List[float]]]]] = None
         self._moved_at = clock()
@@ -153,15 +156,21 @@ class LiveWorker:
                         if self._stopping:
                             return
                         pose, self._pose = self._pose, None
-                        resting = self._clock() - self._moved_at >= self._settle
-                        if pose is not None or not session.converged:
-                            break
-                        if not released and (resting or self._finishing):
-                            break
-                        if released and self._finishing:
-                            return
                         still = self._clock() - self._moved_at
-                        self._wake.wait(None if released else max(0.0, self._settle - still))
+                        if pose is not None:
+                            break
+                        if not session.converged:
+                            # Refined once the handle rests (or the drag ends).
+                            if still >= self._idle or self._finishing:
+                                break
+                            wait: Optional[float] = self._idle - still
+                        elif not released and (still >= self._settle or self._finishing):
+                            break
+                        elif released and self._finishing:
+                            return
+                        else:
+                            wait = None if released else self._settle - still
+                        self._wake.wait(None if wait is None else max(0.0, wait))
                 if pose is not None:
                     session.drag(pose[0], pins=pose[1])
                     released = False

@@ -485,13 +485,65 @@ pub fn vegetation_height(x: f64, y: f64, u: f64) -> (f64, u8) {
     (ground + 3.0 * u, 3)
 }
 
+/// Seeded smooth relief: a sum of plane waves in random directions, their wavelengths spread
+/// by an octave either side of `wavelength` and their amplitudes falling with it, scaled so
+/// that the heights span about `span` metres (a hilly scan's ground: 50 m over hills 100 m
+/// apart makes slopes near 45°, cells of a few metres filling columns two or three deep).
+#[derive(Debug, Clone)]
+pub struct Relief {
+    /// Per wave: the wave vector (radians a metre, x and y), its phase and its amplitude.
+    waves: Vec<([f64; 2], f64, f64)>,
+}
+
+impl Relief {
+    /// `span`: the heights' range, metres; `wavelength`: the hills' spacing, metres.
+    pub fn new(span: f64, wavelength: f64, seed: u64) -> Self {
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut rand = move || {
+            state ^= state >> 12;
+            state ^= state << 25;
+            state ^= state >> 27;
+            (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+        };
+        const WAVES: usize = 24;
+        let mut waves: Vec<([f64; 2], f64, f64)> = (0..WAVES)
+            .map(|_| {
+                let angle = std::f64::consts::TAU * rand();
+                let length = wavelength * 2f64.powf(2.0 * rand() - 1.0);
+                let k = std::f64::consts::TAU / length;
+                let phase = std::f64::consts::TAU * rand();
+                (
+                    [k * angle.cos(), k * angle.sin()],
+                    phase,
+                    length / wavelength,
+                )
+            })
+            .collect();
+        // Sum of WAVES unit-amplitude waves: a standard deviation of sqrt(WAVES / 2) times the
+        // mean amplitude; ±2 standard deviations span `span`.
+        let rms = (waves.iter().map(|w| w.2 * w.2).sum::<f64>() / 2.0).sqrt();
+        for w in &mut waves {
+            w.2 *= span / (4.0 * rms);
+        }
+        Self { waves }
+    }
+
+    /// The height at `(x, y)`, metres about zero.
+    pub fn height(&self, x: f64, y: f64) -> f64 {
+        self.waves
+            .iter()
+            .map(|([kx, ky], phase, a)| a * (kx * x + ky * y + phase).sin())
+            .sum()
+    }
+}
+
 /// A synthetic scan's samples: points on a jittered grid over a rectangle at georeferenced
 /// coordinates (x from 500 000, y from 5 000 000), z from a height function with 2 cm of
 /// noise. Reproducible (xorshift64*).
 pub struct Terrain {
     columns: u64,
     step: [f64; 2],
-    height: fn(f64, f64, f64) -> (f64, u8),
+    height: Box<dyn Fn(f64, f64, f64) -> (f64, u8) + Send>,
     state: u64,
 }
 
@@ -512,7 +564,19 @@ impl Terrain {
         Self::over(n, [1000.0, 200.0], vegetation_height)
     }
 
-    fn over(n: u64, extent: [f64; 2], height: fn(f64, f64, f64) -> (f64, u8)) -> Self {
+    /// A 1 km × 200 m strip of [`Relief`] ground under up to 3 m of low vegetation, `n`
+    /// samples: the vegetation scene with the hills of a chosen height, steepness and seed.
+    pub fn rough(n: u64, relief: Relief) -> Self {
+        Self::over(n, [1000.0, 200.0], move |x, y, u| {
+            (100.0 + relief.height(x, y) + 3.0 * u, 3)
+        })
+    }
+
+    fn over(
+        n: u64,
+        extent: [f64; 2],
+        height: impl Fn(f64, f64, f64) -> (f64, u8) + Send + 'static,
+    ) -> Self {
         // Square cells of the jittered grid: columns / rows = width / depth.
         let aspect = extent[0] / extent[1];
         let columns = ((n as f64) * aspect).sqrt().ceil().max(1.0) as u64;
@@ -520,7 +584,7 @@ impl Terrain {
         Self {
             columns,
             step: [extent[0] / columns as f64, extent[1] / rows as f64],
-            height,
+            height: Box::new(height),
             state: 0x9E37_79B9_7F4A_7C15,
         }
     }

@@ -9,6 +9,31 @@ use crate::rigid::{Motion, Vect};
 /// The default [`super::SolveParams::move_tolerance`]: a thousandth of the finest cell.
 pub const MOVE_TOLERANCE: f64 = 1e-3;
 
+/// Whether a Newton iteration `now` that followed `before` (both in the same load step) leaves
+/// the solve converged: both full steps, each contracting the last by at least half, and the
+/// tail that rate predicts — the move still to come `m·r/(1 − r)` for the ratio `r` of the last
+/// two moves, and the energy still to gain the same way — within `move_tolerance` (finest
+/// cells) and `tolerance` (relative). Newton converges at least this fast near a minimum, so
+/// the next step, which would move less than the tolerance, need not be taken: at 431k cells
+/// it is 8 s of a 42 s run.
+pub(crate) fn newton_converged(
+    before: &IterationLog,
+    now: &IterationLog,
+    tolerance: f64,
+    move_tolerance: f64,
+) -> bool {
+    let tail = |last: f64, previous: f64| {
+        let r = last / previous;
+        (r < 0.5).then(|| last * r / (1.0 - r))
+    };
+    now.method == IterationMethod::Newton
+        && before.load_step == now.load_step
+        && before.step_length == 1.0
+        && now.step_length == 1.0
+        && tail(now.largest_move, before.largest_move).is_some_and(|m| m <= move_tolerance)
+        && tail(now.decrease, before.decrease).is_some_and(|d| d <= tolerance)
+}
+
 /// Which kind of iteration an [`IterationLog`] records.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]

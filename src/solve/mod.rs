@@ -934,12 +934,16 @@ where
             seconds_linear: cost.linear,
             seconds_line_search: searching.elapsed().as_secs_f64(),
         };
+        let previous = (iterations > 1).then(|| info.log.last().copied()).flatten();
         info.log.push(log);
         observer.message(&format!("iteration {iterations}: {log}"));
         crate::progress::check(observer)?;
         // A short step's small move says only that the line search shortened it.
         if decrease <= params.tolerance * before
             || (t >= 1.0 && largest_move <= params.move_tolerance)
+            || previous.is_some_and(|p| {
+                iteration::newton_converged(&p, &log, params.tolerance, params.move_tolerance)
+            })
         {
             info.converged = true;
             break;

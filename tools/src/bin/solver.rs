@@ -15,6 +15,8 @@
 //! - `bar`: the 10 × 1 × 1 bar of the demo (`data_gen::bar`), its end tenths fixed and lifted
 //!   by 2 with a 30° turn, `--cells 4000`;
 //! - `veg-4`: the vegetation scene at 4 m;
+//! - `rough-2.5`, `rough-1.25`, `rough-4`: the same strip and edit over steep hills
+//!   (`gen rough`: 50 m of relief, hills 100 m apart), the cells a corrugated sheet;
 //! - any scene with `-rest` after its name: solved from rest (`--coarse-levels 0`);
 //! - any scene with `-lg` after its name (before `-rest`): `--solver local-global`; with `-gn`:
 //!   `--solver direct` (Gauss-Newton and Newton, factored);
@@ -168,11 +170,17 @@ fn scene_files(dir: &Path, name: &str) -> Res<(PathBuf, PathBuf, Vec<&'static st
             )?;
             (bar, edit, vec!["--cells", "4000"])
         }
-        "veg-2.5" | "veg-1.25" | "veg-4" => {
-            let scan = dir.join("vegetation.las");
+        "veg-2.5" | "veg-1.25" | "veg-4" | "rough-2.5" | "rough-1.25" | "rough-4" => {
+            let (kind, size) = name.split_once('-').unwrap_or((name, "4"));
+            let scan = dir.join(format!("{kind}.las"));
             if !scan.exists() {
                 let n = 2_000_000;
-                data_gen::write_las(&scan, data_gen::Terrain::vegetation(n), n, false)?;
+                let terrain = if kind == "rough" {
+                    data_gen::Terrain::rough(n, data_gen::Relief::new(50.0, 100.0, 1))
+                } else {
+                    data_gen::Terrain::vegetation(n)
+                };
+                data_gen::write_las(&scan, terrain, n, false)?;
             }
             let edit = dir.join("lift.toml");
             std::fs::write(
@@ -182,9 +190,9 @@ fn scene_files(dir: &Path, name: &str) -> Res<(PathBuf, PathBuf, Vec<&'static st
                  [[handle]]\nbox = { min = [500900, 4999990, -100], \
                  max = [501010, 5000210, 1000] }\ntranslate = [0, 0, 20]\n",
             )?;
-            let size = match name {
-                "veg-2.5" => "2.5",
-                "veg-1.25" => "1.25",
+            let size = match size {
+                "2.5" => "2.5",
+                "1.25" => "1.25",
                 _ => "4",
             };
             (scan, edit, vec!["--cell-size", size])
