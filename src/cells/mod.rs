@@ -36,7 +36,7 @@ pub(crate) use size::{Sized, check_size, shortfall, sized};
 pub use tri_box::triangle_box_overlap;
 pub use winding::Winding;
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 use crate::error::{Error, Result};
 use crate::memory::Budget;
@@ -309,7 +309,7 @@ pub struct CellComplex<const D: usize> {
     pub cells: Vec<Cell<D>>,
     /// Face-neighbor pairs, each once.
     pub pairs: Vec<Neighbors>,
-    index: HashMap<CellKey<D>, u32>,
+    index: FxHashMap<CellKey<D>, u32>,
     deepest: u8,
 }
 
@@ -385,15 +385,17 @@ impl<const D: usize> CellComplex<D> {
                 parent[a.max(b) as usize] = a.min(b);
             }
         }
+        // Components numbered in the order of their first cells; `label` by root.
         let mut ids = vec![u32::MAX; self.cells.len()];
+        let mut label = vec![u32::MAX; self.cells.len()];
         let mut count = 0usize;
-        let mut label = HashMap::new();
         for i in 0..self.cells.len() {
-            let r = root(&mut parent, i as u32);
-            ids[i] = *label.entry(r).or_insert_with(|| {
+            let r = root(&mut parent, i as u32) as usize;
+            if label[r] == u32::MAX {
+                label[r] = count as u32;
                 count += 1;
-                (count - 1) as u32
-            });
+            }
+            ids[i] = label[r];
         }
         (ids, count)
     }

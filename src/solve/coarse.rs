@@ -52,6 +52,7 @@ use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid};
+use rayon::prelude::*;
 
 use super::system::System;
 use super::turns::TurnRefusal;
@@ -294,11 +295,36 @@ pub(super) fn prolong<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
+    prolong_held(coarse, motions, fine, &holders(coarse, fine))
+}
+
+/// For each of `fine`'s cells, the cell of `coarse` (a coarsening of it) that holds it.
+pub(super) fn holders<const D: usize>(
+    coarse: &CellComplex<D>,
+    fine: &CellComplex<D>,
+) -> Vec<Option<u32>> {
     fine.cells
-        .iter()
-        .map(|cell| match holder(coarse, cell) {
+        .par_iter()
+        .map(|cell| holder(coarse, cell).map(|c| c as u32))
+        .collect()
+}
+
+/// [`prolong`] with the `holders` of `fine`'s cells known (a drag's stage keeps them).
+pub(super) fn prolong_held<const D: usize>(
+    coarse: &CellComplex<D>,
+    motions: &[Motion<D>],
+    fine: &CellComplex<D>,
+    holders: &[Option<u32>],
+) -> Vec<Motion<D>>
+where
+    Dim<D>: Rigid<D>,
+{
+    fine.cells
+        .par_iter()
+        .zip(holders)
+        .map(|(cell, held)| match held {
             Some(c) => {
-                let (m, at) = (&motions[c], &coarse.cells[c].center);
+                let (m, at) = (&motions[*c as usize], &coarse.cells[*c as usize].center);
                 Motion {
                     rot: m.rot,
                     pos: m.apply(at, &cell.center),

@@ -685,15 +685,24 @@ pub fn carry_loose<const D: usize>(
     constraints: &mut Constraints<D>,
     motions: &mut [crate::rigid::Motion<D>],
 ) {
-    let roles = &mut constraints.roles;
+    let anchors = loose_anchors(complex, &constraints.roles);
+    carry_with(complex, constraints, motions, &anchors);
+}
+
+/// The cells [`carry_loose`] moves, each with the constrained cell whose motion it takes: a
+/// function of the cells and their roles alone, which a session keeps while they stay.
+pub(crate) fn loose_anchors<const D: usize>(
+    complex: &CellComplex<D>,
+    roles: &[Role],
+) -> Vec<[u32; 2]> {
     if !roles.contains(&Role::Rest) {
-        return;
+        return Vec::new();
     }
     let anchored: Vec<u32> = (0..roles.len() as u32)
         .filter(|&c| !matches!(roles[c as usize], Role::Rest | Role::Carried(_)))
         .collect();
     if anchored.is_empty() {
-        return;
+        return Vec::new();
     }
     let centers: Vec<[f64; D]> = anchored
         .iter()
@@ -702,7 +711,7 @@ pub fn carry_loose<const D: usize>(
     // Cell centers are distinct, so the tree builds; should it not, the parts stay at rest
     // and the warning still says so.
     let Ok(tree) = kiddo::ImmutableKdTree::<f64, D>::new_from_slice(&centers) else {
-        return;
+        return Vec::new();
     };
     // Per loose part: its nearest constrained cell and the distance to it.
     let (component, count) = complex.components();
@@ -727,19 +736,30 @@ pub fn carry_loose<const D: usize>(
             *slot = Some((hit.0, anchored[hit.1 as usize]));
         }
     }
-    for c in 0..roles.len() {
-        if roles[c] != Role::Rest {
-            continue;
-        }
-        let Some((_, a)) = nearest[component[c] as usize] else {
-            continue;
-        };
-        let (anchor, m) = (&complex.cells[a as usize], motions[a as usize]);
+    (0..roles.len())
+        .filter(|&c| roles[c] == Role::Rest)
+        .filter_map(|c| nearest[component[c] as usize].map(|(_, a)| [c as u32, a]))
+        .collect()
+}
+
+/// [`carry_loose`] with its [`loose_anchors`] known.
+pub(crate) fn carry_with<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &mut Constraints<D>,
+    motions: &mut [crate::rigid::Motion<D>],
+    anchors: &[[u32; 2]],
+) {
+    for &[c, a] in anchors {
+        let (c, a) = (c as usize, a as usize);
+        let (anchor, m) = (&complex.cells[a], motions[a]);
         motions[c] = crate::rigid::Motion {
             rot: m.rot,
             pos: m.apply(&anchor.center, &complex.cells[c].center),
         };
-        roles[c] = Role::Carried(a);
+        constraints.roles[c] = Role::Carried(a as u32);
+    }
+    if anchors.is_empty() {
+        return;
     }
     for w in &mut constraints.warnings {
         if let Some(head) = w.strip_suffix(LOOSE_WARNING) {

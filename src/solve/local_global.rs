@@ -627,28 +627,14 @@ fn flatten<const D: usize>(rots: &[Mat<D>]) -> Vec<f64> {
     rots.iter().flat_map(|r| r.iter().copied()).collect()
 }
 
-/// Rotations nearest to the `D × D` blocks of `x`. An accelerated iterate's blocks are near
-/// rotations: Newton's iteration for the polar factor, `X ← (X + X⁻ᵀ) / 2`, converges
-/// quadratically there and costs a fraction of an SVD; a block it does not bring to a rotation
-/// within a few steps gets the SVD's.
+/// Rotations nearest to the `D × D` blocks of `x` (an accelerated iterate's blocks are near
+/// rotations: [`Rigid::nearest_rotation`]'s polar iteration settles them in one or two steps).
 fn unflatten<const D: usize>(x: &[f64]) -> Vec<Mat<D>>
 where
     Dim<D>: Rigid<D>,
 {
     x.par_chunks(D * D)
-        .map(|c| {
-            let mut r = Mat::<D>::from_column_slice(c);
-            for _ in 0..6 {
-                if (r.transpose() * r - Mat::<D>::identity()).norm() < 1e-13
-                    && <Dim<D> as Rigid<D>>::determinant(&r) > 0.0
-                {
-                    return r;
-                }
-                let Some(inv) = r.try_inverse() else { break };
-                r = (r + inv.transpose()) * 0.5;
-            }
-            <Dim<D> as Rigid<D>>::nearest_rotation(&Mat::<D>::from_column_slice(c))
-        })
+        .map(|c| <Dim<D> as Rigid<D>>::nearest_rotation(&Mat::<D>::from_column_slice(c)))
         .collect()
 }
 

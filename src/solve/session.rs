@@ -9,11 +9,12 @@
 
 use std::time::Instant;
 
-use super::coarse::{holder, prolong};
+use super::coarse::{holders, prolong_held};
+use super::constraints::{carry_with, loose_anchors};
 use super::system::System;
 use super::turns::TurnGauge;
 use super::{
-    CELLS_ADVICE, Constraints, Role, Solution, SolveParams, SolverInfo, carry_loose, coarsen,
+    CELLS_ADVICE, Constraints, Role, Solution, SolveParams, SolverInfo, coarsen,
     from_rest_either_way, minimize_with, prescribe, targets_at, timed,
 };
 use crate::cells::CellComplex;
@@ -46,6 +47,9 @@ pub struct Session<const D: usize> {
     /// The constraints and motions as a solution holds them, where they differ from
     /// `constraints` and `motions`: the loose parts carried ([`carry_loose`]).
     carried: Option<(Constraints<D>, Vec<Motion<D>>)>,
+    /// The roles the loose parts were last found for, and their anchors
+    /// ([`super::constraints::loose_anchors`]): the same while the roles stay.
+    anchors: Option<(Vec<Role>, Vec<[u32; 2]>)>,
 }
 
 /// Local-global iterations a drag's step takes for each Gauss-Newton iteration it is given
@@ -112,6 +116,8 @@ struct DragStage<const D: usize> {
     constraints: Constraints<D>,
     system: System<D>,
     motions: Vec<Motion<D>>,
+    /// For each of the session's cells, the stage's cell that holds it.
+    holders: Vec<Option<u32>>,
 }
 
 impl<const D: usize> Session<D>
@@ -143,6 +149,7 @@ where
             dragged: false,
             stale_system: false,
             carried: None,
+            anchors: None,
         };
         let info = session.finished(info, start);
         Ok((session, info))
@@ -274,12 +281,14 @@ where
                     return self.update_with(constraints, max_iterations);
                 }
                 let system = self.system_for(&complex, &on_parents, &mut info)?;
-                let motions = restrict(&self.complex, &self.motions, &complex);
+                let holders = holders(&complex, &self.complex);
+                let motions = restrict(&self.complex, &self.motions, &complex, &holders);
                 DragStage {
                     complex,
                     constraints: on_parents,
                     system,
                     motions,
+                    holders,
                 }
             }
         };
@@ -292,7 +301,12 @@ where
         let steps = (max_iterations, DRAG_LOCAL_GLOBAL);
         warm_steps(cells, &self.params, steps, &mut info)?;
         info.converged = false;
-        self.motions = prolong(&stage.complex, &stage.motions, &self.complex);
+        self.motions = prolong_held(
+            &stage.complex,
+            &stage.motions,
+            &self.complex,
+            &stage.holders,
+        );
         prescribe(&self.complex, &constraints, &mut self.motions, 1.0);
         self.stale_system |= !same;
         self.constraints = constraints;
@@ -332,13 +346,18 @@ where
     /// The end of a solve: the loose parts carried as [`super::solve`] carries them, and the
     /// info's counts and seconds.
     fn finished(&mut self, mut info: SolverInfo, start: Instant) -> SolverInfo {
-        self.carried = (self.params.carry_loose && self.constraints.roles.contains(&Role::Rest))
-            .then(|| {
-                let (mut constraints, mut motions) =
-                    (self.constraints.clone(), self.motions.clone());
-                carry_loose(&self.complex, &mut constraints, &mut motions);
-                (constraints, motions)
-            });
+        let roles = &self.constraints.roles;
+        self.carried = None;
+        if self.params.carry_loose && roles.contains(&Role::Rest) {
+            if self.anchors.as_ref().is_none_or(|(r, _)| r != roles) {
+                let anchors = loose_anchors(&self.complex, roles);
+                self.anchors = Some((roles.clone(), anchors));
+            }
+            let (mut constraints, mut motions) = (self.constraints.clone(), self.motions.clone());
+            let anchors = self.anchors.as_ref().map_or(&[][..], |(_, a)| a);
+            carry_with(&self.complex, &mut constraints, &mut motions, anchors);
+            self.carried = Some((constraints, motions));
+        }
         info.cells_final = self.complex.len();
         info.unknowns = self.system.unknowns();
         info.seconds = start.elapsed().as_secs_f64();
@@ -443,18 +462,19 @@ fn same_structure<const D: usize>(a: &Constraints<D>, b: &Constraints<D>) -> boo
 }
 
 /// The motions of `coarse`'s cells, a coarsening of `fine`, from those of `fine`'s: each coarse
-/// cell takes the rigid motion of the first fine cell it holds.
+/// cell takes the rigid motion of the first fine cell it holds (`holders`, by fine cell).
 fn restrict<const D: usize>(
     fine: &CellComplex<D>,
     motions: &[Motion<D>],
     coarse: &CellComplex<D>,
+    holders: &[Option<u32>],
 ) -> Vec<Motion<D>>
 where
     Dim<D>: Rigid<D>,
 {
     let mut out: Vec<Option<Motion<D>>> = vec![None; coarse.len()];
-    for (cell, m) in fine.cells.iter().zip(motions) {
-        if let Some(c) = holder(coarse, cell)
+    for ((cell, m), held) in fine.cells.iter().zip(motions).zip(holders) {
+        if let Some(c) = held.map(|c| c as usize)
             && out[c].is_none()
         {
             out[c] = Some(Motion {
