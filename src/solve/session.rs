@@ -53,18 +53,18 @@ pub struct Session<const D: usize> {
 }
 
 /// Local-global iterations a drag's step takes for each Gauss-Newton iteration it is given
-/// (`pipeline::live::DRAG_ITERATIONS`, one): on 5k cells 4–8 ms each, against 30–90 ms for the
+/// (`pipeline::live::DRAG_ITERATIONS`, one): on 5k cells 2–5 ms each, against 30–90 ms for the
 /// factorization of one Gauss-Newton step. Their matrix is factored once per session (per
-/// structure of the constraints); a pose changes only the right-hand sides. Two a pose: 56
-/// shapes a second in Blender's Live on the 5k cells of the dragon soup, 71–97 updates a
-/// second in the editor at 5k cells; four gave 30–44, with a release sooner (BENCHMARKS.md).
+/// structure of the constraints); a pose changes only the right-hand sides. Two a pose keep
+/// Blender's Live at its timer's rate on 5k cells; four halved the editor's updates a second,
+/// with a release sooner (BENCHMARKS.md).
 pub const DRAG_LOCAL_GLOBAL: usize = 2;
 
-/// Local-global iterations of an idle refinement's step ([`Session::refine`]): a pose that
-/// comes meanwhile waits for it (Blender's Live between two poses: 47 shapes a second at four,
-/// 37 at eight), and each step's Anderson history restarts (at two a step the bar of the tests
-/// needed more than 50 steps to converge; the release after a drag in Live took 1.1–1.5 s at
-/// four, 0.8 s at eight, 3 s at two).
+/// Local-global iterations of an idle refinement's step ([`Session::refine`]). A face refines
+/// once its handle rests, and a pose that comes meanwhile waits for the step; each step's
+/// Anderson history restarts (at two a step the bar of the tests needed more than 50 steps to
+/// converge; the release after a drag in Live took about 1 s at four, 0.8 s at eight, 3 s at
+/// two).
 pub const IDLE_LOCAL_GLOBAL: usize = 4;
 
 /// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels

@@ -243,6 +243,59 @@ def test_live_follows_scripted_moves_and_ends_on_the_converged_shape():
     assert obj.rigidcells.cells == state.worker.cells
 
 
+def test_live_refines_only_once_the_handle_rests(monkeypatch):
+    """A drag's poses each get their step at once; the worker refines only once the handle
+    has rested for `idle` (a refinement between two poses would delay the second's shape),
+    and releases once converged and at rest for `settle`."""
+    from rigidcells_blender.work import LiveWorker
+
+    now, calls = [0.0], []
+
+    class Session:  # what the worker asks of a rigidcells.Session
+        def __init__(self, *args, **kwargs):
+            self.cells, self.converged = 1, True
+
+        def drag(self, poses, pins=None):
+            calls.append(("drag", now[0]))
+            self.converged = False
+
+        def refine(self):
+            calls.append(("refine", now[0]))
+            self.converged = len([c for c in calls if c[0] == "refine"]) >= 3
+
+        def preview(self):
+            return np.zeros((1, 3))
+
+        def release(self):
+            calls.append(("release", now[0]))
+            return np.zeros((1, 3)), None
+
+    def until(test):
+        deadline = time.monotonic() + 10.0
+        while not test():
+            assert time.monotonic() < deadline, calls
+            time.sleep(0.005)
+
+    monkeypatch.setattr(rigidcells, "Session", Session)
+    worker = LiveWorker(np.zeros((1, 3)), {}, None, {}, settle=0.25, idle=0.05,
+                        clock=lambda: now[0]).start()
+    for k in range(8):  # a pose every 16 ms (the worker's clock), real time passing between
+        now[0] = 0.016 * k
+        worker.move([{"k": k}])
+        until(lambda: worker.steps == k + 1)
+        time.sleep(0.03)
+    assert [c[0] for c in calls] == ["drag"] * 8
+    now[0] += 0.06  # rested past `idle`: refined to convergence, not yet released
+    until(lambda: sum(c[0] == "refine" for c in calls) == 3)
+    time.sleep(0.1)
+    assert [c[0] for c in calls][8:] == ["refine"] * 3
+    now[0] += 0.25  # and past `settle`: released
+    until(lambda: calls[-1][0] == "release")
+    worker.stop()
+    worker.thread.join(10)
+    assert worker.done and worker.error is None
+
+
 def test_esc_puts_the_shape_key_back():
     obj, empty = setup_bar()
     # No shape keys before Live: none after Esc.
