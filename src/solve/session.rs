@@ -120,6 +120,21 @@ struct DragStage<const D: usize> {
     holders: Vec<Option<u32>>,
 }
 
+impl<const D: usize> DragStage<D> {
+    /// Moves the stage's handles, pins and targets to those of `constraints`, the session's
+    /// cells' constraints of the same structure.
+    fn follow(&mut self, constraints: &Constraints<D>) {
+        let on_parents = &mut self.constraints;
+        on_parents.handles = constraints.handles.clone();
+        for (p, q) in on_parents.pins.iter_mut().zip(&constraints.pins) {
+            p.to = q.to;
+        }
+        for (t, u) in on_parents.targets.iter_mut().zip(&constraints.targets) {
+            t.to = u.to;
+        }
+    }
+}
+
 impl<const D: usize> Session<D>
 where
     Dim<D>: Rigid<D>,
@@ -203,6 +218,26 @@ where
             self.system = self.system_for(&self.complex, &constraints, &mut info)?;
         }
         self.constraints = constraints;
+        // A whole solve after a drag on the ancestors starts coarse to fine: the ancestors
+        // converged first (a few thousand cells), their motions carried down, so that the
+        // cells' own iterations start where only their finer detail is left.
+        let whole = max_iterations >= self.params.max_iterations;
+        if let Some(stage) = self.drag.as_mut().filter(|_| self.dragged && whole) {
+            stage.follow(&self.constraints);
+            let cells = (
+                &mut stage.system,
+                &stage.complex,
+                &stage.constraints,
+                &mut stage.motions[..],
+            );
+            warm_steps(cells, &self.params, (max_iterations, per_step), &mut info)?;
+            self.motions = prolong_held(
+                &stage.complex,
+                &stage.motions,
+                &self.complex,
+                &stage.holders,
+            );
+        }
         if self.dragged {
             prescribe(&self.complex, &self.constraints, &mut self.motions, 1.0);
             let targets = targets_at(&self.constraints, 1.0);
@@ -265,14 +300,7 @@ where
         let same = same_structure(&constraints, &self.constraints);
         let mut stage = match self.drag.take() {
             Some(mut stage) if same => {
-                let on_parents = &mut stage.constraints;
-                on_parents.handles = constraints.handles.clone();
-                for (p, q) in on_parents.pins.iter_mut().zip(&constraints.pins) {
-                    p.to = q.to;
-                }
-                for (t, u) in on_parents.targets.iter_mut().zip(&constraints.targets) {
-                    t.to = u.to;
-                }
+                stage.follow(&constraints);
                 stage
             }
             _ => {
