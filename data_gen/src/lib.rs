@@ -248,18 +248,22 @@ pub fn decimate(mesh: &Mesh, vertices: usize) -> Mesh {
     cluster(large)
 }
 
+/// The next of xorshift64* `state`'s numbers, uniform in [0, 1): every generator here draws
+/// from it, so that a scene is the same on every machine.
+fn uniform(state: &mut u64) -> f64 {
+    *state ^= *state >> 12;
+    *state ^= *state << 25;
+    *state ^= *state >> 27;
+    (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+}
+
 /// A tree as in the paper's Fig. 9: a closed trunk (a welded bar of 0.4 × 0.4 × 4 along z,
 /// from the origin) and `leaves` disconnected triangles of edge about 0.15, every one with its
 /// own vertices, scattered in a ball of radius 1.5 around the trunk's top (reproducible).
 pub fn leafy_tree(leaves: usize) -> Mesh {
     let mut mesh = bar([0.4, 0.4, 4.0], 8.0);
     let mut state = 0x2545_F491_4F6C_DD1Du64;
-    let mut rand = move || {
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    };
+    let mut rand = move || uniform(&mut state) * 2.0 - 1.0;
     let top = [0.2, 0.2, 4.5];
     let trunk = mesh.triangles.len();
     while mesh.triangles.len() < trunk + leaves {
@@ -499,12 +503,7 @@ impl Relief {
     /// `span`: the heights' range, metres; `wavelength`: the hills' spacing, metres.
     pub fn new(span: f64, wavelength: f64, seed: u64) -> Self {
         let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-        let mut rand = move || {
-            state ^= state >> 12;
-            state ^= state << 25;
-            state ^= state >> 27;
-            (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rand = move || uniform(&mut state);
         const WAVES: usize = 24;
         let mut waves: Vec<([f64; 2], f64, f64)> = (0..WAVES)
             .map(|_| {
@@ -590,10 +589,7 @@ impl Terrain {
     }
 
     fn rand(&mut self) -> f64 {
-        self.state ^= self.state >> 12;
-        self.state ^= self.state << 25;
-        self.state ^= self.state >> 27;
-        (self.state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+        uniform(&mut self.state)
     }
 
     /// Sample `k` (call in order): local x, y, z and its LAS class.
