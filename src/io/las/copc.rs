@@ -276,7 +276,7 @@ fn is_waveform(r: &VlrRecord) -> bool {
 /// definitions known are of horizontal systems); why not, when they name no code or one
 /// without a known definition.
 fn geotiff_wkt(records: &[VlrRecord]) -> std::result::Result<(VlrRecord, Option<String>), String> {
-    let crs = crate::info::crs(records).ok_or("they could not be read")?;
+    let crs = super::crs_of(records).ok_or("they could not be read")?;
     let code = crs
         .epsg
         .ok_or("they name no EPSG code of a horizontal system")?;
@@ -734,6 +734,43 @@ mod tests {
         out
     }
 
+    /// `n` points of LAS 1.2, record format 3, on hills 1,000 × 500 units wide, in centimetres:
+    /// dense and sparse places, so that the octree has levels.
+    fn write_hills(path: &Path, n: u64) {
+        let mut b = las::Builder::from((1, 2));
+        b.point_format = las::point::Format::new(3).unwrap();
+        let t = las::Transform {
+            scale: 0.01,
+            offset: 0.0,
+        };
+        b.transforms = las::Vector { x: t, y: t, z: t };
+        let header = b.into_header().unwrap();
+        let mut w = las::Writer::from_path(path, header).unwrap();
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        let mut uniform = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..n {
+            // Half the points crowd the square's first tenth.
+            let crowd = if uniform() < 0.5 { 0.1 } else { 1.0 };
+            let (px, py) = (1000.0 * crowd * uniform(), 500.0 * crowd * uniform());
+            let pz = 50.0 * (px / 90.0).sin() * (py / 70.0).cos() + uniform();
+            let point = las::Point {
+                x: (px * 100.0).round() / 100.0,
+                y: (py * 100.0).round() / 100.0,
+                z: (pz * 100.0).round() / 100.0,
+                gps_time: Some(px),
+                color: Some(las::Color::new(1, 2, 3)),
+                ..Default::default()
+            };
+            w.write_point(point).unwrap();
+        }
+        w.close().unwrap();
+    }
+
     #[test]
     fn a_node_past_the_hierarchys_32_bits_is_an_error() {
         let out = Path::new("o.copc.laz");
@@ -747,10 +784,10 @@ mod tests {
     /// whose points lie in their cubes.
     #[test]
     fn many_sorted_runs_merge_into_one_octree() {
-        let input =
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/las/autzen_trim.las");
         let dir = std::env::temp_dir().join(format!("rigidcells-copc-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
+        let input = dir.join("hills.las");
+        write_hills(&input, 110_000);
         let output = dir.join("runs.copc.laz");
         let mut src = LasSource::open(&input).unwrap();
         let header = src.header().clone();
