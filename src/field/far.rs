@@ -34,9 +34,9 @@
 //! than the result, so `A4` is large: at a tolerance of 1 % of the extent the first node may be
 //! expanded 90 extents from the model, at 1e-4 9,000 extents. Points where no node can be
 //! expanded ([`FarField::expands_at`], one test per point) take the exact vector sum, so the
-//! option costs nothing there. An earlier version chose nodes by an opening angle alone
-//! (`ρ ≤ θ r`) and erred by 22 % to 86 % of the model's extent at θ = 0.3 to 0.7; a tolerance
-//! the user sets cannot be exceeded.
+//! option costs nothing there. Nodes are chosen by the error bound, not by an opening angle
+//! alone (which errs by up to 86 % of the extent; BENCHMARKS.md §13), so a tolerance the user
+//! sets cannot be exceeded.
 
 #![allow(clippy::needless_range_loop)]
 

@@ -19,8 +19,8 @@
 //! The AVX-512 kernel takes the square root without `vsqrtpd`, whose throughput bounds the
 //! loop: `vrsqrt14pd` refined by two Newton steps (`sqrt_avx512`), ten cheap instructions
 //! that measured 1.4–1.7× faster per center than `vsqrtpd` on this machine's CPU (0.60 against
-//! 1.03 ns per center and point, four points at a time). An earlier variant with one Newton
-//! step and a residual correction measured slower and was dropped.
+//! 1.03 ns per center and point, four points at a time); other refinements measured are in
+//! BENCHMARKS.md §13.
 //!
 //! [`prefetch`] is the other `unsafe` call: a cache hint, which reads nothing.
 //!

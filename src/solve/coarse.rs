@@ -35,17 +35,16 @@
 //! 2 s instead of 28 s, and the dragon's at cells of 3 after 3 s instead of 33 s (BENCHMARKS.md,
 //! "Half turns, and refusing early"). Extrapolating the held turn from the first load steps was
 //! not an option: the turn the cells carry follows the handle's exactly until the step where
-//! the shape snaps back, and the energy gives no warning of it. Going on from where the coarse
-//! cells gave way, on the cells themselves, was tried and not kept: from the bar's coarse
-//! cells at 570° its cells gave way too, where from rest they hold 720°. A turn refused within
+//! the shape snaps back, and the energy gives no warning of it. The cells themselves start from
+//! rest, not from where the coarse cells gave way, which would carry the coarse cells' failure
+//! down (BENCHMARKS.md §13). A turn refused within
 //! the margin (the bust's head bent −180°, held to −174° on coarse and fine cells alike) still
 //! costs the solve of the cells themselves up to where they give way.
 //!
 //! The first iteration on the fine cells still moves corners by about half a cell on the
-//! vegetation scans of BENCHMARKS.md: the fine minimum holds detail the parents could not.
-//! Blending each fine cell's rotation with the parent's neighbors' (so that rotations do not
-//! jump across a parent's face) lowered the fine start's energy by a third there and saved no
-//! iteration: not kept.
+//! vegetation scans of BENCHMARKS.md: the fine minimum holds detail the parents could not. Each
+//! fine cell starts from its parent's motion as it is (smoother starts measured saved no
+//! iteration; BENCHMARKS.md §13).
 
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};

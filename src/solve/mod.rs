@@ -45,8 +45,7 @@
 //! the span of 0.8 at 180°–195° for every cell size from 0.3 to 0.05 (solved to convergence in
 //! steps of 2°, 160°–190° down to cells of 0.02). No cell size holds a whole turn of a part as
 //! short as it is wide (a bust's neck, a bunny or a dragon twisted about its middle give way
-//! at 189°–191°). A barrier against face neighbors coming closer than half their rest distance
-//! was tried and not kept: it held every pair there, and the part still untwisted at 200°.
+//! at 189°–191°), and no barrier between face neighbors changes that (BENCHMARKS.md §13).
 //! Turning in several runs, each deforming the last output, does carry the turn (the rest shape
 //! then holds the turn so far).
 //!
@@ -65,11 +64,8 @@
 //! has to bring the motions near the path's minimum (so that the next starts on the right
 //! side of a saddle): it stops at `INTERMEDIATE_TOLERANCE` or after
 //! `INTERMEDIATE_ITERATIONS`. On the tube: 42 iterations and 5.6 s became 11 iterations and
-//! 1.8 s, to a slightly lower energy (BENCHMARKS.md). Tried and not kept: keeping an earlier
-//! step's Cholesky factor as the preconditioner of conjugate gradients on the next steps'
-//! matrices — 5–12 iterations, each a pair of triangular solves costing a tenth of a
-//! factorization (the factor is memory-bound to read), so no faster on the tube or the
-//! corridor.
+//! 1.8 s, to a slightly lower energy (BENCHMARKS.md). Each step factors its own matrix: an
+//! older step's factor as a preconditioner is no faster (BENCHMARKS.md §13).
 //!
 //! Every Gauss-Newton step is followed by a line search along the step (halving from the full
 //! step, or doubling up to 8× while a full step keeps lowering the energy), and every trial has

@@ -39,9 +39,7 @@
 //! levels as the factor's cost allows. Geometric nested dissection of the coarse level, tried
 //! instead of faer's AMD, gave a factor half as large again (77M entries against 49M at 13.7k
 //! groups).
-//! Also tried, and slower: plain (unsmoothed) rigid aggregation on every level, whose
-//! piecewise-rigid groups represent a bending plate badly (100–140 iterations per step on a
-//! one-cell-thick terrain), and a K-cycle (Notay) over the same levels.
+//! Other coarse spaces and cycles measured slower (BENCHMARKS.md §13).
 
 use faer::prelude::*;
 use rayon::prelude::*;

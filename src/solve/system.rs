@@ -14,13 +14,9 @@
 //! depends only on the cell topology and the roles, so the symbolic analysis (AMD ordering,
 //! elimination tree, supernodes) is computed once per [`System`] and reused by every iteration
 //! and load step; it is rebuilt only when refinement changes the cells. The numeric factor's
-//! storage and scratch are kept with it too. (Nested dissection by coordinate bisection of the
-//! cells was tried as the ordering: 15.3M nonzeros in the factor against AMD's 5.7M at 29k
-//! unknowns, and three times slower; again with one-sided vertex separators and parts of at
-//! most 256 cells in AMD's order of the cell graph: 12.2M against 5.9M, twice as slow. Coarser
-//! supernode relaxation gave 6.2–6.8M nonzeros and no time measurably better than faer's
-//! default. AMD on the graph of the cells, each cell's unknowns kept together: the analysis
-//! 0.46 s instead of 0.81 s at 96k cells, but 1 % more fill and no faster a solve.)
+//! storage and scratch are kept with it too. The ordering is AMD's, with faer's default
+//! supernode relaxation: the other orderings measured filled the factor more and solved no
+//! faster (BENCHMARKS.md §13).
 //!
 //! Assembly writes each pair's blocks into its own fixed-size slot of the value array (in
 //! parallel, no locking); faer's `new_from_argsort` sums the duplicate entries. The pattern,
