@@ -14,8 +14,9 @@
 use std::fmt;
 use std::path::Path;
 
-pub use crate::crs::{Crs, of_records as crs};
+pub use crate::crs::Crs;
 use crate::error::{Error, Result};
+pub use crate::io::crs_of as crs;
 use crate::io::{self, Chunk, LasHeader};
 use crate::progress::Observer;
 

@@ -68,15 +68,14 @@ pub mod io;
 pub mod memory;
 pub mod names;
 pub mod pipeline;
-pub mod preview;
 pub mod progress;
 pub mod render;
-pub mod report;
 pub mod rigid;
 pub mod solve;
 pub mod spec;
 
 pub use error::{Error, Result};
+pub use pipeline::{preview, report};
 
 /// Runs `f`, which calls faer, on a rayon pool of faer's own.
 ///

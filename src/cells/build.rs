@@ -45,13 +45,13 @@ use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 
 use super::blocks::{classify_flood, classify_winding, empty_blocks, pyramid, root_blocks};
+use super::floor;
 use super::morton::{coords, morton};
 use super::size::finest;
 use super::winding::Winding;
 use super::{BuildInfo, BuildParams, Inside};
 use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
 use crate::error::{Error, Result};
-use crate::field::floor;
 use crate::memory::Budget;
 use crate::rigid::Vect;
 

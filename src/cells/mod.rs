@@ -455,3 +455,21 @@ impl<const D: usize> CellComplex<D> {
         Ok(())
     }
 }
+
+/// `t` rounded down, as an integer (saturating): `f64::floor` is a libm call on baseline x86-64,
+/// and this runs per sample (the cells' and the field's lookups).
+#[inline]
+pub(crate) fn floor(t: f64) -> i64 {
+    let i = t as i64;
+    if (i as f64) > t { i - 1 } else { i }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn floor_rounds_down() {
+        for t in [-2.5, -2.0, -0.0, 0.0, 0.3, 1.0, 7.9, -1e-300, 3e18] {
+            assert_eq!(super::floor(t), t.floor() as i64, "{t}");
+        }
+    }
+}

@@ -2,18 +2,12 @@
 //! directory (34735) with its ASCII parameters (34737).
 
 use super::{Crs, Unit, wkt};
-use crate::io::VlrRecord;
 
-/// The CRS of a LAS file's (E)VLRs: the WKT's name, EPSG codes and units, else the GeoTIFF
+/// The CRS of a LAS file's (E)VLRs, given the payload of its `LASF_Projection` record of each
+/// id (`io::las::crs_of` finds them): the WKT's name, EPSG codes and units, else the GeoTIFF
 /// keys'. A WKT without a code or a vertical system of its own takes the GeoTIFF keys' when
 /// the file has both.
-pub fn of_records(records: &[VlrRecord]) -> Option<Crs> {
-    let find = |id: u16| {
-        records
-            .iter()
-            .find(|r| r.is("LASF_Projection", id))
-            .map(|r| r.data.as_slice())
-    };
+pub fn of_projection<'a>(find: impl Fn(u16) -> Option<&'a [u8]>) -> Option<Crs> {
     let keys = find(34735).and_then(|k| geotiff(k, find(34737).unwrap_or(&[])));
     let Some(text) = find(2112) else {
         return keys;

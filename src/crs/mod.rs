@@ -28,7 +28,7 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 
-pub use las::of_records;
+pub use las::of_projection;
 
 /// A coordinate reference system, as a file declares it.
 #[derive(Debug, Clone, Default, PartialEq)]

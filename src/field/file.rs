@@ -137,9 +137,11 @@ where
     /// (evaluated through the far field within `rbf_tolerance`, when given) or a new blend or
     /// RBF, with the prescribed cells exact and samples beyond the margin handled by `outside`.
     ///
-    /// Every map of a field is made here or by the two methods below, through one
+    /// Every map of a whole field is made here or by the two methods below, through one
     /// constructor (`SavedField::assemble`): the in-memory deform, the streamed file, the
-    /// editor's release, a tile's apply and the Python package's fields.
+    /// editor's release, a tile's apply and the Python package's fields. A window of a file
+    /// ([`SavedField::load_window`]) is mapped here too, but from the PU patches the file holds
+    /// ([`Constrained::in_window`]), without `assemble`.
     pub fn deformer(
         self,
         transfer: Option<Transfer>,

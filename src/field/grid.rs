@@ -36,6 +36,7 @@ use rayon::prelude::*;
 use super::exact::Class;
 use super::{Outside, SavedField, Warp};
 use crate::error::{Error, Result};
+pub use crate::io::geotiff::OffsetGrid;
 use crate::memory::Budget;
 use crate::rigid::Vect;
 
@@ -55,23 +56,6 @@ pub struct GridParams {
     pub height: Option<f64>,
     /// The memory budget.
     pub memory: Budget,
-}
-
-/// The offsets of a field on a grid.
-#[derive(Debug, Clone, PartialEq)]
-pub struct OffsetGrid {
-    /// The north-west node (world coordinates).
-    pub west: f64,
-    /// The north-west node's y (world coordinates).
-    pub north: f64,
-    /// The distance between nodes, east and south.
-    pub spacing: f64,
-    /// Nodes per row.
-    pub columns: usize,
-    /// Rows of nodes.
-    pub rows: usize,
-    /// East, north and up offsets of each node, row by row from the north (NaN: no value).
-    pub offsets: Vec<[f32; 3]>,
 }
 
 /// The largest deviation of the grid's interpolation from the field, and where.

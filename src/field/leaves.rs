@@ -5,6 +5,7 @@
 use rustc_hash::FxHashMap;
 
 use super::Field;
+use crate::cells::floor;
 use crate::rigid::Vect;
 
 /// The leaves of the octree the cells form, found from a voxel of the smallest cells' size.
@@ -126,14 +127,6 @@ impl<const D: usize> Leaves<D> {
     }
 }
 
-/// `t` rounded down, as an integer (saturating): `f64::floor` is a libm call on baseline x86-64,
-/// and this runs per sample.
-#[inline]
-pub(crate) fn floor(t: f64) -> i64 {
-    let i = t as i64;
-    if (i as f64) > t { i - 1 } else { i }
-}
-
 /// Whether the cells of `field` are the leaves of an octree, as [`super::Constrained`] needs.
 pub(crate) fn check_cells<const D: usize>(field: &Field<D>) -> std::result::Result<(), String> {
     Leaves::new(&field.centers, &field.halves).map(|_| ())
@@ -183,13 +176,6 @@ pub(super) fn for_each_shell<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn floor_rounds_down() {
-        for t in [-2.5, -2.0, -0.0, 0.0, 0.3, 1.0, 7.9, -1e-300, 3e18] {
-            assert_eq!(floor(t), t.floor() as i64, "{t}");
-        }
-    }
 
     #[test]
     fn shell_skips_the_inner_box() {

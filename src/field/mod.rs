@@ -20,7 +20,6 @@ pub mod far;
 mod file;
 pub mod grid;
 mod leaves;
-pub(crate) use leaves::floor;
 mod nearest;
 mod order;
 mod pu;

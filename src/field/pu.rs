@@ -46,8 +46,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
-use super::leaves::floor;
 use super::{Field, Rbf, Warp, normal_like};
+use crate::cells::floor;
 use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
 

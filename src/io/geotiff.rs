@@ -23,7 +23,22 @@
 //! The few tags are written here by hand rather than through an image crate: every one of
 //! them is spelled out above, and the writer stays a page long.
 
-use crate::field::grid::OffsetGrid;
+/// Offsets on a grid of nodes: what a grid file holds (a field sampled by [`crate::field::grid`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OffsetGrid {
+    /// The north-west node (world coordinates).
+    pub west: f64,
+    /// The north-west node's y (world coordinates).
+    pub north: f64,
+    /// The distance between nodes, east and south.
+    pub spacing: f64,
+    /// Nodes per row.
+    pub columns: usize,
+    /// Rows of nodes.
+    pub rows: usize,
+    /// East, north and up offsets of each node, row by row from the north (NaN: no value).
+    pub offsets: Vec<[f32; 3]>,
+}
 
 /// The value written for a node without an offset.
 pub const NO_VALUE: f32 = -999_999.0;

@@ -1,9 +1,11 @@
-//! Memory-mapped input: the one module of rigidcells with `unsafe` code.
+//! Memory-mapped input.
 //!
 //! Contract: a mapped file is opened read-only and must not be truncated or rewritten by
-//! another process while it is mapped. If it is, reads of the vanished pages raise `SIGBUS` (a
-//! crash, not undefined values); rigidcells itself never writes to an input (outputs go to a
-//! temporary file beside the target, and the CLI refuses an output that names the input).
+//! another process while it is mapped. If it is, the behaviour is undefined: the map's bytes are
+//! read as if they could not change, so a rewritten page may be read as old and new bytes at
+//! once, and on Linux a read past a truncated end raises `SIGBUS`. rigidcells itself never
+//! writes to an input (outputs go to a temporary file beside the target, and the CLI refuses an
+//! output that names the input); another program writing to it is the caller's to prevent.
 
 #![allow(unsafe_code)]
 

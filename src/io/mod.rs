@@ -25,7 +25,7 @@ mod xy;
 mod xyz;
 
 pub use las::{
-    Encoded, LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord, copc, decode_coordinates,
+    Encoded, LasHeader, LasSource, SOFTWARE, VlrInfo, VlrRecord, copc, crs_of, decode_coordinates,
     encode_coordinates, frame_error,
 };
 pub use obj::{ObjFile, ObjSource};

@@ -12,6 +12,8 @@ mod grid;
 pub mod live;
 mod options;
 mod outputs;
+pub mod preview;
+pub mod report;
 pub(crate) mod stages;
 mod transfer_pass;
 

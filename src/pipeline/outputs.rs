@@ -9,11 +9,11 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use super::report::Report;
 use crate::error::{Error, Result};
 use crate::io::ResultSet;
 use crate::progress::Observer;
 use crate::render::View;
-use crate::report::Report;
 use crate::solve::Solution;
 use crate::spec::EditSpec;
 
@@ -183,7 +183,7 @@ fn write_beside(
         set.write(path, &report.json(path)?)?;
     }
     if let Some((path, view, strain)) = &outputs.preview {
-        let picture = crate::preview::preview(solution, &info.proxy, view, *strain);
+        let picture = super::preview::preview(solution, &info.proxy, view, *strain);
         set.write(path, &picture.png(path)?)?;
     }
     Ok(())

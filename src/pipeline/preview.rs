@@ -7,7 +7,7 @@
 //! (control points) orange: at their points before, at where they were sent after. The strain
 //! panel carries a legend with its numbers; every panel an axis triad and a scale bar.
 
-use crate::pipeline::Proxy;
+use super::Proxy;
 use crate::render::{self, Camera, Canvas, Image, View};
 use crate::rigid::Vect;
 use crate::solve::{Role, Solution};

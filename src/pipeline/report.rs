@@ -23,8 +23,8 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::FileInfo;
 use crate::error::{Error, Result};
-use crate::pipeline::FileInfo;
 use crate::rigid::Vect;
 use crate::solve::{Role, Solution};
 
@@ -194,7 +194,7 @@ impl Timings {
     /// The stages' seconds of a deformation: `read` and `write` are a file's passes (0 for
     /// samples in memory; the read less the cells' construction, which is `voxelize`), `total`
     /// the wall time the caller measured.
-    pub fn of(deform: &crate::pipeline::DeformInfo, read: f64, write: f64, total: f64) -> Self {
+    pub fn of(deform: &super::DeformInfo, read: f64, write: f64, total: f64) -> Self {
         Self {
             read: (read - deform.build.seconds).max(0.0),
             voxelize: deform.build.seconds,

@@ -1,12 +1,20 @@
 #!/usr/bin/env python3
-"""The library's house rules, checked from its sources: no file of `src/` over 1,000 lines, and
-no import circle between library files (a module and its own descendants aside).
+"""The library's house rules, checked from its sources:
 
-`python3 tools/python/house.py` from the repository root prints each file over the bound and
-each circle (the files on it and what each imports from the others) and exits 1 when there is
-any. Imports are read as text: every `crate::a::b` and `super::…` path outside comments and
-test modules, each resolved to the deepest module file it names; `src/cli` (the binary) is left
-out. A path through a parent's re-export counts as an import of the parent.
+- no file of `src/`, of the Python extension (`python/src`) or of the Python package over 1,000
+  lines;
+- the layers of docs/ARCHITECTURE.md ("## Layers"): every top-level module of `src/` in one
+  layer, and no import from a module to one in a higher layer;
+- no import circle between top-level modules, nor between library files (a module and its own
+  descendants aside);
+- `unsafe` code only in the files docs/ARCHITECTURE.md names ("`unsafe` in few places"), and
+  printing or exiting only in `interrupt.rs` (the signal handler the same page describes).
+
+`python3 tools/python/house.py` from the repository root prints each breach (for a circle, the
+files on it and what each imports from the others) and exits 1 when there is any. Imports are
+read as text: every `crate::a::b` and `super::…` path outside comments and test modules, each
+resolved to the deepest module file it names; `src/cli` (the binary) is left out. A path through
+a parent's re-export counts as an import of the parent.
 """
 
 import os
@@ -15,6 +23,11 @@ import sys
 
 ROOT = "src"
 MAX_LINES = 1000
+ARCHITECTURE = "docs/ARCHITECTURE.md"
+# Python sources under the same size rule as the library's.
+PYTHON = ["python/src", "python/python/rigidcells", "blender/rigidcells_blender"]
+# The one library file that prints and exits: the signal handler.
+PRINTS = {"src/interrupt.rs"}
 
 
 def modules():
@@ -97,25 +110,108 @@ def circles(edges):
     return out
 
 
+def layers():
+    """Top-level module -> its layer's number, from ARCHITECTURE.md's "## Layers" list."""
+    text = open(ARCHITECTURE, encoding="utf-8").read()
+    section = text.split("\n## Layers\n", 1)[1].split("\n## ", 1)[0]
+    out = {}
+    for line in section.splitlines():
+        item = re.match(r"(\d+)\. [^`]*(.*)", line)
+        if item:
+            for name in re.findall(r"`([a-z_]+)`", item.group(2)):
+                out[name] = int(item.group(1))
+    return out
+
+
+def layer_breaches(mods, edges):
+    """Lines naming each module in no layer and each import upward across layers."""
+    rank = layers()
+    out = [f"{top}: in no layer of {ARCHITECTURE}" for top in sorted({m[0] for m in mods if m})
+           if top not in rank]
+    for a in sorted(edges):
+        for b in sorted(edges[a]):
+            if a and b and a[0] != b[0] and rank.get(b[0], 0) > rank.get(a[0], 0):
+                out.append(f"{'::'.join(a)} (layer {rank.get(a[0])}) imports {'::'.join(b)} "
+                           f"(layer {rank[b[0]]})")
+    return out
+
+
+def code(path):
+    """A Rust file's text without comments and without its test module."""
+    text = open(path, encoding="utf-8").read()
+    text = re.sub(r"//[^\n]*", "", text)
+    return re.sub(r"(?s)#\[cfg\(test\)\]\s*mod tests.*", "", text)
+
+
+def site_breaches(mods):
+    """Lines naming each file whose `unsafe` code or printing the docs do not list."""
+    text = open(ARCHITECTURE, encoding="utf-8").read()
+    paragraph = text.split("**`unsafe` in few places.**", 1)[1].split("\n\n", 1)[0]
+    listed = {os.path.join(ROOT, p) for p in re.findall(r"`([a-z_/]+\.rs)`", paragraph)}
+    found, prints = set(), set()
+    for path in mods.values():
+        body = code(path)
+        if re.search(r"\bunsafe\s*(\{|fn\b|impl\b)", body):
+            found.add(path)
+        if re.search(r"\b(e?print(ln)?!|process::exit|std::process::abort)", body):
+            prints.add(path)
+    out = [f"{p}: `unsafe` code, not listed in {ARCHITECTURE}" for p in sorted(found - listed)]
+    out += [f"{p}: listed in {ARCHITECTURE} as holding `unsafe` code, and has none"
+            for p in sorted(listed - found)]
+    out += [f"{p}: prints or exits (only the signal handler in interrupt.rs may)"
+            for p in sorted(prints - PRINTS)]
+    return out
+
+
+def top_circles(edges):
+    """Circles between top-level modules."""
+    top = {}
+    for a, bs in edges.items():
+        for b in bs:
+            if a and b and a[0] != b[0]:
+                top.setdefault((a[0],), set()).add((b[0],))
+    for m in list(top.values()):
+        for b in m:
+            top.setdefault(b, set())
+    return circles(top)
+
+
+def python_files():
+    for folder in PYTHON:
+        for base, _, files in os.walk(folder):
+            for name in sorted(files):
+                if name.endswith((".rs", ".py")):
+                    yield os.path.join(base, name)
+
+
 def main():
     mods = modules()
     long = []
-    for path in sorted(mods.values()):
+    for path in sorted(mods.values()) + sorted(python_files()):
         n = sum(1 for _ in open(path, encoding="utf-8"))
         if n > MAX_LINES:
             long.append((path, n))
     for path, n in long:
         print(f"{path}: {n} lines (at most {MAX_LINES})")
-    found = circles(imports(mods))
     edges = imports(mods)
+    found = circles(edges)
     for comp in found:
         names = sorted("::".join(c) for c in comp)
         print("import circle:", ", ".join(names))
         for a in comp:
             inner = sorted("::".join(b) for b in edges[a] if b in comp)
             print(f"  {'::'.join(a)} imports {', '.join(inner)}")
-    print(f"{len(mods)} library files, {len(long)} over {MAX_LINES} lines, {len(found)} import circles")
-    return 1 if long or found else 0
+    tops = top_circles(edges)
+    for comp in tops:
+        print("module circle:", ", ".join(sorted(c[0] for c in comp)))
+    breaches = layer_breaches(mods, edges) + site_breaches(mods)
+    for line in breaches:
+        print(line)
+    print(
+        f"{len(mods)} library files, {len(long)} files over {MAX_LINES} lines, "
+        f"{len(found)} file circles, {len(tops)} module circles, {len(breaches)} other breaches"
+    )
+    return 1 if long or found or tops or breaches else 0
 
 
 if __name__ == "__main__":

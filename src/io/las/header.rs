@@ -53,6 +53,16 @@ pub struct VlrRecord {
     pub extended: bool,
 }
 
+/// The CRS the `LASF_Projection` records among `records` declare ([`crate::crs::of_projection`]).
+pub fn crs_of(records: &[VlrRecord]) -> Option<crate::crs::Crs> {
+    crate::crs::of_projection(|id| {
+        records
+            .iter()
+            .find(|r| r.is("LASF_Projection", id))
+            .map(|r| r.data.as_slice())
+    })
+}
+
 impl VlrRecord {
     /// Whether it is the record `user_id`/`record_id`.
     pub fn is(&self, user_id: &str, record_id: u16) -> bool {

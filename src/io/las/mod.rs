@@ -34,7 +34,7 @@ use std::sync::Arc;
 use memmap2::Mmap;
 
 pub use coords::{Encoded, decode_coordinates, encode_coordinates, frame_error};
-pub use header::{LasHeader, SOFTWARE, VlrInfo, VlrRecord};
+pub use header::{LasHeader, SOFTWARE, VlrInfo, VlrRecord, crs_of};
 pub use reader::LasSource;
 
 use crate::error::Result;

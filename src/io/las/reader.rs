@@ -158,7 +158,7 @@ impl Source for LasSource {
     }
 
     fn crs(&self) -> Option<crate::crs::Crs> {
-        crate::crs::of_records(&self.vlr_records())
+        super::crs_of(&self.vlr_records())
     }
 
     fn has_classes(&self) -> bool {
