@@ -2,7 +2,7 @@
 libigl's as-rigid-as-possible deformation, on the same vertex sets.
 
     python tools/python/border_strain.py BIN MESH [--up z] [--fixed 0.2] [--handle 0.55]
-        [--degrees 30] [--axis z] [--lift 0] [--lift-axis z] [--cells N ...] [--transfer pu ...] [--skip-arap] [--out DIR]
+        [--degrees 30] [--axis z] [--lift 0] [--lift-axis z] [--cells N ...] [--transfer pu ...] [--options '...'] [--skip-arap] [--out DIR]
 
 MESH is a triangle mesh (PLY or OBJ); BIN the rigidcells binary. The vertices in the lowest
 `--fixed` fraction of the model's height (along `--up`) are fixed; those above the `--handle`
@@ -126,6 +126,7 @@ def main():
     p.add_argument("--lift-axis", default=None, choices="xyz")
     p.add_argument("--cells", default="", help="comma-separated --cells values (default: none)")
     p.add_argument("--transfer", default="pu", help="comma-separated transfers")
+    p.add_argument("--options", default="", help="more `deform` options, as one string")
     p.add_argument("--skip-arap", action="store_true")
     p.add_argument("--out", default=None, help="keep the results in this folder")
     a = p.parse_args()
@@ -165,10 +166,10 @@ def main():
     cells = [c for c in a.cells.split(",") if c] or [None]
     for transfer in a.transfer.split(","):
         for c in cells:
-            extra = ["--transfer", transfer] + (["--cells", c] if c else [])
+            extra = ["--transfer", transfer] + (["--cells", c] if c else []) + a.options.split()
             out = os.path.join(folder, f"rigidcells_{transfer}_{c or 'default'}.ply")
             u, secs = run_rigidcells(a.binary, a.mesh, spec, out, extra)
-            name = f"rigidcells {transfer}" + (f" {c} cells" if c else "")
+            name = f"rigidcells {transfer}" + (f" {c} cells" if c else "") + (f" {a.options}" if a.options else "")
             report(name, v, u, e, fixed, handle, moved, secs)
     if not a.skip_arap:
         u, secs = run_open3d(v, f, fixed, handle, moved)
