@@ -178,10 +178,16 @@ pub(super) struct RegionSamples<const D: usize> {
     pub(super) per_cell: Option<HashMap<[i64; D], (Vect<D>, u64)>>,
 }
 
-impl<const D: usize> Selections<D> {
-    /// Empty selections for `spec` over an input of `samples` samples. Fails when a region
-    /// selects by LAS class and the input has no classes, or lists an index past its samples.
+impl<const D: usize> Selections<D>
+where
+    crate::rigid::Dim<D>: crate::rigid::Rigid<D>,
+{
+    /// Empty selections for `spec` over an input of `samples` samples: where every run starts
+    /// with its spec, before any pass over the samples. Fails when the spec is not one a
+    /// parser would have made ([`EditSpec::validate`]), when a region selects by LAS class and
+    /// the input has no classes, or lists an index past its samples.
     pub fn new(spec: &EditSpec<D>, has_classes: bool, samples: u64) -> Result<Self> {
+        spec.validate()?;
         spec.check_indices(samples)?;
         let regions: Vec<&Region<D>> = regions(spec).collect();
         if !has_classes && regions.iter().any(|r| r.uses_classes()) {

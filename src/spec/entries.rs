@@ -226,7 +226,8 @@ impl std::fmt::Display for Trend {
     }
 }
 
-/// A parsed and validated edit spec.
+/// An edit spec: parsed from TOML ([`crate::spec::parse_spec`], which checks it line by line), or
+/// made in code and checked by [`EditSpec::validate`] where a run starts.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct EditSpec<const D: usize> {
     /// Fixed regions.

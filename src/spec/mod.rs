@@ -53,6 +53,7 @@ mod geojson;
 mod parse;
 mod region;
 mod scan;
+mod validate;
 
 pub use control_points::{ControlRow, read_control_points};
 pub use entries::{

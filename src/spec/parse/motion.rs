@@ -62,7 +62,7 @@ impl Ctx<'_> {
             ));
         }
         self.within_range(scale, "scale", line)?;
-        let (rotation, turn) = match t.get("rotate") {
+        let (axis, degrees) = match t.get("rotate") {
             Some(_) => {
                 let r: RawRotate = self.field(t, "rotate", line)?;
                 let axis = match (&r.axis, D) {
@@ -95,22 +95,12 @@ impl Ctx<'_> {
                         ),
                     ));
                 }
-                let radians = r.degrees.to_radians();
-                (
-                    <Dim<D> as Rigid<D>>::axis_angle(&axis, radians),
-                    (axis, radians),
-                )
+                (axis, r.degrees)
             }
-            None => (Mat::<D>::identity(), (Vect::<D>::zeros(), 0.0)),
+            None => (Vect::<D>::zeros(), 0.0),
         };
-        Ok(HandleMotion {
-            pivot,
-            rotation,
-            turn,
-            stretch: Mat::<D>::identity() * scale,
-            translate,
-            from_matrix: false,
-        })
+        HandleMotion::turning(axis, degrees, scale, pivot, translate)
+            .map_err(|m| self.error(Some(line), m))
     }
 
     /// `A(x) = L x + t` with `L = R·P` split by polar decomposition, so that load steps can
@@ -139,20 +129,7 @@ impl Ctx<'_> {
             return Err(self.error(at, self.beyond_range(largest, "matrix")));
         }
         let linear = Mat::<D>::from_fn(|r, c| m[r][c]);
-        if <Dim<D> as Rigid<D>>::determinant(&linear) <= 0.0 {
-            return Err(self.error(
-                self.at(line, "matrix"),
-                "`matrix` must keep orientation (positive determinant)".into(),
-            ));
-        }
-        let rotation = <Dim<D> as Rigid<D>>::nearest_rotation(&linear);
-        Ok(HandleMotion {
-            pivot: None,
-            rotation,
-            turn: <Dim<D> as Rigid<D>>::axis_angle_of(&rotation),
-            stretch: rotation.transpose() * linear,
-            translate: Vect::<D>::from_fn(|r, _| m[r][D]),
-            from_matrix: true,
-        })
+        HandleMotion::affine(linear, Vect::<D>::from_fn(|r, _| m[r][D]))
+            .map_err(|e| self.error(self.at(line, "matrix"), e))
     }
 }
