@@ -202,7 +202,7 @@ where
             point.left_out = Some(spec.targets[i].pulled(predicted - t.wanted).norm());
         }
         observer.advance(1);
-        crate::progress::check(observer)?;
+        crate::progress::stop_if_cancelled(observer)?;
     }
     observer.finish();
     Ok(())

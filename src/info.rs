@@ -22,7 +22,7 @@ use crate::progress::Observer;
 
 /// A file's description; [`fmt::Display`] prints it as `rigidcells info` does.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct FileInfo {
+pub struct Description {
     /// The file.
     pub path: String,
     /// The format in words (`LAZ 1.2, point data record format 3, 34 bytes per record`).
@@ -49,7 +49,7 @@ pub struct FileInfo {
     pub details: Vec<(String, String)>,
 }
 
-impl FileInfo {
+impl Description {
     fn coord(&self, axis: usize, v: f64) -> String {
         match &self.decimals {
             Some(d) => format!("{v:.*}", d[axis.min(d.len() - 1)]),
@@ -96,7 +96,7 @@ impl FileInfo {
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 
-impl fmt::Display for FileInfo {
+impl fmt::Display for Description {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "{}", self.path)?;
         writeln!(f, "  format: {}", self.format)?;
@@ -154,8 +154,8 @@ impl fmt::Display for FileInfo {
 
 /// Describes the file at `path` (module docs). Reads every sample once for the centroid (and
 /// the bounds where the header gives none), with progress on `observer`.
-pub fn describe(path: &Path, observer: &dyn Observer) -> Result<FileInfo> {
-    let mut info = FileInfo {
+pub fn describe(path: &Path, observer: &dyn Observer) -> Result<Description> {
+    let mut info = Description {
         path: path.display().to_string(),
         ..Default::default()
     };
@@ -236,7 +236,7 @@ pub fn describe(path: &Path, observer: &dyn Observer) -> Result<FileInfo> {
 }
 
 /// Bounds and centroid of points given in memory.
-fn set_extent<'a>(info: &mut FileInfo, points: impl Iterator<Item = &'a [f64]>, dim: usize) {
+fn set_extent<'a>(info: &mut Description, points: impl Iterator<Item = &'a [f64]>, dim: usize) {
     let mut lo = vec![f64::INFINITY; dim];
     let mut hi = vec![f64::NEG_INFINITY; dim];
     let mut sum = vec![0.0; dim];
@@ -255,13 +255,13 @@ fn set_extent<'a>(info: &mut FileInfo, points: impl Iterator<Item = &'a [f64]>, 
     }
 }
 
-fn other_format(path: &Path, source: &dyn io::Source, info: &mut FileInfo) -> Result<()> {
+fn other_format(path: &Path, source: &dyn io::Source, info: &mut Description) -> Result<()> {
     let triangles = source.triangles().len();
     let ext = io::extension(path).unwrap_or_default();
     info.samples = source.len();
     match ext.as_str() {
         "ply" => {
-            let header = io::describe(path)?;
+            let header = io::layout(path)?;
             info.format = format!(
                 "PLY, {}",
                 header
@@ -307,8 +307,7 @@ fn other_format(path: &Path, source: &dyn io::Source, info: &mut FileInfo) -> Re
         "obj" => {
             info.format = "OBJ".into();
             info.samples_are = "vertices";
-            info.details
-                .push(("statements".into(), io::describe(path)?));
+            info.details.push(("statements".into(), io::layout(path)?));
         }
         _ => {
             info.format = "XYZ text (x y z per line, more columns kept)".into();
@@ -357,7 +356,7 @@ fn las_fields(format: u8) -> Vec<&'static str> {
     f
 }
 
-fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
+fn las(path: &Path, info: &mut Description) -> Result<()> {
     let h = LasHeader::read(path)?;
     info.format = format!(
         "{} {}.{}, point data record format {}, {} bytes per record",
@@ -411,7 +410,7 @@ fn las(path: &Path, info: &mut FileInfo) -> Result<()> {
     Ok(())
 }
 
-fn field(path: &Path, mut info: FileInfo) -> Result<FileInfo> {
+fn field(path: &Path, mut info: Description) -> Result<Description> {
     // "RCFIELD\0", u32 version, u32 dimension.
     let mut head = [0u8; 16];
     std::io::Read::read_exact(
@@ -426,7 +425,7 @@ fn field(path: &Path, mut info: FileInfo) -> Result<FileInfo> {
     Ok(info)
 }
 
-fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedField<D>) {
+fn fill_field<const D: usize>(info: &mut Description, saved: &crate::field::SavedField<D>) {
     let f = &saved.field;
     info.format = format!("rigidcells saved field, {D}D");
     // The system of the input the field was solved on.
@@ -489,7 +488,7 @@ fn fill_field<const D: usize>(info: &mut FileInfo, saved: &crate::field::SavedFi
     ));
 }
 
-fn picture(path: &Path, mut info: FileInfo) -> Result<FileInfo> {
+fn picture(path: &Path, mut info: Description) -> Result<Description> {
     let r = crate::image::Raster::read_png(path)?;
     info.format = format!("PNG, {} × {} pixels", r.width, r.height);
     info.samples_are = "foreground pixels";

@@ -14,11 +14,28 @@
 //! samples ─► cells::build ─► solve::resolve (edit spec) ─► solve::solve ─► field::{Blend,Rbf} ─► samples'
 //! ```
 //!
+//! ## Where to start
+//!
+//! Everything a caller needs is at the crate root; the modules below it are how it is built.
+//!
+//! - **What to do:** an [`EditSpec`] — read from TOML ([`read_spec`], [`parse_spec`]) or made in
+//!   code (its [`Region`]s and [`HandleMotion`]s, checked by [`EditSpec::validate`] where a run
+//!   starts).
+//! - **How:** [`Options`], the user's options with their defaults, checked into
+//!   [`DeformParams`] by [`Options::params`].
+//! - **Points in memory:** [`deform`] (the moved points, the solution, a [`DeformInfo`]), or
+//!   [`solve_points`] for the field alone, to apply to these or other points.
+//! - **Files** (LAS/LAZ/COPC, PLY, OBJ, XYZ, streamed whatever their size): [`deform_file`] and
+//!   [`FileInfo`]; [`solve_files`] solves over tiles and saves a [`SavedField`], which
+//!   [`apply_file`] applies to any file with [`ApplyParams`].
+//! - **Live edits** (one set of cells, pose after pose): [`Live`].
+//! - **What happened:** [`Report`] (what `--report` writes), and every failure an [`Error`]
+//!   whose exit code the command line uses ([`Error::exit_code`]).
+//! - **Progress and stopping:** an [`Observer`] ([`Silent`] hears nothing).
+//!
 //! ```
-//! use rigidcells::pipeline::{Options, deform};
-//! use rigidcells::progress::Silent;
 //! use rigidcells::rigid::Vect;
-//! use rigidcells::spec::parse_spec;
+//! use rigidcells::{Options, Silent, deform, parse_spec};
 //! use std::path::Path;
 //!
 //! // A 4×1×1 bar of points, 0.1 apart along it and 0.25 across.
@@ -93,7 +110,14 @@ pub mod solve;
 pub mod spec;
 
 pub use error::{Error, Result};
-pub use pipeline::{preview, report};
+pub use field::SavedField;
+pub use pipeline::report::Report;
+pub use pipeline::{
+    ApplyParams, DeformInfo, DeformParams, FileInfo, Live, Options, apply_file, deform,
+    deform_file, preview, report, solve_files, solve_points,
+};
+pub use progress::{Observer, Silent};
+pub use spec::{EditSpec, HandleMotion, Region, parse_spec, read_spec};
 
 /// Runs `f`, which calls faer, on a rayon pool of faer's own.
 ///

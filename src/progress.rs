@@ -25,7 +25,7 @@ pub trait Observer: Sync {
 }
 
 /// [`Error::Cancelled`] once `observer` asks to stop.
-pub fn check(observer: &dyn Observer) -> Result<()> {
+pub fn stop_if_cancelled(observer: &dyn Observer) -> Result<()> {
     if observer.cancelled() {
         return Err(Error::Cancelled);
     }

@@ -155,7 +155,7 @@ impl Rigid<3> for Dim<3> {
     /// `sqrt(|X⁻¹| / |X|)`, while far from a rotation): six or seven for a local-global step's
     /// Procrustes matrices (products of the faces' moments and near-rotations), one or two for
     /// a near-rotation, a fifth of an SVD's time. Any other matrix, or one the iteration does not
-    /// settle in [`POLAR_ITERATIONS`], gets the SVD's answer.
+    /// settle in `POLAR_ITERATIONS`, gets the SVD's answer.
     fn nearest_rotation(m: &Mat<3>) -> Mat<3> {
         if !m.iter().all(|v| v.is_finite()) || m.norm() == 0.0 {
             return Matrix3::identity();

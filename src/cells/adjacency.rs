@@ -7,10 +7,10 @@
 
 use rayon::prelude::*;
 
-use super::{CellComplex, CellKey, Neighbors};
+use super::{CellComplex, CellKey, FacePair};
 
-pub(super) fn face_pairs<const D: usize>(complex: &CellComplex<D>) -> Vec<Neighbors> {
-    let mut pairs: Vec<Neighbors> = complex
+pub(super) fn face_pairs<const D: usize>(complex: &CellComplex<D>) -> Vec<FacePair> {
+    let mut pairs: Vec<FacePair> = complex
         .cells
         .par_iter()
         .enumerate()
@@ -42,7 +42,7 @@ pub(super) fn face_pairs<const D: usize>(complex: &CellComplex<D>) -> Vec<Neighb
                     };
                     let other = &complex.cells[j];
                     let area = (2.0 * cell.half.min(other.half)).powi(D as i32 - 1);
-                    found.push(Neighbors {
+                    found.push(FacePair {
                         i: i.min(j) as u32,
                         j: i.max(j) as u32,
                         weight: area / (cell.half + other.half),

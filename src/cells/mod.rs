@@ -291,7 +291,7 @@ impl<const D: usize> Cell<D> {
 
 /// A pair of face neighbors `i < j` with the weight `w_ij = A_ij / (h_i + h_j)` of paper eq. (2).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Neighbors {
+pub struct FacePair {
     /// First cell (the smaller index).
     pub i: u32,
     /// Second cell.
@@ -308,7 +308,7 @@ pub struct CellComplex<const D: usize> {
     /// The leaves.
     pub cells: Vec<Cell<D>>,
     /// Face-neighbor pairs, each once.
-    pub pairs: Vec<Neighbors>,
+    pub pairs: Vec<FacePair>,
     index: FxHashMap<CellKey<D>, u32>,
     deepest: u8,
 }

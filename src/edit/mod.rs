@@ -1,6 +1,6 @@
 //! The interactive editor (`rigidcells edit`): the paper's setting, in a browser.
 //!
-//! The server ([`server`]) holds an [`Editor`]: a decimated proxy of the input ([`Scene`], at
+//! The server (`server`) holds an [`Editor`]: a decimated proxy of the input ([`Scene`], at
 //! most [`crate::pipeline::PROXY_SAMPLES`] samples) and its live deformation
 //! ([`crate::pipeline::Live`]: the cells built once, and a session that re-solves warm —
 //! Gauss-Newton from the current motions, the symbolic factorization kept — each time the

@@ -88,12 +88,12 @@ use crate::rigid::{Affine, Dim, Mat, Rigid, Vect};
 use crate::solve::trend::TrendMap;
 
 /// A cell that follows no prescribed map ([`Prescribed::cells`]).
-pub const FREE: u32 = u32::MAX;
+pub const UNPRESCRIBED: u32 = u32::MAX;
 
 /// The maps that regions of cells follow exactly.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Prescribed<const D: usize> {
-    /// For each cell, the index of its map in `maps`, or [`FREE`]; empty when no cell has one.
+    /// For each cell, the index of its map in `maps`, or [`UNPRESCRIBED`]; empty when no cell has one.
     pub cells: Vec<u32>,
     /// The distinct maps, in the local frame.
     pub maps: Vec<Affine<D>>,
@@ -103,7 +103,7 @@ impl<const D: usize> Prescribed<D> {
     /// The map of cell `c`, if it has one.
     pub fn of(&self, c: usize) -> Option<&Affine<D>> {
         match self.cells.get(c) {
-            Some(&m) if m != FREE => Some(&self.maps[m as usize]),
+            Some(&m) if m != UNPRESCRIBED => Some(&self.maps[m as usize]),
             _ => None,
         }
     }
@@ -115,7 +115,7 @@ impl<const D: usize> Prescribed<D> {
     /// records).
     pub fn set(&mut self, c: usize, n: usize, map: Affine<D>) {
         if self.cells.is_empty() {
-            self.cells = vec![FREE; n];
+            self.cells = vec![UNPRESCRIBED; n];
         }
         let near = |m: &Affine<D>| {
             (m.linear - map.linear).amax() <= 1e-9
@@ -520,7 +520,7 @@ where
         };
         match self.leaves.leaf(v) {
             Some(c) => match self.prescribed.cells.get(c) {
-                Some(&m) if m != FREE => Class::Exact(m),
+                Some(&m) if m != UNPRESCRIBED => Class::Exact(m),
                 _ => band(),
             },
             None => {
@@ -561,7 +561,7 @@ where
             let u = neighbor(v, k);
             let held = self.leaves.leaf(&u).and_then(|c| {
                 let m = self.prescribed.cells[c];
-                (m != FREE).then_some(m)
+                (m != UNPRESCRIBED).then_some(m)
             });
             if let Some(m) = held {
                 add(m, k);
@@ -963,7 +963,7 @@ fn bands<const D: usize>(leaves: &Leaves<D>, prescribed: &Prescribed<D>) -> Band
     use rayon::prelude::*;
     let mut shell: Vec<([i64; D], u32)> = Vec::new();
     for (c, &m) in prescribed.cells.iter().enumerate() {
-        if m == FREE {
+        if m == UNPRESCRIBED {
             continue;
         }
         let (shift, coord) = leaves.keys[c];

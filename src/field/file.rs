@@ -59,7 +59,7 @@ use std::io::Read;
 use std::path::Path;
 
 use super::pu::{Layout, OVERLAP};
-use super::{Constrained, Deformer, FREE, Field, Frame, Outside, PuRbf, Rbf, Transfer};
+use super::{Constrained, Deformer, Field, Frame, Outside, PuRbf, Rbf, Transfer, UNPRESCRIBED};
 use crate::crs::Crs;
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
@@ -311,7 +311,7 @@ where
         }
         if !prescribed.maps.is_empty() {
             for c in 0..f.centers.len() {
-                let m = prescribed.cells.get(c).copied().unwrap_or(FREE);
+                let m = prescribed.cells.get(c).copied().unwrap_or(UNPRESCRIBED);
                 out.extend_from_slice(&m.to_le_bytes());
             }
         }
@@ -574,7 +574,7 @@ where
         let map_of = |i: usize| -> Result<Option<u32>> {
             let Some(at) = maps_at else { return Ok(None) };
             let m = u32::from_le_bytes(bytes[at + 4 * i..at + 4 * i + 4].try_into().expect("4"));
-            if m != FREE && m as usize >= maps.len() {
+            if m != UNPRESCRIBED && m as usize >= maps.len() {
                 return Err(Error::format(path, format!("map index {m} is wrong")));
             }
             Ok(Some(m))

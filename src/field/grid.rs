@@ -4,7 +4,7 @@
 //!
 //! **The nodes.** A grid of `columns × rows` nodes `spacing` apart, at whole multiples of the
 //! spacing, that covers the extent asked for (default: the field's cells' footprint,
-//! [`Field::domain`]). Node `(i, j)` — column `i` from the west, row `j` from the north, as a
+//! [`crate::field::Field::domain`]). Node `(i, j)` — column `i` from the west, row `j` from the north, as a
 //! picture's rows run — lies at `(west + i·s, north − j·s)`.
 //!
 //! **The offsets.** At each node the field's map `F` (the transfer with its exact regions and

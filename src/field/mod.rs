@@ -27,7 +27,7 @@ mod rbf;
 mod simd;
 
 pub use blend::{Blend, Weights};
-pub use exact::{Constrained, FREE, Frame, Outside, OutsideTally, Prescribed};
+pub use exact::{Constrained, Frame, Outside, OutsideTally, Prescribed, UNPRESCRIBED};
 pub use file::SavedField;
 pub use nearest::{Anchor, NEAR, Nearest, Neighbors};
 pub use order::Order;

@@ -266,7 +266,7 @@ pub fn refuse_same_outputs(outputs: &[(&str, &Path)]) -> Result<()> {
 
 /// A short description of a file's layout for `rigidcells info`: a PLY's header lines, an
 /// OBJ's counts of each kind of line.
-pub fn describe(path: &Path) -> Result<String> {
+pub fn layout(path: &Path) -> Result<String> {
     let bytes = mapped::map(path)?;
     match extension(path).as_deref() {
         Some("ply") => {

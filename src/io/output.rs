@@ -304,7 +304,7 @@ impl ResultSet {
 
     /// Renames every staged output over its target, in the order they were staged (the one
     /// named by [`ResultSet::last`] last), with no interrupt between the renames
-    /// ([`crate::interrupt::commit_registered`]). Should a rename fail (renames within a
+    /// (`interrupt::commit_registered`). Should a rename fail (renames within a
     /// folder fail only when the folder changed under the run), the outputs already renamed
     /// are removed again, files they replaced included, and the error names the output that
     /// failed: the run leaves none of its outputs.

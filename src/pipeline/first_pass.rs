@@ -214,7 +214,7 @@ fn first_pass(
             proxy.gather(&chunk);
         }
         observer.advance(chunk.len() as u64);
-        crate::progress::check(observer)?;
+        crate::progress::stop_if_cancelled(observer)?;
     }
     observer.finish();
     Ok(FirstPass {

@@ -11,7 +11,7 @@ use crate::field::grid::{GridInfo, GridParams, sample};
 /// Writes the field saved in `field` as a GeoTIFF grid of east, north and up offsets at
 /// `output` (`.tif` or `.tiff`), for PROJ's `+proj=gridshift`; `epsg` is the CRS of the
 /// field's coordinates when the user names it (a projected CRS's code), else the one the field
-/// records ([`grid_epsg`]). The output appears whole or not at all; an output that names the
+/// records (`grid_epsg`). The output appears whole or not at all; an output that names the
 /// field is refused before any work.
 pub fn grid_file(
     field: &Path,

@@ -37,7 +37,7 @@ pub struct Outputs<'a> {
     pub keep_existing: bool,
 }
 
-/// [`deform_file`] of `input` into `output` with the `outputs` beside it: the proxy is the
+/// [`super::deform_file`] of `input` into `output` with the `outputs` beside it: the proxy is the
 /// preview's when a preview is asked (else the fold-over check's). The files are renamed into
 /// place together at the end: an error or an interrupt on the way leaves none of them, and an
 /// output that names the input, or two that name one file, are refused before any work.

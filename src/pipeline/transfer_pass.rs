@@ -195,7 +195,7 @@ fn pipelined_pass(
         let mut reading = Ok(());
         while let Ok(mut job) = empty.recv() {
             // Asked on the calling thread, where an observer may look at the caller's signals.
-            if let Err(e) = crate::progress::check(observer) {
+            if let Err(e) = crate::progress::stop_if_cancelled(observer) {
                 reading = Err(e);
                 break;
             }

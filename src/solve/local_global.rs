@@ -462,7 +462,7 @@ where
         if n.is_multiple_of(10) {
             observer.message(&format!("iteration {n}: {log}"));
         }
-        crate::progress::check(observer)?;
+        crate::progress::stop_if_cancelled(observer)?;
         done += 1;
         // Once the rate is known, and then every window: would Gauss-Newton be sooner?
         if let Some(newton) = newton

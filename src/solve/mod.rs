@@ -933,7 +933,7 @@ where
         let previous = (iterations > 1).then(|| info.log.last().copied()).flatten();
         info.log.push(log);
         observer.message(&format!("iteration {iterations}: {log}"));
-        crate::progress::check(observer)?;
+        crate::progress::stop_if_cancelled(observer)?;
         // A short step's small move says only that the line search shortened it.
         if decrease <= params.tolerance * before
             || (t >= 1.0 && largest_move <= params.move_tolerance)
