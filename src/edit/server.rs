@@ -32,8 +32,8 @@
 //! never replaced, nor the input. Writes go to a temporary file renamed over the target, which
 //! keeps the replaced file's permission bits.
 //!
-//! The solver runs on its own thread ([`solver`]) and takes commands in order from a bounded
-//! queue ([`queue`]: at most [`MAX_QUEUED`] wait, one more is refused with a message, a
+//! The solver runs on its own thread (`solver`) and takes commands in order from a bounded
+//! queue (`queue`: at most [`MAX_QUEUED`] wait, one more is refused with a message, a
 //! newer pose replaces one waiting); a failure there is the page's message and the session
 //! starts again, never a dead session.
 //!
@@ -302,7 +302,7 @@ impl Server {
 
     /// Serves until the process ends: a thread per connection (named `edit-PORT` for the
     /// page's end of it), at most [`MAX_CONNECTIONS`] at once; one more is answered 503 and
-    /// closed ([`refuse_all`], one thread for all).
+    /// closed (`refuse_all`, one thread for all).
     pub fn run(self) -> Result<()> {
         let gate = Arc::new(Gate {
             token: self.token.clone(),
