@@ -362,6 +362,16 @@ impl<const D: usize> CellComplex<D> {
         self.deepest
     }
 
+    /// The leaf holding the finest grid cell `coord` (the cell itself or an ancestor): where a
+    /// sample of that grid cell takes its constraints.
+    pub fn finest_cell(&self, coord: &[i64; D]) -> Option<usize> {
+        let key = CellKey {
+            level: self.grid.max_level,
+            coord: *coord,
+        };
+        self.locate(&self.grid.center(&key))
+    }
+
     /// The index of the leaf containing the local point `x`, if any. A point on a face between
     /// cells belongs to the cell on its upper side.
     pub fn locate(&self, x: &Vect<D>) -> Option<usize> {

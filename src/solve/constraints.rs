@@ -29,7 +29,7 @@ use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
 use crate::spec::{EditSpec, HandleMotion, Region, Trend};
 
-use super::Sight;
+use super::sight::seen_cells;
 
 /// What constrains a cell.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -361,51 +361,12 @@ where
     }
 }
 
-/// The cell of the complex holding the finest grid cell `coord`.
-fn finest_cell<const D: usize>(complex: &CellComplex<D>, coord: &[i64; D]) -> Option<usize> {
-    let key = CellKey {
-        level: complex.grid.max_level,
-        coord: *coord,
-    };
-    complex.locate(&complex.grid.center(&key))
-}
-
 /// The cell of the complex that takes the constraints of a sample at `x` (input coordinates):
 /// the one holding its finest grid cell, as [`resolve_selected`] maps selected samples.
 pub fn sample_cell<const D: usize>(complex: &CellComplex<D>, x: &Vect<D>) -> Option<usize> {
     let grid = &complex.grid;
     let key = grid.locate(&(x - grid.origin), grid.max_level)?;
-    finest_cell(complex, &key.coord)
-}
-
-/// Per cell of `complex`, whether it holds one of the finest grid cells `coords` and the camera
-/// `view` sees it ([`Sight`]).
-fn seen_cells<'a, const D: usize>(
-    complex: &CellComplex<D>,
-    view: &[[f64; 4]; 4],
-    coords: impl Iterator<Item = &'a [i64; D]>,
-) -> Vec<bool> {
-    let mut cells: Vec<usize> = coords.filter_map(|k| finest_cell(complex, k)).collect();
-    cells.sort_unstable();
-    cells.dedup();
-    seen(complex, view, &cells)
-}
-
-/// Per cell of `complex`, whether the camera `view` sees it, for the `cells` given (the others
-/// are false): [`Sight`] over several cells at once.
-pub fn seen<const D: usize>(
-    complex: &CellComplex<D>,
-    view: &[[f64; 4]; 4],
-    cells: &[usize],
-) -> Vec<bool> {
-    use rayon::prelude::*;
-    let sight = Sight::new(complex, view);
-    let mut out = vec![false; complex.len()];
-    let seen: Vec<bool> = cells.par_iter().map(|&c| sight.sees(c)).collect();
-    for (&c, s) in cells.iter().zip(seen) {
-        out[c] = s;
-    }
-    out
+    complex.finest_cell(&key.coord)
 }
 
 /// Resolves `spec` onto `complex`. `points` are the samples in input coordinates; `classes`
@@ -448,7 +409,7 @@ where
             let seen = seen_cells(complex, view, per_cell.keys());
             let (mut sum, mut count) = (Vect::<D>::zeros(), 0);
             for (coord, (s, m)) in per_cell {
-                if let Some(c) = finest_cell(complex, coord)
+                if let Some(c) = complex.finest_cell(coord)
                     && seen[c]
                 {
                     hit[c] = true;
@@ -459,7 +420,7 @@ where
             return (hit, sum, count);
         }
         for coord in &acc.cells {
-            if let Some(c) = finest_cell(complex, coord) {
+            if let Some(c) = complex.finest_cell(coord) {
                 hit[c] = true;
             }
         }
@@ -659,148 +620,6 @@ pub(crate) fn in_3d<const D: usize>(v: &Vect<D>) -> nalgebra::Vector3<f64> {
     nalgebra::Vector3::from_fn(|i, _| if i < D { v[i] } else { 0.0 })
 }
 
-/// The end of the warning [`anchor`] gives.
-const LOOSE_WARNING: &str = "have no constraint and keep their rest pose";
-/// What becomes of the parts of a shape that no constraint reaches (`--loose-parts`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum LooseParts {
-    /// Each rides along rigidly with the nearest cell of a constrained part ([`carry_loose`]).
-    #[default]
-    Carry,
-    /// Each keeps its rest pose.
-    Rest,
-}
-
-/// The end of the warning once [`carry_loose`] moved them.
-const CARRIED_WARNING: &str = "have no constraint and ride along rigidly with the nearest \
-                               cell of a constrained part (--loose-parts rest keeps them at rest)";
-
-/// Moves every cell at rest (in a part without constraints) rigidly with the nearest cell of a
-/// constrained part — as a leaf follows its twig, a fitting its wall — and marks it
-/// [`Role::Carried`]: each loose part takes, whole, the motion of the constrained cell nearest
-/// to any of its cells, so it keeps its shape and its place beside that cell. `motions` are
-/// the solved motions of `complex`; the warning about the parts at rest says what happened.
-pub fn carry_loose<const D: usize>(
-    complex: &CellComplex<D>,
-    constraints: &mut Constraints<D>,
-    motions: &mut [crate::rigid::Motion<D>],
-) {
-    let anchors = loose_anchors(complex, &constraints.roles);
-    carry_with(complex, constraints, motions, &anchors);
-}
-
-/// The cells [`carry_loose`] moves, each with the constrained cell whose motion it takes: a
-/// function of the cells and their roles alone, which a session keeps while they stay.
-pub(crate) fn loose_anchors<const D: usize>(
-    complex: &CellComplex<D>,
-    roles: &[Role],
-) -> Vec<[u32; 2]> {
-    if !roles.contains(&Role::Rest) {
-        return Vec::new();
-    }
-    let anchored: Vec<u32> = (0..roles.len() as u32)
-        .filter(|&c| !matches!(roles[c as usize], Role::Rest | Role::Carried(_)))
-        .collect();
-    if anchored.is_empty() {
-        return Vec::new();
-    }
-    let centers: Vec<[f64; D]> = anchored
-        .iter()
-        .map(|&c| complex.cells[c as usize].center.into())
-        .collect();
-    // Cell centers are distinct, so the tree builds; should it not, the parts stay at rest
-    // and the warning still says so.
-    let Ok(tree) = kiddo::ImmutableKdTree::<f64, D>::new_from_slice(&centers) else {
-        return Vec::new();
-    };
-    // Per loose part: its nearest constrained cell and the distance to it.
-    let (component, count) = complex.components();
-    let mut nearest: Vec<Option<(f64, u32)>> = vec![None; count];
-    for (c, r) in roles.iter().enumerate() {
-        if *r != Role::Rest {
-            continue;
-        }
-        let q: [f64; D] = complex.cells[c].center.into();
-        let one = std::num::NonZero::new(1).expect("1 is not 0");
-        let Some(hit) = tree
-            .query(&q)
-            .nearest_n::<kiddo::SquaredEuclidean<f64>>(one)
-            .execute()
-            .first()
-            .map(|r| (r.distance, r.item))
-        else {
-            continue;
-        };
-        let slot = &mut nearest[component[c] as usize];
-        if slot.is_none_or(|(d, _)| hit.0 < d) {
-            *slot = Some((hit.0, anchored[hit.1 as usize]));
-        }
-    }
-    (0..roles.len())
-        .filter(|&c| roles[c] == Role::Rest)
-        .filter_map(|c| nearest[component[c] as usize].map(|(_, a)| [c as u32, a]))
-        .collect()
-}
-
-/// [`carry_loose`] with its [`loose_anchors`] known.
-pub(crate) fn carry_with<const D: usize>(
-    complex: &CellComplex<D>,
-    constraints: &mut Constraints<D>,
-    motions: &mut [crate::rigid::Motion<D>],
-    anchors: &[[u32; 2]],
-) {
-    for &[c, a] in anchors {
-        let (c, a) = (c as usize, a as usize);
-        let (anchor, m) = (&complex.cells[a], motions[a]);
-        motions[c] = crate::rigid::Motion {
-            rot: m.rot,
-            pos: m.apply(&anchor.center, &complex.cells[c].center),
-        };
-        constraints.roles[c] = Role::Carried(a as u32);
-    }
-    if anchors.is_empty() {
-        return;
-    }
-    for w in &mut constraints.warnings {
-        if let Some(head) = w.strip_suffix(LOOSE_WARNING) {
-            *w = format!("{head}{CARRIED_WARNING}");
-        }
-    }
-}
-
-/// Gives [`Role::Rest`] to the cells of every connected part of `complex` that holds no
-/// constraint (no role other than free or rest, no target), and [`Role::Free`] to rest cells
-/// of parts that do. Returns the parts without a constraint, all parts, and the warning that
-/// names them (none when every part holds a constraint).
-fn anchor<const D: usize>(
-    complex: &CellComplex<D>,
-    roles: &mut [Role],
-    targets: &[TargetLocal<D>],
-) -> (usize, usize, Option<String>) {
-    let (component, count) = complex.components();
-    let mut anchored = vec![false; count];
-    for (c, r) in roles.iter().enumerate() {
-        anchored[component[c] as usize] |= !matches!(r, Role::Free | Role::Rest);
-    }
-    // A checkpoint (weight 0) pulls nothing.
-    for t in targets.iter().filter(|t| t.weight > 0.0) {
-        anchored[component[t.cell as usize] as usize] = true;
-    }
-    let mut loose = 0;
-    for (c, r) in roles.iter_mut().enumerate() {
-        if !anchored[component[c] as usize] {
-            *r = Role::Rest;
-            loose += 1;
-        } else if *r == Role::Rest {
-            *r = Role::Free;
-        }
-    }
-    let parts = anchored.iter().filter(|&&a| !a).count();
-    let warning = (loose > 0)
-        .then(|| format!("{parts} of {count} connected parts ({loose} cells) {LOOSE_WARNING}"));
-    (parts, count, warning)
-}
-
 /// The constraints of a complex made by [`CellComplex::split`]: children inherit their parent's
 /// role and stiffness, except that a pin stays with the child holding the pinned point; targets
 /// move to the child holding their point.
@@ -960,4 +779,40 @@ pub fn coarsen<const D: usize>(
     out.warnings.retain(|w| !w.ends_with(LOOSE_WARNING));
     out.warnings.extend(loose);
     (coarse, out)
+}
+
+/// The end of the warning [`anchor`] gives.
+pub(super) const LOOSE_WARNING: &str = "have no constraint and keep their rest pose";
+
+/// Gives [`Role::Rest`] to the cells of every connected part of `complex` that holds no
+/// constraint (no role other than free or rest, no target), and [`Role::Free`] to rest cells
+/// of parts that do. Returns the parts without a constraint, all parts, and the warning that
+/// names them (none when every part holds a constraint).
+pub(super) fn anchor<const D: usize>(
+    complex: &CellComplex<D>,
+    roles: &mut [Role],
+    targets: &[TargetLocal<D>],
+) -> (usize, usize, Option<String>) {
+    let (component, count) = complex.components();
+    let mut anchored = vec![false; count];
+    for (c, r) in roles.iter().enumerate() {
+        anchored[component[c] as usize] |= !matches!(r, Role::Free | Role::Rest);
+    }
+    // A checkpoint (weight 0) pulls nothing.
+    for t in targets.iter().filter(|t| t.weight > 0.0) {
+        anchored[component[t.cell as usize] as usize] = true;
+    }
+    let mut loose = 0;
+    for (c, r) in roles.iter_mut().enumerate() {
+        if !anchored[component[c] as usize] {
+            *r = Role::Rest;
+            loose += 1;
+        } else if *r == Role::Rest {
+            *r = Role::Free;
+        }
+    }
+    let parts = anchored.iter().filter(|&&a| !a).count();
+    let warning = (loose > 0)
+        .then(|| format!("{parts} of {count} connected parts ({loose} cells) {LOOSE_WARNING}"));
+    (parts, count, warning)
 }

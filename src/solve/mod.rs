@@ -85,6 +85,7 @@ pub mod energy;
 mod forecast;
 mod iteration;
 mod local_global;
+mod loose;
 mod multilevel;
 mod newton;
 mod params;
@@ -101,8 +102,7 @@ use std::time::Instant;
 
 pub use coarse::{COARSE_FROM, COARSE_STAGE, MAX_COARSE_LEVELS};
 pub use constraints::{
-    Constraints, LooseParts, Role, carry_loose, coarsen, inherit, resolve, resolve_selected,
-    sample_cell, seen,
+    Constraints, Role, coarsen, inherit, resolve, resolve_selected, sample_cell,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
 pub use forecast::forecast;
@@ -111,11 +111,12 @@ pub use iteration::{IterationLog, IterationMethod, MOVE_TOLERANCE};
 pub use local_global::{
     LOCAL_GLOBAL_PER_ITERATION, LocalGlobalInfo, LocalGlobalParams, minimize_local_global,
 };
+pub use loose::{LooseParts, carry_loose};
 pub use selections::Selections;
 pub use session::{
     DRAG_COARSE_FROM, DRAG_FACTOR_MOST, DRAG_LOCAL_GLOBAL, IDLE_LOCAL_GLOBAL, Session,
 };
-pub use sight::Sight;
+pub use sight::{Sight, seen};
 
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};

@@ -10,7 +10,7 @@
 use std::time::Instant;
 
 use super::coarse::{holders, prolong_held};
-use super::constraints::{carry_with, loose_anchors};
+use super::loose::{carry_with, loose_anchors};
 use super::system::System;
 use super::turns::TurnGauge;
 use super::{

@@ -140,3 +140,33 @@ fn sub(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
 fn scale(a: &[f64; 3], s: f64) -> [f64; 3] {
     [a[0] * s, a[1] * s, a[2] * s]
 }
+
+/// Per cell of `complex`, whether it holds one of the finest grid cells `coords` and the camera
+/// `view` sees it ([`Sight`]).
+pub(super) fn seen_cells<'a, const D: usize>(
+    complex: &CellComplex<D>,
+    view: &[[f64; 4]; 4],
+    coords: impl Iterator<Item = &'a [i64; D]>,
+) -> Vec<bool> {
+    let mut cells: Vec<usize> = coords.filter_map(|k| complex.finest_cell(k)).collect();
+    cells.sort_unstable();
+    cells.dedup();
+    seen(complex, view, &cells)
+}
+
+/// Per cell of `complex`, whether the camera `view` sees it, for the `cells` given (the others
+/// are false): [`Sight`] over several cells at once.
+pub fn seen<const D: usize>(
+    complex: &CellComplex<D>,
+    view: &[[f64; 4]; 4],
+    cells: &[usize],
+) -> Vec<bool> {
+    use rayon::prelude::*;
+    let sight = Sight::new(complex, view);
+    let mut out = vec![false; complex.len()];
+    let seen: Vec<bool> = cells.par_iter().map(|&c| sight.sees(c)).collect();
+    for (&c, s) in cells.iter().zip(seen) {
+        out[c] = s;
+    }
+    out
+}
