@@ -115,7 +115,7 @@ impl Scene {
                 }
             }
         };
-        let Some(bounds) = crate::render::bounds(&scene.points) else {
+        let Some(bounds) = crate::render::finite_bounds(&scene.points) else {
             return Err(Error::format(input, "no samples to edit"));
         };
         scene.input = std::path::absolute(input).map_err(|e| Error::io(input, e))?;

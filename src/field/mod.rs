@@ -20,6 +20,7 @@ pub mod far;
 mod file;
 pub mod grid;
 mod leaves;
+mod maps;
 mod nearest;
 mod order;
 mod pu;

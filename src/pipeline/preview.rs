@@ -46,7 +46,7 @@ pub fn preview(solution: &Solution<3>, proxy: &Proxy, view: &View, strain: bool)
             framed.push(c.add_scalar(*h));
         }
     }
-    let Some((lo, hi)) = render::bounds(&framed) else {
+    let Some((lo, hi)) = render::finite_bounds(&framed) else {
         let blank = Image::blank(view.width, view.height);
         return Image::beside(&[blank.clone(), blank]);
     };

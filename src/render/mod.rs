@@ -15,7 +15,11 @@
 //! z blue) in the lower left corner, a scale bar of a round length in the lower right, a strain
 //! legend with its numbers, and markers for pins and targets.
 
+mod files;
+
 use std::path::Path;
+
+pub use files::{ColoredPoints, RENDER_POINTS, colored_points, render_file, up_of};
 
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
@@ -92,51 +96,6 @@ impl Default for View {
             zoom: 1.0,
         }
     }
-}
-
-/// The vertical axis of the file at `path` (module docs): a PLY or OBJ comment that names it,
-/// else y for meshes and z for everything else.
-pub fn up_of(path: &Path) -> usize {
-    let ext = crate::io::extension(path).unwrap_or_default();
-    if ext != "ply" && ext != "obj" {
-        return 2;
-    }
-    // The header, or the first comments of an OBJ.
-    let mut head = vec![0u8; 64 * 1024];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
-        .unwrap_or(0);
-    let text = String::from_utf8_lossy(&head[..n]).to_ascii_lowercase();
-    for line in text.lines() {
-        let comment = match ext.as_str() {
-            "ply" => line.trim().strip_prefix("comment "),
-            _ => line.trim().strip_prefix('#'),
-        };
-        let Some(c) = comment else {
-            if ext == "ply" && line.starts_with("end_header") {
-                break;
-            }
-            continue;
-        };
-        let words: Vec<&str> = c
-            .split(|ch: char| !ch.is_ascii_alphanumeric())
-            .filter(|w| !w.is_empty())
-            .collect();
-        for (i, w) in words.iter().enumerate() {
-            let axis = |a: &str| ["x", "y", "z"].iter().position(|x| *x == a);
-            // `up z`, `z up`, `z_up`, `zup`.
-            let named = match *w {
-                "up" => words.get(i + 1).and_then(|a| axis(a)),
-                "xup" | "yup" | "zup" => axis(&w[..1]),
-                _ if words.get(i + 1) == Some(&"up") => axis(w),
-                _ => None,
-            };
-            if let Some(a) = named {
-                return a;
-            }
-        }
-    }
-    1
 }
 
 /// An RGB image.
@@ -730,8 +689,10 @@ pub fn splat_radius(n: usize, area: f64) -> i64 {
         .clamp(0.0, 4.0) as i64
 }
 
-/// The bounds of `points` (finite ones), or `None` for none.
-pub fn bounds(points: &[Vect<3>]) -> Option<(Vect<3>, Vect<3>)> {
+/// The bounds of the finite ones among `points`, or `None` for none: a picture frames what it
+/// can draw, where an input's own bounds ([`crate::cells::bounds`]) refuse a point that is not
+/// finite.
+pub fn finite_bounds(points: &[Vect<3>]) -> Option<(Vect<3>, Vect<3>)> {
     points
         .iter()
         .filter(|p| p.iter().all(|v| v.is_finite()))
@@ -753,7 +714,7 @@ pub fn render(
     view: &View,
     fit: Option<(Vect<3>, Vect<3>)>,
 ) -> Image {
-    let Some((lo, hi)) = fit.or_else(|| bounds(points)) else {
+    let Some((lo, hi)) = fit.or_else(|| finite_bounds(points)) else {
         return Image::blank(view.width, view.height);
     };
     let mut canvas = Canvas::new(Camera::fit(&lo, &hi, view));
@@ -787,7 +748,7 @@ pub fn render_annotated(
     color: impl Fn(usize, usize) -> [u8; 3],
     view: &View,
 ) -> Image {
-    let Some((lo, hi)) = bounds(points) else {
+    let Some((lo, hi)) = finite_bounds(points) else {
         return Image::blank(view.width, view.height);
     };
     let camera = Camera::fit(&lo, &hi, view);
@@ -798,126 +759,6 @@ pub fn render_annotated(
     };
     canvas.annotate();
     canvas.image
-}
-
-/// Samples [`render_file`] draws of a streamed file at most (every k-th sample).
-pub const RENDER_POINTS: usize = 2_000_000;
-
-/// What `rigidcells render` draws of the file `input`: a PLY, OBJ or XYZ file read whole
-/// ([`crate::io::Document`]), its triangles or points in a PLY's vertex or face colors, else
-/// gray; a LAS/LAZ scan streamed and decimated to [`RENDER_POINTS`], in its RGB or intensity;
-/// with the triad and scale bar.
-pub fn render_file(input: &Path, view: &View) -> Result<Image> {
-    use crate::io::Colors;
-    match crate::io::Document::read(input) {
-        Ok(doc) => {
-            // A PLY's vertex colors (a `cells` output's roles or strain, interpolated across
-            // each triangle) or face colors, else gray.
-            let triangles = doc.triangles();
-            let colors = match crate::io::extension(input).as_deref() {
-                Some("ply") => crate::io::colors(input)?,
-                _ => None,
-            }
-            .filter(|c| match c {
-                Colors::Vertices(v) => v.len() == doc.positions().len(),
-                Colors::Triangles(t) => t.len() == triangles.len(),
-            });
-            let color = |t: usize, v: usize| match &colors {
-                Some(Colors::Vertices(c)) => c[v],
-                Some(Colors::Triangles(c)) => c[t],
-                None => [200, 200, 200],
-            };
-            Ok(render_annotated(
-                doc.positions(),
-                triangles,
-                doc.normals(),
-                color,
-                view,
-            ))
-        }
-        Err(Error::UnsupportedFormat { .. }) => {
-            let p = colored_points(input, RENDER_POINTS, &crate::progress::Silent)?;
-            Ok(render_annotated(
-                &p.points,
-                &[],
-                None,
-                |_, i| p.colors[i],
-                view,
-            ))
-        }
-        Err(e) => Err(e),
-    }
-}
-
-/// Every k-th sample of a streamed file with its color and LAS class: a decimated proxy for
-/// pictures and the editor.
-#[derive(Debug, Clone, Default)]
-pub struct ColoredPoints {
-    /// World coordinates.
-    pub points: Vec<Vect<3>>,
-    /// LAS RGB when the point format has it, else LAS intensity as gray, else a neutral gray;
-    /// intensities and 16-bit RGB scaled by the file's own range.
-    pub colors: Vec<[u8; 3]>,
-    /// LAS classes (empty for formats without them).
-    pub classes: Vec<u8>,
-    /// Samples from one kept to the next.
-    pub stride: u64,
-    /// Samples in the file.
-    pub total: u64,
-}
-
-/// Every k-th sample of a streamed file (at most `max`) with its color and class
-/// ([`ColoredPoints`]).
-pub fn colored_points(
-    input: &Path,
-    max: usize,
-    observer: &dyn crate::progress::Observer,
-) -> Result<ColoredPoints> {
-    let mut source = crate::io::open(input)?;
-    let total = source.len();
-    let stride = (total as usize).div_ceil(max.max(1)).max(1);
-    let las = crate::io::LasHeader::read(input).ok();
-    let mut chunk = crate::io::Chunk::default();
-    let mut out = ColoredPoints {
-        stride: stride as u64,
-        total,
-        ..Default::default()
-    };
-    let mut raw_colors = Vec::new();
-    let mut index = 0usize;
-    observer.stage("reading", total);
-    loop {
-        let n = source.read(1 << 16, &mut chunk)?;
-        if n == 0 {
-            break;
-        }
-        let first = (stride - index % stride) % stride;
-        for i in (first..n).step_by(stride) {
-            out.points.push(chunk.positions[i]);
-            if let Some(&c) = chunk.classes.get(i) {
-                out.classes.push(c);
-            }
-            let rec = (chunk.record_len > 0)
-                .then(|| &chunk.raw[i * chunk.record_len..(i + 1) * chunk.record_len]);
-            raw_colors.push(las.as_ref().zip(rec).map(|(h, r)| h.color(r)));
-        }
-        index += n;
-        observer.advance(n as u64);
-    }
-    observer.finish();
-    let top = raw_colors
-        .iter()
-        .flatten()
-        .flatten()
-        .fold(1u16, |a, &b| a.max(b));
-    out.colors = raw_colors
-        .into_iter()
-        .map(|c| match c {
-            Some(rgb) => rgb.map(|v| (v as u32 * 255 / top as u32) as u8),
-            None => [200, 200, 200],
-        })
-        .collect();
-    Ok(out)
 }
 
 #[cfg(test)]
