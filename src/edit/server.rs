@@ -52,23 +52,27 @@
 
 #![cfg(feature = "editor")]
 
+mod gate;
+mod outputs;
 mod queue;
 mod solver;
 
-use std::collections::HashSet;
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use tungstenite::protocol::{Role, WebSocketConfig};
 use tungstenite::{Message, WebSocket};
 
 use super::Editor;
 use crate::error::{Error, Result};
+use gate::{Gate, header, read_head, respond, token};
+use outputs::Refusal;
+pub use outputs::{Outputs, check_name};
 pub use queue::MAX_QUEUED;
 use queue::{Commands, Refused};
 use solver::{Command, Request};
@@ -100,7 +104,7 @@ pub const MAX_CONNECTIONS: usize = 32;
 
 /// How long a request's head may take to arrive (and the most bytes it may have: 16 KiB).
 pub const HEAD_TIME: Duration = Duration::from_secs(10);
-const HEAD_BYTES: usize = 16 << 10;
+pub(super) const HEAD_BYTES: usize = 16 << 10;
 
 /// How long a write to the page may block (a page that reads nothing frees its connection).
 const WRITE_TIME: Duration = Duration::from_secs(30);
@@ -116,131 +120,6 @@ struct Assets {
     triangles: Vec<u8>,
     cells: Vec<u8>,
     blend: Vec<u8>,
-}
-
-/// The one folder the editor writes into, and the names it wrote there.
-#[derive(Debug)]
-pub struct Outputs {
-    dir: PathBuf,
-    input: PathBuf,
-    written: Mutex<HashSet<String>>,
-}
-
-/// Why a file is not written.
-#[derive(Debug)]
-enum Refusal {
-    /// The file exists, this editor did not write it, and the page did not say its user
-    /// confirmed replacing it.
-    Exists(PathBuf),
-    /// Never written (a bad name, a link, the input…).
-    Error(Error),
-}
-
-impl From<Error> for Refusal {
-    fn from(e: Error) -> Self {
-        Self::Error(e)
-    }
-}
-
-impl Outputs {
-    /// Writes into `dir` (`None`: the folder of `input`), which must be a folder.
-    pub fn new(input: &Path, dir: Option<&Path>) -> Result<Self> {
-        let (dir, named) = match dir {
-            Some(d) => (d.to_path_buf(), true),
-            None => match input.parent() {
-                Some(p) if !p.as_os_str().is_empty() => (p.to_path_buf(), false),
-                _ => (PathBuf::from("."), false),
-            },
-        };
-        let shown = if named {
-            format!("--out-dir {}", dir.display())
-        } else {
-            dir.display().to_string()
-        };
-        let canonical = std::fs::canonicalize(&dir)
-            .map_err(|e| Error::Param(format!("{shown}: not a folder to write into: {e}")))?;
-        if !canonical.is_dir() {
-            return Err(Error::Param(format!("{shown}: not a folder to write into")));
-        }
-        Ok(Self {
-            dir: canonical,
-            input: input.to_path_buf(),
-            written: Mutex::new(HashSet::new()),
-        })
-    }
-
-    /// The folder.
-    pub fn dir(&self) -> &Path {
-        &self.dir
-    }
-
-    /// Where `name` is written, when it may be: a plain name with one of the extensions
-    /// `extensions` ([`check_name`]), not the input, not a link or anything but a regular file,
-    /// and not a file this editor did not write unless `overwrite` (the user confirmed).
-    fn target(&self, name: &str, extensions: &[&str], overwrite: bool) -> Result<PathBuf, Refusal> {
-        check_name(name, extensions)?;
-        let path = self.dir.join(name);
-        crate::io::refuse_overwrite(&self.input, &path)?;
-        match std::fs::symlink_metadata(&path) {
-            Ok(m) if m.file_type().is_symlink() => Err(Error::Param(format!(
-                "{}: a symbolic link; the editor does not replace links, choose another name",
-                path.display()
-            ))
-            .into()),
-            Ok(m) if !m.is_file() => Err(Error::Param(format!(
-                "{}: not a regular file; choose another name",
-                path.display()
-            ))
-            .into()),
-            Ok(_) if !overwrite && !self.wrote(name) => Err(Refusal::Exists(path)),
-            Ok(_) => Ok(path),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(path),
-            Err(e) => Err(Error::write(&path, e).into()),
-        }
-    }
-
-    fn wrote(&self, name: &str) -> bool {
-        self.written
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .contains(name)
-    }
-
-    fn record(&self, name: &str) {
-        self.written
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .insert(name.to_string());
-    }
-}
-
-/// Checks that `name` is a plain file name with one of `extensions` (lowercase, compared
-/// without case): not empty, at most 255 bytes, no `/` or `\\` (no folder), no leading `.`
-/// (no hidden file, no `.` or `..`; the editor's temporary files start with one), no control
-/// character.
-pub fn check_name(name: &str, extensions: &[&str]) -> Result<()> {
-    let bad = |why: &str| Err(Error::Param(format!("{name:?}: {why}")));
-    if name.is_empty() {
-        return Err(Error::Param("a file name is needed".into()));
-    }
-    if name.len() > 255 {
-        return bad("a file name of at most 255 bytes is needed");
-    }
-    if name.contains(['/', '\\']) {
-        return bad("a plain file name is needed, without a folder");
-    }
-    if name.starts_with('.') {
-        return bad("a name starting with '.' is not written");
-    }
-    if name.chars().any(char::is_control) {
-        return bad("a file name without control characters is needed");
-    }
-    let ext = crate::io::extension(Path::new(name));
-    if !ext.is_some_and(|e| extensions.contains(&e.as_str())) {
-        let list: Vec<String> = extensions.iter().map(|e| format!(".{e}")).collect();
-        return bad(&format!("the file must be {}", list.join(" or ")));
-    }
-    Ok(())
 }
 
 /// The editor's server, bound and ready.
@@ -373,15 +252,6 @@ impl Drop for Slot {
     }
 }
 
-/// 128 random bits as hex, from the system's generator.
-fn token() -> Result<String> {
-    let mut bytes = [0u8; 16];
-    std::fs::File::open("/dev/urandom")
-        .and_then(|mut f| f.read_exact(&mut bytes))
-        .map_err(|e| Error::Solver(format!("no random token: /dev/urandom: {e}")))?;
-    Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
-}
-
 fn f32_bytes(v: &[f32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
@@ -444,91 +314,6 @@ fn assets(editor: &Editor, outputs: &Outputs, token: &str) -> Result<Assets> {
         cells: f32_bytes(&editor.cells()),
         blend,
     })
-}
-
-/// Whether two secrets are equal, in a time that depends on their lengths alone (not on where
-/// they first differ).
-fn same_secret(a: &[u8], b: &[u8]) -> bool {
-    let differ = a
-        .iter()
-        .zip(b)
-        .fold(0u8, |acc, (x, y)| acc | std::hint::black_box(x ^ y));
-    a.len() == b.len() && differ == 0
-}
-
-/// What a request must carry.
-struct Gate {
-    token: String,
-    port: u16,
-}
-
-impl Gate {
-    /// Whether the request's token, `Host` and `Origin` are this server's.
-    fn admits(&self, query: &str, headers: &[httparse::Header<'_>]) -> bool {
-        let token_ok = query
-            .split('&')
-            .filter_map(|kv| kv.split_once('='))
-            .filter(|(k, _)| *k == "t")
-            .fold(false, |ok, (_, v)| {
-                same_secret(v.as_bytes(), self.token.as_bytes()) | ok
-            });
-        let host_ok = header(headers, "host").is_some_and(|h| self.hosts().contains(&h));
-        let origin_ok = header(headers, "origin")
-            .is_none_or(|o| self.hosts().iter().any(|h| o == format!("http://{h}")));
-        token_ok && host_ok && origin_ok
-    }
-
-    /// The names of this server as a `Host` header gives them.
-    fn hosts(&self) -> [String; 2] {
-        [
-            format!("127.0.0.1:{}", self.port),
-            format!("localhost:{}", self.port),
-        ]
-    }
-}
-
-/// The value of the header `name`, if the request has it.
-fn header(headers: &[httparse::Header<'_>], name: &str) -> Option<String> {
-    headers
-        .iter()
-        .find(|h| h.name.eq_ignore_ascii_case(name))
-        .map(|h| String::from_utf8_lossy(h.value).into_owned())
-}
-
-/// The request's head, read within [`HEAD_TIME`], and the bytes read after it; `None` when it
-/// is larger than [`HEAD_BYTES`] or slower.
-fn read_head(stream: &mut TcpStream) -> std::io::Result<Option<(Vec<u8>, Vec<u8>)>> {
-    let deadline = Instant::now() + HEAD_TIME;
-    let mut buf = vec![0u8; HEAD_BYTES];
-    let mut len = 0;
-    loop {
-        let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() || len == buf.len() {
-            return Ok(None);
-        }
-        stream.set_read_timeout(Some(left))?;
-        let n = match stream.read(&mut buf[len..]) {
-            Ok(0) => return Err(std::io::ErrorKind::UnexpectedEof.into()),
-            Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                ) =>
-            {
-                return Ok(None);
-            }
-            Err(e) => return Err(e),
-        };
-        let from = len.saturating_sub(3);
-        len += n;
-        if let Some(at) = buf[from..len].windows(4).position(|w| w == b"\r\n\r\n") {
-            let end = from + at + 4;
-            let rest = buf[end..len].to_vec();
-            buf.truncate(end);
-            return Ok(Some((buf, rest)));
-        }
-    }
 }
 
 /// One connection: a GET of the page or data, or the WebSocket.
@@ -603,45 +388,6 @@ fn connection(
         _ => return respond(&mut stream, 404, "text/plain", b"not found", port),
     };
     respond(&mut stream, 200, kind, body, port)
-}
-
-/// The Content-Security-Policy of the server on `port`: its own script and styles only, no
-/// inline code, connections only to itself, never framed.
-fn policy(port: u16) -> String {
-    format!(
-        "default-src 'none'; script-src 'self'; style-src 'self'; \
-         connect-src 'self' ws://127.0.0.1:{port} ws://localhost:{port}; \
-         base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
-    )
-}
-
-fn respond(
-    stream: &mut TcpStream,
-    status: u16,
-    kind: &str,
-    body: &[u8],
-    port: u16,
-) -> std::io::Result<()> {
-    let reason = match status {
-        200 => "OK",
-        400 => "Bad Request",
-        403 => "Forbidden",
-        404 => "Not Found",
-        405 => "Method Not Allowed",
-        503 => "Service Unavailable",
-        _ => "Request Header Fields Too Large",
-    };
-    write!(
-        stream,
-        "HTTP/1.1 {status} {reason}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\n\
-         Cache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\n\
-         Referrer-Policy: no-referrer\r\nContent-Security-Policy: {}\r\n\
-         Connection: close\r\n\r\n",
-        body.len(),
-        policy(port)
-    )?;
-    stream.write_all(body)?;
-    stream.flush()
 }
 
 /// The reading half of a WebSocket's socket: `tungstenite` writes its replies to pings and
@@ -742,24 +488,4 @@ fn write_answers(mut ws: WebSocket<TcpStream>, outbox: Receiver<Message>) {
         }
     }
     let _ = ws.get_ref().shutdown(Shutdown::Both);
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn secrets_are_equal_only_when_every_byte_is() {
-        let token = b"0123456789abcdef0123456789abcdef";
-        assert!(same_secret(token, token));
-        let mut last = *token;
-        last[31] = b'0';
-        assert!(!same_secret(&last, token));
-        let mut first = *token;
-        first[0] = b'1';
-        assert!(!same_secret(&first, token));
-        assert!(!same_secret(&token[..31], token));
-        assert!(!same_secret(b"", token));
-        assert!(!same_secret(token, b""));
-    }
 }

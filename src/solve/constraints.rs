@@ -5,7 +5,7 @@
 //! geometric regions (box, sphere, half-space), when its center lies in the region — so that a
 //! box around the end of a solid fixes the interior cells there too, not only the surface layer.
 //! A screen selection of the visible samples (`visible = true`) is a selection of samples: a
-//! cell gets it when it holds a selected sample and the camera sees it ([`Sight`]).
+//! cell gets it when it holds a selected sample and the camera sees it ([`super::Sight`]).
 //!
 //! - `fixed` and `handle` cells are prescribed (0 DoF); a cell claimed by two different hard
 //!   constraints is an error that names both and the cell.
@@ -17,7 +17,7 @@
 //!   of its cells' scales.
 //! - a connected component of cells with no constraint at all keeps its rest pose during the
 //!   solve; afterwards it rides along rigidly with the nearest cell of a constrained part
-//!   ([`carry_loose`], the default) or stays at rest, with a warning either way; no
+//!   ([`super::carry_loose`], the default) or stays at rest, with a warning either way; no
 //!   constrained cell anywhere is [`Error::NoConstraints`].
 //!
 //! Everything here is in the local frame of the complex.
@@ -45,7 +45,7 @@ pub enum Role {
     /// In a component without any constraint: kept at its rest pose.
     Rest,
     /// In a component without any constraint, carried rigidly by cell `k` — the nearest
-    /// cell of a constrained part ([`carry_loose`]).
+    /// cell of a constrained part ([`super::carry_loose`]).
     Carried(u32),
 }
 

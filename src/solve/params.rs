@@ -9,7 +9,7 @@ use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
 
-/// Parameters of [`solve`].
+/// Parameters of [`super::solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolveParams {
     /// Gauss-Newton iterations per load step at most. Default 50.
@@ -36,7 +36,7 @@ pub struct SolveParams {
     /// (when `refine_strain` is `None`); `None` (default): no refinement. See [`adaptive`].
     pub refine_fraction: Option<f64>,
     /// Before solving, merge sibling cells of one role into their parent up to this many
-    /// times ([`coarsen`]). Default 0. See [`adaptive`].
+    /// times ([`super::coarsen`]). Default 0. See [`adaptive`].
     pub coarsen_levels: u8,
     /// Levels refinement may add below the finest static level. Default 2.
     pub refine_levels: u8,
@@ -44,13 +44,13 @@ pub struct SolveParams {
     pub max_refinements: usize,
     /// Coarse stages before the cells themselves are solved (the `coarse` module): 0 solves
     /// them from rest; `None` (default): as many as the cells call for (none below
-    /// [`COARSE_FROM`] cells).
+    /// [`super::COARSE_FROM`] cells).
     pub coarse_levels: Option<u8>,
     /// How each Gauss-Newton system is solved, or local-global iterations instead. Default
     /// [`Method::Auto`].
     pub method: Method,
     /// Parts of the shape without any constraint ride along rigidly with the nearest cell of
-    /// a constrained part ([`carry_loose`]); `false` keeps them at rest. Default `true`.
+    /// a constrained part ([`super::carry_loose`]); `false` keeps them at rest. Default `true`.
     pub carry_loose: bool,
     /// After a load step's first iteration, add the rotations' second-order term to the
     /// Gauss-Newton matrix (Newton's method; see the module docs). Default `true`.
@@ -104,7 +104,7 @@ impl Default for SolveParams {
 /// minutes).
 pub const REFINE_GROWTH: usize = 8;
 
-/// What [`solve`] did.
+/// What [`super::solve`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SolverInfo {
     /// Accepted iterations (Gauss-Newton and local-global) over all load steps and refinements.
@@ -151,11 +151,11 @@ pub struct SolverInfo {
     pub levels: usize,
     /// Load steps taken again in halves because they left the branch of the load path.
     pub halvings: usize,
-    /// Every turning handle's turn, asked and carried by the cells ([`turns`]).
+    /// Every turning handle's turn, asked and carried by the cells ([`super::turns`]).
     pub turns: Vec<HandleTurn>,
-    /// What the solve was estimated to take before it started ([`forecast()`]).
+    /// What the solve was estimated to take before it started ([`super::forecast()`]).
     pub estimate: Option<crate::estimate::Estimate>,
-    /// The control points' trend ([`trend`]; `None` without one).
+    /// The control points' trend ([`super::trend`]; `None` without one).
     pub trend: Option<crate::spec::Trend>,
     /// Whether a load step or stage stopped its local-global iterations where Gauss-Newton
     /// was estimated to finish sooner ([`Method::Auto`]): the steps and stages after it take
@@ -237,7 +237,7 @@ pub const ADAPTIVE_FRACTION: f64 = 0.25;
 /// The parameters of an adaptive solve down to cells of `min_cell_size` (the paper's §5 at
 /// scale). The complex is built at `min_cell_size` and the constraints resolved
 /// there, so every region ends where it ends on uniform cells of that size; then sibling cells
-/// of one role are merged up to [`ADAPTIVE_LEVELS`] times ([`coarsen`]: cells along a
+/// of one role are merged up to [`ADAPTIVE_LEVELS`] times ([`super::coarsen`]: cells along a
 /// region's border stay small), the coarse complex is solved, and the cells whose strain
 /// exceeds [`ADAPTIVE_FRACTION`] of the round's largest are split, one level a round, and the
 /// solve goes on. A local edit in a large scan then costs small cells only where it bends
