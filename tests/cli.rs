@@ -536,3 +536,22 @@ fn the_summary_prints_plain_figures() {
         "{constraints}"
     );
 }
+
+/// Every option of the library's list is a flag of `deform`, spelled as the list spells it.
+#[test]
+fn deform_takes_every_option_of_the_librarys_list() {
+    let help = run(&["deform", "--help"]);
+    assert_eq!(help.code, 0, "{}", help.stderr);
+    let flags: Vec<&str> = help
+        .stdout
+        .lines()
+        .filter_map(|l| l.trim_start().strip_prefix("--"))
+        .map(|l| l.split([' ', '<', '=']).next().unwrap_or(""))
+        .collect();
+    for name in rigidcells::pipeline::OPTION_NAMES {
+        assert!(
+            flags.contains(&name),
+            "--{name} is not a flag of deform: {flags:?}"
+        );
+    }
+}

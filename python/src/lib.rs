@@ -880,6 +880,26 @@ fn toml_from_json(json: &str) -> PyResult<String> {
     toml::to_string(&value).map_err(|e| PyValueError::new_err(format!("spec: {e}")))
 }
 
+/// The library's tables the package's faces are checked against: the keyword arguments of a
+/// deformation (the options, in order) and the names each choice takes, keyed by its keyword.
+#[pyfunction]
+fn names(py: Python<'_>) -> PyResult<(Vec<String>, Bound<'_, PyDict>)> {
+    fn all<T: Named>() -> Vec<&'static str> {
+        T::ALL.iter().map(|v| v.name()).collect()
+    }
+    let keywords = pipeline::OPTION_NAMES
+        .iter()
+        .map(|n| n.replace('-', "_"))
+        .collect();
+    let choices = PyDict::new(py);
+    choices.set_item("transfer", all::<Transfer>())?;
+    choices.set_item("inside", all::<Inside>())?;
+    choices.set_item("solver", all::<Method>())?;
+    choices.set_item("loose_parts", all::<LooseParts>())?;
+    choices.set_item("outside", all::<Outside>())?;
+    Ok((keywords, choices))
+}
+
 #[pymodule]
 fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("FormatError", m.py().get_type::<FormatError>())?;
@@ -897,5 +917,6 @@ fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(observer::py_caller, m)?)?;
     m.add_function(wrap_pyfunction!(decode_las, m)?)?;
     m.add_function(wrap_pyfunction!(encode_las, m)?)?;
+    m.add_function(wrap_pyfunction!(names, m)?)?;
     Ok(())
 }

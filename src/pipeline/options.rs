@@ -13,6 +13,27 @@ use crate::solve::{self, LooseParts, Method, SolveParams};
 
 use super::DeformParams;
 
+/// Every option of [`Options`], by the command line's name without its dashes (the Python
+/// package's keyword is the same with `_` for `-`): the one list the faces are checked against
+/// (the command line's flags and the Python package's keywords and stub, by tests).
+pub const OPTION_NAMES: [&str; 15] = [
+    "cell-size",
+    "cells",
+    "min-cell-size",
+    "max-level",
+    "shell",
+    "inside",
+    "solver",
+    "tolerance",
+    "coarse-levels",
+    "loose-parts",
+    "refine-strain",
+    "transfer",
+    "rbf-tolerance",
+    "check-gcp",
+    "memory-limit",
+];
+
 /// A deformation's options, each as the user gives it (`None`: the default).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Options {
@@ -339,6 +360,26 @@ mod tests {
         };
         let words = every.to_args();
         assert_eq!(read_back(&words), every, "{words:?}");
+        // Every option is in the faces' list, and the list names nothing else.
+        let all = Options {
+            cell_size: Some(0.5),
+            cells: Some(10),
+            inside: Inside::Flood,
+            ..every
+        };
+        let flags: Vec<&str> = all
+            .to_args()
+            .iter()
+            .filter_map(|w| w.strip_prefix("--"))
+            .map(|f| {
+                OPTION_NAMES
+                    .iter()
+                    .find(|n| **n == f)
+                    .copied()
+                    .unwrap_or("?")
+            })
+            .collect();
+        assert_eq!(flags, OPTION_NAMES, "{:?}", all.to_args());
         assert_eq!(words[words.len() - 2..], ["--memory-limit", "3G"]);
         for other in [
             Options {
