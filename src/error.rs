@@ -7,6 +7,7 @@ use crate::human::degrees;
 
 /// Everything that can go wrong in rigidcells.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// An operating-system error on a file. The OS error is part of the message, not a
     /// `source`, so that a report of the whole chain says it once.

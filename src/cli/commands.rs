@@ -455,7 +455,7 @@ pub(super) fn run_edit(
         return Err(Error::Param("--proxy 0: the page needs samples to show".into()).into());
     }
     if let Some(dir) = out_dir {
-        rigidcells::edit::server::Outputs::new(input, Some(dir))?;
+        rigidcells::edit::server::OutputFolder::new(input, Some(dir))?;
     }
     let options = cells.options(transfer);
     options.params()?;

@@ -23,7 +23,7 @@
 //! a message before any work.
 //!
 //! Files: the token lives in the browser's history, so the server is no general file writer.
-//! *Save edit* and *Apply* write into one folder chosen when the editor starts ([`Outputs`]:
+//! *Save edit* and *Apply* write into one folder chosen when the editor starts ([`OutputFolder`]:
 //! the input's folder, or `--out-dir`), under a plain file name ([`check_name`]) with the
 //! extension of what is written (`.toml` for a spec; for *Apply* the formats `deform` writes
 //! for this input, checked before any work). A file there that this editor did not write is
@@ -72,7 +72,7 @@ use super::Editor;
 use crate::error::{Error, Result};
 use gate::{Gate, header, read_head, respond, token};
 use outputs::Refusal;
-pub use outputs::{Outputs, check_name};
+pub use outputs::{OutputFolder, check_name};
 pub use queue::MAX_QUEUED;
 use queue::{Commands, Refused};
 use solver::{Command, Request};
@@ -137,7 +137,7 @@ impl Server {
     /// *Save edit* and *Apply* write into `out_dir` (`None`: the input's folder), which must be
     /// a folder.
     pub fn bind(editor: Editor, port: u16, out_dir: Option<&Path>) -> Result<Self> {
-        let outputs = Arc::new(Outputs::new(&editor.scene().input, out_dir)?);
+        let outputs = Arc::new(OutputFolder::new(&editor.scene().input, out_dir)?);
         let listener = TcpListener::bind(("127.0.0.1", port))
             .map_err(|e| Error::Param(format!("--port {port}: cannot listen on it: {e}")))?;
         let port = listener
@@ -260,7 +260,7 @@ fn u32_bytes(v: &[u32]) -> Vec<u8> {
     v.iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
-fn assets(editor: &Editor, outputs: &Outputs, token: &str) -> Result<Assets> {
+fn assets(editor: &Editor, outputs: &OutputFolder, token: &str) -> Result<Assets> {
     let scene = editor.scene();
     let (lo, hi) = scene.bounds;
     let c = scene.center;

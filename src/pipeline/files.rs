@@ -42,6 +42,7 @@ pub fn check_chunk(chunk: usize) -> Result<usize> {
 
 /// What [`deform_file`] and [`apply_file`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
+#[non_exhaustive]
 pub struct FileInfo {
     /// Samples read and written.
     pub samples: u64,

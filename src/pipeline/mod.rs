@@ -167,6 +167,7 @@ impl Proxy {
 
 /// What [`deform`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
+#[non_exhaustive]
 pub struct DeformInfo {
     /// The cell complex's construction.
     pub build: BuildInfo,

@@ -30,6 +30,7 @@ use crate::solve::{Role, Solution};
 
 /// The report; see the module docs for the stable keys.
 #[derive(Debug, Clone, Serialize)]
+#[non_exhaustive]
 pub struct Report {
     /// The input file (for a solve over tiles, the files, joined by `, `).
     pub input: String,

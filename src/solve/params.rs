@@ -106,6 +106,7 @@ pub const REFINE_GROWTH: usize = 8;
 
 /// What [`super::solve`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
+#[non_exhaustive]
 pub struct SolverInfo {
     /// Accepted iterations (Gauss-Newton and local-global) over all load steps and refinements.
     pub iterations: usize,

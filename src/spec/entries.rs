@@ -10,8 +10,11 @@ use crate::rigid::{Dim, Mat, Rigid, Vect};
 
 /// How a handle moves: `A(x) = R·P·(x − pivot) + pivot + translate`, with `R` a rotation and `P`
 /// a stretch (`S·I` for a uniform scale). A general affine matrix is stored in this form by polar
-/// decomposition, so that load steps can interpolate it.
+/// decomposition, so that load steps can interpolate it. Made by [`HandleMotion::turning`] or
+/// [`HandleMotion::affine`] (outside the crate, only by them), which keep the rotation and the
+/// turn one map.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
 pub struct HandleMotion<const D: usize> {
     /// The center of rotation and scaling (input coordinates); `None`: the centroid of the
     /// handle's selected samples.

@@ -12,6 +12,7 @@ use crate::rigid::Vect;
 
 /// A region of the edit spec: it selects samples.
 #[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
 pub enum Region<const D: usize> {
     /// The closed axis-aligned box `[min, max]`.
     Box {

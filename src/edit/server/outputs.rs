@@ -1,5 +1,5 @@
 //! Where *Save edit* and *Apply* write: one folder chosen when the editor starts
-//! ([`Outputs`]), plain file names ([`check_name`]), and a file there that this editor did not
+//! ([`OutputFolder`]), plain file names ([`check_name`]), and a file there that this editor did not
 //! write replaced only when the page says its user confirmed it (the module docs of
 //! [`super`]).
 
@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 
 /// The one folder the editor writes into, and the names it wrote there.
 #[derive(Debug)]
-pub struct Outputs {
+pub struct OutputFolder {
     dir: PathBuf,
     input: PathBuf,
     written: Mutex<HashSet<String>>,
@@ -33,7 +33,7 @@ impl From<Error> for Refusal {
     }
 }
 
-impl Outputs {
+impl OutputFolder {
     /// Writes into `dir` (`None`: the folder of `input`), which must be a folder.
     pub fn new(input: &Path, dir: Option<&Path>) -> Result<Self> {
         let (dir, named) = match dir {

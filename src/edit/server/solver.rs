@@ -21,7 +21,7 @@ use serde::Deserialize;
 use tungstenite::Message;
 
 use super::queue::{Inbox, MAX_QUEUED};
-use super::{Outputs, Refusal, f32_bytes, u32_bytes};
+use super::{OutputFolder, Refusal, f32_bytes, u32_bytes};
 use crate::edit::{Edit, Editor, Motions, Released, Selection};
 use crate::error::{Error, Result};
 
@@ -156,7 +156,7 @@ pub(super) fn guarded<T>(
 }
 
 /// The solver thread: commands in order (of consecutive edits the queue keeps the newest).
-pub(super) fn run(mut editor: Editor, outputs: Arc<Outputs>, queue: Inbox<Request>) {
+pub(super) fn run(mut editor: Editor, outputs: Arc<OutputFolder>, queue: Inbox<Request>) {
     let applying = Arc::new(AtomicBool::new(false));
     // Where the last edit's answer went: the idle solver's iterations go there too.
     let mut last: Option<(u32, Sender<Message>)> = None;
@@ -201,7 +201,7 @@ fn answer(
     editor: &mut Editor,
     command: Command,
     reply: &Sender<Message>,
-    outputs: &Arc<Outputs>,
+    outputs: &Arc<OutputFolder>,
     applying: &Arc<AtomicBool>,
 ) -> Vec<Message> {
     let failed = |e: Error| vec![error(&e.to_string())];
@@ -304,9 +304,15 @@ fn released_message(seq: u32, r: Released) -> Vec<Message> {
     out
 }
 
-/// *Save edit*: the spec of `edit` as `name` in the editor's folder ([`Outputs::target`];
+/// *Save edit*: the spec of `edit` as `name` in the editor's folder ([`OutputFolder::target`];
 /// atomically).
-fn save(editor: &Editor, outputs: &Outputs, name: &str, edit: &Edit, overwrite: bool) -> Message {
+fn save(
+    editor: &Editor,
+    outputs: &OutputFolder,
+    name: &str,
+    edit: &Edit,
+    overwrite: bool,
+) -> Message {
     let result = outputs.target(name, &["toml"], overwrite).and_then(|path| {
         crate::io::write_atomic(&path, editor.spec_text(edit).as_bytes())?;
         Ok(path)
@@ -390,7 +396,7 @@ impl Drop for Running {
 /// *Apply*: `deform` of the whole input under the job's spec, on a thread of its own, as the
 /// CLI runs it ([`crate::pipeline::deform_file_with`], the same parameters and checks): its
 /// output is the file `rigidcells deform` writes with the options of [`Editor::flags`].
-fn apply(job: Job, reply: Sender<Message>, outputs: Arc<Outputs>, applying: Arc<AtomicBool>) {
+fn apply(job: Job, reply: Sender<Message>, outputs: Arc<OutputFolder>, applying: Arc<AtomicBool>) {
     if applying.swap(true, Ordering::SeqCst) {
         let _ = reply.send(error("an Apply is already running"));
         return;
