@@ -104,10 +104,13 @@ where
                 axis.as_slice()
             ));
         }
+        // Symmetric, and positive but for rounding: a matrix's stretch (its polar factor) of a
+        // nearly singular matrix, which the parser takes, may round a little below zero.
         let p = &self.stretch;
+        let slack = ROTATION_SLACK * p.amax();
         let positive = p.iter().all(|v| v.is_finite())
             && (p - p.transpose()).amax() <= ROTATION_SLACK * p.amax().max(1.0)
-            && p.cholesky().is_some();
+            && (p + Mat::<D>::identity() * slack).cholesky().is_some();
         if !positive {
             return Err("the stretch is not symmetric positive definite".into());
         }
@@ -154,8 +157,16 @@ fn finite_vector<const D: usize>(v: &Vect<D>, what: &str) -> std::result::Result
 }
 
 /// Whether `region` selects as a written one may: no NaN, corners in order, a radius of at
-/// least 0, a nonzero normal, polygons of three vertices or more.
+/// least 0, a nonzero normal, polygons of three vertices or more. Regions are not bounded by
+/// [`LARGEST`] (a box to ±1e308 says "everything"), as the parser does not bound them.
 fn check_region<const D: usize>(region: &Region<D>) -> std::result::Result<(), String> {
+    let finite = |v: &Vect<D>, what: &str| match v.iter().all(|x| x.is_finite()) {
+        true => Ok(()),
+        false => Err(format!(
+            "{what} must be {D} finite numbers, got {:?}",
+            v.as_slice()
+        )),
+    };
     let numbers = |v: &Vect<D>, what: &str| match v.iter().any(|x| x.is_nan()) {
         true => Err(format!("{what} is not a number: {:?}", v.as_slice())),
         false => Ok(()),
@@ -183,15 +194,15 @@ fn check_region<const D: usize>(region: &Region<D>) -> std::result::Result<(), S
             }
         }
         Region::Sphere { center, radius } => {
-            finite_vector(center, "sphere.center")?;
+            finite(center, "sphere.center")?;
             match radius.is_finite() && *radius >= 0.0 {
                 true => Ok(()),
                 false => Err(format!("sphere.radius {radius} must be ≥ 0")),
             }
         }
         Region::Plane { point, normal } => {
-            finite_vector(point, "plane.point")?;
-            finite_vector(normal, "plane.normal")?;
+            finite(point, "plane.point")?;
+            finite(normal, "plane.normal")?;
             match normal.norm() > 0.0 {
                 true => Ok(()),
                 false => Err("plane.normal is zero".into()),
@@ -343,6 +354,12 @@ mod tests {
             e.contains("<edit spec>: handle #1: sphere.radius -1 must be ≥ 0"),
             "{e}"
         );
+        // Regions are not bounded: a sphere as far as the parser takes one.
+        spec.handles[0].region = Region::Sphere {
+            center: Vect::<3>::new(1e300, 0.0, 0.0),
+            radius: 1e300,
+        };
+        spec.validate().unwrap();
         // A matrix that mirrors.
         let mirror = Mat::<3>::from_diagonal(&Vect::<3>::new(1.0, 1.0, -1.0));
         assert!(HandleMotion::affine(mirror, Vect::<3>::zeros()).is_err());
@@ -370,5 +387,12 @@ mod tests {
         let linear = Mat::<3>::new(0.0, -2.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 2.0);
         let affine = HandleMotion::affine(linear, v(1.0, 2.0, 3.0)).unwrap();
         assert_eq!(spec.handles[1].value, affine);
+        // A matrix the parser takes, however nearly singular, is one map.
+        let thin = Mat::<3>::new(1.0, 1.0 - 1e-15, 0.0, 1.0, 1.0, 0.0, 0.3, 0.1, 1e-9);
+        assert!(<Dim<3> as Rigid<3>>::determinant(&thin) > 0.0);
+        HandleMotion::affine(thin, v(0.0, 0.0, 0.0))
+            .unwrap()
+            .check()
+            .unwrap();
     }
 }
