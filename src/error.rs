@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use crate::human::degrees;
+use crate::said::{Opt, Said};
 
 /// Everything that can go wrong in rigidcells.
 #[derive(Debug, thiserror::Error)]
@@ -41,25 +42,29 @@ pub enum Error {
         /// The file.
         path: PathBuf,
     },
-    /// The edit spec is malformed.
-    #[error("{path}: {message}")]
+    /// The edit spec is malformed, or a file it names cannot be read.
+    #[error("{path}: {}", spec_said(*line, *column, message, excerpt.as_deref()))]
     Spec {
         /// The spec file (or `<edit spec>` for an in-memory spec).
         path: PathBuf,
-        /// What is wrong, with the line where known.
-        message: String,
+        /// The line of the spec where known (1 for the first).
+        line: Option<usize>,
+        /// The column on that line where known (1 for the first).
+        column: Option<usize>,
+        /// What is wrong.
+        message: Said,
+        /// The TOML parser's picture of the line and where on it, for a spec written as text.
+        excerpt: Option<String>,
     },
     /// A parameter is out of range.
     #[error("invalid parameter: {0}")]
-    Param(String),
+    Param(Said),
     /// The input holds no samples, or samples that are not finite.
     #[error("invalid input: {0}")]
-    Input(String),
+    Input(Said),
     /// The cell size divides the input's extent into more finest cells along an axis than cell
     /// coordinates can hold.
-    #[error(
-        "the cell size {cell_size} gives {cells} finest cells along the input's extent, more than the {max} a cell's coordinates can hold; use a larger --cell-size"
-    )]
+    #[error("{}", grid_too_large(*cell_size, *cells, *max))]
     GridTooLarge {
         /// The finest cell size.
         cell_size: f64,
@@ -69,18 +74,16 @@ pub enum Error {
         max: u128,
     },
     /// A buffer would exceed the memory budget ([`crate::memory`]).
-    #[error(
-        "{what} would need about {needed}, over the memory limit of {limit} (--memory-limit): {advice}"
-    )]
+    #[error("{}", memory(what, needed, limit, advice))]
     Memory {
         /// What would be allocated.
-        what: String,
+        what: Said,
         /// The estimate.
         needed: String,
         /// The budget.
         limit: String,
         /// Which parameters shrink it.
-        advice: String,
+        advice: Said,
     },
     /// The edit spec constrains nothing.
     #[error(
@@ -88,30 +91,19 @@ pub enum Error {
     )]
     NoConstraints,
     /// A cell is claimed by two different hard constraints.
-    #[error(
-        "{first} and {second} both claim the cell at {} (size {}); move the regions apart or use a smaller --cell-size",
-        crate::human::point(at, size / 1000.0),
-        crate::human::length(*size, *size)
-    )]
+    #[error("{}", conflict(first, second, at, *size))]
     ConstraintConflict {
         /// The first constraint (e.g. `fixed #1`).
-        first: String,
+        first: Said,
         /// The second constraint.
-        second: String,
+        second: Said,
         /// The cell's center (input coordinates).
         at: Vec<f64>,
         /// The cell's edge length.
         size: f64,
     },
     /// Samples lie beyond the margin of the field's cells, where the field is not defined.
-    #[error(
-        "{path}: {count} samples lie farther than {} outside the field's cells (the \
-         farthest, at {at}, lies {} from the cells' bounding box); nothing was \
-         written. Solve a field over these samples, or pass --outside keep (they keep their \
-         coordinates) or --outside extend (the transfer is extrapolated)",
-        crate::human::length(*margin, *margin),
-        crate::human::length(*farthest, *margin)
-    )]
+    #[error("{path}: {}", outside(*count, *margin, *farthest, at))]
     Outside {
         /// The input file.
         path: PathBuf,
@@ -136,7 +128,7 @@ pub enum Error {
         /// The second system with its file.
         second: String,
         /// What to do.
-        advice: String,
+        advice: Said,
     },
     /// A handle's turn that the cells give way under ([`TurnRefusal`]): its message names the
     /// handle by its line in the edit spec, as the command line does; another face names it
@@ -145,7 +137,7 @@ pub enum Error {
     TurnNotHeld(TurnRefusal),
     /// A numerical failure that damping could not repair.
     #[error("solver failure: {0}")]
-    Solver(String),
+    Solver(Said),
     /// The caller stopped the work ([`crate::progress::Observer::cancelled`]); no output was
     /// left behind.
     #[error("cancelled")]
@@ -179,6 +171,88 @@ impl Error {
         }
     }
 
+    /// A parameter out of range ([`Error::Param`]).
+    pub fn param(message: impl Into<Said>) -> Self {
+        Self::Param(message.into())
+    }
+
+    /// An input without samples, or with samples that are not finite ([`Error::Input`]).
+    pub fn input(message: impl Into<Said>) -> Self {
+        Self::Input(message.into())
+    }
+
+    /// A numerical failure ([`Error::Solver`]).
+    pub fn solver(message: impl Into<Said>) -> Self {
+        Self::Solver(message.into())
+    }
+
+    /// A problem of the edit spec `path` (`<edit spec>` for one in memory), at `line` where
+    /// known.
+    pub fn spec(path: impl Into<PathBuf>, line: Option<usize>, message: impl Into<Said>) -> Self {
+        Self::Spec {
+            path: path.into(),
+            line,
+            column: None,
+            message: message.into(),
+            excerpt: None,
+        }
+    }
+
+    /// The message with its options and spec lines as data, for a face that says them its
+    /// own way; the command line's is `to_string()`. The file an error is about leads it as
+    /// text, and a spec's line is its first part ([`crate::said::Part::Line`]) after the
+    /// spec's name; the prefixes the command line adds ("invalid parameter:") are left out.
+    pub fn said(&self) -> Said {
+        match self {
+            Error::Param(m) | Error::Input(m) => m.clone(),
+            Error::Solver(m) => Said::from("solver failure: ").then(m.clone()),
+            Error::Spec {
+                path,
+                line,
+                column,
+                message,
+                excerpt,
+            } => Said::from(format!("{}: ", path.display())).then(spec_said(
+                *line,
+                *column,
+                message,
+                excerpt.as_deref(),
+            )),
+            Error::GridTooLarge {
+                cell_size,
+                cells,
+                max,
+            } => grid_too_large(*cell_size, *cells, *max),
+            Error::Memory {
+                what,
+                needed,
+                limit,
+                advice,
+            } => memory(what, needed, limit, advice),
+            Error::ConstraintConflict {
+                first,
+                second,
+                at,
+                size,
+            } => conflict(first, second, at, *size),
+            Error::Outside {
+                path,
+                count,
+                margin,
+                farthest,
+                at,
+            } => Said::from(format!("{}: ", path.display()))
+                .then(outside(*count, *margin, *farthest, at)),
+            Error::CrsMismatch {
+                what,
+                first,
+                second,
+                advice,
+            } => Said::from(format!("{what}: {first}, but {second}; ")).then(advice.clone()),
+            e => Said::from(e.to_string()),
+        }
+    }
+
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         Self::Io {
@@ -201,10 +275,7 @@ impl Error {
             std::io::ErrorKind::InvalidData => "not UTF-8 text".to_string(),
             _ => error.to_string(),
         };
-        Self::Spec {
-            path: path.into(),
-            message,
-        }
+        Self::spec(path, None, message)
     }
 
     /// A format error in `path`.
@@ -214,6 +285,74 @@ impl Error {
             message: message.into(),
         }
     }
+}
+
+/// A spec's problem as said after its name: `line 7, column 3: …` and, for the command line,
+/// the TOML parser's picture of the line.
+fn spec_said(
+    line: Option<usize>,
+    column: Option<usize>,
+    message: &Said,
+    excerpt: Option<&str>,
+) -> Said {
+    let mut said = Said::new();
+    if let Some(l) = line {
+        said = said.line(l);
+        if let Some(c) = column {
+            said = said.text(format!(", column {c}"));
+        }
+        said = said.text(": ");
+    }
+    said = said.then(message.clone());
+    match excerpt {
+        Some(e) => said.text(format!("\n{}", e.trim_end())),
+        None => said,
+    }
+}
+
+fn grid_too_large(cell_size: f64, cells: u128, max: u128) -> Said {
+    Said::from(format!(
+        "the cell size {cell_size} gives {cells} finest cells along the input's extent, more \
+         than the {max} a cell's coordinates can hold; use a larger "
+    ))
+    .opt(Opt::CellSize)
+}
+
+fn memory(what: &Said, needed: &str, limit: &str, advice: &Said) -> Said {
+    what.clone()
+        .text(format!(
+            " would need about {needed}, over the memory limit of {limit} ("
+        ))
+        .opt(Opt::MemoryLimit)
+        .text("): ")
+        .then(advice.clone())
+}
+
+fn conflict(first: &Said, second: &Said, at: &[f64], size: f64) -> Said {
+    first
+        .clone()
+        .text(" and ")
+        .then(second.clone())
+        .text(format!(
+            " both claim the cell at {} (size {}); move the regions apart or use a smaller ",
+            crate::human::point(at, size / 1000.0),
+            crate::human::length(size, size)
+        ))
+        .opt(Opt::CellSize)
+}
+
+fn outside(count: u64, margin: f64, farthest: f64, at: &str) -> Said {
+    Said::from(format!(
+        "{count} samples lie farther than {} outside the field's cells (the farthest, at {at}, \
+         lies {} from the cells' bounding box); nothing was written. Solve a field over these \
+         samples, or pass ",
+        crate::human::length(margin, margin),
+        crate::human::length(farthest, margin)
+    ))
+    .set(Opt::Outside, "keep")
+    .text(" (they keep their coordinates) or ")
+    .set(Opt::Outside, "extend")
+    .text(" (the transfer is extrapolated)")
 }
 
 /// What a handle's turn does to the shape between it and the fixed cells, as its messages say.

@@ -29,6 +29,7 @@
 use crate::cells::Forecast;
 use crate::error::Result;
 use crate::memory::Budget;
+use crate::said::{Opt, Said};
 
 /// The linear solver a solve takes: what `--solver auto` comes to for its cells
 /// (`solve::Method`'s `Direct` or `Multilevel`).
@@ -109,14 +110,14 @@ impl Estimate {
 
     /// [`crate::Error::Memory`] when the estimate does not fit `budget`, naming the solve, its
     /// cells and path, with `advice` (the parameters that shrink it).
-    pub fn check(&self, budget: Budget, advice: &str) -> Result<()> {
+    pub fn check(&self, budget: Budget, advice: &Said) -> Result<()> {
         let by = match self.solver {
             Solver::Multilevel => " by the multilevel solver",
             Solver::Direct => "",
             Solver::LocalGlobal => " by local-global iterations",
         };
         budget.check(
-            &format!(
+            format!(
                 "solving {} cells{by}",
                 crate::human::count(self.cells as u64)
             ),
@@ -225,12 +226,17 @@ pub fn check_forecast(forecast: &Forecast, direct: bool, budget: Budget) -> Resu
     let cells = forecast.cells();
     let size = crate::human::length(forecast.cell_size, forecast.cell_size);
     budget.check(
-        &format!(
+        format!(
             "solving about {} cells of size {size}",
             crate::human::count(cells as u64)
         ),
         floor_bytes(forecast, direct),
-        "use a larger --cell-size (or fewer --cells), or raise --memory-limit",
+        Said::from("use a larger ")
+            .opt(Opt::CellSize)
+            .text(" (or fewer ")
+            .opt(Opt::Cells)
+            .text("), or raise ")
+            .opt(Opt::MemoryLimit),
     )
 }
 

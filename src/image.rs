@@ -27,6 +27,7 @@ use crate::pipeline::DeformParams;
 use crate::pipeline::stages::Cells;
 use crate::progress::Silent;
 use crate::rigid::Vect;
+use crate::said::{Opt, Said};
 use crate::spec::EditSpec;
 
 /// An RGBA picture, 8 bits per channel, straight (not premultiplied) alpha.
@@ -64,7 +65,7 @@ impl Raster {
         // hostile header can claim 2³¹ rows of a few bytes of data.
         let (w, h) = (reader.info().width, reader.info().height);
         crate::memory::Budget::default().check(
-            &format!("{}: the {w} × {h} picture", path.display()),
+            format!("{}: the {w} × {h} picture", path.display()),
             size as f64 + 4.0 * w as f64 * h as f64,
             "use a smaller picture",
         )?;
@@ -121,7 +122,7 @@ pub struct ImageInfo {
     /// Pixel triangles the field turned over (the map folds the picture over itself there).
     pub folded: usize,
     /// Warnings of the cells and constraints.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Said>,
 }
 
 /// Deforms the foreground of `input` (alpha > 0, or not `background` when given) under the
@@ -142,10 +143,11 @@ pub fn deform_image(
             .collect(),
         (None, false) => input.rgba.chunks_exact(4).map(|p| p[3] > 0).collect(),
         (None, true) => {
-            return Err(Error::Input(
-                "the picture has no transparent pixels: name its background color with \
-                 --background R,G,B"
-                    .into(),
+            return Err(Error::input(
+                Said::from(
+                    "the picture has no transparent pixels: name its background color with ",
+                )
+                .set(Opt::Background, "R,G,B"),
             ));
         }
     };
@@ -154,7 +156,7 @@ pub fn deform_image(
         .map(|i| Vect::<2>::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5))
         .collect();
     if samples.is_empty() {
-        return Err(Error::Input("the picture has no foreground pixels".into()));
+        return Err(Error::input("the picture has no foreground pixels"));
     }
     let cells = Cells::samples(&samples, &[]);
     let staged = crate::pipeline::stages::run(cells, spec, params, &Silent)?;

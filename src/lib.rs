@@ -106,6 +106,7 @@ pub mod pipeline;
 pub mod progress;
 pub mod render;
 pub mod rigid;
+pub mod said;
 pub mod solve;
 pub mod spec;
 

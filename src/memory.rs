@@ -38,6 +38,7 @@
 //! - the dense RBF: its `n × n` factor and the kernel sums ([`rbf_bytes`]).
 
 use crate::error::{Error, Result};
+use crate::said::Said;
 
 /// The solver's memory per cell before its sparse factor (see the module docs).
 pub const SOLVER_BYTES_PER_CELL: u64 = 4 << 10;
@@ -121,22 +122,22 @@ impl Budget {
     }
 
     /// [`check`] against this budget.
-    pub fn check(self, what: &str, bytes: f64, advice: &str) -> Result<()> {
+    pub fn check(self, what: impl Into<Said>, bytes: f64, advice: impl Into<Said>) -> Result<()> {
         check(what, bytes, self.limit(), advice)
     }
 }
 
 /// [`Error::Memory`] when `bytes` exceed `limit`; `what` names the allocation, `advice` the
 /// parameters that shrink it.
-pub fn check(what: &str, bytes: f64, limit: u64, advice: &str) -> Result<()> {
+pub fn check(what: impl Into<Said>, bytes: f64, limit: u64, advice: impl Into<Said>) -> Result<()> {
     if bytes <= limit as f64 {
         Ok(())
     } else {
         Err(Error::Memory {
-            what: what.to_string(),
+            what: what.into(),
             needed: format_bytes(bytes),
             limit: format_bytes(limit as f64),
-            advice: advice.to_string(),
+            advice: advice.into(),
         })
     }
 }

@@ -537,6 +537,37 @@ fn the_summary_prints_plain_figures() {
     );
 }
 
+/// Every option the library's messages name ([`rigidcells::said::Opt`]) is a flag of some
+/// command, spelled as the messages spell it.
+#[test]
+fn every_option_the_messages_name_is_a_flag() {
+    let mut flags = Vec::new();
+    for command in [
+        "deform", "apply", "cells", "render", "image", "solve", "grid", "info", "edit", "demo",
+    ] {
+        let help = run(&[command, "--help"]);
+        assert_eq!(help.code, 0, "{}", help.stderr);
+        flags.extend(
+            help.stdout
+                .lines()
+                .filter_map(|l| l.trim_start().split("--").nth(1))
+                .map(|l| {
+                    l.split([' ', '<', '=', ','])
+                        .next()
+                        .unwrap_or("")
+                        .to_string()
+                }),
+        );
+    }
+    for o in rigidcells::said::Opt::ALL {
+        assert!(
+            flags.iter().any(|f| f == o.name()),
+            "--{} is no command's flag",
+            o.name()
+        );
+    }
+}
+
 /// Every option of the library's list is a flag of `deform`, spelled as the list spells it.
 #[test]
 fn deform_takes_every_option_of_the_librarys_list() {

@@ -621,7 +621,20 @@ def _said(error: BaseException) -> str:
     if isinstance(handle, int) and isinstance(said, str):
         name = "the handle Empty" if handle == 0 else f"handle {handle + 1}"
         return f"Rigid Cells: {name} {said}"
+    parts = getattr(error, "parts", None)
+    if isinstance(parts, list):
+        from rigidcells._spec import _said as said_with
+
+        return said_with(parts, None, _option_said)
     return str(error)
+
+
+def _option_said(keyword: str, value: Optional[str]) -> str:
+    """A library option as the panel names it (`"Cell size" 0.02`); one the panel does not
+    have as the Python keyword (`memory_limit`)."""
+    prop = RigidCellsSettings.bl_rna.properties.get(keyword)
+    name = f'"{prop.name}"' if prop is not None else keyword
+    return name if value is None else f"{name} {value}"
 
 
 def _status(context: Any, text: Optional[str]) -> None:

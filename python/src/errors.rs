@@ -1,14 +1,13 @@
 //! The library's errors as Python exceptions, in the package's terms: keyword arguments and
-//! dict keys, not the command line's flags and spec lines.
+//! dict keys, not the command line's flags and spec lines. The library's messages carry their
+//! options and spec lines as data ([`rigidcells::said`]); this renders them.
 
 use pyo3::create_exception;
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
+use pyo3::types::PyList;
 use rigidcells::Error;
-use rigidcells::cells::Inside;
-use rigidcells::field::{Outside, Transfer};
-use rigidcells::names::Named;
-use rigidcells::solve::{LooseParts, Method};
+use rigidcells::said::{Kind, Opt, Part, Said, Terms};
 
 create_exception!(
     _rigidcells,
@@ -24,25 +23,131 @@ create_exception!(
     "A handle's turn that the shape gives way under."
 );
 
+/// The package's terms: `cell_size=0.02`, `outside="keep"`, Python's names of types. A spec's
+/// line stays `line 7` here; the package says it as a dict's key path where the spec was one
+/// ([`parts`]).
+struct Package;
+
+impl Terms for Package {
+    fn option(&self, o: Opt) -> String {
+        o.keyword().to_string()
+    }
+
+    fn set(&self, o: Opt, value: &str) -> String {
+        // A picture's size is a (width, height) tuple here.
+        if let (Opt::Size, Some((w, h))) = (o, value.split_once('x')) {
+            return format!("size=({w}, {h})");
+        }
+        if value.parse::<f64>().is_ok() {
+            format!("{}={value}", o.keyword())
+        } else {
+            format!("{}=\"{value}\"", o.keyword())
+        }
+    }
+
+    fn mismatch(&self, expected: &Kind, found: &Kind) -> String {
+        format!("expected {}, got {}", kind(expected), kind(found))
+    }
+}
+
+/// A spec value's kind as Python names its type.
+fn kind(k: &Kind) -> String {
+    match k {
+        Kind::Table => "a dict".into(),
+        Kind::Array => "a list".into(),
+        Kind::Text => "a str".into(),
+        Kind::Float => "a float".into(),
+        Kind::Integer => "an int".into(),
+        Kind::Boolean => "a bool".into(),
+        k => k.toml_words(),
+    }
+}
+
+/// A message in the package's terms.
+pub(crate) fn python_terms(said: &Said) -> String {
+    Package.render(said)
+}
+
+/// A message as a list of the package's words (`str`), the spec's lines (`int`) and the
+/// options it names (`(keyword, value, said)`: the value a `str` as the user would write it,
+/// or None, and the package's way of saying both), for the package to say each line as a dict spec's key path or as `line N`, and for
+/// the Blender add-on to say an option by its panel's name.
+pub(crate) fn parts<'py>(py: Python<'py>, said: &Said) -> PyResult<Bound<'py, PyList>> {
+    let out = PyList::empty(py);
+    let mut words = String::new();
+    for p in said.parts() {
+        let data = match p {
+            Part::Line(n) => (*n).into_pyobject(py)?.into_any(),
+            Part::Opt(o) => (o.keyword(), None::<&str>, o.keyword())
+                .into_pyobject(py)?
+                .into_any(),
+            Part::Set(o, v) => (o.keyword(), Some(v.as_str()), Package.set(*o, v))
+                .into_pyobject(py)?
+                .into_any(),
+            p => {
+                words.push_str(&Package.part(p));
+                continue;
+            }
+        };
+        if !words.is_empty() {
+            out.append(std::mem::take(&mut words))?;
+        }
+        out.append(data)?;
+    }
+    if !words.is_empty() {
+        out.append(words)?;
+    }
+    Ok(out)
+}
+
+/// Messages for the user, each as its [`parts`].
+pub(crate) fn said<'py>(py: Python<'py>, messages: &[Said]) -> PyResult<Bound<'py, PyList>> {
+    let out = PyList::empty(py);
+    for m in messages {
+        out.append(parts(py, m)?)?;
+    }
+    Ok(out)
+}
+
+/// Messages for the user in the package's terms, each as text (for messages that name no
+/// spec line: a field applied to a file).
+pub(crate) fn said_text(messages: &[Said]) -> Vec<String> {
+    messages.iter().map(python_terms).collect()
+}
+
 /// The library's error as a Python exception, by its exit code's class, in the package's
-/// terms (keyword arguments, not the command line's flags).
+/// terms (keyword arguments, not the command line's flags). Its `parts` attribute is the
+/// message as [`parts`]; a spec's error has `spec_line` (or None) and `spec_message` (the
+/// message after the spec's name and line, as parts), so that a dict spec's error can name
+/// the key instead.
 pub(crate) fn py_err(e: Error) -> PyErr {
     if let Error::TurnNotHeld(r) = &e {
         return turn_not_held(r);
     }
-    // A bad argument or array is a ValueError that says what is wrong, without the command
-    // line's "invalid parameter:" (a malformed file is a FormatError).
-    let text = match &e {
-        Error::Param(m) | Error::Input(m) => python_terms(m.trim_end()),
-        e => python_terms(e.to_string().trim_end()),
-    };
-    match (&e, e.exit_code()) {
+    let said = e.said().trimmed();
+    let text = python_terms(&said);
+    let err = match (&e, e.exit_code()) {
         (Error::Io { .. } | Error::Write { .. }, _) => PyOSError::new_err(text),
         (Error::Input(_), _) => PyValueError::new_err(text),
         (_, 3) => FormatError::new_err(text),
         (_, 4) => PyValueError::new_err(text),
         _ => PyRuntimeError::new_err(text),
-    }
+    };
+    Python::attach(|py| {
+        let value = err.value(py);
+        let fields = || -> PyResult<()> {
+            value.setattr("parts", parts(py, &said)?)?;
+            if let Error::Spec { line, message, .. } = &e {
+                value.setattr("spec_line", *line)?;
+                value.setattr("spec_message", parts(py, &message.clone().trimmed())?)?;
+            }
+            Ok(())
+        };
+        match fields() {
+            Ok(()) => err,
+            Err(e) => e,
+        }
+    })
 }
 
 /// A refused turn as a `TurnNotHeldError` with the refusal's fields, so that a face names the
@@ -67,83 +172,4 @@ pub(crate) fn turn_not_held(r: &rigidcells::solve::TurnRefusal) -> PyErr {
             Err(e) => e,
         }
     })
-}
-
-/// The command line's flags in a message as the package's keyword arguments: `--cell-size`
-/// becomes `cell_size`, `--outside keep` becomes `outside="keep"` (a flag followed by one of
-/// its choices) and `--cells 1000` becomes `cells=1000`.
-pub(crate) fn python_terms(text: &str) -> String {
-    fn names<T: Named>() -> impl Iterator<Item = &'static str> {
-        T::ALL.iter().map(|v| v.name())
-    }
-    // The names of the library's choices (a flag followed by one is said as `flag="name"`).
-    let choices: Vec<&str> = names::<Outside>()
-        .chain(names::<LooseParts>())
-        .chain(names::<Transfer>())
-        .chain(names::<Method>())
-        .chain(names::<Inside>())
-        .collect();
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(at) = rest.find("--") {
-        out.push_str(&rest[..at]);
-        let after = &rest[at + 2..];
-        // A flag starts a word (`a--b` in a file name is not one).
-        if !out.is_empty() && !out.ends_with([' ', '(', '`', '"', '\'']) {
-            out.push_str("--");
-            rest = after;
-            continue;
-        }
-        let len = after
-            .find(|c: char| !(c.is_ascii_lowercase() || c == '-'))
-            .unwrap_or(after.len());
-        let name = after[..len].trim_end_matches('-');
-        if name.is_empty() || !name.starts_with(|c: char| c.is_ascii_lowercase()) {
-            out.push_str("--");
-            rest = after;
-            continue;
-        }
-        let arg = match name {
-            "edit" => "spec".to_string(),
-            other => other.replace('-', "_"),
-        };
-        let tail = &after[name.len()..];
-        let value = tail.strip_prefix(' ').and_then(|t| {
-            choices.iter().find(|c| {
-                t.starts_with(**c)
-                    && !t[c.len()..].starts_with(|ch: char| ch.is_ascii_alphanumeric() || ch == '-')
-            })
-        });
-        let number = tail.strip_prefix(' ').map(|t| {
-            let sign = usize::from(t.starts_with('-'));
-            let len = t[sign..]
-                .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-                .map_or(t.len(), |n| n + sign);
-            &t[..len]
-        });
-        match (value, number) {
-            (Some(v), _) => {
-                out.push_str(&format!("{arg}=\"{v}\""));
-                rest = &tail[1 + v.len()..];
-            }
-            (None, Some(n))
-                if n.trim_start_matches('-')
-                    .starts_with(|c: char| c.is_ascii_digit()) =>
-            {
-                out.push_str(&format!("{arg}={n}"));
-                rest = &tail[1 + n.len()..];
-            }
-            _ => {
-                out.push_str(&arg);
-                rest = tail;
-            }
-        }
-    }
-    out.push_str(rest);
-    out
-}
-
-/// Messages for the user in the package's terms.
-pub(crate) fn said(messages: &[String]) -> Vec<String> {
-    messages.iter().map(|m| python_terms(m)).collect()
 }

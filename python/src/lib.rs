@@ -30,7 +30,7 @@ use rigidcells::spec::{EditSpec, parse_spec};
 mod errors;
 mod observer;
 mod session;
-use errors::{FormatError, TurnNotHeldError, py_err, said};
+use errors::{FormatError, TurnNotHeldError, py_err, said, said_text};
 use observer::PyObserver;
 use session::Session;
 
@@ -228,7 +228,7 @@ fn info_dict<'py>(
     d.set_item("converged", info.solver.converged)?;
     d.set_item("energies", info.solver.energies.clone())?;
     d.set_item("foldovers", (info.foldovers.1, info.foldovers.0))?;
-    d.set_item("warnings", PyList::new(py, said(&info.warnings))?)?;
+    d.set_item("warnings", said(py, &info.warnings)?)?;
     let turns = PyList::empty(py);
     for t in &info.solver.turns {
         let c = PyDict::new(py);
@@ -648,7 +648,7 @@ fn deform_file<'py>(
         seconds,
     )?;
     d.set_item("timings", t)?;
-    d.set_item("notes", PyList::new(py, said(&info.notes))?)?;
+    d.set_item("notes", said(py, &info.notes)?)?;
     Ok(d)
 }
 
@@ -721,7 +721,7 @@ fn solve_files<'py>(
     let seconds = summary.timings_s.total;
     let t = timings(py, &info.deform, info.seconds_read, 0.0, seconds)?;
     d.set_item("timings", t)?;
-    d.set_item("notes", PyList::new(py, said(&info.notes))?)?;
+    d.set_item("notes", said(py, &info.notes)?)?;
     Ok(d)
 }
 
@@ -820,8 +820,8 @@ fn apply_file<'py>(
     let info = observer.result(result)?;
     let d = PyDict::new(py);
     d.set_item("samples", info.samples)?;
-    d.set_item("notes", PyList::new(py, said(&info.notes))?)?;
-    d.set_item("warnings", PyList::new(py, said(&info.deform.warnings))?)?;
+    d.set_item("notes", said_text(&info.notes))?;
+    d.set_item("warnings", said_text(&info.deform.warnings))?;
     d.set_item("seconds", info.seconds_write)?;
     Ok(d)
 }

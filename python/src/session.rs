@@ -12,7 +12,7 @@ use std::time::Instant;
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::PyDict;
 use rigidcells::pipeline::{Live, Step};
 use rigidcells::rigid::Vect;
 use rigidcells::spec::parse_poses;
@@ -88,7 +88,7 @@ fn step_dict<'py>(py: Python<'py>, step: Option<&Step>) -> PyResult<Bound<'py, P
     d.set_item("iterations", step.solver.iterations)?;
     d.set_item("from_rest", step.from_rest)?;
     d.set_item("seconds", step.seconds)?;
-    d.set_item("warnings", PyList::new(py, said(&step.warnings))?)?;
+    d.set_item("warnings", said(py, &step.warnings)?)?;
     Ok(d)
 }
 

@@ -498,7 +498,7 @@ def test_mistakes_are_said_in_python_terms(tmp_path):
     src = SHARED / "las" / "autzen_trim.laz"
     with pytest.raises(ValueError, match="^strain applies to the preview: pass preview= too"):
         rigidcells.deform_file(src, tmp_path / "x.laz", BEND_AUTZEN, strain=True)
-    with pytest.raises(ValueError, match="^size=0x5: 16 to 8192 pixels each way"):
+    with pytest.raises(ValueError, match="^size=\\(0, 5\\): 16 to 8192 pixels each way"):
         rigidcells.deform_file(src, tmp_path / "x.laz", BEND_AUTZEN, preview=tmp_path / "p.png", size=(-1, 5))
     # One tile as a path, not a list of them.
     report = rigidcells.solve_files(src, BEND_AUTZEN, tmp_path / "f.field", cells=500, progress=False)

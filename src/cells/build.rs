@@ -54,6 +54,7 @@ use super::{CellComplex, CellKey, CellKind, Grid, triangle_box_overlap};
 use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::rigid::Vect;
+use crate::said::{Opt, Said};
 
 /// Finest cells along an axis at most: the coordinates' bits of a 64-bit Morton code (21 in 3D,
 /// 31 in 2D).
@@ -208,30 +209,43 @@ impl<const D: usize> Occupancy<D> {
         );
         let (what, advice) = match self.roots {
             0 => (
-                format!("the cells of {occupied}"),
-                "use a larger --cell-size or --min-cell-size (or fewer --cells)",
+                Said::from(format!("the cells of {occupied}")),
+                smaller_cells(),
             ),
             roots => (
-                format!(
-                    "{}{} cells of size {} that tile the box at --max-level {}",
+                Said::from(format!(
+                    "{}{} cells of size {} that tile the box at ",
                     match self.sorted {
                         0 => String::new(),
                         _ => format!("{occupied} and the "),
                     },
                     crate::human::count(roots),
                     size(self.grid.size0),
-                    self.grid.max_level
-                ),
-                "use a larger --max-level (or leave it out: by default the largest cells are as \
-                 large as the shape's thinnest extent), or a larger --cell-size",
+                ))
+                .set(Opt::MaxLevel, self.grid.max_level),
+                Said::from("use a larger ")
+                    .opt(Opt::MaxLevel)
+                    .text(
+                        " (or leave it out: by default the largest cells are as large as the \
+                         shape's thinnest extent), or a larger ",
+                    )
+                    .opt(Opt::CellSize),
             ),
         };
         let cells = self.sorted as f64 + self.roots as f64;
-        crate::memory::check(&what, cells * BYTES_PER_OCCUPIED as f64, self.limit, advice)?;
+        crate::memory::check(
+            &what,
+            cells * BYTES_PER_OCCUPIED as f64,
+            self.limit,
+            &advice,
+        )?;
         if cells > MAX_CELLS as f64 {
-            return Err(Error::Param(format!(
-                "{what} are more than the {MAX_CELLS} cells a complex numbers: {advice}"
-            )));
+            return Err(Error::param(
+                what.text(format!(
+                    " are more than the {MAX_CELLS} cells a complex numbers: "
+                ))
+                .then(advice),
+            ));
         }
         Ok(())
     }
@@ -462,7 +476,7 @@ impl<const D: usize> Occupancy<D> {
 /// The grid for the box `lo..hi` under `params`.
 fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Result<Grid<D>> {
     if !(lo.iter().chain(hi.iter()).all(|v| v.is_finite())) || (0..D).any(|a| lo[a] > hi[a]) {
-        return Err(Error::Input(format!(
+        return Err(Error::input(format!(
             "the bounding box {:?}..{:?} is not finite",
             lo.as_slice(),
             hi.as_slice()
@@ -475,7 +489,7 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     let size = finest(params.cell_size, longest)?;
     let levels = match params.max_level {
         Some(l) if l <= 20 => l,
-        Some(l) => return Err(Error::Param(format!("max level {l} is above 20"))),
+        Some(l) => return Err(Error::param(format!("max level {l} is above 20"))),
         // An interior cell lies inside the shape, so no leaf is larger than the box's shortest
         // extent: coarser levels would only make the finest grid a cube over the longest
         // extent (a 2 km terrain 110 m high at 2.5 m cells: 1024³ finest cells instead of
@@ -528,7 +542,7 @@ fn triangle_cells<const D: usize>(
         .iter()
         .find(|t| t.iter().any(|&v| v as usize >= n))
     {
-        return Err(Error::Input(format!(
+        return Err(Error::input(format!(
             "a face refers to vertex {} but there are {n} vertices",
             t.iter().max().unwrap_or(&0)
         )));
@@ -564,13 +578,13 @@ fn triangle_cells<const D: usize>(
         })
         .sum();
     crate::memory::check(
-        &format!(
+        format!(
             "rasterizing {} triangles into cells of size {size}",
             triangles.len()
         ),
         candidates * 8.0,
         limit,
-        "use a larger --cell-size or --min-cell-size (or fewer --cells)",
+        smaller_cells(),
     )?;
     // The closed cell, grown by a millionth of its size: a surface lying on a cell face (a box
     // mesh whose extent is a whole number of cells, as a bar of 10 × 1 × 1 at 0.02 is) marks
@@ -617,6 +631,17 @@ fn triangle_cells<const D: usize>(
             a
         });
     Ok(cells)
+}
+
+/// What to change when the cells do not fit the memory budget.
+fn smaller_cells() -> Said {
+    Said::from("use a larger ")
+        .opt(Opt::CellSize)
+        .text(" or ")
+        .opt(Opt::MinCellSize)
+        .text(" (or fewer ")
+        .opt(Opt::Cells)
+        .text(")")
 }
 
 #[cfg(test)]

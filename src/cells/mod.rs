@@ -161,10 +161,10 @@ pub fn build_checked<const D: usize>(
 /// The bounding box of `points`; an error for no points or a coordinate that is not finite.
 pub fn bounds<const D: usize>(points: &[Vect<D>]) -> Result<(Vect<D>, Vect<D>)> {
     if points.is_empty() {
-        return Err(Error::Input("the input has no points".into()));
+        return Err(Error::input("the input has no points"));
     }
     if let Some(i) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-        return Err(Error::Input(format!(
+        return Err(Error::input(format!(
             "point {i} has a coordinate that is not a finite number"
         )));
     }

@@ -12,6 +12,7 @@ use super::{BuildInfo, BuildParams, CellComplex, bounds, build};
 use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::rigid::Vect;
+use crate::said::{Opt, Said};
 
 /// The default finest cell size is the longest extent of the input's box over this.
 pub const DEFAULT_DIVISIONS: f64 = 32.0;
@@ -20,7 +21,7 @@ pub const DEFAULT_DIVISIONS: f64 = 32.0;
 /// size given, checked ([`check_size`]), or the default.
 pub(crate) fn finest(cell_size: Option<f64>, longest: f64) -> Result<f64> {
     match cell_size {
-        Some(s) => check_size(s, "cell size"),
+        Some(s) => check_size(s, None),
         None if longest > 0.0 => Ok(longest / DEFAULT_DIVISIONS),
         None => Ok(1.0),
     }
@@ -29,14 +30,18 @@ pub(crate) fn finest(cell_size: Option<f64>, longest: f64) -> Result<f64> {
 /// `size` when it is positive and at most [`crate::spec::LARGEST`]: past 1e15 the cells'
 /// corners leave `f64` no digits for the shape (a size of 1e300 ends in an indefinite
 /// Gauss-Newton system). `what` names the size in the error.
-pub(crate) fn check_size(size: f64, what: &str) -> Result<f64> {
+pub(crate) fn check_size(size: f64, what: Option<Opt>) -> Result<f64> {
     if size.is_finite() && size > 0.0 && size <= crate::spec::LARGEST {
         return Ok(size);
     }
-    Err(Error::Param(format!(
-        "{what} {size:?} must be positive and at most {:e}",
+    let said = match what {
+        Some(o) => Said::new().set(o, format!("{size:?}")),
+        None => Said::from(format!("cell size {size:?}")),
+    };
+    Err(Error::param(said.text(format!(
+        " must be positive and at most {:e}",
         crate::spec::LARGEST
-    )))
+    ))))
 }
 
 /// What [`sized`] decided: the build's parameters with the finest cell size, what the search
@@ -45,7 +50,7 @@ pub(crate) fn check_size(size: f64, what: &str) -> Result<f64> {
 /// those very points, in the same bounds, takes this one instead).
 pub(crate) struct Sized<const D: usize> {
     pub params: BuildParams,
-    pub note: Option<String>,
+    pub note: Option<Said>,
     pub built: Option<(CellComplex<D>, BuildInfo)>,
 }
 
@@ -69,10 +74,10 @@ pub(crate) fn sized<'a, const D: usize>(
     check_target(n, budget)?;
     let (points, triangles) = proxy()?;
     let (size, built) = search(&points, triangles, params, n, budget)?;
-    let note = format!(
-        "--cells {n}: finest cell size {}",
+    let note = Said::new().set(Opt::Cells, n).text(format!(
+        ": finest cell size {}",
         crate::human::length(size, size)
-    );
+    ));
     let params = BuildParams {
         cell_size: Some(size),
         target_cells: None,
@@ -89,21 +94,21 @@ pub(crate) fn sized<'a, const D: usize>(
 /// samples, or too thin, to fill more at the finest size searched), or a count more than 2 %
 /// off (the count jumps as the grid's alignment with a thin shape changes: a 10 × 1 × 1 bar of
 /// 20k points has 1,082 cells at 0.2460 and 841 at 0.2487).
-pub(crate) fn shortfall(target: Option<usize>, cells: usize) -> Option<String> {
+pub(crate) fn shortfall(target: Option<usize>, cells: usize) -> Option<Said> {
     let n = target?;
     if cells.saturating_mul(2) < n {
-        return Some(format!(
-            "--cells {n}: the shape gives only {cells} cells at the finest size searched (too \
-             few samples, or too thin, to fill more)"
-        ));
+        return Some(Said::new().set(Opt::Cells, n).text(format!(
+            ": the shape gives only {cells} cells at the finest size searched (too few samples, \
+             or too thin, to fill more)"
+        )));
     }
     let off = cells as f64 / n as f64 - 1.0;
     (off.abs() > 0.02).then(|| {
-        format!(
-            "--cells {n}: {cells} cells ({:+.0} %), the nearest count of the sizes tried: the \
+        Said::new().set(Opt::Cells, n).text(format!(
+            ": {cells} cells ({:+.0} %), the nearest count of the sizes tried: the \
              count jumps as the cells' alignment with the shape changes",
             100.0 * off
-        )
+        ))
     })
 }
 
@@ -234,13 +239,15 @@ pub(crate) const BYTES_PER_TARGET_CELL: u64 = 1 << 10;
 /// until an allocation failed).
 pub(crate) fn check_target(target: usize, budget: Budget) -> Result<()> {
     if target == 0 {
-        return Err(Error::Param(
-            "--cells 0 asks for no cells; ask for at least 1".into(),
+        return Err(Error::param(
+            Said::new()
+                .set(Opt::Cells, 0)
+                .text(" asks for no cells; ask for at least 1"),
         ));
     }
     budget.check(
-        &format!("a complex of {target} cells"),
+        format!("a complex of {target} cells"),
         target as f64 * BYTES_PER_TARGET_CELL as f64,
-        "ask for fewer --cells",
+        Said::from("ask for fewer ").opt(Opt::Cells),
     )
 }

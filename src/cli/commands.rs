@@ -27,7 +27,7 @@ pub(super) fn run_cells(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     if !ply {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{}: the cells are written as .ply",
             output.display()
         ))
@@ -140,7 +140,7 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
     ] {
         if set {
             return Err(
-                Error::Param(format!("{flag} is for 3D inputs, not .xy point sets")).into(),
+                Error::param(format!("{flag} is for 3D inputs, not .xy point sets")).into(),
             );
         }
     }
@@ -233,7 +233,7 @@ pub(super) fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
     let parts: Vec<Option<u8>> = text.split(',').map(|v| v.trim().parse().ok()).collect();
     match parts.as_slice() {
         [Some(r), Some(g), Some(b)] => Ok([*r, *g, *b]),
-        _ => Err(Error::Param(format!(
+        _ => Err(Error::param(format!(
             "--background {text}: expected R,G,B with each 0–255"
         ))
         .into()),
@@ -299,7 +299,7 @@ pub(super) fn parse_extent(text: Option<&str>) -> anyhow::Result<Option<[f64; 4]
         .unwrap_or_default();
     match <[f64; 4]>::try_from(numbers) {
         Ok(extent) => Ok(Some(extent)),
-        Err(_) => Err(Error::Param(format!(
+        Err(_) => Err(Error::param(format!(
             "--extent {text}: expected MINX,MINY,MAXX,MAXY, e.g. 636000,849000,637000,850000"
         ))
         .into()),
@@ -452,7 +452,7 @@ pub(super) fn run_edit(
     quiet: bool,
 ) -> anyhow::Result<()> {
     if proxy == 0 {
-        return Err(Error::Param("--proxy 0: the page needs samples to show".into()).into());
+        return Err(Error::param("--proxy 0: the page needs samples to show").into());
     }
     if let Some(dir) = out_dir {
         rigidcells::edit::server::OutputFolder::new(input, Some(dir))?;

@@ -401,7 +401,7 @@ impl ViewArgs {
     /// vertical axis).
     fn view(&self, input: &Path) -> anyhow::Result<View> {
         let bad = || {
-            Error::Param(format!(
+            Error::param(format!(
                 "--size {}: expected WIDTHxHEIGHT, e.g. 640x480",
                 self.size
             ))

@@ -27,6 +27,7 @@ use std::fmt;
 use std::path::Path;
 
 use crate::error::{Error, Result};
+use crate::said::Said;
 
 pub use las::of_projection;
 
@@ -352,17 +353,17 @@ pub fn check(
     (first, first_path): (Option<&Crs>, &Path),
     (second, second_path): (Option<&Crs>, &Path),
     same: bool,
-    advice: &str,
-) -> Result<Option<String>> {
+    advice: Said,
+) -> Result<Option<Said>> {
     match (first, second) {
         (Some(a), Some(b)) if !same && !a.same_as(b) => Err(Error::CrsMismatch {
             what: what.to_string(),
             first: format!("{} in {}", a.label(), shown(first_path)),
             second: format!("{} in {}", b.label(), shown(second_path)),
-            advice: advice.to_string(),
+            advice,
         }),
-        (Some(a), None) => Ok(Some(one_declared(a, first_path, second_path))),
-        (None, Some(b)) => Ok(Some(one_declared(b, second_path, first_path))),
+        (Some(a), None) => Ok(Some(one_declared(a, first_path, second_path).into())),
+        (None, Some(b)) => Ok(Some(one_declared(b, second_path, first_path).into())),
         _ => Ok(None),
     }
 }

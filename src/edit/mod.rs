@@ -42,6 +42,7 @@ use crate::error::{Error, Result};
 use crate::pipeline::{DeformParams, Live, Options, Step};
 use crate::progress::{Observer, Silent};
 use crate::rigid::Vect;
+use crate::said::Said;
 use crate::solve;
 use crate::spec::EditSpec;
 
@@ -217,7 +218,7 @@ pub struct Motions {
     /// Seconds of this solve.
     pub seconds: f64,
     /// The solver's warnings (parts kept at rest, …).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Said>,
 }
 
 /// The proxy deformed by the final transfer.
@@ -228,7 +229,7 @@ pub struct Released {
     /// Samples checked for fold-overs and how many fold.
     pub foldovers: (usize, usize),
     /// Warnings (fold-overs).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Said>,
 }
 
 /// The editor's state: the scene, and the live deformation of its samples
@@ -436,8 +437,8 @@ impl Editor {
         let region = &spec.fixed[0].region;
         let classes = &self.scene.classes;
         if classes.is_empty() && region.uses_classes() {
-            return Err(Error::Param(
-                "a `classification` region needs an input with LAS classes".into(),
+            return Err(Error::param(
+                "a `classification` region needs an input with LAS classes",
             ));
         }
         let class = |i: usize| classes.get(i).copied();
@@ -487,14 +488,14 @@ impl Selection {
     pub fn check(&self) -> Result<()> {
         let vertices = self.polygon.as_ref().map_or(0, Vec::len);
         if vertices > MAX_POLYGON {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "a polygon of {vertices} vertices; the editor takes at most {MAX_POLYGON}: \
                  draw a simpler lasso"
             )));
         }
         let classes = self.classification.as_ref().map_or(0, Vec::len);
         if classes > MAX_CLASSES {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "a selection of {classes} classes; the editor takes at most {MAX_CLASSES}"
             )));
         }
@@ -508,7 +509,7 @@ impl Edit {
     /// each message the server takes stays bounded.
     pub fn check(&self) -> Result<()> {
         let too_many = |count: usize, what: &str, most: usize| {
-            Err(Error::Param(format!(
+            Err(Error::param(format!(
                 "an edit of {count} {what}; the editor takes at most {most}"
             )))
         };

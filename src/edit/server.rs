@@ -70,6 +70,7 @@ use tungstenite::{Message, WebSocket};
 
 use super::Editor;
 use crate::error::{Error, Result};
+use crate::said::{Opt, Said};
 use gate::{Gate, header, read_head, respond, token};
 use outputs::Refusal;
 pub use outputs::{OutputFolder, check_name};
@@ -138,11 +139,16 @@ impl Server {
     /// a folder.
     pub fn bind(editor: Editor, port: u16, out_dir: Option<&Path>) -> Result<Self> {
         let outputs = Arc::new(OutputFolder::new(&editor.scene().input, out_dir)?);
-        let listener = TcpListener::bind(("127.0.0.1", port))
-            .map_err(|e| Error::Param(format!("--port {port}: cannot listen on it: {e}")))?;
+        let listener = TcpListener::bind(("127.0.0.1", port)).map_err(|e| {
+            Error::param(
+                Said::new()
+                    .set(Opt::Port, port)
+                    .text(format!(": cannot listen on it: {e}")),
+            )
+        })?;
         let port = listener
             .local_addr()
-            .map_err(|e| Error::Solver(format!("the listener's address: {e}")))?
+            .map_err(|e| Error::solver(format!("the listener's address: {e}")))?
             .port();
         let token = token()?;
         let assets = Arc::new(assets(&editor, &outputs, &token)?);
@@ -192,7 +198,7 @@ impl Server {
         std::thread::Builder::new()
             .name("edit-refuse".into())
             .spawn(move || refuse_all(refused))
-            .map_err(|e| Error::Solver(format!("no thread to refuse connections: {e}")))?;
+            .map_err(|e| Error::solver(format!("no thread to refuse connections: {e}")))?;
         for stream in self.listener.incoming() {
             let Ok(stream) = stream else { continue };
             let Some(slot) = Slot::take(&open) else {

@@ -10,7 +10,7 @@ use crate::rigid::Vect;
 
 /// The [`Frame`] of the whole `field` (for saving it).
 pub(crate) fn frame_of<const D: usize>(field: &Field<D>) -> Result<Frame<D>> {
-    let leaves = Leaves::new(&field.centers, &field.halves).map_err(Error::Solver)?;
+    let leaves = Leaves::new(&field.centers, &field.halves).map_err(Error::solver)?;
     let (_, margin_shift) = margin(&leaves, None);
     let mut lo = Vect::<D>::repeat(f64::INFINITY);
     let mut hi = Vect::<D>::repeat(f64::NEG_INFINITY);

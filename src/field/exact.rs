@@ -353,7 +353,7 @@ where
     /// handled by `outside`. Fails when the field's cells are not the leaves of an octree (a
     /// damaged field file).
     pub fn new(field: &Field<D>, inner: Deformer<D>, outside: Outside) -> Result<Self> {
-        let leaves = Leaves::new(&field.centers, &field.halves).map_err(Error::Solver)?;
+        let leaves = Leaves::new(&field.centers, &field.halves).map_err(Error::solver)?;
         let mut lo = Vect::<D>::repeat(f64::INFINITY);
         let mut hi = Vect::<D>::repeat(f64::NEG_INFINITY);
         for (c, h) in field.centers.iter().zip(&field.halves) {
@@ -376,7 +376,7 @@ where
         window: (Vect<D>, Vect<D>),
     ) -> Result<Self> {
         let leaves = Leaves::in_frame(&field.centers, &field.halves, frame.lower, frame.edge)
-            .map_err(Error::Solver)?;
+            .map_err(Error::solver)?;
         Self::assemble(
             field,
             inner,
@@ -399,9 +399,7 @@ where
     ) -> Result<Self> {
         let prescribed = field.prescribed.clone();
         if !prescribed.cells.is_empty() && prescribed.cells.len() != field.centers.len() {
-            return Err(Error::Solver(
-                "the prescribed cells do not match the cells".into(),
-            ));
+            return Err(Error::solver("the prescribed cells do not match the cells"));
         }
         let normal_maps = prescribed
             .maps

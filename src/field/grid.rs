@@ -39,6 +39,7 @@ use crate::error::{Error, Result};
 pub use crate::io::geotiff::OffsetGrid;
 use crate::memory::Budget;
 use crate::rigid::Vect;
+use crate::said::{Opt, Said};
 
 /// Bytes per node while a grid is made: the offsets (`f32`, three), the node's height (`f64`),
 /// the file's samples (`f32`, three) and the heights' fill.
@@ -101,22 +102,28 @@ pub fn sample(saved: SavedField<3>, params: &GridParams) -> Result<(OffsetGrid, 
     let field = &saved.field;
     let (lo, hi) = field
         .domain()
-        .ok_or_else(|| Error::Param("the field has no cells".into()))?;
+        .ok_or_else(|| Error::param("the field has no cells"))?;
     let cell = 2.0 * field.halves.iter().cloned().fold(f64::INFINITY, f64::min);
     let spacing = params.spacing.unwrap_or(cell);
     if !(spacing.is_finite() && spacing > 0.0) {
-        return Err(Error::Param(format!(
-            "--spacing {spacing}: expected a positive length"
-        )));
+        return Err(Error::param(
+            Said::new()
+                .set(Opt::Spacing, spacing)
+                .text(": expected a positive length"),
+        ));
     }
     let [x0, y0, x1, y1] = params.extent.unwrap_or([lo[0], lo[1], hi[0], hi[1]]);
     if !([x0, y0, x1, y1].iter().all(|v| v.is_finite()) && x0 < x1 && y0 < y1) {
-        return Err(Error::Param(format!(
-            "--extent {x0},{y0},{x1},{y1}: expected min x, min y, max x, max y with min < max"
-        )));
+        return Err(Error::param(
+            Said::new()
+                .set(Opt::Extent, format!("{x0},{y0},{x1},{y1}"))
+                .text(": expected min x, min y, max x, max y with min < max"),
+        ));
     }
     if params.height.is_some_and(|z| !z.is_finite()) {
-        return Err(Error::Param("--height: expected a number".into()));
+        return Err(Error::param(
+            Said::new().opt(Opt::Height).text(": expected a number"),
+        ));
     }
     let west = (x0 / spacing).floor() * spacing;
     let south = (y0 / spacing).floor() * spacing;
@@ -124,14 +131,20 @@ pub fn sample(saved: SavedField<3>, params: &GridParams) -> Result<(OffsetGrid, 
     let rows = ((y1 - south) / spacing).ceil() + 1.0;
     let nodes = columns * rows;
     params.memory.check(
-        &format!("a grid of {columns} × {rows} nodes"),
+        format!("a grid of {columns} × {rows} nodes"),
         nodes * BYTES_PER_NODE,
-        "a larger --spacing or a smaller --extent",
+        Said::from("a larger ")
+            .opt(Opt::Spacing)
+            .text(" or a smaller ")
+            .opt(Opt::Extent),
     )?;
     if nodes * 12.0 > f64::from(u32::MAX) - 65536.0 {
-        return Err(Error::Param(format!(
-            "a grid of {columns} × {rows} nodes is past a TIFF's 4 GiB; choose a larger --spacing"
-        )));
+        return Err(Error::param(
+            Said::from(format!(
+                "a grid of {columns} × {rows} nodes is past a TIFF's 4 GiB; choose a larger "
+            ))
+            .opt(Opt::Spacing),
+        ));
     }
     let (columns, rows) = (columns as usize, rows as usize);
     let north = south + (rows - 1) as f64 * spacing;
@@ -166,15 +179,19 @@ pub fn sample(saved: SavedField<3>, params: &GridParams) -> Result<(OffsetGrid, 
         .collect();
     let no_value = offsets.iter().filter(|o| o[0].is_nan()).count();
     if no_value == offsets.len() {
-        return Err(Error::Param(format!(
-            "no node of the grid lies within the field's margin ({}); choose an --extent over \
-             the field{}",
+        let said = Said::from(format!(
+            "no node of the grid lies within the field's margin ({}); choose an ",
             crate::human::length(map.margin(), cell),
-            match params.height {
-                Some(_) => " or a --height among its cells",
-                None => "",
-            }
-        )));
+        ))
+        .opt(Opt::Extent)
+        .text(" over the field");
+        return Err(Error::param(match params.height {
+            Some(_) => said
+                .text(" or a ")
+                .opt(Opt::Height)
+                .text(" among its cells"),
+            None => said,
+        }));
     }
     let grid = OffsetGrid {
         west,

@@ -45,8 +45,8 @@ where
         outside: Outside,
     ) -> Result<Constrained<D>> {
         if self.window.is_some() {
-            return Err(Error::Param(
-                "a window of a saved field is applied once, through `deformer`".into(),
+            return Err(Error::param(
+                "a window of a saved field is applied once, through `deformer`",
             ));
         }
         let transfer = transfer.unwrap_or(self.transfer);
@@ -87,8 +87,8 @@ where
         let transfer = transfer.unwrap_or(self.transfer);
         if let Some(w) = self.window {
             if transfer != Transfer::Pu {
-                return Err(Error::Solver(
-                    "a window of a field serves the PU transfer only".into(),
+                return Err(Error::solver(
+                    "a window of a field serves the PU transfer only",
                 ));
             }
             let inner = Deformer::Pu(Box::new(PuRbf::from_layout(&self.field, w.layout)?));

@@ -280,11 +280,11 @@ impl<const D: usize> Nearest<D> {
     /// cells' boxes.
     pub fn new(centers: &[Vect<D>], halves: &[f64]) -> Result<Self> {
         if centers.is_empty() {
-            return Err(Error::Solver("the field has no cells".into()));
+            return Err(Error::solver("the field has no cells"));
         }
         let centers: Vec<[f64; D]> = centers.iter().map(|c| (*c).into()).collect();
         let tree = ImmutableKdTree::new_from_slice(&centers)
-            .map_err(|e| Error::Solver(format!("kd-tree over cell centers: {e:?}")))?;
+            .map_err(|e| Error::solver(format!("kd-tree over cell centers: {e:?}")))?;
         let mut lower = [f64::MAX; D];
         let mut upper = [f64::MIN; D];
         for (c, h) in centers.iter().zip(halves) {

@@ -227,7 +227,7 @@ impl<const D: usize> PuRbf<D> {
     fn layout(field: &Field<D>) -> Result<Self> {
         let n = field.centers.len();
         if n == 0 {
-            return Err(Error::Solver("the field has no cells".into()));
+            return Err(Error::solver("the field has no cells"));
         }
         let smallest = 2.0 * field.halves.iter().cloned().fold(f64::INFINITY, f64::min);
         let mut lo = Vect::<D>::repeat(f64::INFINITY);
@@ -279,7 +279,7 @@ impl<const D: usize> PuRbf<D> {
         let reach = (0.5 + OVERLAP) * edge;
         let at: Vec<[f64; D]> = field.centers.iter().map(|c| (*c).into()).collect();
         let near = kiddo::ImmutableKdTree::new_from_slice(&at)
-            .map_err(|e| Error::Solver(format!("kd-tree over cell centers: {e:?}")))?;
+            .map_err(|e| Error::solver(format!("kd-tree over cell centers: {e:?}")))?;
         let middle =
             |k: &[i64; D]| Vect::<D>::from_fn(|a, _| lower[a] + (k[a] as f64 + 0.5) * edge);
         let members: Vec<Vec<u32>> = keys
@@ -320,7 +320,7 @@ impl<const D: usize> PuRbf<D> {
             inv_reach: 1.0 / reach,
             index,
             middles: kiddo::ImmutableKdTree::new_from_slice(&points)
-                .map_err(|e| Error::Solver(format!("kd-tree over patches: {e:?}")))?,
+                .map_err(|e| Error::solver(format!("kd-tree over patches: {e:?}")))?,
             patches,
             source: None,
             failed: AtomicUsize::new(0),
@@ -357,9 +357,7 @@ impl<const D: usize> PuRbf<D> {
                 .iter()
                 .any(|(_, m)| m.is_empty() || m.iter().any(|&i| i >= n))
         {
-            return Err(Error::Solver(
-                "the PU layout does not match the cells".into(),
-            ));
+            return Err(Error::solver("the PU layout does not match the cells"));
         }
         let (keys, members) = layout.patches.into_iter().unzip();
         Ok(Self::assemble(layout.lower, layout.edge, keys, members)?.fitting_from(field))

@@ -27,6 +27,7 @@ use super::simd::slices;
 use super::{Field, Warp};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
+use crate::said::{Opt, Said};
 
 /// The RBF transfer of a field.
 #[derive(Clone)]
@@ -68,8 +69,8 @@ impl<const D: usize> Rbf<D> {
             x = saddle(&c, &d, DEGENERATE);
         }
         if !finite(&x) {
-            return Err(Error::Solver(
-                "the RBF system is singular (coincident cell centers?)".into(),
+            return Err(Error::solver(
+                "the RBF system is singular (coincident cell centers?)",
             ));
         }
         Ok(Self::from_solution(&c, |r, k| x[(r, k)], shift, inv_scale))
@@ -132,8 +133,7 @@ impl<const D: usize> Rbf<D> {
                 stack,
             )
         };
-        let singular =
-            || Error::Solver("the RBF system is singular (coincident cell centers?)".into());
+        let singular = || Error::solver("the RBF system is singular (coincident cell centers?)");
         let mut x = rhs.clone();
         solved(&mut x);
         if !x.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
@@ -248,9 +248,11 @@ impl<const D: usize> Rbf<D> {
         if tolerance >= 0.0 && tolerance.is_finite() {
             Ok(())
         } else {
-            Err(Error::Param(format!(
-                "the RBF tolerance (--rbf-tolerance) must be a length of at least 0, not {tolerance}"
-            )))
+            Err(Error::param(
+                Said::from("the RBF tolerance (")
+                    .opt(Opt::RbfTolerance)
+                    .text(format!(") must be a length of at least 0, not {tolerance}")),
+            ))
         }
     }
 
@@ -297,7 +299,7 @@ const DEGENERATE: f64 = 1e-9;
 
 fn scaled_centers<const D: usize>(field: &Field<D>) -> Result<(Vec<Vect<D>>, Vect<D>, f64)> {
     if field.centers.is_empty() {
-        return Err(Error::Solver("the field has no cells".into()));
+        return Err(Error::solver("the field has no cells"));
     }
     let (mut lo, mut hi) = (field.centers[0], field.centers[0]);
     for c in &field.centers {
@@ -638,8 +640,8 @@ impl<const D: usize> Rbf<D> {
     ) -> Result<Self> {
         let n = field.centers.len();
         if weights.iter().any(|w| w.len() != n) {
-            return Err(Error::Solver(
-                "the saved RBF weights do not match the cells".into(),
+            return Err(Error::solver(
+                "the saved RBF weights do not match the cells",
             ));
         }
         let c: Vec<Vect<D>> = field

@@ -60,7 +60,7 @@ pub fn open(path: &Path) -> Result<Box<dyn Source>> {
 pub(crate) fn require_extension(path: &Path, want: &str) -> Result<()> {
     let ext = extension(path);
     if ext.as_deref() != Some(want) && !(want == "xyz" && ext.as_deref() == Some("txt")) {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{}: the output must have the input's format (.{want})",
             path.display()
         )));
@@ -94,7 +94,7 @@ pub fn check_output_format(input: &Path, output: &Path) -> Result<()> {
         return Ok(());
     }
     let names: Vec<String> = formats.iter().map(|e| format!(".{e}")).collect();
-    Err(Error::Param(format!(
+    Err(Error::param(format!(
         "{}: the output must have the input's format ({})",
         output.display(),
         names.join(" or ")
@@ -227,7 +227,7 @@ pub fn refuse_overwrite(input: &Path, output: &Path) -> Result<()> {
     let canon_out = output_identity(output)?;
     let same = canon_out == canon_in || std::fs::canonicalize(output).is_ok_and(|o| o == canon_in);
     if same {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{}: the output would overwrite the input; choose another output name",
             output.display()
         )));
@@ -254,7 +254,7 @@ pub fn refuse_same_outputs(outputs: &[(&str, &Path)]) -> Result<()> {
     for &(option, path) in outputs {
         let id = output_identity(path)?;
         if let Some((first, _)) = seen.iter().find(|(_, other)| *other == id) {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "{}: {first} and {option} name the same file; give each its own",
                 path.display()
             )));

@@ -140,7 +140,7 @@ impl TempFile {
         };
         let name = target
             .file_name()
-            .ok_or_else(|| Error::Param(format!("{}: not a file name", target.display())))?;
+            .ok_or_else(|| Error::param(format!("{}: not a file name", target.display())))?;
         // The target's name, cut on a character boundary so that the temporary's name (with
         // its dots and random part, 18 bytes more) fits where the target's fits (255 bytes).
         let name = name.to_string_lossy();
@@ -280,7 +280,7 @@ impl ResultSet {
         tmp.complete()?;
         let mut staged = self.staged.lock().unwrap_or_else(|e| e.into_inner());
         if staged.iter().any(|t| t.target == tmp.target) {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "{}: two outputs of one run name this file; give each its own",
                 tmp.target.display()
             )));

@@ -322,7 +322,7 @@ impl Sink for PlySink {
         let map = self.map.clone();
         let l = self.layout;
         if chunk.first as usize != self.next || self.next + moved.len() > l.count {
-            return Err(Error::Solver(format!(
+            return Err(Error::solver(format!(
                 "{}: chunks out of order (at {}, expected {})",
                 self.file.target().display(),
                 chunk.first,
@@ -355,7 +355,7 @@ impl Sink for PlySink {
     fn finish(mut self: Box<Self>, set: &ResultSet) -> Result<Vec<String>> {
         let l = self.layout;
         if self.next != l.count {
-            return Err(Error::Solver(format!(
+            return Err(Error::solver(format!(
                 "{}: {} of {} vertices written",
                 self.file.target().display(),
                 self.next,

@@ -160,7 +160,7 @@ pub(crate) fn check_count(path: &Path, given: usize, expected: usize) -> Result<
     if given == expected {
         return Ok(());
     }
-    Err(Error::Param(format!(
+    Err(Error::param(format!(
         "{}: {given} new values for {expected} samples",
         path.display()
     )))

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use super::stream::{Bounds, Chunk, Sink, Source};
 use crate::error::{Error, Result};
+use crate::said::{Opt, Said};
 
 /// The files of a set of tiles as one source.
 pub struct Tiles {
@@ -21,14 +22,14 @@ impl Tiles {
     /// two files.
     pub fn open(paths: &[PathBuf]) -> Result<Self> {
         if paths.is_empty() {
-            return Err(Error::Param("no input files".into()));
+            return Err(Error::param("no input files"));
         }
         let mut sources = Vec::with_capacity(paths.len());
         let (mut offsets, mut len) = (Vec::with_capacity(paths.len()), 0u64);
         for p in paths {
             let s = super::open(p)?;
             if !s.triangles().is_empty() && paths.len() > 1 {
-                return Err(Error::Param(format!(
+                return Err(Error::param(format!(
                     "{}: a mesh cannot be one of several tiles (its triangles would span \
                      them); give it alone",
                     p.display()
@@ -49,7 +50,7 @@ impl Tiles {
     /// Refuses, unless `same` (`--same-crs`), tiles whose coordinate systems differ
     /// ([`crate::crs::check`]), each compared with the first that declares one; returns the
     /// warnings of tiles that declare none beside one that does.
-    pub fn check_crs(&self, same: bool) -> Result<Vec<String>> {
+    pub fn check_crs(&self, same: bool) -> Result<Vec<Said>> {
         let systems: Vec<_> = self.sources.iter().map(|s| (s.crs(), s.path())).collect();
         let Some((first, first_path)) = systems.iter().find(|(c, _)| c.is_some()) else {
             return Ok(Vec::new());
@@ -64,8 +65,9 @@ impl Tiles {
                 (first.as_ref(), first_path),
                 (crs.as_ref(), path),
                 same,
-                "reproject the tiles into one system, or pass --same-crs if both describe the \
-                 same one",
+                Said::from("reproject the tiles into one system, or pass ")
+                    .opt(Opt::SameCrs)
+                    .text(" if both describe the same one"),
             )?);
         }
         Ok(warnings)
@@ -144,7 +146,7 @@ impl Source for Tiles {
     }
 
     fn sink(&self, output: &Path, _bounds: Option<Bounds>) -> Result<Box<dyn Sink>> {
-        Err(Error::Param(format!(
+        Err(Error::param(format!(
             "{}: a set of tiles is solved, not written: `apply` the field to each tile",
             output.display()
         )))

@@ -8,6 +8,7 @@ use crate::error::{Error, Result};
 use crate::field::{Constrained, Outside, Warp, count_foldovers};
 use crate::io::Chunk;
 use crate::rigid::Vect;
+use crate::said::Said;
 use crate::solve::Solution;
 
 /// Samples checked for fold-overs at most: evenly strided, as the check costs a few warps (or
@@ -28,19 +29,19 @@ pub fn check_foldovers<const D: usize>(
     warp: &impl Warp<D>,
     solution: &Solution<D>,
     samples: &[Vect<D>],
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Said>,
 ) -> (usize, usize) {
     let stride = samples.len().div_ceil(FOLDOVER_SAMPLES).max(1);
     let checked: Vec<Vect<D>> = samples.iter().step_by(stride).copied().collect();
     let h = 0.1 * solution.complex.grid.finest_size();
     let folded = count_foldovers(warp, &solution.complex.grid.origin, &checked, h);
     if folded > 0 {
-        warnings.push(format!(
+        warnings.push(Said::from(format!(
             "the deformation folds space over at {folded} of {} samples checked (the Jacobian \
              determinant is not positive there): the shape passes through itself; a smaller \
              edit, more load steps or stiffer cells avoid it",
             checked.len()
-        ));
+        )));
     }
     (checked.len(), folded)
 }
@@ -86,7 +87,7 @@ pub(super) fn refuse_outside(input: &Path, warp: &Constrained<3>) -> Result<()> 
 /// RBF frame was damaged to 5e-324 reached the output as NaN).
 pub(crate) fn check_moved<const D: usize>(first: u64, moved: &[Vect<D>]) -> Result<()> {
     match moved.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-        Some(i) => Err(Error::Solver(format!(
+        Some(i) => Err(Error::solver(format!(
             "the transfer moved sample {} to a position that is not finite",
             first + i as u64
         ))),

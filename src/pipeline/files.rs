@@ -11,6 +11,7 @@ use crate::io::{self, ResultSet, Source};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::Vect;
+use crate::said::{Opt, Said};
 use crate::solve::{self, Solution};
 use crate::spec::EditSpec;
 
@@ -33,8 +34,10 @@ pub const MAX_CHUNK: usize = 1 << 24;
 /// many).
 pub fn check_chunk(chunk: usize) -> Result<usize> {
     if chunk == 0 {
-        return Err(Error::Param(
-            "--chunk 0: a chunk holds 1 to 16,777,216 samples".into(),
+        return Err(Error::param(
+            Said::new()
+                .set(Opt::Chunk, 0)
+                .text(": a chunk holds 1 to 16,777,216 samples"),
         ));
     }
     Ok(chunk.min(MAX_CHUNK))
@@ -49,7 +52,7 @@ pub struct FileInfo {
     /// Cells, solve and transfer (empty for [`apply_file`]).
     pub deform: DeformInfo,
     /// Notes on the output (moved offsets, dropped indices, header fixes).
-    pub notes: Vec<String>,
+    pub notes: Vec<Said>,
     /// Seconds of the first pass (bounds, occupancy, selections).
     pub seconds_read: f64,
     /// Seconds of the second pass (transfer and writing).
@@ -195,11 +198,11 @@ pub(super) fn deform_in(
         None => deformer.outside().count,
     };
     if outside > 0 {
-        info.notes.push(format!(
+        info.notes.push(Said::from(format!(
             "{outside} samples lay beyond the cells' margin ({}) and were moved by the transfer \
              extended there",
             crate::human::length(deformer.margin(), deformer.margin())
-        ));
+        )));
     }
     info.outside = outside;
     info.seconds_write = t2.elapsed().as_secs_f64();
@@ -224,7 +227,7 @@ struct Solved {
     /// The local frame's origin in world coordinates.
     origin: Vect<3>,
     build: BuildInfo,
-    warnings: Vec<String>,
+    warnings: Vec<Said>,
     /// When the field's construction began (the transfer's seconds count from there).
     transfer_start: Instant,
     /// Samples checked for fold-overs, and those folded.
@@ -331,7 +334,9 @@ fn solve_source(
         selections,
     };
     let mut staged = stages::run(cells, spec, params, observer)?;
-    staged.warnings.splice(0..0, crs_warnings);
+    staged
+        .warnings
+        .splice(0..0, crs_warnings.into_iter().map(Said::from));
     staged.saved.crs = crs;
     if let Some((path, set)) = save_field {
         set.write(path, &staged.saved.to_bytes()?)?;
@@ -419,19 +424,24 @@ pub fn apply_file(
     };
     if params.rbf_tolerance.is_some() && params.transfer.unwrap_or(saved.transfer) != Transfer::Rbf
     {
-        return Err(Error::Param(format!(
-            "--rbf-tolerance applies to the RBF transfer only, and {} was saved for another; \
-             add --transfer rbf",
-            field.display()
-        )));
+        return Err(Error::param(
+            Said::new()
+                .opt(Opt::RbfTolerance)
+                .text(format!(
+                    " applies to the RBF transfer only, and {} was saved for another; add ",
+                    field.display()
+                ))
+                .set(Opt::Transfer, "rbf"),
+        ));
     }
     let crs_warning = crate::crs::check(
         "the field's coordinate system differs from the input's",
         (saved.crs.as_ref(), field),
         (source.crs().as_ref(), input),
         params.same_crs,
-        "apply the field to files in the system it was solved in, or pass --same-crs if both \
-         describe the same one",
+        Said::from("apply the field to files in the system it was solved in, or pass ")
+            .opt(Opt::SameCrs)
+            .text(" if both describe the same one"),
     )?;
     let windowed = saved.is_window();
     let set = ResultSet::new();
@@ -444,16 +454,16 @@ pub fn apply_file(
             debug_assert!(windowed);
             match apply_saved(whole, source.as_mut(), to, params, chunk, observer)? {
                 Applied::Done(mut info) => {
-                    info.notes.push(format!(
+                    info.notes.push(Said::from(format!(
                         "{count} samples lay outside the bounds in {}'s header; the whole \
                          field was read",
                         input.display()
-                    ));
+                    )));
                     *info
                 }
                 Applied::BeyondWindow(_) => {
-                    return Err(Error::Solver(
-                        "a whole field reported samples outside its window".into(),
+                    return Err(Error::solver(
+                        "a whole field reported samples outside its window",
                     ));
                 }
             }
@@ -484,9 +494,11 @@ fn apply_saved(
     let origin = field.field.origin;
     if params.transfer == Some(Transfer::Rbf) && !field.has_rbf() {
         params.memory.check(
-            &format!("the RBF transfer of {} cells", field.field.centers.len()),
+            format!("the RBF transfer of {} cells", field.field.centers.len()),
             crate::memory::rbf_bytes(field.field.centers.len(), 3),
-            "apply the field with the transfer it was saved with (no --transfer rbf)",
+            Said::from("apply the field with the transfer it was saved with (no ")
+                .set(Opt::Transfer, "rbf")
+                .text(")"),
         )?;
     }
     observer.stage("transfer", 0);
@@ -507,26 +519,26 @@ fn apply_saved(
     }
     if let Deformer::Pu(pu) = deformer.inner() {
         let (made, all, failed) = pu.fits();
-        notes.push(format!(
+        notes.push(Said::from(format!(
             "the PU transfer fitted {made} of its {all} patches (those the samples reached)"
-        ));
+        )));
         if failed > 0 {
-            notes.push(format!(
+            notes.push(Said::from(format!(
                 "{failed} of the PU's patch fits failed; the samples there were blended from \
                  the patches around them"
-            ));
+            )));
         }
     }
     let outside = deformer.outside().count;
     let margin = crate::human::length(deformer.margin(), deformer.margin());
     match params.outside {
-        Outside::Keep if outside > 0 => notes.push(format!(
+        Outside::Keep if outside > 0 => notes.push(Said::from(format!(
             "{outside} samples beyond the field's margin ({margin}) kept their coordinates"
-        )),
-        Outside::Extend if outside > 0 => notes.push(format!(
+        ))),
+        Outside::Extend if outside > 0 => notes.push(Said::from(format!(
             "{outside} samples beyond the field's margin ({margin}) were moved by the \
              transfer extended there"
-        )),
+        ))),
         _ => {}
     }
     Ok(Applied::Done(Box::new(FileInfo {
@@ -546,7 +558,7 @@ pub fn file_cells(
     params: &DeformParams,
     chunk: usize,
     observer: &dyn Observer,
-) -> Result<(CellComplex<3>, BuildInfo, Option<Solution<3>>, Vec<String>)> {
+) -> Result<(CellComplex<3>, BuildInfo, Option<Solution<3>>, Vec<Said>)> {
     let mut source = io::open(input)?;
     let empty = EditSpec::default();
     let mut notes = Vec::new();

@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 use crate::io::{Bounds, Chunk, Source};
 use crate::progress::Observer;
 use crate::rigid::Vect;
+use crate::said::Said;
 use crate::solve::Selections;
 use crate::spec::EditSpec;
 
@@ -27,7 +28,7 @@ pub(super) fn first_pass_cells(
     chunk: usize,
     proxy_max: usize,
     solving: bool,
-    notes: &mut Vec<String>,
+    notes: &mut Vec<Said>,
     observer: &dyn Observer,
 ) -> Result<(CellComplex<3>, BuildInfo, Selections<3>, Proxy)> {
     // What the spec asks of the input (its classes, its samples' indices), before any pass.
@@ -83,10 +84,11 @@ pub(super) fn first_pass_cells(
         return Ok((complex, build_info, selections, proxy));
     }
     if pass.outside > 0 {
-        notes.push(format!(
-            "{} samples lie outside the bounds in the file's header; the cells use the samples' own bounds",
+        notes.push(Said::from(format!(
+            "{} samples lie outside the bounds in the file's header; the cells use the samples' \
+             own bounds",
             pass.outside
-        ));
+        )));
         let b = pass.bounds;
         pass = first_pass(source, spec, sized, b, chunk, proxy_max, true, observer)?;
     }

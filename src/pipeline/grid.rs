@@ -7,6 +7,7 @@ use crate::crs::{Crs, Unit};
 use crate::error::{Error, Result};
 use crate::field::SavedField;
 use crate::field::grid::{GridInfo, GridParams, sample};
+use crate::said::{Opt, Said};
 
 /// Writes the field saved in `field` as a GeoTIFF grid of east, north and up offsets at
 /// `output` (`.tif` or `.tiff`), for PROJ's `+proj=gridshift`; `epsg` is the CRS of the
@@ -25,16 +26,17 @@ pub fn grid_file(
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"));
     if !tiff {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{}: a correction grid is written as a GeoTIFF (.tif)",
             output.display()
         )));
     }
     if epsg.is_some_and(|c| c == 0 || c > 32766) {
-        return Err(Error::Param(format!(
-            "--epsg {}: a GeoTIFF key holds EPSG codes 1 to 32766",
-            epsg.unwrap_or(0)
-        )));
+        return Err(Error::param(
+            Said::new()
+                .set(Opt::Epsg, epsg.unwrap_or(0))
+                .text(": a GeoTIFF key holds EPSG codes 1 to 32766"),
+        ));
     }
     let saved = SavedField::<3>::load(field)?;
     let epsg = grid_epsg(field, saved.crs.as_ref(), epsg)?;
@@ -59,18 +61,23 @@ fn grid_epsg(field: &Path, crs: Option<&Crs>, asked: Option<u16>) -> Result<Opti
         return Ok(asked);
     };
     if crs.unit == Some(Unit::Degree) {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{}: the field was solved in longitude and latitude ({crs}); a grid of east and \
              north offsets needs projected coordinates: solve on the scan projected",
             field.display()
         )));
     }
     match (asked, crs.epsg) {
-        (Some(a), Some(recorded)) if u32::from(a) != recorded => Err(Error::Param(format!(
-            "--epsg {a}: {} was solved in EPSG:{recorded} ({crs}); leave --epsg out to \
-             declare that system",
-            field.display()
-        ))),
+        (Some(a), Some(recorded)) if u32::from(a) != recorded => Err(Error::param(
+            Said::new()
+                .set(Opt::Epsg, a)
+                .text(format!(
+                    ": {} was solved in EPSG:{recorded} ({crs}); leave ",
+                    field.display()
+                ))
+                .opt(Opt::Epsg)
+                .text(" out to declare that system"),
+        )),
         (Some(a), _) => Ok(Some(a)),
         (None, recorded) => Ok(recorded
             .and_then(|c| u16::try_from(c).ok())

@@ -25,6 +25,7 @@ use crate::error::Result;
 use crate::field::{Blend, Field, Prescribed, Weights};
 use crate::progress::{Observer, Silent};
 use crate::rigid::{Dim, Motion, Rigid, Vect};
+use crate::said::{Opt, Said};
 use crate::solve::{Session, Solution, SolverInfo};
 use crate::spec::EditSpec;
 use crate::spec::HandleMotion;
@@ -55,7 +56,7 @@ pub struct Live {
     session: Option<Session<3>>,
     /// The last solve's report, and the warnings of the session's solve from rest.
     info: SolverInfo,
-    warnings: Vec<String>,
+    warnings: Vec<Said>,
     /// Whether the motions moved warm (a drag's step, a refinement) since the solve from rest.
     warm: bool,
     /// Pairs of handles whose motions were equal when the spec was resolved.
@@ -74,7 +75,7 @@ pub struct Step {
     /// Whether the spec was solved from rest (its regions changed, or it was the first).
     pub from_rest: bool,
     /// The warnings of a solve from rest: the build's, the constraints', the solver's.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Said>,
     /// Seconds of the step.
     pub seconds: f64,
 }
@@ -90,14 +91,22 @@ impl Live {
         params: DeformParams,
     ) -> Result<Self> {
         let refining = [
-            (params.solve.refine_strain.is_some(), "--refine-strain"),
-            (params.solve.refine_fraction.is_some(), "--min-cell-size"),
+            (params.solve.refine_strain.is_some(), Opt::RefineStrain),
+            (params.solve.refine_fraction.is_some(), Opt::MinCellSize),
         ];
         if let Some((_, option)) = refining.iter().find(|(given, _)| *given) {
-            return Err(Error::Param(format!(
-                "{option} refines the cells where they strain; a live deformation keeps the \
-                 cells it built: give --cell-size or --cells (deform refines)"
-            )));
+            return Err(Error::param(
+                Said::new()
+                    .opt(*option)
+                    .text(
+                        " refines the cells where they strain; a live deformation keeps the \
+                         cells it built: give ",
+                    )
+                    .opt(Opt::CellSize)
+                    .text(" or ")
+                    .opt(Opt::Cells)
+                    .text(" (deform refines)"),
+            ));
         }
         super::classes_of(points.len(), &classes)?;
         let check = |forecast: &crate::cells::Forecast| params.check_forecast(forecast);
@@ -142,7 +151,7 @@ impl Live {
 
     /// The warnings of the last solve from rest: the build's, the constraints', the
     /// solver's (a [`Live::release`]'s info holds them, then its fold-overs).
-    pub fn warnings(&self) -> &[String] {
+    pub fn warnings(&self) -> &[Said] {
         &self.warnings
     }
 
@@ -303,19 +312,19 @@ impl Live {
         max_iterations: usize,
     ) -> Result<Step> {
         let Some(last) = &self.spec else {
-            return Err(Error::Param(
-                "no spec to pose: give the spec with its regions first".into(),
+            return Err(Error::param(
+                "no spec to pose: give the spec with its regions first",
             ));
         };
         if poses.len() != last.handles.len() {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "{} poses for the spec's {} handles: give one a handle",
                 poses.len(),
                 last.handles.len()
             )));
         }
         if !pins.is_empty() && pins.len() != last.pins.len() {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "{} pins for the spec's {}: give one a pin, or none",
                 pins.len(),
                 last.pins.len()

@@ -39,6 +39,7 @@ use crate::io::{self, Chunk};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
+use crate::said::{Opt, Said};
 use crate::solve::{Solution, SolveParams, SolverInfo};
 use crate::spec::EditSpec;
 
@@ -118,8 +119,8 @@ impl DeformParams {
     /// (the fold-over check's and the report's samples among them): 1 or more.
     pub fn with_proxy_samples(self, samples: usize) -> Result<Self> {
         if samples == 0 {
-            return Err(Error::Param(
-                "the proxy needs 1 sample or more (the fold-over check runs on it)".into(),
+            return Err(Error::param(
+                "the proxy needs 1 sample or more (the fold-over check runs on it)",
             ));
         }
         Ok(Self {
@@ -187,7 +188,7 @@ pub struct DeformInfo {
     /// ([`deform_file`]: `"the output's scale 0.01"`); `None` where they are the field's values.
     pub control_rounding: Option<String>,
     /// Messages for the user.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Said>,
 }
 
 impl DeformInfo {
@@ -200,7 +201,7 @@ impl DeformInfo {
         transfer_start: Instant,
         foldovers: (usize, usize),
         (control_points, seconds_check): (Vec<ControlPoint>, f64),
-        warnings: Vec<String>,
+        warnings: Vec<Said>,
     ) -> Self {
         Self {
             build,
@@ -262,7 +263,7 @@ where
 /// Refuses `normals` unless there is one for each of `points` samples, or none.
 pub(crate) fn check_normals<const D: usize>(points: usize, normals: &[Vect<D>]) -> Result<()> {
     if !normals.is_empty() && normals.len() != points {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{} normals for {points} points: give one per point, or none",
             normals.len(),
         )));
@@ -276,7 +277,7 @@ fn classes_of(samples: usize, classes: &[u8]) -> Result<Option<&[u8]>> {
     match classes.len() {
         0 => Ok(None),
         n if n == samples => Ok(Some(classes)),
-        n => Err(Error::Param(format!(
+        n => Err(Error::param(format!(
             "{n} LAS classes for {samples} points: give one per point, or none"
         ))),
     }
@@ -293,7 +294,7 @@ pub fn deform_xy_file(
     observer: &dyn Observer,
 ) -> Result<(Solution<2>, DeformInfo, usize)> {
     if io::extension(output).as_deref() != Some("xy") {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{}: a .xy point set is written as .xy",
             output.display()
         )));
@@ -320,7 +321,7 @@ pub fn apply_points(
         crate::cells::bounds(points)?;
     }
     if !normals.is_empty() && normals.len() != points.len() {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{} normals for {} samples",
             normals.len(),
             points.len()
@@ -339,14 +340,20 @@ pub fn apply_points(
     let beyond = deformer.outside();
     if outside == Outside::Refuse && beyond.count > 0 {
         let margin = deformer.margin();
-        return Err(Error::Param(format!(
-            "{}: {} samples lie beyond the field's margin of {} (the farthest {} from it); pass \
-             --outside keep or --outside extend, or solve a field over them",
-            name.display(),
-            beyond.count,
-            crate::human::length(margin, margin),
-            crate::human::length(beyond.farthest, margin)
-        )));
+        return Err(Error::param(
+            Said::from(format!(
+                "{}: {} samples lie beyond the field's margin of {} (the farthest {} from it); \
+                 pass ",
+                name.display(),
+                beyond.count,
+                crate::human::length(margin, margin),
+                crate::human::length(beyond.farthest, margin)
+            ))
+            .set(Opt::Outside, "keep")
+            .text(" or ")
+            .set(Opt::Outside, "extend")
+            .text(", or solve a field over them"),
+        ));
     }
     Ok((moved, turned))
 }

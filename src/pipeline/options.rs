@@ -9,6 +9,7 @@ use crate::cells::{BuildParams, Inside};
 use crate::error::{Error, Result};
 use crate::field::Transfer;
 use crate::memory::Budget;
+use crate::said::{Opt, Said};
 use crate::solve::{self, LooseParts, Method, SolveParams};
 
 use super::DeformParams;
@@ -96,41 +97,51 @@ impl Options {
     /// The library's parameters, checked: sizes in range, no two options that
     /// contradict each other.
     pub fn params(&self) -> Result<DeformParams> {
-        let conflict = |a: &str, b: &str| {
-            Err(Error::Param(format!(
-                "{a} and {b} both size the cells: give one"
-            )))
+        let conflict = |a: Opt, b: Opt| {
+            Err(Error::param(
+                Said::new()
+                    .opt(a)
+                    .text(" and ")
+                    .opt(b)
+                    .text(" both size the cells: give one"),
+            ))
         };
         match (self.cell_size, self.cells, self.min_cell_size) {
-            (Some(_), Some(_), _) => return conflict("--cell-size", "--cells"),
-            (Some(_), _, Some(_)) => return conflict("--cell-size", "--min-cell-size"),
-            (_, Some(_), Some(_)) => return conflict("--cells", "--min-cell-size"),
+            (Some(_), Some(_), _) => return conflict(Opt::CellSize, Opt::Cells),
+            (Some(_), _, Some(_)) => return conflict(Opt::CellSize, Opt::MinCellSize),
+            (_, Some(_), Some(_)) => return conflict(Opt::Cells, Opt::MinCellSize),
             _ => {}
         }
         if let Some(size) = self.cell_size {
-            crate::cells::check_size(size, "--cell-size")?;
+            crate::cells::check_size(size, Some(Opt::CellSize))?;
         }
         if let Some(size) = self.min_cell_size {
-            crate::cells::check_size(size, "--min-cell-size")?;
+            crate::cells::check_size(size, Some(Opt::MinCellSize))?;
         }
         if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
-            return Err(Error::Param(format!(
-                "--tolerance {}: a number of finest cell sizes, 0 or more",
-                self.tolerance
-            )));
+            return Err(Error::param(
+                Said::new()
+                    .set(Opt::Tolerance, self.tolerance)
+                    .text(": a number of finest cell sizes, 0 or more"),
+            ));
         }
         if self.shell && !matches!(self.inside, Inside::Auto | Inside::None) {
-            return Err(Error::Param(format!(
-                "--shell keeps no inside; --inside {} asks for one: give one",
-                self.inside
-            )));
+            return Err(Error::param(
+                Said::new()
+                    .opt(Opt::Shell)
+                    .text(" keeps no inside; ")
+                    .set(Opt::Inside, self.inside)
+                    .text(" asks for one: give one"),
+            ));
         }
         if let Some(s) = self.refine_strain
             && !(s.is_finite() && s >= 0.0)
         {
-            return Err(Error::Param(format!(
-                "--refine-strain {s}: a strain, 0 or more"
-            )));
+            return Err(Error::param(
+                Said::new()
+                    .set(Opt::RefineStrain, s)
+                    .text(": a strain, 0 or more"),
+            ));
         }
         check_rbf_tolerance(self.rbf_tolerance, Some(self.transfer))?;
         let params = self.unchecked();
@@ -254,8 +265,12 @@ pub(super) fn check_rbf_tolerance(
 ) -> Result<()> {
     match (tolerance, transfer) {
         (None, _) => Ok(()),
-        (Some(_), Some(t)) if t != Transfer::Rbf => Err(Error::Param(
-            "--rbf-tolerance applies to --transfer rbf only".into(),
+        (Some(_), Some(t)) if t != Transfer::Rbf => Err(Error::param(
+            Said::new()
+                .opt(Opt::RbfTolerance)
+                .text(" applies to ")
+                .set(Opt::Transfer, "rbf")
+                .text(" only"),
         )),
         (Some(t), _) => crate::field::Rbf::<3>::check_tolerance(t),
     }

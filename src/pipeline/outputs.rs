@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::io::ResultSet;
 use crate::progress::Observer;
 use crate::render::View;
+use crate::said::{Opt, Said};
 use crate::solve::Solution;
 use crate::spec::EditSpec;
 
@@ -89,8 +90,10 @@ pub fn solve_files(
 ) -> Result<(Solution<3>, FileInfo, Report)> {
     let start = Instant::now();
     let Some(field) = outputs.save_field else {
-        return Err(Error::Param(
-            "a solve writes a field: name its file (--save-field)".into(),
+        return Err(Error::param(
+            Said::from("a solve writes a field: name its file (")
+                .opt(Opt::SaveField)
+                .text(")"),
         ));
     };
     let paths: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();

@@ -26,6 +26,7 @@ use serde::Serialize;
 use super::FileInfo;
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
+use crate::said::Said;
 use crate::solve::{Role, Solution};
 
 /// The report; see the module docs for the stable keys.
@@ -104,7 +105,7 @@ pub struct Report {
     /// came.
     pub estimate: Option<EstimateReport>,
     /// Warnings, as printed.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Said>,
     /// Every control point (`[[target]]`): id, where it was given, from (after snapping),
     /// wanted, got (where the output puts it), residual, how far it was snapped, whether it is
     /// 2D, and its leave-one-out prediction error (`--check-gcp`).
@@ -299,7 +300,7 @@ impl Report {
     /// The report as pretty JSON, ending in a newline (`path` names it in errors).
     pub fn json(&self, path: &Path) -> Result<Vec<u8>> {
         let text = serde_json::to_string_pretty(self)
-            .map_err(|e| Error::Param(format!("{}: {e}", path.display())))?;
+            .map_err(|e| Error::param(format!("{}: {e}", path.display())))?;
         Ok(format!("{text}\n").into_bytes())
     }
 }

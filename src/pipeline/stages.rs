@@ -23,6 +23,7 @@ use crate::error::Result;
 use crate::field::{Field, Outside, Rbf, SavedField, Transfer, Warp, apply, apply_into};
 use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid, Vect};
+use crate::said::{Opt, Said};
 use crate::solve::{self, Constraints, Selections, Solution, SolverInfo};
 use crate::spec::EditSpec;
 
@@ -65,7 +66,7 @@ pub(crate) struct Staged<const D: usize> {
     pub(crate) solution: Solution<D>,
     pub(crate) saved: SavedField<D>,
     pub(crate) build: BuildInfo,
-    pub(crate) warnings: Vec<String>,
+    pub(crate) warnings: Vec<Said>,
     /// When the field's construction began (after the solve): the start of the transfer's time.
     pub(crate) transfer_start: Instant,
 }
@@ -191,9 +192,15 @@ pub(crate) fn check_rbf_memory<const D: usize>(cells: usize, params: &DeformPara
         return Ok(());
     }
     params.memory.check(
-        &format!("the RBF transfer of {cells} cells"),
+        format!("the RBF transfer of {cells} cells"),
         crate::memory::rbf_bytes(cells, D),
-        "use --transfer pu (the default) or blend, or a larger --cell-size (or fewer --cells)",
+        Said::from("use ")
+            .set(Opt::Transfer, "pu")
+            .text(" (the default) or blend, or a larger ")
+            .opt(Opt::CellSize)
+            .text(" (or fewer ")
+            .opt(Opt::Cells)
+            .text(")"),
     )
 }
 
@@ -203,7 +210,7 @@ pub(crate) fn warnings<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
     solver: &SolverInfo,
-) -> Vec<String> {
+) -> Vec<Said> {
     let mut out = build_warnings(build, complex);
     out.extend_from_slice(&constraints.warnings);
     out.extend(solver.warnings());
@@ -214,17 +221,20 @@ pub(crate) fn warnings<const D: usize>(
 pub(crate) fn build_warnings<const D: usize>(
     build: &BuildInfo,
     complex: &CellComplex<D>,
-) -> Vec<String> {
+) -> Vec<Said> {
     let mut out = Vec::new();
     if build.glued_cells > 0 {
         let size = complex.grid.finest_size();
         let decimals = (5 - size.log10().floor() as i32).max(0) as usize;
-        out.push(format!(
-            "{} cells hold parts of the mesh that are not connected but lie closer than the finest \
-             cell size ({size:.decimals$}): the parts move together there; a smaller --cell-size \
-             keeps them apart",
-            build.glued_cells,
-        ));
+        out.push(
+            Said::from(format!(
+                "{} cells hold parts of the mesh that are not connected but lie closer than the \
+                 finest cell size ({size:.decimals$}): the parts move together there; a smaller ",
+                build.glued_cells,
+            ))
+            .opt(Opt::CellSize)
+            .text(" keeps them apart"),
+        );
     }
     out
 }

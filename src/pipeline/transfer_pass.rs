@@ -12,6 +12,7 @@ use crate::field::{Constrained, Order, Warp, apply_in_order};
 use crate::io::{Accepted, Bounds, Chunk, ResultSet, Sink, Source};
 use crate::progress::Observer;
 use crate::rigid::Vect;
+use crate::said::Said;
 
 use super::checks::{check_moved, refuse_outside};
 
@@ -56,7 +57,7 @@ pub(super) fn transfer_pass(
     probe: &mut [Vect<3>],
     chunk_len: usize,
     observer: &dyn Observer,
-) -> Result<(Vec<String>, Option<String>)> {
+) -> Result<(Vec<Said>, Option<String>)> {
     let mut bounds = None;
     let mut restarted = false;
     let moved = moved.filter(|m| {
@@ -72,7 +73,7 @@ pub(super) fn transfer_pass(
             Pass::Refused(Accepted::Overflow) if bounds.is_none() => bounds = Some(moved_bounds),
             Pass::Refused(Accepted::Restart) if !restarted => restarted = true,
             Pass::Refused(refusal) => {
-                return Err(Error::Solver(format!(
+                return Err(Error::solver(format!(
                     "{}: the output's writer refused the samples twice ({refusal:?})",
                     output.display()
                 )));
@@ -98,7 +99,7 @@ pub(super) fn transfer_pass(
                 observer.stage("finishing", 0);
                 let finished = s.finish(set);
                 observer.finish();
-                return Ok((finished?, rounding));
+                return Ok((finished?.into_iter().map(Said::from).collect(), rounding));
             }
         }
     }

@@ -23,6 +23,7 @@ pub use files::{ColoredPoints, RENDER_POINTS, colored_points, render_file, up_of
 
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
+use crate::said::{Opt, Said};
 
 /// Where the camera looks from and the picture's size.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -49,7 +50,7 @@ pub fn png_path(path: &Path) -> Result<()> {
     {
         Ok(())
     } else {
-        Err(Error::Param(format!(
+        Err(Error::param(format!(
             "{}: pictures are written as .png",
             path.display()
         )))
@@ -62,24 +63,32 @@ impl View {
     pub fn check(&self) -> Result<()> {
         let sides = 16..=8192;
         if !sides.contains(&self.width) || !sides.contains(&self.height) {
-            return Err(Error::Param(format!(
-                "--size {}x{}: 16 to 8192 pixels each way",
-                self.width, self.height
-            )));
+            return Err(Error::param(
+                Said::new()
+                    .set(Opt::Size, format!("{}x{}", self.width, self.height))
+                    .text(": 16 to 8192 pixels each way"),
+            ));
         }
         if !self.azimuth.is_finite() || !self.elevation.is_finite() {
-            return Err(Error::Param(
-                "--azimuth and --elevation must be finite".into(),
+            return Err(Error::param(
+                Said::new()
+                    .opt(Opt::Azimuth)
+                    .text(" and ")
+                    .opt(Opt::Elevation)
+                    .text(" must be finite"),
             ));
         }
         if !(self.zoom.is_finite() && self.zoom > 0.0 && self.zoom <= 1e6) {
-            return Err(Error::Param(format!(
-                "--zoom {}: a factor above 0, at most 1e6",
-                self.zoom
-            )));
+            return Err(Error::param(
+                Said::new()
+                    .set(Opt::Zoom, self.zoom)
+                    .text(": a factor above 0, at most 1e6"),
+            ));
         }
         if self.up > 2 {
-            return Err(Error::Param(format!("--up {}: an axis, 0 to 2", self.up)));
+            return Err(Error::param(
+                Said::new().set(Opt::Up, self.up).text(": an axis, 0 to 2"),
+            ));
         }
         Ok(())
     }

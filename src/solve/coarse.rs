@@ -56,7 +56,7 @@ use rayon::prelude::*;
 use super::system::System;
 use super::turns::TurnRefusal;
 use super::{
-    CELLS_ADVICE, Constraints, SolveParams, SolverInfo, coarsen, from_rest, minimize_with,
+    Constraints, SolveParams, SolverInfo, cells_advice, coarsen, from_rest, minimize_with,
     prescribe, targets_at, timed,
 };
 
@@ -254,7 +254,7 @@ where
 {
     let mut motions = prolong(coarse.0, coarse.1, complex);
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params.method, budget, CELLS_ADVICE)
+        System::new(complex, constraints, params.method, budget, &cells_advice())
     })?;
     prescribe(complex, constraints, &mut motions, 1.0);
     let targets = targets_at(constraints, 1.0);

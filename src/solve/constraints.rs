@@ -27,6 +27,7 @@ use super::trend::{TrendMap, TrendPoint};
 use crate::cells::{CellComplex, CellKey};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
+use crate::said::Said;
 use crate::spec::{EditSpec, HandleMotion, Region, Trend};
 
 use super::sight::seen_cells;
@@ -134,7 +135,7 @@ pub struct Constraints<const D: usize> {
     /// The world position of the local frame's origin.
     pub origin: Vect<D>,
     /// Messages for the user (e.g. components kept at rest).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Said>,
     /// The targets' global trend `T` (local frame; [`super::trend`]): the edit is `T ∘ F`,
     /// and the cells solve `F`, their fixed and resting cells following `T⁻¹` and each handle
     /// `T⁻¹ ∘ H`. The identity without targets or a trend.
@@ -193,6 +194,7 @@ where
                 super::trend::SPLINE_POINTS_MOST,
                 points.len()
             );
+            let warning = Said::from(warning);
             if !self.warnings.contains(&warning) {
                 self.warnings.push(warning);
             }
@@ -236,6 +238,7 @@ where
                  to go (its areas scale by less than 0.1 or more than 10 there: points nearly on \
                  one line, or a blunder): no trend is used, the cells carry the whole motion"
             );
+            let warning = Said::from(warning);
             if !self.warnings.contains(&warning) {
                 self.warnings.push(warning);
             }
@@ -396,7 +399,7 @@ where
 {
     let n = complex.len();
     let origin = complex.grid.origin;
-    let mut owner: Vec<Option<(String, Role)>> = vec![None; n];
+    let mut owner: Vec<Option<(Said, Role)>> = vec![None; n];
     let mut stiffness = vec![1.0f64; n];
     let mut warnings = Vec::new();
 
@@ -439,11 +442,7 @@ where
     for (k, e) in spec.handles.iter().enumerate() {
         let (hit, sum, count) = select(nf + k, &e.region);
         if !hit.iter().any(|&h| h) {
-            warnings.push(format!(
-                "handle #{} (line {}) selects no cell",
-                k + 1,
-                e.line
-            ));
+            warnings.push(entry_named("handle", k, e.line).text(" selects no cell"));
         }
         let pivot = match e.value.pivot {
             Some(p) if !e.value.from_matrix => p,
@@ -477,11 +476,11 @@ where
         }
         _ => a == b,
     };
-    let mut claim = |cell: usize, name: &str, role: Role| -> Result<()> {
+    let mut claim = |cell: usize, name: &Said, role: Role| -> Result<()> {
         match &owner[cell] {
             Some((other, r)) if !same(*r, role) => Err(Error::ConstraintConflict {
                 first: other.clone(),
-                second: name.to_string(),
+                second: name.clone(),
                 at: (complex.cells[cell].center + origin)
                     .iter()
                     .copied()
@@ -490,31 +489,31 @@ where
             }),
             Some(_) => Ok(()),
             None => {
-                owner[cell] = Some((name.to_string(), role));
+                owner[cell] = Some((name.clone(), role));
                 Ok(())
             }
         }
     };
 
     for (k, e) in spec.fixed.iter().enumerate() {
-        let name = format!("fixed #{} (line {})", k + 1, e.line);
+        let name = entry_named("fixed", k, e.line);
         let (hit, _, _) = select(k, &e.region);
         if !hit.iter().any(|&h| h) {
-            warnings.push(format!("{name} selects no cell"));
+            warnings.push(name.clone().text(" selects no cell"));
         }
         for c in (0..n).filter(|&c| hit[c]) {
             claim(c, &name, Role::Fixed)?;
         }
     }
     for (k, hit) in handle_hits.iter().enumerate() {
-        let name = format!("handle #{} (line {})", k + 1, handles[k].line);
+        let name = entry_named("handle", k, handles[k].line);
         for c in (0..n).filter(|&c| hit[c]) {
             claim(c, &name, Role::Handle(k as u32))?;
         }
     }
     let locate = |x: &Vect<D>, what: &str, hint: &str| {
         complex.locate(&(x - origin)).ok_or_else(|| {
-            Error::Param(format!(
+            Error::param(format!(
                 "{what} at {:?} lies outside every cell of the shape{hint}",
                 x.iter().collect::<Vec<_>>()
             ))
@@ -523,11 +522,7 @@ where
     let mut pins = Vec::new();
     for (k, p) in spec.pins.iter().enumerate() {
         let cell = locate(&p.point, &format!("pin (line {})", p.line), "")?;
-        claim(
-            cell,
-            &format!("pin #{} (line {})", k + 1, p.line),
-            Role::Pin(k as u32),
-        )?;
+        claim(cell, &entry_named("pin", k, p.line), Role::Pin(k as u32))?;
         pins.push(PinLocal {
             point: p.point - origin,
             to: p.to - origin,
@@ -572,7 +567,7 @@ where
         }
         let what = format!("exact control point {} ({})", t.id, t.place);
         let cell = locate(&(local.from + origin), &what, "")?;
-        claim(cell, &what, Role::Pin(pins.len() as u32))?;
+        claim(cell, &Said::from(&what), Role::Pin(pins.len() as u32))?;
         pins.push(PinLocal {
             point: local.from,
             to: local.wanted,
@@ -613,6 +608,13 @@ where
         constraints.handles[k].motion = constraints.directed(complex, k);
     }
     Ok(constraints)
+}
+
+/// An entry of the edit spec as its messages name it: `handle #2 (line 9)`.
+fn entry_named(kind: &str, k: usize, line: usize) -> Said {
+    Said::from(format!("{kind} #{} (", k + 1))
+        .line(line)
+        .text(")")
 }
 
 /// `v` in 3D (a 2D vector in the plane z = 0).
@@ -776,7 +778,8 @@ pub fn coarsen<const D: usize>(
         t.cell = index_of(t.cell);
     }
     let (_, _, loose) = anchor(&coarse, &mut out.roles, &out.targets);
-    out.warnings.retain(|w| !w.ends_with(LOOSE_WARNING));
+    out.warnings
+        .retain(|w| w.strip_suffix(LOOSE_WARNING).is_none());
     out.warnings.extend(loose);
     (coarse, out)
 }
@@ -792,7 +795,7 @@ pub(super) fn anchor<const D: usize>(
     complex: &CellComplex<D>,
     roles: &mut [Role],
     targets: &[TargetLocal<D>],
-) -> (usize, usize, Option<String>) {
+) -> (usize, usize, Option<Said>) {
     let (component, count) = complex.components();
     let mut anchored = vec![false; count];
     for (c, r) in roles.iter().enumerate() {
@@ -814,5 +817,5 @@ pub(super) fn anchor<const D: usize>(
     let parts = anchored.iter().filter(|&&a| !a).count();
     let warning = (loose > 0)
         .then(|| format!("{parts} of {count} connected parts ({loose} cells) {LOOSE_WARNING}"));
-    (parts, count, warning)
+    (parts, count, warning.map(Said::from))
 }

@@ -11,7 +11,7 @@
 use super::auto::{self, Fill, graph_fill};
 use super::constraints::{Constraints, Role, coarsen};
 use super::multilevel::{self, COARSEST, FACTORED};
-use super::{CELLS_ADVICE, Method, SolveParams, check_params, coarse, load_steps};
+use super::{Method, SolveParams, cells_advice, check_params, coarse, load_steps};
 use crate::cells::CellComplex;
 use crate::error::Result;
 use crate::estimate::*;
@@ -60,7 +60,7 @@ where
 {
     check_params(params)?;
     let estimate = forecast(complex, constraints, params, budget)?;
-    estimate.check(budget, CELLS_ADVICE)?;
+    estimate.check(budget, &cells_advice())?;
     observer.estimate(&estimate);
     Ok(estimate)
 }
@@ -434,7 +434,7 @@ mod tests {
             &constraints,
             Method::Direct,
             Budget::default(),
-            "",
+            &crate::said::Said::new(),
         )
         .unwrap();
         let len = system.factor_len().unwrap() as f64;
@@ -456,9 +456,7 @@ mod tests {
         // A budget below the estimate refuses it, naming the cells.
         let tight = Budget::bytes(e.bytes / 10);
         let refused = forecast(&complex, &constraints, &SolveParams::default(), tight).unwrap();
-        let error = refused
-            .check(tight, "use a larger --cell-size")
-            .unwrap_err();
+        let error = refused.check(tight, &cells_advice()).unwrap_err();
         assert!(error.to_string().contains("--cell-size"), "{error}");
     }
 }

@@ -366,7 +366,7 @@ where
             (trial, e, g, false)
         });
         if !e.is_finite() {
-            return Err(Error::Solver("the energy became non-finite".into()));
+            return Err(Error::solver("the energy became non-finite"));
         }
         // The plain step never raises the energy: a rise, or no fall, is rounding at the
         // minimum.

@@ -5,6 +5,7 @@
 
 use super::constraints::{Constraints, LOOSE_WARNING, Role};
 use crate::cells::CellComplex;
+use crate::said::{Opt, Said};
 
 /// What becomes of the parts of a shape that no constraint reaches (`--loose-parts`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -17,8 +18,14 @@ pub enum LooseParts {
 }
 
 /// The end of the warning once [`carry_loose`] moved them.
-const CARRIED_WARNING: &str = "have no constraint and ride along rigidly with the nearest \
-                               cell of a constrained part (--loose-parts rest keeps them at rest)";
+fn carried_warning() -> Said {
+    Said::from(
+        "have no constraint and ride along rigidly with the nearest cell of a constrained part \
+         (",
+    )
+    .set(Opt::LooseParts, "rest")
+    .text(" keeps them at rest)")
+}
 
 /// Moves every cell at rest (in a part without constraints) rigidly with the nearest cell of a
 /// constrained part — as a leaf follows its twig, a fitting its wall — and marks it
@@ -108,7 +115,7 @@ pub(crate) fn carry_with<const D: usize>(
     }
     for w in &mut constraints.warnings {
         if let Some(head) = w.strip_suffix(LOOSE_WARNING) {
-            *w = format!("{head}{CARRIED_WARNING}");
+            *w = head.then(carried_warning());
         }
     }
 }

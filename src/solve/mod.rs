@@ -123,7 +123,8 @@ use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid};
-use newton::{CELLS_ADVICE, REFINE_ADVICE, check_solver_memory, minimize_with, timed};
+use crate::said::{Opt, Said};
+use newton::{cells_advice, check_solver_memory, minimize_with, refine_advice, timed};
 pub use newton::{minimize, minimize_from, total_energy};
 use params::check_params;
 pub use params::{
@@ -180,16 +181,25 @@ where
             }
             let more = split.iter().filter(|&&s| s).count() * ((1 << D) - 1);
             if complex.len() + more > REFINE_GROWTH * info.cells_initial.max(1) {
-                info.refinement_stopped = Some(format!(
-                    "refinement stopped at {} cells: splitting on would pass {REFINE_GROWTH}× \
-                     the {} cells it started from; raise --refine-strain or use a smaller \
-                     --cell-size",
-                    complex.len(),
-                    info.cells_initial
-                ));
+                info.refinement_stopped = Some(
+                    Said::from(format!(
+                        "refinement stopped at {} cells: splitting on would pass \
+                         {REFINE_GROWTH}× the {} cells it started from; raise ",
+                        complex.len(),
+                        info.cells_initial
+                    ))
+                    .opt(Opt::RefineStrain)
+                    .text(" or use a smaller ")
+                    .opt(Opt::CellSize),
+                );
                 break;
             }
-            check_solver_memory(complex.len() + more, params.method, budget, REFINE_ADVICE)?;
+            check_solver_memory(
+                complex.len() + more,
+                params.method,
+                budget,
+                &refine_advice(),
+            )?;
             let (fine, parent) = complex.split(&split);
             motions = fine
                 .cells
@@ -208,7 +218,13 @@ where
             complex = fine;
             info.refinements.push(complex.len());
             system = timed(&mut info.seconds_symbolic, || {
-                System::new(&complex, &constraints, params.method, budget, REFINE_ADVICE)
+                System::new(
+                    &complex,
+                    &constraints,
+                    params.method,
+                    budget,
+                    &refine_advice(),
+                )
             })?;
             let it = minimize_with(
                 &mut system,
@@ -293,7 +309,7 @@ where
 {
     check_params(params)?;
     let steps = load_steps(complex, constraints, params)?;
-    check_solver_memory(complex.len(), params.method, budget, CELLS_ADVICE)?;
+    check_solver_memory(complex.len(), params.method, budget, &cells_advice())?;
     let levels = coarse::levels(complex.len(), params);
     if levels > 0
         && let Some(staged) = coarse::coarse_to_fine(
@@ -319,7 +335,7 @@ where
         .map(|c| Motion::rest(&c.center))
         .collect();
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params.method, budget, CELLS_ADVICE)
+        System::new(complex, constraints, params.method, budget, &cells_advice())
     })?;
     load_stepped(
         &mut system,

@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::progress::Observer;
 use crate::rigid::{Dim, Motion, Rigid, Vect};
+use crate::said::{Opt, Said};
 
 /// Runs Gauss-Newton at load fraction `f` from the given `motions` (prescribed cells are set to
 /// their prescribed motions first). Returns the accepted iterations. This is the whole solver
@@ -39,7 +40,7 @@ where
             constraints,
             params.method,
             Budget::default(),
-            CELLS_ADVICE,
+            &cells_advice(),
         )
     })?;
     minimize_with(
@@ -67,7 +68,7 @@ pub fn minimize_from<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let mut system = System::new(complex, constraints, params.method, budget, CELLS_ADVICE)?;
+    let mut system = System::new(complex, constraints, params.method, budget, &cells_advice())?;
     let mut motions = motions.to_vec();
     let mut info = SolverInfo::default();
     minimize_with(
@@ -198,7 +199,7 @@ where
         for _ in 0..30 {
             let (m, e) = trial(t);
             if !e.is_finite() {
-                return Err(Error::Solver("the energy became non-finite".into()));
+                return Err(Error::solver("the energy became non-finite"));
             }
             if e < energy {
                 accepted = Some((m, e));
@@ -270,16 +271,27 @@ where
 }
 
 /// What to change when the cells do not fit the memory budget.
-pub(super) const CELLS_ADVICE: &str = "use a larger --cell-size (or fewer --cells)";
+pub(crate) fn cells_advice() -> Said {
+    Said::from("use a larger ")
+        .opt(Opt::CellSize)
+        .text(" (or fewer ")
+        .opt(Opt::Cells)
+        .text(")")
+}
+
 /// What to change when refined cells would not fit it.
-pub(super) const REFINE_ADVICE: &str = "use a larger --refine-strain threshold";
+pub(super) fn refine_advice() -> Said {
+    Said::from("use a larger ")
+        .opt(Opt::RefineStrain)
+        .text(" threshold")
+}
 
 /// The solver's estimate for `cells` cells by `method`, checked against `budget`.
 pub(super) fn check_solver_memory(
     cells: usize,
     method: Method,
     budget: Budget,
-    advice: &str,
+    advice: &Said,
 ) -> Result<()> {
     let (per_cell, by) = match method {
         Method::Multilevel => (
@@ -289,7 +301,7 @@ pub(super) fn check_solver_memory(
         _ => (crate::memory::SOLVER_BYTES_PER_CELL, ""),
     };
     budget.check(
-        &format!("solving {cells} cells{by}"),
+        format!("solving {cells} cells{by}"),
         cells as f64 * per_cell as f64,
         advice,
     )

@@ -8,6 +8,7 @@ use super::turns::HandleTurn;
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
+use crate::said::{Opt, Said};
 
 /// Parameters of [`super::solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -131,7 +132,7 @@ pub struct SolverInfo {
     pub refinements: Vec<usize>,
     /// Why refinement stopped before every cell over the threshold was split, if it did (the
     /// bound it hit).
-    pub refinement_stopped: Option<String>,
+    pub refinement_stopped: Option<Said>,
     /// Unknowns of the last system.
     pub unknowns: usize,
     /// Seconds spent in symbolic analysis.
@@ -168,8 +169,12 @@ pub struct SolverInfo {
 impl SolverInfo {
     /// What the user should hear about the solve: refinement that stopped early, and handles
     /// whose turn the cells did not carry.
-    pub fn warnings(&self) -> Vec<String> {
-        let turns = self.turns.iter().filter_map(HandleTurn::warning);
+    pub fn warnings(&self) -> Vec<Said> {
+        let turns = self
+            .turns
+            .iter()
+            .filter_map(HandleTurn::warning)
+            .map(Said::from);
         self.refinement_stopped
             .iter()
             .cloned()
@@ -222,7 +227,7 @@ impl<const D: usize> Solution<D> {
 /// Refuses parameters no solve can take.
 pub(super) fn check_params(params: &SolveParams) -> Result<()> {
     if !(params.move_tolerance >= 0.0 && params.move_tolerance.is_finite()) {
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "the solver's move tolerance must be a number of cells, 0 or more (got {})",
             params.move_tolerance
         )));
@@ -248,7 +253,7 @@ pub fn adaptive(
     build: &crate::cells::BuildParams,
     solve: &SolveParams,
 ) -> Result<(crate::cells::BuildParams, SolveParams)> {
-    crate::cells::check_size(min_cell_size, "minimum cell size")?;
+    crate::cells::check_size(min_cell_size, Some(Opt::MinCellSize))?;
     let build = crate::cells::BuildParams {
         cell_size: Some(min_cell_size),
         target_cells: None,

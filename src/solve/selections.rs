@@ -153,7 +153,7 @@ impl<const D: usize> Snaps<D> {
                 Ok((q, p))
             }
             Some((_, p)) => Ok((p, p)),
-            None => Err(Error::Param(format!(
+            None => Err(Error::param(format!(
                 "control point {} ({}) at {:?}: no sample within {r:.6}{}; give it a larger \
                  `snap` distance",
                 t.id,
@@ -191,8 +191,8 @@ where
         spec.check_indices(samples)?;
         let regions: Vec<&Region<D>> = regions(spec).collect();
         if !has_classes && regions.iter().any(|r| r.uses_classes()) {
-            return Err(Error::Param(
-                "a `classification` region needs an input with LAS classes".into(),
+            return Err(Error::param(
+                "a `classification` region needs an input with LAS classes",
             ));
         }
         Ok(Self {

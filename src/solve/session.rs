@@ -14,7 +14,7 @@ use super::loose::{carry_with, loose_anchors};
 use super::system::System;
 use super::turns::TurnGauge;
 use super::{
-    CELLS_ADVICE, Constraints, Role, Solution, SolveParams, SolverInfo, coarsen,
+    Constraints, Role, Solution, SolveParams, SolverInfo, cells_advice, coarsen,
     from_rest_either_way, minimize_with, prescribe, targets_at, timed,
 };
 use crate::cells::CellComplex;
@@ -204,7 +204,7 @@ where
         (max_iterations, per_step): (usize, usize),
     ) -> Result<SolverInfo> {
         if constraints.roles.len() != self.complex.len() {
-            return Err(Error::Solver(format!(
+            return Err(Error::solver(format!(
                 "the constraints are for {} cells, the session has {}",
                 constraints.roles.len(),
                 self.complex.len()
@@ -366,7 +366,7 @@ where
                 constraints,
                 self.params.method,
                 self.budget,
-                CELLS_ADVICE,
+                &cells_advice(),
             )
         })
     }

@@ -77,7 +77,7 @@ where
     let travel = farthest.map_or(0.0, |f| f.0);
     if travel > MAX_TRAVEL * extent {
         let farthest = farthest.map_or("a constraint", |f| f.1.as_str());
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "{farthest} of the edit spec moves {} relative to the rest of the edit, {:.0} times \
              the shape's size of {}: more than {MAX_TRAVEL} times is refused (it tears the shape \
              apart); check the spec's units and coordinates",

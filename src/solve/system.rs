@@ -43,10 +43,14 @@ use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
+use crate::said::{Opt, Said};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 mod paths;
+mod terms;
+
 pub(super) use paths::first;
+use terms::{accumulate_curvature, accumulate_diag, positive_part};
 
 /// Degrees of freedom of a cell and where they start in the global vector.
 #[derive(Debug, Clone, Copy)]
@@ -79,7 +83,7 @@ pub(crate) struct System<const D: usize> {
     local_global: bool,
     /// The budget and advice Gauss-Newton's system is to be set up with, where
     /// [`Method::Auto`] took local-global iterations first.
-    deferred: Option<(Budget, String)>,
+    deferred: Option<(Budget, Said)>,
 }
 
 /// Where one Gauss-Newton step's time went, in seconds (damping retries included).
@@ -156,7 +160,7 @@ where
         constraints: &Constraints<D>,
         method: Method,
         budget: Budget,
-        advice: &str,
+        advice: &Said,
     ) -> Result<Self> {
         let mut n = 0;
         let slots: Vec<Slot> = constraints
@@ -232,7 +236,7 @@ where
                 // rate says it finishes sooner (`switch_to_gauss_newton`).
                 Method::Auto if system.positions.is_factored() => {
                     system.local_global = true;
-                    system.deferred = Some((budget, advice.to_string()));
+                    system.deferred = Some((budget, advice.clone()));
                 }
                 Method::Auto => system.set_up_auto(complex, budget, advice)?,
             }
@@ -254,7 +258,7 @@ where
         &mut self,
         complex: &CellComplex<D>,
         budget: Budget,
-        advice: &str,
+        advice: &Said,
         most_fill: Option<usize>,
     ) -> Result<bool> {
         let n = self.n;
@@ -262,17 +266,15 @@ where
         let entries = self.free_cells.len() * Self::CELL_SLOT + self.pairs.len() * Self::PAIR_SLOT;
         // The pattern's (row, column) pairs, faer's sorted copy and argsort, the values.
         crate::memory::check(
-            &format!("assembling the solver's system of {} cells", complex.len()),
+            format!("assembling the solver's system of {} cells", complex.len()),
             entries as f64 * 40.0,
             limit,
             advice,
         )?;
         // faer's argsort keeps a flag in the top bit of its 32-bit indices.
         if entries >= 1 << 31 {
-            return Err(Error::Solver(format!(
-                "{entries} entries are too many for the direct solver's 32-bit indices: \
-                 {advice}, or --solver multilevel"
-            )));
+            let what = format!("{entries} entries are too many for the direct solver's");
+            return Err(past_indices(what, advice));
         }
         if most_fill.is_some_and(|most| {
             auto::cell_fill(complex, &self.free_cells, &self.pairs, Self::DOF) > most
@@ -281,7 +283,7 @@ where
         }
         let indices = self.pattern(complex);
         let (sym, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &indices)
-            .map_err(|e| Error::Solver(format!("sparsity pattern: {e:?}")))?;
+            .map_err(|e| Error::solver(format!("sparsity pattern: {e:?}")))?;
         let llt = crate::with_faer(|| {
             factorize_symbolic_cholesky(
                 sym.as_ref(),
@@ -291,12 +293,14 @@ where
             )
         })
         .map_err(|e| match e {
-            faer::sparse::FaerError::IndexOverflow => Error::Solver(format!(
-                "the Cholesky factor of {} cells has more entries than the direct solver's \
-                 32-bit indices allow: {advice}, or --solver multilevel",
-                complex.len()
-            )),
-            e => Error::Solver(format!("symbolic Cholesky: {e:?}")),
+            faer::sparse::FaerError::IndexOverflow => past_indices(
+                format!(
+                    "the Cholesky factor of {} cells has more entries than the direct solver's",
+                    complex.len()
+                ),
+                advice,
+            ),
+            e => Error::solver(format!("symbolic Cholesky: {e:?}")),
         })?;
         let par = faer::get_global_parallelism();
         let scratch = llt
@@ -305,7 +309,7 @@ where
         // The symbolic analysis knows the factor's size exactly: check it before the
         // numeric factor and its scratch are allocated.
         crate::memory::check(
-            &format!("factoring the solver's system of {} cells", complex.len()),
+            format!("factoring the solver's system of {} cells", complex.len()),
             (llt.len_val() * 8 + scratch.size_bytes() + indices.len() * 32) as f64,
             limit,
             advice,
@@ -828,8 +832,8 @@ where
                 }
                 mu = (mu * 100.0).max(1e-6);
             }
-            return Err(Error::Solver(
-                "the Gauss-Newton system stayed indefinite under damping".into(),
+            return Err(Error::solver(
+                "the Gauss-Newton system stayed indefinite under damping",
             ));
         }
         let (argsort, llt) = self.symbolic.as_ref().expect("a system with unknowns");
@@ -839,10 +843,10 @@ where
             // Levenberg–Marquardt on the diagonal, plus a floor for singular directions.
             self.damp(&mut values[..cell_part], &diag, mu, 1e-12 * scale);
             let sym = pattern.take().ok_or_else(|| {
-                Error::Solver("the system's pattern was lost to a failed allocation".into())
+                Error::solver("the system's pattern was lost to a failed allocation")
             })?;
             let matrix = SparseColMat::new_from_argsort(sym, argsort, values)
-                .map_err(|e| Error::Solver(format!("assembly: {e:?}")))?;
+                .map_err(|e| Error::solver(format!("assembly: {e:?}")))?;
             let rhs = Mat::<f64>::from_fn(self.n, 1, |r, _| -grad[r]);
             cost.assembly += assembling.elapsed().as_secs_f64();
             let solved = crate::with_faer(|| {
@@ -884,8 +888,8 @@ where
             }
             mu = (mu * 100.0).max(1e-6);
         }
-        Err(Error::Solver(
-            "the Gauss-Newton system stayed indefinite under damping".into(),
+        Err(Error::solver(
+            "the Gauss-Newton system stayed indefinite under damping",
         ))
     }
 
@@ -944,53 +948,13 @@ where
     }
 }
 
-/// `H += a · JᵀJ` on the lower triangle of a diagonal block stored row by row.
-#[inline]
-fn accumulate_diag<const D: usize>(h: &mut [f64], j: &[Vect<D>; MAX_DOF], n: usize, a: f64) {
-    let mut k = 0;
-    for x in 0..n {
-        for y in 0..=x {
-            h[k] += a * j[x].dot(&j[y]);
-            k += 1;
-        }
-    }
-}
-
-/// `K += a · ∂²(r · R(ω) y)/∂ω²` at `ω = 0` for the rotated arm `y` (lower triangle of the
-/// `ROT × ROT` block): the second-order term of the residual `r` that Gauss-Newton leaves out,
-/// `½ r · (e_x × (e_y × y) + e_y × (e_x × y))`.
-fn accumulate_curvature<const D: usize>(k: &mut [f64; 6], r: &Vect<D>, y: &Vect<D>, a: f64)
-where
-    Dim<D>: Rigid<D>,
-{
-    let rot = <Dim<D> as Rigid<D>>::ROT;
-    let once = <Dim<D> as Rigid<D>>::cross_jacobian(y);
-    let twice: [[Vect<D>; 3]; 3] =
-        std::array::from_fn(|s| <Dim<D> as Rigid<D>>::cross_jacobian(&once[s]));
-    for x in 0..rot {
-        for z in 0..=x {
-            k[tri(x) + z] += a * 0.5 * r.dot(&(twice[z][x] + twice[x][z]));
-        }
-    }
-}
-
-/// The positive semidefinite part of a symmetric `n × n` matrix (`n` 1 or 3) stored as its lower
-/// triangle: negative eigenvalues set to zero.
-fn positive_part(k: &[f64; 6], n: usize) -> [f64; 6] {
-    if n == 1 {
-        return [k[0].max(0.0), 0.0, 0.0, 0.0, 0.0, 0.0];
-    }
-    let m = nalgebra::Matrix3::new(k[0], k[1], k[3], k[1], k[2], k[4], k[3], k[4], k[5]);
-    let eig = m.symmetric_eigen();
-    let lambda = eig.eigenvalues.map(|v| v.max(0.0));
-    let p =
-        eig.eigenvectors * nalgebra::Matrix3::from_diagonal(&lambda) * eig.eigenvectors.transpose();
-    [
-        p[(0, 0)],
-        p[(1, 0)],
-        p[(1, 1)],
-        p[(2, 0)],
-        p[(2, 1)],
-        p[(2, 2)],
-    ]
+/// `what` (`… entries are too many for the direct solver's`) past the 32-bit indices, with
+/// `advice` and the multilevel solver as the ways out.
+fn past_indices(what: String, advice: &Said) -> Error {
+    Error::solver(
+        Said::from(format!("{what} 32-bit indices: "))
+            .then(advice.clone())
+            .text(", or ")
+            .set(Opt::Solver, "multilevel"),
+    )
 }

@@ -62,10 +62,10 @@ fn checkpoint(field: &str) -> Option<bool> {
 pub fn read_control_points<const D: usize>(text: &str, path: &Path) -> Result<Vec<ControlRow<D>>> {
     let fail = |line: usize, column: Option<usize>, message: String| Error::Spec {
         path: path.to_path_buf(),
-        message: match column {
-            Some(c) => format!("line {line}, column {c}: {message}"),
-            None => format!("line {line}: {message}"),
-        },
+        line: Some(line),
+        column,
+        message: message.into(),
+        excerpt: None,
     };
     let mut rows = text
         .lines()

@@ -279,12 +279,13 @@ impl<const D: usize> EditSpec<D> {
             0 => String::new(),
             n => format!(", numbered 0 to {}", n - 1),
         };
-        Err(Error::Spec {
-            path: self.name.clone(),
-            message: format!(
-                "line {line}: `indices` lists sample {index}, but the input has {samples} \
+        Err(Error::spec(
+            self.name.clone(),
+            Some(line),
+            format!(
+                "`indices` lists sample {index}, but the input has {samples} \
                  samples{range}"
             ),
-        })
+        ))
     }
 }

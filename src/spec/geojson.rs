@@ -27,10 +27,7 @@ type Rings = Vec<Vec<[f64; 2]>>;
 /// longitude and latitude on WGS 84, but a polygon exported for a scan is in the scan's).
 pub(super) fn read_rings(path: &Path) -> Result<(Rings, Option<Crs>)> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::spec_file(path, e))?;
-    let bad = |message: String| Error::Spec {
-        path: path.to_path_buf(),
-        message,
-    };
+    let bad = |message: String| Error::spec(path, None, message);
     let json: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| bad(format!("not GeoJSON: {e}")))?;
     let mut rings = Vec::new();

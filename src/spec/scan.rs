@@ -127,16 +127,17 @@ impl<const D: usize> EditSpec<D> {
                     .into(),
                 (false, _) => String::new(),
             };
-            return Err(Error::Spec {
-                path: self.name.clone(),
-                message: format!(
-                    "line {line}: the polygon{of} lies outside the scan's bounds, and selects \
+            return Err(Error::spec(
+                self.name.clone(),
+                Some(line),
+                format!(
+                    "the polygon{of} lies outside the scan's bounds, and selects \
                      nothing: it spans {}, and {} spans {}{hint}",
                     extent(plo, phi),
                     input.display(),
                     extent(lo, hi)
                 ),
-            });
+            ));
         }
         Ok(())
     }

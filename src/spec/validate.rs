@@ -231,13 +231,13 @@ where
     /// ([`HandleMotion::check`]), pins, targets and weights that are not finite, stiffness
     /// scales that are not positive.
     pub fn validate(&self) -> Result<()> {
-        let fail = |what: String, message: String| Error::Spec {
-            path: if self.name.as_os_str().is_empty() {
+        let fail = |what: String, message: String| {
+            let path = if self.name.as_os_str().is_empty() {
                 "<edit spec>".into()
             } else {
                 self.name.clone()
-            },
-            message: format!("{what}: {message}"),
+            };
+            Error::spec(path, None, format!("{what}: {message}"))
         };
         for (k, e) in self.fixed.iter().enumerate() {
             let what = entry("fixed", k, e.line);

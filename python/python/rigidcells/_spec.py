@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from pathlib import Path
 from typing import Any, List, Optional, Tuple, Union
 
@@ -99,43 +98,50 @@ def _spec(spec: Spec) -> Tuple[str, str, Optional[List[str]]]:
     raise TypeError("spec must be TOML text, a path to a .toml file, or a dict")
 
 
-_LINE = re.compile(r"^spec: (?:TOML parse error at )?line (\d+)(?:, column \d+)?(?::|\n)\s*")
-# The TOML parser's picture of the line (`7 | [handle]`, `  | ^^^`), which a dict never had.
-_SNIPPET = re.compile(r"^\s*\d*\s*\|.*$\n?", re.M)
-_SERDE_TYPES = {"map": "a dict", "sequence": "a list", "a sequence": "a list", "string": "a str",
-                "a string": "a str", "floating point": "a float", "integer": "an int",
-                "boolean": "a bool", "a map": "a dict"}
-_INVALID_TYPE = re.compile(r"invalid type: ([\w ]+?)(?: `[^`]*`| \S+)?, expected ([\w ]+)")
+def _said(parts: Any, paths: Optional[List[str]], option: Any = None) -> str:
+    """A message of the library, given as its parts (the package's words; the spec's lines as
+    numbers; the options it names as ``(keyword, value or None, how the package says both)``),
+    with each line said as a dict spec's key path, or as ``line N`` for a spec written as TOML,
+    and each option as ``option(keyword, value)`` says it (default: the package's way). A
+    message that is already text is kept."""
+    if isinstance(parts, str):
+        return parts
+
+    def one(p: Any) -> str:
+        if isinstance(p, str):
+            return p
+        if isinstance(p, tuple):
+            keyword, value, said = p
+            return option(keyword, value) if option is not None else said
+        if paths is not None and 0 < p <= len(paths) and paths[p - 1]:
+            return paths[p - 1]
+        return f"line {p}"
+
+    return "".join(one(p) for p in parts)
+
+
+def _lines_said(messages: List[Any], paths: Optional[List[str]]) -> List[str]:
+    """Messages of the library (as parts, see ``_said``) as text, a dict spec's lines named by
+    their key paths."""
+    return [_said(m, paths) for m in messages]
 
 
 def _in_dict_terms(error: ValueError, paths: Optional[List[str]]) -> ValueError:
-    """A spec error of a dict spec, its TOML line said as the dict's key path, and the
-    parser's names of types as Python's."""
-    text = str(error)
-    m = _LINE.match(text)
-    if paths is None or m is None or not (0 < int(m.group(1)) <= len(paths)):
-        return error
-    path = paths[int(m.group(1)) - 1] or "spec"
-    what = _SNIPPET.sub("", text[m.end():]).strip()
-    what = _INVALID_TYPE.sub(
-        lambda t: f"expected {_SERDE_TYPES.get(t.group(2), t.group(2))}, got "
-        f"{_SERDE_TYPES.get(t.group(1).split(' ')[0], t.group(1))}",
-        what,
-    )
-    return type(error)(f"{path}: {what}")
-
-
-def _lines_said(texts: List[str], paths: Optional[List[str]]) -> List[str]:
-    """Messages that name a dict spec's TOML lines (`line 7`, `the handle on line 7 of the edit
-    spec`), with its key paths instead."""
+    """A spec error of a dict spec: its line said as the dict's key path (the TOML it became,
+    and the parser's picture of it, are the package's, not the user's)."""
     if paths is None:
-        return texts
-
-    def said(m: "re.Match[str]") -> str:
-        n = int(m.group(1))
-        return paths[n - 1] if 0 < n <= len(paths) and paths[n - 1] else m.group(0)
-
-    return [re.sub(r"(?:the handle on )?\bline (\d+)(?: of the edit spec)?", said, t) for t in texts]
+        return error
+    line, message = getattr(error, "spec_line", None), getattr(error, "spec_message", None)
+    if isinstance(line, int) and message is not None:
+        path = paths[line - 1] if 0 < line <= len(paths) and paths[line - 1] else "spec"
+        raised = type(error)(f"{path}: {_said(message, paths)}")
+    else:
+        parts = getattr(error, "parts", None)
+        if not (isinstance(parts, list) and any(isinstance(p, int) for p in parts)):
+            return error
+        raised = type(error)(_said(parts, paths))
+    raised.__dict__.update(error.__dict__)
+    return raised
 
 
 def _call(paths: Optional[List[str]], f: Any, *args: Any) -> Any:

@@ -14,7 +14,7 @@ pub(super) fn token() -> Result<String> {
     let mut bytes = [0u8; 16];
     std::fs::File::open("/dev/urandom")
         .and_then(|mut f| f.read_exact(&mut bytes))
-        .map_err(|e| Error::Solver(format!("no random token: /dev/urandom: {e}")))?;
+        .map_err(|e| Error::solver(format!("no random token: /dev/urandom: {e}")))?;
     Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
 }
 

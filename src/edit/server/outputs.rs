@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 use crate::error::{Error, Result};
+use crate::said::{Opt, Said};
 
 /// The one folder the editor writes into, and the names it wrote there.
 #[derive(Debug)]
@@ -44,14 +45,19 @@ impl OutputFolder {
             },
         };
         let shown = if named {
-            format!("--out-dir {}", dir.display())
+            Said::new().set(Opt::OutDir, dir.display())
         } else {
-            dir.display().to_string()
+            Said::from(dir.display().to_string())
         };
-        let canonical = std::fs::canonicalize(&dir)
-            .map_err(|e| Error::Param(format!("{shown}: not a folder to write into: {e}")))?;
+        let canonical = std::fs::canonicalize(&dir).map_err(|e| {
+            Error::param(
+                shown
+                    .clone()
+                    .text(format!(": not a folder to write into: {e}")),
+            )
+        })?;
         if !canonical.is_dir() {
-            return Err(Error::Param(format!("{shown}: not a folder to write into")));
+            return Err(Error::param(shown.text(": not a folder to write into")));
         }
         Ok(Self {
             dir: canonical,
@@ -78,12 +84,12 @@ impl OutputFolder {
         let path = self.dir.join(name);
         crate::io::refuse_overwrite(&self.input, &path)?;
         match std::fs::symlink_metadata(&path) {
-            Ok(m) if m.file_type().is_symlink() => Err(Error::Param(format!(
+            Ok(m) if m.file_type().is_symlink() => Err(Error::param(format!(
                 "{}: a symbolic link; the editor does not replace links, choose another name",
                 path.display()
             ))
             .into()),
-            Ok(m) if !m.is_file() => Err(Error::Param(format!(
+            Ok(m) if !m.is_file() => Err(Error::param(format!(
                 "{}: not a regular file; choose another name",
                 path.display()
             ))
@@ -115,9 +121,9 @@ impl OutputFolder {
 /// (no hidden file, no `.` or `..`; the editor's temporary files start with one), no control
 /// character.
 pub fn check_name(name: &str, extensions: &[&str]) -> Result<()> {
-    let bad = |why: &str| Err(Error::Param(format!("{name:?}: {why}")));
+    let bad = |why: &str| Err(Error::param(format!("{name:?}: {why}")));
     if name.is_empty() {
-        return Err(Error::Param("a file name is needed".into()));
+        return Err(Error::param("a file name is needed"));
     }
     if name.len() > 255 {
         return bad("a file name of at most 255 bytes is needed");

@@ -24,6 +24,7 @@ use super::queue::{Inbox, MAX_QUEUED};
 use super::{OutputFolder, Refusal, f32_bytes, u32_bytes};
 use crate::edit::{Edit, Editor, Motions, Released, Selection};
 use crate::error::{Error, Result};
+use crate::said::Said;
 
 /// What the page sends; the solver thread takes each with where to answer.
 #[derive(Deserialize)]
@@ -97,7 +98,7 @@ pub(super) fn error(text: &str) -> Message {
 /// The answer to `command` when [`MAX_QUEUED`] commands already wait: the command is not
 /// taken (for a selection, an error the page pairs with it).
 pub(super) fn busy(command: &Command) -> Message {
-    let e = Error::Param(format!(
+    let e = Error::param(format!(
         "the editor is busy: {MAX_QUEUED} commands wait for the solver; this one was not \
          taken, try it again when the editor answers"
     ));
@@ -143,8 +144,8 @@ pub(super) fn guarded<T>(
         Err(panic) => {
             let what = panic_message(panic.as_ref());
             let restarted = std::panic::catch_unwind(AssertUnwindSafe(|| editor.restart()))
-                .unwrap_or_else(|p| Err(Error::Solver(panic_message(p.as_ref()))));
-            Err(Error::Solver(match restarted {
+                .unwrap_or_else(|p| Err(Error::solver(panic_message(p.as_ref()))));
+            Err(Error::solver(match restarted {
                 Ok(()) => format!(
                     "{what}; the editor started its session again: the next edit is solved \
                      from rest"
@@ -410,7 +411,7 @@ fn apply(job: Job, reply: Sender<Message>, outputs: Arc<OutputFolder>, applying:
             state: Mutex::new((String::new(), 0, 0, Instant::now())),
         };
         let result = std::panic::catch_unwind(AssertUnwindSafe(|| deform(&job, &progress)))
-            .unwrap_or_else(|p| Err(Error::Solver(panic_message(p.as_ref()))));
+            .unwrap_or_else(|p| Err(Error::solver(panic_message(p.as_ref()))));
         let message = match result {
             Ok((samples, warnings)) => {
                 outputs.record(&job.name);
@@ -429,7 +430,7 @@ fn apply(job: Job, reply: Sender<Message>, outputs: Arc<OutputFolder>, applying:
 }
 
 /// The job deformed: the samples written and the warnings, as the CLI prints them.
-fn deform(job: &Job, progress: &Progress) -> Result<(u64, Vec<String>)> {
+fn deform(job: &Job, progress: &Progress) -> Result<(u64, Vec<Said>)> {
     crate::io::refuse_overwrite(&job.input, &job.output)?;
     let name = job.output.with_extension("edit.toml");
     let base = name.parent().unwrap_or(Path::new(".")).to_path_buf();
@@ -534,11 +535,11 @@ mod tests {
         let mut editor = editor();
         editor.solve(&lifted(0.5)).unwrap();
         let failed = guarded(&mut editor, false, |_| -> Result<()> {
-            Err(Error::Param("no".into()))
+            Err(Error::param("no"))
         });
         assert!(failed.is_err() && editor.last_spec().is_some());
         let failed = guarded(&mut editor, true, |_| -> Result<()> {
-            Err(Error::Param("no".into()))
+            Err(Error::param("no"))
         });
         assert!(failed.is_err() && editor.last_spec().is_none());
         let motions = editor.solve(&lifted(0.6)).unwrap().unwrap();

@@ -163,7 +163,7 @@ pub fn decode_coordinates(
     offset: [f64; 3],
 ) -> Result<Vec<Vect<3>>> {
     if let Some(why) = frame_error(&scale, &offset) {
-        return Err(Error::Param(why));
+        return Err(Error::param(why));
     }
     Ok(records
         .iter()
@@ -204,7 +204,7 @@ pub fn encode_coordinates(
     reframe: bool,
 ) -> Result<Encoded> {
     if let Some(why) = frame_error(&scale, &offset) {
-        return Err(Error::Param(why));
+        return Err(Error::param(why));
     }
     let records = |(scale, offset): Frame| -> Option<Vec<[i32; 3]>> {
         moved
@@ -235,7 +235,7 @@ pub fn encode_coordinates(
         bounds.1 = bounds.1.sup(p);
     }
     if !moved.iter().all(|p| p.iter().all(|v| v.is_finite())) {
-        return Err(Error::Param("a moved coordinate is not finite".into()));
+        return Err(Error::param("a moved coordinate is not finite"));
     }
     if !reframe {
         let a = (0..3)
@@ -246,7 +246,7 @@ pub fn encode_coordinates(
             })
             .expect("a finite coordinate that does not fit lies on the bounds");
         let step = |i: i32| i as f64 * scale[a] + offset[a];
-        return Err(Error::Param(format!(
+        return Err(Error::param(format!(
             "axis {}: the moved coordinates span {} to {}, but 32-bit record integers with \
              scale {} and offset {} hold {} to {}",
             ["x", "y", "z"][a],
@@ -261,7 +261,7 @@ pub fn encode_coordinates(
     let mut notes = Vec::new();
     let (scale, offset) = self::reframe((scale, offset), bounds, &mut notes);
     let records = records((scale, offset)).ok_or_else(|| {
-        Error::Param(format!(
+        Error::param(format!(
             "the moved coordinates span {:?} to {:?}, more than 32-bit record integers can hold",
             <[f64; 3]>::from(bounds.0),
             <[f64; 3]>::from(bounds.1)

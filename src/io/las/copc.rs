@@ -475,7 +475,7 @@ fn write_copc(
     // hierarchy and the input's EVLRs.
     let laz_vlr = laz::LazVlrBuilder::default()
         .with_point_format(sink.format, sink.extra as u16)
-        .map_err(|e| Error::Solver(format!("LASzip items: {e}")))?
+        .map_err(|e| Error::solver(format!("LASzip items: {e}")))?
         .with_variable_chunk_size()
         .build();
     let mut laz_bytes = Vec::new();
@@ -503,7 +503,7 @@ fn write_copc(
         write_vlr(&mut out, v, false).map_err(werr)?;
     }
     let mut compressor = laz::LasZipCompressor::new(out, laz_vlr.clone())
-        .map_err(|e| Error::Solver(format!("LAZ compressor: {e}")))?;
+        .map_err(|e| Error::solver(format!("LAZ compressor: {e}")))?;
     compressor.reserve_offset_to_chunk_table().map_err(werr)?;
     // (key, offset, bytes, points) per node.
     let mut nodes: Vec<([i32; 4], u64, i32, i32)> = Vec::new();
@@ -631,7 +631,7 @@ fn write_copc(
 fn entry_sizes(output: &Path, bytes: u64, points: u64) -> Result<(i32, i32)> {
     match (i32::try_from(bytes), i32::try_from(points)) {
         (Ok(b), Ok(p)) => Ok((b, p)),
-        _ => Err(Error::Param(format!(
+        _ => Err(Error::param(format!(
             "{}: an octree node would hold {points} points in {bytes} bytes, past what a COPC \
              hierarchy entry records (2^31 - 1): the samples pile up at one spot (duplicates?); \
              write a plain .laz instead",

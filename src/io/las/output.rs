@@ -27,7 +27,7 @@ pub(super) fn sink(input: &Input, output: &Path, bounds: Option<Bounds>) -> Resu
         Some("laz") => true,
         Some("las") => false,
         _ => {
-            return Err(Error::Param(format!(
+            return Err(Error::param(format!(
                 "{}: a LAS/LAZ input is written as .las or .laz",
                 output.display()
             )));

@@ -8,6 +8,7 @@ use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::rigid::Motion;
 use crate::rigid::{Dim, Rigid};
+use crate::said::Said;
 use crate::solve::constraints::Constraints;
 use crate::solve::local_global::{self, Destinations, Layout};
 use crate::solve::multilevel::COARSEST;
@@ -27,7 +28,7 @@ where
         &mut self,
         complex: &CellComplex<D>,
         budget: Budget,
-        advice: &str,
+        advice: &Said,
     ) -> Result<()> {
         let level = complex.cells.first().map(|c| c.key.level);
         let uniform = complex.cells.iter().all(|c| Some(c.key.level) == level);

@@ -19,6 +19,7 @@ use toml::de::{DeTable, DeValue};
 use super::entries::{EditSpec, Entry, HandleMotion, Pin, Trend};
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, Rigid, Vect};
+use crate::said::{Kind, Said};
 
 pub use motion::MAX_TURN_DEGREES;
 
@@ -72,8 +73,8 @@ where
     Dim<D>: Rigid<D>,
 {
     let ctx = Ctx::new(text, base, name);
-    let raw: RawSpec = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
-    let top: toml::Table = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
+    let raw: RawSpec = toml::from_str(text).map_err(|e| ctx.toml(&e))?;
+    let top: toml::Table = toml::from_str(text).map_err(|e| ctx.toml(&e))?;
     if let Some(k) = top
         .keys()
         .find(|k| !["fixed", "handle", "pin", "target", "stiffness", "trend"].contains(&k.as_str()))
@@ -179,7 +180,7 @@ where
         handle: Vec<Spanned<toml::Table>>,
     }
     let ctx = Ctx::new(text, Path::new("."), name);
-    let raw: RawPoses = toml::from_str(text).map_err(|e| ctx.error(None, e.to_string()))?;
+    let raw: RawPoses = toml::from_str(text).map_err(|e| ctx.toml(&e))?;
     raw.handle
         .iter()
         .map(|t| {
@@ -200,6 +201,20 @@ struct Ctx<'a> {
     newlines: Vec<usize>,
 }
 
+/// The TOML parser's message, a value of the wrong kind as [`Said::mismatch`].
+fn parser_said(message: &str) -> Said {
+    let message = message.trim();
+    match message
+        .strip_prefix("invalid type: ")
+        .and_then(|m| m.rsplit_once(", expected "))
+    {
+        Some((found, expected)) => {
+            Said::new().mismatch(Kind::from_parser(expected), Kind::from_parser(found))
+        }
+        None => Said::from(message),
+    }
+}
+
 impl<'a> Ctx<'a> {
     fn new(text: &'a str, base: &'a Path, name: &'a Path) -> Self {
         let newlines = text.match_indices('\n').map(|(at, _)| at).collect();
@@ -212,13 +227,41 @@ impl<'a> Ctx<'a> {
     }
 
     fn error(&self, line: Option<usize>, message: String) -> Error {
-        let message = match line {
-            Some(l) => format!("line {l}: {message}"),
-            None => message,
+        Error::spec(self.name, line, message)
+    }
+
+    /// The TOML parser's error: its line and column, its message (a value of the wrong kind
+    /// as [`Said::mismatch`]) and, for the command line, a picture of the line.
+    fn toml(&self, e: &toml::de::Error) -> Error {
+        let said = parser_said(e.message());
+        let Some(span) = e.span() else {
+            return Error::spec(self.name, None, said);
         };
+        let at = span.start.min(self.text.len());
+        let line = self.newlines.partition_point(|&n| n < at);
+        let start = if line == 0 {
+            0
+        } else {
+            self.newlines[line - 1] + 1
+        };
+        let text = self.text[start..].lines().next().unwrap_or("");
+        let column = self.text[start..at].chars().count();
+        let width = self.text[at..span.end.min(start + text.len()).max(at)]
+            .chars()
+            .count()
+            .max(1);
+        let number = (line + 1).to_string();
+        let margin = " ".repeat(number.len());
         Error::Spec {
             path: self.name.to_path_buf(),
-            message,
+            line: Some(line + 1),
+            column: Some(column + 1),
+            message: said,
+            excerpt: Some(format!(
+                "{margin} |\n{number} | {text}\n{margin} | {}{}",
+                " ".repeat(column),
+                "^".repeat(width)
+            )),
         }
     }
 
@@ -363,9 +406,10 @@ impl<'a> Ctx<'a> {
         let v = t
             .get(key)
             .ok_or_else(|| self.error(self.at(line, key), format!("missing `{key}`")))?;
-        v.clone()
-            .try_into()
-            .map_err(|e| self.error(self.at(line, key), format!("`{key}`: {e}")))
+        v.clone().try_into().map_err(|e| {
+            let said = Said::from(format!("`{key}`: ")).then(parser_said(e.message()));
+            Error::spec(self.name, self.at(line, key), said)
+        })
     }
 
     fn vector<const D: usize>(&self, t: &toml::Table, key: &str, line: usize) -> Result<Vect<D>> {

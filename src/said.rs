@@ -1,0 +1,513 @@
+//! Messages for people that name the library's options and the edit spec's lines as data, so
+//! that each face says them in its own words: the command line `--cell-size 0.5` and "line 7",
+//! Python `cell_size=0.5` and `spec["handle"][0]`, Blender its panel's names.
+//!
+//! A [`Said`] is a list of [`Part`]s; [`Terms`] renders one. Its `Display` is the command line's
+//! ([`Cli`]), which is also what the JSON report and the editor's page show. No face reads a
+//! message back: a face that needs another wording renders the parts again.
+//!
+//! ```
+//! use rigidcells::said::{Opt, Said, Terms};
+//! let said = Said::new().set(Opt::CellSize, 0.02).text(": more cells than the memory holds");
+//! assert_eq!(said.to_string(), "--cell-size 0.02: more cells than the memory holds");
+//! struct Python;
+//! impl Terms for Python {
+//!     fn option(&self, o: Opt) -> String {
+//!         o.keyword().to_string()
+//!     }
+//!     fn set(&self, o: Opt, value: &str) -> String {
+//!         format!("{}={value}", o.keyword())
+//!     }
+//! }
+//! assert_eq!(Python.render(&said), "cell_size=0.02: more cells than the memory holds");
+//! ```
+
+use std::fmt;
+
+/// An option of the command line and the library, by its meaning; [`Opt::flag`] is the
+/// command line's name and [`Opt::keyword`] the Python package's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Opt {
+    /// The edit spec (`--edit`; Python's `spec`).
+    Edit,
+    /// The finest cells' edge (`--cell-size`).
+    CellSize,
+    /// About this many cells (`--cells`).
+    Cells,
+    /// Adaptive cells down to this size (`--min-cell-size`).
+    MinCellSize,
+    /// Octree levels above the finest cells (`--max-level`).
+    MaxLevel,
+    /// Occupied cells only (`--shell`).
+    Shell,
+    /// The inside classification of empty cells (`--inside`).
+    Inside,
+    /// How the Gauss-Newton systems are solved (`--solver`).
+    Solver,
+    /// The move test of each load step (`--tolerance`).
+    Tolerance,
+    /// What parts no constraint reaches do (`--loose-parts`).
+    LooseParts,
+    /// Refinement where the strain is high (`--refine-strain`).
+    RefineStrain,
+    /// How the cells' motions reach the samples (`--transfer`).
+    Transfer,
+    /// The RBF transfer's fitting tolerance (`--rbf-tolerance`).
+    RbfTolerance,
+    /// The memory budget (`--memory-limit`).
+    MemoryLimit,
+    /// Samples beyond the field's cells (`--outside`).
+    Outside,
+    /// The field's file (`--save-field`).
+    SaveField,
+    /// The report's file (`--report`).
+    Report,
+    /// Files in different coordinate systems taken as one (`--same-crs`).
+    SameCrs,
+    /// Samples per chunk of a streamed file (`--chunk`).
+    Chunk,
+    /// A grid's spacing (`--spacing`).
+    Spacing,
+    /// A grid's extent (`--extent`).
+    Extent,
+    /// A grid's height (`--height`).
+    Height,
+    /// A GeoTIFF's EPSG code (`--epsg`).
+    Epsg,
+    /// A picture's size (`--size`).
+    Size,
+    /// The camera's azimuth (`--azimuth`).
+    Azimuth,
+    /// The camera's elevation (`--elevation`).
+    Elevation,
+    /// The camera's zoom (`--zoom`).
+    Zoom,
+    /// The up axis (`--up`).
+    Up,
+    /// A picture's background (`--background`).
+    Background,
+    /// The editor's samples shown (`--proxy`).
+    Proxy,
+    /// The editor's port (`--port`).
+    Port,
+    /// The editor's output folder (`--out-dir`).
+    OutDir,
+}
+
+impl Opt {
+    /// Every option.
+    pub const ALL: [Opt; 32] = [
+        Opt::Edit,
+        Opt::CellSize,
+        Opt::Cells,
+        Opt::MinCellSize,
+        Opt::MaxLevel,
+        Opt::Shell,
+        Opt::Inside,
+        Opt::Solver,
+        Opt::Tolerance,
+        Opt::LooseParts,
+        Opt::RefineStrain,
+        Opt::Transfer,
+        Opt::RbfTolerance,
+        Opt::MemoryLimit,
+        Opt::Outside,
+        Opt::SaveField,
+        Opt::Report,
+        Opt::SameCrs,
+        Opt::Chunk,
+        Opt::Spacing,
+        Opt::Extent,
+        Opt::Height,
+        Opt::Epsg,
+        Opt::Size,
+        Opt::Azimuth,
+        Opt::Elevation,
+        Opt::Zoom,
+        Opt::Up,
+        Opt::Background,
+        Opt::Proxy,
+        Opt::Port,
+        Opt::OutDir,
+    ];
+
+    /// The command line's name, without its dashes (`cell-size`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Opt::Edit => "edit",
+            Opt::CellSize => "cell-size",
+            Opt::Cells => "cells",
+            Opt::MinCellSize => "min-cell-size",
+            Opt::MaxLevel => "max-level",
+            Opt::Shell => "shell",
+            Opt::Inside => "inside",
+            Opt::Solver => "solver",
+            Opt::Tolerance => "tolerance",
+            Opt::LooseParts => "loose-parts",
+            Opt::RefineStrain => "refine-strain",
+            Opt::Transfer => "transfer",
+            Opt::RbfTolerance => "rbf-tolerance",
+            Opt::MemoryLimit => "memory-limit",
+            Opt::Outside => "outside",
+            Opt::SaveField => "save-field",
+            Opt::Report => "report",
+            Opt::SameCrs => "same-crs",
+            Opt::Chunk => "chunk",
+            Opt::Spacing => "spacing",
+            Opt::Extent => "extent",
+            Opt::Height => "height",
+            Opt::Epsg => "epsg",
+            Opt::Size => "size",
+            Opt::Azimuth => "azimuth",
+            Opt::Elevation => "elevation",
+            Opt::Zoom => "zoom",
+            Opt::Up => "up",
+            Opt::Background => "background",
+            Opt::Proxy => "proxy",
+            Opt::Port => "port",
+            Opt::OutDir => "out-dir",
+        }
+    }
+
+    /// The Python package's keyword argument (`cell_size`; the edit spec is `spec`).
+    pub fn keyword(self) -> &'static str {
+        match self {
+            Opt::Edit => "spec",
+            Opt::CellSize => "cell_size",
+            Opt::MinCellSize => "min_cell_size",
+            Opt::MaxLevel => "max_level",
+            Opt::LooseParts => "loose_parts",
+            Opt::RefineStrain => "refine_strain",
+            Opt::RbfTolerance => "rbf_tolerance",
+            Opt::MemoryLimit => "memory_limit",
+            Opt::SaveField => "save_field",
+            Opt::SameCrs => "same_crs",
+            Opt::OutDir => "out_dir",
+            o => o.name(),
+        }
+    }
+}
+
+/// One piece of a message.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Part {
+    /// Words as they are.
+    Text(String),
+    /// An option named (`--cell-size`).
+    Opt(Opt),
+    /// An option with a value (`--cell-size 0.02`), the value as the user would write it.
+    Set(Opt, String),
+    /// A line of the edit spec (`line 7`).
+    Line(usize),
+    /// A value of the edit spec of the wrong kind: `expected` what, `found` what.
+    Mismatch {
+        /// The kind the key takes.
+        expected: Kind,
+        /// The kind given.
+        found: Kind,
+    },
+}
+
+/// The kind of a value of the edit spec, as [`Part::Mismatch`] names it.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum Kind {
+    /// A table (a dict in Python).
+    Table,
+    /// An array (a list).
+    Array,
+    /// A string.
+    Text,
+    /// A number with a fraction.
+    Float,
+    /// A whole number.
+    Integer,
+    /// A number of either kind.
+    Number,
+    /// `true` or `false`.
+    Boolean,
+    /// What the parser called it otherwise.
+    Other(String),
+}
+
+impl Kind {
+    /// The kind named by the TOML parser's message (serde's names: `map`, `sequence`,
+    /// `string`, `floating point`, `f64`, `integer`, `boolean`; with or without an article).
+    pub fn from_parser(name: &str) -> Self {
+        let name = name.trim();
+        let bare = ["a ", "an "]
+            .iter()
+            .find_map(|a| name.strip_prefix(a))
+            .unwrap_or(name);
+        let word = bare.split([' ', '`']).next().unwrap_or(bare);
+        match word {
+            "map" | "table" | "struct" => Kind::Table,
+            "sequence" | "array" | "tuple" => Kind::Array,
+            "string" | "str" | "char" => Kind::Text,
+            "floating" | "f64" | "f32" => Kind::Float,
+            "integer" | "i64" | "u64" | "usize" | "u32" | "i32" | "u8" => Kind::Integer,
+            "boolean" | "bool" => Kind::Boolean,
+            _ => Kind::Other(name.to_string()),
+        }
+    }
+
+    /// TOML's words: `a table`, `an array`, `a string`, `a number`, `a whole number`,
+    /// `a boolean`.
+    pub fn toml_words(&self) -> String {
+        match self {
+            Kind::Table => "a table".into(),
+            Kind::Array => "an array".into(),
+            Kind::Text => "a string".into(),
+            Kind::Float | Kind::Number => "a number".into(),
+            Kind::Integer => "a whole number".into(),
+            Kind::Boolean => "a boolean".into(),
+            Kind::Other(s) => s.clone(),
+        }
+    }
+}
+
+/// A message whose options and spec lines are data ([`Part`]).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Said {
+    parts: Vec<Part>,
+}
+
+impl Said {
+    /// An empty message.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The message with `words` added.
+    pub fn text(mut self, words: impl Into<String>) -> Self {
+        let words = words.into();
+        match self.parts.last_mut() {
+            Some(Part::Text(t)) => t.push_str(&words),
+            _ if words.is_empty() => {}
+            _ => self.parts.push(Part::Text(words)),
+        }
+        self
+    }
+
+    /// The message with option `o` named.
+    pub fn opt(mut self, o: Opt) -> Self {
+        self.parts.push(Part::Opt(o));
+        self
+    }
+
+    /// The message with option `o` given `value`.
+    pub fn set(mut self, o: Opt, value: impl fmt::Display) -> Self {
+        self.parts.push(Part::Set(o, value.to_string()));
+        self
+    }
+
+    /// The message with line `n` of the edit spec named.
+    pub fn line(mut self, n: usize) -> Self {
+        self.parts.push(Part::Line(n));
+        self
+    }
+
+    /// The message with a value of kind `found` where the spec takes `expected`.
+    pub fn mismatch(mut self, expected: Kind, found: Kind) -> Self {
+        self.parts.push(Part::Mismatch { expected, found });
+        self
+    }
+
+    /// The message with `other` added.
+    pub fn then(mut self, other: Said) -> Self {
+        for p in other.parts {
+            self = match p {
+                Part::Text(t) => self.text(t),
+                p => {
+                    self.parts.push(p);
+                    self
+                }
+            };
+        }
+        self
+    }
+
+    /// The message without `words` at its end, when it ends with them.
+    pub fn strip_suffix(&self, words: &str) -> Option<Said> {
+        let (Part::Text(last), head) = self.parts.split_last()? else {
+            return None;
+        };
+        let rest = last.strip_suffix(words)?;
+        Some(
+            Said {
+                parts: head.to_vec(),
+            }
+            .text(rest),
+        )
+    }
+
+    /// The parts, in order.
+    pub fn parts(&self) -> &[Part] {
+        &self.parts
+    }
+
+    /// The message without spaces and line ends at its end.
+    pub fn trimmed(mut self) -> Self {
+        if let Some(Part::Text(t)) = self.parts.last_mut() {
+            t.truncate(t.trim_end().len());
+        }
+        self
+    }
+
+    /// Whether the message says nothing.
+    pub fn is_empty(&self) -> bool {
+        self.parts
+            .iter()
+            .all(|p| matches!(p, Part::Text(t) if t.is_empty()))
+    }
+}
+
+impl From<String> for Said {
+    fn from(words: String) -> Self {
+        Said::new().text(words)
+    }
+}
+
+impl From<&Said> for Said {
+    fn from(said: &Said) -> Self {
+        said.clone()
+    }
+}
+
+impl From<&String> for Said {
+    fn from(words: &String) -> Self {
+        Said::new().text(words.as_str())
+    }
+}
+
+impl From<&str> for Said {
+    fn from(words: &str) -> Self {
+        Said::new().text(words)
+    }
+}
+
+/// How a face says an option, a value and a spec line; [`Terms::render`] says a whole message.
+pub trait Terms {
+    /// Option `o` named.
+    fn option(&self, o: Opt) -> String;
+
+    /// Option `o` given `value` (`--cell-size 0.02`, `cell_size=0.02`).
+    fn set(&self, o: Opt, value: &str) -> String {
+        format!("{} {value}", self.option(o))
+    }
+
+    /// Line `n` of the edit spec.
+    fn line(&self, n: usize) -> String {
+        format!("line {n}")
+    }
+
+    /// A value of kind `found` where the spec takes `expected`.
+    fn mismatch(&self, expected: &Kind, found: &Kind) -> String {
+        format!(
+            "expected {}, found {}",
+            expected.toml_words(),
+            found.toml_words()
+        )
+    }
+
+    /// One part of a message.
+    fn part(&self, part: &Part) -> String {
+        match part {
+            Part::Text(t) => t.clone(),
+            Part::Opt(o) => self.option(*o),
+            Part::Set(o, v) => self.set(*o, v),
+            Part::Line(n) => self.line(*n),
+            Part::Mismatch { expected, found } => self.mismatch(expected, found),
+        }
+    }
+
+    /// The whole message.
+    fn render(&self, said: &Said) -> String {
+        said.parts.iter().map(|p| self.part(p)).collect()
+    }
+}
+
+/// The command line's terms: `--cell-size 0.02`, `line 7`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Cli;
+
+impl Terms for Cli {
+    fn option(&self, o: Opt) -> String {
+        format!("--{}", o.name())
+    }
+}
+
+impl fmt::Display for Said {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&Cli.render(self))
+    }
+}
+
+impl serde::Serialize for Said {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_command_line_says_flags_and_lines() {
+        let said = Said::new()
+            .line(4)
+            .text(": use a larger ")
+            .opt(Opt::CellSize)
+            .text(" or ")
+            .set(Opt::Outside, "keep");
+        assert_eq!(
+            said.to_string(),
+            "line 4: use a larger --cell-size or --outside keep"
+        );
+    }
+
+    #[test]
+    fn the_parsers_kinds_are_named_in_tomls_words() {
+        let kinds = |e: &str, f: &str| {
+            Cli.render(&Said::new().mismatch(Kind::from_parser(e), Kind::from_parser(f)))
+        };
+        assert_eq!(
+            kinds("a sequence", "map"),
+            "expected an array, found a table"
+        );
+        assert_eq!(
+            kinds("f64", "string \"x\""),
+            "expected a number, found a string"
+        );
+        assert_eq!(
+            kinds("a boolean", "integer `3`"),
+            "expected a boolean, found a whole number"
+        );
+        assert_eq!(
+            kinds("a unicorn", "map"),
+            "expected a unicorn, found a table"
+        );
+    }
+
+    #[test]
+    fn text_added_to_text_is_one_part() {
+        let said = Said::from("a").text("b").text("").opt(Opt::Up).text("c");
+        assert_eq!(said.parts().len(), 3);
+        assert!(Said::new().text("").is_empty());
+        assert_eq!(Said::from("x \n").trimmed().to_string(), "x");
+    }
+
+    #[test]
+    fn every_option_has_one_name_and_one_keyword() {
+        let names: std::collections::HashSet<_> = Opt::ALL.iter().map(|o| o.name()).collect();
+        let words: std::collections::HashSet<_> = Opt::ALL.iter().map(|o| o.keyword()).collect();
+        assert_eq!(names.len(), Opt::ALL.len());
+        assert_eq!(words.len(), Opt::ALL.len());
+        for o in Opt::ALL {
+            assert!(!o.keyword().contains('-'), "{o:?}");
+        }
+    }
+}
