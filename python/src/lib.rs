@@ -11,19 +11,17 @@ use std::time::Instant;
 
 use numpy::ndarray::Array2;
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict, PyList};
+use pyo3::types::{PyBytes, PyDict};
 use rigidcells::cells::Inside;
 use rigidcells::field::{Outside, SavedField, Transfer};
 use rigidcells::io;
 use rigidcells::names::{Named, UnknownName};
 use rigidcells::pipeline::Options;
-use rigidcells::pipeline::{self, DeformInfo, DeformParams};
+use rigidcells::pipeline::{self, DeformParams};
 use rigidcells::render::View;
-use rigidcells::report::Timings;
 use rigidcells::rigid::Vect;
-use rigidcells::solve::Solution;
 use rigidcells::solve::{LooseParts, Method};
 use rigidcells::spec::{EditSpec, parse_spec};
 
@@ -211,67 +209,17 @@ fn type_name(value: &Bound<'_, PyAny>) -> String {
         .unwrap_or_else(|_| "another type".into())
 }
 
-/// What a deformation did, as a dict.
-fn info_dict<'py>(
-    py: Python<'py>,
-    info: &DeformInfo,
-    samples: u64,
-) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("samples", samples)?;
-    d.set_item("cells", info.solver.cells_final)?;
-    d.set_item("iterations", info.solver.iterations)?;
-    d.set_item(
-        "energy",
-        info.solver.energies.last().copied().unwrap_or(0.0),
-    )?;
-    d.set_item("converged", info.solver.converged)?;
-    d.set_item("energies", info.solver.energies.clone())?;
-    d.set_item("foldovers", (info.foldovers.1, info.foldovers.0))?;
-    d.set_item("warnings", said(py, &info.warnings)?)?;
-    let turns = PyList::empty(py);
-    for t in &info.solver.turns {
-        let c = PyDict::new(py);
-        c.set_item("line", t.line)?;
-        c.set_item("turn_asked_degrees", t.asked_degrees)?;
-        c.set_item("turn_taken_degrees", t.taken_degrees)?;
-        turns.append(c)?;
-    }
-    d.set_item("handle_turns", turns)?;
-    let points = PyList::empty(py);
-    for p in &info.control_points {
-        let c = PyDict::new(py);
-        c.set_item("id", &p.id)?;
-        c.set_item("from", p.from.clone())?;
-        c.set_item("wanted", p.wanted.clone())?;
-        c.set_item("got", p.got.clone())?;
-        c.set_item("residual", p.residual)?;
-        c.set_item("check", p.check)?;
-        c.set_item("exact", p.exact)?;
-        points.append(c)?;
-    }
-    d.set_item("control_points", points)?;
-    d.set_item("control_rounding", info.control_rounding.clone())?;
-    d.set_item(
-        "control_rmse",
-        rigidcells::control::rmse(&info.control_points),
-    )?;
-    d.set_item("control_trend", info.solver.trend.map(|t| t.to_string()))?;
-    let checkpoints = match rigidcells::control::check_accuracy(&info.control_points) {
-        Some(a) => {
-            let c = PyDict::new(py);
-            c.set_item("count", a.count)?;
-            c.set_item("rmse_x", a.rmse_x)?;
-            c.set_item("rmse_y", a.rmse_y)?;
-            c.set_item("rmse_r", a.rmse_r)?;
-            c.set_item("rmse_z", a.rmse_z)?;
-            c.set_item("accuracy_r_95", a.accuracy_r_95)?;
-            c.set_item("accuracy_z_95", a.accuracy_z_95)?;
-            c.into_any()
-        }
-        None => py.None().into_bound(py),
-    };
-    d.set_item("checkpoints", checkpoints)?;
+/// The library's report ([`rigidcells::Report`], serialized as the command line's `--report`
+/// writes it) as a dict, its messages as [`said`]'s parts for the package to say.
+fn report_dict<'py>(py: Python<'py>, report: &rigidcells::Report) -> PyResult<Bound<'py, PyDict>> {
+    let text = serde_json::to_string(report)
+        .map_err(|e| PyRuntimeError::new_err(format!("the report: {e}")))?;
+    let d = py
+        .import("json")?
+        .call_method1("loads", (text,))?
+        .cast_into::<PyDict>()?;
+    d.set_item("warnings", said(py, &report.warnings)?)?;
+    d.set_item("notes", said(py, &report.notes)?)?;
     Ok(d)
 }
 
@@ -345,74 +293,18 @@ fn deform<'py>(
             &params,
             &observer,
         )?;
-        let residuals = residuals(Some(&solution), &s.points, &moved);
-        Ok((moved, turned, residuals, info))
+        let n = s.points.len() as u64;
+        let seconds = start.elapsed().as_secs_f64();
+        let report =
+            rigidcells::Report::of_samples(Some(&solution), &info, n, (&s.points, &moved), seconds);
+        Ok((moved, turned, report))
     });
-    let (moved, moved_normals, residuals, info) = observer.finished(result)?;
-    let seconds = start.elapsed().as_secs_f64();
-    let d = deformed_dict(py, &info, residuals, s.points.len(), seconds)?;
+    let (moved, moved_normals, report) = observer.finished(result)?;
+    let d = report_dict(py, &report)?;
     if normals.is_some() {
         d.set_item("normals", moved_array(py, &moved_normals))?;
     }
     Ok((moved_array(py, &moved), d))
-}
-
-/// The largest residuals at the fixed and the handle samples of a deformation of `points` into
-/// `moved`, and its finest cell size (zeros without a solution: nothing was constrained).
-fn residuals(
-    solution: Option<&Solution<3>>,
-    points: &[Vect<3>],
-    moved: &[Vect<3>],
-) -> (f64, f64, f64) {
-    match solution {
-        Some(solution) => {
-            let (fixed, handle, _) = rigidcells::report::residuals(solution, points, moved);
-            (fixed, handle, solution.complex.grid.finest_size())
-        }
-        None => (0.0, 0.0, 0.0),
-    }
-}
-
-/// What a deformation of `samples` samples in memory did, as a dict: [`info_dict`] with the
-/// [`residuals`] at the fixed and handle samples, the cell size and the timings.
-fn deformed_dict<'py>(
-    py: Python<'py>,
-    info: &DeformInfo,
-    (fixed, handle, cell_size): (f64, f64, f64),
-    samples: usize,
-    seconds: f64,
-) -> PyResult<Bound<'py, PyDict>> {
-    let d = info_dict(py, info, samples as u64)?;
-    d.set_item("residual_fixed_max", fixed)?;
-    d.set_item("residual_handle_max", handle)?;
-    d.set_item("cell_size", cell_size)?;
-    d.set_item("timings", timings(py, info, 0.0, 0.0, seconds)?)?;
-    Ok(d)
-}
-
-/// Seconds per stage ([`Timings::of`]: `read` and `write` are a file's passes, 0 for samples
-/// in memory), under the command line's report's names.
-fn timings<'py>(
-    py: Python<'py>,
-    info: &DeformInfo,
-    read: f64,
-    write: f64,
-    total: f64,
-) -> PyResult<Bound<'py, PyDict>> {
-    let t = Timings::of(info, read, write, total);
-    let d = PyDict::new(py);
-    for (name, seconds) in [
-        ("read", t.read),
-        ("voxelize", t.voxelize),
-        ("solve", t.solve),
-        ("transfer", t.transfer),
-        ("write", t.write),
-        ("check_gcp", t.check_gcp),
-        ("total", t.total),
-    ] {
-        d.set_item(name, seconds)?;
-    }
-    Ok(d)
 }
 
 /// A solved field: apply it to samples, save it for `rigidcells apply`, load one; pickled as
@@ -550,11 +442,10 @@ fn solve<'py>(
         )
     });
     let (saved, solution, info) = observer.finished(result)?;
-    let d = info_dict(py, &info, s.points.len() as u64)?;
-    d.set_item("cell_size", solution.complex.grid.finest_size())?;
     let seconds = start.elapsed().as_secs_f64();
-    d.set_item("timings", timings(py, &info, 0.0, 0.0, seconds)?)?;
-    Ok((Field { saved }, d))
+    let n = s.points.len() as u64;
+    let report = rigidcells::Report::of_samples(Some(&solution), &info, n, (&[], &[]), seconds);
+    Ok((Field { saved }, report_dict(py, &report)?))
 }
 
 /// What `deform` or `solve` of `points` under the TOML `spec` with the `options` will take,
@@ -634,22 +525,8 @@ fn deform_file<'py>(
         rigidcells::io::refuse_overwrite(&input, &output)?;
         pipeline::deform_file_with(&input, &output, &spec, &params, chunk, &outputs, &observer)
     });
-    let (solution, info, summary) = observer.result(result)?;
-    let d = info_dict(py, &info.deform, info.samples)?;
-    d.set_item("residual_fixed_max", summary.residual_fixed_max)?;
-    d.set_item("residual_handle_max", summary.residual_handle_max)?;
-    d.set_item("cell_size", solution.complex.grid.finest_size())?;
-    let seconds = summary.timings_s.total;
-    let t = timings(
-        py,
-        &info.deform,
-        info.seconds_read,
-        info.seconds_write,
-        seconds,
-    )?;
-    d.set_item("timings", t)?;
-    d.set_item("notes", said(py, &info.notes)?)?;
-    Ok(d)
+    let (_, _, report) = observer.result(result)?;
+    report_dict(py, &report)
 }
 
 /// Samples per streamed chunk (default: the command line's): 1 to [`pipeline::MAX_CHUNK`].
@@ -713,16 +590,8 @@ fn solve_files<'py>(
             &observer,
         )
     });
-    let (solution, info, summary) = observer.result(result)?;
-    let d = info_dict(py, &info.deform, info.samples)?;
-    d.set_item("residual_fixed_max", summary.residual_fixed_max)?;
-    d.set_item("residual_handle_max", summary.residual_handle_max)?;
-    d.set_item("cell_size", solution.complex.grid.finest_size())?;
-    let seconds = summary.timings_s.total;
-    let t = timings(py, &info.deform, info.seconds_read, 0.0, seconds)?;
-    d.set_item("timings", t)?;
-    d.set_item("notes", said(py, &info.notes)?)?;
-    Ok(d)
+    let (_, _, report) = observer.result(result)?;
+    report_dict(py, &report)
 }
 
 /// The preview's view of a `view` dict (`azimuth`, `elevation`, `size` as (width, height),

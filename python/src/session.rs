@@ -19,8 +19,7 @@ use rigidcells::spec::parse_poses;
 
 use crate::observer::caller;
 use crate::{
-    PyObserver, classes, deformed_dict, moved_array, options, points, py_err, residuals, said,
-    spec, triangles,
+    PyObserver, classes, moved_array, options, points, py_err, report_dict, said, spec, triangles,
 };
 
 /// A live deformation of samples in memory ([`Live`]): the cells built once, a spec solved
@@ -227,12 +226,19 @@ impl Session {
         let start = Instant::now();
         let released = self.with(py, |live, normals| -> rigidcells::Result<_> {
             let (moved, turned, solution, info) = live.release(normals, &observer)?;
-            let residuals = residuals(solution.as_ref(), live.points(), &moved);
-            Ok((moved, turned, residuals, info))
+            let n = moved.len() as u64;
+            let seconds = start.elapsed().as_secs_f64();
+            let report = rigidcells::Report::of_samples(
+                solution.as_ref(),
+                &info,
+                n,
+                (live.points(), &moved),
+                seconds,
+            );
+            Ok((moved, turned, report))
         })?;
-        let (moved, turned, residuals, info) = observer.finished(released)?;
-        let seconds = start.elapsed().as_secs_f64();
-        let d = deformed_dict(py, &info, residuals, moved.len(), seconds)?;
+        let (moved, turned, report) = observer.finished(released)?;
+        let d = report_dict(py, &report)?;
         if !self.normals.is_empty() {
             d.set_item("normals", moved_array(py, &turned))?;
         }

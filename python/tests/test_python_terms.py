@@ -95,7 +95,7 @@ def test_deform_file_writes_the_command_lines_report_and_preview(tmp_path):
                 check=True,
             )
         else:
-            rigidcells.deform_file(
+            returned = rigidcells.deform_file(
                 src, d / "bent.laz", edit, cells=2000, report=d / "r.json", preview=d / "p.png",
                 strain=True, save_field=d / "f.field", chunk=5000, azimuth=30, elevation=40,
                 size=(320, 200), up="z", zoom=1.5, progress=False,
@@ -103,6 +103,14 @@ def test_deform_file_writes_the_command_lines_report_and_preview(tmp_path):
     for name in ("bent.laz", "p.png", "f.field"):
         assert (outputs["py"] / name).read_bytes() == (outputs["cli"] / name).read_bytes(), name
     a, b = (json.loads((outputs[f] / "r.json").read_text()) for f in ("cli", "py"))
+    # The report returned is the one written: the same keys, the same meanings (the energy a
+    # list), every value the file's but the process's peak memory and the messages' words.
+    assert set(returned.keys()) == set(b) | {"normals"}
+    for key, value in b.items():
+        if key not in ("peak_memory_bytes", "cell_levels", "warnings", "notes"):
+            assert returned[key] == value, key
+    assert returned.cell_levels == {int(k): v for k, v in b["cell_levels"].items()}
+    assert isinstance(returned.energy, list) and returned.energy == b["energy"]
     for varying in ("output", "timings_s", "peak_memory_bytes", "iteration_log"):
         a.pop(varying), b.pop(varying)
     assert a == b

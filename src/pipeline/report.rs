@@ -23,7 +23,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::FileInfo;
+use super::{DeformInfo, FileInfo};
 use crate::error::{Error, Result};
 use crate::rigid::Vect;
 use crate::said::Said;
@@ -106,6 +106,8 @@ pub struct Report {
     pub estimate: Option<EstimateReport>,
     /// Warnings, as printed.
     pub warnings: Vec<Said>,
+    /// Notes on the output (an offset moved to fit, samples beyond the margin), as printed.
+    pub notes: Vec<Said>,
     /// Every control point (`[[target]]`): id, where it was given, from (after snapping),
     /// wanted, got (where the output puts it), residual, how far it was snapped, whether it is
     /// 2D, and its leave-one-out prediction error (`--check-gcp`).
@@ -219,47 +221,67 @@ impl Report {
         file: &FileInfo,
         total: f64,
     ) -> Self {
-        let d = &file.deform;
-        let s = &d.solver;
-        let complex = &solution.complex;
-        let mut cell_levels = BTreeMap::new();
-        for c in &complex.cells {
-            *cell_levels.entry(c.key.level).or_insert(0) += 1;
-        }
-        let mut cell_roles = BTreeMap::new();
-        for role in &solution.constraints.roles {
-            let name = match role {
-                Role::Free => "free",
-                Role::Fixed => "fixed",
-                Role::Handle(_) => "handle",
-                Role::Pin(_) => "pin",
-                Role::Rest => "rest",
-                Role::Carried(_) => "carried",
-            };
-            *cell_roles.entry(name).or_insert(0) += 1;
-        }
         let proxy = &file.proxy;
-        let (residual_fixed_max, residual_handle_max, residual_samples) =
-            residuals(solution, &proxy.before, &proxy.after);
-        let target_residual_max = solution
-            .constraints
-            .targets
-            .iter()
-            .map(|t| {
-                let c = t.cell as usize;
-                let moved = solution.motions[c].apply(&complex.cells[c].center, &t.from);
-                (solution.constraints.trend.apply(&moved) - t.wanted).norm()
-            })
-            .fold(0.0, f64::max);
         let inputs: Vec<String> = inputs.iter().map(|p| p.display().to_string()).collect();
+        Self::of(
+            (inputs, output.display().to_string()),
+            Some(solution),
+            &file.deform,
+            (file.samples, &proxy.before, &proxy.after),
+            Timings::of(&file.deform, file.seconds_read, file.seconds_write, total),
+            file.notes.clone(),
+        )
+    }
+
+    /// The report of a deformation of samples in memory (`deform`, a live session's release,
+    /// the Python package's arrays): `before` went to `after` (both empty for a solve that
+    /// moved none), every one measured for the residuals; no file in or out, and no read or
+    /// write time. Without a solution (nothing was constrained yet) the cells' figures are 0.
+    pub fn of_samples(
+        solution: Option<&Solution<3>>,
+        info: &DeformInfo,
+        samples: u64,
+        (before, after): (&[Vect<3>], &[Vect<3>]),
+        total: f64,
+    ) -> Self {
+        Self::of(
+            (Vec::new(), String::new()),
+            solution,
+            info,
+            (samples, before, after),
+            Timings::of(info, 0.0, 0.0, total),
+            Vec::new(),
+        )
+    }
+
+    fn of(
+        (inputs, output): (Vec<String>, String),
+        solution: Option<&Solution<3>>,
+        d: &DeformInfo,
+        (samples, before, after): (u64, &[Vect<3>], &[Vect<3>]),
+        timings_s: Timings,
+        notes: Vec<Said>,
+    ) -> Self {
+        let s = &d.solver;
+        let mut cell_levels = BTreeMap::new();
+        let mut cell_roles = BTreeMap::new();
+        let (mut residual_fixed_max, mut residual_handle_max, mut residual_samples) = (0.0, 0.0, 0);
+        let (mut cell_size, mut target_residual_max) = (0.0, 0.0f64);
+        if let Some(solution) = solution {
+            (cell_levels, cell_roles) = census(solution);
+            (residual_fixed_max, residual_handle_max, residual_samples) =
+                residuals(solution, before, after);
+            cell_size = solution.complex.grid.finest_size();
+            target_residual_max = target_residual(solution);
+        }
         Self {
             input: inputs.join(", "),
             inputs,
-            output: output.display().to_string(),
-            points: file.samples,
+            output,
+            points: samples,
             cells: s.cells_final,
             cells_initial: s.cells_initial,
-            cell_size: complex.grid.finest_size(),
+            cell_size,
             cell_levels,
             cell_roles,
             iterations: s.iterations,
@@ -279,10 +301,11 @@ impl Report {
             target_residual_max,
             foldovers: d.foldovers.1,
             foldovers_checked: d.foldovers.0,
-            timings_s: Timings::of(d, file.seconds_read, file.seconds_write, total),
+            timings_s,
             peak_memory_bytes: peak_memory(),
             estimate: s.estimate.as_ref().map(EstimateReport::from),
             warnings: d.warnings.clone(),
+            notes,
             control_points: d.control_points.clone(),
             control_rounding: d.control_rounding.clone(),
             control_rmse: crate::control::rmse(&d.control_points),
@@ -303,6 +326,43 @@ impl Report {
             .map_err(|e| Error::param(format!("{}: {e}", path.display())))?;
         Ok(format!("{text}\n").into_bytes())
     }
+}
+
+/// The cells per level and per role.
+fn census(solution: &Solution<3>) -> (BTreeMap<u8, usize>, BTreeMap<&'static str, usize>) {
+    let mut levels = BTreeMap::new();
+    for c in &solution.complex.cells {
+        *levels.entry(c.key.level).or_insert(0) += 1;
+    }
+    let mut roles = BTreeMap::new();
+    for role in &solution.constraints.roles {
+        let name = match role {
+            Role::Free => "free",
+            Role::Fixed => "fixed",
+            Role::Handle(_) => "handle",
+            Role::Pin(_) => "pin",
+            Role::Rest => "rest",
+            Role::Carried(_) => "carried",
+        };
+        *roles.entry(name).or_insert(0) += 1;
+    }
+    (levels, roles)
+}
+
+/// The largest distance of a soft target's point, under its cell's motion and the control
+/// points' trend, from where it is wanted.
+fn target_residual(solution: &Solution<3>) -> f64 {
+    let complex = &solution.complex;
+    solution
+        .constraints
+        .targets
+        .iter()
+        .map(|t| {
+            let c = t.cell as usize;
+            let moved = solution.motions[c].apply(&complex.cells[c].center, &t.from);
+            (solution.constraints.trend.apply(&moved) - t.wanted).norm()
+        })
+        .fold(0.0, f64::max)
 }
 
 /// The largest distances of a sample in a fixed cell and in a handle cell from where its cell's

@@ -31,8 +31,8 @@ and other attributes kept and its normals turned (a Trimesh derives its own from
 faces). None of laspy, trimesh and
 Open3D is a dependency: their objects are recognized when the library is imported.
 
-A deformation returns a ``Report`` (a dataclass: cells, cell size, iterations, energy,
-residuals, fold-overs, warnings, timings); its warnings are also emitted through Python's
+A deformation returns a ``Report`` (a dataclass with the keys of ``deform --report``: cells,
+cell size, iterations, energies, residuals, fold-overs, warnings, timings); its warnings are also emitted through Python's
 ``warnings`` module as ``rigidcells.RigidCellsWarning``. Errors are exceptions that name the
 argument: ``TypeError`` or ``ValueError`` for a bad argument, spec or parameter, ``OSError`` for
 I/O, ``rigidcells.FormatError`` (a ``ValueError``) for malformed files,
@@ -51,7 +51,7 @@ import sys
 import threading
 import warnings
 from dataclasses import dataclass
-from typing import Any, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -89,54 +89,92 @@ def _warn(messages: Sequence[str]) -> None:
 
 @dataclass
 class Report:
-    """What a deformation did: the figures of the command line's report (``deform --report``)
-    under the same names (``points``, ``cells``, ``iterations``, ``residual_max``,
-    ``foldovers``, ``timings_s``, ...), with ``energy`` the last energy (the JSON's ``energy``
-    list is ``energies`` here). ``report["cells"]`` and ``report.keys()`` read it as a dict."""
+    """What a deformation did: the library's report, the one ``deform --report R.json``
+    writes, under the same keys with the same meanings (``energy`` is the list of energies,
+    ``timings_s`` the seconds per stage), plus ``normals``. The messages (``warnings``,
+    ``notes``) name options as keyword arguments and, for a dict spec, its entries by key
+    path. For points in memory ``input`` and ``output`` are empty and ``timings_s`` has no
+    read or write. ``report["cells"]`` and ``report.keys()`` read it as a dict."""
 
+    input: str
+    """The input file (for a solve over tiles, the files, joined by ``, ``; "" for arrays)."""
+    inputs: List[str]
+    """The input files (none for arrays)."""
+    output: str
+    """The output file (for a solve, the field; "" for arrays)."""
     points: int
     """Samples deformed."""
     cells: int
     """Cells of the complex solved (after refinement)."""
+    cells_initial: int
+    """Cells before refinement."""
     cell_size: float
     """The finest cells' edge length, in the points' units (the one ``cells=`` chose)."""
+    cell_levels: Dict[int, int]
+    """Cells per octree level (0 the finest), after refinement."""
+    cell_roles: Dict[str, int]
+    """Cells of each role: ``free``, ``fixed``, ``handle``, ``pin``, ``rest``, ``carried``."""
     iterations: int
     """Solver iterations in all (Gauss-Newton or local-global: ``iteration_log`` says which)."""
-    energy: float
-    """The energy at the end."""
-    energies: List[float]
-    """The energy before each load step's first iteration and after every iteration."""
+    load_steps: int
+    """Load steps."""
+    load_step_halvings: int
+    """Load steps taken again in halves (a part untwisting the short way round)."""
+    handle_turns: List[dict]
+    """Per turning handle: its ``line`` in the spec (for a dict spec also its ``key``),
+    ``turn_asked_degrees`` and ``turn_taken_degrees``."""
+    linear_solver: str
+    """How the last iterations were solved: ``direct``, ``multilevel`` or ``local-global``."""
+    linear_iterations: int
+    """Conjugate-gradient iterations over all Gauss-Newton steps (multilevel)."""
+    levels: int
+    """Levels of the multilevel hierarchy (0 when direct)."""
+    energy: List[float]
+    """The energy before each load step's first iteration and after every iteration (the
+    last is the energy at the end)."""
     converged: bool
     """Whether the last load step met the tolerance."""
+    iteration_log: List[dict]
+    """Every iteration: ``method``, ``load_step``, ``energy``, ``decrease``,
+    ``largest_move``, ``step_length``, ``linear_iterations`` and its seconds."""
     residual_max: float
     """The largest of the two residuals below."""
     residual_fixed_max: float
     """The largest distance of a sample in a fixed cell from its rest position (0: exact)."""
     residual_handle_max: float
     """The largest distance of a sample in a handle's cell from where the handle sends it."""
+    residual_samples: int
+    """Samples the residuals measured (every one for arrays; a file's preview proxy)."""
+    target_residual_max: float
+    """The largest distance of a soft target's point, under its cell's motion, from its
+    target."""
     foldovers: int
     """Samples where the map folds space over (its Jacobian's determinant not positive)."""
     foldovers_checked: int
     """Samples checked for fold-overs."""
-    warnings: List[str]
-    """Messages for the user, as the command line prints them."""
-    notes: List[str]
-    """Notes on the output (an offset moved to fit, samples beyond the margin)."""
     timings_s: dict
     """Seconds per stage: ``read``, ``voxelize``, ``solve``, ``transfer``, ``write``,
     ``check_gcp``, ``total``."""
-    handle_turns: List[dict]
-    """Per turning handle: its ``line`` in the spec (for a dict spec also its ``key``),
-    ``turn_asked_degrees`` and ``turn_taken_degrees``."""
+    peak_memory_bytes: Optional[int]
+    """The process's peak resident memory (None where unknown)."""
+    estimate: Optional[dict]
+    """What the solve was estimated to take before it started: ``cells``, ``bytes``,
+    ``seconds``, ``solver``."""
+    warnings: List[str]
+    """Messages for the user."""
+    notes: List[str]
+    """Notes on the output (an offset moved to fit, samples beyond the margin)."""
     control_points: List[dict]
-    """Per control point (``[[target]]``): ``id``, ``from``, ``wanted``, ``got``,
+    """Per control point (``[[target]]``): ``id``, ``place``, ``from``, ``wanted``, ``got``,
     ``residual``, ``check`` (a checkpoint, scored and not solved for), ``exact`` (its cell
-    pinned to it)."""
+    pinned to it), and what the report file says of it."""
     control_rounding: Optional[str]
     """What ``got`` was rounded to before the residuals were measured, as the output file
     stores it (``"the output's scale 0.01"``; None for arrays, whose values are the field's)."""
     control_rmse: Optional[float]
     """The control points' root mean square residual (None without any)."""
+    control_rmse_left_out: Optional[float]
+    """The root mean square of their leave-one-out prediction errors (with ``check_gcp``)."""
     control_trend: Optional[str]
     """The control points' trend (``"spline"``, ``"affine"``, …; None without one): the map
     through them that carries what is global, the cells carrying the rest."""
@@ -161,18 +199,11 @@ class Report:
 
     @staticmethod
     def _of(info: dict, notes: Optional[List[str]] = None, paths: Optional[List[str]] = None) -> "Report":
-        """The report of the native call's ``info``, with the Python layer's ``notes`` and a
-        dict spec's key ``paths`` for the lines its messages name."""
+        """The report of the native call's ``info`` (the library's report as a dict, its
+        messages as parts), with the Python layer's ``notes`` and a dict spec's key ``paths``
+        for the lines its messages name."""
         known = {k: info.get(k) for k in Report.__dataclass_fields__}
-        known["points"] = info["samples"]
-        known["foldovers"], known["foldovers_checked"] = info["foldovers"]
-        energies = list(info.get("energies", []))
-        known["energies"] = energies
-        known["timings_s"] = info.get("timings", {})
-        fixed = info.get("residual_fixed_max") or 0.0
-        handle = info.get("residual_handle_max") or 0.0
-        known["residual_fixed_max"], known["residual_handle_max"] = fixed, handle
-        known["residual_max"] = max(fixed, handle)
+        known["cell_levels"] = {int(k): v for k, v in (info.get("cell_levels") or {}).items()}
         known["warnings"] = _lines_said(list(info.get("warnings", [])), paths)
         known["notes"] = _lines_said(list(info.get("notes", [])) + list(notes or []), paths)
         turns = [dict(t) for t in info.get("handle_turns", [])]

@@ -1,6 +1,6 @@
 import os
 from dataclasses import dataclass
-from typing import Any, Callable, List, Literal, NamedTuple, Optional, Sequence, Tuple, Union, overload
+from typing import Any, Callable, Dict, List, Literal, NamedTuple, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
 
@@ -37,27 +37,43 @@ class RigidCellsWarning(UserWarning):
 
 @dataclass
 class Report:
-    """What a deformation did (the command line's report)."""
+    """What a deformation did: the library's report (`deform --report`), the same keys."""
 
+    input: str
+    inputs: List[str]
+    output: str
     points: int
     cells: int
+    cells_initial: int
     cell_size: float
+    cell_levels: Dict[int, int]
+    cell_roles: Dict[str, int]
     iterations: int
-    energy: float
-    energies: List[float]
+    load_steps: int
+    load_step_halvings: int
+    handle_turns: List[dict]
+    linear_solver: str
+    linear_iterations: int
+    levels: int
+    energy: List[float]
     converged: bool
+    iteration_log: List[dict]
     residual_max: float
     residual_fixed_max: float
     residual_handle_max: float
+    residual_samples: int
+    target_residual_max: float
     foldovers: int
     foldovers_checked: int
+    timings_s: dict
+    peak_memory_bytes: Optional[int]
+    estimate: Optional[dict]
     warnings: List[str]
     notes: List[str]
-    timings_s: dict
-    handle_turns: List[dict]
     control_points: List[dict]
     control_rounding: Optional[str]
     control_rmse: Optional[float]
+    control_rmse_left_out: Optional[float]
     control_trend: Optional[str]
     checkpoints: Optional[dict]
     normals: Optional[np.ndarray] = ...
