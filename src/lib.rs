@@ -26,8 +26,9 @@
 //! - **Points in memory:** [`deform`] (the moved points, the solution, a [`DeformInfo`]), or
 //!   [`solve_points`] for the field alone, to apply to these or other points.
 //! - **Files** (LAS/LAZ/COPC, PLY, OBJ, XYZ, streamed whatever their size): [`deform_file`] and
-//!   [`FileInfo`]; [`solve_files`] solves over tiles and saves a [`SavedField`], which
-//!   [`apply_file`] applies to any file with [`ApplyParams`].
+//!   [`FileInfo`], or [`deform_file_with`] and the [`Outputs`] beside the file (a saved field,
+//!   the report, a preview; the chunk size); [`solve_files`] solves over tiles and saves a
+//!   [`SavedField`], which [`apply_file`] applies to any file with [`ApplyParams`].
 //! - **Live edits** (one set of cells, pose after pose): [`Live`].
 //! - **What happened:** [`Report`] (what `--report` writes), and every failure an [`Error`]
 //!   whose exit code the command line uses ([`Error::exit_code`]).
@@ -114,8 +115,8 @@ pub use error::{Error, Result};
 pub use field::SavedField;
 pub use pipeline::report::Report;
 pub use pipeline::{
-    ApplyParams, DeformInfo, DeformParams, FileInfo, Live, Options, apply_file, deform,
-    deform_file, preview, report, solve_files, solve_points,
+    ApplyParams, DeformInfo, DeformParams, FileInfo, Live, Options, Outputs, apply_file, deform,
+    deform_file, deform_file_with, preview, report, solve_files, solve_points,
 };
 pub use progress::{Observer, Silent};
 pub use spec::{EditSpec, HandleMotion, Region, parse_spec, read_spec};

@@ -24,7 +24,7 @@
 
 use std::fmt;
 
-/// An option of the command line and the library, by its meaning; [`Opt::flag`] is the
+/// An option of the command line and the library, by its meaning; [`Opt::name`] is the
 /// command line's name and [`Opt::keyword`] the Python package's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[non_exhaustive]

@@ -862,7 +862,7 @@ fn xyz_streams_like_the_whole_file() {
 #[test]
 fn the_preview_proxy_samples_the_input_and_the_output() {
     use rigidcells::field::Transfer;
-    use rigidcells::pipeline::{Options, deform_file};
+    use rigidcells::pipeline::Options;
     use rigidcells::progress::Silent;
     use rigidcells::spec::read_spec;
     let dir = tempfile::tempdir().unwrap();
@@ -886,7 +886,13 @@ fn the_preview_proxy_samples_the_input_and_the_output() {
     .params()
     .and_then(|p| p.with_proxy_samples(max))
     .unwrap();
-    let (_, info) = deform_file(&input, &output, &spec, &params, 4099, None, &Silent).unwrap();
+    let outputs = rigidcells::pipeline::Outputs {
+        chunk: Some(4099),
+        ..Default::default()
+    };
+    let (_, info, _) =
+        rigidcells::pipeline::deform_file_with(&input, &output, &spec, &params, &outputs, &Silent)
+            .unwrap();
     let proxy = &info.proxy;
     let n = rest.len() as u64;
     assert_eq!(proxy.stride, n.div_ceil(max as u64));

@@ -56,8 +56,9 @@ fn a_link_planted_beside_the_output_is_never_followed() {
         report: Some(&report),
         preview: None,
         keep_existing: false,
+        chunk: None,
     };
-    pipeline::deform_file_with(&input, &out, &spec, &params(), CHUNK, &outputs, &Silent).unwrap();
+    pipeline::deform_file_with(&input, &out, &spec, &params(), &outputs, &Silent).unwrap();
     assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
     for path in [&out, &field, &report] {
         let meta = std::fs::symlink_metadata(path).unwrap();
@@ -161,8 +162,9 @@ fn concurrent_runs_keep_each_others_outputs() {
                     report: Some(&report),
                     preview: None,
                     keep_existing: false,
+                    chunk: Some(97),
                 };
-                pipeline::deform_file_with(&input, &out, &good, &params(), 97, &outputs, &Silent)
+                pipeline::deform_file_with(&input, &out, &good, &params(), &outputs, &Silent)
             });
             let err = s.spawn(|| {
                 let outputs = Outputs {
@@ -170,8 +172,9 @@ fn concurrent_runs_keep_each_others_outputs() {
                     report: None,
                     preview: Some((&taken, Default::default(), false)),
                     keep_existing: false,
+                    chunk: Some(97),
                 };
-                pipeline::deform_file_with(&input, &failed, &good, &params(), 97, &outputs, &Silent)
+                pipeline::deform_file_with(&input, &failed, &good, &params(), &outputs, &Silent)
             });
             ok.join().unwrap().unwrap();
             let e = err.join().unwrap().unwrap_err();
@@ -198,11 +201,7 @@ fn concurrent_runs_keep_each_others_outputs() {
     let same = dir.path().join("same.ply");
     std::thread::scope(|s| {
         let runs: Vec<_> = (0..2)
-            .map(|_| {
-                s.spawn(|| {
-                    pipeline::deform_file(&input, &same, &good, &params(), 97, None, &Silent)
-                })
-            })
+            .map(|_| s.spawn(|| pipeline::deform_file(&input, &same, &good, &params(), &Silent)))
             .collect();
         for r in runs {
             r.join().unwrap().unwrap();
@@ -227,17 +226,20 @@ fn the_library_never_writes_over_its_input() {
         assert!(matches!(e, rigidcells::Error::Param(_)), "{e}");
         e.to_string()
     };
-    let m = refused(
-        pipeline::deform_file(&input, &input, &spec, &params(), CHUNK, None, &Silent).map(|_| ()),
-    );
+    let m = refused(pipeline::deform_file(&input, &input, &spec, &params(), &Silent).map(|_| ()));
     assert!(m.contains("overwrite the input"), "{m}");
+    let with_field = |field| Outputs {
+        save_field: Some(field),
+        ..Default::default()
+    };
     let m = refused(
-        pipeline::deform_file(&input, &out, &spec, &params(), CHUNK, Some(&out), &Silent)
+        pipeline::deform_file_with(&input, &out, &spec, &params(), &with_field(&out), &Silent)
             .map(|_| ()),
     );
     assert!(m.contains("name the same file"), "{m}");
     assert!(!out.exists());
-    pipeline::deform_file(&input, &out, &spec, &params(), CHUNK, Some(&field), &Silent).unwrap();
+    pipeline::deform_file_with(&input, &out, &spec, &params(), &with_field(&field), &Silent)
+        .unwrap();
     let field_bytes = std::fs::read(&field).unwrap();
     let apply = |to: &PathBuf| {
         pipeline::apply_file(&field, &out, to, &ApplyParams::default(), CHUNK, &Silent).map(|_| ())
@@ -264,7 +266,11 @@ fn the_library_checks_its_arguments_before_any_work() {
     .params()
     .unwrap();
     let run = |output: &Path, chunk: usize| {
-        pipeline::deform_file(&input, output, &spec, &tiny, chunk, None, &Silent)
+        let outputs = Outputs {
+            chunk: Some(chunk),
+            ..Default::default()
+        };
+        pipeline::deform_file_with(&input, output, &spec, &tiny, &outputs, &Silent)
             .map(|_| ())
             .unwrap_err()
     };
@@ -277,7 +283,7 @@ fn the_library_checks_its_arguments_before_any_work() {
     assert!(e.to_string().contains("--chunk 0"), "{e}");
     let long = dir.path().join(format!("{}.ply", "é".repeat(125)));
     assert_eq!(long.file_name().unwrap().len(), 254);
-    pipeline::deform_file(&input, &long, &spec, &params(), CHUNK, None, &Silent).unwrap();
+    pipeline::deform_file(&input, &long, &spec, &params(), &Silent).unwrap();
     assert!(long.exists());
 }
 

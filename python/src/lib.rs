@@ -519,11 +519,12 @@ fn deform_file<'py>(
         report: report.as_deref(),
         preview: preview.as_deref().map(|p| (p, view, strain)),
         keep_existing: false,
+        chunk: Some(chunk),
     };
     let observer = PyObserver::new(progress);
     let result = py.detach(|| -> rigidcells::Result<_> {
         rigidcells::io::refuse_overwrite(&input, &output)?;
-        pipeline::deform_file_with(&input, &output, &spec, &params, chunk, &outputs, &observer)
+        pipeline::deform_file_with(&input, &output, &spec, &params, &outputs, &observer)
     });
     let (_, _, report) = observer.result(result)?;
     report_dict(py, &report)
@@ -578,18 +579,11 @@ fn solve_files<'py>(
         report: report.as_deref(),
         preview: preview.as_deref().map(|p| (p, view, strain)),
         keep_existing: false,
+        chunk: Some(chunk),
     };
     let observer = PyObserver::new(progress);
-    let result = py.detach(|| {
-        pipeline::solve_files(
-            &inputs,
-            &spec,
-            &params,
-            chunk,
-            (&outputs, same_crs),
-            &observer,
-        )
-    });
+    let result = py
+        .detach(|| pipeline::solve_files(&inputs, &spec, &params, (&outputs, same_crs), &observer));
     let (_, _, report) = observer.result(result)?;
     report_dict(py, &report)
 }

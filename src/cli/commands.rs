@@ -87,15 +87,18 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         return run_deform_xy(args);
     }
     let params = args.params()?;
-    let outputs = args
-        .reports
-        .outputs(args.save_field.as_deref(), &args.input)?;
+    let outputs = pipeline::Outputs {
+        chunk: Some(chunk),
+        ..args
+            .reports
+            .outputs(args.save_field.as_deref(), &args.input)?
+    };
     let files = (
         args.input.as_path(),
         args.output.as_path(),
         args.edit.as_path(),
     );
-    deform_file(files, &params, chunk, &outputs, args.quiet)
+    deform_file(files, &params, &outputs, args.quiet)
 }
 
 /// `deform` of the file `input` into `output` under the spec in `edit`, with the `outputs`
@@ -103,14 +106,13 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
 fn deform_file(
     (input, output, edit): (&Path, &Path, &Path),
     params: &DeformParams,
-    chunk: usize,
     outputs: &pipeline::Outputs,
     quiet: bool,
 ) -> anyhow::Result<()> {
     let spec = read_spec::<3>(edit)?;
     let bar = Bar::new(quiet);
     let (_, info, summary) =
-        pipeline::deform_file_with(input, output, &spec, params, chunk, outputs, &bar)?;
+        pipeline::deform_file_with(input, output, &spec, params, outputs, &bar)?;
     if !quiet {
         for w in &summary.warnings {
             eprintln!("warning: {w}");
@@ -375,15 +377,17 @@ pub(super) fn run_solve(args: &SolveArgs) -> anyhow::Result<()> {
     let chunk = pipeline::check_chunk(args.chunk)?;
     let spec = read_spec::<3>(&args.edit)?;
     let params = args.params()?;
-    let outputs = args
-        .reports
-        .outputs(Some(&args.save_field), &args.inputs[0])?;
+    let outputs = pipeline::Outputs {
+        chunk: Some(chunk),
+        ..args
+            .reports
+            .outputs(Some(&args.save_field), &args.inputs[0])?
+    };
     let bar = Bar::new(args.quiet);
     let (_, info, report) = pipeline::solve_files(
         &args.inputs,
         &spec,
         &params,
-        chunk,
         (&outputs, args.same_crs),
         &bar,
     )?;
@@ -425,7 +429,7 @@ pub(super) fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
             job.output.as_path(),
             job.edit.as_path(),
         );
-        deform_file(files, &job.params, CHUNK, &Default::default(), quiet)?;
+        deform_file(files, &job.params, &Default::default(), quiet)?;
     }
     let p = &demo.picture;
     image_job(&p.input, &p.edit, &p.output, None, &p.params, quiet)?;

@@ -310,6 +310,7 @@ impl ReportArgs {
             report: self.report.as_deref(),
             preview: self.preview.as_deref().map(|p| (p, view, self.strain)),
             keep_existing: false,
+            chunk: None,
         })
     }
 }

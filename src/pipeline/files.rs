@@ -92,32 +92,21 @@ impl ApplyParams {
 /// Deforms the file `input` into `output` in two streaming passes: pass 1 builds
 /// the cells from occupancy and gathers what the spec's regions select, never holding all
 /// samples (meshes excepted: their triangles need the vertices); the solve runs on the cells;
-/// pass 2 streams chunks of `chunk` samples through the field, in file order, into the output.
-/// With `save_field`, the solved field (with its transfer, and the RBF's coefficients when that
-/// is the transfer) is written there too; [`apply_file`] with it writes the same bytes. The
-/// outputs appear together at the end, or, on an error, not at all; an output that names the
-/// input, or two that name one file, are refused before any work.
+/// pass 2 streams chunks of [`CHUNK`] samples through the field, in file order, into the
+/// output. The output appears at the end, or, on an error, not at all; an output that names
+/// the input is refused before any work. [`super::deform_file_with`] writes the field, the
+/// report and the preview beside it, and streams chunks of another size.
 pub fn deform_file(
     input: &Path,
     output: &Path,
     spec: &EditSpec<3>,
     params: &DeformParams,
-    chunk: usize,
-    save_field: Option<&Path>,
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo)> {
-    let set = ResultSet::new();
-    let done = deform_in(
-        &set,
-        input,
-        (output, save_field),
-        spec,
-        params,
-        chunk,
-        observer,
-    )?;
-    set.commit()?;
-    Ok(done)
+    let outputs = super::Outputs::default();
+    let (solution, info, _) =
+        super::deform_file_with(input, output, spec, params, &outputs, observer)?;
+    Ok((solution, info))
 }
 
 /// Refuses, before any work and in every face, `outputs` (each with what it is, for the

@@ -36,24 +36,34 @@ pub struct Outputs<'a> {
     /// works (the editor's *Apply* to a name that was free when its user asked): the run then
     /// fails at its end, naming the file, and leaves it as it is.
     pub keep_existing: bool,
+    /// Samples per chunk of the streamed passes (`None`: [`super::CHUNK`]; at most
+    /// [`super::MAX_CHUNK`] are taken): memory, not results — every size writes the same
+    /// bytes.
+    pub chunk: Option<usize>,
+}
+
+impl Outputs<'_> {
+    /// Samples per chunk: [`Outputs::chunk`]'s ([`super::check_chunk`]), or [`super::CHUNK`].
+    fn chunk(&self) -> Result<usize> {
+        self.chunk.map_or(Ok(super::CHUNK), super::check_chunk)
+    }
 }
 
 /// [`super::deform_file`] of `input` into `output` with the `outputs` beside it: the proxy is the
 /// preview's when a preview is asked (else the fold-over check's). The files are renamed into
 /// place together at the end: an error or an interrupt on the way leaves none of them, and an
 /// output that names the input, or two that name one file, are refused before any work.
-/// Returns the solution, what the pass did and
-/// the report (whether or not it is written).
+/// Returns the solution, what the pass did and the report (whether or not it is written).
 pub fn deform_file_with(
     input: &Path,
     output: &Path,
     spec: &EditSpec<3>,
     params: &DeformParams,
-    chunk: usize,
     outputs: &Outputs,
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo, Report)> {
     let start = Instant::now();
+    let chunk = outputs.chunk()?;
     let mut named = vec![("the output", output)];
     named.extend(outputs.save_field.map(|p| ("the saved field", p)));
     let params = prepare(&[input], named, outputs, params)?;
@@ -84,11 +94,11 @@ pub fn solve_files(
     inputs: &[PathBuf],
     spec: &EditSpec<3>,
     params: &DeformParams,
-    chunk: usize,
     (outputs, same_crs): (&Outputs, bool),
     observer: &dyn Observer,
 ) -> Result<(Solution<3>, FileInfo, Report)> {
     let start = Instant::now();
+    let chunk = outputs.chunk()?;
     let Some(field) = outputs.save_field else {
         return Err(Error::param(
             Said::from("a solve writes a field: name its file (")
@@ -133,10 +143,11 @@ fn prepare<'a>(
         view.check()?;
     }
     Ok(DeformParams {
-        proxy_samples: Some(match outputs.preview {
+        // The caller's proxy ([`DeformParams::with_proxy_samples`]) where it chose one.
+        proxy_samples: params.proxy_samples.or(Some(match outputs.preview {
             Some(_) => PROXY_SAMPLES,
             None => FOLDOVER_SAMPLES,
-        }),
+        })),
         ..*params
     })
 }

@@ -440,7 +440,6 @@ fn deform(job: &Job, progress: &Progress) -> Result<(u64, Vec<Said>)> {
         &job.output,
         &spec,
         &job.params,
-        crate::pipeline::CHUNK,
         &crate::pipeline::Outputs {
             keep_existing: job.keep_existing,
             ..Default::default()

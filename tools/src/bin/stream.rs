@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use las::{Builder, LazParallelism, PointDataBuilder, ReaderOptions, WriterOptions};
 use rigidcells::field::Transfer;
-use rigidcells::pipeline::{CHUNK, Options, deform_file};
+use rigidcells::pipeline::{Options, deform_file};
 use rigidcells::progress::Silent;
 use rigidcells::spec::{parse_spec, read_spec};
 
@@ -86,7 +86,7 @@ fn main() {
             let _ = std::fs::remove_file(&copy_out);
         }
         let t = Instant::now();
-        let (_, info) = deform_file(&input, &out, &spec, &params, CHUNK, None, &Silent).unwrap();
+        let (_, info) = deform_file(&input, &out, &spec, &params, &Silent).unwrap();
         deforms.push(t.elapsed().as_secs_f64());
         let _ = std::fs::remove_file(&out);
         last = Some(info);
