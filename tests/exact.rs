@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 
 use common::{arg as s, deform, records, run, shared};
-use rigidcells::field::{Constrained, Deformer, Field, Outside, Transfer, Warp};
+use rigidcells::field::{Deformer, Field, FieldMap, Outside, Transfer, Warp};
 use rigidcells::io::{Document, LasHeader};
 use rigidcells::pipeline::{self, Options};
 use rigidcells::progress::Silent;
@@ -198,7 +198,7 @@ fn exact_regions_blend_smoothly_into_the_field() {
         0.25,
     );
     for transfer in [Transfer::Rbf, Transfer::Pu, Transfer::Blend] {
-        let map = Constrained::new(
+        let map = FieldMap::new(
             &field,
             Deformer::new(&field, transfer).unwrap(),
             Outside::Extend,
@@ -246,7 +246,7 @@ fn the_border_takes_a_twist_up_without_a_collar() {
         cell,
     );
     for transfer in [Transfer::Pu, Transfer::Rbf, Transfer::Blend] {
-        let map = Constrained::new(
+        let map = FieldMap::new(
             &field,
             Deformer::new(&field, transfer).unwrap(),
             Outside::Extend,

@@ -1,5 +1,5 @@
 //! The field's domain: the margin of voxels around its cells within which a sample counts as
-//! inside (see [`super::Constrained`]), and the [`Frame`] a saved field keeps of it.
+//! inside (see [`super::FieldMap`]), and the [`Frame`] a saved field keeps of it.
 
 use rustc_hash::FxHashSet;
 

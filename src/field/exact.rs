@@ -4,7 +4,7 @@
 //! **Constraints are exact, and the map stays smooth.** The blend and the RBF interpolate the
 //! cells' motions between their centers, so a sample inside a fixed region but near its border
 //! (or anywhere inside it, with the RBF) moved a little, and a handle's samples missed its
-//! transform. [`Constrained`] adds, for every region `r` of cells that follow one prescribed map
+//! transform. [`FieldMap`] adds, for every region `r` of cells that follow one prescribed map
 //! `A_r` (the fixed cells and the cells kept at rest follow the identity; each handle its
 //! transform; a pinned cell and the cells of a loose part carried along, their own rigid
 //! motion), a weight `w_r` that is 1 on the region's cells and falls to 0 over a band of two of
@@ -68,7 +68,7 @@
 //! outer boundary, aligned with the cells) around each voxel that such a cell meets. So every
 //! sample within that cell size of a cell (in each axis) is inside, and none farther than twice
 //! that. What happens beyond is [`Outside`]: refused (the default of `apply`), kept unchanged,
-//! or extended by the transfer as it is. Either way they are counted ([`Constrained::outside`]).
+//! or extended by the transfer as it is. Either way they are counted ([`FieldMap::outside`]).
 //!
 //! **Lookups.** The cells are the leaves of an octree, which is rebuilt from their centers and
 //! sizes alone (the field file stores nothing more, and `deform` and `apply` then locate samples
@@ -213,8 +213,9 @@ struct Bands<const D: usize> {
 /// `k = Σ_a (o_a + 1)·3^a`).
 type Masks = ([(u32, u32); 4], usize);
 
-/// The transfer `inner` with exact constraints and a guarded domain; see the module docs.
-pub struct Constrained<const D: usize> {
+/// A field's map of space, what [`crate::SavedField::deformer`] gives: its transfer (`inner`),
+/// exact in the regions the spec prescribes, within a guarded domain; see the module docs.
+pub struct FieldMap<const D: usize> {
     inner: Deformer<D>,
     origin: Vect<D>,
     halves: Vec<f64>,
@@ -232,7 +233,7 @@ pub struct Constrained<const D: usize> {
     bounds: (Vect<D>, Vect<D>),
     outside: Outside,
     tally: Mutex<OutsideTally<D>>,
-    /// For a window of a field's cells ([`Constrained::in_window`]): the box (local) its
+    /// For a window of a field's cells ([`FieldMap::in_window`]): the box (local) its
     /// samples must lie in, and how many did not.
     window: Option<(Vect<D>, Vect<D>)>,
     beyond_window: std::sync::atomic::AtomicUsize,
@@ -243,7 +244,7 @@ pub struct Constrained<const D: usize> {
 }
 
 /// What a window of a field's cells needs from the whole field to treat samples as the whole
-/// field does ([`Constrained::in_window`]; saved in field files).
+/// field does ([`FieldMap::in_window`]; saved in field files).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame<const D: usize> {
     /// The voxel grid of the leaves: voxel 0's lower corner (local) and the voxels' edge.
@@ -339,7 +340,7 @@ fn fall(v: f64) -> f64 {
     (integral / (u + a)).clamp(0.0, 1.0)
 }
 
-impl<const D: usize> Constrained<D>
+impl<const D: usize> FieldMap<D>
 where
     Dim<D>: Rigid<D>,
 {
@@ -363,11 +364,11 @@ where
         Self::assemble(field, inner, outside, leaves, None, (lo, hi), None)
     }
 
-    /// `inner` for the cells of a window of a field, as [`Constrained::new`] for the whole
+    /// `inner` for the cells of a window of a field, as [`FieldMap::new`] for the whole
     /// field would map every sample in the box `window` (local) when the window holds every
     /// cell within [`Frame::reach`] of that box: the leaves on the whole field's grid, its
     /// margin's voxel size and its bounds from `frame`. Samples outside `window` are counted
-    /// ([`Constrained::beyond_window`]); their results are not the whole field's.
+    /// ([`FieldMap::beyond_window`]); their results are not the whole field's.
     pub fn in_window(
         field: &Field<D>,
         inner: Deformer<D>,
@@ -434,7 +435,7 @@ where
         })
     }
 
-    /// What a window of this field's cells needs from it ([`Constrained::in_window`]).
+    /// What a window of this field's cells needs from it ([`FieldMap::in_window`]).
     pub fn frame(&self) -> Frame<D> {
         Frame {
             lower: self.leaves.lower,
@@ -445,7 +446,7 @@ where
         }
     }
 
-    /// Samples met outside the window's box ([`Constrained::in_window`]; 0 for a whole
+    /// Samples met outside the window's box ([`FieldMap::in_window`]; 0 for a whole
     /// field): when any were, the results are not the whole field's.
     pub fn beyond_window(&self) -> usize {
         self.beyond_window
@@ -486,7 +487,7 @@ where
         &self.inner
     }
 
-    /// The samples beyond the margin met since the last [`Constrained::reset_outside`], by
+    /// The samples beyond the margin met since the last [`FieldMap::reset_outside`], by
     /// [`Warp::warp_run`] and [`Warp::warp_with_normal`] (the calls that produce output).
     pub fn outside(&self) -> OutsideTally<D> {
         *self.tally.lock().expect("not poisoned")
@@ -744,7 +745,7 @@ where
     }
 }
 
-impl<const D: usize> Warp<D> for Constrained<D>
+impl<const D: usize> Warp<D> for FieldMap<D>
 where
     Dim<D>: Rigid<D>,
 {

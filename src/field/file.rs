@@ -34,7 +34,7 @@
 //! margin and its bands. The [`Frame`] carries what those lookups take from the whole field
 //! (its voxel grid, margin voxel and bounds). Memory and time then grow with the tile, not
 //! with the field; a sample outside the box (a header whose bounds are wrong) is counted
-//! ([`Constrained::beyond_window`]) and `apply` starts again with the whole field. The PU
+//! ([`FieldMap::beyond_window`]) and `apply` starts again with the whole field. The PU
 //! coefficients themselves are not stored: each patch's fit is a small dense solve of its own
 //! cells on one thread, the same bits wherever it runs, and cheaper to redo than to read
 //! (a patch's weights and cell list would take about three times the cells' bytes).
@@ -51,7 +51,7 @@
 //! keep no height and have no trend.
 //!
 //! Version 2 added the transfer `deform` used (what `apply` uses unless told otherwise) and the
-//! maps that fixed and handle cells follow exactly ([`super::Constrained`]). Version 1 files
+//! maps that fixed and handle cells follow exactly ([`super::FieldMap`]). Version 1 files
 //! still load: their transfer is the RBF (the one they were saved for) and they prescribe no
 //! cell, so their constraints are as exact as the transfer makes them.
 

@@ -1,6 +1,6 @@
 //! The leaves of an octree rebuilt from cell centers and sizes alone: what a saved field holds
 //! is enough to locate samples among its cells with the same integer arithmetic in `deform` and
-//! `apply` (used by [`super::Constrained`]).
+//! `apply` (used by [`super::FieldMap`]).
 
 use rustc_hash::FxHashMap;
 
@@ -127,7 +127,7 @@ impl<const D: usize> Leaves<D> {
     }
 }
 
-/// Whether the cells of `field` are the leaves of an octree, as [`super::Constrained`] needs.
+/// Whether the cells of `field` are the leaves of an octree, as [`super::FieldMap`] needs.
 pub(crate) fn check_cells<const D: usize>(field: &Field<D>) -> std::result::Result<(), String> {
     Leaves::new(&field.centers, &field.halves).map(|_| ())
 }

@@ -1,8 +1,8 @@
 //! The maps of a saved field: [`SavedField::deformer`] and its variants, each a transfer over
 //! the field's cells with the exact constraints and the policy beyond the margin
-//! ([`Constrained`]), all made by one constructor (`assemble`) but a window's.
+//! ([`FieldMap`]), all made by one constructor (`assemble`) but a window's.
 
-use super::{Constrained, Deformer, Field, Outside, PuRbf, Rbf, SavedField, Transfer};
+use super::{Deformer, Field, FieldMap, Outside, PuRbf, Rbf, SavedField, Transfer};
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, Rigid};
 
@@ -25,13 +25,13 @@ where
     /// constructor (`SavedField::assemble`): the in-memory deform, the streamed file, the
     /// editor's release, a tile's apply and the Python package's fields. A window of a file
     /// ([`SavedField::load_window`]) is mapped here too, but from the PU patches the file holds
-    /// ([`Constrained::in_window`]), without `assemble`.
+    /// ([`FieldMap::in_window`]), without `assemble`.
     pub fn deformer(
         self,
         transfer: Option<Transfer>,
         rbf_tolerance: Option<f64>,
         outside: Outside,
-    ) -> Result<Constrained<D>> {
+    ) -> Result<FieldMap<D>> {
         self.deformer_with(transfer, rbf_tolerance, outside, Fits::All)
     }
 
@@ -43,7 +43,7 @@ where
         transfer: Option<Transfer>,
         rbf_tolerance: Option<f64>,
         outside: Outside,
-    ) -> Result<Constrained<D>> {
+    ) -> Result<FieldMap<D>> {
         if self.window.is_some() {
             return Err(Error::param(
                 "a window of a saved field is applied once, through `deformer`",
@@ -73,7 +73,7 @@ where
         transfer: Option<Transfer>,
         rbf_tolerance: Option<f64>,
         outside: Outside,
-    ) -> Result<Constrained<D>> {
+    ) -> Result<FieldMap<D>> {
         self.deformer_with(transfer, rbf_tolerance, outside, Fits::OnDemand)
     }
 
@@ -83,7 +83,7 @@ where
         rbf_tolerance: Option<f64>,
         outside: Outside,
         fits: Fits,
-    ) -> Result<Constrained<D>> {
+    ) -> Result<FieldMap<D>> {
         let transfer = transfer.unwrap_or(self.transfer);
         if let Some(w) = self.window {
             if transfer != Transfer::Pu {
@@ -92,7 +92,7 @@ where
                 ));
             }
             let inner = Deformer::Pu(Box::new(PuRbf::from_layout(&self.field, w.layout)?));
-            return Constrained::in_window(&self.field, inner, outside, &w.frame, w.samples);
+            return FieldMap::in_window(&self.field, inner, outside, &w.frame, w.samples);
         }
         Self::assemble(
             &self.field,
@@ -115,7 +115,7 @@ where
         fits: Fits,
         rbf_tolerance: Option<f64>,
         outside: Outside,
-    ) -> Result<Constrained<D>> {
+    ) -> Result<FieldMap<D>> {
         let inner = match (transfer, rbf) {
             (Transfer::Rbf, Some(r)) => Deformer::Rbf(r),
             (t, _) => match fits {
@@ -124,6 +124,6 @@ where
             },
         }
         .with_rbf_tolerance(rbf_tolerance)?;
-        Constrained::new(field, inner, outside)
+        FieldMap::new(field, inner, outside)
     }
 }

@@ -28,7 +28,7 @@ mod rbf;
 mod simd;
 
 pub use blend::{Blend, Weights};
-pub use exact::{Constrained, Frame, Outside, OutsideTally, Prescribed, UNPRESCRIBED};
+pub use exact::{FieldMap, Frame, Outside, OutsideTally, Prescribed, UNPRESCRIBED};
 pub use file::SavedField;
 pub use nearest::{Anchor, NEAR, Nearest, Neighbors};
 pub use order::Order;
@@ -53,10 +53,10 @@ pub struct Field<const D: usize> {
     pub halves: Vec<f64>,
     /// Rigid motion of each cell (local).
     pub motions: Vec<Motion<D>>,
-    /// The maps that the fixed and handle cells follow exactly ([`Constrained`]).
+    /// The maps that the fixed and handle cells follow exactly ([`FieldMap`]).
     pub prescribed: Prescribed<D>,
     /// The field moves the horizontal coordinates only: every sample keeps its last
-    /// coordinate (its height) as it came ([`Constrained`]). So it is for a scan pulled by 2D
+    /// coordinate (its height) as it came ([`FieldMap`]). So it is for a scan pulled by 2D
     /// control points alone ([`Field::from_solution`]), which prescribe no height.
     pub heights_kept: bool,
     /// The control points' trend `T` (local frame; `crate::solve::trend`): the transfer's

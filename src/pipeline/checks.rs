@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::field::{Constrained, Outside, Warp, count_foldovers};
+use crate::field::{FieldMap, Outside, Warp, count_foldovers};
 use crate::io::Chunk;
 use crate::rigid::Vect;
 use crate::said::Said;
@@ -65,7 +65,7 @@ pub(super) fn check_finite(path: &Path, chunk: &Chunk) -> Result<()> {
 }
 
 /// [`Error::Outside`] when `warp` refuses samples beyond its margin and met some.
-pub(super) fn refuse_outside(input: &Path, warp: &Constrained<3>) -> Result<()> {
+pub(super) fn refuse_outside(input: &Path, warp: &FieldMap<3>) -> Result<()> {
     let tally = warp.outside();
     if warp.outside_policy() != Outside::Refuse || tally.count == 0 {
         return Ok(());

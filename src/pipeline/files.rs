@@ -6,7 +6,7 @@ use std::time::Instant;
 use crate::cells::{BuildInfo, CellComplex};
 use crate::control::ControlPoint;
 use crate::error::{Error, Result};
-use crate::field::{Constrained, Deformer, Outside, SavedField, Transfer, apply};
+use crate::field::{Deformer, FieldMap, Outside, SavedField, Transfer, apply};
 use crate::io::{self, ResultSet, Source};
 use crate::memory::Budget;
 use crate::progress::Observer;
@@ -212,7 +212,7 @@ pub(super) fn deform_in(
 struct Solved {
     solution: Solution<3>,
     /// The field's map (the chosen transfer with its exact regions), extended beyond the margin.
-    deformer: Constrained<3>,
+    deformer: FieldMap<3>,
     /// The local frame's origin in world coordinates.
     origin: Vect<3>,
     build: BuildInfo,

@@ -12,7 +12,7 @@
 //! it was and each inside a handle's cell should follow the handle's motion; `residual_max` is
 //! the largest distance of such a sample from there, in input units (zero when the proxy holds
 //! none). `residual_fixed_max` and `residual_handle_max` split it by role. Every transfer makes
-//! fixed and handle samples exact ([`crate::field::Constrained`]), so these are zero up to the
+//! fixed and handle samples exact ([`crate::field::FieldMap`]), so these are zero up to the
 //! rounding of the handle's transform. Soft targets are reported apart, as the distance of each
 //! target's point under its cell's motion (and the control points' trend) from the target
 //! (`target_residual_max`): a soft target is not met exactly by design.

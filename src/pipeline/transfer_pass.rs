@@ -8,7 +8,7 @@ use std::sync::mpsc;
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
-use crate::field::{Constrained, Order, Warp, apply_in_order};
+use crate::field::{FieldMap, Order, Warp, apply_in_order};
 use crate::io::{Accepted, Bounds, Chunk, ResultSet, Sink, Source};
 use crate::progress::Observer;
 use crate::rigid::Vect;
@@ -51,7 +51,7 @@ const IN_FLIGHT: usize = 5;
 pub(super) fn transfer_pass(
     source: &mut dyn Source,
     (output, set): (&Path, &ResultSet),
-    warp: &Constrained<3>,
+    warp: &FieldMap<3>,
     origin: &Vect<3>,
     moved: Option<&[Vect<3>]>,
     probe: &mut [Vect<3>],

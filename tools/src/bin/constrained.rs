@@ -1,4 +1,4 @@
-//! What the exact-constraint layer ([`rigidcells::field::Constrained`]) costs: the blend and
+//! What the exact-constraint layer ([`rigidcells::field::FieldMap`]) costs: the blend and
 //! the RBF alone against the same transfers with fixed and handle samples made exact and the
 //! domain checked, on the same samples in the same run (medians of 5 alternating runs).
 //!
@@ -8,7 +8,7 @@
 
 use std::time::Instant;
 
-use rigidcells::field::{Constrained, Deformer, Field, Outside, Transfer, Warp, apply};
+use rigidcells::field::{Deformer, Field, FieldMap, Outside, Transfer, Warp, apply};
 use rigidcells::io::Document;
 use rigidcells::rigid::Vect;
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
@@ -54,7 +54,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let alone = Deformer::new(&field, transfer)?;
         let inner = Deformer::new(&field, transfer)?;
         let t = Instant::now();
-        let layered = Constrained::new(&field, inner, Outside::Refuse)?;
+        let layered = FieldMap::new(&field, inner, Outside::Refuse)?;
         let build = t.elapsed().as_secs_f64();
         let (mut a, mut b) = (Vec::new(), Vec::new());
         for _ in 0..5 {
