@@ -10,7 +10,7 @@ use crate::field::Transfer;
 use crate::pipeline::{DeformParams, Options};
 
 /// The edit of the bar and the soup: the left end fixed, the right end turned 90° upwards.
-pub const BEND_SPEC: &str = "# Bend the bar 90 degrees upwards: fix the left end, turn the right end.\n\
+pub(crate) const BEND_SPEC: &str = "# Bend the bar 90 degrees upwards: fix the left end, turn the right end.\n\
     [[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\n\
     [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
     rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\n\

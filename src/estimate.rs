@@ -7,7 +7,7 @@
 //!   known and the empty space is tiled, before the tiles are classified (a winding number
 //!   each: most of a large build's time) or any leaf is made. [`check_forecast`] refuses a run
 //!   whose cells cannot be solved within the budget even by the leanest path: the complex and
-//!   the multilevel solver's finest level, [`FLOOR_BYTES_PER_CELL`] a cell.
+//!   the multilevel solver's finest level, `FLOOR_BYTES_PER_CELL` a cell.
 //! - **The solve's estimate** (`solve::forecast`), once the complex and the roles are known,
 //!   before the solve's first stage: the symbolic analysis of the free cells' graph (a node a
 //!   cell, AMD, as the direct solver's own analysis orders the unknowns) gives the Cholesky
@@ -21,8 +21,8 @@
 //! The prices are the constants below, measured on the development machine (2 cores, release
 //! build; BENCHMARKS.md, "What a run will take"). They assume that machine's speed: the
 //! seconds scale with the cores and the memory bandwidth, the bytes do not. The iterations
-//! are the typical counts of a solve coarse to fine ([`ITERATIONS_PER_LOAD_STEP`] a load step
-//! on the coarsest cells, [`ITERATIONS_PER_STAGE`] on each finer stage): an edit that needs
+//! are the typical counts of a solve coarse to fine (`ITERATIONS_PER_LOAD_STEP` a load step
+//! on the coarsest cells, `ITERATIONS_PER_STAGE` on each finer stage): an edit that needs
 //! more (a twist of several turns, a stiff target) takes longer than estimated; the memory does
 //! not depend on them.
 
@@ -163,18 +163,18 @@ fn duration(seconds: f64) -> String {
 /// The complex, the roles, the motions and their copies (the line search's trial, the load
 /// step's start and prediction), the solver's layout, the field: bytes a cell, over
 /// [`BYTES_PER_PAIR`] a face pair, the position system's factor and the linear solver.
-pub const BYTES_PER_CELL: f64 = 1200.0;
+pub(crate) const BYTES_PER_CELL: f64 = 1200.0;
 /// A face pair: its entry in the complex, its quadrature and its slot in the system's layout.
-pub const BYTES_PER_PAIR: f64 = 60.0;
+pub(crate) const BYTES_PER_PAIR: f64 = 60.0;
 /// A cell of the complex alone: the cell and its entry in the index of keys.
-pub const COMPLEX_BYTES_PER_CELL: f64 = 150.0;
+pub(crate) const COMPLEX_BYTES_PER_CELL: f64 = 150.0;
 /// The least a cell costs a solve, the complex and the multilevel solver's finest level
 /// included (its matrix in `f64` and `f32`, the block inverses, the smoothed prolongation):
 /// what [`check_forecast`] refuses on before the cells are built.
-pub const FLOOR_BYTES_PER_CELL: f64 = 6000.0;
+pub(crate) const FLOOR_BYTES_PER_CELL: f64 = 6000.0;
 /// The cells' construction: bytes an occupied finest cell (its code, the pyramid, the blocks
 /// and their classification, the leaves), as `cells::build` checks it.
-pub const BUILD_BYTES_PER_OCCUPIED: f64 = 1024.0;
+pub(crate) const BUILD_BYTES_PER_OCCUPIED: f64 = 1024.0;
 
 // ----- Time: rates measured on the development machine. -----
 
@@ -182,45 +182,45 @@ pub const BUILD_BYTES_PER_OCCUPIED: f64 = 1024.0;
 /// supernodal, 32-bit indices), as the symbolic analysis of the cells' graph counts them: the
 /// bar at 0.02 factors 1.3e12 of them in 38–148 s, at 0.05 1.4e11 in 6–13 s, as the load of
 /// the shared machine varies.
-pub const FLOPS_PER_SECOND: f64 = 2.0e10;
+pub(crate) const FLOPS_PER_SECOND: f64 = 2.0e10;
 /// Multiply-adds a second of the multilevel path's coarsest factorization (faer's `Llt`,
 /// `usize` indices: 1.0e12 in 139 s, 1.1e11 in 13 s on a loaded machine).
-pub const COARSEST_FLOPS_PER_SECOND: f64 = 1.2e10;
+pub(crate) const COARSEST_FLOPS_PER_SECOND: f64 = 1.2e10;
 /// Seconds an assembled entry costs the direct path's symbolic analysis (AMD over the
 /// unknowns, the pattern) and the position system's, once a stage.
-pub const SYMBOLIC_SECONDS_PER_ENTRY: f64 = 2.2e-7;
+pub(crate) const SYMBOLIC_SECONDS_PER_ENTRY: f64 = 2.2e-7;
 /// Seconds a cell of the cells' construction (rasterizing, tiling, the leaves, adjacency).
-pub const BUILD_SECONDS_PER_CELL: f64 = 3.0e-6;
+pub(crate) const BUILD_SECONDS_PER_CELL: f64 = 3.0e-6;
 /// Seconds a block of the empty space classified by its winding number.
-pub const WINDING_SECONDS_PER_BLOCK: f64 = 1.2e-5;
+pub(crate) const WINDING_SECONDS_PER_BLOCK: f64 = 1.2e-5;
 /// Seconds a Gauss-Newton iteration spends a cell and a coupled pair on assembly, the line
 /// search and the position projection.
-pub const ITERATION_SECONDS_PER_ENTRY: f64 = 4.0e-6;
+pub(crate) const ITERATION_SECONDS_PER_ENTRY: f64 = 4.0e-6;
 /// Seconds a factor entry costs the two triangular solves of a direct iteration.
-pub const SOLVE_SECONDS_PER_FACTOR_ENTRY: f64 = 3.0e-9;
+pub(crate) const SOLVE_SECONDS_PER_FACTOR_ENTRY: f64 = 3.0e-9;
 /// Seconds an entry of the coarsest factor costs a conjugate-gradient iteration (its
 /// triangular solves in the V-cycle).
-pub const CG_SECONDS_PER_COARSEST_ENTRY: f64 = 1.0e-9;
+pub(crate) const CG_SECONDS_PER_COARSEST_ENTRY: f64 = 1.0e-9;
 /// Seconds a block of the multilevel path's finest level (its matrix and prolongation) costs a
 /// conjugate-gradient iteration (two smoothings, a residual, the restriction and the
 /// prolongation).
-pub const CG_SECONDS_PER_BLOCK: f64 = 3.5e-7;
+pub(crate) const CG_SECONDS_PER_BLOCK: f64 = 3.5e-7;
 /// Conjugate-gradient iterations of a Gauss-Newton step (multilevel path).
-pub const CG_ITERATIONS: f64 = 6.0;
+pub(crate) const CG_ITERATIONS: f64 = 6.0;
 /// Seconds a block of the finest level costs the hierarchy's construction (the smoothed
 /// prolongation, the Galerkin product), beside its coarsest factor.
-pub const HIERARCHY_SECONDS_PER_BLOCK: f64 = 2.0e-6;
+pub(crate) const HIERARCHY_SECONDS_PER_BLOCK: f64 = 2.0e-6;
 /// Seconds a cell of the transfer's construction (the PU's patches, the field).
-pub const TRANSFER_SECONDS_PER_CELL: f64 = 1.0e-5;
+pub(crate) const TRANSFER_SECONDS_PER_CELL: f64 = 1.0e-5;
 /// Gauss-Newton iterations a load step takes on the coarsest cells.
-pub const ITERATIONS_PER_LOAD_STEP: f64 = 3.0;
+pub(crate) const ITERATIONS_PER_LOAD_STEP: f64 = 3.0;
 /// Gauss-Newton iterations each finer stage of a solve coarse to fine takes (the cells' own:
 /// one more).
-pub const ITERATIONS_PER_STAGE: f64 = 2.0;
+pub(crate) const ITERATIONS_PER_STAGE: f64 = 2.0;
 
 /// Refuses a run whose forecast cells ([`Forecast`]) cannot be solved within `budget` by any
 /// path (by the direct one with `direct`, `--solver direct`): the cells' construction, or the
-/// complex and the leanest linear solver ([`FLOOR_BYTES_PER_CELL`] a cell). Called by the
+/// complex and the leanest linear solver (`FLOOR_BYTES_PER_CELL` a cell). Called by the
 /// build before the empty space is classified.
 pub fn check_forecast(forecast: &Forecast, direct: bool, budget: Budget) -> Result<()> {
     let cells = forecast.cells();

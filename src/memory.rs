@@ -24,14 +24,14 @@
 //!   bar, the paper's meshes and a scan (BENCHMARKS.md, "What a run will take");
 //! - with `--solver auto` (the default) the direct path where its factor fits, else the
 //!   multilevel one;
-//! - the solver, again at each stage: [`SOLVER_BYTES_PER_CELL`] per cell before anything is
+//! - the solver, again at each stage: `SOLVER_BYTES_PER_CELL` per cell before anything is
 //!   built (the motions, the energies, the position system), then, for the direct path, the
 //!   assembled system's entries before they are allocated, and the sparse Cholesky factor
 //!   exactly, from its symbolic analysis, before its values are (the factor's fill depends on
 //!   the shape: 12–13 KB per cell on a terrain, 27 KB on the 10 × 1 × 1 bar at 0.02; a flat
 //!   per-cell estimate refused a 1.1M-cell terrain that ran in 14.4 GB);
 //! - the multilevel solver ([`crate::solve::Method::Multilevel`]): at least
-//!   [`MULTILEVEL_BYTES_PER_CELL`] (the normal equations' blocks, the smoothed prolongation,
+//!   `MULTILEVEL_BYTES_PER_CELL` (the normal equations' blocks, the smoothed prolongation,
 //!   the coarse level's factor; 10.4 KB per cell of process peak measured at 342k cells of a
 //!   terrain, but 41 KB on the bar, whose coarsest level factors as a solid: the whole
 //!   solve's estimate above counts it);
@@ -41,10 +41,10 @@ use crate::error::{Error, Result};
 use crate::said::Said;
 
 /// The solver's memory per cell before its sparse factor (see the module docs).
-pub const SOLVER_BYTES_PER_CELL: u64 = 4 << 10;
+pub(crate) const SOLVER_BYTES_PER_CELL: u64 = 4 << 10;
 
 /// The multilevel solver's memory per cell (see the module docs).
-pub const MULTILEVEL_BYTES_PER_CELL: u64 = 12 << 10;
+pub(crate) const MULTILEVEL_BYTES_PER_CELL: u64 = 12 << 10;
 
 /// The memory budget when none is given: three quarters of the physical memory, or of the
 /// control group's limit where that is lower (24 GiB where neither can be read), and at most

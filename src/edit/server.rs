@@ -104,7 +104,7 @@ pub const MAX_MESSAGE: usize = 1 << 20;
 pub const MAX_CONNECTIONS: usize = 32;
 
 /// How long a request's head may take to arrive (and the most bytes it may have: 16 KiB).
-pub const HEAD_TIME: Duration = Duration::from_secs(10);
+pub(crate) const HEAD_TIME: Duration = Duration::from_secs(10);
 pub(super) const HEAD_BYTES: usize = 16 << 10;
 
 /// How long a write to the page may block (a page that reads nothing frees its connection).

@@ -24,7 +24,7 @@
 //! `τ`, and its expansion is used only where its bound fits that share: `r ≥ ρ + 3/8 A4 / (τ m
 //! / n)` (per node, one precomputed radius). The nodes used at a point hold disjoint sets of
 //! centers, so their bounds add up to at most `τ`, and the rest is summed exactly (leaves, by
-//! the vector kernel of `field::simd`). Nodes of fewer than [`MIN_EXPANDED`] centers are
+//! the vector kernel of `field::simd`). Nodes of fewer than `MIN_EXPANDED` centers are
 //! never expanded: an expansion takes some 150 scalar operations per component, about what the
 //! vector kernel spends on 100 centers (an estimate from the kernel's measured rate, not a
 //! measurement of the expansion).
@@ -44,7 +44,7 @@
 pub const LEAF: usize = 24;
 
 /// Nodes of fewer centers are summed exactly, never expanded.
-pub const MIN_EXPANDED: usize = 96;
+pub(crate) const MIN_EXPANDED: usize = 96;
 
 /// The hierarchy over the centers of an RBF, with its weights.
 #[derive(Clone)]

@@ -43,7 +43,7 @@ use crate::said::{Opt, Said};
 
 /// Bytes per node while a grid is made: the offsets (`f32`, three), the node's height (`f64`),
 /// the file's samples (`f32`, three) and the heights' fill.
-pub const BYTES_PER_NODE: f64 = 48.0;
+pub(crate) const BYTES_PER_NODE: f64 = 48.0;
 
 /// Parameters of [`sample`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

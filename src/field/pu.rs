@@ -52,13 +52,13 @@ use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
 
 /// The centers a patch box holds on average at least (it sets the patches' size).
-pub const PATCH_CENTERS: f64 = 20.0;
+pub(crate) const PATCH_CENTERS: f64 = 20.0;
 
 /// How far a patch's support reaches past its box on each side, in box edges.
-pub const OVERLAP: f64 = 0.25;
+pub(crate) const OVERLAP: f64 = 0.25;
 
 /// The fewest centers a patch fits.
-pub const MIN_FIT: usize = 12;
+pub(crate) const MIN_FIT: usize = 12;
 
 /// The partition-of-unity RBF transfer of a field.
 pub struct PuRbf<const D: usize> {

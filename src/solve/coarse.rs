@@ -78,11 +78,11 @@ pub const MAX_COARSE_LEVELS: u8 = 3;
 /// many degrees past the turn the coarse cells held, and cells one level coarser give way no
 /// more than this sooner (the module docs: cells that resolve the part gave way within 45° of
 /// each other).
-pub const COARSE_REFUSAL_MARGIN: f64 = 60.0;
+pub(crate) const COARSE_REFUSAL_MARGIN: f64 = 60.0;
 
 /// The energy tolerance of a coarse stage (its move tolerance is a hundred times the fine
 /// one's: a tenth of a finest cell by default).
-pub const COARSE_TOLERANCE: f64 = 1e-4;
+pub(crate) const COARSE_TOLERANCE: f64 = 1e-4;
 
 /// How many coarse stages a solve of `cells` cells takes: `params.coarse_levels` where given,
 /// else none under [`COARSE_FROM`] cells and from there enough that the coarsest has fewer

@@ -38,7 +38,7 @@ pub use crate::error::{TurnKind, TurnRefusal, handle_on_line};
 
 /// A turn is a twist where its axis lies within this angle (45°) of the direction from the fixed
 /// cells to the handle's cells, else a bend.
-pub const TWIST_WITHIN_DEGREES: f64 = 45.0;
+pub(crate) const TWIST_WITHIN_DEGREES: f64 = 45.0;
 
 impl TurnKind {
     /// The kind of handle `k`'s turn: by the angle between its axis and the direction from the

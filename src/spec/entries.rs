@@ -40,7 +40,7 @@ pub struct HandleMotion<const D: usize> {
 /// which way round it turns ([`HandleMotion::undirected`]): its antisymmetric part, which would
 /// tell, is `2 sin θ` there, of the order of its rounding (a half turn about z made in single
 /// precision, as Blender's matrices are, has `sin θ` of 9e-8, of either sign).
-pub const HALF_TURN_SLACK: f64 = 1e-3;
+pub(crate) const HALF_TURN_SLACK: f64 = 1e-3;
 
 impl<const D: usize> HandleMotion<D> {
     /// Whether the motion is a `matrix` turning by a half turn, which reaches the same pose

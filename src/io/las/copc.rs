@@ -12,7 +12,7 @@
 //! become 6 and 8, with a note) and appends it, with its moved coordinates, to a spill file
 //! beside the output. At the end, with the bounds known, the cube is fixed and every record
 //! gets the Morton code of its position in the cube (21 bits per axis); an external sort by
-//! that code (sorted runs of at most [`RUN_BYTES`], merged) walks the points in octree order,
+//! that code (sorted runs of at most `RUN_BYTES`, merged) walks the points in octree order,
 //! where the points of any node, at any level, are contiguous. One pass then samples the
 //! levels: a node of level `l` keeps the first point of each cell of a `2^7`-per-axis grid over
 //! it (its *spacing* is the node's edge / 128) that no shallower node kept; points every level
@@ -45,7 +45,7 @@ pub const MAX_LEVEL: u32 = 14;
 /// Sampling cells per node edge at every level (`2^GRID_BITS`).
 const GRID_BITS: u32 = 7;
 /// Bytes of records sorted in memory at a time.
-pub const RUN_BYTES: usize = 256 << 20;
+pub(crate) const RUN_BYTES: usize = 256 << 20;
 
 /// Whether `path` names a COPC output (`*.copc.laz`).
 pub fn is_copc(path: &Path) -> bool {
