@@ -24,152 +24,100 @@
 
 use std::fmt;
 
-/// An option of the command line and the library, by its meaning; [`Opt::name`] is the
-/// command line's name and [`Opt::keyword`] the Python package's.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[non_exhaustive]
-pub enum Opt {
+/// The options: each variant, its docs and its command-line name, written once; the enum,
+/// [`Opt::ALL`] and [`Opt::name`] are made from this list.
+macro_rules! options {
+    ($($(#[$doc:meta])* $variant:ident => $name:literal,)*) => {
+        /// An option of the command line and the library, by its meaning; [`Opt::name`] is the
+        /// command line's name and [`Opt::keyword`] the Python package's.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        #[non_exhaustive]
+        pub enum Opt {
+            $($(#[$doc])* $variant,)*
+        }
+
+        impl Opt {
+            /// Every option.
+            pub const ALL: [Opt; [$($name),*].len()] = [$(Opt::$variant),*];
+
+            /// The command line's name, without its dashes (`cell-size`).
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(Opt::$variant => $name,)*
+                }
+            }
+        }
+    };
+}
+
+options! {
     /// The edit spec (`--edit`; Python's `spec`).
-    Edit,
+    Edit => "edit",
     /// The finest cells' edge (`--cell-size`).
-    CellSize,
+    CellSize => "cell-size",
     /// About this many cells (`--cells`).
-    Cells,
+    Cells => "cells",
     /// Adaptive cells down to this size (`--min-cell-size`).
-    MinCellSize,
+    MinCellSize => "min-cell-size",
     /// Octree levels above the finest cells (`--max-level`).
-    MaxLevel,
+    MaxLevel => "max-level",
     /// Occupied cells only (`--shell`).
-    Shell,
+    Shell => "shell",
     /// The inside classification of empty cells (`--inside`).
-    Inside,
+    Inside => "inside",
     /// How the Gauss-Newton systems are solved (`--solver`).
-    Solver,
+    Solver => "solver",
     /// The move test of each load step (`--tolerance`).
-    Tolerance,
+    Tolerance => "tolerance",
     /// What parts no constraint reaches do (`--loose-parts`).
-    LooseParts,
+    LooseParts => "loose-parts",
     /// Refinement where the strain is high (`--refine-strain`).
-    RefineStrain,
+    RefineStrain => "refine-strain",
     /// How the cells' motions reach the samples (`--transfer`).
-    Transfer,
+    Transfer => "transfer",
     /// The RBF transfer's fitting tolerance (`--rbf-tolerance`).
-    RbfTolerance,
+    RbfTolerance => "rbf-tolerance",
     /// The memory budget (`--memory-limit`).
-    MemoryLimit,
+    MemoryLimit => "memory-limit",
     /// Samples beyond the field's cells (`--outside`).
-    Outside,
+    Outside => "outside",
     /// The field's file (`--save-field`).
-    SaveField,
+    SaveField => "save-field",
     /// The report's file (`--report`).
-    Report,
+    Report => "report",
     /// Files in different coordinate systems taken as one (`--same-crs`).
-    SameCrs,
+    SameCrs => "same-crs",
     /// Samples per chunk of a streamed file (`--chunk`).
-    Chunk,
+    Chunk => "chunk",
     /// A grid's spacing (`--spacing`).
-    Spacing,
+    Spacing => "spacing",
     /// A grid's extent (`--extent`).
-    Extent,
+    Extent => "extent",
     /// A grid's height (`--height`).
-    Height,
+    Height => "height",
     /// A GeoTIFF's EPSG code (`--epsg`).
-    Epsg,
+    Epsg => "epsg",
     /// A picture's size (`--size`).
-    Size,
+    Size => "size",
     /// The camera's azimuth (`--azimuth`).
-    Azimuth,
+    Azimuth => "azimuth",
     /// The camera's elevation (`--elevation`).
-    Elevation,
+    Elevation => "elevation",
     /// The camera's zoom (`--zoom`).
-    Zoom,
+    Zoom => "zoom",
     /// The up axis (`--up`).
-    Up,
+    Up => "up",
     /// A picture's background (`--background`).
-    Background,
+    Background => "background",
     /// The editor's samples shown (`--proxy`).
-    Proxy,
+    Proxy => "proxy",
     /// The editor's port (`--port`).
-    Port,
+    Port => "port",
     /// The editor's output folder (`--out-dir`).
-    OutDir,
+    OutDir => "out-dir",
 }
 
 impl Opt {
-    /// Every option.
-    pub const ALL: [Opt; 32] = [
-        Opt::Edit,
-        Opt::CellSize,
-        Opt::Cells,
-        Opt::MinCellSize,
-        Opt::MaxLevel,
-        Opt::Shell,
-        Opt::Inside,
-        Opt::Solver,
-        Opt::Tolerance,
-        Opt::LooseParts,
-        Opt::RefineStrain,
-        Opt::Transfer,
-        Opt::RbfTolerance,
-        Opt::MemoryLimit,
-        Opt::Outside,
-        Opt::SaveField,
-        Opt::Report,
-        Opt::SameCrs,
-        Opt::Chunk,
-        Opt::Spacing,
-        Opt::Extent,
-        Opt::Height,
-        Opt::Epsg,
-        Opt::Size,
-        Opt::Azimuth,
-        Opt::Elevation,
-        Opt::Zoom,
-        Opt::Up,
-        Opt::Background,
-        Opt::Proxy,
-        Opt::Port,
-        Opt::OutDir,
-    ];
-
-    /// The command line's name, without its dashes (`cell-size`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Opt::Edit => "edit",
-            Opt::CellSize => "cell-size",
-            Opt::Cells => "cells",
-            Opt::MinCellSize => "min-cell-size",
-            Opt::MaxLevel => "max-level",
-            Opt::Shell => "shell",
-            Opt::Inside => "inside",
-            Opt::Solver => "solver",
-            Opt::Tolerance => "tolerance",
-            Opt::LooseParts => "loose-parts",
-            Opt::RefineStrain => "refine-strain",
-            Opt::Transfer => "transfer",
-            Opt::RbfTolerance => "rbf-tolerance",
-            Opt::MemoryLimit => "memory-limit",
-            Opt::Outside => "outside",
-            Opt::SaveField => "save-field",
-            Opt::Report => "report",
-            Opt::SameCrs => "same-crs",
-            Opt::Chunk => "chunk",
-            Opt::Spacing => "spacing",
-            Opt::Extent => "extent",
-            Opt::Height => "height",
-            Opt::Epsg => "epsg",
-            Opt::Size => "size",
-            Opt::Azimuth => "azimuth",
-            Opt::Elevation => "elevation",
-            Opt::Zoom => "zoom",
-            Opt::Up => "up",
-            Opt::Background => "background",
-            Opt::Proxy => "proxy",
-            Opt::Port => "port",
-            Opt::OutDir => "out-dir",
-        }
-    }
-
     /// The Python package's keyword argument (`cell_size`; the edit spec is `spec`).
     pub fn keyword(self) -> &'static str {
         match self {
