@@ -4,11 +4,11 @@
 //! Deformations Based on Rigid Cells* (M. Botsch, M. Pauly, M. Wicke, M. Gross, Computer
 //! Graphics Forum 26(3), Eurographics 2007).
 //!
-//! The shape is embedded in an adaptive octree (quadtree in 2D) of rigid cells ([`cells`]); the
-//! cells are coupled by an elastic glue energy ([`solve::energy`]) and solved for under the
-//! user's constraints ([`spec`], [`solve`]) by Gauss-Newton on rigid motions; the resulting space
-//! warp ([`field`]) moves every sample of the input. One code path serves 2D and 3D: everything
-//! is generic over `const D: usize`, and [`rigid::Rigid`] holds the few operations that differ.
+//! The shape is embedded in an adaptive octree (quadtree in 2D) of rigid cells; the cells are
+//! coupled by an elastic glue energy and solved for under the user's constraints by
+//! Gauss-Newton on rigid motions; the resulting space warp moves every sample of the input. One
+//! code path serves 2D and 3D: everything is generic over `const D: usize`, and [`Rigid`] holds
+//! the few operations that differ.
 //!
 //! ```text
 //! samples ─► cells::build ─► solve::resolve (edit spec) ─► solve::solve ─► field::{Blend,Rbf} ─► samples'
@@ -16,11 +16,18 @@
 //!
 //! ## Where to start
 //!
-//! Everything a caller needs is at the crate root; the modules below it are how it is built.
+//! Everything a caller needs is at the crate root, and is what the library promises: its
+//! functions, their parameters, specs, reports and errors, and the choices they take
+//! ([`Inside`], [`Method`], [`LooseParts`], [`Transfer`], [`Outside`], [`Budget`], a preview's
+//! [`View`]). Messages for people are [`said`]'s. The modules that build it (the cells, the
+//! solver, the field, the file formats) live in `internal`, hidden from these pages: the
+//! command line, the Python extension, the tools and the tests use their parts, and they change
+//! with the library. A type that a root item shows but that the root does not name (the cell
+//! complex in a [`Solution`], a solver's iteration log) is read through its fields and methods.
 //!
 //! - **What to do:** an [`EditSpec`] — read from TOML ([`read_spec`], [`parse_spec`]) or made in
-//!   code (its [`Region`]s and [`HandleMotion`]s, checked by [`EditSpec::validate`] where a run
-//!   starts).
+//!   code (its [`Entry`]s of [`Region`]s and [`HandleMotion`]s, [`Pin`]s and [`Target`]s,
+//!   checked by [`EditSpec::validate`] where a run starts).
 //! - **How:** [`Options`], the user's options with their defaults, checked into
 //!   [`DeformParams`] by [`Options::params`].
 //! - **Points in memory:** [`deform`] (the moved points, the solution, a [`DeformInfo`]), or
@@ -29,14 +36,13 @@
 //!   [`FileInfo`], or [`deform_file_with`] and the [`Outputs`] beside the file (a saved field,
 //!   the report, a preview; the chunk size); [`solve_files`] solves over tiles and saves a
 //!   [`SavedField`], which [`apply_file`] applies to any file with [`ApplyParams`].
-//! - **Live edits** (one set of cells, pose after pose): [`Live`].
+//! - **Live edits** (one set of cells, pose after pose): [`Live`], each pose's [`Step`].
 //! - **What happened:** [`Report`] (what `--report` writes), and every failure an [`Error`]
 //!   whose exit code the command line uses ([`Error::exit_code`]).
 //! - **Progress and stopping:** an [`Observer`] ([`Silent`] hears nothing).
 //!
 //! ```
-//! use rigidcells::rigid::Vect;
-//! use rigidcells::{Options, Silent, deform, parse_spec};
+//! use rigidcells::{Options, Silent, Vect, deform, parse_spec};
 //! use std::path::Path;
 //!
 //! // A 4×1×1 bar of points, 0.1 apart along it and 0.25 across.
@@ -67,8 +73,7 @@
 //! ## Features
 //!
 //! The library itself needs none of them (`default-features = false`). `cli` brings the
-//! command line's parser and progress bars, `editor` the editor's local web server
-//! ([`edit`]'s `server`), `demo` the generated inputs of `rigidcells demo` (`demo`). All three
+//! command line's parser and progress bars, `editor` the editor's local web server, `demo` the generated inputs of `rigidcells demo` (`demo`). All three
 //! are on by default, and the `rigidcells` binary requires them.
 //!
 //! ## In a debug build of your crate
@@ -87,39 +92,32 @@
 //! debug-assertions = false
 //! ```
 
-pub mod cells;
-pub mod control;
-pub mod crs;
-#[cfg(feature = "demo")]
-pub mod demo;
-pub mod edit;
-pub mod error;
-pub mod estimate;
-pub mod field;
-pub mod human;
-pub mod image;
-pub mod info;
-pub mod interrupt;
-pub mod io;
-pub mod memory;
-pub mod names;
-pub mod pipeline;
-pub mod progress;
-pub mod render;
-pub mod rigid;
 pub mod said;
-pub mod solve;
-pub mod spec;
 
+#[doc(hidden)]
+pub mod internal;
+
+#[cfg(feature = "editor")]
+pub(crate) use internal::edit;
+pub(crate) use internal::{
+    cells, control, crs, error, estimate, field, human, image, interrupt, io, memory, pipeline,
+    progress, render, rigid, solve, spec,
+};
+
+pub use cells::Inside;
 pub use error::{Error, Result};
-pub use field::SavedField;
+pub use field::{FieldMap, Outside, SavedField, Transfer};
+pub use memory::Budget;
 pub use pipeline::report::Report;
 pub use pipeline::{
-    ApplyParams, DeformInfo, DeformParams, FileInfo, Live, Options, Outputs, apply_file, deform,
-    deform_file, deform_file_with, preview, report, solve_files, solve_points,
+    ApplyParams, DeformInfo, DeformParams, FileInfo, Live, Options, Outputs, Step, apply_file,
+    deform, deform_file, deform_file_with, solve_files, solve_points,
 };
 pub use progress::{Observer, Silent};
-pub use spec::{EditSpec, HandleMotion, Region, parse_spec, read_spec};
+pub use render::View;
+pub use rigid::{Dim, Mat, Rigid, Vect};
+pub use solve::{LooseParts, Method, Solution, SolverInfo};
+pub use spec::{EditSpec, Entry, HandleMotion, Pin, Region, Target, Trend, parse_spec, read_spec};
 
 /// Runs `f`, which calls faer, on a rayon pool of faer's own.
 ///

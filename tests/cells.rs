@@ -5,10 +5,10 @@ mod common;
 
 use common::shared;
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use rigidcells::cells::{BuildParams, Inside, Winding, build};
-use rigidcells::io::Document;
-use rigidcells::memory::Budget;
-use rigidcells::rigid::Vect;
+use rigidcells::Budget;
+use rigidcells::Vect;
+use rigidcells::internal::cells::{BuildParams, Inside, Winding, build};
+use rigidcells::internal::io::Document;
 
 /// The mesh of `file` in `../shared/data/meshes`.
 fn mesh(file: &str) -> (Vec<Vect<3>>, Vec<[u32; 3]>) {
@@ -288,7 +288,8 @@ fn cells_search_keeps_the_complex_a_build_at_its_size_makes() {
     };
     let (kept, _) = build(&dragon, &tris, &asked, Budget::default()).unwrap();
     let size =
-        rigidcells::cells::cell_size_for(&dragon, &tris, &asked, 1200, Budget::default()).unwrap();
+        rigidcells::internal::cells::cell_size_for(&dragon, &tris, &asked, 1200, Budget::default())
+            .unwrap();
     let given = BuildParams {
         cell_size: Some(size),
         target_cells: None,
@@ -314,8 +315,8 @@ fn cells_search_keeps_the_complex_a_build_at_its_size_makes() {
 /// the centroid of the handle's samples, moves with the soup's duplicated vertices).
 #[test]
 fn mesh_soup_and_points_give_the_same_cells_and_bend() {
-    use rigidcells::pipeline::{Options, deform};
-    use rigidcells::progress::Silent;
+    use rigidcells::internal::pipeline::{Options, deform};
+    use rigidcells::internal::progress::Silent;
     let (dragon, tris) = mesh("dragon_11k_binary.ply");
     let (soup, soup_tris) = unweld(&dragon, &tris);
     // Samples uniform by area (the dragon's flat base has few, large triangles).
@@ -346,7 +347,7 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
     let cell = (hi - lo).max() / 24.0;
     let params = Options {
         cell_size: Some(cell),
-        transfer: rigidcells::field::Transfer::Rbf,
+        transfer: rigidcells::internal::field::Transfer::Rbf,
         ..Default::default()
     }
     .params()
@@ -355,7 +356,8 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
     let (p, pi) = build(&cloud, &[], params.build(), Budget::default()).unwrap();
     assert_eq!(pi.inside, Inside::Flood);
     // Every interior cell of one lies within one finest cell of the other's cells.
-    let covered = |a: &rigidcells::cells::CellComplex<3>, b: &rigidcells::cells::CellComplex<3>| {
+    let covered = |a: &rigidcells::internal::cells::CellComplex<3>,
+                   b: &rigidcells::internal::cells::CellComplex<3>| {
         let near = |x: Vect<3>| {
             (0..27).any(|k| {
                 let d = Vect::<3>::new(
@@ -368,7 +370,7 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
         };
         a.cells
             .iter()
-            .filter(|c| c.kind == rigidcells::cells::CellKind::Interior)
+            .filter(|c| c.kind == rigidcells::internal::cells::CellKind::Interior)
             .filter(|c| !near(c.center + a.grid.origin - b.grid.origin))
             .count()
     };
@@ -377,8 +379,9 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
         (0, 0),
         "interior cells not covered"
     );
-    let volume =
-        |c: &rigidcells::cells::CellComplex<3>| c.cells.iter().map(|c| c.volume()).sum::<f64>();
+    let volume = |c: &rigidcells::internal::cells::CellComplex<3>| {
+        c.cells.iter().map(|c| c.volume()).sum::<f64>()
+    };
     let ratio = volume(&p) / volume(&m);
     assert!(
         (ratio - 1.0).abs() < 0.1,
@@ -386,7 +389,7 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
     );
 
     let z = |f: f64| lo.z + f * (hi.z - lo.z);
-    let spec = rigidcells::spec::parse_spec::<3>(
+    let spec = rigidcells::internal::spec::parse_spec::<3>(
         &format!(
             "[[fixed]]\nbox = {{ min = [-1e9, -1e9, -1e9], max = [1e9, 1e9, {}] }}\n\
              [[handle]]\nbox = {{ min = [-1e9, -1e9, {}], max = [1e9, 1e9, 1e9] }}\n\
@@ -445,8 +448,8 @@ fn mesh_soup_and_points_give_the_same_cells_and_bend() {
 /// numbers (the default for oriented points) keeps the interior, close to the closed cloud's.
 #[test]
 fn oriented_points_with_a_hole_keep_their_interior() {
-    use rigidcells::pipeline::{CHUNK, Options, file_cells};
-    use rigidcells::progress::Silent;
+    use rigidcells::internal::pipeline::{CHUNK, Options, file_cells};
+    use rigidcells::internal::progress::Silent;
     let dir = tempfile::tempdir().unwrap();
     let doc = Document::read(&shared("meshes/bunny_vn.ply")).unwrap();
     let (pts, normals) = (doc.positions(), doc.normals().unwrap());

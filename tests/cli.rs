@@ -4,8 +4,8 @@ mod common;
 
 use common::{deform, run};
 
-use rigidcells::io::Document;
-use rigidcells::rigid::{Dim, Rigid, Vect};
+use rigidcells::internal::io::Document;
+use rigidcells::{Dim, Rigid, Vect};
 
 fn edges(tris: &[[u32; 3]]) -> Vec<(u32, u32)> {
     let mut e: Vec<(u32, u32)> = tris
@@ -305,7 +305,7 @@ fn render_and_preview_draw_what_was_there() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     let image = read_png(&png);
     assert_eq!((image.width, image.height), (320, 240));
-    let fg = |x: u32, y: u32| image.pixel(x, y) != rigidcells::render::BACKGROUND;
+    let fg = |x: u32, y: u32| image.pixel(x, y) != rigidcells::internal::render::BACKGROUND;
     assert!(
         fg(160, 120) || fg(150, 120) || fg(170, 120),
         "the model's middle"
@@ -396,13 +396,13 @@ fn render(input: &std::path::Path, output: &std::path::Path, extra: &[&str]) -> 
     run(&args)
 }
 
-fn read_png(path: &std::path::Path) -> rigidcells::render::Image {
-    let raster = rigidcells::image::Raster::read_png(path).unwrap();
+fn read_png(path: &std::path::Path) -> rigidcells::internal::render::Image {
+    let raster = rigidcells::internal::image::Raster::read_png(path).unwrap();
     assert!(
         raster.rgba.chunks_exact(4).all(|p| p[3] == 255),
         "renders are opaque"
     );
-    rigidcells::render::Image {
+    rigidcells::internal::render::Image {
         width: raster.width,
         height: raster.height,
         rgb: raster
@@ -579,7 +579,7 @@ fn deform_takes_every_option_of_the_librarys_list() {
         .filter_map(|l| l.trim_start().strip_prefix("--"))
         .map(|l| l.split([' ', '<', '=']).next().unwrap_or(""))
         .collect();
-    for name in rigidcells::pipeline::OPTION_NAMES {
+    for name in rigidcells::internal::pipeline::OPTION_NAMES {
         assert!(
             flags.contains(&name),
             "--{name} is not a flag of deform: {flags:?}"

@@ -5,7 +5,7 @@
 mod common;
 
 use common::{arg, deform, records, shared};
-use rigidcells::io::{Chunk, LasSource, Source};
+use rigidcells::internal::io::{Chunk, LasSource, Source};
 
 /// Every record's position, classification, intensity and color, sorted (COPC reorders the
 /// points and may change the point format).
@@ -149,7 +149,7 @@ fn every_las_file_becomes_a_valid_copc() {
         .collect();
     inputs.sort();
     for input in inputs {
-        let Ok(header) = rigidcells::io::LasHeader::read(&input) else {
+        let Ok(header) = rigidcells::internal::io::LasHeader::read(&input) else {
             continue;
         };
         if header.count > 200_000 || header.version.1 > 4 {
@@ -221,7 +221,7 @@ fn copc_out_states_a_legacy_crs_as_wkt() {
             records.iter().any(|r| r.is("LASF_Projection", 34735)),
             "{name}: the GeoTIFF keys are kept"
         );
-        let crs = rigidcells::info::crs(&records).unwrap();
+        let crs = rigidcells::internal::info::crs(&records).unwrap();
         match code {
             Some(code) => {
                 assert!(wkt_bit, "{name}: the WKT bit");
@@ -269,7 +269,8 @@ fn copc_of_a_waveform_file_keeps_no_waveform_records() {
          translate = [0, 0, 1]\n",
     )
     .unwrap();
-    let waveform = |r: &&rigidcells::io::VlrRecord| r.user_id == "LASF_Spec" && r.record_id >= 100;
+    let waveform =
+        |r: &&rigidcells::internal::io::VlrRecord| r.user_id == "LASF_Spec" && r.record_id >= 100;
     let before = LasSource::open(&input).unwrap().vlr_records();
     assert!(before.iter().any(|r| r.is("LASF_Spec", 100)));
     let copc = dir.path().join("o.copc.laz");

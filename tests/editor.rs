@@ -12,9 +12,9 @@ use std::net::TcpStream;
 use std::path::Path;
 use std::time::Duration;
 
-use rigidcells::edit::server::Server;
-use rigidcells::edit::{Editor, Scene};
-use rigidcells::pipeline::Options;
+use rigidcells::Options;
+use rigidcells::internal::edit::server::Server;
+use rigidcells::internal::edit::{Editor, Scene};
 use serde_json::json;
 use tungstenite::Message;
 
@@ -36,10 +36,10 @@ fn serve(dir: &Path) -> (Server, std::path::PathBuf) {
 fn serve_into(dir: &Path, out_dir: Option<&Path>) -> (Server, std::path::PathBuf) {
     let input = dir.join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let options = Options {
         cell_size: Some(0.5),
-        transfer: rigidcells::field::Transfer::Pu,
+        transfer: rigidcells::internal::field::Transfer::Pu,
         ..Default::default()
     };
     (
@@ -301,7 +301,7 @@ fn the_page_runs_no_inline_code_and_connects_only_to_its_server() {
 /// on serving.
 #[test]
 fn websocket_messages_are_capped() {
-    use rigidcells::edit::server::MAX_MESSAGE;
+    use rigidcells::internal::edit::server::MAX_MESSAGE;
     const { assert!(MAX_MESSAGE <= 4 << 20) };
     let dir = tempfile::tempdir().unwrap();
     let (port, token) = running(dir.path());
@@ -391,7 +391,8 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
     let b = next_binary(&mut ws);
     assert_eq!(u32_at(&b, 1), 3);
     // A drag's step: one Gauss-Newton iteration, or its local-global iterations.
-    let most = rigidcells::edit::DRAG_ITERATIONS * rigidcells::solve::DRAG_LOCAL_GLOBAL;
+    let most = rigidcells::internal::edit::DRAG_ITERATIONS
+        * rigidcells::internal::solve::DRAG_LOCAL_GLOBAL;
     let iterations = u32_at(&b, 3) as usize;
     assert!((1..=most).contains(&iterations), "{iterations} iterations");
     let maps = f32s(&b[20..20 + 48 * cells]);
@@ -422,8 +423,8 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
     let out = dir.path().join("bent.ply");
     let r = common::deform(&input, &out, &spec, &["--cell-size", "0.5"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    let doc = rigidcells::io::Document::read(&out).unwrap();
-    let center = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent)
+    let doc = rigidcells::internal::io::Document::read(&out).unwrap();
+    let center = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent)
         .unwrap()
         .center;
     assert_eq!(doc.positions().len(), n);
@@ -435,7 +436,7 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
     }
     // The editor's session went there warm, the CLI from rest: both to the solver's move
     // tolerance (a thousandth of a cell of 0.5).
-    let tolerance = rigidcells::solve::MOVE_TOLERANCE * 0.5;
+    let tolerance = rigidcells::internal::solve::MOVE_TOLERANCE * 0.5;
     assert!(
         worst < tolerance,
         "the CLI's shape is {worst} from the editor's"
@@ -473,7 +474,7 @@ fn a_move_returns_motions_and_the_saved_spec_reproduces_the_shape() {
 #[test]
 fn a_class_selection_fixes_the_ground() {
     let input = common::shared("las/autzen_trim.las");
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     assert!(scene.classes.contains(&2));
     let options = Options {
         cells: Some(800),
@@ -487,7 +488,7 @@ fn a_class_selection_fixes_the_ground() {
         [0, 0, 0, 1]
     ]);
     let mut editor = Editor::new(scene, options).unwrap();
-    let edit: rigidcells::edit::Edit = serde_json::from_value(json!({
+    let edit: rigidcells::internal::edit::Edit = serde_json::from_value(json!({
         "fixed": [
             {"classification": [2]},
             {"classification": [2], "polygon": [[-1.1, -1.1], [0.0, -1.1], [0.0, 1.1], [-1.1, 1.1]],
@@ -524,23 +525,23 @@ fn a_class_selection_fixes_the_ground() {
 #[test]
 fn the_editor_refuses_an_rbf_beyond_the_budget_as_deform_does() {
     let input = common::shared("las/autzen_trim.las");
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     // Room for the 799 cells' least solve (4.8 MB, checked as they are built), not for their
     // dense RBF (5.2 MB).
     let limit = 5_000_000;
     let options = Options {
         cells: Some(800),
         memory_limit: Some(limit),
-        transfer: rigidcells::field::Transfer::Rbf,
+        transfer: rigidcells::internal::field::Transfer::Rbf,
         ..Default::default()
     };
     let mut editor = Editor::new(scene, options).unwrap();
     let cells = editor.complex().len();
     assert!(
-        rigidcells::memory::rbf_bytes(cells, 3) > limit as f64,
+        rigidcells::internal::memory::rbf_bytes(cells, 3) > limit as f64,
         "{cells} cells"
     );
-    let edit: rigidcells::edit::Edit =
+    let edit: rigidcells::internal::edit::Edit =
         serde_json::from_value(json!({"fixed": [{"classification": [2]}]})).unwrap();
     let e = editor.solve(&edit).expect_err("refused").to_string();
     assert!(
@@ -554,15 +555,16 @@ fn the_editor_refuses_an_rbf_beyond_the_budget_as_deform_does() {
 /// row, a boolean, not inverted.
 #[test]
 fn screen_selections_parse_strictly() {
-    use rigidcells::spec::parse_spec;
+    use rigidcells::internal::spec::parse_spec;
     let parse = |t: &str| parse_spec::<3>(t, Path::new("."), Path::new("e.toml"));
     let view = "view = [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 0], [0, 0, -1, 0]]";
     let square = "polygon = [[-1, -1], [1, -1], [1, 1], [-1, 1]]";
     let spec = parse(&format!("[[fixed]]\n{square}\n{view}\n")).unwrap();
     let region = &spec.fixed[0].region;
     // w = −z: in front of this camera is z < 0; x/w and y/w must lie in the square.
-    let at =
-        |x: f64, y: f64, z: f64| region.contains_point(&rigidcells::rigid::Vect::<3>::new(x, y, z));
+    let at = |x: f64, y: f64, z: f64| {
+        region.contains_point(&rigidcells::internal::rigid::Vect::<3>::new(x, y, z))
+    };
     assert!(at(0.5, 0.5, -1.0) && !at(0.5, 0.5, 1.0) && !at(3.0, 0.0, -1.0) && at(3.0, 0.0, -4.0));
     for bad in [
         format!("[[fixed]]\nbox = {{ min = [0, 0, 0], max = [1, 1, 1] }}\n{view}\n"),
@@ -594,9 +596,9 @@ fn a_mesh_larger_than_the_proxy_is_decimated() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
-    let all = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let all = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     assert!(!all.triangles.is_empty() && all.total == all.points.len() as u64);
-    let few = Scene::load(&input, 500, &rigidcells::progress::Silent).unwrap();
+    let few = Scene::load(&input, 500, &rigidcells::internal::progress::Silent).unwrap();
     assert!(few.triangles.is_empty() && few.points.len() <= 500 && few.total == all.total);
     assert_eq!(few.points[1], all.points[few.total.div_ceil(500) as usize]);
 }
@@ -703,7 +705,7 @@ fn files_are_written_only_into_the_folder_under_plain_names() {
         }
     };
     assert_eq!(done["type"], "applied", "{done}");
-    assert!(rigidcells::io::Document::read(&old).is_ok());
+    assert!(rigidcells::internal::io::Document::read(&old).is_ok());
     let mode = std::fs::metadata(&old).unwrap().permissions().mode() & 0o777;
     assert_eq!(mode, 0o640, "{mode:o}");
 
@@ -808,8 +810,8 @@ fn camera(eye: [f64; 3], at: [f64; 3], up: [f64; 3]) -> [[f64; 4]; 4] {
 }
 
 /// A screen square `[-r, r]²` seen by `view`, visible samples only or all (x-ray).
-fn square(view: [[f64; 4]; 4], r: f64, visible: bool) -> rigidcells::edit::Selection {
-    rigidcells::edit::Selection {
+fn square(view: [[f64; 4]; 4], r: f64, visible: bool) -> rigidcells::internal::edit::Selection {
+    rigidcells::internal::edit::Selection {
         polygon: Some(vec![[-r, -r], [r, -r], [r, r], [-r, r]]),
         view: Some(view),
         visible,
@@ -826,12 +828,12 @@ fn a_box_selects_what_is_visible_unless_xray() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 8.0), true).unwrap();
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let c = scene.center;
     let x: Vec<f64> = scene.points.iter().map(|p| p[0] - c[0]).collect();
     let options = Options {
         cell_size: Some(0.25),
-        transfer: rigidcells::field::Transfer::Pu,
+        transfer: rigidcells::internal::field::Transfer::Pu,
         ..Default::default()
     };
     let mut editor = Editor::new(scene, options).unwrap();
@@ -851,8 +853,8 @@ fn a_box_selects_what_is_visible_unless_xray() {
         );
     }
 
-    let edit = |visible: bool| rigidcells::edit::Edit {
-        fixed: vec![rigidcells::edit::Selection {
+    let edit = |visible: bool| rigidcells::internal::edit::Edit {
+        fixed: vec![rigidcells::internal::edit::Selection {
             polygon: Some(vec![[-1.1, -1.1], [-0.9, -1.1], [-0.9, 1.1], [-1.1, 1.1]]),
             view: Some([
                 [0.2, 0.0, 0.0, 0.0],
@@ -862,7 +864,7 @@ fn a_box_selects_what_is_visible_unless_xray() {
             ]),
             ..Default::default()
         }],
-        handles: vec![rigidcells::edit::HandleEdit {
+        handles: vec![rigidcells::internal::edit::HandleEdit {
             selections: vec![square(end_on, 0.3, visible)],
             translate: [0.0, 0.0, 1.0],
             axis: [0.0, 0.0, 1.0],
@@ -885,7 +887,7 @@ fn a_box_selects_what_is_visible_unless_xray() {
     let out = dir.path().join("bent.ply");
     let r = common::deform(&input, &out, &spec, &["--cell-size", "0.25"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    let doc = rigidcells::io::Document::read(&out).unwrap();
+    let doc = rigidcells::internal::io::Document::read(&out).unwrap();
     let mut worst = 0f64;
     for (i, p) in doc.positions().iter().enumerate() {
         for a in 0..3 {
@@ -900,7 +902,7 @@ fn a_box_selects_what_is_visible_unless_xray() {
 #[test]
 fn a_box_over_the_horse_head_takes_the_head_alone() {
     let input = common::shared("meshes/horse.ply");
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let c = scene.center;
     // The horse faces +y, z up; its head is at y > 0.03.
     let y: Vec<f64> = scene.points.iter().map(|p| p[1] - c[1]).collect();
@@ -910,7 +912,7 @@ fn a_box_over_the_horse_head_takes_the_head_alone() {
     };
     let editor = Editor::new(scene, options).unwrap();
     let front = camera([0.0, 1.0, 0.04], [0.0, 0.0, 0.04], [0.0, 0.0, 1.0]);
-    let head = rigidcells::edit::Selection {
+    let head = rigidcells::internal::edit::Selection {
         polygon: Some(vec![
             [-0.06, -0.02],
             [0.06, -0.02],
@@ -921,7 +923,7 @@ fn a_box_over_the_horse_head_takes_the_head_alone() {
     };
     let behind = |mask: &[bool]| (0..y.len()).filter(|&i| mask[i] && y[i] < 0.0).count();
     let xray = editor
-        .selected(&rigidcells::edit::Selection {
+        .selected(&rigidcells::internal::edit::Selection {
             visible: false,
             ..head.clone()
         })
@@ -940,7 +942,7 @@ fn the_editor_keeps_min_cell_size_for_apply() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let options = Options {
         min_cell_size: Some(0.25),
         ..Default::default()
@@ -953,27 +955,35 @@ fn the_editor_keeps_min_cell_size_for_apply() {
 }
 
 /// The bar's vertices (10 × 1 × 1, 4 a unit) and a `Live` on them with cells of 0.5.
-fn live_bar() -> (Vec<rigidcells::rigid::Vect<3>>, rigidcells::pipeline::Live) {
+fn live_bar() -> (
+    Vec<rigidcells::internal::rigid::Vect<3>>,
+    rigidcells::internal::pipeline::Live,
+) {
     let bar = data_gen::bar([10.0, 1.0, 1.0], 4.0);
     let points: Vec<_> = bar
         .vertices
         .iter()
-        .map(|p| rigidcells::rigid::Vect::<3>::new(p[0], p[1], p[2]))
+        .map(|p| rigidcells::internal::rigid::Vect::<3>::new(p[0], p[1], p[2]))
         .collect();
-    let params = rigidcells::pipeline::Options {
+    let params = rigidcells::internal::pipeline::Options {
         cell_size: Some(0.5),
         ..Default::default()
     }
     .params()
     .unwrap();
-    let live = rigidcells::pipeline::Live::new(points.clone(), &bar.triangles, Vec::new(), params)
-        .unwrap();
+    let live = rigidcells::internal::pipeline::Live::new(
+        points.clone(),
+        &bar.triangles,
+        Vec::new(),
+        params,
+    )
+    .unwrap();
     (points, live)
 }
 
 /// The bar's left end fixed, and a handle box over its right end per entry of `lifts` (each
 /// lifted by its number; boxes that overlap, as a handle drawn as two boxes is).
-fn handles_spec(lifts: &[f64]) -> rigidcells::spec::EditSpec<3> {
+fn handles_spec(lifts: &[f64]) -> rigidcells::internal::spec::EditSpec<3> {
     let mut text = "[[fixed]]\nbox = { min = [-1, -1, -1], max = [1.5, 2, 2] }\n".to_string();
     for (k, lift) in lifts.iter().enumerate() {
         let low = 8.0 + 0.25 * k as f64;
@@ -982,7 +992,7 @@ fn handles_spec(lifts: &[f64]) -> rigidcells::spec::EditSpec<3> {
              translate = [0, 0, {lift:?}]\n"
         );
     }
-    rigidcells::spec::parse_spec::<3>(&text, Path::new("."), Path::new("e.toml")).unwrap()
+    rigidcells::internal::spec::parse_spec::<3>(&text, Path::new("."), Path::new("e.toml")).unwrap()
 }
 
 /// Handles tied by an equal motion, then a spec of fewer handles (the page's Undo), or
@@ -990,7 +1000,7 @@ fn handles_spec(lifts: &[f64]) -> rigidcells::spec::EditSpec<3> {
 /// dragged after it solved warm.
 #[test]
 fn fewer_handles_after_tied_ones_solve() {
-    use rigidcells::progress::Silent;
+    use rigidcells::internal::progress::Silent;
     let (_, mut live) = live_bar();
     let tied = live.solve(handles_spec(&[0.0, 0.0]), 1, &Silent).unwrap();
     assert!(tied.unwrap().from_rest);
@@ -1107,12 +1117,12 @@ fn a_failed_solve_is_said_and_the_next_edit_solved() {
 fn apply_writes_what_the_cli_writes_for_the_saved_spec() {
     let dir = tempfile::tempdir().unwrap();
     let input = common::shared("meshes/dragon_11k_binary.ply");
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let (lo, hi) = scene.bounds;
     let half = (hi - lo) * 0.5;
     let options = Options {
         cells: Some(3000),
-        transfer: rigidcells::field::Transfer::Pu,
+        transfer: rigidcells::internal::field::Transfer::Pu,
         ..Default::default()
     };
     let editor = Editor::new(scene, options).unwrap();
@@ -1174,7 +1184,7 @@ fn the_saved_spec_names_the_input_absolute() {
     let up = "../".repeat(cwd.components().count() - 1);
     let given = Path::new(&up).join(dir.path().join("sub/../bar.ply").strip_prefix("/").unwrap());
     assert!(given.is_relative() && given.exists(), "{}", given.display());
-    let scene = Scene::load(&given, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&given, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let editor = Editor::new(scene, Options::default()).unwrap();
     let text = editor.spec_text(&serde_json::from_value(ends([0.0; 3], 0.0)).unwrap());
     let named = cwd.join(&given);
@@ -1204,7 +1214,7 @@ fn the_files_of_a_linked_input_go_beside_the_link() {
     data_gen::write_ply(&target, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
     let link = project.join("scan.ply");
     std::os::unix::fs::symlink(&target, &link).unwrap();
-    let scene = Scene::load(&link, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&link, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let options = Options {
         cell_size: Some(0.5),
         ..Default::default()
@@ -1235,14 +1245,14 @@ fn the_saved_command_carries_every_option() {
     let dir = tempfile::tempdir().unwrap();
     let input = dir.path().join("bar.ply");
     data_gen::write_ply(&input, &data_gen::bar([10.0, 1.0, 1.0], 4.0), true).unwrap();
-    let scene = Scene::load(&input, 1 << 20, &rigidcells::progress::Silent).unwrap();
+    let scene = Scene::load(&input, 1 << 20, &rigidcells::internal::progress::Silent).unwrap();
     let options = Options {
         min_cell_size: Some(0.5),
         max_level: Some(2),
         tolerance: 0.05,
         coarse_levels: Some(0),
-        loose_parts: rigidcells::solve::LooseParts::Rest,
-        transfer: rigidcells::field::Transfer::Blend,
+        loose_parts: rigidcells::internal::solve::LooseParts::Rest,
+        transfer: rigidcells::internal::field::Transfer::Blend,
         check_control_points: true,
         memory_limit: Some(2 << 30),
         ..Default::default()

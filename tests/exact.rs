@@ -7,12 +7,12 @@ mod common;
 use std::path::Path;
 
 use common::{arg as s, deform, records, run, shared};
-use rigidcells::field::{Deformer, Field, FieldMap, Outside, Transfer, Warp};
-use rigidcells::io::{Document, LasHeader};
-use rigidcells::pipeline::{self, Options};
-use rigidcells::progress::Silent;
-use rigidcells::rigid::{Dim, Rigid, Vect};
-use rigidcells::spec::parse_spec;
+use rigidcells::Silent;
+use rigidcells::internal::field::{Deformer, Field, FieldMap, Outside, Transfer, Warp};
+use rigidcells::internal::io::{Document, LasHeader};
+use rigidcells::internal::pipeline::{self, Options};
+use rigidcells::parse_spec;
+use rigidcells::{Dim, Rigid, Vect};
 
 /// Deforms the LAS/LAZ `input` under `edit` with each of `transfers` and checks that every
 /// sample west of `fixed_x` keeps its record's bytes and every sample east of `handle_x` lands

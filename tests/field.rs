@@ -2,10 +2,10 @@
 //! displacements; blend weights sum to one over the true 4 nearest centers.
 
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use rigidcells::field::{
+use rigidcells::internal::field::{
     Anchor, Blend, Deformer, Field, Nearest, Rbf, Transfer, Warp, Weights, count_foldovers,
 };
-use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
+use rigidcells::internal::rigid::{Dim, Motion, Rigid, Vect};
 
 fn field(n: usize, seed: u64) -> Field<3> {
     let mut rng = StdRng::seed_from_u64(seed);

@@ -6,10 +6,10 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{arg, deform, records, run, shared};
-use rigidcells::io::{
+use rigidcells::Vect;
+use rigidcells::internal::io::{
     Accepted, Chunk, Document, LasHeader, PlyRecordStream, PlyStream, Source, XyzStream,
 };
-use rigidcells::rigid::Vect;
 
 /// The translation: exact in one decimal, the fewest any text input here has.
 const T: [f64; 3] = [1.5, -2.5, 0.5];
@@ -640,7 +640,7 @@ fn solve_over_tiles_reports_what_deform_reports_for_the_merged_file() {
     // Three panels (before, after, strain) of 200×150 pixels, 2 pixels apart.
     let png = std::fs::read(&preview).unwrap();
     assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
-    let picture = rigidcells::image::Raster::read_png(&preview).unwrap();
+    let picture = rigidcells::internal::image::Raster::read_png(&preview).unwrap();
     assert_eq!((picture.width, picture.height), (604, 150));
     // The same proxy, the same cells: the same picture.
     assert!(png == std::fs::read(&merged_preview).unwrap());
@@ -685,7 +685,7 @@ fn translate_stream(
         let accepted = sink.write(&buffer, &moved, &buffer.normals).unwrap();
         assert_eq!(accepted, Accepted::Yes);
     }
-    let set = rigidcells::io::ResultSet::new();
+    let set = rigidcells::internal::io::ResultSet::new();
     sink.finish(&set).unwrap();
     set.commit().unwrap();
     (positions, std::fs::read(out).unwrap())
@@ -861,10 +861,10 @@ fn xyz_streams_like_the_whole_file() {
 /// is what the output holds for those samples (to the LAS scale).
 #[test]
 fn the_preview_proxy_samples_the_input_and_the_output() {
-    use rigidcells::field::Transfer;
-    use rigidcells::pipeline::Options;
-    use rigidcells::progress::Silent;
-    use rigidcells::spec::read_spec;
+    use rigidcells::internal::field::Transfer;
+    use rigidcells::internal::pipeline::Options;
+    use rigidcells::internal::progress::Silent;
+    use rigidcells::internal::spec::read_spec;
     let dir = tempfile::tempdir().unwrap();
     let input = shared("las/autzen_trim.las");
     let (header, _, rest, _) = records(&input);
@@ -886,13 +886,14 @@ fn the_preview_proxy_samples_the_input_and_the_output() {
     .params()
     .and_then(|p| p.with_proxy_samples(max))
     .unwrap();
-    let outputs = rigidcells::pipeline::Outputs {
+    let outputs = rigidcells::internal::pipeline::Outputs {
         chunk: Some(4099),
         ..Default::default()
     };
-    let (_, info, _) =
-        rigidcells::pipeline::deform_file_with(&input, &output, &spec, &params, &outputs, &Silent)
-            .unwrap();
+    let (_, info, _) = rigidcells::internal::pipeline::deform_file_with(
+        &input, &output, &spec, &params, &outputs, &Silent,
+    )
+    .unwrap();
     let proxy = &info.proxy;
     let n = rest.len() as u64;
     assert_eq!(proxy.stride, n.div_ceil(max as u64));
@@ -1017,7 +1018,7 @@ fn outputs_name_rigidcells_and_text_numbers_keep_the_inputs_precision() {
         let (_, output) = translate(dir.path(), &spec, &input, &[]).unwrap();
         let (before, _, _, _) = common::records(&input);
         let (after, _, _, _) = common::records(&output);
-        assert_eq!(after.software, rigidcells::io::SOFTWARE, "{name}");
+        assert_eq!(after.software, rigidcells::internal::io::SOFTWARE, "{name}");
         assert_eq!(after.system, before.system, "{name}");
     }
     // A text cloud made here: plain numbers of 3 and 1 decimals in x, of 2 decimals and

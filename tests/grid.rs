@@ -20,7 +20,7 @@ fn rubber_sheeted(dir: &Path) -> std::path::PathBuf {
             let p = rest
                 .iter()
                 .min_by(|a, b| {
-                    let d = |p: &&rigidcells::rigid::Vect<3>| (p.x - x).hypot(p.y - y);
+                    let d = |p: &&rigidcells::internal::rigid::Vect<3>| (p.x - x).hypot(p.y - y);
                     d(a).total_cmp(&d(b))
                 })
                 .unwrap();

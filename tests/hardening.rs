@@ -582,7 +582,7 @@ fn a_field_window_cell_off_the_grid_is_a_format_error() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     std::fs::remove_file(&out).unwrap();
     // The first cell's center moved by 0.37 of its half-size along x: off every grid voxel.
-    let saved = rigidcells::field::SavedField::<3>::load(&field).unwrap();
+    let saved = rigidcells::internal::field::SavedField::<3>::load(&field).unwrap();
     assert!(!saved.is_window());
     let bytes = std::fs::read(&field).unwrap();
     let first = 8 + 4 + 4 + 1 + 24 + 8;

@@ -6,7 +6,7 @@ mod common;
 use std::path::Path;
 
 use common::run;
-use rigidcells::image::Raster;
+use rigidcells::internal::image::Raster;
 
 /// `rigidcells image INPUT --edit EDIT -o OUTPUT` plus `extra` arguments.
 fn image(input: &Path, edit: &Path, output: &Path, extra: &[&str]) -> common::Run {

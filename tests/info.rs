@@ -144,7 +144,7 @@ fn fields_and_pictures() {
     let png = dir.path().join("gingerbread.png");
     let t = info(&png);
     assert!(line(&t, "format:").contains("240 × 240"), "{t}");
-    let raster = rigidcells::image::Raster::read_png(&png).unwrap();
+    let raster = rigidcells::internal::image::Raster::read_png(&png).unwrap();
     let opaque = raster.rgba.chunks_exact(4).filter(|p| p[3] > 0).count();
     assert_eq!(
         line(&t, "foreground pixels:"),

@@ -3,11 +3,11 @@
 
 use std::path::Path;
 
-use rigidcells::pipeline::{self, DeformParams, Live, Options};
-use rigidcells::progress::Silent;
-use rigidcells::rigid::Vect;
-use rigidcells::solve::LooseParts;
-use rigidcells::spec::{EditSpec, parse_poses, parse_spec};
+use rigidcells::LooseParts;
+use rigidcells::Silent;
+use rigidcells::Vect;
+use rigidcells::internal::pipeline::{self, DeformParams, Live, Options};
+use rigidcells::internal::spec::{EditSpec, parse_poses, parse_spec};
 
 /// A 10 × 1 × 1 bar's vertices and triangles.
 fn bar() -> (Vec<Vect<3>>, Vec<[u32; 3]>) {
@@ -86,7 +86,7 @@ fn a_drag_of_small_steps_ends_where_deform_does() {
             .unwrap();
         assert!(!step.from_rest, "pose {k} was solved from rest");
         // One Gauss-Newton iteration, or a drag's few local-global ones.
-        let most = rigidcells::solve::DRAG_LOCAL_GLOBAL;
+        let most = rigidcells::internal::solve::DRAG_LOCAL_GLOBAL;
         assert!(
             step.solver.iterations <= most,
             "pose {k}: {:?}",
@@ -137,7 +137,7 @@ fn new_regions_solve_from_rest_and_an_empty_spec_rests() {
     // Another fixed region: resolved and solved from rest, to convergence.
     let mut other = spec(&points, 1.0, 0.0);
     other.fixed.truncate(0);
-    other.pins.push(rigidcells::spec::Pin {
+    other.pins.push(rigidcells::internal::spec::Pin {
         point: Vect::<3>::new(0.0, 0.5, 0.5),
         to: Vect::<3>::new(0.0, 0.5, 0.5),
         line: 1,
@@ -186,7 +186,7 @@ fn pins_move_warm_and_release_onto_deforms_shape() {
     let params = params();
     let pinned = |to_z: f64| {
         let mut s = spec(&points, 1.0, 0.0);
-        s.pins.push(rigidcells::spec::Pin {
+        s.pins.push(rigidcells::internal::spec::Pin {
             point: Vect::<3>::new(5.0, 0.5, 1.0),
             to: Vect::<3>::new(5.0, 0.5, to_z),
             line: 99,

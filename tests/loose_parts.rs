@@ -4,8 +4,8 @@
 mod common;
 
 use common::{arg, deform_verbose, run};
-use rigidcells::io::Document;
-use rigidcells::rigid::Vect;
+use rigidcells::Vect;
+use rigidcells::internal::io::Document;
 
 /// The distance from `p` to the nearest of `points`.
 fn gap(p: &Vect<3>, points: &[Vect<3>]) -> f64 {

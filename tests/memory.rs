@@ -281,11 +281,11 @@ fn a_long_solve_is_announced_before_it_starts() {
 /// build are forecast within 3 % of those a build makes.
 #[test]
 fn the_estimate_counts_the_cells_of_a_run() {
-    use rigidcells::pipeline::{self, Options};
-    use rigidcells::rigid::Vect;
+    use rigidcells::internal::pipeline::{self, Options};
+    use rigidcells::internal::rigid::Vect;
     let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
     let points: Vec<Vect<3>> = bar.vertices.iter().map(|&v| Vect::<3>::from(v)).collect();
-    let spec = rigidcells::spec::parse_spec::<3>(
+    let spec = rigidcells::internal::spec::parse_spec::<3>(
         "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }\n\
          [[handle]]\nbox = { min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }\n\
          translate = [0, 0, 1]\n",
@@ -304,7 +304,7 @@ fn the_estimate_counts_the_cells_of_a_run() {
     };
     let at = params(0.25, None);
     let e = pipeline::estimate(&points, &bar.triangles, &[], &spec, &at).unwrap();
-    let silent = rigidcells::progress::Silent;
+    let silent = rigidcells::internal::progress::Silent;
     let (_, solution, info) =
         pipeline::deform(&points, &bar.triangles, &spec, &at, &silent).unwrap();
     assert_eq!(e.cells, solution.complex.len());
@@ -314,11 +314,11 @@ fn the_estimate_counts_the_cells_of_a_run() {
     let tight = params(0.05, Some(100 << 20));
     let e = pipeline::estimate(&points, &bar.triangles, &[], &spec, &tight).unwrap();
     assert!(!e.complete && !e.fits(), "{e:?}");
-    let built = rigidcells::cells::build(
+    let built = rigidcells::internal::cells::build(
         &points,
         &bar.triangles,
         tight.build(),
-        rigidcells::memory::Budget::default(),
+        rigidcells::internal::memory::Budget::default(),
     )
     .unwrap()
     .0

@@ -7,10 +7,10 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use rigidcells::io::{ResultSet, TempFile};
-use rigidcells::pipeline::{self, ApplyParams, CHUNK, Options, Outputs};
-use rigidcells::progress::Silent;
-use rigidcells::spec::read_spec;
+use rigidcells::Silent;
+use rigidcells::internal::io::{ResultSet, TempFile};
+use rigidcells::internal::pipeline::{self, ApplyParams, CHUNK, Options, Outputs};
+use rigidcells::read_spec;
 
 /// The names in `dir`, sorted.
 fn names(dir: &Path) -> Vec<String> {

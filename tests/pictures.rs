@@ -5,8 +5,8 @@
 mod common;
 
 use common::{arg, deform, run, shared};
-use rigidcells::image::Raster;
-use rigidcells::render::{heat, up_of};
+use rigidcells::internal::image::Raster;
+use rigidcells::internal::render::{heat, up_of};
 
 fn picture(path: &std::path::Path) -> Raster {
     Raster::read_png(path).unwrap()
@@ -126,11 +126,11 @@ fn previews_draw_triangles_mark_pins_and_targets_and_carry_a_legend() {
     // Pins magenta, targets orange, in the input and the output panels.
     for k in 0..2 {
         assert!(
-            panel(k, &|c| c == rigidcells::preview::PIN) > 10,
+            panel(k, &|c| c == rigidcells::internal::pipeline::preview::PIN) > 10,
             "panel {k}"
         );
         assert!(
-            panel(k, &|c| c == rigidcells::preview::TARGET) > 10,
+            panel(k, &|c| c == rigidcells::internal::pipeline::preview::TARGET) > 10,
             "panel {k}"
         );
     }
@@ -254,8 +254,8 @@ fn preview_colors_follow_the_regions_across_a_triangle() {
     // for the handle's yellow, in between where the two blend.
     let ratio = |c: [u8; 3]| c[2] as f64 / c[1].max(1) as f64;
     let (fixed, handle) = (
-        ratio(rigidcells::preview::FIXED),
-        ratio(rigidcells::preview::HANDLE),
+        ratio(rigidcells::internal::pipeline::preview::FIXED),
+        ratio(rigidcells::internal::pipeline::preview::HANDLE),
     );
     let mut blended = 0;
     for y in 0..p.height {

@@ -10,8 +10,8 @@ use std::sync::OnceLock;
 
 use proptest::prelude::*;
 use rigidcells::Error;
-use rigidcells::field::{Outside, SavedField};
-use rigidcells::spec::parse_spec;
+use rigidcells::parse_spec;
+use rigidcells::{Outside, SavedField};
 
 /// A TOML number, often one that must be refused.
 fn number() -> BoxedStrategy<String> {
@@ -400,8 +400,8 @@ proptest! {
         let window = SavedField::<3>::load_window(
             &path,
             (
-                rigidcells::rigid::Vect::<3>::new(8.0, 0.0, 0.0),
-                rigidcells::rigid::Vect::<3>::new(10.0, 1.0, 1.0),
+                rigidcells::internal::rigid::Vect::<3>::new(8.0, 0.0, 0.0),
+                rigidcells::internal::rigid::Vect::<3>::new(10.0, 1.0, 1.0),
             ),
         );
         for loaded in [whole, window] {

@@ -4,11 +4,11 @@
 
 use std::path::Path;
 
-use rigidcells::field::{Field, Outside, PuRbf, Rbf, SavedField, Transfer, Warp};
-use rigidcells::pipeline::{self, Options};
-use rigidcells::progress::Silent;
-use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
-use rigidcells::spec::parse_spec;
+use rigidcells::Silent;
+use rigidcells::internal::field::{Field, Outside, PuRbf, Rbf, SavedField, Transfer, Warp};
+use rigidcells::internal::pipeline::{self, Options};
+use rigidcells::internal::rigid::{Dim, Motion, Rigid, Vect};
+use rigidcells::parse_spec;
 
 /// The 10×1×1 bar bent by 90° (fixed left end, turned right end) at `cell` cells: a solved
 /// field with cells of several sizes.

@@ -4,9 +4,9 @@
 mod common;
 
 use common::{deform, shared};
-use rigidcells::io::{Chunk, LasSource, Source};
-use rigidcells::rigid::Vect;
-use rigidcells::spec::Polygon;
+use rigidcells::Vect;
+use rigidcells::internal::io::{Chunk, LasSource, Source};
+use rigidcells::internal::spec::Polygon;
 
 /// Positions and classes of every record.
 fn samples(path: &std::path::Path) -> (Vec<Vect<3>>, Vec<u8>) {

@@ -2,12 +2,12 @@
 //! motions, energy never increases, no NaN.
 
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use rigidcells::cells::{BuildParams, CellComplex, build};
-use rigidcells::memory::Budget;
-use rigidcells::progress::Silent;
-use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
-use rigidcells::solve::{self, Role, SolveParams, SolverInfo};
-use rigidcells::spec::parse_spec;
+use rigidcells::Budget;
+use rigidcells::Silent;
+use rigidcells::internal::cells::{BuildParams, CellComplex, build};
+use rigidcells::internal::rigid::{Dim, Motion, Rigid, Vect};
+use rigidcells::internal::solve::{self, Role, SolveParams, SolverInfo};
+use rigidcells::parse_spec;
 
 /// Dense samples on the surface of an ellipsoid-like blob with semi-axes `radii`.
 fn blob<const D: usize>(radii: [f64; D], n: usize) -> Vec<Vect<D>> {
@@ -739,7 +739,7 @@ fn coarsened_cells_keep_their_roles_and_adaptive_refines_where_it_bends() {
     }
     let (_, params) = solve::adaptive(
         0.125,
-        &rigidcells::cells::BuildParams::default(),
+        &rigidcells::internal::cells::BuildParams::default(),
         &SolveParams::default(),
     )
     .unwrap();

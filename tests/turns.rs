@@ -9,12 +9,12 @@ use std::sync::Mutex;
 
 use common::{arg as s, deform};
 use rigidcells::Error;
-use rigidcells::io::Document;
-use rigidcells::pipeline::{self, Options};
-use rigidcells::progress::{Observer, Silent};
-use rigidcells::rigid::Vect;
-use rigidcells::solve::TurnKind;
-use rigidcells::spec::parse_spec;
+use rigidcells::Vect;
+use rigidcells::internal::io::Document;
+use rigidcells::internal::pipeline::{self, Options};
+use rigidcells::internal::solve::TurnKind;
+use rigidcells::parse_spec;
+use rigidcells::{Observer, Silent};
 
 /// A closed cylinder of diameter 1 and `height` along y, its base at y = 0, in `dir`.
 fn cylinder(dir: &Path, height: f64) -> PathBuf {

@@ -154,7 +154,7 @@ pub(crate) fn py_err(e: Error) -> PyErr {
 /// handle its own way without reading the message: `handle` (its index in the spec's
 /// handles), `line`, `kind` ("bend" or "twist"), `asked_degrees`, `held_degrees`,
 /// `other_way_degrees` (or None) and `said` (the message after the handle's name).
-pub(crate) fn turn_not_held(r: &rigidcells::solve::TurnRefusal) -> PyErr {
+pub(crate) fn turn_not_held(r: &rigidcells::internal::solve::TurnRefusal) -> PyErr {
     Python::attach(|py| {
         let err = TurnNotHeldError::new_err(r.to_string());
         let value = err.value(py);

@@ -14,16 +14,16 @@ use numpy::{IntoPyArray, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
-use rigidcells::cells::Inside;
-use rigidcells::field::{Outside, SavedField, Transfer};
-use rigidcells::io;
-use rigidcells::names::{Named, UnknownName};
-use rigidcells::pipeline::Options;
-use rigidcells::pipeline::{self, DeformParams};
-use rigidcells::render::View;
-use rigidcells::rigid::Vect;
-use rigidcells::solve::{LooseParts, Method};
-use rigidcells::spec::{EditSpec, parse_spec};
+use rigidcells::Inside;
+use rigidcells::Options;
+use rigidcells::Vect;
+use rigidcells::View;
+use rigidcells::internal::io;
+use rigidcells::internal::names::{Named, UnknownName};
+use rigidcells::internal::pipeline::{self, DeformParams};
+use rigidcells::{EditSpec, parse_spec};
+use rigidcells::{LooseParts, Method};
+use rigidcells::{Outside, SavedField, Transfer};
 
 mod errors;
 mod observer;
@@ -176,7 +176,7 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
 fn memory_limit(value: &Bound<'_, PyAny>) -> PyResult<u64> {
     if value.is_instance_of::<pyo3::types::PyString>() {
         let text: String = value.extract()?;
-        return rigidcells::memory::parse_size(&text)
+        return rigidcells::internal::memory::parse_size(&text)
             .map_err(|e| PyValueError::new_err(format!("memory_limit: {e}")));
     }
     whole(
@@ -449,7 +449,7 @@ fn solve<'py>(
 }
 
 /// What `deform` or `solve` of `points` under the TOML `spec` with the `options` will take,
-/// without solving (`rigidcells::pipeline::estimate`): a dict of its `cells`, peak memory in
+/// without solving (`rigidcells::internal::pipeline::estimate`): a dict of its `cells`, peak memory in
 /// `bytes`, `seconds` (the whole run: the cells as built, the solve and the transfer as
 /// estimated), `solve_seconds`, `solver` (`direct`, `multilevel` or `local-global`), `limit` (the memory
 /// budget), `fits` and `complete` (false where the cells were only forecast, because they
@@ -523,7 +523,7 @@ fn deform_file<'py>(
     };
     let observer = PyObserver::new(progress);
     let result = py.detach(|| -> rigidcells::Result<_> {
-        rigidcells::io::refuse_overwrite(&input, &output)?;
+        rigidcells::internal::io::refuse_overwrite(&input, &output)?;
         pipeline::deform_file_with(&input, &output, &spec, &params, &outputs, &observer)
     });
     let (_, _, report) = observer.result(result)?;
@@ -592,7 +592,7 @@ fn solve_files<'py>(
 /// `up` as "x", "y" or "z", `zoom`, `strain`), the command line's defaults for the rest.
 fn view(d: Option<&Bound<'_, PyDict>>, input: &Path) -> PyResult<(View, bool)> {
     let mut view = View {
-        up: rigidcells::render::up_of(input),
+        up: rigidcells::internal::render::up_of(input),
         ..Default::default()
     };
     let mut strain = false;
@@ -669,7 +669,7 @@ fn apply_file<'py>(
             .transpose()?,
         rbf_tolerance,
         outside: named("outside", outside, Outside::Refuse)?,
-        memory: rigidcells::memory::Budget::given(
+        memory: rigidcells::internal::memory::Budget::given(
             memory_limit.map(|m| self::memory_limit(&m)).transpose()?,
         ),
         same_crs,
@@ -677,7 +677,7 @@ fn apply_file<'py>(
     let chunk = self::chunk(chunk)?;
     let observer = PyObserver::new(progress);
     let result = py.detach(|| -> rigidcells::Result<_> {
-        rigidcells::io::refuse_overwrite(&input, &output)?;
+        rigidcells::internal::io::refuse_overwrite(&input, &output)?;
         pipeline::apply_file(&field, &input, &output, &params, chunk, &observer)
     });
     let info = observer.result(result)?;

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
 use rigidcells::Error;
-use rigidcells::progress::Observer;
+use rigidcells::Observer;
 
 use crate::py_err;
 

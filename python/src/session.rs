@@ -13,9 +13,9 @@ use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use rigidcells::pipeline::{Live, Step};
-use rigidcells::rigid::Vect;
-use rigidcells::spec::parse_poses;
+use rigidcells::Vect;
+use rigidcells::internal::spec::parse_poses;
+use rigidcells::{Live, Step};
 
 use crate::observer::caller;
 use crate::{

@@ -5,7 +5,7 @@
 //!   regular grid of cells of size `cell_size · 2^max_level`; level `max_level` cells have the
 //!   finest size `cell_size` chosen by the user. Refinement during the solve may go deeper.
 //! - Cells holding samples of the shape (points, or triangles overlapping the box) are refined to
-//!   `max_level` ([`build`]); the empty space is tiled by maximal empty cells of the tree, each
+//!   `max_level` ([`build()`]); the empty space is tiled by maximal empty cells of the tree, each
 //!   classified inside/outside (winding numbers, or an exterior flood fill over them); interior
 //!   cells stay as coarse as the tree allows, exterior cells are dropped. Nothing is sized by
 //!   the bounding box's volume ([`Occupancy`]).
@@ -61,7 +61,7 @@ pub enum Inside {
     None,
 }
 
-/// Parameters of [`build`].
+/// Parameters of [`build()`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BuildParams {
     /// Edge length of the finest cells, in input units. Default (`None`): the longest extent of
@@ -89,7 +89,7 @@ impl Default for BuildParams {
     }
 }
 
-/// What [`build`] did.
+/// What [`build()`] did.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct BuildInfo {
     /// Finest cells along each axis.
@@ -123,7 +123,7 @@ pub fn build<const D: usize>(
     build_checked(points, triangles, params, budget, &|_| Ok(()))
 }
 
-/// [`build`], handing `check` the [`Forecast`] of the cells before the empty space is
+/// [`build()`], handing `check` the [`Forecast`] of the cells before the empty space is
 /// classified or any leaf is made ([`Occupancy::finish_checked`]): what a run that will solve
 /// the cells calls, so that one which cannot is refused before the build's time and memory are
 /// spent. (A `--cells N` search's trial builds are not checked: only the size it settles on.)

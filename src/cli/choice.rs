@@ -1,4 +1,4 @@
-//! Options whose values are the library's named choices ([`rigidcells::names`]): the names, and
+//! Options whose values are the library's named choices ([`rigidcells::internal::names`]): the names, and
 //! the order `--help` lists them in, come from the library; the line of help each value gets in
 //! `--help` is written here. Parsing goes through clap's own possible-values check, so a wrong
 //! value gets clap's message, with its list and its "a similar value exists" tip.
@@ -7,10 +7,10 @@ use std::ffi::OsStr;
 use std::marker::PhantomData;
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
-use rigidcells::cells::Inside;
-use rigidcells::field::{Outside, Transfer};
-use rigidcells::names::Named;
-use rigidcells::solve::{LooseParts, Method};
+use rigidcells::Inside;
+use rigidcells::internal::names::Named;
+use rigidcells::{LooseParts, Method};
+use rigidcells::{Outside, Transfer};
 
 /// A named choice with a line of help for each value.
 pub(super) trait Help: Named + Send + Sync {

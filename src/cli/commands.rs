@@ -4,12 +4,12 @@ use std::path::Path;
 
 use anyhow::Context;
 use rigidcells::Error;
-use rigidcells::field::Transfer;
-use rigidcells::io::refuse_overwrite;
-use rigidcells::pipeline::{self, CHUNK, DeformParams};
-use rigidcells::render::{self, View};
-use rigidcells::report::Summary;
-use rigidcells::spec::read_spec;
+use rigidcells::Transfer;
+use rigidcells::internal::io::refuse_overwrite;
+use rigidcells::internal::pipeline::report::Summary;
+use rigidcells::internal::pipeline::{self, CHUNK, DeformParams};
+use rigidcells::internal::render::{self, View};
+use rigidcells::read_spec;
 
 use super::progress::Bar;
 use super::*;
@@ -22,7 +22,7 @@ pub(super) fn run_cells(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    rigidcells::io::check_folders([output])?;
+    rigidcells::internal::io::check_folders([output])?;
     let ply = output
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
@@ -40,7 +40,7 @@ pub(super) fn run_cells(
         spec.as_ref(),
         &params,
         CHUNK,
-        &rigidcells::progress::Silent,
+        &rigidcells::internal::progress::Silent,
     )?;
     pipeline::write_cells(output, &complex, solution.as_ref(), render::up_of(input))?;
     if quiet {
@@ -57,7 +57,7 @@ pub(super) fn run_cells(
         shown.len(),
         info.boundary_cells,
         info.interior_cells,
-        rigidcells::human::length(shown.grid.finest_size(), shown.grid.finest_size())
+        rigidcells::internal::human::length(shown.grid.finest_size(), shown.grid.finest_size())
     );
     Ok(())
 }
@@ -70,8 +70,8 @@ fn refuse_clashes(inputs: &[PathBuf], outputs: &[(&str, &Path)]) -> anyhow::Resu
             refuse_overwrite(input, output)?;
         }
     }
-    rigidcells::io::refuse_same_outputs(outputs)?;
-    rigidcells::io::check_folders(outputs.iter().map(|(_, path)| *path))?;
+    rigidcells::internal::io::refuse_same_outputs(outputs)?;
+    rigidcells::internal::io::check_folders(outputs.iter().map(|(_, path)| *path))?;
     Ok(())
 }
 
@@ -81,7 +81,7 @@ pub(super) fn run_deform(args: &DeformArgs) -> anyhow::Result<()> {
         ("--save-field", args.save_field.as_deref()),
     ]);
     refuse_clashes(std::slice::from_ref(&args.input), &outputs)?;
-    rigidcells::io::check_output_format(&args.input, &args.output)?;
+    rigidcells::internal::io::check_output_format(&args.input, &args.output)?;
     let chunk = pipeline::check_chunk(args.chunk)?;
     if is_xy(&args.input) {
         return run_deform_xy(args);
@@ -162,7 +162,9 @@ pub(super) fn run_deform_xy(args: &DeformArgs) -> anyhow::Result<()> {
             points,
             solution.complex.len(),
             solution.info.iterations_in_words(),
-            rigidcells::human::figure(solution.info.energies.last().copied().unwrap_or(0.0))
+            rigidcells::internal::human::figure(
+                solution.info.energies.last().copied().unwrap_or(0.0)
+            )
         );
         print_control_points(&info);
     }
@@ -193,12 +195,12 @@ pub(super) fn image_job(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    rigidcells::io::check_folders([output])?;
-    rigidcells::render::png_path(output)?;
+    rigidcells::internal::io::check_folders([output])?;
+    rigidcells::internal::render::png_path(output)?;
     let background = background.map(parse_color).transpose()?;
     let spec = read_spec::<2>(edit)?;
-    let raster = rigidcells::image::Raster::read_png(input)?;
-    let (out, info) = rigidcells::image::deform_image(&raster, &spec, params, background)
+    let raster = rigidcells::internal::image::Raster::read_png(input)?;
+    let (out, info) = rigidcells::internal::image::deform_image(&raster, &spec, params, background)
         .with_context(|| format!("deforming {}", input.display()))?;
     out.write_png(output)?;
     if !quiet {
@@ -244,8 +246,8 @@ pub(super) fn parse_color(text: &str) -> anyhow::Result<[u8; 3]> {
 
 pub(super) fn run_render(input: &Path, output: &Path, view: &View) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    rigidcells::io::check_folders([output])?;
-    rigidcells::render::png_path(output)?;
+    rigidcells::internal::io::check_folders([output])?;
+    rigidcells::internal::render::png_path(output)?;
     let image = render::render_file(input, view)?;
     image.write_png(output)?;
     println!(
@@ -267,8 +269,8 @@ pub(super) fn run_apply(
     quiet: bool,
 ) -> anyhow::Result<()> {
     refuse_overwrite(input, output)?;
-    rigidcells::io::check_folders([output])?;
-    rigidcells::io::check_output_format(input, output)?;
+    rigidcells::internal::io::check_folders([output])?;
+    rigidcells::internal::io::check_output_format(input, output)?;
     let bar = Bar::new(quiet);
     let info = pipeline::apply_file(field, input, output, params, CHUNK, &bar)?;
     if !quiet {
@@ -312,7 +314,7 @@ pub(super) fn parse_extent(text: Option<&str>) -> anyhow::Result<Option<[f64; 4]
 pub(super) fn run_grid(
     field: &Path,
     output: &Path,
-    params: &rigidcells::field::grid::GridParams,
+    params: &rigidcells::internal::field::grid::GridParams,
     epsg: Option<u32>,
     quiet: bool,
 ) -> anyhow::Result<()> {
@@ -325,10 +327,10 @@ pub(super) fn run_grid(
     if quiet {
         return Ok(());
     }
-    let length = |v: f64| rigidcells::human::length(v, info.cell);
+    let length = |v: f64| rigidcells::internal::human::length(v, info.cell);
     let place = |[x, y]: [f64; 2]| format!("{}, {}", length(x), length(y));
     // A deviation that rounds to nothing at the cells' precision has no place worth naming.
-    let deviation = |d: rigidcells::field::grid::Deviation| match length(d.value) {
+    let deviation = |d: rigidcells::internal::field::grid::Deviation| match length(d.value) {
         zero if zero == "0" => zero,
         text => format!("{text} at ({})", place(d.at)),
     };
@@ -346,7 +348,7 @@ pub(super) fn run_grid(
         println!(
             "note: {} nodes lie beyond the field's margin and have no value; PROJ refuses \
              points next to them",
-            rigidcells::human::count(info.no_value as u64)
+            rigidcells::internal::human::count(info.no_value as u64)
         );
     }
     println!(
@@ -407,22 +409,25 @@ pub(super) fn run_solve(args: &SolveArgs) -> anyhow::Result<()> {
 }
 
 pub(super) fn run_info(input: &Path) -> anyhow::Result<()> {
-    let info = rigidcells::info::describe(input, &Bar::new(false))?;
+    let info = rigidcells::internal::info::describe(input, &Bar::new(false))?;
     print!("{info}");
     Ok(())
 }
 
 /// The control points' table: the ten largest residuals and the RMSE.
-pub(super) fn print_control_points(info: &rigidcells::pipeline::DeformInfo) {
-    let table =
-        rigidcells::control::table(&info.control_points, 10, info.control_rounding.as_deref());
+pub(super) fn print_control_points(info: &rigidcells::internal::pipeline::DeformInfo) {
+    let table = rigidcells::internal::control::table(
+        &info.control_points,
+        10,
+        info.control_rounding.as_deref(),
+    );
     if !table.is_empty() {
         println!("{table}");
     }
 }
 
 pub(super) fn run_demo(out: &Path, quiet: bool) -> anyhow::Result<()> {
-    let demo = rigidcells::demo::prepare(out)?;
+    let demo = rigidcells::internal::demo::prepare(out)?;
     for job in &demo.shapes {
         let files = (
             job.input.as_path(),
@@ -459,13 +464,13 @@ pub(super) fn run_edit(
         return Err(Error::param("--proxy 0: the page needs samples to show").into());
     }
     if let Some(dir) = out_dir {
-        rigidcells::edit::server::OutputFolder::new(input, Some(dir))?;
+        rigidcells::internal::edit::server::OutputFolder::new(input, Some(dir))?;
     }
     let options = cells.options(transfer);
     options.params()?;
-    let scene = rigidcells::edit::Scene::load(input, proxy, &Bar::new(quiet))?;
-    let editor = rigidcells::edit::Editor::new(scene, options)?;
-    let server = rigidcells::edit::server::Server::bind(editor, port, out_dir)?;
+    let scene = rigidcells::internal::edit::Scene::load(input, proxy, &Bar::new(quiet))?;
+    let editor = rigidcells::internal::edit::Editor::new(scene, options)?;
+    let server = rigidcells::internal::edit::server::Server::bind(editor, port, out_dir)?;
     println!("{}", server.url());
     if open {
         let _ = std::process::Command::new("xdg-open")

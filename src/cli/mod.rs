@@ -10,13 +10,13 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use rigidcells::Budget;
 use rigidcells::Error;
-use rigidcells::cells::Inside;
-use rigidcells::field::{Outside, Transfer};
-use rigidcells::memory::Budget;
-use rigidcells::pipeline::{self, CHUNK, DeformParams};
-use rigidcells::render::{self, View};
-use rigidcells::solve::{LooseParts, Method};
+use rigidcells::Inside;
+use rigidcells::internal::pipeline::{self, CHUNK, DeformParams};
+use rigidcells::internal::render::{self, View};
+use rigidcells::{LooseParts, Method};
+use rigidcells::{Outside, Transfer};
 
 use choice::choice;
 use commands::*;
@@ -463,7 +463,7 @@ struct CellArgs {
     /// cell by more than this many finest cell sizes, or that lowers the energy by less than a
     /// millionth of it (a thousandth in the load steps before the last); 0 keeps only the
     /// energy test.
-    #[arg(long, value_name = "F", default_value_t = rigidcells::solve::MOVE_TOLERANCE)]
+    #[arg(long, value_name = "F", default_value_t = rigidcells::internal::solve::MOVE_TOLERANCE)]
     tolerance: f64,
     /// Solve this many coarser complexes first (each cell's parents, then theirs), each
     /// starting the next finer one at its solution, so that the cells' own Gauss-Newton
@@ -497,7 +497,7 @@ impl MemoryArg {
 }
 
 fn parse_memory(text: &str) -> Result<u64, String> {
-    rigidcells::memory::parse_size(text)
+    rigidcells::internal::memory::parse_size(text)
 }
 
 impl CellArgs {
@@ -528,7 +528,7 @@ impl CellArgs {
 
 /// Parses the command line, runs the command, prints an error and gives the exit code.
 pub(crate) fn main() -> ExitCode {
-    rigidcells::interrupt::remove_temporaries_on_signals();
+    rigidcells::internal::interrupt::remove_temporaries_on_signals();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Deform(args) => run_deform(&args),
@@ -562,7 +562,7 @@ pub(crate) fn main() -> ExitCode {
             memory,
             quiet,
         } => parse_extent(extent.as_deref()).and_then(|extent| {
-            let params = rigidcells::field::grid::GridParams {
+            let params = rigidcells::internal::field::grid::GridParams {
                 spacing,
                 extent,
                 height,

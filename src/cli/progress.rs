@@ -4,8 +4,8 @@
 use std::io::IsTerminal;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use rigidcells::estimate::Estimate;
-use rigidcells::progress::Observer;
+use rigidcells::Observer;
+use rigidcells::internal::estimate::Estimate;
 
 /// A progress bar on a terminal (a spinner for stages of unknown length), a new one for each
 /// stage (a finished bar draws no more); silent otherwise.

@@ -5,7 +5,7 @@
 //! connections are served at once, a thread each (two for a WebSocket: one reads the page's
 //! messages, one writes the answers; each blocks on its socket or its channel, neither polls);
 //! one more is answered 503 and closed, by one thread for all. `httparse` reads the request
-//! line and headers, read within [`HEAD_TIME`]; the server answers a WebSocket upgrade itself
+//! line and headers, read within `HEAD_TIME`; the server answers a WebSocket upgrade itself
 //! (RFC 6455's accept key) and hands the socket to `tungstenite`.
 //!
 //! Safety: the listener binds 127.0.0.1 only. Every request must carry the session's random

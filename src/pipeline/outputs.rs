@@ -30,7 +30,7 @@ pub struct Outputs<'a> {
     /// The JSON report ([`Report`]).
     pub report: Option<&'a Path>,
     /// A PNG of the input and the output side by side, seen from the view, with the strained
-    /// cells beside them when the flag is set ([`crate::preview::preview`]).
+    /// cells beside them when the flag is set ([`crate::pipeline::preview::preview`]).
     pub preview: Option<(&'a Path, View, bool)>,
     /// Replace no file that appears under the output's or another output's name while the run
     /// works (the editor's *Apply* to a name that was free when its user asked): the run then

@@ -410,7 +410,7 @@ where
 /// local-global iterations, the run also stops where its rate says it would take more than
 /// half of that (then [`Outcome::Slower`]). Returns the iterations and how the run ended.
 #[allow(clippy::too_many_arguments)]
-pub(in crate::solve) fn logged<const D: usize>(
+pub(super) fn logged<const D: usize>(
     (positions, layout): (&Positions, &Layout<D>),
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,

@@ -109,7 +109,7 @@ pub struct Entry<const D: usize, T> {
     pub region: Region<D>,
     /// What the entry does.
     pub value: T,
-    /// The line of the entry in the spec (1-based).
+    /// The line of the entry in the spec (1-based; 0 for an entry made in code).
     pub line: usize,
 }
 
@@ -120,7 +120,7 @@ pub struct Pin<const D: usize> {
     pub point: Vect<D>,
     /// Where it goes.
     pub to: Vect<D>,
-    /// The line of the entry (1-based).
+    /// The line of the entry (1-based; 0 for a pin made in code).
     pub line: usize,
 }
 
@@ -134,7 +134,7 @@ pub struct Target<const D: usize> {
     pub to: Vect<D>,
     /// Weight, relative to the glue between two finest cells.
     pub weight: f64,
-    /// The line of the `[[target]]` entry in the spec (1-based).
+    /// The line of the `[[target]]` entry in the spec (1-based; 0 for a target made in code).
     pub line: usize,
     /// The point's name: the file's ID column, else `#k` (the k-th target of the spec).
     pub id: String,

@@ -4,8 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use rigidcells::io::{Chunk, LasHeader, LasSource, Source};
-use rigidcells::rigid::Vect;
+use rigidcells::Vect;
+use rigidcells::internal::io::{Chunk, LasHeader, LasSource, Source};
 
 pub fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_rigidcells"))

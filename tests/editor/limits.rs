@@ -7,7 +7,7 @@ use std::net::TcpStream;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use rigidcells::edit::{MAX_HANDLES, MAX_PINS, MAX_POLYGON, MAX_SELECTIONS};
+use rigidcells::internal::edit::{MAX_HANDLES, MAX_PINS, MAX_POLYGON, MAX_SELECTIONS};
 use serde_json::json;
 use tungstenite::Message;
 
@@ -123,7 +123,8 @@ fn a_spec_of_many_pins_is_read_in_linear_time() {
     }
     let start = Instant::now();
     let spec =
-        rigidcells::spec::parse_spec::<3>(&text, Path::new("."), Path::new("p.toml")).unwrap();
+        rigidcells::internal::spec::parse_spec::<3>(&text, Path::new("."), Path::new("p.toml"))
+            .unwrap();
     let took = start.elapsed();
     assert_eq!(spec.pins.len(), 60_000);
     assert_eq!(spec.pins[59_999].line, 4 * 59_999 + 2);
@@ -142,7 +143,7 @@ fn a_spec_of_many_pins_is_read_in_linear_time() {
 /// the answer, so one just before the idle connections could leave one of them refused).
 #[test]
 fn connections_are_capped() {
-    use rigidcells::edit::server::MAX_CONNECTIONS;
+    use rigidcells::internal::edit::server::MAX_CONNECTIONS;
     let dir = tempfile::tempdir().unwrap();
     let (port, token) = running(dir.path());
     let host = format!("127.0.0.1:{port}");

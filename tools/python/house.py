@@ -7,6 +7,8 @@
   layer, and no import from a module to one in a higher layer;
 - no import circle between top-level modules, nor between library files (a module and its own
   descendants aside);
+- the crate root public only as its facade: `src/lib.rs` declares `said` and `internal`, and
+  `src/internal.rs` declares every other top-level module (hidden from the docs);
 - `unsafe` code only in the files docs/ARCHITECTURE.md names ("`unsafe` in few places"), and
   printing or exiting only in `interrupt.rs` (the signal handler the same page describes).
 
@@ -28,6 +30,8 @@ ARCHITECTURE = "docs/ARCHITECTURE.md"
 PYTHON = ["python/src", "python/python/rigidcells", "blender/rigidcells_blender"]
 # The one library file that prints and exits: the signal handler.
 PRINTS = {"src/interrupt.rs"}
+# The modules the crate root declares itself: the facade's (the rest are `internal`'s).
+FACADE = {"said", "internal"}
 
 
 def modules():
@@ -42,6 +46,9 @@ def modules():
             if parts[-1] in ("mod", "lib"):
                 parts = parts[:-1]
             if parts and parts[0] == "cli":
+                continue
+            # Declares the modules behind the facade, holding no code: see `facade_breaches`.
+            if parts == ["internal"]:
                 continue
             out[tuple(parts)] = path
     return out
@@ -176,6 +183,20 @@ def top_circles(edges):
     return circles(top)
 
 
+def facade_breaches(mods):
+    """Top-level modules declared where they should not be: the root declares `said` and
+    `internal`; `internal.rs` every other one, by `#[path]` to its own file."""
+    declared = lambda path: re.findall(r"(?m)^\s*pub(?:\([a-z]+\))? mod ([a-z_0-9]+);", code(path))
+    public = set(declared(os.path.join(ROOT, "lib.rs")))
+    hidden = set(declared(os.path.join(ROOT, "internal.rs")))
+    tops = {m[0] for m in mods if m}
+    out = [f"src/lib.rs declares {m}, which is not part of the facade: declare it in src/internal.rs"
+           for m in sorted(public - FACADE)]
+    out += [f"src/{m}: a top-level module that src/internal.rs does not declare"
+            for m in sorted(tops - hidden - FACADE)]
+    return out
+
+
 def python_files():
     for folder in PYTHON:
         for base, _, files in os.walk(folder):
@@ -204,7 +225,7 @@ def main():
     tops = top_circles(edges)
     for comp in tops:
         print("module circle:", ", ".join(sorted(c[0] for c in comp)))
-    breaches = layer_breaches(mods, edges) + site_breaches(mods)
+    breaches = layer_breaches(mods, edges) + site_breaches(mods) + facade_breaches(mods)
     for line in breaches:
         print(line)
     print(

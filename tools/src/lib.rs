@@ -5,17 +5,17 @@ use std::path::PathBuf;
 
 use data_gen::{Mesh, decimate, split_to, subdivide};
 use rand::{Rng, SeedableRng, rngs::StdRng};
+use rigidcells::Budget;
 use rigidcells::Error;
-use rigidcells::cells::{BuildParams, CellComplex, build};
-use rigidcells::memory::Budget;
-use rigidcells::rigid::Vect;
-use rigidcells::spec::{EditSpec, parse_spec};
+use rigidcells::Vect;
+use rigidcells::internal::cells::{BuildParams, CellComplex, build};
+use rigidcells::{EditSpec, parse_spec};
 
 /// The model of [`model_arg`] as a mesh, and its path; prints a line naming it with `what`
 /// (the harness's units and conventions) after the vertex and thread counts.
 pub fn load_scan(what: &str) -> Result<(PathBuf, Mesh), Box<dyn std::error::Error>> {
     let model = model_arg();
-    let doc = rigidcells::io::Document::read(&model)?;
+    let doc = rigidcells::internal::io::Document::read(&model)?;
     let scan = Mesh {
         vertices: doc.positions().iter().map(|p| [p.x, p.y, p.z]).collect(),
         triangles: doc.triangles().to_vec(),
@@ -107,7 +107,7 @@ pub fn build_at(points: &[Vect<3>], tris: &[[u32; 3]], size: f64) -> Result<Cell
 
 /// The finest cell size that gives about `target` cells (the library's bisection).
 pub fn cell_size_for(points: &[Vect<3>], tris: &[[u32; 3]], target: usize) -> Result<f64, Error> {
-    rigidcells::cells::cell_size_for(
+    rigidcells::internal::cells::cell_size_for(
         points,
         tris,
         &BuildParams::default(),
@@ -122,14 +122,14 @@ pub fn solve_default(
     complex: CellComplex<3>,
     spec: &EditSpec<3>,
     points: &[Vect<3>],
-) -> Result<rigidcells::solve::Solution<3>, Error> {
-    let constraints = rigidcells::solve::resolve(&complex, spec, points, None)?;
-    rigidcells::solve::solve(
+) -> Result<rigidcells::internal::solve::Solution<3>, Error> {
+    let constraints = rigidcells::internal::solve::resolve(&complex, spec, points, None)?;
+    rigidcells::internal::solve::solve(
         complex,
         constraints,
-        &rigidcells::solve::SolveParams::default(),
+        &rigidcells::internal::solve::SolveParams::default(),
         Budget::default(),
-        &rigidcells::progress::Silent,
+        &rigidcells::internal::progress::Silent,
     )
 }
 

@@ -93,7 +93,7 @@ where
 /// sooner (`Method::Auto`; then `system` is switched to it for this step and the next, and the
 /// answer is the iterations and the energy the motions are left at).
 #[allow(clippy::too_many_arguments)]
-pub(in crate::solve) fn first<const D: usize>(
+pub(in crate::internal::solve) fn first<const D: usize>(
     system: &mut System<D>,
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,

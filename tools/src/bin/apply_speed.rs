@@ -111,7 +111,7 @@ fn main() {
     let dir = std::env::temp_dir().join(format!("rigidcells-apply-speed-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
 
-    let header = rigidcells::io::LasHeader::read(&files[0]).unwrap();
+    let header = rigidcells::internal::io::LasHeader::read(&files[0]).unwrap();
     let w = header.max[0] - header.min[0];
     let edit = dir.join("edit.toml");
     std::fs::write(
@@ -146,7 +146,9 @@ fn main() {
     for input in &files {
         let ext = input.extension().unwrap().to_string_lossy().to_string();
         let out = dir.join(format!("out.{ext}"));
-        let n = rigidcells::io::LasHeader::read(input).unwrap().count;
+        let n = rigidcells::internal::io::LasHeader::read(input)
+            .unwrap()
+            .count;
         let apply = |transfer: Option<&str>| {
             let mut c = Command::new(&rigidcells);
             c.arg("apply").arg(&field).arg(input).arg("-o").arg(&out);

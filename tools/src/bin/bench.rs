@@ -8,8 +8,8 @@
 
 use std::time::Instant;
 
-use rigidcells::field::{Deformer, Field, Transfer, apply};
-use rigidcells::io::Document;
+use rigidcells::internal::field::{Deformer, Field, Transfer, apply};
+use rigidcells::internal::io::Document;
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

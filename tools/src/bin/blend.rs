@@ -3,7 +3,7 @@
 //! `cargo run --release -p rigidcells-tools --bin blend [MODEL.ply]` (default: the decimated
 //! dragon). For about 1.2k and 5.5k cells, 480k random surface samples (the paper's largest
 //! model) are queried by: a kiddo kd-tree (`k = 5`, the generic reference), the tiled search of
-//! `rigidcells::field::Nearest` (tiles filled on the way, as in a real run), and the whole blend
+//! `rigidcells::internal::field::Nearest` (tiles filled on the way, as in a real run), and the whole blend
 //! transfer in both weightings. The tiled search runs again on the samples sorted into a
 //! spatially coherent order, as scans come. The tiled neighbors are compared with the brute-force scan on
 //! 100k samples, and the transfer's bits with one thread against all threads.
@@ -14,9 +14,9 @@ use std::time::Instant;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use rayon::prelude::*;
-use rigidcells::field::{Deformer, Field, NEAR, Nearest, Transfer, apply};
-use rigidcells::io::Document;
-use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
+use rigidcells::internal::field::{Deformer, Field, NEAR, Nearest, Transfer, apply};
+use rigidcells::internal::io::Document;
+use rigidcells::internal::rigid::{Dim, Motion, Rigid, Vect};
 use rigidcells_tools::{build_at, cell_size_for, model_arg, surface_samples};
 
 const SAMPLES: usize = 480_000;
@@ -135,7 +135,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 }
 
 /// The complex's cells, each turned by a random rotation of up to 0.3 rad and shifted a little.
-fn random_field(complex: &rigidcells::cells::CellComplex<3>) -> Field<3> {
+fn random_field(complex: &rigidcells::internal::cells::CellComplex<3>) -> Field<3> {
     let mut rng = StdRng::seed_from_u64(3);
     let h = complex.cells[0].half;
     Field {

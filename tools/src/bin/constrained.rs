@@ -1,4 +1,4 @@
-//! What the exact-constraint layer ([`rigidcells::field::FieldMap`]) costs: the blend and
+//! What the exact-constraint layer ([`rigidcells::internal::field::FieldMap`]) costs: the blend and
 //! the RBF alone against the same transfers with fixed and handle samples made exact and the
 //! domain checked, on the same samples in the same run (medians of 5 alternating runs).
 //!
@@ -8,9 +8,9 @@
 
 use std::time::Instant;
 
-use rigidcells::field::{Deformer, Field, FieldMap, Outside, Transfer, Warp, apply};
-use rigidcells::io::Document;
-use rigidcells::rigid::Vect;
+use rigidcells::Vect;
+use rigidcells::internal::field::{Deformer, Field, FieldMap, Outside, Transfer, Warp, apply};
+use rigidcells::internal::io::Document;
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn seconds(warp: &impl Warp<3>, origin: &Vect<3>, samples: &[Vect<3>]) -> f64 {

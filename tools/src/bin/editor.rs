@@ -11,9 +11,9 @@ use std::net::TcpStream;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use rigidcells::edit::server::Server;
-use rigidcells::edit::{Edit, Editor, HandleEdit, Scene, Selection};
-use rigidcells::pipeline::{Options, PROXY_SAMPLES};
+use rigidcells::internal::edit::server::Server;
+use rigidcells::internal::edit::{Edit, Editor, HandleEdit, Scene, Selection};
+use rigidcells::internal::pipeline::{Options, PROXY_SAMPLES};
 use tungstenite::Message;
 
 /// The west and east tenths of the scene as screen selections of a view looking down z.
@@ -57,12 +57,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let updates: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(30);
     let options = Options {
         cells: Some(cells),
-        transfer: rigidcells::field::Transfer::Pu,
+        transfer: rigidcells::internal::field::Transfer::Pu,
         ..Default::default()
     };
 
     let t = Instant::now();
-    let scene = Scene::load(&input, PROXY_SAMPLES, &rigidcells::progress::Silent)?;
+    let scene = Scene::load(
+        &input,
+        PROXY_SAMPLES,
+        &rigidcells::internal::progress::Silent,
+    )?;
     let proxy_s = t.elapsed().as_secs_f64();
     let (samples, total) = (scene.points.len(), scene.total);
     let extent = (scene.bounds.1 - scene.bounds.0).amax();

@@ -27,8 +27,8 @@
 use std::time::Instant;
 
 use rayon::prelude::*;
-use rigidcells::field::{Deformer, Field, Rbf, Transfer, apply};
-use rigidcells::rigid::Vect;
+use rigidcells::Vect;
+use rigidcells::internal::field::{Deformer, Field, Rbf, Transfer, apply};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, load_scan, resampled};
 
 const VERTICES: usize = 480_000;

@@ -396,8 +396,8 @@ fn bounds_of(path: &Path, format: Format, bytes: &[u8]) -> Option<Bounds> {
 }
 
 fn samples_of(path: &Path) -> Result<Vec<[f64; 3]>, Failure> {
-    let mut source = rigidcells::io::open(path)?;
-    let mut chunk = rigidcells::io::Chunk::default();
+    let mut source = rigidcells::internal::io::open(path)?;
+    let mut chunk = rigidcells::internal::io::Chunk::default();
     let mut points = Vec::new();
     while source.read(65536, &mut chunk)? > 0 {
         points.extend(chunk.positions.iter().map(|p| [p.x, p.y, p.z]));

@@ -15,11 +15,11 @@
 
 use std::time::Instant;
 
-use rigidcells::cells::{BuildParams, CellComplex, build};
-use rigidcells::memory::Budget;
-use rigidcells::rigid::{Motion, Vect};
-use rigidcells::solve::{self, LocalGlobalParams, SolveParams, SolverInfo};
-use rigidcells::spec::parse_spec;
+use rigidcells::Budget;
+use rigidcells::internal::cells::{BuildParams, CellComplex, build};
+use rigidcells::internal::rigid::{Motion, Vect};
+use rigidcells::internal::solve::{self, LocalGlobalParams, SolveParams, SolverInfo};
+use rigidcells::parse_spec;
 
 /// Relative gaps to Newton's minimum that are timed.
 const GAPS: [f64; 2] = [1e-3, 1e-6];

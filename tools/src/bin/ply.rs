@@ -1,5 +1,5 @@
 //! Reading a binary PLY point cloud: `ply-rs-bw` against our header parse plus memory-mapped
-//! fast path (`rigidcells::io::PlyStream`) and our record walker (`PlyRecordStream`, which
+//! fast path (`rigidcells::internal::io::PlyStream`) and our record walker (`PlyRecordStream`, which
 //! checks every record as it opens, as when the file is read whole), on the same file in the
 //! same run.
 //!
@@ -12,8 +12,8 @@ use std::time::Instant;
 
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{DefaultElement, Property};
-use rigidcells::io::{Chunk, Document, PlyRecordStream, PlyStream, Source};
-use rigidcells::rigid::Vect;
+use rigidcells::Vect;
+use rigidcells::internal::io::{Chunk, Document, PlyRecordStream, PlyStream, Source};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let n: u64 = std::env::args()

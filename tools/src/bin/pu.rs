@@ -11,9 +11,9 @@
 
 use std::time::Instant;
 
-use rigidcells::field::{Deformer, Field, PuRbf, Rbf, Warp, apply};
-use rigidcells::io::Document;
-use rigidcells::rigid::{Dim, Motion, Rigid, Vect};
+use rigidcells::internal::field::{Deformer, Field, PuRbf, Rbf, Warp, apply};
+use rigidcells::internal::io::Document;
+use rigidcells::internal::rigid::{Dim, Motion, Rigid, Vect};
 use rigidcells_tools::{bend_spec, build_at, cell_size_for, model_arg, surface_samples};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

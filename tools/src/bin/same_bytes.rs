@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use rigidcells::info;
+use rigidcells::internal::info;
 
 fn main() {
     let mut before = None;
@@ -144,7 +144,7 @@ fn steady_line(line: &str) -> String {
 /// lifted by a tenth of the box (half-spaces, so that a flat scan is selected as well as a
 /// mesh).
 fn spec(input: &Path) -> String {
-    let Ok(i) = info::describe(input, &rigidcells::progress::Silent) else {
+    let Ok(i) = info::describe(input, &rigidcells::internal::progress::Silent) else {
         return "[[fixed]]\nsphere = { center = [0, 0, 0], radius = 1 }\n".into();
     };
     let Some((lo, hi)) = i.bounds else {

@@ -8,10 +8,10 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use las::{Builder, LazParallelism, PointDataBuilder, ReaderOptions, WriterOptions};
-use rigidcells::field::Transfer;
-use rigidcells::pipeline::{Options, deform_file};
-use rigidcells::progress::Silent;
-use rigidcells::spec::{parse_spec, read_spec};
+use rigidcells::Silent;
+use rigidcells::Transfer;
+use rigidcells::{Options, deform_file};
+use rigidcells::{parse_spec, read_spec};
 
 /// Points per batch of the plain copy: its fastest (the crate decompresses and compresses the
 /// LAZ chunks of a batch in parallel; 64k-point batches made the LAZ copy 45 % slower).
@@ -56,7 +56,7 @@ fn main() {
     let spec = match args.get(2) {
         Some(p) => read_spec::<3>(Path::new(p)).unwrap(),
         None => {
-            let h = rigidcells::io::LasHeader::read(&input).unwrap();
+            let h = rigidcells::internal::io::LasHeader::read(&input).unwrap();
             let w = h.max[0] - h.min[0];
             let text = data_gen::end_lift_spec(h.min, h.max, 0.15, 0.025 * w, -10.0);
             parse_spec::<3>(&text, Path::new("."), Path::new("<default edit>")).unwrap()
@@ -70,7 +70,7 @@ fn main() {
     }
     .params()
     // As the CLI: a proxy for the fold-over check.
-    .and_then(|p| p.with_proxy_samples(rigidcells::pipeline::FOLDOVER_SAMPLES))
+    .and_then(|p| p.with_proxy_samples(rigidcells::internal::pipeline::FOLDOVER_SAMPLES))
     .unwrap();
     // Alternating runs, medians reported: the copy writes as many bytes as the deform and its
     // time swings with page-cache writeback. `deform` syncs its output before the rename (so

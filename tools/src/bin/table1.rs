@@ -14,12 +14,12 @@
 
 use std::time::Instant;
 
-use rigidcells::cells::{BuildParams, build};
-use rigidcells::field::{Deformer, Field, Transfer, apply};
-use rigidcells::memory::Budget;
-use rigidcells::progress::Silent;
-use rigidcells::rigid::Vect;
-use rigidcells::solve::{self, SolveParams};
+use rigidcells::Budget;
+use rigidcells::Silent;
+use rigidcells::Vect;
+use rigidcells::internal::cells::{BuildParams, build};
+use rigidcells::internal::field::{Deformer, Field, Transfer, apply};
+use rigidcells::internal::solve::{self, SolveParams};
 use rigidcells_tools::{bend_spec, cell_size_for, load_scan, resampled};
 
 /// The paper's dragon rows: vertices, cells, voxelization, solve (one Newton iteration),

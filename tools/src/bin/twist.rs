@@ -11,10 +11,10 @@
 use std::time::Instant;
 
 use rigidcells::Error;
-use rigidcells::pipeline::{self, Options};
-use rigidcells::progress::Silent;
-use rigidcells::rigid::Vect;
-use rigidcells::spec::parse_spec;
+use rigidcells::Silent;
+use rigidcells::Vect;
+use rigidcells::internal::pipeline::{self, Options};
+use rigidcells::parse_spec;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let degrees: f64 = match std::env::args().nth(1) {

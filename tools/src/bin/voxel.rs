@@ -9,9 +9,9 @@
 
 use std::time::Instant;
 
-use rigidcells::cells::{BuildParams, build};
-use rigidcells::memory::Budget;
-use rigidcells::rigid::Vect;
+use rigidcells::Budget;
+use rigidcells::Vect;
+use rigidcells::internal::cells::{BuildParams, build};
 use rigidcells_tools::{cell_size_for, load_scan, resampled};
 
 /// The paper's rows: vertices, cells, voxelization seconds.
