@@ -12,4 +12,7 @@ cp "$work/gingerbread.png" docs/gingerbread.png
 cp "$work/gingerbread_bent.png" docs/gingerbread_bent.png
 $bin render ../shared/data/meshes/dragon_11k_binary.ply -o docs/dragon.png --size 360x300 --up z
 $bin render ../shared/data/las/autzen_trim.las -o docs/autzen.png --azimuth -90 --elevation 90 --size 360x300
+# The editor in Chromium (Debian's chromium and chromedriver): after a drag, and with its help open.
+RIGIDCELLS_BIN=$bin python3 tests/browser/editor_test.py --screenshot docs/editor.png \
+    --help-screenshot docs/editor_help.png
 ls -l docs/*.png

@@ -206,6 +206,57 @@ fn the_token_host_and_origin_are_enforced() {
     assert!(tungstenite::client(format!("ws://{host}/ws"), stream).is_err());
 }
 
+/// The server says what it does, a line at a time: the page loaded, connected and closed, each
+/// request refused or not found, each file saved or applied. A browser's icon request, which
+/// carries no token, is answered "no content" and not logged as refused.
+#[test]
+fn the_server_says_what_it_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let lines = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+    let heard = lines.clone();
+    let (server, _) = serve(dir.path());
+    let server = server.logging(std::sync::Arc::new(move |line: &str| {
+        heard.lock().unwrap().push(line.to_string())
+    }));
+    let (port, token) = (server.port(), server.token().to_string());
+    std::thread::spawn(move || server.run());
+    let host = format!("127.0.0.1:{port}");
+    let (status, head, body) = get_head(port, "/favicon.ico", &host, None);
+    assert_eq!(status, 204, "{head}");
+    assert!(
+        body.is_empty() && !head.contains("Content-Length"),
+        "{head}"
+    );
+    assert_eq!(get(port, &format!("/?t={token}"), &host, None).0, 200);
+    assert_eq!(get(port, "/scene.json?t=00", &host, None).0, 403);
+    assert_eq!(
+        get(port, &format!("/nothing?t={token}"), &host, None).0,
+        404
+    );
+    let mut ws = connect(port, &token);
+    save(&mut ws, "ends.edit.toml", &ends([0.0, 0.0, 1.0], 0.0));
+    ws.close(None).unwrap();
+    while ws.read().is_ok() {}
+    let said = |lines: &[String]| lines.iter().any(|l| l == "page closed");
+    for _ in 0..100 {
+        if said(&lines.lock().unwrap()) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let lines = lines.lock().unwrap().clone();
+    let saved = format!("saved {}", dir.path().join("ends.edit.toml").display());
+    let expected = [
+        "page loaded",
+        "refused GET /scene.json: without this session's token, or from another host or page",
+        "not found: /nothing",
+        "page connected",
+        saved.as_str(),
+        "page closed",
+    ];
+    assert_eq!(lines, expected, "{lines:#?}");
+}
+
 /// A WebSocket needs an `Origin` (a browser always sends one), and this server's; the page is
 /// sent without a referrer and may not be framed.
 #[test]

@@ -470,7 +470,10 @@ pub(super) fn run_edit(
     options.params()?;
     let scene = rigidcells::internal::edit::Scene::load(input, proxy, &Bar::new(quiet))?;
     let editor = rigidcells::internal::edit::Editor::new(scene, options)?;
-    let server = rigidcells::internal::edit::server::Server::bind(editor, port, out_dir)?;
+    let mut server = rigidcells::internal::edit::server::Server::bind(editor, port, out_dir)?;
+    if !quiet {
+        server = server.logging(std::sync::Arc::new(|line: &str| eprintln!("{line}")));
+    }
     println!("{}", server.url());
     if open {
         let _ = std::process::Command::new("xdg-open")

@@ -204,6 +204,8 @@ function draw(t) {
 // ---------- the gizmo: three axes, a ring, a center ----------
 function gizmo() {
   const h = edit.handles[active]; if (!h || !h.selections.length) return null;
+  // Its centre is the handle's samples' centroid: none until the server says which they are.
+  if (h.selections.some((sel) => !maskCache.has(keyOf(sel)))) return null;
   const m = mvp(), at = add(h.pivot, h.translate), c = project(m, at); if (c[2] <= 0) return null;
   const r = Math.hypot(...sub(scene.hi, scene.lo)) * 0.12;
   const axes = [[1, 0, 0], [0, 1, 0], [0, 0, 1]].map((a) => { const e = project(m, add(at, scl(a, r))); return { dir: a, end: toScreen(e) }; });
@@ -279,19 +281,34 @@ function centroid(ms) {
 // The server's limits on an edit (scene.json): the page keeps within them, the server refuses
 // what passes them.
 function selectionCount(e) { return e.fixed.length + e.handles.reduce((n, h) => n + h.selections.length, 0); }
+// Adds `sel` to the fixed regions or to a handle (the role chosen now) once the server says
+// which samples it holds: a selection that holds none is not kept, and the page says so.
 function addSelection(sel) {
-  if (selectionCount(edit) >= scene.max_selections) { warn(`the editor takes at most ${scene.max_selections} selections: undo some first`); return; }
-  if ($("role").value !== "fixed" && active >= scene.max_handles) { warn(`the editor takes at most ${scene.max_handles} handles`); return; }
-  const next = JSON.parse(JSON.stringify(edit));
-  if ($("role").value === "fixed") next.fixed.push(sel);
-  else {
-    if (!next.handles[active]) { next.handles[active] = { selections: [], translate: [0, 0, 0], axis: [0, 0, 1], degrees: 0, pivot: [0, 0, 0] }; }
-    next.handles[active].selections.push(sel);
-  }
-  if (!fits(next)) { warn(`the edit would pass the editor's limit of ${scene.max_message} bytes a message: draw fewer or simpler lassos`); return; }
-  snapshot(); edit = next;
-  changed(true);
+  const fixed = $("role").value === "fixed", handle = active;
+  status("selecting…");
+  fetchMasks([sel], () => {
+    const caught = countOf(maskOf(sel));
+    if (caught === 0) { warn(`the ${fixed ? "fixed" : "handle"} selection caught no sample: nothing selected${xray ? "" : " (X-ray selects through the shape)"}`); status(`${scene.name}: the empty selection was not kept`); return; }
+    // Built from the edit as it is now: other selections may have come in meanwhile.
+    if (selectionCount(edit) >= scene.max_selections) { warn(`the editor takes at most ${scene.max_selections} selections: undo some first`); return; }
+    if (!fixed && handle >= scene.max_handles) { warn(`the editor takes at most ${scene.max_handles} handles`); return; }
+    const next = JSON.parse(JSON.stringify(edit));
+    if (fixed) next.fixed.push(sel);
+    else {
+      if (!next.handles[handle]) { next.handles[handle] = { selections: [], translate: [0, 0, 0], axis: [0, 0, 1], degrees: 0, pivot: [0, 0, 0] }; }
+      next.handles[handle].selections.push(sel);
+    }
+    if (!fits(next)) { warn(`the edit would pass the editor's limit of ${scene.max_message} bytes a message: draw fewer or simpler lassos`); return; }
+    const what = fixed ? `fixed, selection ${next.fixed.length}` : `handle ${handle + 1}, selection ${next.handles[handle].selections.length}`;
+    warn("");
+    snapshot(); edit = next;
+    caughtNote = `${what}: ${caught.toLocaleString("en")} of ${N.toLocaleString("en")} samples shown`;
+    changed(true);
+    status(caughtNote);
+  });
 }
+let caughtNote = ""; // what the last selection caught, kept on the status line
+function countOf(mask) { let c = 0; for (let i = 0; i < mask.length; i++) c += mask[i]; return c; }
 
 // ---------- edits, history, the solver ----------
 function snapshot() { history.push(JSON.stringify(edit)); future = []; }
@@ -349,11 +366,12 @@ function onMessage(ev) {
     const maps = new Float32Array(ev.data, 20, cells * 12), strain = new Float32Array(ev.data, 20 + cells * 48, cells);
     motionTexture(cells, maps, strain);
     strainMax = 1e-12; for (const v of strain) strainMax = Math.max(strainMax, v);
+    strainLegend();
     display = 1; motionsSeen = true; rc.updates += 1;
     const t0 = sentAt.get(s); if (t0 !== undefined) { requestAnimationFrame(() => { rc.roundTrips.push(performance.now() - t0); }); }
     for (const k of sentAt.keys()) if (k <= s) sentAt.delete(k);
     warn("");
-    status(`${scene.name}: ${N} of ${scene.total} samples, ${scene.cells} cells · solve ${its} iterations, ${(secs * 1000).toFixed(0)} ms`);
+    status(`${scene.name}: ${N.toLocaleString("en")} of ${scene.total.toLocaleString("en")} samples, ${scene.cells.toLocaleString("en")} cells · solve ${its} iterations, ${(secs * 1000).toFixed(0)} ms` + (caughtNote ? ` · ${caughtNote}` : ""));
     redraw();
   } else if (kind === 3) {
     const n = dv.getUint32(8, true), bits = new Uint8Array(ev.data, 16), mask = new Uint8Array(n);
@@ -459,18 +477,27 @@ $("select-classes").onclick = () => { const cls = checkedClasses(); if (cls.leng
 $("undo").onclick = () => { if (history.length) { future.push(JSON.stringify(edit)); restore(history.pop()); release(); } };
 $("redo").onclick = () => { if (future.length) { history.push(JSON.stringify(edit)); restore(future.pop()); release(); } };
 $("clear").onclick = () => { snapshot(); edit = { fixed: [], handles: [], pins: [] }; active = 0; changed(true); };
-$("strain").onclick = () => { showStrain = !showStrain; $("strain").classList.toggle("on", showStrain); if (showStrain && display === 2) display = 1; redraw(); };
+$("strain").onclick = () => { showStrain = !showStrain; $("strain").classList.toggle("on", showStrain); if (showStrain && display === 2) display = 1; strainLegend(); redraw(); };
+// The legend's strain scale: shown with Strain, from rigid (blue) to this edit's most (red).
+function strainLegend() {
+  $("strain-scale").hidden = !showStrain;
+  $("strain-high").textContent = strainMax > 1e-12 ? `most ${strainMax.toPrecision(2)}` : "most";
+}
+function toggleHelp() { $("help").hidden = !$("help").hidden; $("help-button").classList.toggle("on", !$("help").hidden); }
+$("help-button").onclick = toggleHelp;
 $("show-cells").onclick = () => { showCells = !showCells; $("show-cells").classList.toggle("on", showCells); redraw(); };
 $("xray").onclick = () => setXray(!xray);
 // Save and Apply write a plain file name into the server's folder; the server answers
 // "exists" for a file it did not write, and the page asks before sending overwrite.
 function write(action, name, overwrite) {
-  if (action === "apply") $("progress").value = 0;
+  warn("");
+  if (action === "apply") { $("progress").value = 0; status(`applying into ${name}…`); } else status(`saving ${name}…`);
   socket.send(JSON.stringify({ type: action, name, edit, overwrite }));
 }
 $("save").onclick = () => { const n = $("spec-path").value.trim(); if (n) write("save", n, false); };
 $("apply").onclick = () => { const n = $("out-path").value.trim(); if (n) write("apply", n, false); };
 addEventListener("keydown", (e) => {
+  if (e.key === "F1") { e.preventDefault(); toggleHelp(); return; }
   if (e.target.tagName === "INPUT") return;
   if ((e.ctrlKey || e.metaKey) && e.key === "z") $("undo").onclick();
   else if ((e.ctrlKey || e.metaKey) && (e.key === "y" || e.key === "Z")) $("redo").onclick();
@@ -496,7 +523,7 @@ addEventListener("resize", redraw);
     handleList();
     socket = new WebSocket(`ws://${location.host}/ws?t=${token}`); socket.binaryType = "arraybuffer";
     socket.onmessage = onMessage;
-    socket.onopen = () => { rc.ready = true; status(`${scene.name}: ${N} of ${scene.total} samples, ${scene.cells} cells — select fixed and handle regions (Box, Lasso), then drag the gizmo`); };
+    socket.onopen = () => { rc.ready = true; status(`${scene.name}: ${N.toLocaleString("en")} of ${scene.total.toLocaleString("en")} samples, ${scene.cells.toLocaleString("en")} cells — select fixed and handle regions (Box, Lasso), then drag the gizmo`); };
     socket.onclose = () => status("disconnected from the server");
     redraw();
   } catch (e) { status("error: " + e.message); }

@@ -131,7 +131,13 @@ pub struct Server {
     assets: Arc<Assets>,
     commands: Commands<Request>,
     out_dir: PathBuf,
+    log: Log,
 }
+
+/// Where the server says what it did, a line at a time (the command line prints them on
+/// stderr): the page loaded, connected and gone, each request refused and why, each file saved
+/// or applied, each error and warning the page was shown.
+pub type Log = Arc<dyn Fn(&str) + Send + Sync>;
 
 impl Server {
     /// Binds 127.0.0.1:`port` (0: any free port) and starts the solver thread over `editor`;
@@ -162,7 +168,13 @@ impl Server {
             assets,
             commands,
             out_dir,
+            log: Arc::new(|_: &str| {}),
         })
+    }
+
+    /// Says what it does to `log` (by default, to no one).
+    pub fn logging(self, log: Log) -> Self {
+        Self { log, ..self }
     }
 
     /// The folder *Save edit* and *Apply* write into.
@@ -206,15 +218,19 @@ impl Server {
                 let _ = refuse.try_send(stream);
                 continue;
             };
-            let (gate, assets, commands) =
-                (gate.clone(), self.assets.clone(), self.commands.clone());
+            let (gate, assets, commands, log) = (
+                gate.clone(),
+                self.assets.clone(),
+                self.commands.clone(),
+                self.log.clone(),
+            );
             // Named for the page's end of the connection (`edit-PORT`), as its writer is.
             let peer = stream.peer_addr().map_or(0, |a| a.port());
             let _ = std::thread::Builder::new()
                 .name(format!("edit-{peer}"))
                 .spawn(move || {
                     let _slot = slot;
-                    let _ = connection(stream, &gate, &assets, &commands);
+                    let _ = connection(stream, &gate, &assets, &commands, &log);
                 });
         }
         Ok(())
@@ -328,6 +344,7 @@ fn connection(
     gate: &Gate,
     assets: &Assets,
     commands: &Commands<Request>,
+    log: &Log,
 ) -> std::io::Result<()> {
     stream.set_write_timeout(Some(WRITE_TIME))?;
     let port = gate.port;
@@ -347,6 +364,10 @@ fn connection(
     }
     let target = request.path.unwrap_or("/").to_string();
     let (path, query) = target.split_once('?').unwrap_or((&target, ""));
+    // A browser asks for an icon without the page's token: there is none, and nothing to guard.
+    if path == "/favicon.ico" && request.method == Some("GET") {
+        return respond(&mut stream, 204, "", b"", port);
+    }
     let admitted = gate.admits(query, request.headers);
     let upgrade =
         header(request.headers, "upgrade").is_some_and(|v| v.eq_ignore_ascii_case("websocket"));
@@ -357,7 +378,7 @@ fn connection(
         let version = header(request.headers, "sec-websocket-version");
         return match key {
             Some(key) if version.as_deref() == Some("13") => {
-                websocket(stream, &key, rest, commands)
+                websocket(stream, &key, rest, commands, log)
             }
             _ => respond(
                 &mut stream,
@@ -368,10 +389,15 @@ fn connection(
             ),
         };
     }
-    if request.method != Some("GET") {
+    let method = request.method.unwrap_or("?");
+    if method != "GET" {
+        log(&format!("refused {method} {path}: only GET is served"));
         return respond(&mut stream, 405, "text/plain", b"only GET", port);
     }
     if !admitted || upgrade {
+        log(&format!(
+            "refused GET {path}: without this session's token, or from another host or page"
+        ));
         return respond(
             &mut stream,
             403,
@@ -391,8 +417,14 @@ fn connection(
         "/triangles.bin" => ("application/octet-stream", &assets.triangles),
         "/cells.bin" => ("application/octet-stream", &assets.cells),
         "/blend.bin" => ("application/octet-stream", &assets.blend),
-        _ => return respond(&mut stream, 404, "text/plain", b"not found", port),
+        _ => {
+            log(&format!("not found: {path}"));
+            return respond(&mut stream, 404, "text/plain", b"not found", port);
+        }
     };
+    if path == "/" {
+        log("page loaded");
+    }
     respond(&mut stream, 200, kind, body, port)
 }
 
@@ -424,6 +456,7 @@ fn websocket(
     key: &str,
     rest: Vec<u8>,
     commands: &Commands<Request>,
+    log: &Log,
 ) -> std::io::Result<()> {
     write!(
         stream,
@@ -445,9 +478,11 @@ fn websocket(
     let writer = WebSocket::from_raw_socket(stream.try_clone()?, Role::Server, Some(config));
     let (answers, outbox) = mpsc::channel::<Message>();
     let peer = stream.peer_addr()?.port();
+    let answers_log = log.clone();
     let writing = std::thread::Builder::new()
         .name(format!("edit-w-{peer}"))
-        .spawn(move || write_answers(writer, outbox))?;
+        .spawn(move || write_answers(writer, outbox, &answers_log))?;
+    log("page connected");
     loop {
         match reader.read() {
             Ok(Message::Text(text)) => match Command::parse(text.as_str()) {
@@ -475,13 +510,50 @@ fn websocket(
     }
     let _ = answers.send(Message::Close(None));
     let _ = writing.join();
+    log("page closed");
     Ok(())
+}
+
+/// What the page is told that the terminal hears too: files saved, applied or found in the way,
+/// warnings and errors (not progress).
+fn said_to_the_page(text: &str) -> Option<String> {
+    let v: serde_json::Value = serde_json::from_str(text).ok()?;
+    let field = |k: &str| v[k].as_str().unwrap_or("").to_string();
+    Some(match v["type"].as_str()? {
+        "saved" => format!("saved {}", field("path")),
+        "applied" => {
+            let samples = v["samples"].as_u64().unwrap_or(0);
+            let seconds = v["seconds"].as_f64().unwrap_or(0.0);
+            let mut line = format!(
+                "applied: {} ({} samples, {:.1} s)",
+                field("output"),
+                crate::human::count(samples),
+                seconds
+            );
+            for w in v["warnings"].as_array().into_iter().flatten() {
+                line += &format!("\n  warning: {}", w.as_str().unwrap_or(""));
+            }
+            line
+        }
+        "exists" => format!(
+            "{} exists: the page asks before replacing it",
+            field("name")
+        ),
+        "warning" => format!("warning: {}", field("message")),
+        "error" => format!("error: {}", field("message")),
+        _ => return None,
+    })
 }
 
 /// Writes the answers in `outbox` to the page until a close (which it sends) or a failed
 /// write; then closes the socket, which ends the reading thread too.
-fn write_answers(mut ws: WebSocket<TcpStream>, outbox: Receiver<Message>) {
+fn write_answers(mut ws: WebSocket<TcpStream>, outbox: Receiver<Message>, log: &Log) {
     for message in outbox {
+        if let Message::Text(text) = &message
+            && let Some(line) = said_to_the_page(text.as_str())
+        {
+            log(&line);
+        }
         let sent = match message {
             Message::Close(_) => {
                 let _ = ws.close(None).and_then(|()| ws.flush());

@@ -7,12 +7,16 @@ deforms the bar with the CLI under the saved spec and checks that it gives the s
 showed. Also measures the page while dragging (frame times, solver updates, round trips).
 Then: a box over the bar seen end-on takes only its near end (the visible surface, the page's
 default, said in the toolbar) and with X-ray on the whole bar; saving over a file the editor
-did not write asks first (declined: the file is kept; accepted: replaced, its mode kept).
+did not write asks first (declined: the file is kept; accepted: replaced, its mode kept); a
+box that catches nothing is not kept and the page says so; the help opens and closes, the legend
+shows the strain's scale with Strain; at 1280 px the toolbar keeps its two rows whole; and the
+server's log (stderr) says what it did and refused nothing the page asked for, its icon too.
 
 Standard library only (WebDriver is JSON over HTTP; the screenshots are PNGs decoded here).
 
     RIGIDCELLS_BIN=target/release/rigidcells python3 tests/browser/editor_test.py \
-        [--screenshot docs/editor.png] [--figures figures.json] [--input FILE --cells N]
+        [--screenshot docs/editor.png] [--help-screenshot docs/editor_help.png]
+        [--figures figures.json] [--input FILE --cells N]
 """
 
 import argparse
@@ -206,6 +210,7 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--screenshot", help="write the page after the drag here (the README's)")
     ap.add_argument("--figures", help="write the measured figures here (JSON)")
+    ap.add_argument("--help-screenshot", help="write the page with its help open here (the README's)")
     ap.add_argument("--input", help="measure on this file instead (no shape checks): fix its west tenth, "
                     "drag its east tenth")
     ap.add_argument("--cells", default="5000", help="with --input: about this many cells")
@@ -219,8 +224,10 @@ def main():
         bar, cells = os.path.join(work, "bar.ply"), ["--cell-size", "0.5"]
     port = free_port()
     started = time.time()
-    editor = subprocess.Popen([binary, "edit", bar, *cells, "--port", str(port), "-q"],
-                              stdout=subprocess.PIPE, text=True)
+    # The server's log (what it says on stderr without -q), read at the end.
+    log = open(os.path.join(work, "editor.log"), "w+")
+    editor = subprocess.Popen([binary, "edit", bar, *cells, "--port", str(port)],
+                              stdout=subprocess.PIPE, stderr=log, text=True)
     driver_port = free_port()
     chromedriver = subprocess.Popen(["chromedriver", f"--port={driver_port}"],
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -269,7 +276,8 @@ def main():
         driver.js("document.getElementById('role').value = 'handle'")
         (x0, y0), (x1, y1) = box_around(*east)
         driver.drag([(x0, y0), (x1, y0 + 5), (x1, y1)])
-        state = driver.wait("return rc.updates >= 1 && rc.state()", timeout=300)
+        state = driver.wait("const s = rc.state(); return rc.updates >= 1 && "
+                            "s.edit.handles.length === 1 && s.edit.fixed.length === 1 && s", timeout=300)
         assert len(state["edit"]["fixed"]) == 1 and len(state["edit"]["handles"]) == 1, state
         before = driver.screenshot()
 
@@ -384,6 +392,50 @@ def main():
         driver.wait("return rc.messages.some((m) => m.type === 'saved' && m.name === 'mine.toml')")
         assert open(mine).read().startswith("# rigidcells edit")
         assert os.stat(mine).st_mode & 0o777 == 0o600, oct(os.stat(mine).st_mode)
+
+        # A box that catches nothing is not kept, and says so; the status says what one caught.
+        driver.click("clear")
+        driver.wait("return rc.state().edit.fixed.length === 0")
+        w, h = driver.js("return [innerWidth, innerHeight]")
+        driver.drag([(w - 160, h - 200), (w - 100, h - 195), (w - 60, h - 120)])
+        driver.wait("return document.getElementById('warn').textContent.includes('caught no sample')")
+        assert driver.js("return rc.state().edit.fixed.length") == 0
+        through = box_count()
+        caught = driver.wait("const s = document.getElementById('status').textContent; "
+                             "return s.includes('samples shown') && s")
+        assert f"{n:,} of {n:,} samples shown" in caught, caught
+
+        # Help and the legend: the help opens and closes; the strain scale shows with Strain.
+        assert driver.js("return document.getElementById('help').hidden") is True
+        driver.click("help-button")
+        assert driver.js("return document.getElementById('help').offsetHeight") > 200
+        assert "gizmo" in driver.js("return document.getElementById('help').textContent")
+        if args.help_screenshot:
+            open(args.help_screenshot, "wb").write(driver.screenshot())
+        driver.click("help-button")
+        assert driver.js("return document.getElementById('help').hidden") is True
+        assert driver.js("return document.getElementById('legend').offsetWidth") > 100
+        driver.click("strain")
+        assert driver.js("return document.getElementById('strain-scale').hidden") is False
+        driver.click("strain")
+
+        # At 1280 px the toolbar keeps its two rows, each whole, and the file names room.
+        driver.s("POST", "/window/rect", {"width": 1280, "height": 800})
+        time.sleep(0.3)
+        rows = driver.js("return [...document.querySelectorAll('#bar .row')]"
+                         ".map((r) => [r.scrollWidth, r.clientWidth, r.offsetHeight])")
+        assert len(rows) == 2 and all(sw <= cw and oh < 40 for sw, cw, oh in rows), rows
+        widths = driver.js("return ['spec-path', 'out-path'].map((i) => document.getElementById(i).offsetWidth)")
+        assert min(widths) >= 120, widths
+        figures["toolbar_rows_at_1280"] = rows
+
+        # The server said what it did, and refused nothing the page asked for (its icon too).
+        log.flush()
+        log.seek(0)
+        said = log.read()
+        assert "page loaded" in said and "page connected" in said, said
+        assert f"saved {mine}" in said, said
+        assert "refused" not in said and "not found" not in said, said
         print(json.dumps(figures))
         if args.figures:
             json.dump(figures, open(args.figures, "w"), indent=1)

@@ -122,6 +122,7 @@ pub(super) fn respond(
 ) -> std::io::Result<()> {
     let reason = match status {
         200 => "OK",
+        204 => "No Content",
         400 => "Bad Request",
         403 => "Forbidden",
         404 => "Not Found",
@@ -129,13 +130,17 @@ pub(super) fn respond(
         503 => "Service Unavailable",
         _ => "Request Header Fields Too Large",
     };
+    // A 204 has no body, and says nothing of one.
+    let body_head = match status {
+        204 => String::new(),
+        _ => format!("Content-Type: {kind}\r\nContent-Length: {}\r\n", body.len()),
+    };
     write!(
         stream,
-        "HTTP/1.1 {status} {reason}\r\nContent-Type: {kind}\r\nContent-Length: {}\r\n\
+        "HTTP/1.1 {status} {reason}\r\n{body_head}\
          Cache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\n\
          Referrer-Policy: no-referrer\r\nContent-Security-Policy: {}\r\n\
          Connection: close\r\n\r\n",
-        body.len(),
         policy(port)
     )?;
     stream.write_all(body)?;
