@@ -26,6 +26,8 @@ on the calling thread.
 
 from __future__ import annotations
 
+import os
+import sys
 from typing import Any, List, Optional, Tuple
 
 import bpy
@@ -40,6 +42,15 @@ from bpy.props import (
     StringProperty,
 )
 
+from .handles import (  # noqa: F401  (an Empty's motion as a handle pose)
+    InputError,
+    _flat,
+    _motion,
+    _rotation_values,
+    _scale_values,
+    handle_pose,
+    typed_turn,
+)
 from .work import Cancelled, DeformJob, LiveWorker
 
 from .rotations import (  # noqa: F401  (the rotations' arithmetic, without Blender)
@@ -54,6 +65,24 @@ from .rotations import (  # noqa: F401  (the rotations' arithmetic, without Blen
     _in_mode,
 )
 
+# What Blender's add-on list shows of a legacy install (Blender 3.4 to 4.1, or Install… from
+# the legacy zip in later ones); an extension (4.2 and later) is described by its manifest.
+bl_info = {
+    "name": "Rigid Cells",
+    "author": "rigidcells developers",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "3D View > Sidebar > Rigid Cells",
+    "description": "Bend meshes, soups and scans with rigid cells into a shape key",
+    "category": "Mesh",
+}
+
+# A legacy install carries the rigidcells package unpacked beside the add-on, in `site/`
+# (`blender/build_extension.py`); an extension has Blender install the package's wheel.
+_SITE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "site")
+if os.path.isdir(_SITE) and _SITE not in sys.path:
+    sys.path.append(_SITE)
+
 SHAPE_KEY = "RigidCells"
 
 TRANSFERS = [
@@ -62,29 +91,6 @@ TRANSFERS = [
     ("blend", "Blend", "Each vertex follows the cells around it, blended"),
     ("blend-idw", "Blend (inverse distance)", "The blend with inverse-distance weights"),
 ]
-
-
-def _flat(matrix: Any) -> List[float]:
-    return [v for row in matrix for v in row]
-
-
-
-
-def _rotation_values(empty: bpy.types.Object) -> List[float]:
-    """The Empty's rotation as typed (the keyed value at the current frame when animated),
-    four numbers for its `rotation_mode`: Euler (x, y, z, 0) in radians, axis-angle
-    (angle, x, y, z), quaternion (w, x, y, z)."""
-    mode = empty.rotation_mode
-    if mode == "QUATERNION":
-        return list(empty.rotation_quaternion)
-    if mode == "AXIS_ANGLE":
-        return list(empty.rotation_axis_angle)
-    return list(empty.rotation_euler) + [0.0]
-
-
-def _scale_values(empty: bpy.types.Object) -> List[float]:
-    """The Empty's own scale as its matrix applies it: `scale` times `delta_scale`."""
-    return [a * b for a, b in zip(empty.scale, empty.delta_scale)]
 
 
 def _take_rest(settings: "RigidCellsSettings", _context: Any) -> None:
@@ -171,17 +177,28 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
         min=0.0,
         description="Edge of the finest cells, in the object's units (0: automatic)",
     )
+    cells: IntProperty(
+        name="Cells",
+        default=0,
+        min=0,
+        description="About this many cells, their size found to match (0: the cell size decides)",
+    )
+    memory_limit: FloatProperty(
+        name="Memory limit",
+        default=0.0,
+        min=0.0,
+        description="GiB a run may take; one that would take more is refused before it starts "
+        "(0: three quarters of the machine's memory)",
+    )
     transfer: EnumProperty(name="Transfer", items=TRANSFERS, default="pu")
     # The last run's figures, for the panel.
-    cells: IntProperty(options={"HIDDEN"})
+    run_cells: IntProperty(options={"HIDDEN"})
     iterations: IntProperty(options={"HIDDEN"})
     residual_fixed: FloatProperty(options={"HIDDEN"})
     residual_handle: FloatProperty(options={"HIDDEN"})
     foldovers: IntProperty(options={"HIDDEN"})
-
-
-class InputError(ValueError):
-    """What the artist set up cannot be deformed; said in Blender's error report."""
+    # The last estimate (`RIGIDCELLS_OT_estimate`), for the panel.
+    estimate: StringProperty(options={"HIDDEN"})
 
 
 def _group_indices(obj: bpy.types.Object, name: str, role: str) -> List[int]:
@@ -221,177 +238,6 @@ def _triangles(mesh: bpy.types.Mesh) -> Optional[np.ndarray]:
     tris = np.empty(3 * m, dtype=np.int64)
     mesh.loop_triangles.foreach_get("vertices", tris)
     return tris.reshape(-1, 3)
-
-
-def _motion(obj: bpy.types.Object, empty: bpy.types.Object, rest: Any) -> np.ndarray:
-    """The Empty's motion since its rest pose (world), seen from the object: a 4 × 4 affine
-    map of the object's own coordinates."""
-    rest = np.array(rest, dtype=np.float64).reshape(4, 4)
-    now = np.array(empty.matrix_world, dtype=np.float64)
-    world = np.array(obj.matrix_world, dtype=np.float64)
-    local = np.linalg.inv(world) @ (now @ np.linalg.inv(rest)) @ world
-    local[3] = [0.0, 0.0, 0.0, 1.0]
-    return local
-
-
-def typed_turn(
-    mode: str, now: Any, rest_mode: str, rest: Any
-) -> Optional[Tuple[Optional[np.ndarray], float]]:
-    """The turn the rotation values typed on an Empty make from `rest` to `now` (four numbers
-    each, `_rotation_values`; `rest_mode` is the mode they were typed in), in the frame the
-    Empty's rotation acts in (its parent's, through the parent inverse and the delta
-    rotation): `(axis, radians)`, a unit axis and a signed angle of any size, `(None, 0.0)`
-    for no turn, or None where the values imply no winding of their own and the matrix's
-    rotation is the turn:
-
-    - Euler (any order): when one angle changed, the turn is about that angle's axis as the
-      rotations after it in the order carry it, by the change as typed (0° → 360° is a whole
-      turn). When several changed, None: their composition has no single axis that carries a
-      winding (a whole turn about x then 10° about z is 10° about z), and the library's
-      `rotate` has one axis, so the matrix's rotation (at most 180°) is the honest turn.
-    - Axis-angle: the axis unchanged (or reversed, or either angle 0), the typed angle's
-      difference; the axis changed, None, as for several Euler angles.
-    - Quaternion: the relative quaternion `q·q₀⁻¹`, its angle `2·atan2(|v|, w)` in [0°, 360°]
-      about its vector's direction: a quaternion holds a turn modulo 720°, so this is its
-      whole range (a turn beyond ±360° cannot be typed, and +360° and −360° are the same
-      quaternion, `w = −1`). That whole turn names no axis when its vector is exactly zero,
-      and is refused (`InputError`); turned there with Blender's tools, the vector keeps the
-      axis in its rounding.
-
-    A rest in another mode (the mode changed since the Empty was assigned) is converted into
-    the current mode first, with no winding (`_in_mode`). An unknown rest mode (an Empty
-    assigned before the add-on kept the values) gives None."""
-    if rest_mode not in ROTATION_MODES or mode not in ROTATION_MODES:
-        return None
-    now = [float(v) for v in now]
-    rest = [float(v) for v in rest]
-    if rest_mode != mode:
-        rest = _in_mode(mode, rest_mode, rest, now)
-    if mode == "QUATERNION":
-        q1, q0 = _unit(now), _unit(rest)
-        q1 = np.array([1.0, 0, 0, 0]) if q1 is None else q1
-        q0 = np.array([1.0, 0, 0, 0]) if q0 is None else q0
-        w0, v0 = q0[0], -q0[1:]  # q0's inverse (conjugate, q0 being a unit)
-        w1, v1 = q1[0], q1[1:]
-        w = w1 * w0 - v1 @ v0
-        v = w1 * v0 + w0 * v1 + np.cross(v1, v0)
-        n = np.linalg.norm(v)
-        if n == 0.0:
-            if w >= 0.0:
-                return None, 0.0
-            raise InputError(
-                "Rigid Cells: the handle Empty's quaternion makes a whole turn from its rest "
-                "(W −1, X, Y and Z 0), which names no axis to turn about: type the turn in "
-                "Axis Angle or Euler rotation mode"
-            )
-        return v / n, 2.0 * np.arctan2(n, w)
-    if mode == "AXIS_ANGLE":
-        a1, a0 = _unit(now[1:]), _unit(rest[1:])
-        t1 = now[0] if a1 is not None else 0.0
-        t0 = rest[0] if a0 is not None else 0.0
-        if t0 == 0.0:
-            return (a1, t1) if t1 != 0.0 else (None, 0.0)
-        if t1 == 0.0:
-            return a0, -t0
-        if np.abs(a1 - a0).max() <= 1e-6:
-            return (a1, t1 - t0) if t1 != t0 else (None, 0.0)
-        if np.abs(a1 + a0).max() <= 1e-6:
-            return a1, t1 + t0
-        return None
-    change = np.array(now[:3]) - np.array(rest[:3])
-    changed = [k for k in range(3) if abs(change[k]) > 1e-6]
-    if not changed:
-        return None, 0.0
-    if len(changed) > 1:
-        return None
-    k = changed[0]
-    carry = np.eye(3)
-    for c in mode[mode.index("XYZ"[k]) + 1 :]:
-        carry = _elemental("XYZ".index(c), now["XYZ".index(c)]) @ carry
-    return carry[:, k], float(change[k])
-
-
-def handle_pose(
-    obj: bpy.types.Object,
-    empty: bpy.types.Object,
-    rest: Any,
-    rest_mode: str = "",
-    rest_rotation: Any = (0.0, 0.0, 0.0, 0.0),
-    rest_scale: Any = (1.0, 1.0, 1.0),
-) -> dict:
-    """A handle's pose for the library, in the object's own coordinates: the Empty's motion
-    since its rest (the world matrix `rest`, and the rotation values `rest_rotation` typed in
-    `rest_mode` and scale `rest_scale` it had then), as a handle dict of the spec.
-
-    The map is the Empty's motion seen from the object, `_motion`, and the pose says it as
-    `A(x) = s·R·(x − pivot) + pivot + translate`: `pivot` is the Empty's rest origin (the
-    load steps of a solve from rest turn the handle about it, as the Empty turned), `translate`
-    takes it to the Empty's origin now, `R` is `rotate = {axis, degrees}` with the typed turn
-    (`typed_turn`: its axis carried into the object's coordinates through the Empty's parent,
-    parent inverse, delta rotation and the object's matrix; the Empty's own scale, unchanged,
-    drops out) and `s` is `scale` where the Empty's scale changed alike on its three axes.
-    The typed motion is taken where it is the matrices' map (to Blender's single precision);
-    where it is not (the Empty's parent moved, or a constraint turns it), the turn is the
-    matrices' rotation with the winding nearest the typed turn, so the map stays the
-    matrices' exactly.
-
-    A motion that stretches unevenly (an Empty scaled differently on its axes, a parent or
-    object scaled unevenly) goes as its `matrix`, whose turn the library takes in [0°, 180°]:
-    the spec's `rotate` takes only a uniform `scale` beside it, so a `rotate` could carry the
-    winding or the stretch exactly, not both, and the map must be exact."""
-    local = _motion(obj, empty, rest)
-    lin = local[:3, :3]
-    to_obj = np.linalg.inv(np.array(obj.matrix_world, dtype=np.float64))
-    now = np.array(empty.matrix_world, dtype=np.float64)
-    rest_m = np.array(rest, dtype=np.float64).reshape(4, 4)
-    pivot = (to_obj @ rest_m[:, 3])[:3]
-    translate = (to_obj @ now[:, 3])[:3] - pivot
-    mode, values = empty.rotation_mode, _rotation_values(empty)
-    turn = typed_turn(mode, values, rest_mode, rest_rotation)
-    scale_now, scale_rest = np.array(_scale_values(empty)), np.array(rest_scale, dtype=np.float64)
-    # The typed turn in the object's coordinates: its axis through the frame the Empty's
-    # rotation acts in (the matrix with the Empty's own rotation and scale taken off).
-    typed = None
-    if turn is not None and np.all(scale_now != 0.0):
-        axis, angle = turn
-        if axis is not None:
-            frame = to_obj[:3, :3] @ now[:3, :3] @ np.diag(1.0 / scale_now)
-            frame = frame @ _rotation(mode, values).T
-            axis = _unit(np.sign(np.linalg.det(frame)) * (frame @ axis))
-        typed = (axis, angle) if axis is not None else (None, 0.0)
-    ratio = scale_now / scale_rest if np.all(scale_rest != 0.0) else None
-    size = max(1.0, np.abs(lin).max())
-    chosen = None
-    if typed is not None and ratio is not None and np.ptp(ratio) <= 1e-6 * np.abs(ratio).max():
-        s = 1.0 if np.all(scale_now == scale_rest) else float(ratio.mean())
-        axis, angle = typed
-        r = np.eye(3) if axis is None else _axis_rotation(axis, angle)
-        if np.abs(s * r - lin).max() <= _SAME_MAP * size:
-            chosen = (axis, angle, s)
-    if chosen is None:
-        u, sv, vt = np.linalg.svd(lin)
-        if np.linalg.det(lin) <= 0.0 or np.ptp(sv) > _SAME_MAP * sv.max():
-            return {"matrix": local.tolist()}
-        s = float(sv.mean())
-        s = 1.0 if abs(s - 1.0) <= _SAME_MAP else s
-        axis, angle = _axis_angle(u @ vt)
-        # The winding nearest the typed turn (none: the matrix's own, at most 180°).
-        want = np.zeros(3) if typed is None or typed[0] is None else typed[0] * typed[1]
-        along = axis @ want
-        angle = min(
-            (a + 2 * np.pi * round((along - a) / (2 * np.pi)) for a in (angle, -angle)),
-            key=lambda a: abs(a - along),
-        )
-        if along < 0.0:
-            axis, angle = -axis, -angle
-        chosen = (axis if angle != 0.0 else None, angle, s)
-    axis, angle, s = chosen
-    pose: dict = {"pivot": pivot.tolist(), "translate": translate.tolist()}
-    if axis is not None and angle != 0.0:
-        pose["rotate"] = {"axis": axis.tolist(), "degrees": float(np.degrees(angle))}
-    if s != 1.0:
-        pose["scale"] = s
-    return pose
 
 
 def _movers(settings: RigidCellsSettings, kind: str) -> List[RigidCellsMover]:
@@ -478,7 +324,13 @@ def inputs(obj: bpy.types.Object) -> Tuple[np.ndarray, Optional[np.ndarray], dic
 
 def options(settings: RigidCellsSettings) -> dict:
     """The library's keyword options the settings give."""
-    return {"cell_size": settings.cell_size or None, "transfer": settings.transfer}
+    memory = int(settings.memory_limit * 2**30)
+    return {
+        "cell_size": settings.cell_size or None,
+        "cells": settings.cells or None,
+        "memory_limit": memory or None,
+        "transfer": settings.transfer,
+    }
 
 
 def write_shape_key(obj: bpy.types.Object, moved: np.ndarray) -> bpy.types.ShapeKey:
@@ -497,7 +349,7 @@ def write_shape_key(obj: bpy.types.Object, moved: np.ndarray) -> bpy.types.Shape
 def show_report(obj: bpy.types.Object, report: Any) -> None:
     """The report's figures in the panel's settings."""
     settings = obj.rigidcells
-    settings.cells = report.cells
+    settings.run_cells = report.cells
     settings.iterations = report.iterations
     settings.residual_fixed = report.residual_fixed_max
     settings.residual_handle = report.residual_handle_max
@@ -614,6 +466,24 @@ def _mesh_active(context: Any) -> bool:
 ERRORS = (ValueError, TypeError, OSError, RuntimeError, Cancelled)
 
 
+def _leave_edit_mode(context: Any) -> bool:
+    """Leaves Edit Mode, if the object is in it, so that the mesh holds its edits and the shape
+    key written stays (Edit Mode writes its copy of the mesh back when it ends, over a key
+    written meanwhile): whether it was on, to enter it again when done."""
+    obj = context.active_object
+    if obj is None or obj.mode != "EDIT":
+        return False
+    bpy.ops.object.mode_set(mode="OBJECT")
+    return True
+
+
+def _back_to_edit_mode(context: Any, was: bool) -> None:
+    """Enters Edit Mode again where `_leave_edit_mode` left it: it shows the new shape key."""
+    obj = context.active_object
+    if was and obj is not None and obj.mode != "EDIT":
+        bpy.ops.object.mode_set(mode="EDIT")
+
+
 def _said(error: BaseException) -> str:
     """The error as the panel names things: a refused turn (`rigidcells.TurnNotHeldError`)
     names its handle "the handle Empty" or "handle 2", not by the spec the add-on wrote."""
@@ -655,7 +525,15 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         return _mesh_active(context)
 
     def execute(self, context: Any) -> set:
-        """The deformation on this thread (scripts, and Blender without a window)."""
+        """The deformation on this thread (scripts, and Blender without a window), out of Edit
+        Mode and back."""
+        editing = _leave_edit_mode(context)
+        try:
+            return self._execute(context)
+        finally:
+            _back_to_edit_mode(context, editing)
+
+    def _execute(self, context: Any) -> set:
         obj = context.active_object
         wm = context.window_manager
         stages: dict = {}
@@ -684,11 +562,13 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         it and leaves the mesh as it was."""
         if context.window is None:
             return self.execute(context)
+        self._editing = _leave_edit_mode(context)
         obj = context.active_object
         try:
             points, triangles, spec = inputs(obj)
         except ERRORS as e:
             self.report({"ERROR"}, _said(e))
+            _back_to_edit_mode(context, self._editing)
             return {"CANCELLED"}
         self._name = obj.name
         self._job = DeformJob(points, spec, triangles, options(obj.rigidcells)).start()
@@ -718,11 +598,21 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         _status(context, None)
         obj = bpy.data.objects.get(self._name)
         try:
+            return self._finished(context, job, obj)
+        finally:
+            _back_to_edit_mode(context, self._editing)
+
+    def _finished(self, context: Any, job: DeformJob, obj: Any) -> set:
+        """The job's shape on the key, or why not."""
+        try:
             if job.error is not None:
                 raise job.error
             if obj is None:
                 raise InputError(f"Rigid Cells: {self._name} was removed while solving")
             moved, report = job.result
+            # Edit Mode entered while it solved would write its copy over the key.
+            if context.active_object == obj:
+                self._editing = _leave_edit_mode(context) or self._editing
             finish(obj, moved, report)
         except Cancelled as e:
             self.report({"INFO"}, str(e))
@@ -743,7 +633,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
     def _done(self, report: Any) -> None:
         self.report(
             {"INFO"},
-            f"Rigid Cells: {report.cells} cells, {report.iterations} iterations, "
+            f"Rigid Cells: {report.cells:,} cells, {report.iterations} iterations, "
             f"{report.foldovers} fold-overs",
         )
 
@@ -768,10 +658,12 @@ class OBJECT_OT_rigidcells_live(bpy.types.Operator):
         if context.window is None:
             self.report({"ERROR"}, "Rigid Cells: Live follows the Empties in Blender's window")
             return {"CANCELLED"}
+        self._editing = _leave_edit_mode(context)
         try:
             self._state = LiveState(context.active_object)
         except ERRORS as e:
             self.report({"ERROR"}, _said(e))
+            _back_to_edit_mode(context, self._editing)
             return {"CANCELLED"}
         _live[self._state.name] = self._state
         self._finishing = False
@@ -821,7 +713,51 @@ class OBJECT_OT_rigidcells_live(bpy.types.Operator):
         context.window_manager.event_timer_remove(self._timer)
         _live.pop(self._state.name, None)
         _status(context, None)
+        _back_to_edit_mode(context, self._editing)
         return result
+
+
+class RIGIDCELLS_OT_estimate(bpy.types.Operator):
+    """What Deform will take with these settings, without solving: its cells, memory and
+    seconds (the cells are built, the solve counted)"""
+
+    bl_idname = "rigidcells.estimate"
+    bl_label = "Estimate"
+    bl_options = {"REGISTER", "INTERNAL"}
+
+    @classmethod
+    def poll(cls, context: Any) -> bool:
+        return _mesh_active(context)
+
+    def execute(self, context: Any) -> set:
+        import rigidcells
+
+        obj = context.active_object
+        editing = _leave_edit_mode(context)
+        try:
+            points, triangles, spec = inputs(obj)
+            est = rigidcells.estimate(points, spec, triangles=triangles, **options(obj.rigidcells))
+        except ERRORS as e:
+            # The panel keeps the refusal beside the button (a budget the cells cannot fit).
+            obj.rigidcells.estimate = _said(e)
+            self.report({"ERROR"}, _said(e))
+            return {"CANCELLED"}
+        finally:
+            _back_to_edit_mode(context, editing)
+        obj.rigidcells.estimate = estimate_said(est)
+        self.report({"INFO"}, f"Rigid Cells: {obj.rigidcells.estimate}")
+        return {"FINISHED"}
+
+
+def estimate_said(est: Any) -> str:
+    """An estimate as the panel says it: `12,345 cells, 1.2 GiB, 3 s`, and whether the memory
+    limit refuses it."""
+    gib, s = est.bytes / 2**30, est.seconds
+    said = f"{'at least ' if not est.complete else ''}{est.cells:,} cells, {gib:.2g} GiB, "
+    said += f"{s:.2g} s" if s < 10 else f"{s:.0f} s"
+    if not est.fits:
+        said += f": over the memory limit ({est.limit / 2**30:.2g} GiB)"
+    return said
 
 
 class RIGIDCELLS_OT_add(bpy.types.Operator):
@@ -903,16 +839,22 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
             col.prop(s, "stiffness")
         col = layout.column(align=True)
         col.prop(s, "cell_size")
+        col.prop(s, "cells")
+        col.prop(s, "memory_limit")
         col.prop(s, "transfer", text="")
+        row = layout.row(align=True)
+        row.operator(RIGIDCELLS_OT_estimate.bl_idname, text="Estimate")
+        if s.estimate:
+            row.label(text=s.estimate)
         row = layout.row(align=True)
         row.operator(OBJECT_OT_rigidcells_deform.bl_idname, text="Deform")
         if obj.name in _live:
             row.label(text="Live: Enter keeps, Esc restores")
         else:
             row.operator(OBJECT_OT_rigidcells_live.bl_idname, text="Live")
-        if s.cells:
+        if s.run_cells:
             col = layout.column(align=True)
-            col.label(text=f"{s.cells} cells, {s.iterations} iterations")
+            col.label(text=f"{s.run_cells:,} cells, {s.iterations} iterations")
             col.label(text=f"Residual: fixed {s.residual_fixed:.3g}, handle {s.residual_handle:.3g}")
             col.label(text=f"Fold-overs: {s.foldovers}")
 
@@ -922,6 +864,7 @@ CLASSES = (
     RigidCellsSettings,
     OBJECT_OT_rigidcells_deform,
     OBJECT_OT_rigidcells_live,
+    RIGIDCELLS_OT_estimate,
     RIGIDCELLS_OT_add,
     RIGIDCELLS_OT_remove,
     VIEW3D_PT_rigidcells,

@@ -1,5 +1,6 @@
 """The add-on's modal operators in Blender's window, driven as an artist drives them: Deform
-invoked from the panel (solved on its thread while the window runs), then Live with the
+invoked from the panel (solved on its thread while the window runs), again from Edit Mode
+(the key kept after Tab), then Live with the
 handle Empty moved a few times and Enter pressed, then Live again with Esc, and once more with
 the Empty deleted. Blender without a
 window runs no modal operator, so this runs in Blender itself, under a virtual display:
@@ -116,6 +117,21 @@ def steps():
     assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
     check("and it is the one execute writes", np.array_equal(threaded, key_co(obj)))
     deformed = key_co(obj).copy()
+
+    # From Edit Mode: Deform leaves it for the solve and enters it again; after Tab the key is
+    # still the deformation (Edit Mode would write its copy of the mesh back over it).
+    obj.shape_key_clear()
+    bpy.ops.object.mode_set(mode="EDIT")
+    started = invoke(bpy.ops.object.rigidcells_deform)
+    check("deform invoked from edit mode runs modal", started == {"RUNNING_MODAL"})
+    for _ in range(200):
+        if obj.mode == "EDIT" and key_co(obj) is not None:
+            break
+        yield from wait(0.05)
+    check("and is back in edit mode", obj.mode == "EDIT", obj.mode)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    after = key_co(obj)
+    check("whose key stays after Tab", after is not None and np.array_equal(after, deformed))
 
     # Live, from the rest pose to the same pose in five moves, then Enter.
     empty.location, empty.rotation_euler = (5.0, 0.0, 0.0), (0.0, 0.0, 0.0)

@@ -105,11 +105,55 @@ def test_the_shape_key_is_the_librarys_deformation():
     handle = [v.index for v in obj.data.vertices if v.co.x > 4.4]
     sent = (np.c_[rest[handle], np.ones(len(handle))] @ m.T)[:, :3]
     assert np.abs(got[handle] - sent).max() < 1e-5
-    assert obj.rigidcells.cells == report.cells and obj.rigidcells.iterations > 0
+    assert obj.rigidcells.run_cells == report.cells and obj.rigidcells.iterations > 0
     # Again: the key is replaced, not stacked.
     assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
     assert [k.name for k in obj.data.shape_keys.key_blocks] == ["Basis", "RigidCells"]
     assert np.abs(vertices(obj, "RigidCells") - got).max() < 1e-6
+
+
+def test_deform_in_edit_mode_keeps_its_key_and_returns_to_edit_mode():
+    """Run from Edit Mode, Deform writes its key out of it (Edit Mode would write its own copy of
+    the mesh back over the key when it ends) and enters it again; after Tab the key is still the
+    deformation, not the Basis."""
+    obj, empty = setup_bar()
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode="EDIT")
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    assert obj.mode == "EDIT"
+    bpy.ops.object.mode_set(mode="OBJECT")
+    key, rest = vertices(obj, "RigidCells"), vertices(obj)
+    points, triangles, spec = addon.inputs(obj)
+    want, _ = rigidcells.deform(points, spec, triangles=triangles, cell_size=0.25, progress=False)
+    assert np.abs(key - want).max() < 1e-6
+    assert np.abs(key - rest).max() > 1.0
+
+
+def test_the_panel_estimates_and_takes_a_cell_count_and_a_memory_limit():
+    """Estimate says what Deform will take (the library's estimate, in the panel); Cells and
+    Memory limit reach the library; a refusal names the panel's settings."""
+    obj, empty = setup_bar()
+    s = obj.rigidcells
+    s.cell_size, s.cells = 0.0, 1500
+    assert bpy.ops.rigidcells.estimate() == {"FINISHED"}
+    points, triangles, spec = addon.inputs(obj)
+    est = rigidcells.estimate(points, spec, triangles=triangles, cells=1500)
+    # The seconds are partly measured (the cells are built), so they differ run to run.
+    assert s.estimate.startswith(f"{est.cells:,} cells, {est.bytes / 2**30:.2g} GiB, "), s.estimate
+    assert s.estimate.endswith(" s") and "over the memory limit" not in s.estimate
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    assert s.run_cells == est.cells
+    s.cell_size = 0.25
+    with pytest.raises(RuntimeError, match='"Cell size" and "Cells" both size the cells: give one'):
+        bpy.ops.object.rigidcells_deform()
+    # 1 MiB: the cells asked for cannot fit; the estimate says so, and Deform refuses.
+    s.cell_size, s.memory_limit = 0.0, 1 / 1024
+    refusal = 'over the memory limit of 1.0 MiB \\("Memory limit"\\): ask for fewer "Cells"'
+    with pytest.raises(RuntimeError, match=refusal):
+        bpy.ops.rigidcells.estimate()
+    assert "over the memory limit" in s.estimate, s.estimate
+    with pytest.raises(RuntimeError, match=refusal):
+        bpy.ops.object.rigidcells_deform()
 
 
 def test_a_soup_of_loose_cubes_bends_with_every_cube_carried():
@@ -241,7 +285,7 @@ def test_live_follows_scripted_moves_and_ends_on_the_converged_shape():
     assert all(b > a for a, b in zip(rises, rises[1:])) and rises[-1] > 2.0, rises
     # At rest the solve converges and the exact transfer is written; Enter ends on it.
     ends_on_deforms_shape(obj, state)
-    assert obj.rigidcells.cells == state.worker.cells
+    assert obj.rigidcells.run_cells == state.worker.cells
 
 
 def test_live_refines_only_once_the_handle_rests(monkeypatch):
