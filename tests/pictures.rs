@@ -270,3 +270,40 @@ fn preview_colors_follow_the_regions_across_a_triangle() {
     }
     assert!(blended > 500, "{blended} pixels blend the two regions");
 }
+
+/// A scan colored by intensity is shown by most of its intensities, not by its brightest
+/// return: one return at 65,535 among a thousand at 200–400 leaves the rest light gray, not
+/// black (the editor's proxy and `render` share these colors).
+#[test]
+fn intensity_is_scaled_by_the_scan_not_its_brightest_return() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("intensity.las");
+    let mut builder = las::Builder::from((1, 2));
+    builder.point_format = las::point::Format::new(1).unwrap();
+    let mut writer = las::Writer::from_path(&path, builder.into_header().unwrap()).unwrap();
+    for i in 0..1000u16 {
+        let point = las::Point {
+            x: f64::from(i % 40),
+            y: f64::from(i / 40),
+            z: 0.0,
+            intensity: if i == 500 { u16::MAX } else { 200 + i % 200 },
+            gps_time: Some(0.0),
+            ..Default::default()
+        };
+        writer.write_point(point).unwrap();
+    }
+    writer.close().unwrap();
+    let shown =
+        rigidcells::internal::render::colored_points(&path, 10_000, &rigidcells::Silent).unwrap();
+    let mut grays: Vec<u8> = shown.colors.iter().map(|c| c[0]).collect();
+    grays.sort_unstable();
+    assert!(
+        grays[500] > 120,
+        "the median intensity is shown at {}",
+        grays[500]
+    );
+    assert_eq!(grays[999], 255);
+    // Brighter returns stay brighter, up to white.
+    let at = |k: usize| shown.colors[k][0];
+    assert!(at(399) > at(200), "{} vs {}", at(399), at(200));
+}

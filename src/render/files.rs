@@ -109,7 +109,8 @@ pub struct ColoredPoints {
     /// World coordinates.
     pub points: Vec<Vect<3>>,
     /// LAS RGB when the point format has it, else LAS intensity as gray, else a neutral gray;
-    /// intensities and 16-bit RGB scaled by the file's own range.
+    /// RGB scaled by the file's largest value, intensities by their 99th percentile (a few
+    /// bright returns would leave the rest of a scan nearly black).
     pub colors: Vec<[u8; 3]>,
     /// LAS classes (empty for formats without them).
     pub classes: Vec<u8>,
@@ -117,6 +118,17 @@ pub struct ColoredPoints {
     pub stride: u64,
     /// Samples in the file.
     pub total: u64,
+}
+
+/// The intensity shown white: the 99th percentile of `intensities`, at least 1.
+fn intensity_white(intensities: impl Iterator<Item = u16>) -> u16 {
+    let mut all: Vec<u16> = intensities.collect();
+    if all.is_empty() {
+        return 1;
+    }
+    let k = (all.len() - 1) * 99 / 100;
+    let (_, &mut white, _) = all.select_nth_unstable(k);
+    white.max(1)
 }
 
 /// Every k-th sample of a streamed file (at most `max`) with its color and class
@@ -158,15 +170,18 @@ pub fn colored_points(
         observer.advance(n as u64);
     }
     observer.finish();
-    let top = raw_colors
-        .iter()
-        .flatten()
-        .flatten()
-        .fold(1u16, |a, &b| a.max(b));
+    let top = match &las {
+        Some(h) if !h.has_rgb() => intensity_white(raw_colors.iter().flatten().map(|c| c[0])),
+        _ => raw_colors
+            .iter()
+            .flatten()
+            .flatten()
+            .fold(1u16, |a, &b| a.max(b)),
+    };
     out.colors = raw_colors
         .into_iter()
         .map(|c| match c {
-            Some(rgb) => rgb.map(|v| (v as u32 * 255 / top as u32) as u8),
+            Some(rgb) => rgb.map(|v| (v as u32 * 255 / top as u32).min(255) as u8),
             None => [200, 200, 200],
         })
         .collect();

@@ -310,6 +310,11 @@ impl LasHeader {
         if self.format >= 6 { 16 } else { 15 }
     }
 
+    /// Whether the point format carries RGB (else [`LasHeader::color`] is the intensity).
+    pub fn has_rgb(&self) -> bool {
+        matches!(self.format, 2 | 3 | 5 | 7 | 8 | 10)
+    }
+
     /// A record's color for pictures: its 16-bit RGB when the point format has one, else its
     /// intensity three times.
     pub fn color(&self, record: &[u8]) -> [u16; 3] {
