@@ -41,22 +41,10 @@ check(
     rigidcells.__file__,
 )
 
-bpy.ops.mesh.primitive_cube_add(size=1.0)
-obj = bpy.context.active_object
-obj.scale = (10.0, 1.0, 1.0)
-bpy.ops.object.transform_apply(scale=True)
-bpy.ops.object.mode_set(mode="EDIT")
-bpy.ops.mesh.subdivide(number_cuts=8)
-bpy.ops.object.mode_set(mode="OBJECT")
-for name, keep in (("fixed", lambda x: x < -4.4), ("handle", lambda x: x > 4.4)):
-    obj.vertex_groups.new(name=name).add(
-        [v.index for v in obj.data.vertices if keep(v.co.x)], 1.0, "REPLACE"
-    )
-bpy.ops.object.empty_add(location=(5.0, 0.0, 0.0))
-empty = bpy.context.active_object
-bpy.context.view_layer.objects.active = obj
-s = obj.rigidcells
-s.fixed_group, s.handle_group, s.handle_object, s.cell_size = "fixed", "handle", empty, 0.25
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from bar_scene import bar_scene  # noqa: E402  (beside this script)
+
+obj, empty = bar_scene()
 empty.location = (5.0, 0.0, 2.0)
 bpy.context.view_layer.update()
 result = bpy.ops.object.rigidcells_deform()

@@ -27,8 +27,10 @@ ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
 if ARGS:
     sys.path.insert(0, ARGS[0])
 sys.path.insert(0, str(ROOT / "blender"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import rigidcells_blender as addon  # noqa: E402
+from bar_scene import bar_scene  # noqa: E402  (beside this script)
 
 FAILED = []
 
@@ -52,25 +54,7 @@ def key_co(obj):
 def setup():
     for o in list(bpy.data.objects):
         bpy.data.objects.remove(o)
-    bpy.ops.mesh.primitive_cube_add(size=1.0)
-    obj = bpy.context.active_object
-    obj.scale = (10.0, 1.0, 1.0)
-    bpy.ops.object.transform_apply(scale=True)
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.subdivide(number_cuts=8)
-    bpy.ops.object.mode_set(mode="OBJECT")
-    for name, keep in (("fixed", lambda x: x < -4.4), ("handle", lambda x: x > 4.4)):
-        obj.vertex_groups.new(name=name).add(
-            [v.index for v in obj.data.vertices if keep(v.co.x)], 1.0, "REPLACE"
-        )
-    bpy.ops.object.empty_add(location=(5.0, 0.0, 0.0))
-    empty = bpy.context.active_object
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o == obj)
-    bpy.context.view_layer.objects.active = obj
-    s = obj.rigidcells
-    s.fixed_group, s.handle_group, s.handle_object, s.cell_size = "fixed", "handle", empty, 0.25
-    return obj, empty
+    return bar_scene()
 
 
 def override():
