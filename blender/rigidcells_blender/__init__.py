@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import os
 import sys
+import textwrap
 from typing import Any, List, Optional, Tuple
 
 import bpy
@@ -842,10 +843,11 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
         col.prop(s, "cells")
         col.prop(s, "memory_limit")
         col.prop(s, "transfer", text="")
-        row = layout.row(align=True)
-        row.operator(RIGIDCELLS_OT_estimate.bl_idname, text="Estimate")
-        if s.estimate:
-            row.label(text=s.estimate)
+        col = layout.column(align=True)
+        col.operator(RIGIDCELLS_OT_estimate.bl_idname, text="Estimate")
+        # The sidebar is narrow: the estimate (or its refusal) wrapped, a label a line.
+        for line in textwrap.wrap(s.estimate, 30):
+            col.label(text=line)
         row = layout.row(align=True)
         row.operator(OBJECT_OT_rigidcells_deform.bl_idname, text="Deform")
         if obj.name in _live:

@@ -1,5 +1,5 @@
 """A screenshot of the Rigid Cells panel in Blender's window, beside the soup of ten loose
-cubes it bent (`docs/blender_panel.png`). Runs inside Blender with its interface, under a
+cubes it bent, with its estimate shown (`docs/blender_panel.png`). Runs inside Blender with its interface, under a
 virtual display where there is no screen:
 
     blender -b --factory-startup --python-expr \\
@@ -98,6 +98,7 @@ def shoot():
 def main():
     addon.register()
     obj = scene()
+    bpy.ops.rigidcells.estimate()  # its figures beside the button
     show(obj)
     bpy.app.timers.register(open_tab, first_interval=1.5)
 
