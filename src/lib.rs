@@ -73,8 +73,9 @@
 //! ## Features
 //!
 //! The library itself needs none of them (`default-features = false`). `cli` brings the
-//! command line's parser and progress bars, `editor` the editor's local web server, `demo` the generated inputs of `rigidcells demo` (`demo`). All three
-//! are on by default, and the `rigidcells` binary requires them.
+//! command line's parser and progress bars, `editor` the editor's local web server, `demo` the
+//! generated inputs of `rigidcells demo`. All three are on by default, and the `rigidcells`
+//! binary requires them.
 //!
 //! ## In a debug build of your crate
 //!
