@@ -17,6 +17,9 @@ motion as `rotate` (axis and degrees, of any size) about the Empty's rest origin
 and `scale`: the same map as the Empty's matrices, with the typed turn. Deform and Live read
 the poses alike, so the same typed pose gives the same shape.
 
+Follow (`follow.py`) keeps the key on the Empties' poses as they move or play, as a modifier
+would, and bakes a frame range into keyed shapes.
+
 Deform solves on a thread of its own (`work.DeformJob`) while Blender stays responsive; Live
 keeps a `rigidcells.Session` on a thread (`work.LiveWorker`) that follows the handle and pin
 Empties as the artist moves them: a short solver step and a blended preview a pose, the exact
@@ -34,6 +37,7 @@ from typing import Any, List, Optional, Tuple
 import bpy
 import numpy as np
 from bpy.props import (
+    BoolProperty,
     CollectionProperty,
     EnumProperty,
     FloatProperty,
@@ -52,6 +56,8 @@ from .handles import (  # noqa: F401  (an Empty's motion as a handle pose)
     handle_pose,
     typed_turn,
 )
+from . import follow
+from .follow import RIGIDCELLS_OT_bake
 from .work import Cancelled, DeformJob, LiveWorker
 
 from .rotations import (  # noqa: F401  (the rotations' arithmetic, without Blender)
@@ -113,6 +119,12 @@ def _take_item_rest(item: "RigidCellsMover", _context: Any) -> None:
         item.rest_mode = empty.rotation_mode
         item.rest_rotation = _rotation_values(empty)
         item.rest_scale = _scale_values(empty)
+
+
+def _follow_changed(settings: "RigidCellsSettings", context: Any) -> None:
+    from .follow import follow_changed
+
+    follow_changed(settings, context)
 
 
 def _is_empty(_self: Any, obj: bpy.types.Object) -> bool:
@@ -192,6 +204,15 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
         "(0: three quarters of the machine's memory)",
     )
     transfer: EnumProperty(name="Transfer", items=TRANSFERS, default="pu")
+    follow: BoolProperty(
+        name="Follow",
+        default=False,
+        update=_follow_changed,
+        description="The shape key follows the Empties as they move, are typed, driven or "
+        "keyframed (re-solved warm at each change and each frame), without running Deform",
+    )
+    # Why Follow stopped, for the panel.
+    follow_said: StringProperty(options={"HIDDEN"})
     # The last run's figures, for the panel.
     run_cells: IntProperty(options={"HIDDEN"})
     iterations: IntProperty(options={"HIDDEN"})
@@ -849,6 +870,11 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
         for line in textwrap.wrap(s.estimate, 30):
             col.label(text=line)
         row = layout.row(align=True)
+        row.prop(s, "follow", toggle=True)
+        row.operator(RIGIDCELLS_OT_bake.bl_idname, text="Bake frames")
+        for line in textwrap.wrap(follow.status(obj) or "", 30):
+            layout.label(text=line)
+        row = layout.row(align=True)
         row.operator(OBJECT_OT_rigidcells_deform.bl_idname, text="Deform")
         if obj.name in _live:
             row.label(text="Live: Enter keeps, Esc restores")
@@ -867,6 +893,7 @@ CLASSES = (
     OBJECT_OT_rigidcells_deform,
     OBJECT_OT_rigidcells_live,
     RIGIDCELLS_OT_estimate,
+    RIGIDCELLS_OT_bake,
     RIGIDCELLS_OT_add,
     RIGIDCELLS_OT_remove,
     VIEW3D_PT_rigidcells,
@@ -877,6 +904,7 @@ def register() -> None:
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Object.rigidcells = PointerProperty(type=RigidCellsSettings)
+    follow.register()
 
 
 def unregister() -> None:
@@ -884,6 +912,7 @@ def unregister() -> None:
         state.worker.stop()
         state.worker.thread.join(5.0)
     _live.clear()
+    follow.unregister()
     del bpy.types.Object.rigidcells
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)

@@ -1,9 +1,9 @@
 """The add-on's modal operators in Blender's window, driven as an artist drives them: Deform
-invoked from the panel (solved on its thread while the window runs), again from Edit Mode
-(the key kept after Tab), then Live with the
-handle Empty moved a few times and Enter pressed, then Live again with Esc, and once more with
-the Empty deleted. Blender without a
-window runs no modal operator, so this runs in Blender itself, under a virtual display:
+invoked from the panel (solved on its thread while the window runs), again from Edit Mode (the
+key kept after Tab), then Live with the handle Empty moved a few times and Enter pressed, then
+Live again with Esc, once more with the Empty deleted, and Follow after the Empty moved and
+keyframed. Blender without a window runs no modal operator, so this runs in Blender itself,
+under a virtual display:
 
     blender -b --factory-startup --python-expr \\
         "import bpy; bpy.ops.wm.save_as_mainfile(filepath='/tmp/start.blend')"
@@ -164,6 +164,28 @@ def steps():
     check("the move was solved", moved)
     back = key_co(obj)
     check("esc restores the key", back is not None and np.array_equal(back, before))
+
+    # Follow, in the window: the key follows the Empty moved in the viewport and its keyframes
+    # as the frames change, and the panel draws its row.
+    obj, empty = setup()
+    handle = [v.index for v in obj.data.vertices if v.co.x > 4.4]
+    rest = np.array([v.co[:] for v in obj.data.vertices], dtype=np.float32)
+    obj.rigidcells.follow = True
+    yield from wait(0.3)
+    empty.location = (5.0, 0.0, 2.0)
+    yield from wait(0.5)
+    lift = key_co(obj)[handle, 2] - rest[handle, 2]
+    check("follow takes the moved Empty", np.abs(lift - 2.0).max() < 1e-5, f"{lift.min():.5f}")
+    scene = bpy.context.scene
+    empty.keyframe_insert("location", frame=1)
+    empty.location = (5.0, 0.0, -1.0)
+    empty.keyframe_insert("location", frame=3)
+    scene.frame_set(3)
+    yield from wait(0.3)
+    lift = key_co(obj)[handle, 2] - rest[handle, 2]
+    check("and its keyframes", np.abs(lift + 1.0).max() < 1e-5, f"{lift.min():.5f}")
+    check("still following", obj.rigidcells.follow and not obj.rigidcells.follow_said,
+          obj.rigidcells.follow_said)
 
 
 def main():

@@ -727,3 +727,49 @@ def test_the_turn_reaches_the_objects_coordinates_through_parents_and_scales():
     bpy.context.view_layer.update()
     with pytest.raises(addon.InputError, match="names no axis"):
         addon.poses(obj)
+
+
+def test_follow_keys_the_shape_of_each_pose_as_deform_would():
+    """Follow on: the key follows the Empty as it moves and as its keyframes play, each shape
+    Deform's for that pose; Bake keys one shape a frame and removes the followed key."""
+    obj, empty = setup_bar()
+    scene = bpy.context.scene
+    empty.location, empty.rotation_euler = (5.0, 0.0, 0.0), (0.0, 0.0, 0.0)
+    empty.keyframe_insert("location", frame=1)
+    empty.location = (5.0, 0.0, 3.0)
+    empty.keyframe_insert("location", frame=5)
+    scene.frame_set(1)
+    obj.rigidcells.follow = True
+    assert "Following" in (addon.follow.status(obj) or "")
+    shapes = {}
+    for frame in (5, 3):
+        scene.frame_set(frame)
+        shapes[frame] = vertices(obj, "RigidCells").copy()
+        points, triangles, spec = addon.inputs(obj)
+        want, _ = rigidcells.deform(points, spec, triangles=triangles, cell_size=0.25, progress=False)
+        # Solved warm from the last frame's cells: the same shape to the solver's tolerance
+        # (as Live ends on Deform's), not bit for bit.
+        assert np.abs(shapes[frame] - want).max() < 1e-3, frame
+    handle = [v.index for v in obj.data.vertices if v.co.x > 4.4]
+    rest = vertices(obj)
+    assert np.abs(shapes[5][handle] - rest[handle] - [0, 0, 3]).max() < 1e-5
+    assert np.abs(shapes[3][handle] - rest[handle] - [0, 0, 1.5]).max() < 1e-5
+    # Moved by hand (no keyframe at this frame): followed on the update.
+    empty.location = (5.0, 0.0, 2.0)
+    bpy.context.view_layer.update()
+    assert np.abs(vertices(obj, "RigidCells")[handle] - rest[handle] - [0, 0, 2]).max() < 1e-5
+
+    scene.frame_start, scene.frame_end = 1, 5
+    assert bpy.ops.rigidcells.bake() == {"FINISHED"}
+    names = [k.name for k in obj.data.shape_keys.key_blocks]
+    assert names == ["Basis"] + [f"RigidCells {f}" for f in range(1, 6)], names
+    assert not obj.rigidcells.follow
+    baked = vertices(obj, "RigidCells 5")
+    assert np.abs(baked - shapes[5]).max() < 1e-3  # warm from frame 4 here, from frame 1 there
+    # Each baked key is on at its frame only, as the animation plays.
+    third = obj.data.shape_keys.key_blocks["RigidCells 3"]
+    played = []
+    for f in (2, 3, 4):
+        scene.frame_set(f)
+        played.append(third.value)
+    assert played == [0.0, 1.0, 0.0], played

@@ -1,0 +1,249 @@
+"""Follow: the shape key follows the handle and pin Empties wherever they move — dragged,
+typed, driven or keyframed — without running Deform again, and a frame range bakes into keyed
+shapes.
+
+Blender's Python has no custom modifiers, so an object whose *Follow* is on keeps a
+`rigidcells.Session` (its cells built once) here, and two handlers serve it: after each
+dependency-graph update (an Empty moved or typed in the viewport) and after each frame change
+(the timeline, playback, a render), the Empties' poses are read as Deform reads them and, when
+they changed, the session solves the new spec warm from where its cells are and releases it
+through the transfer: the key is Deform's shape for that pose (fixed vertices bit for bit,
+handle vertices where their Empties send them). A change of the options builds the session
+again at once, a change of the groups at the next move of an Empty. A failure turns Follow off
+and says why in the panel.
+
+*Bake* steps the scene's frame range and keys one shape a frame (`RigidCells 12`: value 1 on
+its frame, 0 on the frames beside it), so that the animation plays, renders and exports without
+the add-on; Follow is then turned off and the followed key removed.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Dict, Optional
+
+import bpy
+import numpy as np
+from bpy.app.handlers import persistent
+
+# The object's name -> its session and what it was last solved for.
+_sessions: Dict[str, "Followed"] = {}
+# Set while the handlers write keys: the updates that writing makes are not new poses.
+_writing = False
+
+
+class Followed:
+    """One followed object's session, built from the spec it was first solved for."""
+
+    def __init__(self, obj: bpy.types.Object) -> None:
+        import rigidcells
+
+        from . import inputs, options
+
+        points, triangles, spec = inputs(obj)
+        self.options = options(obj.rigidcells)
+        self.regions = _regions(spec)
+        self.spec = spec
+        self.poses: Any = None
+        self.session = rigidcells.Session(points, spec, triangles=triangles, **self.options)
+
+    def matches(self, spec: dict, options: dict) -> bool:
+        """Whether `spec` only moves this session's handles and pins (same regions, options)."""
+        return options == self.options and _regions(spec) == self.regions
+
+
+def _regions(spec: dict) -> Any:
+    """A spec without its handles' and pins' poses: what a warm solve cannot change."""
+    return (
+        spec.get("fixed"),
+        [h.get("indices") for h in spec.get("handle", [])],
+        [p.get("point") for p in spec.get("pin", [])],
+        spec.get("stiffness"),
+    )
+
+
+def follow_now(obj: bpy.types.Object) -> bool:
+    """Solves `obj` for its Empties' current poses when they changed since its last shape, and
+    writes the key: whether it wrote one."""
+    global _writing
+    from . import inputs, options, poses, show_report, write_shape_key
+
+    state = _sessions.get(obj.name)
+    # The Empties' poses alone first: most updates (a selection, another object) move none.
+    moves = poses(obj)
+    if (
+        state is not None
+        and moves == state.poses
+        and not obj.rigidcells.pins
+        and options(obj.rigidcells) == state.options
+        and SHAPE_KEY_NAME in _keys(obj)
+    ):
+        return False
+    _, _, spec = inputs(obj)
+    if state is not None and state.matches(spec, options(obj.rigidcells)):
+        if spec == state.spec and SHAPE_KEY_NAME in _keys(obj):
+            return False
+        state.session.solve(spec)
+        state.spec = spec
+    else:
+        state = _sessions[obj.name] = Followed(obj)
+    state.poses = moves
+    moved, report = state.session.release()
+    _writing = True
+    try:
+        write_shape_key(obj, np.asarray(moved))
+        show_report(obj, report)
+    finally:
+        _writing = False
+    return True
+
+
+SHAPE_KEY_NAME = "RigidCells"
+
+
+def _keys(obj: bpy.types.Object) -> Any:
+    keys = obj.data.shape_keys
+    return keys.key_blocks if keys is not None else {}
+
+
+def _follow_all() -> None:
+    """Every object whose Follow is on, followed; one that fails is turned off, with why."""
+    from . import ERRORS, _said
+
+    for obj in list(bpy.data.objects):
+        settings = getattr(obj, "rigidcells", None)
+        if settings is None or not settings.follow or obj.type != "MESH":
+            continue
+        try:
+            follow_now(obj)
+        except ERRORS as e:
+            stop(obj)
+            settings.follow_said = _said(e)
+
+
+def stop(obj: bpy.types.Object) -> None:
+    """Follow off for `obj`: its session dropped, its key left as it is."""
+    _sessions.pop(obj.name, None)
+    if obj.rigidcells.follow:
+        obj.rigidcells.follow = False
+
+
+def follow_changed(settings: Any, context: Any) -> None:
+    """The Follow setting's update: on, the object is followed at once; off, its session goes."""
+    obj = settings.id_data
+    if not settings.follow:
+        _sessions.pop(obj.name, None)
+        return
+    settings.follow_said = ""
+    _follow_all()
+
+
+@persistent
+def on_update(_scene: Any, _depsgraph: Any = None) -> None:
+    if not _writing and any(
+        getattr(o, "rigidcells", None) is not None and o.rigidcells.follow for o in bpy.data.objects
+    ):
+        _follow_all()
+
+
+@persistent
+def on_load(_path: Any = None, _other: Any = None) -> None:
+    """A file loaded: the sessions were of the last one's objects (a followed object in the
+    new file builds its own at its first update)."""
+    _sessions.clear()
+
+
+def _handlers() -> Any:
+    h = bpy.app.handlers
+    return ((h.depsgraph_update_post, on_update), (h.frame_change_post, on_update), (h.load_post, on_load))
+
+
+def register() -> None:
+    for handlers, f in _handlers():
+        if f not in handlers:
+            handlers.append(f)
+
+
+def unregister() -> None:
+    for handlers, f in _handlers():
+        while f in handlers:
+            handlers.remove(f)
+    _sessions.clear()
+
+
+class RIGIDCELLS_OT_bake(bpy.types.Operator):
+    """Key one shape a frame over the scene's frame range, as Follow gives it: the animation
+    then plays, renders and exports without the add-on. Follow is turned off and its key
+    removed"""
+
+    bl_idname = "rigidcells.bake"
+    bl_label = "Bake frames"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context: Any) -> bool:
+        obj = context.active_object
+        return obj is not None and obj.type == "MESH"
+
+    def execute(self, context: Any) -> set:
+        from . import ERRORS, _back_to_edit_mode, _leave_edit_mode, _said
+
+        obj, scene = context.active_object, context.scene
+        editing = _leave_edit_mode(context)
+        start, end, now = scene.frame_start, scene.frame_end, scene.frame_current
+        try:
+            baked = bake(obj, scene, start, end)
+        except ERRORS as e:
+            self.report({"ERROR"}, _said(e))
+            return {"CANCELLED"}
+        finally:
+            scene.frame_set(now)
+            _back_to_edit_mode(context, editing)
+        self.report({"INFO"}, f"Rigid Cells: {baked} frames baked, {start} to {end}")
+        return {"FINISHED"}
+
+
+def bake(obj: bpy.types.Object, scene: Any, start: int, end: int) -> int:
+    """Keys `RigidCells F` for each frame F of `start`..`end` (replacing keys of those names);
+    turns Follow off and removes the followed key. The number of frames baked."""
+    global _writing
+    stop(obj)
+    shapes = []
+    # Followed by hand, one session warm from frame to frame: Follow is off while baking, so
+    # the handlers stay out of the way.
+    for frame in range(start, end + 1):
+        scene.frame_set(frame)
+        follow_now(obj)
+        co = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
+        _keys(obj)[SHAPE_KEY_NAME].data.foreach_get("co", co)
+        shapes.append(co)
+    _sessions.pop(obj.name, None)
+    _writing = True
+    try:
+        keys = _keys(obj)
+        obj.shape_key_remove(keys[SHAPE_KEY_NAME])
+        for frame, co in zip(range(start, end + 1), shapes):
+            name = f"{SHAPE_KEY_NAME} {frame}"
+            old = _keys(obj).get(name)
+            if old is not None:
+                obj.shape_key_remove(old)
+            key = obj.shape_key_add(name=name, from_mix=False)
+            key.data.foreach_set("co", co.ravel())
+            for f, v in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
+                key.value = v
+                key.keyframe_insert("value", frame=f)
+        obj.data.update()
+    finally:
+        _writing = False
+    scene.frame_set(scene.frame_current)
+    return len(shapes)
+
+
+def status(obj: bpy.types.Object) -> Optional[str]:
+    """The panel's line for a followed object: its cells, or why Follow stopped."""
+    settings = obj.rigidcells
+    if settings.follow_said:
+        return settings.follow_said
+    state = _sessions.get(obj.name)
+    if settings.follow and state is not None:
+        return f"Following: {state.session.cells:,} cells"
+    return None
