@@ -65,7 +65,7 @@ def follow_now(obj: bpy.types.Object) -> bool:
     """Solves `obj` for its Empties' current poses when they changed since its last shape, and
     writes the key: whether it wrote one."""
     global _writing
-    from . import inputs, options, poses, show_report, write_shape_key
+    from . import SHAPE_KEY, inputs, options, poses, show_report, write_shape_key
 
     state = _sessions.get(obj.name)
     # The Empties' poses alone first: most updates (a selection, another object) move none.
@@ -75,12 +75,12 @@ def follow_now(obj: bpy.types.Object) -> bool:
         and moves == state.poses
         and not obj.rigidcells.pins
         and options(obj.rigidcells) == state.options
-        and SHAPE_KEY_NAME in _keys(obj)
+        and SHAPE_KEY in _keys(obj)
     ):
         return False
     _, _, spec = inputs(obj)
     if state is not None and state.matches(spec, options(obj.rigidcells)):
-        if spec == state.spec and SHAPE_KEY_NAME in _keys(obj):
+        if spec == state.spec and SHAPE_KEY in _keys(obj):
             return False
         state.session.solve(spec)
         state.spec = spec
@@ -95,9 +95,6 @@ def follow_now(obj: bpy.types.Object) -> bool:
     finally:
         _writing = False
     return True
-
-
-SHAPE_KEY_NAME = "RigidCells"
 
 
 def _keys(obj: bpy.types.Object) -> Any:
@@ -206,6 +203,8 @@ def bake(obj: bpy.types.Object, scene: Any, start: int, end: int) -> int:
     """Keys `RigidCells F` for each frame F of `start`..`end` (replacing keys of those names);
     turns Follow off and removes the followed key. The number of frames baked."""
     global _writing
+    from . import SHAPE_KEY
+
     stop(obj)
     shapes = []
     # Followed by hand, one session warm from frame to frame: Follow is off while baking, so
@@ -214,15 +213,15 @@ def bake(obj: bpy.types.Object, scene: Any, start: int, end: int) -> int:
         scene.frame_set(frame)
         follow_now(obj)
         co = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
-        _keys(obj)[SHAPE_KEY_NAME].data.foreach_get("co", co)
+        _keys(obj)[SHAPE_KEY].data.foreach_get("co", co)
         shapes.append(co)
     _sessions.pop(obj.name, None)
     _writing = True
     try:
         keys = _keys(obj)
-        obj.shape_key_remove(keys[SHAPE_KEY_NAME])
+        obj.shape_key_remove(keys[SHAPE_KEY])
         for frame, co in zip(range(start, end + 1), shapes):
-            name = f"{SHAPE_KEY_NAME} {frame}"
+            name = f"{SHAPE_KEY} {frame}"
             old = _keys(obj).get(name)
             if old is not None:
                 obj.shape_key_remove(old)
