@@ -149,6 +149,18 @@ pub enum Part {
     Set(Opt, String),
     /// A line of the edit spec (`line 7`).
     Line(usize),
+    /// An entry of the edit spec (`handle #2 (line 17)`): the kind of its table (`fixed`,
+    /// `handle`, `pin`, `target`, `stiffness`), its place among the entries of that kind (from
+    /// 0), and its line (0 for an entry made in code). A face names it as its user made it:
+    /// the editor "handle 1, selection 2", Blender "the handle", Python `spec["handle"][1]`.
+    Entry {
+        /// The kind of entry, its table's name in the spec.
+        kind: &'static str,
+        /// Its place among the entries of its kind, from 0.
+        index: usize,
+        /// Its line in the spec (0: made in code).
+        line: usize,
+    },
     /// A value of the edit spec of the wrong kind: `expected` what, `found` what.
     Mismatch {
         /// The kind the key takes.
@@ -257,6 +269,13 @@ impl Said {
         self
     }
 
+    /// The message with the `index`-th entry (from 0) of kind `kind` named, written on `line`
+    /// of the spec (0: made in code).
+    pub fn entry(mut self, kind: &'static str, index: usize, line: usize) -> Self {
+        self.parts.push(Part::Entry { kind, index, line });
+        self
+    }
+
     /// The message with a value of kind `found` where the spec takes `expected`.
     pub fn mismatch(mut self, expected: Kind, found: Kind) -> Self {
         self.parts.push(Part::Mismatch { expected, found });
@@ -351,6 +370,15 @@ pub trait Terms {
         format!("line {n}")
     }
 
+    /// The `index`-th entry (from 0) of kind `kind`, on `line` (0: made in code):
+    /// `handle #2 (line 17)`, `handle #2`.
+    fn entry(&self, kind: &str, index: usize, line: usize) -> String {
+        match line {
+            0 => format!("{kind} #{}", index + 1),
+            n => format!("{kind} #{} ({})", index + 1, self.line(n)),
+        }
+    }
+
     /// A value of kind `found` where the spec takes `expected`.
     fn mismatch(&self, expected: &Kind, found: &Kind) -> String {
         format!(
@@ -367,6 +395,7 @@ pub trait Terms {
             Part::Opt(o) => self.option(*o),
             Part::Set(o, v) => self.set(*o, v),
             Part::Line(n) => self.line(*n),
+            Part::Entry { kind, index, line } => self.entry(kind, *index, *line),
             Part::Mismatch { expected, found } => self.mismatch(expected, found),
         }
     }
@@ -415,6 +444,23 @@ mod tests {
             said.to_string(),
             "line 4: use a larger --cell-size or --outside keep"
         );
+    }
+
+    #[test]
+    fn an_entry_is_named_by_its_kind_place_and_line() {
+        let said = Said::new().entry("handle", 1, 17).text(" selects no cell");
+        assert_eq!(said.to_string(), "handle #2 (line 17) selects no cell");
+        assert_eq!(Said::new().entry("pin", 0, 0).to_string(), "pin #1");
+        struct Page;
+        impl Terms for Page {
+            fn option(&self, o: Opt) -> String {
+                o.name().into()
+            }
+            fn entry(&self, kind: &str, index: usize, _line: usize) -> String {
+                format!("{kind} {}", index + 1)
+            }
+        }
+        assert_eq!(Page.render(&said), "handle 2 selects no cell");
     }
 
     #[test]

@@ -5,7 +5,7 @@
 use pyo3::create_exception;
 use pyo3::exceptions::{PyOSError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyList;
+use pyo3::types::{PyDict, PyList};
 use rigidcells::Error;
 use rigidcells::said::{Kind, Opt, Part, Said, Terms};
 
@@ -68,10 +68,12 @@ pub(crate) fn python_terms(said: &Said) -> String {
     Package.render(said)
 }
 
-/// A message as a list of the package's words (`str`), the spec's lines (`int`) and the
+/// A message as a list of the package's words (`str`), the spec's lines (`int`), the
 /// options it names (`(keyword, value, said)`: the value a `str` as the user would write it,
-/// or None, and the package's way of saying both), for the package to say each line as a dict spec's key path or as `line N`, and for
-/// the Blender add-on to say an option by its panel's name.
+/// or None, and the package's way of saying both) and the spec entries it names (a `dict` of
+/// `entry` (the kind), `index`, `line` and `said`), for the package to say each line and entry
+/// as a dict spec's key path or as `line N`, and for the Blender add-on to say an option and an
+/// entry by its panel's names.
 pub(crate) fn parts<'py>(py: Python<'py>, said: &Said) -> PyResult<Bound<'py, PyList>> {
     let out = PyList::empty(py);
     let mut words = String::new();
@@ -84,6 +86,14 @@ pub(crate) fn parts<'py>(py: Python<'py>, said: &Said) -> PyResult<Bound<'py, Py
             Part::Set(o, v) => (o.keyword(), Some(v.as_str()), Package.set(*o, v))
                 .into_pyobject(py)?
                 .into_any(),
+            Part::Entry { kind, index, line } => {
+                let entry = PyDict::new(py);
+                entry.set_item("entry", *kind)?;
+                entry.set_item("index", *index)?;
+                entry.set_item("line", *line)?;
+                entry.set_item("said", Package.part(p))?;
+                entry.into_any()
+            }
             p => {
                 words.push_str(&Package.part(p));
                 continue;

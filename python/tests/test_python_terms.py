@@ -569,6 +569,32 @@ def test_a_refused_turn_names_the_handle_as_the_spec_was_written():
     assert raised.value.handle == 1
 
 
+def test_entries_are_named_by_key_path_or_line():
+    """A warning or an error about an entry names it as the spec was written: a dict's key path
+    (`spec["handle"][1]`), a TOML spec's `handle #2 (line N)`."""
+    import json
+
+    g = np.linspace(0.0, 1.0, 11)
+    cube = np.ascontiguousarray(np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3))
+    nowhere = {"box": {"min": [5, 5, 5], "max": [6, 6, 6]}, "translate": [0, 0, 0.1]}
+    spec = {
+        "fixed": [{"box": {"min": [-1, -1, -1], "max": [2, 2, 0.1]}}],
+        "handle": [{"box": {"min": [-1, -1, 0.9], "max": [2, 2, 2]}, "translate": [0, 0, 0.1]}, nowhere],
+    }
+    _, report = rigidcells.deform(cube, spec, cell_size=0.1, progress=False)
+    assert 'spec["handle"][1] selects no cell' in report.warnings, report.warnings
+    text = rigidcells._rigidcells.toml_from_json(json.dumps(spec))
+    line = [k + 1 for k, t in enumerate(text.splitlines()) if t == "[[handle]]"][1]
+    _, report = rigidcells.deform(cube, text, cell_size=0.1, progress=False)
+    assert f"handle #2 (line {line}) selects no cell" in report.warnings, report.warnings
+    # Two entries claiming the same cells: both named by key path.
+    spec["handle"][1] = {"box": {"min": [-1, -1, -1], "max": [2, 2, 0.1]}, "translate": [0, 0, 0.1]}
+    with pytest.raises(ValueError) as e:
+        rigidcells.deform(cube, spec, cell_size=0.1, progress=False)
+    assert 'spec["fixed"][0]' in str(e.value) and 'spec["handle"][1]' in str(e.value), e.value
+    assert "line" not in str(e.value), e.value
+
+
 def test_control_points_take_the_trend_as_the_command_line_does(tmp_path):
     """A scan pulled onto control points from a CSV with a dict spec and a chosen trend: the
     command line's bytes, the trend in the report, and a bad trend named as the dict's key."""

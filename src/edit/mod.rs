@@ -42,7 +42,7 @@ use crate::error::{Error, Result};
 use crate::pipeline::{DeformParams, Live, Options, Step};
 use crate::progress::{Observer, Silent};
 use crate::rigid::Vect;
-use crate::said::Said;
+use crate::said::{Opt, Said, Terms};
 use crate::solve;
 use crate::spec::EditSpec;
 
@@ -217,8 +217,8 @@ pub struct Motions {
     pub iterations: usize,
     /// Seconds of this solve.
     pub seconds: f64,
-    /// The solver's warnings (parts kept at rest, …).
-    pub warnings: Vec<Said>,
+    /// The solver's warnings (parts kept at rest, …), in the page's words ([`PageNames`]).
+    pub warnings: Vec<String>,
 }
 
 /// The proxy deformed by the final transfer.
@@ -228,8 +228,8 @@ pub struct Released {
     pub positions: Vec<f32>,
     /// Samples checked for fold-overs and how many fold.
     pub foldovers: (usize, usize),
-    /// Warnings (fold-overs).
-    pub warnings: Vec<Said>,
+    /// Warnings (fold-overs), in the page's words ([`PageNames`]).
+    pub warnings: Vec<String>,
 }
 
 /// The editor's state: the scene, and the live deformation of its samples
@@ -245,6 +245,8 @@ pub struct Editor {
     live: Live,
     /// The TOML text of the last edit solved.
     text: Option<String>,
+    /// What the page calls the entries of that text.
+    names: PageNames,
 }
 
 pub use crate::pipeline::live::DRAG_ITERATIONS;
@@ -263,6 +265,7 @@ impl Editor {
             params,
             live,
             text: None,
+            names: PageNames::default(),
         })
     }
 
@@ -327,7 +330,19 @@ impl Editor {
 
     /// The edit spec of `edit` as TOML, in the input's coordinates: what *Save edit* writes.
     pub fn spec_text(&self, edit: &Edit) -> String {
+        self.spec_named(edit).0
+    }
+
+    /// The edit spec of `edit` as TOML ([`Editor::spec_text`]), and what the page calls each
+    /// of its entries.
+    pub fn spec_named(&self, edit: &Edit) -> (String, PageNames) {
         spec_text(edit, &self.scene, &self.flags())
+    }
+
+    /// A message of the library about the last edit solved, in the page's words: its entries
+    /// named as the page names them ("handle 1, selection 2"), not by the spec's lines.
+    pub fn said(&self, said: &Said) -> String {
+        self.names.render(said)
     }
 
     /// The user's options as `deform`'s flags ([`Options::to_args`]: those at their defaults
@@ -342,7 +357,8 @@ impl Editor {
     /// selections did ([`Live::solve`]). `None` when the edit constrains nothing.
     pub fn solve(&mut self, edit: &Edit) -> Result<Option<Motions>> {
         edit.check()?;
-        let text = self.spec_text(edit);
+        let (text, names) = self.spec_named(edit);
+        self.names = names;
         if edit.is_empty() {
             self.text = None;
             self.live
@@ -402,7 +418,7 @@ impl Editor {
             strain,
             iterations: step.solver.iterations,
             seconds: step.seconds,
-            warnings: step.warnings.clone(),
+            warnings: step.warnings.iter().map(|w| self.said(w)).collect(),
         }
     }
 
@@ -416,7 +432,7 @@ impl Editor {
         Ok(Released {
             positions: relative(&moved, &self.scene.center),
             foldovers: info.foldovers,
-            warnings: info.warnings,
+            warnings: info.warnings.iter().map(|w| self.said(w)).collect(),
         })
     }
 
@@ -430,7 +446,7 @@ impl Editor {
             fixed: vec![selection.clone()],
             ..Default::default()
         };
-        let text = spec_text(&edit, &self.scene, "");
+        let (text, _) = spec_text(&edit, &self.scene, "");
         let name = self.scene.input.with_extension("edit.toml");
         let base = name.parent().unwrap_or(Path::new(".")).to_path_buf();
         let spec = crate::spec::parse_spec::<3>(&text, &base, &name)?;
@@ -633,22 +649,61 @@ fn region_keys(s: &Selection, center: &Vect<3>) -> String {
     keys
 }
 
-/// The edit spec of `edit` on `scene`, as TOML; `flags` the options of the command that
-/// reproduces it, in a comment.
-fn spec_text(edit: &Edit, scene: &Scene, flags: &str) -> String {
+/// What the page calls the entries of a spec the editor wrote ("fixed, selection 1",
+/// "handle 2, selection 1", "pin 1"), each with the line its table starts on: the terms
+/// ([`Terms`]) the page's messages are said in, so that a warning names what the user made on
+/// the page and not the saved spec's numbering. Options keep the command line's names, which
+/// the page shows in the saved spec's comment.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PageNames(Vec<(usize, String)>);
+
+impl PageNames {
+    /// The name of the entry whose table holds `line`.
+    fn at(&self, line: usize) -> Option<&str> {
+        let k = self.0.partition_point(|&(start, _)| start <= line);
+        k.checked_sub(1).map(|k| self.0[k].1.as_str())
+    }
+}
+
+impl Terms for PageNames {
+    fn option(&self, o: Opt) -> String {
+        format!("--{}", o.name())
+    }
+
+    fn line(&self, n: usize) -> String {
+        self.at(n)
+            .map_or_else(|| format!("line {n} of the saved edit"), str::to_string)
+    }
+
+    fn entry(&self, kind: &str, index: usize, line: usize) -> String {
+        self.at(line)
+            .map_or_else(|| format!("{kind} {}", index + 1), str::to_string)
+    }
+}
+
+/// The edit spec of `edit` on `scene`, as TOML, and what the page calls its entries; `flags`
+/// the options of the command that reproduces it, in a comment.
+fn spec_text(edit: &Edit, scene: &Scene, flags: &str) -> (String, PageNames) {
     let c = scene.center;
     let input = shell_word(&scene.input);
     let mut out = format!(
         "# rigidcells edit of {input}: the CLI reproduces it with\n\
          #   rigidcells deform {input} -o OUT --edit THIS.toml {flags}\n"
     );
-    for s in &edit.fixed {
-        out += &format!("\n[[fixed]]\n{}", region_keys(s, &c));
+    let mut names = Vec::new();
+    // Each entry starts with an empty line: its table is on the line after.
+    let mut entry = |out: &mut String, name: String, text: String| {
+        names.push((out.matches('\n').count() + 2, name));
+        *out += &text;
+    };
+    for (j, s) in edit.fixed.iter().enumerate() {
+        let text = format!("\n[[fixed]]\n{}", region_keys(s, &c));
+        entry(&mut out, format!("fixed, selection {}", j + 1), text);
     }
     for (k, h) in edit.handles.iter().enumerate() {
         let pivot = [h.pivot[0] + c[0], h.pivot[1] + c[1], h.pivot[2] + c[2]];
-        for s in &h.selections {
-            out += &format!(
+        for (j, s) in h.selections.iter().enumerate() {
+            let text = format!(
                 "\n[[handle]] # handle {}\n{}translate = {}\n\
                  rotate = {{ axis = {}, degrees = {:?} }}\npivot = {}\n",
                 k + 1,
@@ -658,13 +713,19 @@ fn spec_text(edit: &Edit, scene: &Scene, flags: &str) -> String {
                 h.degrees,
                 array(&pivot)
             );
+            entry(
+                &mut out,
+                format!("handle {}, selection {}", k + 1, j + 1),
+                text,
+            );
         }
     }
-    for p in &edit.pins {
+    for (k, p) in edit.pins.iter().enumerate() {
         let at = array(&[p[0] + c[0], p[1] + c[1], p[2] + c[2]]);
-        out += &format!("\n[[pin]]\npoint = {at}\nto = {at}\n");
+        let text = format!("\n[[pin]]\npoint = {at}\nto = {at}\n");
+        entry(&mut out, format!("pin {}", k + 1), text);
     }
-    out
+    (out, PageNames(names))
 }
 
 #[cfg(test)]

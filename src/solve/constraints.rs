@@ -511,17 +511,17 @@ where
             claim(c, &name, Role::Handle(k as u32))?;
         }
     }
-    let locate = |x: &Vect<D>, what: &str, hint: &str| {
+    let locate = |x: &Vect<D>, what: Said, hint: &str| {
         complex.locate(&(x - origin)).ok_or_else(|| {
-            Error::param(format!(
-                "{what} at {:?} lies outside every cell of the shape{hint}",
+            Error::param(what.text(format!(
+                " at {:?} lies outside every cell of the shape{hint}",
                 x.iter().collect::<Vec<_>>()
-            ))
+            )))
         })
     };
     let mut pins = Vec::new();
     for (k, p) in spec.pins.iter().enumerate() {
-        let cell = locate(&p.point, &format!("pin (line {})", p.line), "")?;
+        let cell = locate(&p.point, entry_named("pin", k, p.line), "")?;
         claim(cell, &entry_named("pin", k, p.line), Role::Pin(k as u32))?;
         pins.push(PinLocal {
             point: p.point - origin,
@@ -554,7 +554,7 @@ where
                 wanted: to - origin,
                 // A checkpoint is scored, not solved for.
                 weight: if t.check { 0.0 } else { t.weight * glue },
-                cell: locate(&carrier, &what, hint)? as u32,
+                cell: locate(&carrier, Said::from(&what), hint)? as u32,
                 mask: t.mask(),
             })
         })
@@ -566,7 +566,7 @@ where
             continue;
         }
         let what = format!("exact control point {} ({})", t.id, t.place);
-        let cell = locate(&(local.from + origin), &what, "")?;
+        let cell = locate(&(local.from + origin), Said::from(&what), "")?;
         claim(cell, &Said::from(&what), Role::Pin(pins.len() as u32))?;
         pins.push(PinLocal {
             point: local.from,
@@ -610,11 +610,10 @@ where
     Ok(constraints)
 }
 
-/// An entry of the edit spec as its messages name it: `handle #2 (line 9)`.
-fn entry_named(kind: &str, k: usize, line: usize) -> Said {
-    Said::from(format!("{kind} #{} (", k + 1))
-        .line(line)
-        .text(")")
+/// An entry of the edit spec as its messages name it ([`crate::said::Part::Entry`]):
+/// `handle #2 (line 9)` on the command line.
+fn entry_named(kind: &'static str, k: usize, line: usize) -> Said {
+    Said::new().entry(kind, k, line)
 }
 
 /// `v` in 3D (a 2D vector in the plane z = 0).

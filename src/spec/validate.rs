@@ -12,6 +12,7 @@ use super::parse::{LARGEST, MAX_TURN_DEGREES};
 use super::{EditSpec, Region};
 use crate::error::{Error, Result};
 use crate::rigid::{Dim, Mat, Rigid, Vect};
+use crate::said::Said;
 
 /// How far a rotation may be from orthonormal, and from the rotation its turn gives, in the
 /// largest entry of the difference: a rotation made in single precision (Blender's) is within
@@ -231,13 +232,13 @@ where
     /// ([`HandleMotion::check`]), pins, targets and weights that are not finite, stiffness
     /// scales that are not positive.
     pub fn validate(&self) -> Result<()> {
-        let fail = |what: String, message: String| {
+        let fail = |what: Said, message: String| {
             let path = if self.name.as_os_str().is_empty() {
                 "<edit spec>".into()
             } else {
                 self.name.clone()
             };
-            Error::spec(path, None, format!("{what}: {message}"))
+            Error::spec(path, None, what.text(format!(": {message}")))
         };
         for (k, e) in self.fixed.iter().enumerate() {
             let what = entry("fixed", k, e.line);
@@ -282,12 +283,10 @@ where
     }
 }
 
-/// An entry named for messages: `handle #2`, with its line when it was written in a file.
-fn entry(kind: &str, k: usize, line: usize) -> String {
-    match line {
-        0 => format!("{kind} #{}", k + 1),
-        _ => format!("{kind} #{} (line {line})", k + 1),
-    }
+/// An entry named for messages ([`crate::said::Part::Entry`]): `handle #2`, with its line
+/// when it was written in a file.
+fn entry(kind: &'static str, k: usize, line: usize) -> Said {
+    Said::new().entry(kind, k, line)
 }
 
 #[cfg(test)]

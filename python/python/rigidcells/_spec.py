@@ -98,14 +98,23 @@ def _spec(spec: Spec) -> Tuple[str, str, Optional[List[str]]]:
     raise TypeError("spec must be TOML text, a path to a .toml file, or a dict")
 
 
-def _said(parts: Any, paths: Optional[List[str]], option: Any = None) -> str:
+def _said(
+    parts: Any, paths: Optional[List[str]], option: Any = None, entry: Any = None
+) -> str:
     """A message of the library, given as its parts (the package's words; the spec's lines as
-    numbers; the options it names as ``(keyword, value or None, how the package says both)``),
-    with each line said as a dict spec's key path, or as ``line N`` for a spec written as TOML,
-    and each option as ``option(keyword, value)`` says it (default: the package's way). A
-    message that is already text is kept."""
+    numbers; the options it names as ``(keyword, value or None, how the package says both)``;
+    the spec entries it names as dicts of ``entry`` (the kind: ``handle``), ``index`` (from 0),
+    ``line`` and ``said``), with each line and entry said as a dict spec's key path, or as
+    ``line N`` and ``handle #2 (line 17)`` for a spec written as TOML, each option as
+    ``option(keyword, value)`` says it (default: the package's way) and each entry as
+    ``entry(kind, index)`` says it where given. A message that is already text is kept."""
     if isinstance(parts, str):
         return parts
+
+    def path(line: int) -> Optional[str]:
+        if paths is not None and 0 < line <= len(paths) and paths[line - 1]:
+            return paths[line - 1]
+        return None
 
     def one(p: Any) -> str:
         if isinstance(p, str):
@@ -113,9 +122,11 @@ def _said(parts: Any, paths: Optional[List[str]], option: Any = None) -> str:
         if isinstance(p, tuple):
             keyword, value, said = p
             return option(keyword, value) if option is not None else said
-        if paths is not None and 0 < p <= len(paths) and paths[p - 1]:
-            return paths[p - 1]
-        return f"line {p}"
+        if isinstance(p, dict):
+            if entry is not None:
+                return entry(p["entry"], p["index"])
+            return path(p["line"]) or p["said"]
+        return path(p) or f"line {p}"
 
     return "".join(one(p) for p in parts)
 
@@ -137,7 +148,8 @@ def _in_dict_terms(error: ValueError, paths: Optional[List[str]]) -> ValueError:
         raised = type(error)(f"{path}: {_said(message, paths)}")
     else:
         parts = getattr(error, "parts", None)
-        if not (isinstance(parts, list) and any(isinstance(p, int) for p in parts)):
+        # Only a message naming a line or an entry reads otherwise by key path.
+        if not (isinstance(parts, list) and any(isinstance(p, (int, dict)) for p in parts)):
             return error
         raised = type(error)(_said(parts, paths))
     raised.__dict__.update(error.__dict__)

@@ -22,9 +22,9 @@ use tungstenite::Message;
 
 use super::queue::{Inbox, MAX_QUEUED};
 use super::{OutputFolder, Refusal, f32_bytes, u32_bytes};
-use crate::edit::{Edit, Editor, Motions, Released, Selection};
+use crate::edit::{Edit, Editor, Motions, PageNames, Released, Selection};
 use crate::error::{Error, Result};
-use crate::said::Said;
+use crate::said::Terms;
 
 /// What the page sends; the solver thread takes each with where to answer.
 #[derive(Deserialize)]
@@ -174,7 +174,7 @@ pub(super) fn run(mut editor: Editor, outputs: Arc<OutputFolder>, queue: Inbox<R
                     idle = true;
                     let answer = match guarded(&mut editor, true, Editor::refine) {
                         Ok(m) => motions_message(*seq, m),
-                        Err(e) => vec![error(&e.to_string())],
+                        Err(e) => vec![error(&editor.said(&e.said()))],
                     };
                     for m in answer {
                         let _ = reply.send(m);
@@ -205,13 +205,17 @@ fn answer(
     outputs: &Arc<OutputFolder>,
     applying: &Arc<AtomicBool>,
 ) -> Vec<Message> {
-    let failed = |e: Error| vec![error(&e.to_string())];
+    // A solve's errors name the entries as the page does.
+    let failed = |editor: &Editor, e: Error| vec![error(&editor.said(&e.said()))];
     match command {
-        Command::Edit { seq, edit } => guarded(editor, true, |e| e.solve(&edit))
-            .map_or_else(failed, |m| motions_message(seq, m)),
-        Command::Release { seq } => {
-            guarded(editor, true, Editor::release).map_or_else(failed, |r| released_message(seq, r))
-        }
+        Command::Edit { seq, edit } => match guarded(editor, true, |e| e.solve(&edit)) {
+            Ok(m) => motions_message(seq, m),
+            Err(e) => failed(editor, e),
+        },
+        Command::Release { seq } => match guarded(editor, true, Editor::release) {
+            Ok(r) => released_message(seq, r),
+            Err(e) => failed(editor, e),
+        },
         Command::Select { seq, selection } => {
             match guarded(editor, false, |e| e.selected(&selection)) {
                 Ok(mask) => vec![selected_message(seq, &mask)],
@@ -235,12 +239,14 @@ fn answer(
                     // A name free now is kept free of other writers' files: Apply replaces
                     // only what its user agreed to replace.
                     let keep_existing = std::fs::symlink_metadata(&output).is_err();
+                    let (spec, names) = editor.spec_named(&edit);
                     let job = Job {
                         input,
                         output,
                         keep_existing,
                         name,
-                        spec: editor.spec_text(&edit),
+                        spec,
+                        names,
                         params: *editor.params(),
                     };
                     apply(job, reply.clone(), outputs.clone(), applying.clone());
@@ -379,6 +385,8 @@ struct Job {
     output: PathBuf,
     name: String,
     spec: String,
+    /// What the page calls the entries of `spec`, for the warnings and errors.
+    names: PageNames,
     params: crate::pipeline::DeformParams,
     /// The output's name was free when Apply was asked: no file that appears there meanwhile
     /// is replaced.
@@ -423,14 +431,14 @@ fn apply(job: Job, reply: Sender<Message>, outputs: Arc<OutputFolder>, applying:
                     "warnings": warnings,
                 }))
             }
-            Err(e) => error(&e.to_string()),
+            Err(e) => error(&job.names.render(&e.said())),
         };
         let _ = reply.send(message);
     });
 }
 
-/// The job deformed: the samples written and the warnings, as the CLI prints them.
-fn deform(job: &Job, progress: &Progress) -> Result<(u64, Vec<Said>)> {
+/// The job deformed: the samples written and the warnings, in the page's words.
+fn deform(job: &Job, progress: &Progress) -> Result<(u64, Vec<String>)> {
     crate::io::refuse_overwrite(&job.input, &job.output)?;
     let name = job.output.with_extension("edit.toml");
     let base = name.parent().unwrap_or(Path::new(".")).to_path_buf();
@@ -446,7 +454,8 @@ fn deform(job: &Job, progress: &Progress) -> Result<(u64, Vec<Said>)> {
         },
         progress,
     )?;
-    Ok((info.samples, report.warnings))
+    let warnings = report.warnings.iter().map(|w| job.names.render(w));
+    Ok((info.samples, warnings.collect()))
 }
 
 #[cfg(test)]
@@ -505,6 +514,34 @@ mod tests {
             }],
             ..Default::default()
         }
+    }
+
+    /// The solver's warnings and errors name what the user made on the page ("handle 1,
+    /// selection 2"), not the entries of the spec the editor wrote for it.
+    #[test]
+    fn messages_name_selections_as_the_page_does() {
+        let mut editor = editor();
+        let mut edit = lifted(0.5);
+        let nowhere = Selection {
+            polygon: Some(vec![[5.0, 5.0], [6.0, 5.0], [6.0, 6.0], [5.0, 6.0]]),
+            view: edit.handles[0].selections[0].view,
+            ..Default::default()
+        };
+        edit.handles[0].selections.push(nowhere);
+        let m = editor.solve(&edit).unwrap().unwrap();
+        assert_eq!(m.warnings, ["handle 1, selection 2 selects no cell"]);
+        // The spec itself numbers it as the CLI reads it.
+        let spec = editor.last_parsed().unwrap().clone();
+        assert_eq!(spec.handles.len(), 2);
+        let mut both = lifted(0.5);
+        both.fixed = both.handles[0].selections.clone();
+        let e = guarded(&mut editor, true, |e| e.solve(&both)).unwrap_err();
+        let said = editor.said(&e.said());
+        assert!(
+            said.contains("fixed, selection 1") && said.contains("handle 1, selection 1"),
+            "{said}"
+        );
+        assert!(e.to_string().contains("handle #1 (line "), "{e}");
     }
 
     /// A panic in the solver's work is an error for the page, and the editor solves the next
