@@ -155,7 +155,7 @@ fn a_live_session_follows_pose_after_pose() {
     let first = live.preview().unwrap();
     let axis = Vect::<3>::new(1.0, 0.0, 0.0);
     let further = HandleMotion::turning(axis, 50.0, 1.0, None, Vect::<3>::zeros()).unwrap();
-    let step = live.pose(&[further], &[], 200).unwrap();
+    let step = live.pose(&[further], &[], &[], 200).unwrap();
     assert!(!step.from_rest);
     let second = live.preview().unwrap();
     let corner = points

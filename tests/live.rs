@@ -162,19 +162,19 @@ fn poses_alone_move_the_handles_of_the_last_spec() {
     let mut live = Live::new(points.clone(), &triangles, Vec::new(), params()).unwrap();
     // No spec yet: nothing to pose.
     let lift = parse_poses::<3>("[[handle]]\ntranslate = [0.0, 0.0, 1.0]\n", name).unwrap();
-    assert!(live.pose(&lift, &[], 1).is_err());
+    assert!(live.pose(&lift, &[], &[], 1).is_err());
     live.solve(spec(&points, 0.0, 0.0), 1, &Silent).unwrap();
     // The pose as a matrix: the same step as the whole spec with that translation.
     let matrix = "[[handle]]\nmatrix = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], \
                   [0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 0.0, 1.0]]\n";
     let poses = parse_poses::<3>(matrix, name).unwrap();
-    let step = live.pose(&poses, &[], 50).unwrap();
+    let step = live.pose(&poses, &[], &[], 50).unwrap();
     assert!(!step.from_rest && step.solver.converged, "{step:?}");
     let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
     let tip = points.iter().position(|p| p.x == 10.0).unwrap();
     assert!((moved[tip].z - points[tip].z - 1.0).abs() < 1e-9);
     // One pose a handle, and nothing but a pose.
-    assert!(live.pose(&[], &[], 1).is_err());
+    assert!(live.pose(&[], &[], &[], 1).is_err());
     let region = "[[handle]]\nbox = { min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }\n";
     let err = parse_poses::<3>(region, name).unwrap_err().to_string();
     assert!(err.contains("box"), "{err}");
@@ -207,15 +207,59 @@ fn pins_move_warm_and_release_onto_deforms_shape() {
     .unwrap();
     for k in 1..=4 {
         let to = Vect::<3>::new(5.0, 0.5, 1.0 + 0.25 * f64::from(k));
-        let step = live.pose(&lift, &[to], 1).unwrap();
+        let step = live.pose(&lift, &[to], &[], 1).unwrap();
         assert!(!step.from_rest, "pin move {k} was solved from rest");
     }
-    assert!(live.pose(&lift, &[Vect::<3>::zeros(); 2], 1).is_err());
+    assert!(live.pose(&lift, &[Vect::<3>::zeros(); 2], &[], 1).is_err());
     let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
     let (expected, _, _) =
         pipeline::deform(&points, &triangles, &pinned(2.0), &params, &Silent).unwrap();
     let off = farthest(&moved, &expected);
     assert!(off < 1e-3, "the release is {off} from deform's shape");
+}
+
+/// Soft targets go where each pose sends them (a Blender vertex weight's partial pull follows
+/// its Empty), warm, and the release is `deform`'s shape with the targets there.
+#[test]
+fn targets_move_with_the_poses() {
+    let (points, triangles) = bar();
+    let params = params();
+    let targeted = |to_z: f64| {
+        let mut s = spec(&points, 1.0, 0.0);
+        let text = format!(
+            "[[target]]\nfrom = [5.0, 0.5, 1.0]\nto = [5.0, 0.5, {to_z:?}]\nweight = 4.0\n"
+        );
+        let extra = parse_spec::<3>(&text, Path::new("."), Path::new("t.toml")).unwrap();
+        s.targets = extra.targets;
+        s
+    };
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+    live.solve(targeted(1.0), 1, &Silent).unwrap();
+    let lift = parse_poses::<3>(
+        "[[handle]]\ntranslate = [0.0, 0.0, 1.0]\npivot = [10.0, 0.5, 0.5]\n",
+        Path::new("p"),
+    )
+    .unwrap();
+    for k in 1..=4 {
+        let to = Vect::<3>::new(5.0, 0.5, 1.0 + 0.25 * f64::from(k));
+        let step = live.pose(&lift, &[], &[to], 1).unwrap();
+        assert!(!step.from_rest, "target move {k} was solved from rest");
+    }
+    let e = live
+        .pose(&lift, &[], &[Vect::<3>::zeros(); 2], 1)
+        .unwrap_err();
+    assert!(e.to_string().contains("2 targets for the spec's 1"), "{e}");
+    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+    let (expected, _, _) =
+        pipeline::deform(&points, &triangles, &targeted(2.0), &params, &Silent).unwrap();
+    let off = farthest(&moved, &expected);
+    assert!(off < 1e-3, "the release is {off} from deform's shape");
+    let (unpulled, _, _) =
+        pipeline::deform(&points, &triangles, &targeted(1.0), &params, &Silent).unwrap();
+    assert!(
+        farthest(&moved, &unpulled) > 0.05,
+        "the target did not pull"
+    );
 }
 
 #[test]

@@ -156,30 +156,36 @@ impl Session {
     }
 
     /// The last spec with its handles posed as the TOML `poses` say (one `[[handle]]` table
-    /// a handle, its motion alone) and its pins going to `pins` ((k, 3), one a pin, or none),
-    /// with at most `iterations` solver steps.
-    #[pyo3(signature = (poses_text, iterations, pins=None))]
+    /// a handle, its motion alone), its pins going to `pins` ((k, 3), one a pin, or none) and
+    /// its targets pulling towards `targets` ((t, 3), one a target, or none), with at most
+    /// `iterations` solver steps.
+    #[pyo3(signature = (poses_text, iterations, pins=None, targets=None))]
     fn pose<'py>(
         &self,
         py: Python<'py>,
         poses_text: &str,
         iterations: usize,
         pins: Option<PyReadonlyArray2<'py, f64>>,
+        targets: Option<PyReadonlyArray2<'py, f64>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         // Named as a spec, so that the package says its errors by key path.
         let poses = parse_poses::<3>(poses_text, Path::new("spec")).map_err(py_err)?;
-        let pins = match &pins {
-            Some(p) => self::points(p)?,
-            None => Vec::new(),
+        let finite = |given: &Option<PyReadonlyArray2<'py, f64>>, what: &str| {
+            let points = match given {
+                Some(p) => self::points(p)?,
+                None => Vec::new(),
+            };
+            if let Some(k) = points.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
+                return Err(PyValueError::new_err(format!(
+                    "{what}[{k}]: {:?} is not 3 finite numbers",
+                    points[k].as_slice()
+                )));
+            }
+            Ok(points)
         };
-        if let Some(k) = pins.iter().position(|p| !p.iter().all(|v| v.is_finite())) {
-            return Err(PyValueError::new_err(format!(
-                "pins[{k}]: {:?} is not 3 finite numbers",
-                pins[k].as_slice()
-            )));
-        }
+        let (pins, targets) = (finite(&pins, "pins")?, finite(&targets, "targets")?);
         let step = self
-            .with(py, |live, _| live.pose(&poses, &pins, iterations))?
+            .with(py, |live, _| live.pose(&poses, &pins, &targets, iterations))?
             .map_err(py_err)?;
         step_dict(py, Some(&step))
     }

@@ -146,6 +146,25 @@ def test_pins_follow_a_drag():
         live.drag(pose, pins=[[5.0, 0.5, float("inf")]])
 
 
+def test_targets_follow_a_drag():
+    """A soft target's pull moves with the drag (a Blender vertex weight's partial pull)."""
+    pts = bar_points()
+    spec = bar_spec(pts, lift=1.0)
+    spec["target"] = [{"from": [5.0, 0.5, 1.0], "to": [5.0, 0.5, 1.0], "weight": 4.0}]
+    live = rigidcells.Session(pts, spec, cell_size=0.25)
+    pose = {"translate": [0, 0, 1.0], "pivot": [10.0, 0.5, 0.5]}
+    for z in (1.25, 1.5, 1.75, 2.0):
+        assert not live.drag(pose, targets=[[5.0, 0.5, z]]).from_rest
+    moved, _ = live.release()
+    spec["target"][0]["to"] = [5.0, 0.5, 2.0]
+    expected, _ = rigidcells.deform(pts, spec, cell_size=0.25)
+    assert np.abs(moved - expected).max() < 1e-3 * live.cell_size
+    with pytest.raises(ValueError, match="2 targets for the spec's 1"):
+        live.drag(pose, targets=[[5.0, 0.5, 2.0], [5.0, 0.5, 2.0]])
+    with pytest.raises(ValueError, match=r"targets\[0\]"):
+        live.drag(pose, targets=[[5.0, 0.5, float("nan")]])
+
+
 def cube_points():
     """3,000 random points in a unit cube: most of its cells are parts of their own."""
     return np.random.default_rng(7).random((3000, 3))

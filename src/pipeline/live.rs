@@ -27,8 +27,8 @@ use crate::progress::{Observer, Silent};
 use crate::rigid::{Dim, Motion, Rigid, Vect};
 use crate::said::{Opt, Said};
 use crate::solve::{Session, Solution, SolverInfo};
-use crate::spec::EditSpec;
 use crate::spec::HandleMotion;
+use crate::spec::{EditSpec, Target, Trend};
 
 use super::DeformInfo;
 
@@ -223,6 +223,15 @@ impl Live {
                     pin.wanted = entry.to - origin;
                     pin.to = constraints.trend.back(&pin.wanted).unwrap_or(pin.wanted);
                 }
+                for (target, entry) in constraints.targets.iter_mut().zip(&spec.targets) {
+                    let mut to = entry.to - origin;
+                    if entry.horizontal {
+                        // Its height is the snapped sample's, as it was resolved.
+                        to[2] = target.wanted[2];
+                    }
+                    target.wanted = to;
+                    target.to = constraints.trend.back(&to).unwrap_or(to);
+                }
                 // A drag's step (which may move the cells' ancestors), or the whole solve.
                 let stepped = if max_iterations < self.params.solve.max_iterations {
                     session.drag(constraints, max_iterations)
@@ -303,12 +312,14 @@ impl Live {
     }
 
     /// [`Live::solve`] of the last spec with its handles in `poses` (one per handle, in the
-    /// spec's order) and its pins going to `pins` (one per pin, or none to leave them): the
-    /// warm step of a drag, without writing or reading the regions again.
+    /// spec's order), its pins going to `pins` (one per pin, or none to leave them) and its
+    /// soft targets pulling towards `targets` (one per target, or none): the warm step of a
+    /// drag, without writing or reading the regions again.
     pub fn pose(
         &mut self,
         poses: &[HandleMotion<3>],
         pins: &[Vect<3>],
+        targets: &[Vect<3>],
         max_iterations: usize,
     ) -> Result<Step> {
         let Some(last) = &self.spec else {
@@ -323,12 +334,15 @@ impl Live {
                 last.handles.len()
             )));
         }
-        if !pins.is_empty() && pins.len() != last.pins.len() {
-            return Err(Error::param(format!(
-                "{} pins for the spec's {}: give one a pin, or none",
-                pins.len(),
-                last.pins.len()
-            )));
+        for (given, wanted, what) in [
+            (pins.len(), last.pins.len(), "pin"),
+            (targets.len(), last.targets.len(), "target"),
+        ] {
+            if given != 0 && given != wanted {
+                return Err(Error::param(format!(
+                    "{given} {what}s for the spec's {wanted}: give one a {what}, or none"
+                )));
+            }
         }
         let mut spec = last.clone();
         for (entry, pose) in spec.handles.iter_mut().zip(poses) {
@@ -336,6 +350,9 @@ impl Live {
         }
         for (pin, to) in spec.pins.iter_mut().zip(pins) {
             pin.to = *to;
+        }
+        for (target, to) in spec.targets.iter_mut().zip(targets) {
+            target.to = *to;
         }
         Ok(self
             .solve(spec, max_iterations, &Silent)?
@@ -525,7 +542,16 @@ fn same_but_poses(a: &EditSpec<3>, b: &EditSpec<3>) -> bool {
             .iter()
             .zip(&b.pins)
             .all(|(p, q)| p.point == q.point && p.line == q.line)
-        && a.targets == b.targets
+        && a.targets.len() == b.targets.len()
+        && a.targets.iter().zip(&b.targets).all(|(t, u)| {
+            // A target's pull moves warm while no trend is fitted to where the targets go.
+            let moved = Target {
+                to: u.to,
+                ..t.clone()
+            };
+            moved == *u && (t.to == u.to || a.trend == Trend::None)
+        })
+        && a.trend == b.trend
         && a.stiffness == b.stiffness
         && a.handles.len() == b.handles.len()
         && a.handles

@@ -589,13 +589,18 @@ class Session:
             return self.last
 
     def drag(
-        self, poses: Union[dict, Sequence[dict]], iterations: int = 1, pins: Any = None
+        self,
+        poses: Union[dict, Sequence[dict]],
+        iterations: int = 1,
+        pins: Any = None,
+        targets: Any = None,
     ) -> Step:
         """Moves the handles to ``poses``: one dict a handle, in the spec's order (a dict alone
         for one handle), each with a handle's motion keys only (``translate``, ``rotate``,
         ``scale``, ``pivot``, or ``matrix``), solved with ``iterations`` steps (each one
-        Gauss-Newton iteration or two local-global ones) from where the cells are. ``pins`` ((k, 3), one point a pin of the spec):
-        where the pins go now (None: where they went)."""
+        Gauss-Newton iteration or two local-global ones) from where the cells are. ``pins``
+        ((k, 3), one point a pin of the spec): where the pins go now; ``targets`` ((t, 3), one
+        point a target of the spec): where the targets pull now (None: where they did)."""
         if isinstance(poses, dict):
             poses = [poses]
         iterations = _iterations(iterations)
@@ -605,9 +610,10 @@ class Session:
             raise type(e)(_poses_path(str(e))) from None
         text = _rigidcells.toml_from_json(json.dumps(plain))
         to = None if pins is None else _plain3(pins, "pins")
+        pulled = None if targets is None else _plain3(targets, "targets")
         with self._turn():
             try:
-                info = self._native.pose(text, iterations, to)
+                info = self._native.pose(text, iterations, to, pulled)
             except ValueError as e:
                 # The poses' key paths, worked out only for an error (a drag is the hot path).
                 paths = [_poses_path(p) for p in _key_paths(text)]
