@@ -58,6 +58,23 @@ from .handles import (  # noqa: F401  (an Empty's motion as a handle pose)
 )
 from . import follow
 from .follow import RIGIDCELLS_OT_bake
+from .scene import (  # noqa: F401  (the scene's inputs and keys, for the operators and tests)
+    FULL_WEIGHT,
+    PULL,
+    SHAPE_KEY,
+    Weighted,
+    _group_indices,
+    _group_weights,
+    _movers,
+    _rest_vertices,
+    inputs,
+    members,
+    pin_places,
+    poses,
+    split,
+    write_keys,
+    write_shape_key,
+)
 from .work import Cancelled, DeformJob, LiveWorker
 
 from .rotations import (  # noqa: F401  (the rotations' arithmetic, without Blender)
@@ -90,7 +107,6 @@ _SITE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "site")
 if os.path.isdir(_SITE) and _SITE not in sys.path:
     sys.path.append(_SITE)
 
-SHAPE_KEY = "RigidCells"
 
 TRANSFERS = [
     ("pu", "Partition of unity", "Local RBFs blended over the cells (the default)"),
@@ -129,6 +145,16 @@ def _follow_changed(settings: "RigidCellsSettings", context: Any) -> None:
 
 def _is_empty(_self: Any, obj: bpy.types.Object) -> bool:
     return obj.type == "EMPTY"
+
+
+def _is_mesh(_self: Any, obj: bpy.types.Object) -> bool:
+    return obj.type == "MESH"
+
+
+class RigidCellsMember(bpy.types.PropertyGroup):
+    """A mesh deformed together with the object, as one scene (its own key)."""
+
+    object: PointerProperty(name="Object", type=bpy.types.Object, poll=_is_mesh)
 
 
 class RigidCellsMover(bpy.types.PropertyGroup):
@@ -173,6 +199,12 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
     handle_rest_scale: FloatVectorProperty(size=3, default=(1.0, 1.0, 1.0), options={"HIDDEN"})
     handles: CollectionProperty(type=RigidCellsMover, name="More handles")
     pins: CollectionProperty(type=RigidCellsMover, name="Pins")
+    together: CollectionProperty(
+        type=RigidCellsMember,
+        name="Together",
+        description="Meshes deformed with this one as one scene, each into its own key; their "
+        "vertex groups of the names above are the scene's groups",
+    )
     stiffness_group: StringProperty(
         name="Stiffness group",
         description="Vertex group whose cells are stiffer (or softer) than the rest",
@@ -223,127 +255,6 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
     estimate: StringProperty(options={"HIDDEN"})
 
 
-def _group_indices(obj: bpy.types.Object, name: str, role: str) -> List[int]:
-    """The vertices of the group `name` (weight above 0)."""
-    if not name:
-        raise InputError(f"Rigid Cells: name the {role} vertex group")
-    group = obj.vertex_groups.get(name)
-    if group is None:
-        raise InputError(f"Rigid Cells: {obj.name} has no vertex group {name!r}")
-    k = group.index
-    found = [
-        v.index for v in obj.data.vertices if any(g.group == k and g.weight > 0 for g in v.groups)
-    ]
-    if not found:
-        raise InputError(f"Rigid Cells: the vertex group {name!r} holds no vertex")
-    return found
-
-
-def _rest_vertices(mesh: bpy.types.Mesh) -> np.ndarray:
-    """The base shape's vertices ((n, 3) float64): the reference shape key's where there are
-    shape keys, so a deformation never stacks on the last one."""
-    co = np.empty(3 * len(mesh.vertices), dtype=np.float32)
-    keys = mesh.shape_keys
-    if keys is not None and keys.reference_key is not None:
-        keys.reference_key.data.foreach_get("co", co)
-    else:
-        mesh.vertices.foreach_get("co", co)
-    return co.reshape(-1, 3).astype(np.float64)
-
-
-def _triangles(mesh: bpy.types.Mesh) -> Optional[np.ndarray]:
-    """The faces as triangles ((m, 3) vertex indices), or None for a vertex-only mesh."""
-    mesh.calc_loop_triangles()
-    m = len(mesh.loop_triangles)
-    if m == 0:
-        return None
-    tris = np.empty(3 * m, dtype=np.int64)
-    mesh.loop_triangles.foreach_get("vertices", tris)
-    return tris.reshape(-1, 3)
-
-
-def _movers(settings: RigidCellsSettings, kind: str) -> List[RigidCellsMover]:
-    """The extra handles or the pins, each checked to name an Empty."""
-    items = list(getattr(settings, kind))
-    what, first = ("handle", 2) if kind == "handles" else ("pin", 1)
-    for k, item in enumerate(items):
-        if item.object is None:
-            raise InputError(f"Rigid Cells: choose the Empty of {what} {first + k}")
-    return items
-
-
-def poses(obj: bpy.types.Object) -> List[dict]:
-    """Each handle's pose (`handle_pose`), in the spec's order (the handle, then the extra
-    ones): what Deform puts in the spec and Live hands the session as the Empties move, so
-    that both give the same shape for the same typed pose."""
-    settings = obj.rigidcells
-    if settings.handle_object is None:
-        raise InputError("Rigid Cells: choose the handle Empty")
-    moves = [
-        handle_pose(
-            obj,
-            settings.handle_object,
-            settings.handle_rest,
-            settings.handle_rest_mode,
-            settings.handle_rest_rotation,
-            settings.handle_rest_scale,
-        )
-    ]
-    for item in _movers(settings, "handles"):
-        moves.append(
-            handle_pose(
-                obj, item.object, item.rest, item.rest_mode, item.rest_rotation, item.rest_scale
-            )
-        )
-    return moves
-
-
-def _pins(obj: bpy.types.Object, rest: np.ndarray) -> List[dict]:
-    """The pins: each group's center at rest, and where its Empty's motion sends it."""
-    items = _movers(obj.rigidcells, "pins")
-    centers = [rest[_group_indices(obj, item.group, "pin")].mean(axis=0) for item in items]
-    places = pin_places(obj, centers)
-    return [{"point": c.tolist(), "to": to} for c, to in zip(centers, places)]
-
-
-def pin_places(obj: bpy.types.Object, centers: List[np.ndarray]) -> List[List[float]]:
-    """Where each pin's Empty sends its group's center now (what Live hands the session)."""
-    items = _movers(obj.rigidcells, "pins")
-    return [
-        (_motion(obj, item.object, item.rest) @ np.append(c, 1.0))[:3].tolist()
-        for item, c in zip(items, centers)
-    ]
-
-
-def inputs(obj: bpy.types.Object) -> Tuple[np.ndarray, Optional[np.ndarray], dict]:
-    """The library's inputs for `obj`: its rest vertices, its triangles and the spec."""
-    if obj is None or obj.type != "MESH":
-        raise InputError("Rigid Cells: select a mesh object")
-    settings = obj.rigidcells
-    fixed = _group_indices(obj, settings.fixed_group, "fixed")
-    handle = _group_indices(obj, settings.handle_group, "handle")
-    if settings.handle_object is None:
-        raise InputError("Rigid Cells: choose the handle Empty")
-    groups = [handle] + [
-        _group_indices(obj, item.group, f"handle {k + 2}")
-        for k, item in enumerate(_movers(settings, "handles"))
-    ]
-    rest = _rest_vertices(obj.data)
-    spec: dict = {
-        "fixed": [{"indices": fixed}],
-        "handle": [
-            {"indices": g, **pose} for g, pose in zip(groups, poses(obj))
-        ],
-    }
-    pins = _pins(obj, rest)
-    if pins:
-        spec["pin"] = pins
-    if settings.stiffness_group:
-        stiff = _group_indices(obj, settings.stiffness_group, "stiffness")
-        spec["stiffness"] = [{"indices": stiff, "scale": settings.stiffness}]
-    return rest, _triangles(obj.data), spec
-
-
 def options(settings: RigidCellsSettings) -> dict:
     """The library's keyword options the settings give."""
     memory = int(settings.memory_limit * 2**30)
@@ -353,19 +264,6 @@ def options(settings: RigidCellsSettings) -> dict:
         "memory_limit": memory or None,
         "transfer": settings.transfer,
     }
-
-
-def write_shape_key(obj: bpy.types.Object, moved: np.ndarray) -> bpy.types.ShapeKey:
-    """`moved` as the shape key `RigidCells` (replacing one of that name), over a Basis."""
-    if obj.data.shape_keys is None:
-        obj.shape_key_add(name="Basis", from_mix=False)
-    key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
-    if key is None:
-        key = obj.shape_key_add(name=SHAPE_KEY, from_mix=False)
-    key.data.foreach_set("co", moved.astype(np.float32).ravel())
-    key.value = 1.0
-    obj.data.update()
-    return key
 
 
 def show_report(obj: bpy.types.Object, report: Any) -> None:
@@ -379,14 +277,9 @@ def show_report(obj: bpy.types.Object, report: Any) -> None:
 
 
 def finish(obj: bpy.types.Object, moved: np.ndarray, report: Any) -> None:
-    """A deformation's result as the shape key and the panel's figures; refused when the mesh
-    no longer has the vertices it was solved for."""
-    if len(moved) != len(obj.data.vertices):
-        raise InputError(
-            f"Rigid Cells: {obj.name} has {len(obj.data.vertices)} vertices now, "
-            f"{len(moved)} were solved; deform again"
-        )
-    write_shape_key(obj, moved)
+    """A deformation's result as each object's shape key and the panel's figures; refused when
+    the meshes no longer have the vertices they were solved for."""
+    write_keys(obj, moved)
     show_report(obj, report)
 
 
@@ -420,16 +313,10 @@ class LiveState:
         self._centers = [np.array(p["point"]) for p in spec.get("pin", [])]
         self.pins = [p["to"] for p in spec.get("pin", [])]
         self.poses = poses(obj)
+        self._weighted = Weighted(obj, points) if "target" in spec else None
         self.count = len(points)
-        keys = obj.data.shape_keys
-        key = keys.key_blocks.get(SHAPE_KEY) if keys is not None else None
-        # What Esc restores: no shape keys, no RigidCells key, or the key's shape and value.
-        self._before: Optional[Tuple[Optional[np.ndarray], float]] = None
-        self._had_keys = keys is not None
-        if key is not None:
-            co = np.empty(3 * len(key.data), dtype=np.float32)
-            key.data.foreach_get("co", co)
-            self._before = (co, key.value)
+        # What Esc restores, for each object of the scene (`members`).
+        self._before = {o.name: _KeyBefore(o) for o in members(obj)}
         self.kind: Optional[str] = None
         self.worker = LiveWorker(points, spec, triangles, options(obj.rigidcells), settle).start()
 
@@ -442,14 +329,13 @@ class LiveState:
         pins = pin_places(obj, self._centers)
         if now != self.poses or pins != self.pins:
             self.poses, self.pins = now, pins
-            self.worker.move(now, pins or None)
+            targets = None if self._weighted is None else self._weighted.places(obj).tolist()
+            self.worker.move(now, pins or None, targets)
         shape = self.worker.take()
         if shape is None:
             return None
         self.kind, moved = shape
-        if len(moved) != len(obj.data.vertices):
-            raise InputError(f"Rigid Cells: {obj.name} changed its vertices during Live")
-        write_shape_key(obj, moved)
+        write_keys(obj, moved)
         if self.kind == "released" and self.worker.report is not None:
             show_report(obj, self.worker.report)
         return self.kind
@@ -458,19 +344,38 @@ class LiveState:
         self.worker.finish()
 
     def cancel(self, obj: Optional[bpy.types.Object]) -> None:
-        """Stops the worker and puts the shape key back as it was before Live."""
+        """Stops the worker and puts each object's shape key back as it was before Live."""
         self.worker.stop()
-        if obj is None:
-            return
-        if not self._had_keys:
+        for name, before in self._before.items():
+            other = bpy.data.objects.get(name)
+            if other is not None:
+                before.restore(other)
+
+
+class _KeyBefore:
+    """An object's `RigidCells` key as it was: no shape keys, no such key, or its shape and
+    value; `restore` puts it back."""
+
+    def __init__(self, obj: bpy.types.Object) -> None:
+        keys = obj.data.shape_keys
+        key = keys.key_blocks.get(SHAPE_KEY) if keys is not None else None
+        self.had_keys = keys is not None
+        self.shape: Optional[Tuple[np.ndarray, float]] = None
+        if key is not None:
+            co = np.empty(3 * len(key.data), dtype=np.float32)
+            key.data.foreach_get("co", co)
+            self.shape = (co, key.value)
+
+    def restore(self, obj: bpy.types.Object) -> None:
+        if not self.had_keys:
             if obj.data.shape_keys is not None:
                 obj.shape_key_clear()
-        elif self._before is None:
+        elif self.shape is None:
             key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
             if key is not None:
                 obj.shape_key_remove(key)
         else:
-            co, value = self._before
+            co, value = self.shape
             key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
             if key is None:
                 key = obj.shape_key_add(name=SHAPE_KEY, from_mix=False)
@@ -517,8 +422,20 @@ def _said(error: BaseException) -> str:
     if isinstance(parts, list):
         from rigidcells._spec import _said as said_with
 
-        return said_with(parts, None, _option_said)
+        return said_with(parts, None, _option_said, _entry_said)
     return str(error)
+
+
+def _entry_said(kind: str, index: int) -> str:
+    """An entry of the spec the add-on wrote, as the panel names the group that made it: the
+    fixed group, the handle group, handle 2's group, pin 1's group, the stiffness group."""
+    if kind == "handle":
+        return "the handle group" if index == 0 else f"handle {index + 1}'s group"
+    if kind == "pin":
+        return f"pin {index + 1}'s group"
+    if kind in ("fixed", "stiffness"):
+        return f"the {kind} group"
+    return f"{kind} {index + 1}"
 
 
 def _option_said(keyword: str, value: Optional[str]) -> str:
@@ -782,6 +699,126 @@ def estimate_said(est: Any) -> str:
     return said
 
 
+# The vertex groups "From selection" makes: the add-on's own, replaced each time; a group the
+# artist made and named in the panel is never changed.
+GROUP_PREFIX = "RigidCells "
+
+ROLES = [
+    ("fixed", "Fixed", "The fixed group"),
+    ("handle", "Handle", "The handle group, and its Empty"),
+    ("handles", "More handles", "Handle `index + 2`'s group, and its Empty"),
+    ("pins", "Pins", "Pin `index + 1`'s group, and its Empty"),
+    ("stiffness", "Stiffness", "The stiffness group"),
+]
+
+
+def _selected_vertices(obj: bpy.types.Object) -> List[int]:
+    """The vertices selected in Edit Mode (the mesh's selection, brought up to date when the
+    object is in Edit Mode)."""
+    if obj.mode == "EDIT":
+        obj.update_from_editmode()
+    return [v.index for v in obj.data.vertices if v.select]
+
+
+def from_selection(context: Any, role: str, index: int = 0) -> bpy.types.VertexGroup:
+    """The selected vertices as the group of `role` (`index` among the extra handles or the
+    pins): the add-on's vertex group `RigidCells <Role>` holds exactly them, at weight 1, and
+    the panel names it; a handle or pin without an Empty gets a new one at their center, as
+    Blender's "Hook to New Object" does."""
+    obj = context.active_object
+    chosen = _selected_vertices(obj)
+    if not chosen:
+        raise InputError("Rigid Cells: select the vertices in Edit Mode first")
+    s = obj.rigidcells
+    if role in ("handles", "pins"):
+        item = getattr(s, role)[index]
+        label = f"Handle {index + 2}" if role == "handles" else f"Pin {index + 1}"
+    else:
+        item, label = s, role.capitalize()
+    name = GROUP_PREFIX + label
+    editing = _leave_edit_mode(context)
+    try:
+        group = obj.vertex_groups.get(name) or obj.vertex_groups.new(name=name)
+        group.remove(range(len(obj.data.vertices)))
+        group.add(chosen, 1.0, "REPLACE")
+        if role in ("handles", "pins"):
+            item.group = name
+        else:
+            setattr(s, f"{role}_group", name)
+        empty_of = {"handle": "handle_object", "handles": "object", "pins": "object"}.get(role)
+        if empty_of is not None and getattr(item, empty_of) is None:
+            center = obj.matrix_world @ _mathutils().Vector(
+                _rest_vertices(obj.data)[chosen].mean(axis=0)
+            )
+            empty = bpy.data.objects.new(f"{obj.name} {label}", None)
+            empty.empty_display_type = "ARROWS"
+            empty.location = center
+            empty.matrix_world = _mathutils().Matrix.Translation(center)
+            for collection in obj.users_collection:
+                collection.objects.link(empty)
+            setattr(item, empty_of, empty)  # its rest pose is taken now
+    finally:
+        _back_to_edit_mode(context, editing)
+    return group
+
+
+def _mathutils() -> Any:
+    import mathutils
+
+    return mathutils
+
+
+class RIGIDCELLS_OT_from_selection(bpy.types.Operator):
+    """Make the vertices selected in Edit Mode this group (the add-on's own vertex group holds
+    them); a handle or pin without an Empty gets one at their center"""
+
+    bl_idname = "rigidcells.from_selection"
+    bl_label = "From selection"
+    bl_options = {"REGISTER", "UNDO", "INTERNAL"}
+    role: EnumProperty(items=ROLES)
+    index: IntProperty()
+
+    @classmethod
+    def poll(cls, context: Any) -> bool:
+        return _mesh_active(context)
+
+    def execute(self, context: Any) -> set:
+        try:
+            group = from_selection(context, self.role, self.index)
+        except ERRORS as e:
+            self.report({"ERROR"}, _said(e))
+            return {"CANCELLED"}
+        count = sum(1 for v in context.active_object.data.vertices if v.select)
+        self.report({"INFO"}, f"Rigid Cells: {group.name} holds {count:,} vertices")
+        return {"FINISHED"}
+
+
+class RIGIDCELLS_OT_together(bpy.types.Operator):
+    """Deform the other selected meshes with this one, as one scene: each gets its own key, and
+    their vertex groups of the names above are the scene's groups (none selected: this one
+    alone)"""
+
+    bl_idname = "rigidcells.together"
+    bl_label = "Together"
+    bl_options = {"REGISTER", "UNDO", "INTERNAL"}
+
+    @classmethod
+    def poll(cls, context: Any) -> bool:
+        return _mesh_active(context)
+
+    def execute(self, context: Any) -> set:
+        obj = context.active_object
+        together = obj.rigidcells.together
+        together.clear()
+        for other in context.selected_objects:
+            if other.type == "MESH" and other != obj:
+                together.add().object = other
+        n = len(together)
+        said = "alone" if n == 0 else f"with {n} other mesh{'es' if n > 1 else ''}"
+        self.report({"INFO"}, f"Rigid Cells: {obj.name} deforms {said}")
+        return {"FINISHED"}
+
+
 class RIGIDCELLS_OT_add(bpy.types.Operator):
     """Add another handle or a pin: a vertex group moved by an Empty"""
 
@@ -817,6 +854,14 @@ class RIGIDCELLS_OT_remove(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _group_row(col: Any, owner: Any, prop: str, obj: Any, role: str, index: int = 0) -> None:
+    """A group's field, and the button that makes it the Edit Mode selection."""
+    row = col.row(align=True)
+    row.prop_search(owner, prop, obj, "vertex_groups", text="")
+    op = row.operator(RIGIDCELLS_OT_from_selection.bl_idname, text="", icon="RESTRICT_SELECT_OFF")
+    op.role, op.index = role, index
+
+
 class VIEW3D_PT_rigidcells(bpy.types.Panel):
     """The settings, Deform, Live, and the last run's figures, in the 3D view's sidebar."""
 
@@ -836,10 +881,10 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
         # Each label above its field: the sidebar is narrow.
         col = layout.column(align=True)
         col.label(text="Fixed group")
-        col.prop_search(s, "fixed_group", obj, "vertex_groups", text="")
+        _group_row(col, s, "fixed_group", obj, "fixed")
         col = layout.column(align=True)
         col.label(text="Handle: group, Empty")
-        col.prop_search(s, "handle_group", obj, "vertex_groups", text="")
+        _group_row(col, s, "handle_group", obj, "handle")
         col.prop(s, "handle_object", text="")
         for kind, label in (("handles", "Handle"), ("pins", "Pin")):
             first = 2 if kind == "handles" else 1
@@ -849,14 +894,18 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
                 row.label(text=f"{label} {first + k}: group, Empty")
                 remove = row.operator(RIGIDCELLS_OT_remove.bl_idname, text="", icon="X")
                 remove.kind, remove.index = kind, k
-                col.prop_search(item, "group", obj, "vertex_groups", text="")
+                _group_row(col, item, "group", obj, kind, k)
                 col.prop(item, "object", text="")
         row = layout.row(align=True)
         row.operator(RIGIDCELLS_OT_add.bl_idname, text="Handle", icon="ADD").kind = "handles"
         row.operator(RIGIDCELLS_OT_add.bl_idname, text="Pin", icon="ADD").kind = "pins"
+        row = layout.row(align=True)
+        n = len(members(obj)) - 1
+        row.label(text=f"Together with {n} more" if n else "This object alone")
+        row.operator(RIGIDCELLS_OT_together.bl_idname, text="Take selected")
         col = layout.column(align=True)
         col.label(text="Stiffness group")
-        col.prop_search(s, "stiffness_group", obj, "vertex_groups", text="")
+        _group_row(col, s, "stiffness_group", obj, "stiffness")
         if s.stiffness_group:
             col.prop(s, "stiffness")
         col = layout.column(align=True)
@@ -889,11 +938,14 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
 
 CLASSES = (
     RigidCellsMover,
+    RigidCellsMember,
     RigidCellsSettings,
     OBJECT_OT_rigidcells_deform,
     OBJECT_OT_rigidcells_live,
     RIGIDCELLS_OT_estimate,
     RIGIDCELLS_OT_bake,
+    RIGIDCELLS_OT_from_selection,
+    RIGIDCELLS_OT_together,
     RIGIDCELLS_OT_add,
     RIGIDCELLS_OT_remove,
     VIEW3D_PT_rigidcells,

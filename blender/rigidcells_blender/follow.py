@@ -52,11 +52,13 @@ class Followed:
 
 
 def _regions(spec: dict) -> Any:
-    """A spec without its handles' and pins' poses: what a warm solve cannot change."""
+    """A spec without its handles' poses and where its pins and weighted vertices go: what a
+    warm solve cannot change."""
     return (
         spec.get("fixed"),
         [h.get("indices") for h in spec.get("handle", [])],
         [p.get("point") for p in spec.get("pin", [])],
+        [(t.get("from"), t.get("weight")) for t in spec.get("target", [])],
         spec.get("stiffness"),
     )
 
@@ -65,7 +67,7 @@ def follow_now(obj: bpy.types.Object) -> bool:
     """Solves `obj` for its Empties' current poses when they changed since its last shape, and
     writes the key: whether it wrote one."""
     global _writing
-    from . import SHAPE_KEY, inputs, options, poses, show_report, write_shape_key
+    from . import SHAPE_KEY, inputs, options, poses, show_report, write_keys
 
     state = _sessions.get(obj.name)
     # The Empties' poses alone first: most updates (a selection, another object) move none.
@@ -90,7 +92,7 @@ def follow_now(obj: bpy.types.Object) -> bool:
     moved, report = state.session.release()
     _writing = True
     try:
-        write_shape_key(obj, np.asarray(moved))
+        write_keys(obj, np.asarray(moved))
         show_report(obj, report)
     finally:
         _writing = False
@@ -200,41 +202,52 @@ class RIGIDCELLS_OT_bake(bpy.types.Operator):
 
 
 def bake(obj: bpy.types.Object, scene: Any, start: int, end: int) -> int:
-    """Keys `RigidCells F` for each frame F of `start`..`end` (replacing keys of those names);
-    turns Follow off and removes the followed key. The number of frames baked."""
+    """Keys `RigidCells F` for each frame F of `start`..`end` on each object of the scene
+    (replacing keys of those names); turns Follow off and removes the followed keys. The number
+    of frames baked."""
     global _writing
-    from . import SHAPE_KEY
+    from . import SHAPE_KEY, members
 
     stop(obj)
-    shapes = []
+    objects = members(obj)
+    shapes: Dict[str, list] = {o.name: [] for o in objects}
     # Followed by hand, one session warm from frame to frame: Follow is off while baking, so
     # the handlers stay out of the way.
     for frame in range(start, end + 1):
         scene.frame_set(frame)
         follow_now(obj)
-        co = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
-        _keys(obj)[SHAPE_KEY].data.foreach_get("co", co)
-        shapes.append(co)
+        for other in objects:
+            co = np.empty(3 * len(other.data.vertices), dtype=np.float32)
+            _keys(other)[SHAPE_KEY].data.foreach_get("co", co)
+            shapes[other.name].append(co)
     _sessions.pop(obj.name, None)
     _writing = True
     try:
-        keys = _keys(obj)
-        obj.shape_key_remove(keys[SHAPE_KEY])
-        for frame, co in zip(range(start, end + 1), shapes):
-            name = f"{SHAPE_KEY} {frame}"
-            old = _keys(obj).get(name)
-            if old is not None:
-                obj.shape_key_remove(old)
-            key = obj.shape_key_add(name=name, from_mix=False)
-            key.data.foreach_set("co", co.ravel())
-            for f, v in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
-                key.value = v
-                key.keyframe_insert("value", frame=f)
-        obj.data.update()
+        for other in objects:
+            _key_frames(other, shapes[other.name], start)
     finally:
         _writing = False
     scene.frame_set(scene.frame_current)
-    return len(shapes)
+    return end + 1 - start
+
+
+def _key_frames(obj: bpy.types.Object, shapes: list, start: int) -> None:
+    """`shapes` as `obj`'s keys `RigidCells F` from frame `start`, each on at its frame only;
+    the followed key removed."""
+    from . import SHAPE_KEY
+
+    obj.shape_key_remove(_keys(obj)[SHAPE_KEY])
+    for frame, co in enumerate(shapes, start):
+        name = f"{SHAPE_KEY} {frame}"
+        old = _keys(obj).get(name)
+        if old is not None:
+            obj.shape_key_remove(old)
+        key = obj.shape_key_add(name=name, from_mix=False)
+        key.data.foreach_set("co", co.ravel())
+        for f, v in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
+            key.value = v
+            key.keyframe_insert("value", frame=f)
+    obj.data.update()
 
 
 def status(obj: bpy.types.Object) -> Optional[str]:

@@ -83,7 +83,7 @@ class LiveWorker:
         self._args = (points, spec, triangles, options)
         self._settle, self._idle, self._clock = settle, min(idle, settle), clock
         self._wake = threading.Condition()
-        self._pose: Optional[Tuple[List[dict], Optional[List[List[float]]]]] = None
+        self._pose: Optional[Tuple[List[dict], Any, Any]] = None
         self._moved_at = clock()
         self._finishing = self._stopping = False
         self._shape: Optional[Tuple[str, np.ndarray]] = None
@@ -99,11 +99,17 @@ class LiveWorker:
         self.thread.start()
         return self
 
-    def move(self, poses: List[dict], pins: Optional[List[List[float]]] = None) -> None:
-        """The handles' newest poses (one dict a handle) and where the pins go now (one point
-        a pin, or None); an older move not yet solved is dropped."""
+    def move(
+        self,
+        poses: List[dict],
+        pins: Optional[List[List[float]]] = None,
+        targets: Optional[List[List[float]]] = None,
+    ) -> None:
+        """The handles' newest poses (one dict a handle), where the pins go now (one point a
+        pin, or None) and where the weighted vertices pull (one point a target, or None); an
+        older move not yet solved is dropped."""
         with self._wake:
-            self._pose = (poses, pins)
+            self._pose = (poses, pins, targets)
             self._moved_at = self._clock()
             self._wake.notify()
 
@@ -172,7 +178,7 @@ class LiveWorker:
                             wait = None if released else self._settle - still
                         self._wake.wait(None if wait is None else max(0.0, wait))
                 if pose is not None:
-                    session.drag(pose[0], pins=pose[1])
+                    session.drag(pose[0], pins=pose[1], targets=pose[2])
                     released = False
                     # Published before counted: a step counted has its shape waiting.
                     self._publish("preview", session.preview())

@@ -129,6 +129,196 @@ def test_deform_in_edit_mode_keeps_its_key_and_returns_to_edit_mode():
     assert np.abs(key - rest).max() > 1.0
 
 
+def test_the_edit_mode_selection_makes_the_groups_and_a_handle_empty():
+    """In Edit Mode, "From selection" makes the selected vertices the add-on's group for the
+    role and names it in the panel; a handle without an Empty gets one at their center; a
+    second selection replaces the add-on's group, and the artist's own groups are left."""
+    obj = grid_bar()
+    s = obj.rigidcells
+    s.cell_size = 0.25
+    mine = group(obj, "mine", lambda co: co.x > 0)
+
+    def select(keep):
+        """Selects the vertices `keep` holds for, as a box selection in Edit Mode would."""
+        bpy.ops.object.mode_set(mode="OBJECT")
+        mesh = obj.data
+        for v in mesh.vertices:
+            v.select = keep(v.co)
+        for e in mesh.edges:
+            e.select = all(mesh.vertices[i].select for i in e.vertices)
+        for f in mesh.polygons:
+            f.select = all(mesh.vertices[i].select for i in f.vertices)
+        bpy.ops.object.mode_set(mode="EDIT")
+
+    def members(name):
+        k = obj.vertex_groups[name].index
+        return [v.index for v in obj.data.vertices if any(g.group == k for g in v.groups)]
+
+    select(lambda co: False)
+    with pytest.raises(RuntimeError, match="select the vertices in Edit Mode first"):
+        bpy.ops.rigidcells.from_selection(role="fixed")
+    select(lambda co: co.x < -4.4)
+    assert bpy.ops.rigidcells.from_selection(role="fixed") == {"FINISHED"}
+    select(lambda co: co.x > 4.4)
+    assert bpy.ops.rigidcells.from_selection(role="handle") == {"FINISHED"}
+    assert obj.mode == "EDIT"
+    assert (s.fixed_group, s.handle_group) == ("RigidCells Fixed", "RigidCells Handle")
+    empty = s.handle_object
+    assert empty is not None and empty.type == "EMPTY"
+    assert np.allclose(empty.location, (5.0, 0.0, 0.0), atol=1e-6)
+    select(lambda co: co.x > 4.8)
+    assert bpy.ops.rigidcells.from_selection(role="handle") == {"FINISHED"}
+    assert s.handle_object == empty
+    assert members("RigidCells Handle") == [v.index for v in obj.data.vertices if v.co.x > 4.8]
+    assert len(members("mine")) == sum(1 for v in obj.data.vertices if v.co.x > 0)
+    assert mine.name == "mine"
+
+    bpy.ops.object.mode_set(mode="OBJECT")
+    rest = vertices(obj)
+    empty.location.z += 2.0
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    got = vertices(obj, "RigidCells")
+    fixed = members("RigidCells Fixed")
+    handle = members("RigidCells Handle")
+    assert np.array_equal(got[fixed], rest[fixed])
+    assert np.abs(got[handle] - (rest[handle] + [0.0, 0.0, 2.0])).max() < 1e-5
+
+
+def weighted_bar(band_weight):
+    """The bar with its right end in the handle group at weight 1 and a band across its
+    middle (0 < x < 1) at `band_weight`; the Empty lifted by 2."""
+    obj = grid_bar()
+    group(obj, "fixed", lambda co: co.x < -4.4)
+    g = group(obj, "handle", lambda co: co.x > 4.4)
+    g.add([v.index for v in obj.data.vertices if 0.0 < v.co.x < 1.0], band_weight, "REPLACE")
+    empty = handle_empty(obj)
+    s = obj.rigidcells
+    s.fixed_group, s.handle_group, s.handle_object, s.cell_size = "fixed", "handle", empty, 0.25
+    empty.location.z += 2.0
+    bpy.context.view_layer.update()
+    return obj, empty
+
+
+def test_vertex_weights_pull_part_of_the_way_as_a_hooks_do():
+    """A handle group's vertex of weight w below 1 is pulled a fraction w of the way its Empty
+    sends it (a soft target of the library), as a Hook's weight moves it; weight 1 follows the
+    Empty exactly. 0.1 and 1.0 give different shapes, and Live and Follow pull the weighted
+    vertices as Deform does."""
+    rises = {}
+    for w in (0.1, 0.9, 1.0):
+        obj, empty = weighted_bar(w)
+        rest = vertices(obj)
+        assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}, w
+        got = vertices(obj, "RigidCells")
+        band = [v.index for v in obj.data.vertices if 0.0 < v.co.x < 1.0]
+        end = [v.index for v in obj.data.vertices if v.co.x > 4.4]
+        fixed = [v.index for v in obj.data.vertices if v.co.x < -4.4]
+        assert np.array_equal(got[fixed], rest[fixed]), w
+        assert np.abs(got[end] - rest[end] - [0, 0, 2]).max() < 1e-5, w
+        rises[w] = float((got[band] - rest[band])[:, 2].mean())
+        _, _, spec = addon.inputs(obj)
+        assert len(spec.get("target", [])) == (0 if w == 1.0 else len(band)), w
+    # Weight 1: exactly the Empty's lift; 0.9 near it, 0.1 far below.
+    assert abs(rises[1.0] - 2.0) < 1e-5, rises
+    assert 1.2 < rises[0.9] < 2.0 and rises[0.1] < 0.8 * rises[0.9], rises
+
+    # Follow and Live move the pull with the Empty: their shapes are Deform's.
+    obj, empty = weighted_bar(0.5)
+    empty.location.z = 0.0
+    bpy.context.view_layer.update()
+    obj.rigidcells.follow = True
+    empty.location.z = 1.5
+    bpy.context.view_layer.update()
+    followed = vertices(obj, "RigidCells").copy()
+    obj.rigidcells.follow = False
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    assert np.abs(followed - vertices(obj, "RigidCells")).max() < 1e-3
+    state = addon.LiveState(obj)
+    live_moves(obj, empty, state, [((5.0, 0.0, 1.0), 0.0), ((5.0, 0.0, 2.5), 0.0)])
+    ends_on_deforms_shape(obj, state)
+
+
+def test_a_handle_group_without_a_vertex_of_weight_one_is_refused():
+    obj, empty = weighted_bar(0.5)
+    g = obj.vertex_groups["handle"]
+    g.add([v.index for v in obj.data.vertices if v.co.x > 4.4], 0.7, "REPLACE")
+    with pytest.raises(RuntimeError, match="'handle' has no vertex of weight 1"):
+        bpy.ops.object.rigidcells_deform()
+    assert obj.data.shape_keys is None
+
+
+def half_bar(location, turned, cuts=6):
+    """A 5 × 1 × 1 half bar at `location`: along x, or along y turned 90° about z (its world
+    extent along x either way)."""
+    bpy.ops.mesh.primitive_cube_add(size=1.0)
+    obj = bpy.context.active_object
+    obj.scale = (1.0, 5.0, 1.0) if turned else (5.0, 1.0, 1.0)
+    bpy.ops.object.transform_apply(scale=True)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.subdivide(number_cuts=cuts)
+    bpy.ops.object.mode_set(mode="OBJECT")
+    obj.location = location
+    obj.rotation_euler = (0.0, 0.0, math.pi / 2 if turned else 0.0)
+    bpy.context.view_layer.update()
+    return obj
+
+
+def world(obj, co):
+    m = np.array(obj.matrix_world)
+    return co @ m[:3, :3].T + m[:3, 3]
+
+
+def test_selected_objects_deform_together_each_into_its_own_key():
+    """Two objects, a bar's halves (the right one turned in its own coordinates), taken
+    together: one scene whose groups come from each, each half its own key in its own
+    coordinates; the fixed vertices keep their bits, the handle's follow the Empty, and the
+    halves move alike where they meet."""
+    left = half_bar((-2.5, 0.0, 0.0), False)
+    right = half_bar((2.5, 0.0, 0.0), True)
+    group(left, "fixed", lambda co: co.x < -1.9)
+    group(right, "handle", lambda co: co.y < -1.9)  # world x > 4.4
+    empty = handle_empty(left)
+    s = left.rigidcells
+    s.fixed_group, s.handle_group, s.handle_object, s.cell_size = "fixed", "handle", empty, 0.25
+    for o in (left, right):
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = left
+    assert bpy.ops.rigidcells.together() == {"FINISHED"}
+    assert addon.members(left) == [left, right]
+    empty.location.z += 2.0
+    bpy.context.view_layer.update()
+    rests = {o.name: vertices(o) for o in (left, right)}
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    got = {o.name: vertices(o, "RigidCells") for o in (left, right)}
+    fixed = [v.index for v in left.data.vertices if v.co.x < -1.9]
+    assert np.array_equal(got[left.name][fixed], rests[left.name][fixed])
+    handle = [v.index for v in right.data.vertices if v.co.y < -1.9]
+    lifted = got[right.name][handle] - rests[right.name][handle]
+    assert np.abs(lifted - [0.0, 0.0, 2.0]).max() < 1e-5, lifted
+    # Where the halves meet (world x = 0) they moved alike: one scene, no tear.
+    meet = {}
+    for o in (left, right):
+        at = world(o, rests[o.name])
+        near = np.abs(at[:, 0]) < 1e-4
+        meet[o.name] = (world(o, got[o.name]) - at)[near].mean(axis=0)
+    assert np.abs(meet[left.name] - meet[right.name]).max() < 0.02, meet
+    assert 0.1 < meet[left.name][2] < 1.9, meet
+    # Follow keeps both keys on the Empty.
+    s.follow = True
+    empty.location.z += 1.0
+    bpy.context.view_layer.update()
+    lifted = vertices(right, "RigidCells")[handle] - rests[right.name][handle]
+    assert np.abs(lifted - [0.0, 0.0, 3.0]).max() < 1e-5, lifted
+    assert np.array_equal(vertices(left, "RigidCells")[fixed], rests[left.name][fixed])
+    s.follow = False
+    # Alone again: the right half is no part of the scene, and the handle group is missing.
+    right.select_set(False)
+    assert bpy.ops.rigidcells.together() == {"FINISHED"}
+    with pytest.raises(RuntimeError, match="has no vertex group 'handle'"):
+        bpy.ops.object.rigidcells_deform()
+
+
 def test_the_panel_estimates_and_takes_a_cell_count_and_a_memory_limit():
     """Estimate says what Deform will take (the library's estimate, in the panel); Cells and
     Memory limit reach the library; a refusal names the panel's settings."""
@@ -200,6 +390,12 @@ def test_a_soup_of_loose_cubes_bends_with_every_cube_carried():
         (lambda o, e: setattr(o.rigidcells, "handle_object", None), "choose the handle Empty"),
         # The library's message names the panel's setting, not the Python keyword.
         (lambda o, e: setattr(o.rigidcells, "cell_size", 1e-5), 'memory.*a larger "Cell size"'),
+        # Regions named by the panel's groups, not by the spec the add-on wrote.
+        (
+            lambda o, e: setattr(o.rigidcells, "handle_group", "fixed"),
+            r"the fixed group and the handle group both claim the cell .*\(size 0\.25\); "
+            r".* a smaller \"Cell size\"",
+        ),
     ],
 )
 def test_bad_input_refuses_and_leaves_the_mesh_as_it_was(breaks, says):
@@ -300,7 +496,7 @@ def test_live_refines_only_once_the_handle_rests(monkeypatch):
         def __init__(self, *args, **kwargs):
             self.cells, self.converged = 1, True
 
-        def drag(self, poses, pins=None):
+        def drag(self, poses, pins=None, targets=None):
             calls.append(("drag", now[0]))
             self.converged = False
 
