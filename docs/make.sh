@@ -15,4 +15,14 @@ $bin render ../shared/data/las/autzen_trim.las -o docs/autzen.png --azimuth -90 
 # The editor in Chromium (Debian's chromium and chromedriver): after a drag, and with its help open.
 RIGIDCELLS_BIN=$bin python3 tests/browser/editor_test.py --screenshot docs/editor.png \
     --help-screenshot docs/editor_help.png
+# Blender's window under a virtual display (Debian's blender and xvfb), with the wheel
+# unpacked in target/blender-site: the panel, and Follow at three frames of an animation.
+if command -v blender >/dev/null && [ -d target/blender-site ]; then
+    blender -b --factory-startup --python-expr \
+        "import bpy; bpy.ops.wm.save_as_mainfile(filepath='$work/start.blend')"
+    for shot in panel follow; do
+        xvfb-run -a -s "-screen 0 1500x900x24" blender "$work/start.blend" --enable-event-simulate \
+            --python "tools/python/blender_$shot.py" -- "docs/blender_$shot.png" "$PWD/target/blender-site"
+    done
+fi
 ls -l docs/*.png

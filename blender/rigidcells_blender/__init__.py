@@ -67,7 +67,9 @@ from .scene import (  # noqa: F401  (the scene's inputs and keys, for the operat
     _group_weights,
     _movers,
     _rest_vertices,
+    FOLDS_GROUP,
     inputs,
+    mark_folds,
     members,
     pin_places,
     poses,
@@ -274,6 +276,7 @@ def show_report(obj: bpy.types.Object, report: Any) -> None:
     settings.residual_fixed = report.residual_fixed_max
     settings.residual_handle = report.residual_handle_max
     settings.foldovers = report.foldovers
+    mark_folds(obj, getattr(report, "foldover_samples", None) or [])
 
 
 def finish(obj: bpy.types.Object, moved: np.ndarray, report: Any) -> None:
@@ -934,6 +937,9 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
             col.label(text=f"{s.run_cells:,} cells, {s.iterations} iterations")
             col.label(text=f"Residual: fixed {s.residual_fixed:.3g}, handle {s.residual_handle:.3g}")
             col.label(text=f"Fold-overs: {s.foldovers}")
+            if s.foldovers:
+                # Where: the group to select in Edit Mode (Vertex Groups > Select).
+                col.label(text=f'in the vertex group "{FOLDS_GROUP}"')
 
 
 CLASSES = (

@@ -22,6 +22,9 @@ from .handles import InputError, _motion, handle_pose
 
 SHAPE_KEY = "RigidCells"
 
+# The vertex group holding the vertices where the last deformation folds space over.
+FOLDS_GROUP = "RigidCells Folds"
+
 # Weights at least this are whole: the vertex is fixed, or follows its Empty, exactly.
 FULL_WEIGHT = 1.0 - 1e-6
 
@@ -327,3 +330,22 @@ def write_keys(obj: bpy.types.Object, moved: np.ndarray) -> None:
     """The scene's moved vertices as each object's shape key `RigidCells` (`split`)."""
     for other, part in split(obj, moved):
         write_shape_key(other, part)
+
+
+def mark_folds(obj: bpy.types.Object, folded: List[int]) -> None:
+    """The scene's vertices where the deformation folds space over (their indices, as
+    `rest_points` numbers them) as each object's vertex group `RigidCells Folds`, to select
+    and look at; the group is removed from an object where none fold."""
+    start = 0
+    for other in members(obj):
+        n = len(other.data.vertices)
+        mine = [i - start for i in folded if start <= i < start + n]
+        group = other.vertex_groups.get(FOLDS_GROUP)
+        if mine:
+            if group is None:
+                group = other.vertex_groups.new(name=FOLDS_GROUP)
+            group.remove(range(n))
+            group.add(mine, 1.0, "REPLACE")
+        elif group is not None:
+            other.vertex_groups.remove(group)
+        start += n

@@ -595,6 +595,23 @@ def test_entries_are_named_by_key_path_or_line():
     assert "line" not in str(e.value), e.value
 
 
+def test_the_points_that_fold_are_listed():
+    """An edit that pushes a bar's end through its middle folds space over: the report lists
+    the points where, by index, as many as it counts; a plain bend lists none."""
+    pts = bar_points()
+    spec = {
+        "fixed": [{"box": {"min": [-1, -1, -1], "max": [2, 2, 2]}}],
+        "handle": [{"box": {"min": [8, -1, -1], "max": [11, 2, 2]}, "translate": [-7, 0, 0]}],
+    }
+    _, report = rigidcells.deform(pts, spec, cell_size=0.5, progress=False)
+    folded = report.foldover_samples
+    assert report.foldovers == len(folded) > 0, report.foldovers
+    assert folded == sorted(set(folded)) and 0 <= folded[0] and folded[-1] < len(pts)
+    assert any("folds space over" in w for w in report.warnings)
+    _, report = rigidcells.deform(pts, BEND, cell_size=0.5, progress=False)
+    assert report.foldovers == 0 and report.foldover_samples == []
+
+
 def test_control_points_take_the_trend_as_the_command_line_does(tmp_path):
     """A scan pulled onto control points from a CSV with a dict spec and a chosen trend: the
     command line's bytes, the trend in the report, and a bad trend named as the dict's key."""

@@ -449,22 +449,24 @@ fn warp_pieces<const D: usize>(
         });
 }
 
-/// How many of the world-coordinate `points` the map folds over: where the Jacobian
-/// determinant of `warp` (central differences of step `h`, or the closed form) is not positive,
-/// space is turned inside out. Parallel.
-pub fn count_foldovers<const D: usize>(
+/// Which of the world-coordinate `points` the map folds over (their indices, in order): where
+/// the Jacobian determinant of `warp` (central differences of step `h`, or the closed form) is
+/// not positive, space is turned inside out. Parallel.
+pub fn foldovers<const D: usize>(
     warp: &impl Warp<D>,
     origin: &Vect<D>,
     points: &[Vect<D>],
     h: f64,
-) -> usize {
+) -> Vec<usize> {
     points
         .par_iter()
-        .filter(|p| {
+        .enumerate()
+        .filter(|(_, p)| {
             let det = determinant(&warp.jacobian(&(*p - origin), h));
             det.is_nan() || det <= 0.0
         })
-        .count()
+        .map(|(i, _)| i)
+        .collect()
 }
 
 /// The determinant of a small square matrix, by elimination with partial pivoting.

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use crate::error::{Error, Result};
-use crate::field::{FieldMap, Outside, Warp, count_foldovers};
+use crate::field::{FieldMap, Outside, Warp, foldovers};
 use crate::io::Chunk;
 use crate::rigid::Vect;
 use crate::said::Said;
@@ -15,9 +15,10 @@ use crate::solve::Solution;
 /// one Jacobian) per sample.
 pub const FOLDOVER_SAMPLES: usize = 100_000;
 
-/// Counts the fold-overs of `warp` at up to [`FOLDOVER_SAMPLES`] of the world-coordinate
-/// `samples` (every k-th), with central differences of a tenth of the finest cell, and warns
-/// when there are any. Returns `(checked, folded)`.
+/// The fold-overs of `warp` at up to [`FOLDOVER_SAMPLES`] of the world-coordinate `samples`
+/// (every k-th), with central differences of a tenth of the finest cell, with a warning when
+/// there are any: how many samples were checked, and the indices in `samples` of those that
+/// fold over, in order.
 ///
 /// Why a tenth: the blend is continuous but not smooth. Its weights have kinks where neighbor
 /// sets change, and at points equidistant from five or more centers (the corners of a regular
@@ -30,16 +31,20 @@ pub fn check_foldovers<const D: usize>(
     solution: &Solution<D>,
     samples: &[Vect<D>],
     warnings: &mut Vec<Said>,
-) -> (usize, usize) {
+) -> (usize, Vec<usize>) {
     let stride = samples.len().div_ceil(FOLDOVER_SAMPLES).max(1);
     let checked: Vec<Vect<D>> = samples.iter().step_by(stride).copied().collect();
     let h = 0.1 * solution.complex.grid.finest_size();
-    let folded = count_foldovers(warp, &solution.complex.grid.origin, &checked, h);
-    if folded > 0 {
+    let folded: Vec<usize> = foldovers(warp, &solution.complex.grid.origin, &checked, h)
+        .into_iter()
+        .map(|k| k * stride)
+        .collect();
+    if !folded.is_empty() {
         warnings.push(Said::from(format!(
-            "the deformation folds space over at {folded} of {} samples checked (the Jacobian \
+            "the deformation folds space over at {} of {} samples checked (the Jacobian \
              determinant is not positive there): the shape passes through itself; a smaller \
              edit, more load steps or stiffer cells avoid it",
+            folded.len(),
             checked.len()
         )));
     }

@@ -271,7 +271,10 @@ fn solve_checked(
         triangles,
         ..proxy
     };
-    let foldovers = check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
+    // The proxy's samples are no file's: only their count is said.
+    let (checked, folded) =
+        check_foldovers(&deformer, &solution, &info.proxy.before, &mut warnings);
+    let foldovers = (checked, folded.len());
     observer.finish();
     let controls = control_results(spec, &solution, &deformer, params, observer)?;
     Ok(Solved {

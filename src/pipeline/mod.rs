@@ -182,6 +182,9 @@ pub struct DeformInfo {
     /// determinant not positive): at most [`FOLDOVER_SAMPLES`], evenly strided over the samples
     /// of [`deform`] or the proxy of [`deform_file`].
     pub foldovers: (usize, usize),
+    /// The samples of [`deform`] the map folds over, among those checked: their indices, in
+    /// order (what an editor shows). Empty for [`deform_file`], whose check is on its proxy.
+    pub folded: Vec<usize>,
     /// The control points (`[[target]]` entries): where each went, its residual.
     pub control_points: Vec<ControlPoint>,
     /// What the control points' `got` was rounded to, as the output file stores its samples
@@ -209,6 +212,7 @@ impl DeformInfo {
             seconds_transfer: transfer_start.elapsed().as_secs_f64() - seconds_check,
             seconds_check,
             foldovers,
+            folded: Vec::new(),
             control_points,
             control_rounding: None,
             warnings,

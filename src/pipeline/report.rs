@@ -95,6 +95,10 @@ pub struct Report {
     pub foldovers: usize,
     /// Samples checked for fold-overs.
     pub foldovers_checked: usize,
+    /// The samples the map folds over, by their index in the input: for points deformed in
+    /// memory; a file's check is on its preview proxy, whose samples are not the file's, and
+    /// lists none.
+    pub foldover_samples: Vec<usize>,
     /// Seconds per stage.
     pub timings_s: Timings,
     /// The process's peak resident memory in bytes (`VmHWM`; absent where unknown).
@@ -301,6 +305,7 @@ impl Report {
             target_residual_max,
             foldovers: d.foldovers.1,
             foldovers_checked: d.foldovers.0,
+            foldover_samples: d.folded.clone(),
             timings_s,
             peak_memory_bytes: peak_memory(),
             estimate: s.estimate.as_ref().map(EstimateReport::from),

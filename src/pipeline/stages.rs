@@ -298,15 +298,16 @@ where
     let (mut moved, mut turned) = (Vec::new(), Vec::new());
     apply_into(&deformer, &origin, points, normals, &mut moved, &mut turned);
     check_moved(0, &moved)?;
-    let foldovers = check_foldovers(&deformer, &solution, points, &mut warnings);
+    let (checked, folded) = check_foldovers(&deformer, &solution, points, &mut warnings);
     let controls = control_results(spec, &solution, &deformer, params, observer)?;
-    let info = DeformInfo::of(
+    let mut info = DeformInfo::of(
         build,
         &solution.info,
         transfer_start,
-        foldovers,
+        (checked, folded.len()),
         controls,
         warnings,
     );
+    info.folded = folded;
     Ok((moved, turned, solution, info))
 }

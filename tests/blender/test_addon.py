@@ -319,6 +319,28 @@ def test_selected_objects_deform_together_each_into_its_own_key():
         bpy.ops.object.rigidcells_deform()
 
 
+def test_fold_overs_are_a_vertex_group_to_select():
+    """A handle pushed through the bar folds it over: the vertices where are the group
+    `RigidCells Folds` (the report's, by index); a bend that folds nothing removes it."""
+    obj, empty = setup_bar()
+    empty.rotation_euler = (0.0, 0.0, 0.0)
+    empty.location = (-4.0, 0.0, 0.0)  # the handle pushed into the fixed end
+    obj.rigidcells.cell_size = 1.0  # a cell across: it folds rather than buckles
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    s = obj.rigidcells
+    assert s.foldovers > 0
+    k = obj.vertex_groups[addon.FOLDS_GROUP].index
+    marked = [v.index for v in obj.data.vertices if any(g.group == k for g in v.groups)]
+    points, triangles, spec = addon.inputs(obj)
+    _, report = rigidcells.deform(points, spec, triangles=triangles, cell_size=1.0, progress=False)
+    assert marked == report.foldover_samples and len(marked) == s.foldovers
+    empty.location = (5.0, 0.0, 1.0)
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    assert s.foldovers == 0 and addon.FOLDS_GROUP not in obj.vertex_groups
+
+
 def test_the_panel_estimates_and_takes_a_cell_count_and_a_memory_limit():
     """Estimate says what Deform will take (the library's estimate, in the panel); Cells and
     Memory limit reach the library; a refusal names the panel's settings."""

@@ -152,6 +152,9 @@ class Report:
     """Samples where the map folds space over (its Jacobian's determinant not positive)."""
     foldovers_checked: int
     """Samples checked for fold-overs."""
+    foldover_samples: List[int]
+    """The points the map folds over, by index (among those checked; for a file, whose check
+    is on its preview, none are listed)."""
     timings_s: dict
     """Seconds per stage: ``read``, ``voxelize``, ``solve``, ``transfer``, ``write``,
     ``check_gcp``, ``total``."""
