@@ -180,86 +180,73 @@ fn poses_alone_move_the_handles_of_the_last_spec() {
     assert!(err.contains("box"), "{err}");
 }
 
-#[test]
-fn pins_move_warm_and_release_onto_deforms_shape() {
-    let (points, triangles) = bar();
-    let params = params();
-    let pinned = |to_z: f64| {
-        let mut s = spec(&points, 1.0, 0.0);
-        s.pins.push(rigidcells::internal::spec::Pin {
-            point: Vect::<3>::new(5.0, 0.5, 1.0),
-            to: Vect::<3>::new(5.0, 0.5, to_z),
-            line: 99,
-        });
-        s
-    };
-    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
-    assert!(
-        live.solve(pinned(1.0), 1, &Silent)
-            .unwrap()
-            .unwrap()
-            .from_rest
-    );
-    let lift = parse_poses::<3>(
-        "[[handle]]\ntranslate = [0.0, 0.0, 1.0]\npivot = [10.0, 0.5, 0.5]\n",
-        Path::new("p"),
-    )
-    .unwrap();
-    for k in 1..=4 {
-        let to = Vect::<3>::new(5.0, 0.5, 1.0 + 0.25 * f64::from(k));
-        let step = live.pose(&lift, &[to], &[], 1).unwrap();
-        assert!(!step.from_rest, "pin move {k} was solved from rest");
-    }
-    assert!(live.pose(&lift, &[Vect::<3>::zeros(); 2], &[], 1).is_err());
-    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
-    let (expected, _, _) =
-        pipeline::deform(&points, &triangles, &pinned(2.0), &params, &Silent).unwrap();
-    let off = farthest(&moved, &expected);
-    assert!(off < 1e-3, "the release is {off} from deform's shape");
+/// A point at the bar's middle that a pose moves: a pin, or a soft target (a Blender vertex
+/// weight's partial pull follows its Empty).
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Moved {
+    Pin,
+    Target,
 }
 
-/// Soft targets go where each pose sends them (a Blender vertex weight's partial pull follows
-/// its Empty), warm, and the release is `deform`'s shape with the targets there.
+/// Pins and soft targets go where each pose sends them, warm, and the release is `deform`'s
+/// shape with them there; a pose with the wrong count of them is refused.
 #[test]
-fn targets_move_with_the_poses() {
+fn pins_and_targets_move_warm_and_release_onto_deforms_shape() {
     let (points, triangles) = bar();
     let params = params();
-    let targeted = |to_z: f64| {
-        let mut s = spec(&points, 1.0, 0.0);
-        let text = format!(
-            "[[target]]\nfrom = [5.0, 0.5, 1.0]\nto = [5.0, 0.5, {to_z:?}]\nweight = 4.0\n"
+    for kind in [Moved::Pin, Moved::Target] {
+        let with = |to_z: f64| {
+            let mut s = spec(&points, 1.0, 0.0);
+            let text = match kind {
+                Moved::Pin => {
+                    format!("[[pin]]\npoint = [5.0, 0.5, 1.0]\nto = [5.0, 0.5, {to_z:?}]\n")
+                }
+                Moved::Target => format!(
+                    "[[target]]\nfrom = [5.0, 0.5, 1.0]\nto = [5.0, 0.5, {to_z:?}]\nweight = 4.0\n"
+                ),
+            };
+            let extra = parse_spec::<3>(&text, Path::new("."), Path::new("m.toml")).unwrap();
+            s.pins = extra.pins;
+            s.targets = extra.targets;
+            s
+        };
+        let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+        let first = live.solve(with(1.0), 1, &Silent).unwrap().unwrap();
+        assert!(first.from_rest, "{kind:?}");
+        let lift = parse_poses::<3>(
+            "[[handle]]\ntranslate = [0.0, 0.0, 1.0]\npivot = [10.0, 0.5, 0.5]\n",
+            Path::new("p"),
+        )
+        .unwrap();
+        let pose = |live: &mut Live, to: &[Vect<3>]| match kind {
+            Moved::Pin => live.pose(&lift, to, &[], 1),
+            Moved::Target => live.pose(&lift, &[], to, 1),
+        };
+        for k in 1..=4 {
+            let to = Vect::<3>::new(5.0, 0.5, 1.0 + 0.25 * f64::from(k));
+            let step = pose(&mut live, &[to]).unwrap();
+            assert!(!step.from_rest, "{kind:?} move {k} was solved from rest");
+        }
+        let e = pose(&mut live, &[Vect::<3>::zeros(); 2]).unwrap_err();
+        let said = format!("2 {}s for the spec's 1", format!("{kind:?}").to_lowercase());
+        assert!(e.to_string().contains(&said), "{e}");
+        let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
+        let deformed = |z| {
+            pipeline::deform(&points, &triangles, &with(z), &params, &Silent)
+                .unwrap()
+                .0
+        };
+        let off = farthest(&moved, &deformed(2.0));
+        assert!(
+            off < 1e-3,
+            "{kind:?}: the release is {off} from deform's shape"
         );
-        let extra = parse_spec::<3>(&text, Path::new("."), Path::new("t.toml")).unwrap();
-        s.targets = extra.targets;
-        s
-    };
-    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
-    live.solve(targeted(1.0), 1, &Silent).unwrap();
-    let lift = parse_poses::<3>(
-        "[[handle]]\ntranslate = [0.0, 0.0, 1.0]\npivot = [10.0, 0.5, 0.5]\n",
-        Path::new("p"),
-    )
-    .unwrap();
-    for k in 1..=4 {
-        let to = Vect::<3>::new(5.0, 0.5, 1.0 + 0.25 * f64::from(k));
-        let step = live.pose(&lift, &[], &[to], 1).unwrap();
-        assert!(!step.from_rest, "target move {k} was solved from rest");
+        let unmoved = farthest(&moved, &deformed(1.0));
+        assert!(
+            unmoved > 0.05,
+            "{kind:?}: the move did not pull ({unmoved})"
+        );
     }
-    let e = live
-        .pose(&lift, &[], &[Vect::<3>::zeros(); 2], 1)
-        .unwrap_err();
-    assert!(e.to_string().contains("2 targets for the spec's 1"), "{e}");
-    let (moved, _, _, _) = live.release(&[], &Silent).unwrap();
-    let (expected, _, _) =
-        pipeline::deform(&points, &triangles, &targeted(2.0), &params, &Silent).unwrap();
-    let off = farthest(&moved, &expected);
-    assert!(off < 1e-3, "the release is {off} from deform's shape");
-    let (unpulled, _, _) =
-        pipeline::deform(&points, &triangles, &targeted(1.0), &params, &Silent).unwrap();
-    assert!(
-        farthest(&moved, &unpulled) > 0.05,
-        "the target did not pull"
-    );
 }
 
 #[test]

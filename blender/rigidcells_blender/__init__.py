@@ -904,7 +904,7 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
         row.operator(RIGIDCELLS_OT_add.bl_idname, text="Pin", icon="ADD").kind = "pins"
         row = layout.row(align=True)
         n = len(members(obj)) - 1
-        row.label(text=f"Together with {n} more" if n else "This object alone")
+        row.label(text=f"With {n} more" if n else "Alone")
         row.operator(RIGIDCELLS_OT_together.bl_idname, text="Take selected")
         col = layout.column(align=True)
         col.label(text="Stiffness group")

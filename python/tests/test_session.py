@@ -128,41 +128,30 @@ def test_a_step_on_a_thread_leaves_the_gil_free():
     assert live.converged
 
 
-def test_pins_follow_a_drag():
+@pytest.mark.parametrize(
+    "key, entry",
+    [
+        ("pins", {"pin": [{"point": [5.0, 0.5, 1.0], "to": [5.0, 0.5, 1.0]}]}),
+        # A soft target's pull moves with the drag (a Blender vertex weight's partial pull).
+        ("targets", {"target": [{"from": [5.0, 0.5, 1.0], "to": [5.0, 0.5, 1.0], "weight": 4.0}]}),
+    ],
+)
+def test_pins_and_targets_follow_a_drag(key, entry):
     pts = bar_points()
-    spec = bar_spec(pts, lift=1.0)
-    spec["pin"] = [{"point": [5.0, 0.5, 1.0], "to": [5.0, 0.5, 1.0]}]
+    spec = {**bar_spec(pts, lift=1.0), **entry}
     live = rigidcells.Session(pts, spec, cell_size=0.25)
     pose = {"translate": [0, 0, 1.0], "pivot": [10.0, 0.5, 0.5]}
     for z in (1.25, 1.5, 1.75, 2.0):
-        assert not live.drag(pose, pins=[[5.0, 0.5, z]]).from_rest
+        assert not live.drag(pose, **{key: [[5.0, 0.5, z]]}).from_rest
     moved, _ = live.release()
-    spec["pin"][0]["to"] = [5.0, 0.5, 2.0]
+    (table,) = entry
+    spec[table][0]["to"] = [5.0, 0.5, 2.0]
     expected, _ = rigidcells.deform(pts, spec, cell_size=0.25)
     assert np.abs(moved - expected).max() < 1e-3 * live.cell_size
-    with pytest.raises(ValueError, match="2 pins for the spec's 1"):
-        live.drag(pose, pins=[[5.0, 0.5, 2.0], [5.0, 0.5, 2.0]])
-    with pytest.raises(ValueError, match=r"pins\[0\]"):
-        live.drag(pose, pins=[[5.0, 0.5, float("inf")]])
-
-
-def test_targets_follow_a_drag():
-    """A soft target's pull moves with the drag (a Blender vertex weight's partial pull)."""
-    pts = bar_points()
-    spec = bar_spec(pts, lift=1.0)
-    spec["target"] = [{"from": [5.0, 0.5, 1.0], "to": [5.0, 0.5, 1.0], "weight": 4.0}]
-    live = rigidcells.Session(pts, spec, cell_size=0.25)
-    pose = {"translate": [0, 0, 1.0], "pivot": [10.0, 0.5, 0.5]}
-    for z in (1.25, 1.5, 1.75, 2.0):
-        assert not live.drag(pose, targets=[[5.0, 0.5, z]]).from_rest
-    moved, _ = live.release()
-    spec["target"][0]["to"] = [5.0, 0.5, 2.0]
-    expected, _ = rigidcells.deform(pts, spec, cell_size=0.25)
-    assert np.abs(moved - expected).max() < 1e-3 * live.cell_size
-    with pytest.raises(ValueError, match="2 targets for the spec's 1"):
-        live.drag(pose, targets=[[5.0, 0.5, 2.0], [5.0, 0.5, 2.0]])
-    with pytest.raises(ValueError, match=r"targets\[0\]"):
-        live.drag(pose, targets=[[5.0, 0.5, float("nan")]])
+    with pytest.raises(ValueError, match=f"2 {key} for the spec's 1"):
+        live.drag(pose, **{key: [[5.0, 0.5, 2.0], [5.0, 0.5, 2.0]]})
+    with pytest.raises(ValueError, match=rf"{key}\[0\]"):
+        live.drag(pose, **{key: [[5.0, 0.5, float("inf")]]})
 
 
 def cube_points():

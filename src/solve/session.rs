@@ -69,9 +69,10 @@ pub const IDLE_LOCAL_GLOBAL: usize = 4;
 
 /// From this many cells on, a drag moves the cells' ancestors (at most 6,000 where three levels
 /// of coarsening reach that) and the cells follow them rigidly; the cells themselves are solved
-/// when the drag pauses or ends. At 50k cells of a terrain an update on the cells costs
-/// 0.45–0.75 s, most of it the factorization.
-pub const DRAG_COARSE_FROM: usize = 20_000;
+/// when the drag pauses or ends. A drag's two local-global iterations cost about 2.5 ms per
+/// thousand cells on two cores: on the 15k cells of a bust 34–41 ms, 15.6 shapes a second in
+/// Blender's Live, against 37–38 on their ancestors, with the same release (BENCHMARKS.md §11).
+pub const DRAG_COARSE_FROM: usize = 10_000;
 
 /// A drag also moves the cells' ancestors when the cells' Cholesky factor has more nonzeros
 /// than this, whatever their count: a numeric factorization costs about what its factor

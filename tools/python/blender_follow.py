@@ -22,12 +22,10 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
-OUT = Path(ARGS[0]).resolve() if ARGS else ROOT / "docs" / "blender_follow.png"
-if len(ARGS) > 1:
-    sys.path.insert(0, ARGS[1])
-sys.path.insert(0, str(ROOT / "blender"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from blender_window import ROOT, picture, save, view_cut  # noqa: E402
+
+OUT = picture("blender_follow.png")
 sys.path.insert(0, str(ROOT / "tests" / "blender"))
 
 import rigidcells_blender as addon  # noqa: E402
@@ -82,38 +80,20 @@ def step(k=0):
 
 
 def shoot(k):
-    window = bpy.context.window_manager.windows[0]
     path = OUT.with_name(f"{OUT.stem}_{k}.png")
-    with bpy.context.temp_override(window=window):
-        bpy.ops.screen.screenshot(filepath=str(path))
-    area = next(a for a in window.screen.areas if a.type == "VIEW_3D")
-    shot = bpy.data.images.load(str(path))
-    w, h = shot.size
-    pixels = np.empty(w * h * 4, dtype=np.float32)
-    shot.pixels.foreach_get(pixels)
-    pixels = pixels.reshape(h, w, 4)
-    x0, x1 = area.x + area.width // 6, area.x + area.width * 5 // 6
-    y0, y1 = area.y + area.height // 8, area.y + area.height * 7 // 8
-    shots.append(np.ascontiguousarray(pixels[y0:y1, x0:x1]))
-    bpy.data.images.remove(shot)
-    path.unlink()
+    shots.append(view_cut(path, (1 / 6, 5 / 6), (1 / 8, 7 / 8)))
     if k + 1 < len(FRAMES):
         step(k + 1)
     else:
-        save()
+        join()
 
 
-def save():
+def join():
     """The three frames side by side, a thin dark line between them."""
     h = shots[0].shape[0]
     line = np.zeros((h, 4, 4), dtype=np.float32)
     line[..., 3] = 1.0
-    row = np.concatenate([p for s in shots for p in (s, line)][:-1], axis=1)
-    out = bpy.data.images.new("follow", row.shape[1], row.shape[0])
-    out.pixels.foreach_set(row.ravel())
-    out.filepath_raw, out.file_format = str(OUT), "PNG"
-    out.save()
-    print(f"wrote {OUT}: frames {', '.join(map(str, FRAMES))}")
+    save(np.concatenate([p for s in shots for p in (s, line)][:-1], axis=1), OUT)
     bpy.ops.wm.quit_blender()
 
 

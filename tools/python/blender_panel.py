@@ -18,15 +18,11 @@ import sys
 from pathlib import Path
 
 import bpy
-import numpy as np
 
-ROOT = Path(__file__).resolve().parents[2]
-ARGS = sys.argv[sys.argv.index("--") + 1 :] if "--" in sys.argv else []
-OUT = Path(ARGS[0]).resolve() if ARGS else ROOT / "docs" / "blender_panel.png"
-if len(ARGS) > 1:
-    sys.path.insert(0, ARGS[1])
-sys.path.insert(0, str(ROOT / "blender"))
-sys.path.insert(0, str(ROOT / "tools" / "python"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from blender_window import picture, save, view_cut  # noqa: E402
+
+OUT = picture("blender_panel.png")
 
 import rigidcells_blender as addon  # noqa: E402
 from blender_laplacian import rigid_soup  # noqa: E402
@@ -75,23 +71,7 @@ def open_tab():
 def shoot():
     """The window's screenshot, cut to the 3D view's right four fifths and top three quarters:
     the bent soup and the panel."""
-    window = bpy.context.window_manager.windows[0]
-    with bpy.context.temp_override(window=window):
-        bpy.ops.screen.screenshot(filepath=str(OUT))
-    area = next(a for a in window.screen.areas if a.type == "VIEW_3D")
-    shot = bpy.data.images.load(str(OUT))
-    w, h = shot.size
-    pixels = np.empty(w * h * 4, dtype=np.float32)
-    shot.pixels.foreach_get(pixels)
-    pixels = pixels.reshape(h, w, 4)  # rows from the bottom, as the window's coordinates
-    x0, x1 = area.x + area.width // 5, area.x + area.width
-    y0, y1 = area.y + area.height // 4, area.y + area.height
-    cut = np.ascontiguousarray(pixels[y0:y1, x0:x1])
-    out = bpy.data.images.new("panel", x1 - x0, y1 - y0)
-    out.pixels.foreach_set(cut.ravel())
-    out.filepath_raw, out.file_format = str(OUT), "PNG"
-    out.save()
-    print(f"wrote {OUT}")
+    save(view_cut(OUT, (0.2, 1.0), (0.25, 1.0)), OUT)
     bpy.ops.wm.quit_blender()
 
 
