@@ -253,6 +253,8 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
     residual_fixed: FloatProperty(options={"HIDDEN"})
     residual_handle: FloatProperty(options={"HIDDEN"})
     foldovers: IntProperty(options={"HIDDEN"})
+    # The last run's warnings, a line each, in the panel's words.
+    warnings: StringProperty(options={"HIDDEN"})
     # The last estimate (`RIGIDCELLS_OT_estimate`), for the panel.
     estimate: StringProperty(options={"HIDDEN"})
 
@@ -277,6 +279,14 @@ def show_report(obj: bpy.types.Object, report: Any) -> None:
     settings.residual_handle = report.residual_handle_max
     settings.foldovers = report.foldovers
     mark_folds(obj, getattr(report, "foldover_samples", None) or [])
+    settings.warnings = "\n".join(warnings_said(report))
+
+
+def warnings_said(report: Any) -> List[str]:
+    """The run's warnings as the panel names things (its settings, its groups); the package's
+    own Python warnings are silenced for the add-on (`register`), which shows these instead."""
+    said = getattr(report, "warnings_in", None)
+    return said(_option_said, _entry_said) if said is not None else list(report.warnings)
 
 
 def finish(obj: bpy.types.Object, moved: np.ndarray, report: Any) -> None:
@@ -578,6 +588,8 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
             f"Rigid Cells: {report.cells:,} cells, {report.iterations} iterations, "
             f"{report.foldovers} fold-overs",
         )
+        for warning in warnings_said(report):
+            self.report({"WARNING"}, f"Rigid Cells: {warning}")
 
 
 # The objects Live runs on, with their state (the panel shows it).
@@ -937,6 +949,9 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
             col.label(text=f"{s.run_cells:,} cells, {s.iterations} iterations")
             col.label(text=f"Residual: fixed {s.residual_fixed:.3g}, handle {s.residual_handle:.3g}")
             col.label(text=f"Fold-overs: {s.foldovers}")
+            for warning in filter(None, s.warnings.split("\n")):
+                for k, line in enumerate(textwrap.wrap(warning, 30)):
+                    col.label(text=line, icon="ERROR" if k == 0 else "BLANK1")
             if s.foldovers:
                 # Where: the group to select in Edit Mode (Vertex Groups > Select).
                 col.label(text=f'in the vertex group "{FOLDS_GROUP}"')
@@ -958,11 +973,22 @@ CLASSES = (
 )
 
 
+# The add-on shows the library's warnings in its own words (`warnings_said`): the package's
+# Python warnings, in the package's words, are silenced for calls from the add-on's modules
+# (`rigidcells_blender.work`, or `bl_ext.user_default.rigidcells_blender.work` as an extension).
+_QUIET = {"action": "ignore", "module": r"(.+\.)?rigidcells_blender(\..+)?$"}
+
+
 def register() -> None:
+    import warnings
+
+    import rigidcells
+
     for cls in CLASSES:
         bpy.utils.register_class(cls)
     bpy.types.Object.rigidcells = PointerProperty(type=RigidCellsSettings)
     follow.register()
+    warnings.filterwarnings(category=rigidcells.RigidCellsWarning, **_QUIET)
 
 
 def unregister() -> None:

@@ -587,6 +587,9 @@ def test_entries_are_named_by_key_path_or_line():
     line = [k + 1 for k, t in enumerate(text.splitlines()) if t == "[[handle]]"][1]
     _, report = rigidcells.deform(cube, text, cell_size=0.1, progress=False)
     assert f"handle #2 (line {line}) selects no cell" in report.warnings, report.warnings
+    # Another face's terms (the Blender add-on's): its own name for each entry.
+    named = report.warnings_in(entry=lambda kind, index: f"{kind} {index + 1} of the panel")
+    assert "handle 2 of the panel selects no cell" in named, named
     # Two entries claiming the same cells: both named by key path.
     spec["handle"][1] = {"box": {"min": [-1, -1, -1], "max": [2, 2, 0.1]}, "translate": [0, 0, 0.1]}
     with pytest.raises(ValueError) as e:

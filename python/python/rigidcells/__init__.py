@@ -59,7 +59,7 @@ from . import _rigidcells, dask
 from ._points import Frame, _float_dtype, _Points, _plain3, _triangles
 from ._rigidcells import FormatError, TurnNotHeldError
 from ._spec import (
-    Spec, _call, _in_dict_terms, _key_paths, _lines_said, _plain, _spec,
+    Spec, _call, _in_dict_terms, _key_paths, _lines_said, _plain, _said, _spec,
 )
 
 __all__ = [
@@ -216,7 +216,20 @@ class Report:
                 if 0 < n <= len(paths):
                     t["key"] = paths[n - 1]
         known["handle_turns"] = turns
-        return Report(**known)
+        report = Report(**known)
+        report._warning_parts = list(info.get("warnings", []))
+        return report
+
+    def warnings_in(self, option: Any = None, entry: Any = None) -> List[str]:
+        """The warnings in another face's terms: each option the library names as
+        ``option(keyword, value)`` says it (``value`` a ``str`` as typed, or None), each entry
+        of the spec as ``entry(kind, index)`` says it (``"handle"``, 0 for the first), each
+        either left in the package's terms when not given. The Blender add-on names its
+        panel's settings and groups so."""
+        parts = getattr(self, "_warning_parts", None)
+        if parts is None:
+            return list(self.warnings)
+        return [_said(p, None, option, entry) for p in parts]
 
 
 def _field_from_bytes(data: bytes, report: Optional[Report] = None) -> "Field":
