@@ -8,9 +8,11 @@ dependency-graph update (an Empty moved or typed in the viewport) and after each
 (the timeline, playback, a render), the Empties' poses are read as Deform reads them and, when
 they changed, the session solves the new spec warm from where its cells are and releases it
 through the transfer: the key is Deform's shape for that pose (fixed vertices bit for bit,
-handle vertices where their Empties send them). A change of the options builds the session
-again at once, a change of the groups at the next move of an Empty. A failure turns Follow off
-and says why in the panel.
+handle vertices where their Empties send them). While an Empty is dragged in Blender's window,
+each update is a drag's step and its preview instead (as Live's), and the exact shape follows
+once the Empties have rested for `SETTLE` (a timer); a frame change is always exact. A change of
+the options builds the session again at once, a change of the groups at the next move of an
+Empty. A failure turns Follow off and says why in the panel.
 
 *Bake* steps the scene's frame range and keys one shape a frame (`RigidCells 12`: value 1 on
 its frame, 0 on the frames beside it), so that the animation plays, renders and exports without
@@ -19,6 +21,7 @@ the add-on; Follow is then turned off and the followed key removed.
 
 from __future__ import annotations
 
+import time
 from typing import Any, Dict, Optional
 
 import bpy
@@ -31,13 +34,18 @@ _sessions: Dict[str, "Followed"] = {}
 _writing = False
 
 
+# How long the Empties rest after a move in the viewport before the shape is converged and
+# released exactly (as Live's worker waits).
+SETTLE = 0.25
+
+
 class Followed:
     """One followed object's session, built from the spec it was first solved for."""
 
     def __init__(self, obj: bpy.types.Object) -> None:
         import rigidcells
 
-        from . import inputs, options
+        from . import Weighted, inputs, options
 
         points, triangles, spec = inputs(obj)
         self.options = options(obj.rigidcells)
@@ -45,6 +53,14 @@ class Followed:
         self.spec = spec
         self.poses: Any = None
         self.session = rigidcells.Session(points, spec, triangles=triangles, **self.options)
+        # What a drag step moves besides the handles: the pins' centers and the weighted
+        # vertices' pulls.
+        self.centers = [np.array(p["point"]) for p in spec.get("pin", [])]
+        self.weighted = Weighted(obj, points) if "target" in spec else None
+        # Whether the key is the exact shape of `poses` (else a drag's preview), and when the
+        # Empties last moved.
+        self.exact = False
+        self.moved_at = 0.0
 
     def matches(self, spec: dict, options: dict) -> bool:
         """Whether `spec` only moves this session's handles and pins (same regions, options)."""
@@ -63,40 +79,85 @@ def _regions(spec: dict) -> Any:
     )
 
 
-def follow_now(obj: bpy.types.Object) -> bool:
+def follow_now(obj: bpy.types.Object, exact: bool = True) -> bool:
     """Solves `obj` for its Empties' current poses when they changed since its last shape, and
-    writes the key: whether it wrote one."""
-    global _writing
-    from . import SHAPE_KEY, inputs, options, poses, show_report, write_keys
+    writes the key: whether it wrote one. `exact`: converged and released through the
+    transfer (a frame, a render, the Empties at rest); else, while an Empty is dragged in the
+    viewport, a drag's step and its preview, the exact shape following once they rest."""
+    from . import SHAPE_KEY, inputs, options, pin_places, poses
 
     state = _sessions.get(obj.name)
     # The Empties' poses alone first: most updates (a selection, another object) move none.
     moves = poses(obj)
-    if (
+    unchanged = (
         state is not None
         and moves == state.poses
         and not obj.rigidcells.pins
         and options(obj.rigidcells) == state.options
         and SHAPE_KEY in _keys(obj)
-    ):
+    )
+    if unchanged and (state.exact or not exact):
         return False
+    if not exact and state is not None and options(obj.rigidcells) == state.options:
+        pins = pin_places(obj, state.centers) or None
+        targets = None if state.weighted is None else state.weighted.places(obj).tolist()
+        state.session.drag(moves, pins=pins, targets=targets)
+        state.poses, state.exact, state.moved_at = moves, False, time.monotonic()
+        _write(obj, state.session.preview(), None)
+        if not bpy.app.timers.is_registered(_settle):
+            bpy.app.timers.register(_settle, first_interval=SETTLE)
+        return True
     _, _, spec = inputs(obj)
     if state is not None and state.matches(spec, options(obj.rigidcells)):
-        if spec == state.spec and SHAPE_KEY in _keys(obj):
+        if spec == state.spec and state.exact and SHAPE_KEY in _keys(obj):
             return False
         state.session.solve(spec)
         state.spec = spec
     else:
         state = _sessions[obj.name] = Followed(obj)
-    state.poses = moves
-    moved, report = state.session.release()
+    state.poses, state.exact = moves, True
+    _write(obj, *state.session.release())
+    return True
+
+
+def _write(obj: bpy.types.Object, moved: Any, report: Any) -> None:
+    """The shape as the scene's keys, and the report's figures when it is exact."""
+    global _writing
+    from . import show_report, write_keys
+
     _writing = True
     try:
         write_keys(obj, np.asarray(moved))
-        show_report(obj, report)
+        if report is not None:
+            show_report(obj, report)
     finally:
         _writing = False
-    return True
+
+
+def _settle() -> Optional[float]:
+    """The timer after a drag's steps: each followed object whose Empties have rested for
+    `SETTLE` gets its exact shape; again later while some still move."""
+    from . import ERRORS, _said
+
+    waiting = [
+        (name, state) for name, state in _sessions.items() if not state.exact
+    ]
+    later = []
+    for name, state in waiting:
+        obj = bpy.data.objects.get(name)
+        if obj is None:
+            _sessions.pop(name, None)
+            continue
+        rested = time.monotonic() - state.moved_at
+        if rested < SETTLE:
+            later.append(SETTLE - rested)
+            continue
+        try:
+            follow_now(obj, exact=True)
+        except ERRORS as e:
+            stop(obj)
+            obj.rigidcells.follow_said = _said(e)
+    return min(later) if later else None
 
 
 def _keys(obj: bpy.types.Object) -> Any:
@@ -104,8 +165,9 @@ def _keys(obj: bpy.types.Object) -> Any:
     return keys.key_blocks if keys is not None else {}
 
 
-def _follow_all() -> None:
-    """Every object whose Follow is on, followed; one that fails is turned off, with why."""
+def _follow_all(exact: bool = True) -> None:
+    """Every object whose Follow is on, followed (`follow_now`); one that fails is turned off,
+    with why."""
     from . import ERRORS, _said
 
     for obj in list(bpy.data.objects):
@@ -113,7 +175,7 @@ def _follow_all() -> None:
         if settings is None or not settings.follow or obj.type != "MESH":
             continue
         try:
-            follow_now(obj)
+            follow_now(obj, exact)
         except ERRORS as e:
             stop(obj)
             settings.follow_said = _said(e)
@@ -136,12 +198,30 @@ def follow_changed(settings: Any, context: Any) -> None:
     _follow_all()
 
 
+def _following() -> bool:
+    return not _writing and any(
+        getattr(o, "rigidcells", None) is not None and o.rigidcells.follow for o in bpy.data.objects
+    )
+
+
 @persistent
 def on_update(_scene: Any, _depsgraph: Any = None) -> None:
-    if not _writing and any(
-        getattr(o, "rigidcells", None) is not None and o.rigidcells.follow for o in bpy.data.objects
-    ):
-        _follow_all()
+    """An update (an Empty dragged or typed in the viewport): in Blender's window a drag's
+    step, the exact shape once the Empties rest; without a window, the exact shape."""
+    if _following():
+        _follow_all(exact=not _in_window())
+
+
+def _in_window() -> bool:
+    """Whether Blender runs with its window (where a dragged Empty's updates come quickly)."""
+    return not bpy.app.background
+
+
+@persistent
+def on_frame(_scene: Any, _depsgraph: Any = None) -> None:
+    """A frame (the timeline, playback, a render): the exact shape of the frame's poses."""
+    if _following():
+        _follow_all(exact=True)
 
 
 @persistent
@@ -153,7 +233,11 @@ def on_load(_path: Any = None, _other: Any = None) -> None:
 
 def _handlers() -> Any:
     h = bpy.app.handlers
-    return ((h.depsgraph_update_post, on_update), (h.frame_change_post, on_update), (h.load_post, on_load))
+    return (
+        (h.depsgraph_update_post, on_update),
+        (h.frame_change_post, on_frame),
+        (h.load_post, on_load),
+    )
 
 
 def register() -> None:

@@ -951,7 +951,7 @@ def test_the_turn_reaches_the_objects_coordinates_through_parents_and_scales():
         addon.poses(obj)
 
 
-def test_follow_keys_the_shape_of_each_pose_as_deform_would():
+def test_follow_keys_the_shape_of_each_pose_as_deform_would(monkeypatch):
     """Follow on: the key follows the Empty as it moves and as its keyframes play, each shape
     Deform's for that pose; Bake keys one shape a frame and removes the followed key."""
     obj, empty = setup_bar()
@@ -980,6 +980,24 @@ def test_follow_keys_the_shape_of_each_pose_as_deform_would():
     empty.location = (5.0, 0.0, 2.0)
     bpy.context.view_layer.update()
     assert np.abs(vertices(obj, "RigidCells")[handle] - rest[handle] - [0, 0, 2]).max() < 1e-5
+
+    # Dragged in a window: a drag's step and its preview at each update, the exact shape once
+    # the Empty has rested (the timer, run here by hand).
+    monkeypatch.setattr(addon.follow, "_in_window", lambda: True)
+    empty.location = (5.0, 0.0, 2.5)
+    bpy.context.view_layer.update()
+    state = addon.follow._sessions[obj.name]
+    assert not state.exact and bpy.app.timers.is_registered(addon.follow._settle)
+    preview = vertices(obj, "RigidCells").copy()
+    assert 1.0 < (preview[handle] - rest[handle])[:, 2].mean() < 3.0
+    state.moved_at -= addon.follow.SETTLE
+    assert addon.follow._settle() is None and state.exact
+    points, triangles, spec = addon.inputs(obj)
+    want, _ = rigidcells.deform(points, spec, triangles=triangles, cell_size=0.25, progress=False)
+    assert np.abs(vertices(obj, "RigidCells") - want).max() < 1e-3
+    assert np.abs(vertices(obj, "RigidCells")[handle] - rest[handle] - [0, 0, 2.5]).max() < 1e-5
+    bpy.app.timers.unregister(addon.follow._settle)
+    monkeypatch.undo()
 
     scene.frame_start, scene.frame_end = 1, 5
     assert bpy.ops.rigidcells.bake() == {"FINISHED"}
