@@ -2,8 +2,11 @@
 unregisters cleanly, its shape key is `rigidcells.deform` of the same vertices, a soup of loose
 cubes bends with every cube carried, bad input leaves the mesh as it was, Deform runs off the
 main thread, Live follows scripted Empty moves to the converged shape and Esc restores the
-shape key, more handles, pins and a stiffness group reach the library, and a handle turns as
-its Empty's rotation was typed, whole turns included, in every rotation mode and as keyed.
+shape key, more handles, pins and a stiffness group reach the library, a handle turns as
+its Empty's rotation was typed, whole turns included, in every rotation mode and as keyed,
+the Edit Mode selection makes groups, vertex weights pull part of the way, several objects
+deform as one scene, fold-overs are a vertex group, Follow keys each pose and bakes frames,
+and the library's messages name the panel's settings and groups.
 
 Blender without a window runs no modal operators: the tests drive the pieces the modal
 operators call on each timer tick and key press (`DeformJob`, `LiveState`);
