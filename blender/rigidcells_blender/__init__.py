@@ -68,6 +68,7 @@ from .scene import (  # noqa: F401  (the scene's inputs and keys, for the operat
     _movers,
     _rest_vertices,
     FOLDS_GROUP,
+    KeyBefore,
     inputs,
     mark_folds,
     members,
@@ -329,7 +330,7 @@ class LiveState:
         self._weighted = Weighted(obj, points) if "target" in spec else None
         self.count = len(points)
         # What Esc restores, for each object of the scene (`members`).
-        self._before = {o.name: _KeyBefore(o) for o in members(obj)}
+        self._before = {o.name: KeyBefore(o) for o in members(obj)}
         self.kind: Optional[str] = None
         self.worker = LiveWorker(points, spec, triangles, options(obj.rigidcells), settle).start()
 
@@ -363,38 +364,6 @@ class LiveState:
             other = bpy.data.objects.get(name)
             if other is not None:
                 before.restore(other)
-
-
-class _KeyBefore:
-    """An object's `RigidCells` key as it was: no shape keys, no such key, or its shape and
-    value; `restore` puts it back."""
-
-    def __init__(self, obj: bpy.types.Object) -> None:
-        keys = obj.data.shape_keys
-        key = keys.key_blocks.get(SHAPE_KEY) if keys is not None else None
-        self.had_keys = keys is not None
-        self.shape: Optional[Tuple[np.ndarray, float]] = None
-        if key is not None:
-            co = np.empty(3 * len(key.data), dtype=np.float32)
-            key.data.foreach_get("co", co)
-            self.shape = (co, key.value)
-
-    def restore(self, obj: bpy.types.Object) -> None:
-        if not self.had_keys:
-            if obj.data.shape_keys is not None:
-                obj.shape_key_clear()
-        elif self.shape is None:
-            key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
-            if key is not None:
-                obj.shape_key_remove(key)
-        else:
-            co, value = self.shape
-            key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
-            if key is None:
-                key = obj.shape_key_add(name=SHAPE_KEY, from_mix=False)
-            key.data.foreach_set("co", co)
-            key.value = value
-        obj.data.update()
 
 
 def _mesh_active(context: Any) -> bool:

@@ -349,3 +349,35 @@ def mark_folds(obj: bpy.types.Object, folded: List[int]) -> None:
         elif group is not None:
             other.vertex_groups.remove(group)
         start += n
+
+
+class KeyBefore:
+    """An object's `RigidCells` key as it was: no shape keys, no such key, or its shape and
+    value; `restore` puts it back."""
+
+    def __init__(self, obj: bpy.types.Object) -> None:
+        keys = obj.data.shape_keys
+        key = keys.key_blocks.get(SHAPE_KEY) if keys is not None else None
+        self.had_keys = keys is not None
+        self.shape: Optional[Tuple[np.ndarray, float]] = None
+        if key is not None:
+            co = np.empty(3 * len(key.data), dtype=np.float32)
+            key.data.foreach_get("co", co)
+            self.shape = (co, key.value)
+
+    def restore(self, obj: bpy.types.Object) -> None:
+        if not self.had_keys:
+            if obj.data.shape_keys is not None:
+                obj.shape_key_clear()
+        elif self.shape is None:
+            key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
+            if key is not None:
+                obj.shape_key_remove(key)
+        else:
+            co, value = self.shape
+            key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
+            if key is None:
+                key = obj.shape_key_add(name=SHAPE_KEY, from_mix=False)
+            key.data.foreach_set("co", co)
+            key.value = value
+        obj.data.update()
