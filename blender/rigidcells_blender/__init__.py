@@ -919,7 +919,7 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
             col.label(text=f"Residual: fixed {s.residual_fixed:.3g}, handle {s.residual_handle:.3g}")
             col.label(text=f"Fold-overs: {s.foldovers}")
             for warning in filter(None, s.warnings.split("\n")):
-                for k, line in enumerate(textwrap.wrap(warning, 30)):
+                for k, line in enumerate(textwrap.wrap(warning, 26)):
                     col.label(text=line, icon="ERROR" if k == 0 else "BLANK1")
             if s.foldovers:
                 # Where: the group to select in Edit Mode (Vertex Groups > Select).

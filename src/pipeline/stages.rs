@@ -225,12 +225,12 @@ pub(crate) fn build_warnings<const D: usize>(
     let mut out = Vec::new();
     if build.glued_cells > 0 {
         let size = complex.grid.finest_size();
-        let decimals = (5 - size.log10().floor() as i32).max(0) as usize;
         out.push(
             Said::from(format!(
                 "{} cells hold parts of the mesh that are not connected but lie closer than the \
-                 finest cell size ({size:.decimals$}): the parts move together there; a smaller ",
+                 finest cell size ({}): the parts move together there; a smaller ",
                 build.glued_cells,
+                crate::human::length(size, size),
             ))
             .opt(Opt::CellSize)
             .text(" keeps them apart"),

@@ -23,7 +23,7 @@ import bpy
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from blender_window import ROOT, picture, save, view_cut  # noqa: E402
+from blender_window import ROOT, picture, save, view_3d, view_cut  # noqa: E402
 
 OUT = picture("blender_follow.png")
 sys.path.insert(0, str(ROOT / "tests" / "blender"))
@@ -55,19 +55,11 @@ def animate():
 
 def view():
     """The 3D view from the front, framing the bar's whole motion, the sidebar closed."""
-    window = bpy.context.window_manager.windows[0]
-    for area in window.screen.areas:
-        if area.type != "VIEW_3D":
-            continue
-        space = area.spaces.active
-        space.show_region_ui = False
-        space.shading.type = "SOLID"
-        space.overlay.show_floor = True
-        r3d = space.region_3d
-        r3d.view_perspective = "ORTHO"
-        r3d.view_rotation = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)  # from the front
-        r3d.view_location = (1.0, 0.0, 2.0)
-        r3d.view_distance = 13.0
+    r3d = view_3d(sidebar=False)[2].region_3d
+    r3d.view_perspective = "ORTHO"
+    r3d.view_rotation = (math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0)  # from the front
+    r3d.view_location = (1.0, 0.0, 2.0)
+    r3d.view_distance = 13.0
 
 
 shots = []

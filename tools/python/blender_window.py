@@ -22,6 +22,18 @@ def picture(name: str) -> Path:
     return Path(args[0]).resolve() if args else ROOT / "docs" / name
 
 
+def view_3d(sidebar: bool):
+    """The window's 3D view, shaded solid over its floor, with its sidebar shown or not:
+    `(window, area, space)`."""
+    window = bpy.context.window_manager.windows[0]
+    area = next(a for a in window.screen.areas if a.type == "VIEW_3D")
+    space = area.spaces.active
+    space.show_region_ui = sidebar
+    space.shading.type = "SOLID"
+    space.overlay.show_floor = True
+    return window, area, space
+
+
 def view_cut(path: Path, x: tuple, y: tuple) -> np.ndarray:
     """The window's screenshot (written to `path`, then removed), cut to the fractions `x` and
     `y` of the 3D view's width and height (from its left and bottom): RGBA rows from the
