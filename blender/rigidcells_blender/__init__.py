@@ -260,11 +260,18 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
     estimate: StringProperty(options={"HIDDEN"})
 
 
+def _typed(value: float) -> float:
+    """A panel's number as the artist typed it: Blender keeps it in single precision (0.00001
+    is 9.999999747378752e-06 there), the shortest decimal that is that float is what was
+    typed."""
+    return float(np.format_float_positional(np.float32(value), unique=True))
+
+
 def options(settings: RigidCellsSettings) -> dict:
     """The library's keyword options the settings give."""
-    memory = int(settings.memory_limit * 2**30)
+    memory = int(_typed(settings.memory_limit) * 2**30)
     return {
-        "cell_size": settings.cell_size or None,
+        "cell_size": _typed(settings.cell_size) or None,
         "cells": settings.cells or None,
         "memory_limit": memory or None,
         "transfer": settings.transfer,
@@ -280,14 +287,32 @@ def show_report(obj: bpy.types.Object, report: Any) -> None:
     settings.residual_handle = report.residual_handle_max
     settings.foldovers = report.foldovers
     mark_folds(obj, getattr(report, "foldover_samples", None) or [])
-    settings.warnings = "\n".join(warnings_said(report))
+    settings.warnings = "\n".join(warnings_said(report, obj))
 
 
-def warnings_said(report: Any) -> List[str]:
-    """The run's warnings as the panel names things (its settings, its groups); the package's
-    own Python warnings are silenced for the add-on (`register`), which shows these instead."""
+def warnings_said(report: Any, obj: Optional[bpy.types.Object] = None) -> List[str]:
+    """The run's warnings as the panel names things (its settings, its groups), after the
+    add-on's own about `obj`; the package's own Python warnings are silenced for the add-on
+    (`register`), which shows these instead."""
     said = getattr(report, "warnings_in", None)
-    return said(_option_said, _entry_said) if said is not None else list(report.warnings)
+    library = said(_option_said, _entry_said) if said is not None else list(report.warnings)
+    return (uneven_scale(obj) if obj is not None else []) + library
+
+
+def uneven_scale(obj: bpy.types.Object) -> List[str]:
+    """A warning when `obj` is scaled unevenly: the scene is deformed in its coordinates, where
+    the cells are cubes, so its shape in the world is not what the same mesh with the scale
+    applied gives."""
+    world = np.array(obj.matrix_world)[:3, :3]
+    sizes = np.linalg.norm(world, axis=0)
+    if sizes.max() <= sizes.min() * (1.0 + 1e-6):
+        return []
+    scale = ", ".join(f"{v:.3g}" for v in sizes)
+    return [
+        f"{obj.name} is scaled unevenly ({scale}): the cells are cubes in its own "
+        "coordinates, not in the world's, and the bend is not the one the same mesh bends "
+        "with its scale applied (Object > Apply > Scale)"
+    ]
 
 
 def finish(obj: bpy.types.Object, moved: np.ndarray, report: Any) -> None:
@@ -475,7 +500,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         finally:
             wm.progress_end()
             _status(context, None)
-        self._done(report)
+        self._done(obj, report)
         return {"FINISHED"}
 
     def invoke(self, context: Any, event: Any) -> set:
@@ -541,7 +566,7 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         except Exception as e:  # the library's errors and Blender's: the mesh as it was
             self.report({"ERROR"}, _said(e))
             return {"CANCELLED"}
-        self._done(report)
+        self._done(obj, report)
         return {"FINISHED"}
 
     def cancel(self, context: Any) -> None:
@@ -551,13 +576,13 @@ class OBJECT_OT_rigidcells_deform(bpy.types.Operator):
         context.window_manager.progress_end()
         _status(context, None)
 
-    def _done(self, report: Any) -> None:
+    def _done(self, obj: bpy.types.Object, report: Any) -> None:
         self.report(
             {"INFO"},
             f"Rigid Cells: {report.cells:,} cells, {report.iterations} iterations, "
             f"{report.foldovers} fold-overs",
         )
-        for warning in warnings_said(report):
+        for warning in filter(None, obj.rigidcells.warnings.split("\n")):
             self.report({"WARNING"}, f"Rigid Cells: {warning}")
 
 
@@ -704,46 +729,71 @@ def _selected_vertices(obj: bpy.types.Object) -> List[int]:
     return [v.index for v in obj.data.vertices if v.select]
 
 
+def _selecting(context: Any) -> List[bpy.types.Object]:
+    """The meshes whose Edit Mode selection makes a group: the active object, those taken
+    together with it, and the others in Edit Mode with it."""
+    obj = context.active_object
+    out = members(obj)
+    if obj.mode == "EDIT":
+        out += [o for o in context.objects_in_mode if o.type == "MESH" and o not in out]
+    return out
+
+
 def from_selection(context: Any, role: str, index: int = 0) -> bpy.types.VertexGroup:
     """The selected vertices as the group of `role` (`index` among the extra handles or the
-    pins): the add-on's vertex group `RigidCells <Role>` holds exactly them, at weight 1, and
-    the panel names it; a handle or pin without an Empty gets a new one at their center, as
-    Blender's "Hook to New Object" does."""
+    pins): in each mesh with a selection (`_selecting`), the add-on's vertex group
+    `RigidCells <Role>` holds exactly them, at weight 1 (and no other mesh holds that group),
+    and the panel names it; a handle or pin without an Empty gets a new one at their center,
+    as Blender's "Hook to New Object" does. Returns the active object's group, or None where
+    it has none selected."""
     obj = context.active_object
-    chosen = _selected_vertices(obj)
-    if not chosen:
-        raise InputError("Rigid Cells: select the vertices in Edit Mode first")
     s = obj.rigidcells
     if role in ("handles", "pins"):
-        item = getattr(s, role)[index]
-        label = f"Handle {index + 2}" if role == "handles" else f"Pin {index + 1}"
+        items = getattr(s, role)
+        what = f"handle {index + 2}" if role == "handles" else f"pin {index + 1}"
+        if not 0 <= index < len(items):
+            add = "+ Handle" if role == "handles" else "+ Pin"
+            raise InputError(f"Rigid Cells: there is no {what}: add it with {add} first")
+        item, label = items[index], what.capitalize()
     else:
         item, label = s, role.capitalize()
+    chosen = {o.name: _selected_vertices(o) for o in _selecting(context)}
+    if not any(chosen.values()):
+        raise InputError("Rigid Cells: select the vertices in Edit Mode first")
     name = GROUP_PREFIX + label
     editing = _leave_edit_mode(context)
     try:
-        group = obj.vertex_groups.get(name) or obj.vertex_groups.new(name=name)
-        group.remove(range(len(obj.data.vertices)))
-        group.add(chosen, 1.0, "REPLACE")
+        mathutils = _mathutils()
+        at = []
+        for other_name, picked in chosen.items():
+            other = bpy.data.objects[other_name]
+            group = other.vertex_groups.get(name)
+            if not picked:
+                if group is not None:
+                    other.vertex_groups.remove(group)
+                continue
+            group = group or other.vertex_groups.new(name=name)
+            group.remove(range(len(other.data.vertices)))
+            group.add(picked, 1.0, "REPLACE")
+            world = np.array(other.matrix_world)
+            at.append(_rest_vertices(other.data)[picked] @ world[:3, :3].T + world[:3, 3])
         if role in ("handles", "pins"):
             item.group = name
         else:
             setattr(s, f"{role}_group", name)
         empty_of = {"handle": "handle_object", "handles": "object", "pins": "object"}.get(role)
         if empty_of is not None and getattr(item, empty_of) is None:
-            center = obj.matrix_world @ _mathutils().Vector(
-                _rest_vertices(obj.data)[chosen].mean(axis=0)
-            )
+            center = mathutils.Vector(np.concatenate(at).mean(axis=0))
             empty = bpy.data.objects.new(f"{obj.name} {label}", None)
             empty.empty_display_type = "ARROWS"
             empty.location = center
-            empty.matrix_world = _mathutils().Matrix.Translation(center)
+            empty.matrix_world = mathutils.Matrix.Translation(center)
             for collection in obj.users_collection:
                 collection.objects.link(empty)
             setattr(item, empty_of, empty)  # its rest pose is taken now
     finally:
         _back_to_edit_mode(context, editing)
-    return group
+    return obj.vertex_groups.get(name)
 
 
 def _mathutils() -> Any:
@@ -772,8 +822,11 @@ class RIGIDCELLS_OT_from_selection(bpy.types.Operator):
         except ERRORS as e:
             self.report({"ERROR"}, _said(e))
             return {"CANCELLED"}
-        count = sum(1 for v in context.active_object.data.vertices if v.select)
-        self.report({"INFO"}, f"Rigid Cells: {group.name} holds {count:,} vertices")
+        count = sum(
+            sum(1 for v in o.data.vertices if v.select) for o in _selecting(context)
+        )
+        name = group.name if group is not None else "the group"
+        self.report({"INFO"}, f"Rigid Cells: {name} holds {count:,} vertices")
         return {"FINISHED"}
 
 

@@ -125,7 +125,9 @@ def _group_weights(
         names = ", ".join(o.name for o in objects)
         raise InputError(f"Rigid Cells: none of {names} has a vertex group {name!r}")
     if not indices:
-        raise InputError(f"Rigid Cells: the vertex group {name!r} holds no vertex")
+        raise InputError(
+            f"Rigid Cells: the vertex group {name!r} holds no vertex of a weight above 0"
+        )
     return np.array(indices, dtype=np.int64), np.array(weights, dtype=np.float64)
 
 

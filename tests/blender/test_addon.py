@@ -132,6 +132,18 @@ def test_deform_in_edit_mode_keeps_its_key_and_returns_to_edit_mode():
     assert np.abs(key - rest).max() > 1.0
 
 
+def select_vertices(obj, keep):
+    """Selects the vertices of `obj` that `keep(co)` holds for (and the edges and faces all of
+    whose vertices are), as a box selection in Edit Mode would; in Object Mode."""
+    mesh = obj.data
+    for v in mesh.vertices:
+        v.select = keep(v.co)
+    for e in mesh.edges:
+        e.select = all(mesh.vertices[i].select for i in e.vertices)
+    for f in mesh.polygons:
+        f.select = all(mesh.vertices[i].select for i in f.vertices)
+
+
 def test_the_edit_mode_selection_makes_the_groups_and_a_handle_empty():
     """In Edit Mode, "From selection" makes the selected vertices the add-on's group for the
     role and names it in the panel; a handle without an Empty gets one at their center; a
@@ -142,15 +154,8 @@ def test_the_edit_mode_selection_makes_the_groups_and_a_handle_empty():
     mine = group(obj, "mine", lambda co: co.x > 0)
 
     def select(keep):
-        """Selects the vertices `keep` holds for, as a box selection in Edit Mode would."""
         bpy.ops.object.mode_set(mode="OBJECT")
-        mesh = obj.data
-        for v in mesh.vertices:
-            v.select = keep(v.co)
-        for e in mesh.edges:
-            e.select = all(mesh.vertices[i].select for i in e.vertices)
-        for f in mesh.polygons:
-            f.select = all(mesh.vertices[i].select for i in f.vertices)
+        select_vertices(obj, keep)
         bpy.ops.object.mode_set(mode="EDIT")
 
     def members(name):
@@ -160,6 +165,8 @@ def test_the_edit_mode_selection_makes_the_groups_and_a_handle_empty():
     select(lambda co: False)
     with pytest.raises(RuntimeError, match="select the vertices in Edit Mode first"):
         bpy.ops.rigidcells.from_selection(role="fixed")
+    with pytest.raises(RuntimeError, match=r"there is no pin 1: add it with \+ Pin first"):
+        bpy.ops.rigidcells.from_selection(role="pins", index=0)
     select(lambda co: co.x < -4.4)
     assert bpy.ops.rigidcells.from_selection(role="fixed") == {"FINISHED"}
     select(lambda co: co.x > 4.4)
@@ -346,6 +353,58 @@ def test_fold_overs_are_a_vertex_group_to_select():
     bpy.context.view_layer.update()
     assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
     assert s.foldovers == 0 and addon.FOLDS_GROUP not in obj.vertex_groups
+
+
+def test_the_selection_of_several_meshes_in_edit_mode_makes_one_group():
+    """Two meshes in Edit Mode together, vertices selected in the one that is not active: the
+    group is made in it (the scene's groups are found by name in each object), and the
+    handle's Empty sits at its selection's center."""
+    left = half_bar((-2.5, 0.0, 0.0), False)
+    right = half_bar((2.5, 0.0, 0.0), True)
+    for o in (left, right):
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = left
+    assert bpy.ops.rigidcells.together() == {"FINISHED"}
+    for o, keep in ((left, lambda co: co.x < -1.9), (right, lambda co: False)):
+        select_vertices(o, keep)
+    bpy.ops.object.mode_set(mode="EDIT")
+    assert {o.name for o in bpy.context.objects_in_mode} == {left.name, right.name}
+    assert bpy.ops.rigidcells.from_selection(role="fixed") == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    for o, keep in ((left, lambda co: False), (right, lambda co: co.y < -1.9)):
+        select_vertices(o, keep)
+    bpy.ops.object.mode_set(mode="EDIT")
+    assert bpy.ops.rigidcells.from_selection(role="handle") == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert "RigidCells Handle" in right.vertex_groups and "RigidCells Handle" not in left.vertex_groups
+    assert "RigidCells Fixed" in left.vertex_groups and "RigidCells Fixed" not in right.vertex_groups
+    empty = left.rigidcells.handle_object
+    assert np.allclose(empty.location, (5.0, 0.0, 0.0), atol=1e-6), empty.location
+    empty.location.z += 1.0
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    handle = [v.index for v in right.data.vertices if v.co.y < -1.9]
+    lifted = vertices(right, "RigidCells")[handle] - vertices(right)[handle]
+    assert np.abs(lifted - [0.0, 0.0, 1.0]).max() < 1e-5
+
+
+def test_an_uneven_scale_and_a_typed_cell_size_are_said_as_the_artist_would():
+    """An object scaled unevenly is warned about (its cells are cubes in its own coordinates);
+    a cell size typed in the panel reaches the library as typed, not as Blender's single
+    precision keeps it."""
+    obj, empty = setup_bar()
+    obj.scale = (1.0, 1.0, 0.5)
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    assert "is scaled unevenly (1, 1, 0.5)" in obj.rigidcells.warnings, obj.rigidcells.warnings
+    obj.scale = (2.0, 2.0, 2.0)
+    bpy.context.view_layer.update()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    assert "unevenly" not in obj.rigidcells.warnings
+    obj.rigidcells.cell_size = 0.00001
+    assert addon.options(obj.rigidcells)["cell_size"] == 0.00001
+    with pytest.raises(RuntimeError, match=r"size 0\.00001\b"):
+        bpy.ops.object.rigidcells_deform()
 
 
 def test_the_panel_estimates_and_takes_a_cell_count_and_a_memory_limit():
