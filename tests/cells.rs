@@ -151,9 +151,24 @@ fn tree_soup_with_thousands_of_leaves_bends_from_the_cli() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(
         r.stderr
-            .contains("cells hold parts of the mesh that are not connected"),
+            .contains("cells hold parts of the mesh that are not connected")
+            && r.stderr.contains("finest cell size (0.2)")
+            && r.stderr.contains("a smaller --cell-size keeps them apart"),
         "leaves closer than a cell are glued, and the user is told: {}",
         r.stderr
+    );
+    // Sized by a count, the advice asks for more cells (a size would be refused beside it).
+    let counted = common::deform_verbose(
+        &input,
+        &output,
+        &edit,
+        &["--cells", "3000", "--transfer", "blend"],
+    );
+    assert_eq!(counted.code, 0, "{}", counted.stderr);
+    assert!(
+        counted.stderr.contains("more --cells keep them apart"),
+        "{}",
+        counted.stderr
     );
     let (before, after) = (
         Document::read(&input).unwrap(),

@@ -43,7 +43,7 @@ pub fn check_foldovers<const D: usize>(
         warnings.push(Said::from(format!(
             "the deformation folds space over at {} of {} samples checked (the Jacobian \
              determinant is not positive there): the shape passes through itself; a smaller \
-             edit, more load steps or stiffer cells avoid it",
+             edit, or stiffer cells where it folds (a stiffness region), avoid it",
             folded.len(),
             checked.len()
         )));

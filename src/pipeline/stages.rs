@@ -120,6 +120,7 @@ where
         &solution.complex,
         &solution.constraints,
         &solution.info,
+        params.build.target_cells.is_some(),
     );
     warnings.extend(sizing);
     let transfer_start = Instant::now();
@@ -204,37 +205,44 @@ pub(crate) fn check_rbf_memory<const D: usize>(cells: usize, params: &DeformPara
     )
 }
 
-/// The warnings of a solve, in order: the cell construction's, the constraints', the solver's.
+/// The warnings of a solve, in order: the cell construction's, the constraints', the solver's;
+/// `by_count`: the cells were sized by a count (`--cells`), which their advice names.
 pub(crate) fn warnings<const D: usize>(
     build: &BuildInfo,
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
     solver: &SolverInfo,
+    by_count: bool,
 ) -> Vec<Said> {
-    let mut out = build_warnings(build, complex);
+    let mut out = build_warnings(build, complex, by_count);
     out.extend_from_slice(&constraints.warnings);
     out.extend(solver.warnings());
     out
 }
 
-/// The warnings of the cell construction.
+/// The warnings of the cell construction; `by_count`: the cells were sized by a count
+/// (`--cells`), so that the advice asks for more of them rather than a smaller size.
 pub(crate) fn build_warnings<const D: usize>(
     build: &BuildInfo,
     complex: &CellComplex<D>,
+    by_count: bool,
 ) -> Vec<Said> {
     let mut out = Vec::new();
     if build.glued_cells > 0 {
         let size = complex.grid.finest_size();
-        out.push(
-            Said::from(format!(
-                "{} cells hold parts of the mesh that are not connected but lie closer than the \
-                 finest cell size ({}): the parts move together there; a smaller ",
-                build.glued_cells,
-                crate::human::length(size, size),
-            ))
-            .opt(Opt::CellSize)
-            .text(" keeps them apart"),
-        );
+        let said = Said::from(format!(
+            "{} cells hold parts of the mesh that are not connected but lie closer than the \
+             finest cell size ({}): the parts move together there; ",
+            build.glued_cells,
+            crate::human::length(size, size),
+        ));
+        out.push(match by_count {
+            true => said.text("more ").opt(Opt::Cells).text(" keep them apart"),
+            false => said
+                .text("a smaller ")
+                .opt(Opt::CellSize)
+                .text(" keeps them apart"),
+        });
     }
     out
 }
