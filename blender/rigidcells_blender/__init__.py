@@ -70,6 +70,7 @@ from .scene import (  # noqa: F401  (the scene's inputs and keys, for the operat
     _rest_vertices,
     FOLDS_GROUP,
     KeyBefore,
+    held_vertices,
     inputs,
     mark_folds,
     members,
@@ -357,6 +358,8 @@ class LiveState:
         self.count = len(points)
         # What Esc restores, for each object of the scene (`members`).
         self._before = {o.name: KeyBefore(o) for o in members(obj)}
+        # The other objects' fixed vertices, given back bit for bit in every shape.
+        self._held = held_vertices(obj)
         self.kind: Optional[str] = None
         self.worker = LiveWorker(points, spec, triangles, options(obj.rigidcells), settle).start()
 
@@ -375,7 +378,7 @@ class LiveState:
         if shape is None:
             return None
         self.kind, moved = shape
-        write_keys(obj, moved)
+        write_keys(obj, moved, self._held)
         if self.kind == "released" and self.worker.report is not None:
             show_report(obj, self.worker.report)
         return self.kind

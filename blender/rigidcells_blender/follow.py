@@ -45,7 +45,7 @@ class Followed:
     def __init__(self, obj: bpy.types.Object) -> None:
         import rigidcells
 
-        from . import Weighted, inputs, options
+        from . import Weighted, held_vertices, inputs, options
 
         points, triangles, spec = inputs(obj)
         self.options = options(obj.rigidcells)
@@ -61,6 +61,8 @@ class Followed:
         # Empties last moved.
         self.exact = False
         self.moved_at = 0.0
+        # The other objects' fixed vertices, given back bit for bit in every shape.
+        self.held = held_vertices(obj)
 
     def matches(self, spec: dict, options: dict) -> bool:
         """Whether `spec` only moves this session's handles and pins (same regions, options)."""
@@ -103,7 +105,7 @@ def follow_now(obj: bpy.types.Object, exact: bool = True) -> bool:
         targets = None if state.weighted is None else state.weighted.places(obj).tolist()
         state.session.drag(moves, pins=pins, targets=targets)
         state.poses, state.exact, state.moved_at = moves, False, time.monotonic()
-        _write(obj, state.session.preview(), None)
+        _write(obj, state.session.preview(), None, state.held)
         if not bpy.app.timers.is_registered(_settle):
             bpy.app.timers.register(_settle, first_interval=SETTLE)
         return True
@@ -116,18 +118,19 @@ def follow_now(obj: bpy.types.Object, exact: bool = True) -> bool:
     else:
         state = _sessions[obj.name] = Followed(obj)
     state.poses, state.exact = moves, True
-    _write(obj, *state.session.release())
+    _write(obj, *state.session.release(), state.held)
     return True
 
 
-def _write(obj: bpy.types.Object, moved: Any, report: Any) -> None:
-    """The shape as the scene's keys, and the report's figures when it is exact."""
+def _write(obj: bpy.types.Object, moved: Any, report: Any, held: Any) -> None:
+    """The shape as the scene's keys (`held`: the other objects' fixed vertices), and the
+    report's figures when it is exact."""
     global _writing
     from . import show_report, write_keys
 
     _writing = True
     try:
-        write_keys(obj, np.asarray(moved))
+        write_keys(obj, np.asarray(moved), held)
         if report is not None:
             show_report(obj, report)
     finally:

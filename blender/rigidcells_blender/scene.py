@@ -13,7 +13,7 @@ settings are the active object's.
 
 from __future__ import annotations
 
-from typing import Any, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import bpy
 import numpy as np
@@ -296,10 +296,29 @@ def write_shape_key(obj: bpy.types.Object, moved: np.ndarray) -> bpy.types.Shape
     return key
 
 
-def split(obj: bpy.types.Object, moved: np.ndarray) -> List[Tuple[bpy.types.Object, np.ndarray]]:
+def held_vertices(obj: bpy.types.Object) -> Dict[str, List[int]]:
+    """For each object of the scene but `obj`, its vertices of weight 1 in the fixed group:
+    those `split` gives back bit for bit. Found once for a session (Live, Follow), whose every
+    shape is split."""
+    out: Dict[str, List[int]] = {}
+    for other in members(obj)[1:]:
+        group = other.vertex_groups.get(obj.rigidcells.fixed_group)
+        if group is not None:
+            k = group.index
+            out[other.name] = [
+                v.index
+                for v in other.data.vertices
+                if any(g.group == k and g.weight >= FULL_WEIGHT for g in v.groups)
+            ]
+    return out
+
+
+def split(
+    obj: bpy.types.Object, moved: np.ndarray, held: Optional[Dict[str, List[int]]] = None
+) -> List[Tuple[bpy.types.Object, np.ndarray]]:
     """The scene's moved vertices as each object's, in its own coordinates; the vertices of
-    weight 1 in the fixed group keep their coordinates bit for bit in every object. Refused
-    when an object no longer has the vertices it was solved for."""
+    weight 1 in the fixed group (`held`, else found now) keep their coordinates bit for bit in
+    every object. Refused when an object no longer has the vertices it was solved for."""
     objects = members(obj)
     counts = [len(o.data.vertices) for o in objects]
     if sum(counts) != len(moved):
@@ -308,29 +327,26 @@ def split(obj: bpy.types.Object, moved: np.ndarray) -> List[Tuple[bpy.types.Obje
             f"Rigid Cells: {names} have {sum(counts)} vertices now, {len(moved)} were solved; "
             "deform again"
         )
+    if held is None:
+        held = held_vertices(obj)
     out, start = [], 0
     for other, n in zip(objects, counts):
         part = np.asarray(moved[start : start + n], dtype=np.float64)
         if other is not obj:
             back = np.linalg.inv(_frame(obj, other))
             part = part @ back[:3, :3].T + back[:3, 3]
-            group = other.vertex_groups.get(obj.rigidcells.fixed_group)
-            if group is not None:
-                k = group.index
-                held = [
-                    v.index
-                    for v in other.data.vertices
-                    if any(g.group == k and g.weight >= FULL_WEIGHT for g in v.groups)
-                ]
-                part[held] = _rest_vertices(other.data)[held]
+            kept = held.get(other.name, [])
+            part[kept] = _rest_vertices(other.data)[kept]
         out.append((other, part))
         start += n
     return out
 
 
-def write_keys(obj: bpy.types.Object, moved: np.ndarray) -> None:
+def write_keys(
+    obj: bpy.types.Object, moved: np.ndarray, held: Optional[Dict[str, List[int]]] = None
+) -> None:
     """The scene's moved vertices as each object's shape key `RigidCells` (`split`)."""
-    for other, part in split(obj, moved):
+    for other, part in split(obj, moved, held):
         write_shape_key(other, part)
 
 
