@@ -4,7 +4,7 @@
 /// The Morton code of a cell's coordinates: their bits interleaved (axis 0 lowest), so that a
 /// parent's code is its child's shifted right by `D` bits.
 #[inline]
-pub(super) fn morton<const D: usize>(c: &[i64; D]) -> u64 {
+pub(crate) fn morton<const D: usize>(c: &[i64; D]) -> u64 {
     let masks = spread_of::<D>();
     c.iter()
         .enumerate()

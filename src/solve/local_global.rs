@@ -56,6 +56,9 @@ pub struct LocalGlobalParams {
     pub tolerance: f64,
     /// Previous iterates of Anderson acceleration; 0 turns it off. Default 5.
     pub anderson: usize,
+    /// Solve the global step by this many subdomains ([`super::schwarz`]) instead of one
+    /// factor; 0 factors it whole. Default 0.
+    pub subdomains: usize,
 }
 
 impl Default for LocalGlobalParams {
@@ -64,6 +67,7 @@ impl Default for LocalGlobalParams {
             max_iterations: 1000,
             tolerance: 1e-9,
             anderson: 5,
+            subdomains: 0,
         }
     }
 }
@@ -581,7 +585,11 @@ where
         pins: &pins,
         targets: &targets,
     };
-    let positions = Positions::new(complex, constraints);
+    let positions = if params.subdomains > 0 {
+        Positions::by_subdomains(complex, constraints, params.subdomains)
+    } else {
+        Positions::new(complex, constraints)
+    };
     info.seconds_factor = clock.elapsed().as_secs_f64();
     let layout = Layout::new(complex, constraints);
     let rots: Vec<Mat<D>> = layout
@@ -772,17 +780,20 @@ mod tests {
             .map(|c| Motion::rest(&c.center))
             .collect();
         let mut reached = Vec::new();
-        for anderson in [0, 5] {
+        // Plain, accelerated, and accelerated with the global step solved by four subdomains
+        // (the solve spread over processes, in one).
+        for (anderson, subdomains) in [(0, 0), (5, 0), (5, 4)] {
             let params = LocalGlobalParams {
                 max_iterations: 3000,
                 tolerance: 0.0,
                 anderson,
+                subdomains,
             };
             let (motions, info) = minimize_local_global(complex, constraints, &rest, &params);
             for w in info.energies.windows(2) {
                 assert!(
                     w[1] <= w[0],
-                    "{D}D m = {anderson}: the energy rose from {} to {}",
+                    "{D}D m = {anderson}, {subdomains} subdomains: the energy rose from {} to {}",
                     w[0],
                     w[1]
                 );
@@ -802,6 +813,13 @@ mod tests {
             );
             let first = info.energies.iter().position(|&e| e <= best * (1.0 + 1e-3));
             reached.push(first.unwrap());
+            if subdomains > 0 {
+                assert!(
+                    last <= best * (1.0 + 1e-6),
+                    "{D}D by {subdomains} subdomains: {last} after {} iterations, Newton {best}",
+                    info.iterations
+                );
+            }
         }
         assert!(
             reached[1] < reached[0],

@@ -22,69 +22,69 @@
 //! from 51 to 26; with the line search also extrapolating full steps, to 16 (14–20 over six
 //! seeds; 3D: 15 → 10).
 
-use faer::Side;
 use faer::prelude::*;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
-use faer::sparse::{SparseColMat, Triplet};
+use faer::sparse::linalg::solvers::Llt;
 
-use super::constraints::{Constraints, Role};
+use super::constraints::Constraints;
+use super::laplacian::{Laplacian, factor, laplacian, pair_weight};
+use super::schwarz::{self, Schwarz, Subdomains};
 use crate::cells::CellComplex;
 use crate::rigid::{Motion, Vect};
 
-/// The factored position system of one topology.
+/// The position system of one topology, ready to solve.
 pub(crate) struct Positions {
     /// Row of every cell whose position is free.
     row: Vec<Option<u32>>,
     /// Free cells (rows).
     n: usize,
-    factor: Option<Llt<usize, f64>>,
+    solver: Option<Solver>,
 }
+
+/// How the position system is solved.
+enum Solver {
+    /// Factored whole, as one process holds it.
+    Factor(Llt<usize, f64>),
+    /// By subdomains, each factoring its own block ([`super::schwarz`]): what a solve spread
+    /// over processes does, here in one.
+    Subdomains(Box<(Laplacian, Schwarz)>),
+}
+
+/// Relative residual to which the subdomains' conjugate gradients solve the global step: the
+/// step must be a block minimization to near rounding for the energy never to rise.
+const SUBDOMAIN_TOLERANCE: f64 = 1e-11;
 
 impl Positions {
     /// Factors the Laplacian of the free cells. A singular system (a free part with nothing
     /// holding its translation) leaves the projection off: [`Self::project`] does nothing.
     pub fn new<const D: usize>(complex: &CellComplex<D>, constraints: &Constraints<D>) -> Self {
-        let mut n = 0usize;
-        let row: Vec<Option<u32>> = constraints
-            .roles
-            .iter()
-            .map(|r| {
-                (*r == Role::Free).then(|| {
-                    n += 1;
-                    n as u32 - 1
-                })
-            })
-            .collect();
-        let mut triplets = Vec::new();
-        let mut diag = vec![0.0f64; n];
-        for pr in &complex.pairs {
-            let (i, j) = (pr.i as usize, pr.j as usize);
-            let k = pair_weight(constraints, pr.weight, i, j);
-            for r in [row[i], row[j]].into_iter().flatten() {
-                diag[r as usize] += k;
-            }
-            if let (Some(ri), Some(rj)) = (row[i], row[j]) {
-                triplets.push(Triplet::new(ri.max(rj) as usize, ri.min(rj) as usize, -k));
-            }
-        }
-        for t in &constraints.targets {
-            if let Some(r) = row[t.cell as usize] {
-                diag[r as usize] += t.weight;
-            }
-        }
-        let factor = if diag.iter().any(|&d| d > 0.0) {
-            triplets.extend(diag.iter().enumerate().map(|(r, &d)| Triplet::new(r, r, d)));
-            factor(n, &triplets)
+        let (row, n, triplets) = laplacian(complex, constraints);
+        let solver = if triplets.iter().any(|t| t.row == t.col && t.val > 0.0) {
+            factor(n, &triplets).map(Solver::Factor)
         } else {
             None
         };
-        Self { row, n, factor }
+        Self { row, n, solver }
+    }
+
+    /// The system split into `subdomains` ([`super::schwarz`]), each block factored alone,
+    /// solved by preconditioned conjugate gradients.
+    pub fn by_subdomains<const D: usize>(
+        complex: &CellComplex<D>,
+        constraints: &Constraints<D>,
+        subdomains: usize,
+    ) -> Self {
+        let (row, n, triplets) = laplacian(complex, constraints);
+        let l = Laplacian::from_lower(n, &triplets);
+        let split = Subdomains::split(complex, &row, subdomains);
+        let solver = Schwarz::new(&l, &split, schwarz::OVERLAP, schwarz::aggregate_size(n))
+            .map(|m| Solver::Subdomains(Box::new((l, m))));
+        Self { row, n, solver }
     }
 
     /// Whether the Laplacian was factored (it is singular where a free part has nothing
     /// holding its translation).
     pub fn is_factored(&self) -> bool {
-        self.factor.is_some()
+        self.solver.is_some()
     }
 
     /// Sets the position of every free cell to its optimum for the current rotations (and the
@@ -96,7 +96,7 @@ impl Positions {
         motions: &mut [Motion<D>],
         targets_to: &[Vect<D>],
     ) {
-        let Some(factor) = &self.factor else {
+        let Some(solver) = &self.solver else {
             return;
         };
         let mut rhs = Mat::<f64>::zeros(self.n, D);
@@ -142,7 +142,26 @@ impl Positions {
                 );
             }
         }
-        let x = crate::with_faer(|| factor.solve(&rhs));
+        let x = match solver {
+            Solver::Factor(factor) => crate::with_faer(|| factor.solve(&rhs)),
+            Solver::Subdomains(system) => {
+                let (l, m) = &**system;
+                let b: Vec<f64> = (0..self.n * D)
+                    .map(|k| rhs[(k % self.n, k / self.n)])
+                    .collect();
+                // From the positions as they are: near the minimum they change little.
+                let mut x = vec![0.0; self.n * D];
+                for (c, r) in self.row.iter().enumerate() {
+                    if let Some(r) = r {
+                        for a in 0..D {
+                            x[a * self.n + *r as usize] = motions[c].pos[a];
+                        }
+                    }
+                }
+                schwarz::solve(l, m, &b, &mut x, SUBDOMAIN_TOLERANCE, 10 * self.n.max(100));
+                Mat::<f64>::from_fn(self.n, D, |i, a| x[a * self.n + i])
+            }
+        };
         if !x.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
             return;
         }
@@ -154,31 +173,13 @@ impl Positions {
     }
 }
 
-/// The sparse Cholesky factor of the `n × n` matrix given by lower-triangle `triplets`.
-fn factor(n: usize, triplets: &[Triplet<usize, usize, f64>]) -> Option<Llt<usize, f64>> {
-    let m = SparseColMat::try_new_from_triplets(n, n, triplets).ok()?;
-    crate::with_faer(|| {
-        let symbolic = SymbolicLlt::try_new(m.symbolic(), Side::Lower).ok()?;
-        Llt::try_new_with_symbolic(symbolic, m.as_ref(), Side::Lower).ok()
-    })
-}
-
-fn pair_weight<const D: usize>(
-    constraints: &Constraints<D>,
-    weight: f64,
-    i: usize,
-    j: usize,
-) -> f64 {
-    (constraints.stiffness[i] * constraints.stiffness[j]).sqrt() * weight
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::cells::{BuildParams, build};
     use crate::memory::Budget;
     use crate::rigid::{Dim, Rigid};
-    use crate::solve::constraints::TargetLocal;
+    use crate::solve::constraints::{Role, TargetLocal};
     use crate::solve::total_energy;
     use rand::{Rng, SeedableRng, rngs::StdRng};
 

@@ -3,7 +3,8 @@
 //! full load, from rest and from Newton's minimum at 95 % of the load (a warm start, as a drag's
 //! next frame or a last load step starts): the time to factor, the time per iteration, and the iterations and
 //! seconds each takes to come within 1e-3 and 1e-6 (relative) of Newton's minimum energy,
-//! local-global plain and with Anderson acceleration (m = 5).
+//! local-global plain and with Anderson acceleration (m = 5), and with the global step solved
+//! by 4 and 16 subdomains (`solve::schwarz`, the solve spread over processes, here in one).
 //!
 //! `cargo run --release -p rigidcells-tools --bin local_global [scene …]`; scenes:
 //! - `tube`: the closed 480k-vertex tube (`data_gen::tube`) at about 5,500 cells, its first
@@ -175,11 +176,12 @@ fn compare(
         &seconds,
         best,
     );
-    for anderson in [0, 5] {
+    for (anderson, subdomains) in [(0, 0), (5, 0), (5, 4), (5, 16)] {
         let params = LocalGlobalParams {
             max_iterations: iterations,
             tolerance: 0.0,
             anderson,
+            subdomains,
         };
         let (_, lg) = solve::minimize_local_global(complex, constraints, start, &params);
         let monotone = lg.energies.windows(2).all(|w| w[1] <= w[0]);
@@ -190,10 +192,14 @@ fn compare(
             per(lg.seconds_global),
             per(lg.seconds_energy)
         );
+        let by = match subdomains {
+            0 => String::new(),
+            k => format!(", the global step by {k} subdomains"),
+        };
         let name = match anderson {
-            0 => format!("local-global ({split})"),
+            0 => format!("local-global ({split}{by})"),
             m => format!(
-                "local-global + Anderson m={m} ({} kept; {split})",
+                "local-global + Anderson m={m} ({} kept; {split}{by})",
                 lg.accelerated
             ),
         };

@@ -1,0 +1,526 @@
+//! The global step's system solved by subdomains: conjugate gradients preconditioned by a
+//! two-level additive Schwarz method. This is the global half of a local-global solve spread
+//! over processes or machines, each holding its subdomain's rows; here the subdomains are
+//! solved in one process (`LocalGlobalParams::subdomains`), which shows that the split solve
+//! reaches the same minimum and measures its iterations.
+//!
+//! The local-global solver's global step solves `L p = b` with `L` the weighted graph Laplacian
+//! of the free cells ([`Laplacian`]): one scalar matrix for the `D` coordinates, constant
+//! over an edit. One process factors it whole. Split over subdomains, each holds only its own
+//! rows, and the system is solved iteratively with a preconditioner that each subdomain applies
+//! alone, plus one small problem they share:
+//!
+//! ```text
+//! M⁻¹ r = Σ_k R_kᵀ A_k⁻¹ R_k r  +  P A_0⁻¹ Pᵀ r,      A_0 = Pᵀ L P
+//! ```
+//!
+//! - **Subdomains** ([`Subdomains::split`]): the free cells in Morton order of their lower
+//!   corners on the finest grid, cut into `k` runs of equal length — compact pieces of space,
+//!   each a run of the space-filling curve.
+//! - **Local solves**: `R_k` takes the rows of subdomain `k` grown by [`OVERLAP`] layer of
+//!   neighbors; `A_k = R_k L R_kᵀ`, a principal block of `L`, is factored once, by whoever holds
+//!   the subdomain.
+//! - **Coarse space**: with local solves alone, the iterations grow with the number of
+//!   subdomains (a correction crosses one subdomain per iteration). The coarse space carries
+//!   the Laplacian's near-null vectors, the constants, across all of them: aggregates of
+//!   [`aggregate_size`] consecutive cells of each subdomain's Morton run, their indicators
+//!   smoothed by one damped Jacobi step (`P = (I − ⅔ D⁻¹ L) P₀`, smoothed aggregation), and
+//!   `A_0` factored once by one process.
+//!
+//! `M⁻¹` is symmetric positive definite wherever `L` is (each term is), so conjugate gradients
+//! apply. Measured by `tools/src/bin/schwarz.rs` on the hilly 1 km × 200 m strip (its west end
+//! fixed, a random right-hand side solved to 1e-8; BENCHMARKS.md §7), the iterations from 4 to 16
+//! subdomains: 50 → 63 at 2.5 m (74,717 free cells) and 52 → 64 at 1.25 m (388,638); with the
+//! aggregates' plain indicators 66 → 90, and with the coarse correction applied before and
+//! after the local solves (the balanced form) 56 → 81 at twice the work an iteration. A second
+//! layer of overlap changes them by −8 to +3 %. One process factoring the whole matrix is
+//! far faster (3.1 s to factor and 0.4 s to solve at 1.25 m, against 13 s of iterations): the
+//! split is for a solve whose matrix one process cannot hold.
+
+use faer::prelude::*;
+use faer::sparse::Triplet;
+use faer::sparse::linalg::solvers::Llt;
+use rayon::prelude::*;
+
+use super::laplacian::{Laplacian, factor};
+use crate::cells::CellComplex;
+
+/// Layers of neighbors each subdomain's block grows by.
+pub const OVERLAP: usize = 1;
+
+/// Cells per coarse aggregate for `n` free cells: 16, or more where the coarse problem would
+/// pass [`COARSE_MAX`] unknowns.
+pub fn aggregate_size(n: usize) -> usize {
+    16.max(n.div_ceil(COARSE_MAX))
+}
+
+/// Coarse unknowns at most (the one problem every subdomain shares, factored by one process).
+pub const COARSE_MAX: usize = 50_000;
+
+/// The free cells split into subdomains.
+pub struct Subdomains {
+    /// Each subdomain's rows, ascending.
+    pub parts: Vec<Vec<u32>>,
+    /// Rows in Morton order: each subdomain is a run of it, and so is each coarse aggregate.
+    order: Vec<u32>,
+    /// Where each subdomain's run starts in `order` (and the end).
+    runs: Vec<usize>,
+}
+
+impl Subdomains {
+    /// `k` subdomains of the free cells (`row` as [`Laplacian::of`] gives it): runs of equal
+    /// length of the cells' Morton order (their lower corners on the finest grid).
+    pub fn split<const D: usize>(complex: &CellComplex<D>, row: &[Option<u32>], k: usize) -> Self {
+        let max = complex.grid.max_level as u32;
+        let mut keyed: Vec<(u64, u32)> = complex
+            .cells
+            .iter()
+            .zip(row)
+            .filter_map(|(cell, r)| {
+                let shift = max - cell.key.level as u32;
+                let corner = cell.key.coord.map(|c| c << shift);
+                r.map(|r| (crate::cells::morton_code(&corner), r))
+            })
+            .collect();
+        keyed.par_sort_unstable();
+        let order: Vec<u32> = keyed.into_iter().map(|(_, r)| r).collect();
+        let n = order.len();
+        let k = k.clamp(1, n.max(1));
+        let runs: Vec<usize> = (0..=k).map(|p| p * n / k).collect();
+        let parts = runs
+            .windows(2)
+            .map(|w| {
+                let mut rows = order[w[0]..w[1]].to_vec();
+                rows.sort_unstable();
+                rows
+            })
+            .collect();
+        Self { parts, order, runs }
+    }
+}
+
+/// One subdomain's grown rows and the factor of their block.
+struct Block {
+    rows: Vec<u32>,
+    factor: Llt<usize, f64>,
+}
+
+/// The two-level additive Schwarz preconditioner of a [`Laplacian`] (see the module docs).
+pub struct Schwarz {
+    blocks: Vec<Block>,
+    /// Rows.
+    n: usize,
+    prolongation: Prolongation,
+    coarse: Llt<usize, f64>,
+    coarse_n: usize,
+}
+
+impl Schwarz {
+    /// Factors each subdomain's block, grown by `overlap` layers of neighbors, and the coarse
+    /// problem on aggregates of `aggregate` consecutive cells of each subdomain's run. `None`
+    /// where a block or the coarse problem is not positive definite (`L` is singular: a free
+    /// part with nothing holding its translation).
+    pub fn new(
+        l: &Laplacian,
+        subdomains: &Subdomains,
+        overlap: usize,
+        aggregate: usize,
+    ) -> Option<Self> {
+        let blocks = subdomains
+            .parts
+            .par_iter()
+            .map(|part| block(l, grown(l, part, overlap)))
+            .collect::<Option<Vec<_>>>()?;
+        let size = aggregate.max(1);
+        let mut of = vec![0u32; l.n];
+        let mut coarse_n = 0usize;
+        for w in subdomains.runs.windows(2) {
+            for (k, &r) in subdomains.order[w[0]..w[1]].iter().enumerate() {
+                of[r as usize] = (coarse_n + k / size) as u32;
+            }
+            coarse_n += (w[1] - w[0]).div_ceil(size);
+        }
+        let prolongation = smoothed(l, &of);
+        let lower = prolongation.galerkin(l);
+        let coarse = factor(coarse_n, &lower)?;
+        Some(Self {
+            blocks,
+            n: l.n,
+            prolongation,
+            coarse,
+            coarse_n,
+        })
+    }
+
+    /// Subdomains.
+    pub fn subdomains(&self) -> usize {
+        self.blocks.len()
+    }
+
+    /// Coarse unknowns.
+    pub fn coarse_len(&self) -> usize {
+        self.coarse_n
+    }
+
+    /// Rows of the largest grown subdomain block (what one process factors).
+    pub fn largest_block(&self) -> usize {
+        self.blocks.iter().map(|b| b.rows.len()).max().unwrap_or(0)
+    }
+
+    /// `z = M⁻¹ r` for `D` columns of `n` each.
+    pub fn apply(&self, r: &[f64], z: &mut [f64], d: usize) {
+        let q = self.coarse(r, d);
+        let y = self.local(r, d);
+        for k in 0..r.len() {
+            z[k] = q[k] + y[k];
+        }
+    }
+
+    /// `Σ_k R_kᵀ A_k⁻¹ R_k r`: every subdomain's solve.
+    fn local(&self, r: &[f64], d: usize) -> Vec<f64> {
+        let n = self.n;
+        let solved: Vec<Mat<f64>> = self
+            .blocks
+            .par_iter()
+            .map(|b| {
+                let mut x =
+                    Mat::<f64>::from_fn(b.rows.len(), d, |i, a| r[a * n + b.rows[i] as usize]);
+                crate::with_faer(|| b.factor.solve_in_place(x.as_mut()));
+                x
+            })
+            .collect();
+        let mut z = vec![0.0; n * d];
+        for (b, x) in self.blocks.iter().zip(&solved) {
+            for a in 0..d {
+                for (i, &row) in b.rows.iter().enumerate() {
+                    z[a * n + row as usize] += x[(i, a)];
+                }
+            }
+        }
+        z
+    }
+
+    /// `R_0ᵀ A_0⁻¹ R_0 r`: the coarse problem's solve.
+    fn coarse(&self, r: &[f64], d: usize) -> Vec<f64> {
+        let n = self.n;
+        let p = &self.prolongation;
+        let mut x0 = Mat::<f64>::zeros(self.coarse_n, d);
+        for a in 0..d {
+            for i in 0..n {
+                for (g, w) in p.row(i) {
+                    x0[(g, a)] += w * r[a * n + i];
+                }
+            }
+        }
+        crate::with_faer(|| self.coarse.solve_in_place(x0.as_mut()));
+        (0..n * d)
+            .map(|k| p.row(k % n).map(|(g, w)| w * x0[(g, k / n)]).sum())
+            .collect()
+    }
+}
+
+/// The coarse space's basis, row by row: `P = R_0ᵀ`.
+struct Prolongation {
+    start: Vec<usize>,
+    to: Vec<u32>,
+    weight: Vec<f64>,
+}
+
+impl Prolongation {
+    fn row(&self, i: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
+        let range = self.start[i]..self.start[i + 1];
+        self.to[range.clone()]
+            .iter()
+            .zip(&self.weight[range])
+            .map(|(&g, &w)| (g as usize, w))
+    }
+
+    /// The lower triangle of `Pᵀ L P`.
+    fn galerkin(&self, l: &Laplacian) -> Vec<Triplet<usize, usize, f64>> {
+        use rustc_hash::FxHashMap;
+        // L P, row by row, then Pᵀ (L P) gathered by coarse row.
+        let mut sums: FxHashMap<(u32, u32), f64> = FxHashMap::default();
+        let mut lp: FxHashMap<u32, f64> = FxHashMap::default();
+        for i in 0..l.n {
+            lp.clear();
+            for (j, v) in l.row(i) {
+                for (g, w) in self.row(j) {
+                    *lp.entry(g as u32).or_default() += v * w;
+                }
+            }
+            for (a, wa) in self.row(i) {
+                for (&b, &x) in &lp {
+                    if a as u32 >= b {
+                        *sums.entry((a as u32, b)).or_default() += wa * x;
+                    }
+                }
+            }
+        }
+        sums.into_iter()
+            .map(|((a, b), v)| Triplet::new(a as usize, b as usize, v))
+            .collect()
+    }
+}
+
+/// The aggregates' indicators smoothed by one damped Jacobi step, `P = (I − ω D⁻¹ L) P₀` with
+/// `ω = 2/3`.
+fn smoothed(l: &Laplacian, of: &[u32]) -> Prolongation {
+    use rustc_hash::FxHashMap;
+    let mut start = vec![0usize];
+    let (mut to, mut weight) = (Vec::new(), Vec::new());
+    let mut row: FxHashMap<u32, f64> = FxHashMap::default();
+    for i in 0..l.n {
+        row.clear();
+        let diag = l.row(i).find(|&(j, _)| j == i).map_or(1.0, |(_, v)| v);
+        let omega = 2.0 / 3.0 / diag;
+        *row.entry(of[i]).or_default() += 1.0;
+        for (j, v) in l.row(i) {
+            *row.entry(of[j]).or_default() -= omega * v;
+        }
+        let mut entries: Vec<(u32, f64)> = row
+            .iter()
+            .map(|(&g, &w)| (g, w))
+            .filter(|e| e.1 != 0.0)
+            .collect();
+        entries.sort_unstable_by_key(|e| e.0);
+        for (g, w) in entries {
+            to.push(g);
+            weight.push(w);
+        }
+        start.push(to.len());
+    }
+    Prolongation { start, to, weight }
+}
+
+/// `part` grown by `layers` layers of its rows' neighbors in `l`, ascending.
+fn grown(l: &Laplacian, part: &[u32], layers: usize) -> Vec<u32> {
+    let mut rows = part.to_vec();
+    let mut front = part.to_vec();
+    for _ in 0..layers {
+        let mut next: Vec<u32> = front
+            .iter()
+            .flat_map(|&r| l.row(r as usize).map(|(c, _)| c as u32))
+            .filter(|c| rows.binary_search(c).is_err())
+            .collect();
+        next.sort_unstable();
+        next.dedup();
+        rows.extend_from_slice(&next);
+        rows.sort_unstable();
+        front = next;
+    }
+    rows
+}
+
+/// The factor of `l`'s principal block on `rows` (ascending).
+fn block(l: &Laplacian, rows: Vec<u32>) -> Option<Block> {
+    let mut lower = Vec::new();
+    for (i, &r) in rows.iter().enumerate() {
+        for (c, v) in l.row(r as usize) {
+            if let Ok(j) = rows.binary_search(&(c as u32))
+                && j <= i
+            {
+                lower.push(Triplet::new(i, j, v));
+            }
+        }
+    }
+    let factor = factor(rows.len(), &lower)?;
+    Some(Block { rows, factor })
+}
+
+/// `L` factored whole, as one process solves the global step: the reference the subdomains'
+/// solve is measured against.
+pub struct Factored {
+    factor: Llt<usize, f64>,
+    n: usize,
+}
+
+impl Factored {
+    /// The factor of `l`; `None` where `l` is singular.
+    pub fn new(l: &Laplacian) -> Option<Self> {
+        let lower: Vec<_> = (0..l.n)
+            .flat_map(|r| {
+                l.row(r)
+                    .filter(move |&(c, _)| c <= r)
+                    .map(move |(c, v)| Triplet::new(r, c, v))
+            })
+            .collect();
+        factor(l.n, &lower).map(|factor| Self { factor, n: l.n })
+    }
+
+    /// `L⁻¹ b` for `b` of `D` columns of `n` each (column after column).
+    pub fn solve(&self, b: &[f64]) -> Vec<f64> {
+        let n = self.n;
+        let d = b.len() / n.max(1);
+        let mut x = Mat::<f64>::from_fn(n, d, |i, a| b[a * n + i]);
+        crate::with_faer(|| self.factor.solve_in_place(x.as_mut()));
+        (0..n * d).map(|k| x[(k % n, k / n)]).collect()
+    }
+}
+
+/// What [`solve`] did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Solved {
+    /// Conjugate-gradient iterations (the most any column took).
+    pub iterations: usize,
+    /// The largest relative residual `|b − L x| / |b|` over the columns at the end.
+    pub residual: f64,
+}
+
+/// Solves `L x = b` (`D` columns of `n` each, column after column) by conjugate gradients
+/// preconditioned by `m`, from `x` as given, until every column's residual is at most
+/// `tolerance` of its right-hand side (or `max_iterations`).
+pub fn solve(
+    l: &Laplacian,
+    m: &Schwarz,
+    b: &[f64],
+    x: &mut [f64],
+    tolerance: f64,
+    max_iterations: usize,
+) -> Solved {
+    let n = l.n;
+    let d = b.len() / n.max(1);
+    let dot = |u: &[f64], v: &[f64], a: usize| -> f64 {
+        u[a * n..(a + 1) * n]
+            .iter()
+            .zip(&v[a * n..(a + 1) * n])
+            .map(|(p, q)| p * q)
+            .sum()
+    };
+    let mut r = vec![0.0; n * d];
+    l.mul(x, &mut r);
+    r.iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
+    let norm_b: Vec<f64> = (0..d)
+        .map(|a| dot(b, b, a).sqrt().max(f64::MIN_POSITIVE))
+        .collect();
+    let relative = |r: &[f64]| -> f64 {
+        (0..d)
+            .map(|a| dot(r, r, a).sqrt() / norm_b[a])
+            .fold(0.0, f64::max)
+    };
+    let mut z = vec![0.0; n * d];
+    m.apply(&r, &mut z, d);
+    let mut p = z.clone();
+    let mut rz: Vec<f64> = (0..d).map(|a| dot(&r, &z, a)).collect();
+    let mut q = vec![0.0; n * d];
+    let mut iterations = 0;
+    while iterations < max_iterations && relative(&r) > tolerance {
+        l.mul(&p, &mut q);
+        for a in 0..d {
+            let pq = dot(&p, &q, a);
+            let alpha = if pq > 0.0 { rz[a] / pq } else { 0.0 };
+            let s = a * n..(a + 1) * n;
+            x[s.clone()]
+                .iter_mut()
+                .zip(&p[s.clone()])
+                .for_each(|(x, p)| *x += alpha * p);
+            r[s.clone()]
+                .iter_mut()
+                .zip(&q[s])
+                .for_each(|(r, q)| *r -= alpha * q);
+        }
+        m.apply(&r, &mut z, d);
+        for a in 0..d {
+            let next = dot(&r, &z, a);
+            let beta = if rz[a] > 0.0 { next / rz[a] } else { 0.0 };
+            rz[a] = next;
+            let s = a * n..(a + 1) * n;
+            p[s.clone()]
+                .iter_mut()
+                .zip(&z[s])
+                .for_each(|(p, z)| *p = z + beta * *p);
+        }
+        iterations += 1;
+    }
+    Solved {
+        iterations,
+        residual: relative(&r),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cells::{BuildParams, build};
+    use crate::memory::Budget;
+    use crate::rigid::Vect;
+    use crate::solve::constraints::{Constraints, Role};
+    use rand::{Rng, SeedableRng, rngs::StdRng};
+
+    /// A plate of cells over a wavy ground, its west end fixed: the global step's matrix.
+    fn plate() -> (Laplacian, CellComplex<3>, Vec<Option<u32>>) {
+        let mut rng = StdRng::seed_from_u64(11);
+        let pts: Vec<Vect<3>> = (0..60_000)
+            .map(|_| {
+                let (x, y) = (rng.random_range(0.0..40.0), rng.random_range(0.0..10.0));
+                Vect::<3>::new(x, y, (0.3 * x).sin() + 0.2 * rng.random_range(0.0..1.0))
+            })
+            .collect();
+        let params = BuildParams {
+            cell_size: Some(0.5),
+            ..Default::default()
+        };
+        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
+        let n = complex.len();
+        let roles = complex
+            .cells
+            .iter()
+            .map(|c| {
+                if c.center.x + complex.grid.origin.x < 2.0 {
+                    Role::Fixed
+                } else {
+                    Role::Free
+                }
+            })
+            .collect();
+        let constraints = Constraints {
+            roles,
+            handles: vec![],
+            pins: vec![],
+            targets: vec![],
+            stiffness: vec![1.0; n],
+            origin: complex.grid.origin,
+            warnings: vec![],
+            trend: Default::default(),
+            trend_kind: crate::spec::Trend::None,
+        };
+        let (l, row) = Laplacian::of(&complex, &constraints);
+        (l, complex, row)
+    }
+
+    /// The preconditioned solve equals the factored one, and its iterations barely grow from 4
+    /// subdomains to 16 (the coarse space's work); without the coarse space they would grow.
+    #[test]
+    fn schwarz_solves_as_the_factor_does_with_iterations_flat_in_the_subdomains() {
+        let (l, complex, row) = plate();
+        let n = l.n;
+        assert!(n > 2000, "{n} free cells");
+        let mut rng = StdRng::seed_from_u64(3);
+        let b: Vec<f64> = (0..3 * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let exact = Factored::new(&l).unwrap().solve(&b);
+        let scale = exact.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+        let mut iterations = Vec::new();
+        for k in [4, 16] {
+            let sub = Subdomains::split(&complex, &row, k);
+            assert_eq!(sub.parts.iter().map(Vec::len).sum::<usize>(), n);
+            let m = Schwarz::new(&l, &sub, 1, 64).unwrap();
+            let mut x = vec![0.0; 3 * n];
+            let solved = solve(&l, &m, &b, &mut x, 1e-10, 500);
+            assert!(solved.residual <= 1e-10, "{solved:?}");
+            let error = x
+                .iter()
+                .zip(&exact)
+                .map(|(x, e)| (x - e).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                error <= 1e-7 * scale,
+                "{k} subdomains: error {error} of {scale}"
+            );
+            eprintln!("{k}: {solved:?} coarse {}", m.coarse_len());
+            iterations.push(solved.iterations);
+        }
+        assert!(
+            iterations[1] as f64 <= 1.5 * iterations[0] as f64,
+            "iterations at 4 and 16 subdomains: {iterations:?}"
+        );
+    }
+}
