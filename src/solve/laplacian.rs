@@ -119,6 +119,9 @@ impl Laplacian {
     /// `y = L x`, for `x` and `y` of `D` columns of `n` each (column after column).
     pub fn mul(&self, x: &[f64], y: &mut [f64]) {
         let n = self.n;
+        if n == 0 {
+            return;
+        }
         y.par_chunks_mut(n).enumerate().for_each(|(a, col)| {
             let x = &x[a * n..(a + 1) * n];
             for (r, out) in col.iter_mut().enumerate() {

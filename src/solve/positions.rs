@@ -11,8 +11,10 @@
 //! and a soft target adds `λ |R_i (f − c_i) + p_i − t|²`. The minimizer solves `L p = b` with
 //! `L` the graph Laplacian of the pair weights `s_ij w_ij` over the free cells (plus the target
 //! weights on the diagonal) — one scalar matrix for all `D` coordinates, whose entries do not
-//! depend on the motions. It is factored once per [`Positions`] (per topology) and every call of
-//! [`Positions::project`] is one back substitution with `D` right-hand sides.
+//! depend on the motions (`laplacian.rs`). It is factored once per [`Positions`] (per topology)
+//! and every call of [`Positions::project`] is one back substitution with `D` right-hand sides;
+//! or, split into subdomains (`Positions::by_subdomains`, [`super::schwarz`]), each call is a
+//! run of preconditioned conjugate gradients from the current positions.
 //!
 //! Why: Gauss-Newton linearizes rotations and positions together, so a step with a poor
 //! rotation update also leaves the positions off. Replacing the positions of every trial by
@@ -46,23 +48,37 @@ enum Solver {
     Factor(Llt<usize, f64>),
     /// By subdomains, each factoring its own block ([`super::schwarz`]): what a solve spread
     /// over processes does, here in one.
-    Subdomains(Box<(Laplacian, Schwarz)>),
+    Subdomains(Box<Split>),
+}
+
+/// The system and its subdomains' preconditioner.
+struct Split {
+    matrix: Laplacian,
+    preconditioner: Schwarz,
+}
+
+/// Whether a system of these lower-triangle entries has rows, one of them held (a positive
+/// diagonal): without, there is nothing to solve, or nothing holds the free cells.
+fn held(lower: &[faer::sparse::Triplet<usize, usize, f64>]) -> bool {
+    lower.iter().any(|t| t.row == t.col && t.val > 0.0)
 }
 
 /// Relative residual to which the subdomains' conjugate gradients solve the global step: the
 /// step must be a block minimization to near rounding for the energy never to rise.
 const SUBDOMAIN_TOLERANCE: f64 = 1e-11;
 
+/// Conjugate-gradient iterations at most for one global step by subdomains (from rest on the
+/// 389k-cell strip the solve takes about 64 to 1e-8).
+const SUBDOMAIN_ITERATIONS: usize = 1000;
+
 impl Positions {
     /// Factors the Laplacian of the free cells. A singular system (a free part with nothing
     /// holding its translation) leaves the projection off: [`Self::project`] does nothing.
     pub fn new<const D: usize>(complex: &CellComplex<D>, constraints: &Constraints<D>) -> Self {
         let (row, n, triplets) = laplacian(complex, constraints);
-        let solver = if triplets.iter().any(|t| t.row == t.col && t.val > 0.0) {
-            factor(n, &triplets).map(Solver::Factor)
-        } else {
-            None
-        };
+        let solver = held(&triplets)
+            .then(|| factor(n, &triplets).map(Solver::Factor))
+            .flatten();
         Self { row, n, solver }
     }
 
@@ -74,15 +90,25 @@ impl Positions {
         subdomains: usize,
     ) -> Self {
         let (row, n, triplets) = laplacian(complex, constraints);
-        let l = Laplacian::from_lower(n, &triplets);
-        let split = Subdomains::split(complex, &row, subdomains);
-        let solver = Schwarz::new(&l, &split, schwarz::OVERLAP, schwarz::aggregate_size(n))
-            .map(|m| Solver::Subdomains(Box::new((l, m))));
+        let solver = held(&triplets)
+            .then(|| {
+                let matrix = Laplacian::from_lower(n, &triplets);
+                let split = Subdomains::split(complex, &row, subdomains);
+                let aggregate = schwarz::aggregate_size(n);
+                Schwarz::new(&matrix, &split, schwarz::OVERLAP, aggregate).map(|preconditioner| {
+                    Solver::Subdomains(Box::new(Split {
+                        matrix,
+                        preconditioner,
+                    }))
+                })
+            })
+            .flatten();
         Self { row, n, solver }
     }
 
-    /// Whether the Laplacian was factored (it is singular where a free part has nothing
-    /// holding its translation).
+    /// Whether the system can be solved: it has free cells and was factored (whole, or each
+    /// subdomain's block and the coarse problem); a free part with nothing holding its
+    /// translation makes it singular.
     pub fn is_factored(&self) -> bool {
         self.solver.is_some()
     }
@@ -144,8 +170,8 @@ impl Positions {
         }
         let x = match solver {
             Solver::Factor(factor) => crate::with_faer(|| factor.solve(&rhs)),
-            Solver::Subdomains(system) => {
-                let (l, m) = &**system;
+            Solver::Subdomains(split) => {
+                let (l, m) = (&split.matrix, &split.preconditioner);
                 let b: Vec<f64> = (0..self.n * D)
                     .map(|k| rhs[(k % self.n, k / self.n)])
                     .collect();
@@ -158,7 +184,7 @@ impl Positions {
                         }
                     }
                 }
-                schwarz::solve(l, m, &b, &mut x, SUBDOMAIN_TOLERANCE, 10 * self.n.max(100));
+                schwarz::solve(l, m, &b, &mut x, SUBDOMAIN_TOLERANCE, SUBDOMAIN_ITERATIONS);
                 Mat::<f64>::from_fn(self.n, D, |i, a| x[a * self.n + i])
             }
         };
