@@ -475,7 +475,6 @@ mod tests {
             ..Default::default()
         };
         let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
-        let n = complex.len();
         let roles = complex
             .cells
             .iter()
@@ -487,19 +486,23 @@ mod tests {
                 }
             })
             .collect();
-        let constraints = Constraints {
+        let (l, row) = Laplacian::of(&complex, &held(&complex, roles));
+        (l, complex, row)
+    }
+
+    /// Constraints of these roles alone.
+    fn held(complex: &CellComplex<3>, roles: Vec<Role>) -> Constraints<3> {
+        Constraints {
+            stiffness: vec![1.0; roles.len()],
             roles,
             handles: vec![],
             pins: vec![],
             targets: vec![],
-            stiffness: vec![1.0; n],
             origin: complex.grid.origin,
             warnings: vec![],
             trend: Default::default(),
             trend_kind: crate::spec::Trend::None,
-        };
-        let (l, row) = Laplacian::of(&complex, &constraints);
-        (l, complex, row)
+        }
     }
 
     /// The preconditioned solve equals the factored one, and its iterations barely grow from 4
@@ -604,17 +607,7 @@ mod tests {
     fn no_free_cell_leaves_nothing_to_solve() {
         let (_, complex, _) = plate();
         let n = complex.len();
-        let constraints = Constraints {
-            roles: vec![Role::Fixed; n],
-            handles: vec![],
-            pins: vec![],
-            targets: vec![],
-            stiffness: vec![1.0; n],
-            origin: complex.grid.origin,
-            warnings: vec![],
-            trend: Default::default(),
-            trend_kind: crate::spec::Trend::None,
-        };
+        let constraints = held(&complex, vec![Role::Fixed; n]);
         let (l, row) = Laplacian::of(&complex, &constraints);
         assert_eq!(l.n, 0);
         assert!(
