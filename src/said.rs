@@ -67,6 +67,8 @@ options! {
     Inside => "inside",
     /// How the Gauss-Newton systems are solved (`--solver`).
     Solver => "solver",
+    /// The global step solved by subdomains (`--subdomains`).
+    Subdomains => "subdomains",
     /// The move test of each load step (`--tolerance`).
     Tolerance => "tolerance",
     /// What parts no constraint reaches do (`--loose-parts`).

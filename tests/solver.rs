@@ -6,7 +6,7 @@ use rigidcells::Budget;
 use rigidcells::Silent;
 use rigidcells::internal::cells::{BuildParams, CellComplex, build};
 use rigidcells::internal::rigid::{Dim, Motion, Rigid, Vect};
-use rigidcells::internal::solve::{self, Role, SolveParams, SolverInfo};
+use rigidcells::internal::solve::{self, Role, SolveParams, SolverInfo, schwarz};
 use rigidcells::parse_spec;
 
 /// Dense samples on the surface of an ellipsoid-like blob with semi-axes `radii`.
@@ -594,6 +594,90 @@ fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
     assert!(
         last(&newton) < last(&gauss) && newton.iterations < gauss.iterations,
         "Newton {newton:?} vs Gauss-Newton {gauss:?}"
+    );
+}
+
+/// Workers that factor and solve the blocks sent to them in this process, counting the
+/// blocks: the seam a process pool plugs into.
+struct Counting(std::sync::atomic::AtomicUsize);
+
+struct Factors(Vec<schwarz::BlockFactor>);
+
+impl schwarz::Workers for Counting {
+    fn factor(
+        &self,
+        blocks: Vec<schwarz::Block>,
+    ) -> rigidcells::Result<Box<dyn schwarz::BlockSolves>> {
+        self.0
+            .fetch_add(blocks.len(), std::sync::atomic::Ordering::Relaxed);
+        Ok(Box::new(Factors(
+            blocks.iter().map(|b| b.factor().unwrap()).collect(),
+        )))
+    }
+}
+
+impl schwarz::BlockSolves for Factors {
+    fn solve(&self, rhs: Vec<Vec<f64>>) -> rigidcells::Result<Vec<Vec<f64>>> {
+        Ok(self
+            .0
+            .iter()
+            .zip(&rhs)
+            .map(|(f, r)| f.solve(r).unwrap())
+            .collect())
+    }
+}
+
+/// Local-global iterations with the global step by subdomains reach the default solve's
+/// minimum, with the same motions whether the blocks are solved here or by workers; the
+/// subdomains with a Gauss-Newton solver are refused.
+#[test]
+fn subdomains_reach_the_minimum_here_and_on_workers() {
+    let (complex, constraints) = bent_bar(
+        "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]",
+    );
+    let default = solve_bar(&complex, &constraints, &SolveParams::default()).unwrap();
+    let split = SolveParams {
+        subdomains: 4,
+        ..Default::default()
+    };
+    let here = solve_bar(&complex, &constraints, &split).unwrap();
+    monotone(&here.info);
+    assert_eq!(here.info.linear_solver(), "local-global");
+    let (e, e0) = (
+        *here.info.energies.last().unwrap(),
+        *default.info.energies.last().unwrap(),
+    );
+    assert!(
+        (e - e0).abs() <= 1e-6 * e0,
+        "by subdomains {e}, default {e0}"
+    );
+    let workers = std::sync::Arc::new(Counting(Default::default()));
+    let registration = schwarz::register(workers.clone());
+    let there = solve_bar(
+        &complex,
+        &constraints,
+        &SolveParams {
+            workers: Some(registration.id()),
+            ..split
+        },
+    )
+    .unwrap();
+    assert_eq!(there.motions, here.motions);
+    assert!(workers.0.load(std::sync::atomic::Ordering::Relaxed) >= 4);
+    let refused = solve_bar(
+        &complex,
+        &constraints,
+        &SolveParams {
+            method: solve::Method::Direct,
+            ..split
+        },
+    )
+    .unwrap_err();
+    assert_eq!(refused.exit_code(), 4);
+    assert!(
+        refused.to_string().contains("--subdomains 4")
+            && refused.to_string().contains("--solver direct"),
+        "{refused}"
     );
 }
 

@@ -28,6 +28,7 @@ use rigidcells::{Outside, SavedField, Transfer};
 mod errors;
 mod observer;
 mod session;
+mod workers;
 use errors::{FormatError, TurnNotHeldError, py_err, said, said_text};
 use observer::PyObserver;
 use session::Session;
@@ -156,6 +157,10 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
             "shell" => o.shell = flag()?,
             "inside" => o.inside = named("inside", name()?, Inside::Auto)?,
             "solver" => o.solver = named("solver", name()?, Method::Auto)?,
+            "subdomains" => {
+                o.subdomains =
+                    usize::try_from(whole("a whole number of subdomains")?).unwrap_or(usize::MAX)
+            }
             "tolerance" => o.tolerance = number()?,
             "coarse_levels" => {
                 o.coarse_levels = Some(level(whole("a whole number of levels")?, 8)?)
@@ -551,9 +556,11 @@ fn chunk(chunk: Option<Bound<'_, PyAny>>) -> PyResult<usize> {
 /// `deform_file` gives on the merged file. The JSON report and the preview (seen as the `view`
 /// dict says, as for `deform_file`) are written beside the field when given, all together or
 /// none; what they and the returned dict hold is what `deform_file` gives for the merged file.
-/// Tiles in different coordinate systems are refused unless `same_crs`.
+/// Tiles in different coordinate systems are refused unless `same_crs`. With `workers` (and
+/// the option `subdomains`), the subdomains' blocks are factored and solved by that object
+/// (`workers.rs`); an exception it raises ends the call and is raised as it was.
 #[pyfunction]
-#[pyo3(signature = (inputs, save_field, spec_text, base, report=None, preview=None, view=None, chunk=None, options=None, progress=None, same_crs=false))]
+#[pyo3(signature = (inputs, save_field, spec_text, base, report=None, preview=None, view=None, chunk=None, options=None, progress=None, same_crs=false, workers=None))]
 #[allow(clippy::too_many_arguments)]
 fn solve_files<'py>(
     py: Python<'py>,
@@ -568,8 +575,14 @@ fn solve_files<'py>(
     options: Option<Bound<'py, PyDict>>,
     progress: Option<Py<PyAny>>,
     same_crs: bool,
+    workers: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let params = self::options(options.as_ref())?.params().map_err(py_err)?;
+    let workers = workers.map(|w| std::sync::Arc::new(workers::PyWorkers::new(w)));
+    let registration = workers
+        .as_ref()
+        .map(|w| rigidcells::internal::solve::schwarz::register(std::sync::Arc::clone(w) as _));
+    let params = params.with_workers(registration.as_ref().map(|r| r.id()));
     let spec = self::spec(spec_text, base)?;
     let first = inputs.first().map_or(Path::new(""), PathBuf::as_path);
     let (view, strain) = self::view(view.as_ref(), first)?;
@@ -584,6 +597,10 @@ fn solve_files<'py>(
     let observer = PyObserver::new(progress);
     let result = py
         .detach(|| pipeline::solve_files(&inputs, &spec, &params, (&outputs, same_crs), &observer));
+    drop(registration);
+    if let (Err(_), Some(raised)) = (&result, workers.and_then(|w| w.raised())) {
+        return Err(raised);
+    }
     let (_, _, report) = observer.result(result)?;
     report_dict(py, &report)
 }
@@ -770,6 +787,7 @@ fn _rigidcells(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<Field>()?;
     m.add_class::<Session>()?;
+    m.add_class::<workers::BlockFactor>()?;
     m.add_function(wrap_pyfunction!(deform, m)?)?;
     m.add_function(wrap_pyfunction!(solve, m)?)?;
     m.add_function(wrap_pyfunction!(estimate, m)?)?;

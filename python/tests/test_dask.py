@@ -1,11 +1,15 @@
-"""rigidcells.dask.apply_tiles on a LocalCluster of 2 worker processes over 16 tiles: every
-output byte-identical to the command line's `apply` of that tile."""
+"""rigidcells.dask on LocalClusters of 2 worker processes: apply_tiles over 16 tiles, every
+output byte-identical to the command line's `apply` of that tile; solve_tiles over them, the
+field of the same subdomains solved in one process, and a worker lost mid-solve leaving
+nothing written."""
 
+import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import rigidcells
@@ -72,3 +76,69 @@ def test_a_tile_the_library_refuses_is_not_run_again(tmp_path, monkeypatch):
             infos = rigidcells.dask.apply_tiles(field, [inside], tmp_path / "out", client)
     assert runs == ["outside.xyz", "gone.xyz", "gone.xyz", "inside.xyz"]
     assert infos[0]["samples"] == 50
+
+
+AUTZEN_BEND = {
+    "fixed": [{"box": {"min": [636000, 848900, 0], "max": [636300, 849600, 1000]}}],
+    "handle": [
+        {"box": {"min": [636900, 848900, 0], "max": [637200, 849600, 1000]}, "translate": [0, 0, 20]}
+    ],
+}
+
+
+# Cells of the solves on workers: few, for the test's time (each iteration of the solve is a
+# round trip to the workers).
+CELL = 40.0
+
+
+def _moved(field, points):
+    return rigidcells.Field.load(field).apply(points)
+
+
+def test_solve_tiles_on_worker_processes_gives_the_one_process_field(tmp_path):
+    """Four subdomains on two worker processes: the field of the same split solved in one
+    process, to rounding, and the minimum of the default solve (Gauss-Newton's) within a
+    thousandth of a cell and a millionth of the energy."""
+    src = SHARED / "las" / "autzen_trim.laz"
+    tiles = cut_tiles(src, tmp_path)
+    laspy = pytest.importorskip("laspy")
+    las = laspy.read(src)
+    points = np.column_stack([las.x, las.y, las.z])[::7]
+    common = dict(cell_size=CELL, progress=False)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster:
+        with distributed.Client(cluster) as client:
+            report = rigidcells.dask.solve_tiles(
+                tiles, AUTZEN_BEND, tmp_path / "dask.field", client, subdomains=4, **common
+            )
+    assert report.linear_solver == "local-global"
+    rigidcells.solve_files(tiles, AUTZEN_BEND, tmp_path / "here.field", subdomains=4, **common)
+    default = rigidcells.solve_files(tiles, AUTZEN_BEND, tmp_path / "default.field", **common)
+    dask, here, minimum = (
+        _moved(tmp_path / f"{name}.field", points) for name in ("dask", "here", "default")
+    )
+    assert np.abs(dask - here).max() <= 1e-9 * CELL
+    assert np.abs(dask - minimum).max() <= 1e-3 * CELL
+    assert abs(report.energy[-1] - default.energy[-1]) <= 1e-6 * default.energy[-1]
+    assert np.abs(dask - points).max() > 10.0  # the handle moved the east end by 20 m
+
+
+def test_a_worker_lost_mid_solve_ends_it_with_nothing_written(tmp_path):
+    src = SHARED / "las" / "autzen_trim.laz"
+    field = tmp_path / "lost.field"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster:
+        with distributed.Client(cluster) as client:
+            victim = sorted(client.scheduler_info()["workers"])[1]
+            killed = []
+
+            def progress(stage, done, total):
+                if stage.startswith("solving") and not killed:
+                    killed.append(stage)
+                    client.run(os._exit, 1, workers=[victim], on_error="ignore")
+
+            with pytest.raises(rigidcells.dask.WorkerLost, match="lost mid-solve"):
+                rigidcells.dask.solve_tiles(
+                    [src], AUTZEN_BEND, field, client, subdomains=4, cell_size=CELL,
+                    progress=progress, report=tmp_path / "lost.json",
+                )
+    assert killed
+    assert not field.exists() and not (tmp_path / "lost.json").exists()

@@ -459,6 +459,13 @@ struct CellArgs {
     /// the cells; BENCHMARKS.md says which is faster where).
     #[arg(long, value_parser = choice::<Method>(), default_value_t = Method::Auto)]
     solver: Method,
+    /// Solve by local-global iterations with each global step split into this many subdomains
+    /// of the cells (conjugate gradients with a two-level Schwarz preconditioner, each
+    /// subdomain's block factored alone): how a solve spread over processes runs, here in
+    /// one; the Python package's `rigidcells.dask.solve_tiles` gives the blocks to Dask
+    /// workers. 0: as --solver says.
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    subdomains: usize,
     /// Stop each load step at the first full Gauss-Newton step that moves no corner of any
     /// cell by more than this many finest cell sizes, or that lowers the energy by less than a
     /// millionth of it (a thousandth in the load steps before the last); 0 keeps only the
@@ -511,6 +518,7 @@ impl CellArgs {
             shell: self.shell,
             inside: self.inside,
             solver: self.solver,
+            subdomains: self.subdomains,
             tolerance: self.tolerance,
             coarse_levels: self.coarse_levels,
             loose_parts: self.loose_parts,

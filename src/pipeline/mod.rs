@@ -115,6 +115,18 @@ impl DeformParams {
         crate::estimate::check_forecast(forecast, direct, self.memory)
     }
 
+    /// These parameters with the subdomains' blocks given to `workers`
+    /// ([`crate::solve::schwarz::register`]; with the option `subdomains`).
+    pub fn with_workers(self, workers: Option<crate::solve::schwarz::WorkersId>) -> Self {
+        Self {
+            solve: SolveParams {
+                workers,
+                ..self.solve
+            },
+            ..self
+        }
+    }
+
     /// These parameters with at most `samples` samples in [`deform_file`]'s preview proxy
     /// (the fold-over check's and the report's samples among them): 1 or more.
     pub fn with_proxy_samples(self, samples: usize) -> Result<Self> {

@@ -17,7 +17,7 @@ use super::DeformParams;
 /// Every option of [`Options`], by the command line's name without its dashes (the Python
 /// package's keyword is the same with `_` for `-`): the one list the faces are checked against
 /// (the command line's flags and the Python package's keywords and stub, by tests).
-pub const OPTION_NAMES: [&str; 15] = [
+pub const OPTION_NAMES: [&str; 16] = [
     "cell-size",
     "cells",
     "min-cell-size",
@@ -25,6 +25,7 @@ pub const OPTION_NAMES: [&str; 15] = [
     "shell",
     "inside",
     "solver",
+    "subdomains",
     "tolerance",
     "coarse-levels",
     "loose-parts",
@@ -52,6 +53,9 @@ pub struct Options {
     pub inside: Inside,
     /// How the Gauss-Newton systems are solved (`--solver`).
     pub solver: Method,
+    /// Local-global iterations with the global step solved by this many subdomains
+    /// (`--subdomains`; 0: as `solver` says).
+    pub subdomains: usize,
     /// The move test of each load step, in finest cell sizes (`--tolerance`).
     pub tolerance: f64,
     /// Coarser complexes solved first (`--coarse-levels`).
@@ -81,6 +85,7 @@ impl Default for Options {
             shell: false,
             inside: Inside::Auto,
             solver: Method::Auto,
+            subdomains: 0,
             tolerance: solve::MOVE_TOLERANCE,
             coarse_levels: None,
             loose_parts: LooseParts::Carry,
@@ -188,6 +193,9 @@ impl Options {
         if self.solver != d.solver {
             flag("solver", Some(self.solver.to_string()));
         }
+        if self.subdomains != d.subdomains {
+            flag("subdomains", Some(self.subdomains.to_string()));
+        }
         if self.tolerance != d.tolerance {
             flag("tolerance", Some(format!("{:?}", self.tolerance)));
         }
@@ -228,6 +236,7 @@ impl Options {
         };
         let solve = SolveParams {
             method: self.solver,
+            subdomains: self.subdomains,
             carry_loose: self.loose_parts == LooseParts::Carry,
             move_tolerance: self.tolerance,
             coarse_levels: self.coarse_levels,
@@ -337,6 +346,7 @@ mod tests {
                 "--shell" => o.shell = true,
                 "--inside" => o.inside = value().parse().unwrap(),
                 "--solver" => o.solver = value().parse().unwrap(),
+                "--subdomains" => o.subdomains = value().parse().unwrap(),
                 "--tolerance" => o.tolerance = value().parse().unwrap(),
                 "--coarse-levels" => o.coarse_levels = Some(value().parse().unwrap()),
                 "--loose-parts" => o.loose_parts = value().parse().unwrap(),
@@ -362,7 +372,8 @@ mod tests {
             min_cell_size: Some(0.1 + 0.2),
             max_level: Some(3),
             shell: true,
-            solver: Method::Multilevel,
+            solver: Method::LocalGlobal,
+            subdomains: 4,
             tolerance: 0.05,
             coarse_levels: Some(0),
             loose_parts: LooseParts::Rest,

@@ -254,11 +254,11 @@ where
 {
     let mut motions = prolong(coarse.0, coarse.1, complex);
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params.method, budget, &cells_advice())
+        System::new(complex, constraints, params, budget, &cells_advice())
     })?;
     prescribe(complex, constraints, &mut motions, 1.0);
     let targets = targets_at(constraints, 1.0);
-    system.project_positions(complex, constraints, &mut motions, &targets);
+    system.project_positions(complex, constraints, &mut motions, &targets)?;
     observer.stage(&format!("solving {} cells", complex.len()), 1);
     let it = minimize_with(
         &mut system,

@@ -124,7 +124,14 @@ where
     };
     let fill = counts.factor.nodes_len * counts.dof / counts.free.max(1.0);
     let free = counts.free as usize;
-    let method = match params.method {
+    // Subdomains solve by local-global iterations; their blocks' factors hold about what the
+    // whole factor does.
+    let asked = if params.subdomains > 0 {
+        Method::LocalGlobal
+    } else {
+        params.method
+    };
+    let method = match asked {
         Method::Direct => Method::Direct,
         Method::Multilevel => Method::Multilevel,
         Method::LocalGlobal => Method::LocalGlobal,
@@ -432,7 +439,10 @@ mod tests {
         let system = System::new(
             &complex,
             &constraints,
-            Method::Direct,
+            &SolveParams {
+                method: Method::Direct,
+                ..Default::default()
+            },
             Budget::default(),
             &crate::said::Said::new(),
         )

@@ -238,7 +238,7 @@ impl<const D: usize> Layout<D> {
         motions: &mut [Motion<D>],
         rots: &[Mat<D>],
         to: &Destinations<D>,
-    ) {
+    ) -> Result<()> {
         for (&c, rot) in self.rotating.iter().zip(rots) {
             let c = c as usize;
             motions[c].rot = *rot;
@@ -247,7 +247,7 @@ impl<const D: usize> Layout<D> {
                     rot * (complex.cells[c].center - self.centers[c]) + to.pins[k as usize];
             }
         }
-        positions.project(complex, constraints, motions, to.targets);
+        positions.project(complex, constraints, motions, to.targets)
     }
 }
 
@@ -324,14 +324,14 @@ where
     }
     let fixed = (complex, constraints, positions);
     let (global_time, energy_time) = (std::cell::Cell::new(0.0), std::cell::Cell::new(0.0));
-    let step = |motions: &mut [Motion<D>], rots: &[Mat<D>]| {
+    let step = |motions: &mut [Motion<D>], rots: &[Mat<D>]| -> Result<f64> {
         let t = Instant::now();
-        layout.global(fixed, motions, rots, to);
+        layout.global(fixed, motions, rots, to)?;
         global_time.set(global_time.get() + t.elapsed().as_secs_f64());
         let t = Instant::now();
         let e = total_energy(complex, constraints, motions, to.targets);
         energy_time.set(energy_time.get() + t.elapsed().as_secs_f64());
-        e
+        Ok(e)
     };
     let mut history = Anderson::new(stop.anderson);
     let rots: Vec<Mat<D>> = layout
@@ -356,7 +356,7 @@ where
         if let Some(candidate) = candidate {
             let rots = unflatten::<D>(&candidate);
             let mut trial = motions.to_vec();
-            let e = step(&mut trial, &rots);
+            let e = step(&mut trial, &rots)?;
             if e < energy {
                 next = Some((trial, e, flatten(&rots), true));
             } else {
@@ -364,11 +364,14 @@ where
                 history.push(&x, &g);
             }
         }
-        let (trial, e, rots, accelerated) = next.unwrap_or_else(|| {
-            let mut trial = motions.to_vec();
-            let e = step(&mut trial, &g_rots);
-            (trial, e, g, false)
-        });
+        let (trial, e, rots, accelerated) = match next {
+            Some(next) => next,
+            None => {
+                let mut trial = motions.to_vec();
+                let e = step(&mut trial, &g_rots)?;
+                (trial, e, g, false)
+            }
+        };
         if !e.is_finite() {
             return Err(Error::solver("the energy became non-finite"));
         }
@@ -585,10 +588,11 @@ where
         pins: &pins,
         targets: &targets,
     };
-    let positions = if params.subdomains > 0 {
-        Positions::by_subdomains(complex, constraints, params.subdomains)
-    } else {
-        Positions::new(complex, constraints)
+    // Blocks solved in this process: nothing but workers can fail.
+    let positions = match params.subdomains {
+        0 => Positions::new(complex, constraints),
+        k => Positions::by_subdomains(complex, constraints, k, None)
+            .unwrap_or_else(|_| Positions::new(complex, constraints)),
     };
     info.seconds_factor = clock.elapsed().as_secs_f64();
     let layout = Layout::new(complex, constraints);
@@ -597,7 +601,8 @@ where
         .iter()
         .map(|&c| motions[c as usize].rot)
         .collect();
-    layout.global((complex, constraints, &positions), &mut motions, &rots, &to);
+    // The one-process global step does not fail (see above).
+    let _ = layout.global((complex, constraints, &positions), &mut motions, &rots, &to);
     let energy = total_energy(complex, constraints, &motions, &targets);
     info.energies.push(energy);
     info.seconds.push(clock.elapsed().as_secs_f64());

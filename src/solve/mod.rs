@@ -220,13 +220,7 @@ where
             complex = fine;
             info.refinements.push(complex.len());
             system = timed(&mut info.seconds_symbolic, || {
-                System::new(
-                    &complex,
-                    &constraints,
-                    params.method,
-                    budget,
-                    &refine_advice(),
-                )
+                System::new(&complex, &constraints, params, budget, &refine_advice())
             })?;
             let it = minimize_with(
                 &mut system,
@@ -337,7 +331,7 @@ where
         .map(|c| Motion::rest(&c.center))
         .collect();
     let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params.method, budget, &cells_advice())
+        System::new(complex, constraints, params, budget, &cells_advice())
     })?;
     load_stepped(
         &mut system,
@@ -385,7 +379,12 @@ where
             predict(constraints, motions, before, (to - f) / (f - f0));
             // The free cells' positions are the optimum for the predicted rotations.
             prescribe(complex, constraints, motions, to);
-            system.project_positions(complex, constraints, motions, &targets_at(constraints, to));
+            system.project_positions(
+                complex,
+                constraints,
+                motions,
+                &targets_at(constraints, to),
+            )?;
         }
         let predicted = (!turning.is_empty()).then(|| motions.to_vec());
         // A step before the last only has to bring the motions near the path's minimum, so

@@ -38,7 +38,7 @@ where
         System::new(
             complex,
             constraints,
-            params.method,
+            params,
             Budget::default(),
             &cells_advice(),
         )
@@ -68,7 +68,7 @@ pub fn minimize_from<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let mut system = System::new(complex, constraints, params.method, budget, &cells_advice())?;
+    let mut system = System::new(complex, constraints, params, budget, &cells_advice())?;
     let mut motions = motions.to_vec();
     let mut info = SolverInfo::default();
     minimize_with(
@@ -190,14 +190,14 @@ where
         // One trial: the step scaled by `t`, positions projected, and its energy.
         let trial = |t: f64| {
             let mut m = system.advance(complex, constraints, motions, &pins_to, &delta, t);
-            system.project_positions(complex, constraints, &mut m, &targets_to);
+            system.project_positions(complex, constraints, &mut m, &targets_to)?;
             let e = total_energy(complex, constraints, &m, &targets_to);
-            (m, e)
+            Ok::<_, Error>((m, e))
         };
         let mut t = 1.0;
         let mut accepted = None;
         for _ in 0..30 {
-            let (m, e) = trial(t);
+            let (m, e) = trial(t)?;
             if !e.is_finite() {
                 return Err(Error::solver("the energy became non-finite"));
             }
@@ -213,7 +213,7 @@ where
             while let Some((_, best)) = &accepted
                 && t < 8.0
             {
-                let (m, e) = trial(2.0 * t);
+                let (m, e) = trial(2.0 * t)?;
                 if e >= *best || e.is_nan() {
                     break;
                 }

@@ -56,6 +56,13 @@ pub struct SolveParams {
     /// After a load step's first iteration, add the rotations' second-order term to the
     /// Gauss-Newton matrix (Newton's method; see the module docs). Default `true`.
     pub newton: bool,
+    /// Local-global iterations with the global step solved by this many subdomains
+    /// ([`super::schwarz`]): what a solve spread over processes does. 0 (default): as
+    /// `method` says. Past 0 it takes the place of `method`'s Gauss-Newton systems.
+    pub subdomains: usize,
+    /// Who factors and solves the subdomains' blocks ([`super::schwarz::register`]); `None`
+    /// (default): this process.
+    pub workers: Option<super::schwarz::WorkersId>,
 }
 
 /// How the Gauss-Newton normal equations are solved.
@@ -96,6 +103,8 @@ impl Default for SolveParams {
             method: Method::Auto,
             newton: true,
             carry_loose: true,
+            subdomains: 0,
+            workers: None,
         }
     }
 }
@@ -226,6 +235,15 @@ impl<const D: usize> Solution<D> {
 
 /// Refuses parameters no solve can take.
 pub(super) fn check_params(params: &SolveParams) -> Result<()> {
+    if params.subdomains > 0 && matches!(params.method, Method::Direct | Method::Multilevel) {
+        return Err(Error::param(
+            Said::new()
+                .set(Opt::Subdomains, params.subdomains)
+                .text(" solves by local-global iterations, not by ")
+                .set(Opt::Solver, params.method)
+                .text(": give one"),
+        ));
+    }
     if !(params.move_tolerance >= 0.0 && params.move_tolerance.is_finite()) {
         return Err(Error::param(format!(
             "the solver's move tolerance must be a number of cells, 0 or more (got {})",

@@ -29,8 +29,9 @@ use faer::sparse::linalg::solvers::Llt;
 
 use super::constraints::Constraints;
 use super::laplacian::{Laplacian, factor, laplacian, pair_weight};
-use super::schwarz::{self, Schwarz, Subdomains};
+use super::schwarz::{self, Schwarz, Subdomains, Workers};
 use crate::cells::CellComplex;
+use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
 
 /// The position system of one topology, ready to solve.
@@ -82,28 +83,31 @@ impl Positions {
         Self { row, n, solver }
     }
 
-    /// The system split into `subdomains` ([`super::schwarz`]), each block factored alone,
-    /// solved by preconditioned conjugate gradients.
+    /// The system split into `subdomains` ([`super::schwarz`]), each block factored alone
+    /// (by `workers` where given, else here), solved by preconditioned conjugate gradients.
+    /// An error where the workers fail.
     pub fn by_subdomains<const D: usize>(
         complex: &CellComplex<D>,
         constraints: &Constraints<D>,
         subdomains: usize,
-    ) -> Self {
+        workers: Option<&dyn Workers>,
+    ) -> Result<Self> {
         let (row, n, triplets) = laplacian(complex, constraints);
-        let solver = held(&triplets)
-            .then(|| {
-                let matrix = Laplacian::from_lower(n, &triplets);
-                let split = Subdomains::split(complex, &row, subdomains);
-                let aggregate = schwarz::aggregate_size(n);
-                Schwarz::new(&matrix, &split, schwarz::OVERLAP, aggregate).map(|preconditioner| {
-                    Solver::Subdomains(Box::new(Split {
-                        matrix,
-                        preconditioner,
-                    }))
-                })
-            })
-            .flatten();
-        Self { row, n, solver }
+        let mut solver = None;
+        if held(&triplets) {
+            let matrix = Laplacian::from_lower(n, &triplets);
+            let split = Subdomains::split(complex, &row, subdomains);
+            let aggregate = schwarz::aggregate_size(n);
+            let preconditioner =
+                Schwarz::new(&matrix, &split, schwarz::OVERLAP, aggregate, workers)?;
+            solver = preconditioner.map(|preconditioner| {
+                Solver::Subdomains(Box::new(Split {
+                    matrix,
+                    preconditioner,
+                }))
+            });
+        }
+        Ok(Self { row, n, solver })
     }
 
     /// Whether the system can be solved: it has free cells and was factored (whole, or each
@@ -115,15 +119,18 @@ impl Positions {
 
     /// Sets the position of every free cell to its optimum for the current rotations (and the
     /// positions of the other cells). Leaves `motions` unchanged if the solve is not finite.
+    /// By subdomains, an error where the workers fail or the iterations do not reach the
+    /// optimum to [`SUBDOMAIN_TOLERANCE`] (the step would not be the block minimization the
+    /// local-global iteration relies on).
     pub fn project<const D: usize>(
         &self,
         complex: &CellComplex<D>,
         constraints: &Constraints<D>,
         motions: &mut [Motion<D>],
         targets_to: &[Vect<D>],
-    ) {
+    ) -> Result<()> {
         let Some(solver) = &self.solver else {
-            return;
+            return Ok(());
         };
         let mut rhs = Mat::<f64>::zeros(self.n, D);
         let mut add = |r: u32, v: Vect<D>| {
@@ -184,18 +191,29 @@ impl Positions {
                         }
                     }
                 }
-                schwarz::solve(l, m, &b, &mut x, SUBDOMAIN_TOLERANCE, SUBDOMAIN_ITERATIONS);
+                let solved =
+                    schwarz::solve(l, m, &b, &mut x, SUBDOMAIN_TOLERANCE, SUBDOMAIN_ITERATIONS)?;
+                if solved.residual > SUBDOMAIN_TOLERANCE {
+                    return Err(Error::solver(format!(
+                        "the global step by {} subdomains reached a residual of {:.0e}, not \
+                         {SUBDOMAIN_TOLERANCE:.0e}, in {} conjugate-gradient iterations",
+                        m.subdomains(),
+                        solved.residual,
+                        solved.iterations
+                    )));
+                }
                 Mat::<f64>::from_fn(self.n, D, |i, a| x[a * self.n + i])
             }
         };
         if !x.col_iter().all(|col| col.iter().all(|v| v.is_finite())) {
-            return;
+            return Ok(());
         }
         for (c, r) in self.row.iter().enumerate() {
             if let Some(r) = r {
                 motions[c].pos = Vect::<D>::from_fn(|a, _| x[(*r as usize, a)]);
             }
         }
+        Ok(())
     }
 }
 
@@ -268,7 +286,9 @@ mod tests {
         let to = [target.to];
         let before = total_energy(&complex, &constraints, &motions, &to);
         let fixed: Vec<_> = [0, n - 1].map(|c| motions[c]).to_vec();
-        Positions::new(&complex, &constraints).project(&complex, &constraints, &mut motions, &to);
+        Positions::new(&complex, &constraints)
+            .project(&complex, &constraints, &mut motions, &to)
+            .unwrap();
         let after = total_energy(&complex, &constraints, &motions, &to);
         assert!(after < before);
         assert_eq!(vec![motions[0], motions[n - 1]], fixed);

@@ -1,8 +1,9 @@
 //! The global step's system solved by subdomains: conjugate gradients preconditioned by a
 //! two-level additive Schwarz method. This is the global half of a local-global solve spread
-//! over processes or machines, each holding its subdomain's rows; here the subdomains are
-//! solved in one process (`LocalGlobalParams::subdomains`), which shows that the split solve
-//! reaches the same minimum and measures its iterations.
+//! over processes or machines: `SolveParams::subdomains` (`--subdomains`) solves by it, each
+//! subdomain's block factored and solved by [`Workers`] registered for the call ([`register`];
+//! the Python package's Dask actors) or else in this process. The process that runs the
+//! iterations keeps the matrix's products and the coarse problem.
 //!
 //! The local-global solver's global step solves `L p = b` with `L` the weighted graph Laplacian
 //! of the free cells ([`Laplacian`]): one scalar matrix for the `D` coordinates, constant
@@ -40,6 +41,8 @@
 //! far faster (3.1 s to factor and 0.4 s to solve at 1.25 m, against 13 s of iterations): the
 //! split is for a solve whose matrix one process cannot hold.
 
+use std::sync::{Arc, Mutex};
+
 use faer::prelude::*;
 use faer::sparse::Triplet;
 use faer::sparse::linalg::solvers::Llt;
@@ -47,6 +50,7 @@ use rayon::prelude::*;
 
 use super::laplacian::{Laplacian, factor};
 use crate::cells::CellComplex;
+use crate::error::{Error, Result};
 
 /// Layers of neighbors each subdomain's block grows by.
 pub const OVERLAP: usize = 1;
@@ -110,15 +114,175 @@ impl Subdomains {
     }
 }
 
-/// One subdomain's grown rows and the factor of their block.
-struct Block {
-    rows: Vec<u32>,
+/// One subdomain's block as the process that holds it receives it: the lower triangle of
+/// `A_k = R_k L R_kᵀ` in the block's own numbering (`rows[t] ≥ cols[t]`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Block {
+    /// Rows (and columns) of the block.
+    pub size: usize,
+    /// Each entry's row.
+    pub rows: Vec<u32>,
+    /// Each entry's column.
+    pub cols: Vec<u32>,
+    /// Each entry's value.
+    pub values: Vec<f64>,
+}
+
+impl Block {
+    /// `l`'s principal block on `rows` (ascending).
+    fn of(l: &Laplacian, rows: &[u32]) -> Self {
+        let mut block = Self {
+            size: rows.len(),
+            ..Self::default()
+        };
+        for (i, &r) in rows.iter().enumerate() {
+            for (c, v) in l.row(r as usize) {
+                if let Ok(j) = rows.binary_search(&(c as u32))
+                    && j <= i
+                {
+                    block.rows.push(i as u32);
+                    block.cols.push(j as u32);
+                    block.values.push(v);
+                }
+            }
+        }
+        block
+    }
+
+    /// Its Cholesky factor; `None` where the block is not positive definite, or an entry
+    /// lies outside it or above its diagonal.
+    pub fn factor(&self) -> Option<BlockFactor> {
+        let n = self.size;
+        let mut lower = Vec::with_capacity(self.values.len());
+        for ((&i, &j), &v) in self.rows.iter().zip(&self.cols).zip(&self.values) {
+            let (i, j) = (i as usize, j as usize);
+            if i >= n || j > i || !v.is_finite() {
+                return None;
+            }
+            lower.push(Triplet::new(i, j, v));
+        }
+        let factor = factor(n, &lower)?;
+        Some(BlockFactor { factor, n })
+    }
+}
+
+/// A block's Cholesky factor, held by the process that solves it.
+pub struct BlockFactor {
     factor: Llt<usize, f64>,
+    n: usize,
+}
+
+impl BlockFactor {
+    /// Rows of the block.
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether the block has no rows.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// `A⁻¹ b` for `b` of columns of `len()` each, column after column; `None` where `b` is
+    /// not whole columns.
+    pub fn solve(&self, b: &[f64]) -> Option<Vec<f64>> {
+        let n = self.n;
+        if b.is_empty() {
+            return Some(Vec::new());
+        }
+        if n == 0 || !b.len().is_multiple_of(n) {
+            return None;
+        }
+        let d = b.len() / n;
+        let mut x = Mat::<f64>::from_fn(n, d, |i, a| b[a * n + i]);
+        crate::with_faer(|| self.factor.solve_in_place(x.as_mut()));
+        Some((0..n * d).map(|k| x[(k % n, k / n)]).collect())
+    }
+}
+
+/// Processes that hold the subdomains' blocks, one block each or several: each factors its
+/// blocks once per system and solves them for the right-hand sides sent to it, so that no
+/// process but its own holds a block's factor. Without workers this process factors and
+/// solves every block itself. The Python package's Dask layer is one.
+pub trait Workers: Send + Sync {
+    /// Sends every block to the worker that will hold it, to factor; the answer solves them.
+    /// An error (a block not positive definite, a worker lost) ends the solve.
+    fn factor(&self, blocks: Vec<Block>) -> Result<Box<dyn BlockSolves>>;
+}
+
+/// The blocks factored by [`Workers`].
+pub trait BlockSolves: Send + Sync {
+    /// `A_k⁻¹ r_k` for every block `k`, in the blocks' order, each right-hand side of whole
+    /// columns (column after column) and each answer the same shape. An error ends the solve.
+    fn solve(&self, rhs: Vec<Vec<f64>>) -> Result<Vec<Vec<f64>>>;
+}
+
+/// Workers registered for the length of a call ([`register`]): what a solve's parameters
+/// name them by, so that the parameters stay plain values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct WorkersId(u64);
+
+/// The last id given, and the workers registered now by id.
+struct Registry {
+    last: u64,
+    workers: Vec<(u64, Arc<dyn Workers>)>,
+}
+
+static REGISTERED: Mutex<Registry> = Mutex::new(Registry {
+    last: 0,
+    workers: Vec::new(),
+});
+
+/// Registers `workers` until the answer is dropped; its [`Registration::id`] goes in the solve's
+/// parameters.
+pub fn register(workers: Arc<dyn Workers>) -> Registration {
+    let mut r = REGISTERED.lock().unwrap_or_else(|e| e.into_inner());
+    r.last += 1;
+    let id = r.last;
+    r.workers.push((id, workers));
+    Registration(WorkersId(id))
+}
+
+/// Keeps workers registered ([`register`]) while it lives.
+pub struct Registration(WorkersId);
+
+impl Registration {
+    /// The id the solve's parameters name the workers by.
+    pub fn id(&self) -> WorkersId {
+        self.0
+    }
+}
+
+impl Drop for Registration {
+    fn drop(&mut self) {
+        let mut r = REGISTERED.lock().unwrap_or_else(|e| e.into_inner());
+        r.workers.retain(|(id, _)| *id != (self.0).0);
+    }
+}
+
+/// The workers registered as `id`; an error once they are no longer registered.
+pub fn registered(id: WorkersId) -> Result<Arc<dyn Workers>> {
+    let r = REGISTERED.lock().unwrap_or_else(|e| e.into_inner());
+    r.workers
+        .iter()
+        .find(|(k, _)| *k == id.0)
+        .map(|(_, w)| Arc::clone(w))
+        .ok_or_else(|| Error::solver("the workers given for the subdomains are gone"))
+}
+
+/// Where the subdomains' blocks are factored and solved.
+enum Local {
+    /// In this process.
+    Here(Vec<BlockFactor>),
+    /// By workers.
+    Workers(Box<dyn BlockSolves>),
 }
 
 /// The two-level additive Schwarz preconditioner of a [`Laplacian`] (see the module docs).
 pub struct Schwarz {
-    blocks: Vec<Block>,
+    /// Each subdomain's grown rows, ascending.
+    rows: Vec<Vec<u32>>,
+    local: Local,
     /// Rows.
     n: usize,
     prolongation: Prolongation,
@@ -138,12 +302,21 @@ impl Schwarz {
         subdomains: &Subdomains,
         overlap: usize,
         aggregate: usize,
-    ) -> Option<Self> {
-        let blocks = subdomains
+        workers: Option<&dyn Workers>,
+    ) -> Result<Option<Self>> {
+        let rows: Vec<Vec<u32>> = subdomains
             .parts
             .par_iter()
-            .map(|part| block(l, grown(l, part, overlap)))
-            .collect::<Option<Vec<_>>>()?;
+            .map(|part| grown(l, part, overlap))
+            .collect();
+        let blocks = rows.par_iter().map(|r| Block::of(l, r));
+        let local = match workers {
+            None => match blocks.map(|b| b.factor()).collect::<Option<Vec<_>>>() {
+                Some(factors) => Local::Here(factors),
+                None => return Ok(None),
+            },
+            Some(workers) => Local::Workers(workers.factor(blocks.collect())?),
+        };
         let size = aggregate.max(1);
         let mut of = vec![0u32; l.n];
         let mut coarse_n = 0usize;
@@ -155,19 +328,22 @@ impl Schwarz {
         }
         let prolongation = smoothed(l, &of);
         let lower = prolongation.galerkin(l);
-        let coarse = factor(coarse_n, &lower)?;
-        Some(Self {
-            blocks,
+        let Some(coarse) = factor(coarse_n, &lower) else {
+            return Ok(None);
+        };
+        Ok(Some(Self {
+            rows,
+            local,
             n: l.n,
             prolongation,
             coarse,
             coarse_n,
-        })
+        }))
     }
 
     /// Subdomains.
     pub fn subdomains(&self) -> usize {
-        self.blocks.len()
+        self.rows.len()
     }
 
     /// Coarse unknowns.
@@ -177,40 +353,56 @@ impl Schwarz {
 
     /// Rows of the largest grown subdomain block (what one process factors).
     pub fn largest_block(&self) -> usize {
-        self.blocks.iter().map(|b| b.rows.len()).max().unwrap_or(0)
+        self.rows.iter().map(Vec::len).max().unwrap_or(0)
     }
 
-    /// `z = M⁻¹ r` for `D` columns of `n` each.
-    pub fn apply(&self, r: &[f64], z: &mut [f64], d: usize) {
-        let q = self.coarse(r, d);
-        let y = self.local(r, d);
+    /// `z = M⁻¹ r` for `D` columns of `n` each. Fails only where workers do.
+    pub fn apply(&self, r: &[f64], z: &mut [f64], d: usize) -> Result<()> {
+        let (q, y) = rayon::join(|| self.coarse(r, d), || self.local(r, d));
+        let y = y?;
         for k in 0..r.len() {
             z[k] = q[k] + y[k];
         }
+        Ok(())
     }
 
     /// `Σ_k R_kᵀ A_k⁻¹ R_k r`: every subdomain's solve.
-    fn local(&self, r: &[f64], d: usize) -> Vec<f64> {
+    fn local(&self, r: &[f64], d: usize) -> Result<Vec<f64>> {
         let n = self.n;
-        let solved: Vec<Mat<f64>> = self
-            .blocks
-            .par_iter()
-            .map(|b| {
-                let mut x =
-                    Mat::<f64>::from_fn(b.rows.len(), d, |i, a| r[a * n + b.rows[i] as usize]);
-                crate::with_faer(|| b.factor.solve_in_place(x.as_mut()));
-                x
-            })
-            .collect();
-        let mut z = vec![0.0; n * d];
-        for (b, x) in self.blocks.iter().zip(&solved) {
-            for a in 0..d {
-                for (i, &row) in b.rows.iter().enumerate() {
-                    z[a * n + row as usize] += x[(i, a)];
+        let restricted = |rows: &Vec<u32>| -> Vec<f64> {
+            (0..rows.len() * d)
+                .map(|k| r[(k / rows.len()) * n + rows[k % rows.len()] as usize])
+                .collect()
+        };
+        let solved: Vec<Vec<f64>> = match &self.local {
+            Local::Here(factors) => self
+                .rows
+                .par_iter()
+                .zip(factors)
+                .map(|(rows, f)| f.solve(&restricted(rows)).unwrap_or_default())
+                .collect(),
+            Local::Workers(solves) => {
+                let answers = solves.solve(self.rows.iter().map(restricted).collect())?;
+                let whole = answers.len() == self.rows.len()
+                    && answers
+                        .iter()
+                        .zip(&self.rows)
+                        .all(|(x, rows)| x.len() == rows.len() * d);
+                if !whole {
+                    return Err(Error::solver(
+                        "a worker answered a subdomain's solve with the wrong number of values",
+                    ));
                 }
+                answers
+            }
+        };
+        let mut z = vec![0.0; n * d];
+        for (rows, x) in self.rows.iter().zip(&solved) {
+            for (k, v) in x.iter().enumerate() {
+                z[(k / rows.len()) * n + rows[k % rows.len()] as usize] += v;
             }
         }
-        z
+        Ok(z)
     }
 
     /// `R_0ᵀ A_0⁻¹ R_0 r`: the coarse problem's solve.
@@ -324,45 +516,20 @@ fn grown(l: &Laplacian, part: &[u32], layers: usize) -> Vec<u32> {
     rows
 }
 
-/// The factor of `l`'s principal block on `rows` (ascending).
-fn block(l: &Laplacian, rows: Vec<u32>) -> Option<Block> {
-    let mut lower = Vec::new();
-    for (i, &r) in rows.iter().enumerate() {
-        for (c, v) in l.row(r as usize) {
-            if let Ok(j) = rows.binary_search(&(c as u32))
-                && j <= i
-            {
-                lower.push(Triplet::new(i, j, v));
-            }
-        }
-    }
-    let factor = factor(rows.len(), &lower)?;
-    Some(Block { rows, factor })
-}
-
 /// `L` factored whole, as one process solves the global step: the reference the subdomains'
 /// solve is measured against.
-pub struct Factored {
-    factor: Llt<usize, f64>,
-    n: usize,
-}
+pub struct Factored(BlockFactor);
 
 impl Factored {
     /// The factor of `l`; `None` where `l` is singular.
     pub fn new(l: &Laplacian) -> Option<Self> {
-        block(l, (0..l.n as u32).collect()).map(|b| Self {
-            factor: b.factor,
-            n: l.n,
-        })
+        let all: Vec<u32> = (0..l.n as u32).collect();
+        Block::of(l, &all).factor().map(Self)
     }
 
     /// `L⁻¹ b` for `b` of `D` columns of `n` each (column after column).
     pub fn solve(&self, b: &[f64]) -> Vec<f64> {
-        let n = self.n;
-        let d = b.len() / n.max(1);
-        let mut x = Mat::<f64>::from_fn(n, d, |i, a| b[a * n + i]);
-        crate::with_faer(|| self.factor.solve_in_place(x.as_mut()));
-        (0..n * d).map(|k| x[(k % n, k / n)]).collect()
+        self.0.solve(b).unwrap_or_default()
     }
 }
 
@@ -388,7 +555,7 @@ pub fn solve(
     x: &mut [f64],
     tolerance: f64,
     max_iterations: usize,
-) -> Solved {
+) -> Result<Solved> {
     let n = l.n;
     let d = b.len() / n.max(1);
     let dot = |u: &[f64], v: &[f64], a: usize| -> f64 {
@@ -413,7 +580,7 @@ pub fn solve(
             .fold(0.0, f64::max)
     };
     let mut z = vec![0.0; n * d];
-    m.apply(&r, &mut z, d);
+    m.apply(&r, &mut z, d)?;
     let mut p = z.clone();
     let mut rz: Vec<f64> = (0..d).map(|a| dot(&r, &z, a)).collect();
     let mut q = vec![0.0; n * d];
@@ -433,7 +600,7 @@ pub fn solve(
                 .zip(&q[s])
                 .for_each(|(r, q)| *r -= alpha * q);
         }
-        m.apply(&r, &mut z, d);
+        m.apply(&r, &mut z, d)?;
         for a in 0..d {
             let next = dot(&r, &z, a);
             let beta = if rz[a] > 0.0 { next / rz[a] } else { 0.0 };
@@ -446,10 +613,10 @@ pub fn solve(
         }
         iterations += 1;
     }
-    Solved {
+    Ok(Solved {
         iterations,
         residual: relative(&r),
-    }
+    })
 }
 
 #[cfg(test)]
@@ -520,9 +687,11 @@ mod tests {
         for k in [4, 16] {
             let sub = Subdomains::split(&complex, &row, k);
             assert_eq!(sub.parts().iter().map(Vec::len).sum::<usize>(), n);
-            let m = Schwarz::new(&l, &sub, OVERLAP, aggregate_size(n)).unwrap();
+            let m = Schwarz::new(&l, &sub, OVERLAP, aggregate_size(n), None)
+                .unwrap()
+                .unwrap();
             let mut x = vec![0.0; 3 * n];
-            let solved = solve(&l, &m, &b, &mut x, 1e-10, 500);
+            let solved = solve(&l, &m, &b, &mut x, 1e-10, 500).unwrap();
             assert!(solved.residual <= 1e-10, "{solved:?}");
             let error = x
                 .iter()
@@ -617,7 +786,104 @@ mod tests {
                 .all(Vec::is_empty)
         );
         let positions =
-            super::super::positions::Positions::by_subdomains(&complex, &constraints, 4);
+            super::super::positions::Positions::by_subdomains(&complex, &constraints, 4, None)
+                .unwrap();
         assert!(!positions.is_factored());
+    }
+
+    /// Workers that factor and solve the blocks they are sent in this process, counting the
+    /// blocks and the solves, or failing the solves from the `fail_at`-th on: what a process
+    /// pool does, without the processes.
+    struct Pool {
+        blocks: Mutex<usize>,
+        solves: Arc<Mutex<usize>>,
+        fail_at: usize,
+    }
+
+    struct PoolSolves {
+        factors: Vec<BlockFactor>,
+        solves: Arc<Mutex<usize>>,
+        fail_at: usize,
+    }
+
+    impl Workers for Pool {
+        fn factor(&self, blocks: Vec<Block>) -> Result<Box<dyn BlockSolves>> {
+            *self.blocks.lock().unwrap() += blocks.len();
+            let factors = blocks
+                .iter()
+                .map(|b| b.factor().ok_or_else(|| Error::solver("not definite")))
+                .collect::<Result<Vec<_>>>()?;
+            Ok(Box::new(PoolSolves {
+                factors,
+                solves: Arc::clone(&self.solves),
+                fail_at: self.fail_at,
+            }))
+        }
+    }
+
+    impl BlockSolves for PoolSolves {
+        fn solve(&self, rhs: Vec<Vec<f64>>) -> Result<Vec<Vec<f64>>> {
+            let mut solves = self.solves.lock().unwrap();
+            *solves += 1;
+            if *solves >= self.fail_at {
+                return Err(Error::solver("worker lost"));
+            }
+            Ok(self
+                .factors
+                .iter()
+                .zip(&rhs)
+                .map(|(f, r)| f.solve(r).unwrap())
+                .collect())
+        }
+    }
+
+    /// Blocks solved by workers give the bits of blocks solved here, each block sent once;
+    /// a worker's failure ends the solve with its error, and workers no longer registered are
+    /// named as gone.
+    #[test]
+    fn workers_solve_the_blocks_as_this_process_does_and_their_failure_ends_the_solve() {
+        let (l, complex, row) = plate();
+        let n = l.n;
+        let mut rng = StdRng::seed_from_u64(5);
+        let b: Vec<f64> = (0..3 * n).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let sub = Subdomains::split(&complex, &row, 6);
+        let here = Schwarz::new(&l, &sub, OVERLAP, aggregate_size(n), None)
+            .unwrap()
+            .unwrap();
+        let mut x_here = vec![0.0; 3 * n];
+        let solved_here = solve(&l, &here, &b, &mut x_here, 1e-10, 500).unwrap();
+
+        let pool = Arc::new(Pool {
+            blocks: Mutex::new(0),
+            solves: Arc::new(Mutex::new(0)),
+            fail_at: usize::MAX,
+        });
+        let registration = register(Arc::clone(&pool) as Arc<dyn Workers>);
+        let workers = registered(registration.id()).unwrap();
+        let there = Schwarz::new(&l, &sub, OVERLAP, aggregate_size(n), Some(&*workers))
+            .unwrap()
+            .unwrap();
+        let mut x_there = vec![0.0; 3 * n];
+        let solved_there = solve(&l, &there, &b, &mut x_there, 1e-10, 500).unwrap();
+        assert_eq!(x_there, x_here);
+        assert_eq!(solved_there, solved_here);
+        assert_eq!(*pool.blocks.lock().unwrap(), 6);
+        // One solve of the blocks per iteration, and one before the first.
+        assert_eq!(*pool.solves.lock().unwrap(), solved_here.iterations + 1);
+        let id = registration.id();
+        drop(registration);
+        assert!(registered(id).is_err());
+
+        let failing = Pool {
+            blocks: Mutex::new(0),
+            solves: Arc::new(Mutex::new(0)),
+            fail_at: 5,
+        };
+        let m = Schwarz::new(&l, &sub, OVERLAP, aggregate_size(n), Some(&failing))
+            .unwrap()
+            .unwrap();
+        let mut x = vec![0.0; 3 * n];
+        let e = solve(&l, &m, &b, &mut x, 1e-10, 500).unwrap_err();
+        assert!(e.to_string().contains("worker lost"), "{e}");
     }
 }

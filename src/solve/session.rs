@@ -244,7 +244,7 @@ where
             let targets = targets_at(&self.constraints, 1.0);
             let (complex, constraints) = (&self.complex, &self.constraints);
             self.system
-                .project_positions(complex, constraints, &mut self.motions, &targets);
+                .project_positions(complex, constraints, &mut self.motions, &targets)?;
             self.dragged = false;
         }
         let (complex, constraints) = (&self.complex, &self.constraints);
@@ -365,7 +365,7 @@ where
             System::new(
                 complex,
                 constraints,
-                self.params.method,
+                &self.params,
                 self.budget,
                 &cells_advice(),
             )

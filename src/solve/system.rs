@@ -38,7 +38,7 @@ use super::energy::quadrature;
 use super::local_global::Layout;
 use super::multilevel::{Hierarchy, Nodes};
 use super::positions::Positions;
-use super::{Method, auto};
+use super::{Method, SolveParams, auto, schwarz};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::memory::Budget;
@@ -153,15 +153,27 @@ where
     const CELL_SLOT: usize = tri(Self::DOF);
     const PAIR_SLOT: usize = 2 * tri(Self::DOF) + Self::DOF * Self::DOF;
 
-    /// The layout and symbolic factorization for `complex` under `constraints`, solved by
-    /// `method` within the memory `budget`.
+    /// The layout and symbolic factorization for `complex` under `constraints`, solved as
+    /// `params` say (`method`, or local-global by `subdomains`) within the memory `budget`.
     pub fn new(
         complex: &CellComplex<D>,
         constraints: &Constraints<D>,
-        method: Method,
+        params: &SolveParams,
         budget: Budget,
         advice: &Said,
     ) -> Result<Self> {
+        let (method, positions) = if params.subdomains > 0 {
+            let workers = params.workers.map(schwarz::registered).transpose()?;
+            let positions = Positions::by_subdomains(
+                complex,
+                constraints,
+                params.subdomains,
+                workers.as_deref(),
+            )?;
+            (Method::LocalGlobal, positions)
+        } else {
+            (params.method, Positions::new(complex, constraints))
+        };
         let mut n = 0;
         let slots: Vec<Slot> = constraints
             .roles
@@ -209,7 +221,7 @@ where
             symbolic: None,
             buffers: Buffers::default(),
             multilevel: None,
-            positions: Positions::new(complex, constraints),
+            positions,
             layout: std::sync::OnceLock::new(),
             local_global: false,
             deferred: None,
@@ -331,9 +343,9 @@ where
         constraints: &Constraints<D>,
         motions: &mut [Motion<D>],
         targets_to: &[Vect<D>],
-    ) {
+    ) -> Result<()> {
         self.positions
-            .project(complex, constraints, motions, targets_to);
+            .project(complex, constraints, motions, targets_to)
     }
 
     /// The nonzeros of the direct path's Cholesky factor (its symbolic analysis knows them):

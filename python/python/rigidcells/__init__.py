@@ -332,7 +332,10 @@ _OPTIONS_DOC = """
     count; not with ``cell_size``), ``min_cell_size`` (adaptive cells
     down to this size), ``max_level`` (octree levels above the finest cells), ``shell`` (occupied
     cells only), ``inside`` (``"auto"``, ``"winding"``, ``"flood"``, ``"none"``), ``solver``
-    (``"auto"``, ``"direct"``, ``"multilevel"``, ``"local-global"``), ``tolerance`` (the move
+    (``"auto"``, ``"direct"``, ``"multilevel"``, ``"local-global"``), ``subdomains``
+    (local-global iterations with each global step split into this many subdomains, each
+    block factored alone; ``rigidcells.dask.solve_tiles`` gives the blocks to Dask workers;
+    0: as ``solver`` says), ``tolerance`` (the move
     test, in finest cell sizes; default 1e-3; 0: the energy test only), ``coarse_levels`` (coarser complexes solved
     first, 0 to 8), ``loose_parts`` (``"carry"`` or ``"rest"``), ``refine_strain`` (split
     cells strained past this and solve again), ``transfer`` (``"pu"``, ``"rbf"``,
@@ -356,8 +359,8 @@ def _options(**given: Any) -> dict:
 # The keyword arguments that are options of a deformation (the command line's names).
 _OPTION_NAMES = (
     "cell_size", "cells", "min_cell_size", "max_level", "shell", "inside", "solver",
-    "tolerance", "coarse_levels", "loose_parts", "refine_strain", "transfer", "rbf_tolerance",
-    "check_gcp", "memory_limit",
+    "subdomains", "tolerance", "coarse_levels", "loose_parts", "refine_strain", "transfer",
+    "rbf_tolerance", "check_gcp", "memory_limit",
 )
 
 
@@ -430,6 +433,7 @@ def deform(
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
     solver: Optional[str] = None,
+    subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
     coarse_levels: Optional[int] = None,
     loose_parts: Optional[str] = None,
@@ -563,6 +567,7 @@ class Session:
         shell: Optional[bool] = None,
         inside: Optional[str] = None,
         solver: Optional[str] = None,
+        subdomains: Optional[int] = None,
         tolerance: Optional[float] = None,
         coarse_levels: Optional[int] = None,
         loose_parts: Optional[str] = None,
@@ -725,6 +730,7 @@ def solve(
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
     solver: Optional[str] = None,
+    subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
     coarse_levels: Optional[int] = None,
     loose_parts: Optional[str] = None,
@@ -789,6 +795,7 @@ def estimate(
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
     solver: Optional[str] = None,
+    subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
     coarse_levels: Optional[int] = None,
     loose_parts: Optional[str] = None,
@@ -832,6 +839,7 @@ def deform_file(
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
     solver: Optional[str] = None,
+    subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
     coarse_levels: Optional[int] = None,
     loose_parts: Optional[str] = None,
@@ -920,6 +928,7 @@ def solve_files(
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
     solver: Optional[str] = None,
+    subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
     coarse_levels: Optional[int] = None,
     loose_parts: Optional[str] = None,
@@ -938,20 +947,29 @@ def solve_files(
     ``zoom``); ``check_gcp`` runs the control points' leave-one-out check. Tiles that declare
     different coordinate systems are a ``ValueError`` unless ``same_crs`` (``--same-crs``).
     Returns a ``Report`` of the solve: what ``deform_file`` returns for the merged file."""
-    options = _picked(locals())
-    text, base, paths = _spec(spec)
+    return _solve_files(locals(), None)
+
+
+def _solve_files(arguments: dict, workers: Any) -> Report:
+    """``solve_files`` with its ``arguments`` (its ``locals()``), the subdomains' blocks given
+    to ``workers`` where not None (``rigidcells.dask.solve_tiles``)."""
+    options = _picked(arguments)
+    text, base, paths = _spec(arguments["spec"])
+    inputs = arguments["inputs"]
     one = isinstance(inputs, (str, bytes, os.PathLike))
     files = [os.fspath(inputs)] if one else [os.fspath(p) for p in inputs]
     path = lambda p: None if p is None else os.fspath(p)
     view = _options(
-        strain=strain, azimuth=azimuth, elevation=elevation, size=size, up=up, zoom=zoom
+        **{k: arguments[k] for k in ("strain", "azimuth", "elevation", "size", "up", "zoom")}
     )
+    preview = arguments["preview"]
     if view and preview is None:
         raise ValueError(f"{next(iter(view))} applies to the preview: pass preview= too")
     info = _with_progress(
-        progress, lambda cb: _call(
-            paths, _rigidcells.solve_files, files, os.fspath(save_field), text, base,
-            path(report), path(preview), view, chunk, options, cb, same_crs,
+        arguments["progress"], lambda cb: _call(
+            paths, _rigidcells.solve_files, files, os.fspath(arguments["save_field"]), text,
+            base, path(arguments["report"]), path(preview), view, arguments["chunk"], options,
+            cb, arguments["same_crs"], workers,
         )
     )
     report = Report._of(info, paths=paths)

@@ -1,5 +1,19 @@
-"""Tiles on a Dask cluster: ``apply_tiles`` maps ``rigidcells.apply_file`` over tiles, one task
-per tile, each written to ``out_dir/<the tile's file name>``.
+"""Tiles on a Dask cluster: ``solve_tiles`` solves an edit over tiles with the solver's global
+step split into subdomains held by the cluster's workers, and ``apply_tiles`` maps
+``rigidcells.apply_file`` over tiles, one task per tile, each written to
+``out_dir/<the tile's file name>``.
+
+**The solve by subdomains.** ``solve_tiles`` solves by local-global iterations (the option
+``subdomains``): each global step is a linear system of the cells' positions, solved by
+conjugate gradients preconditioned by a two-level additive Schwarz method — the cells cut into
+``subdomains`` compact runs of a space-filling curve, each grown by a layer of neighbours. Each
+subdomain's block is sent once per system to one worker (an actor that factors it and keeps
+the factor), and every iteration sends each worker its blocks' right-hand sides and takes
+their solutions back; the small coarse problem every subdomain shares is solved by the
+calling process, which also runs the iterations, the local steps and the transfer. The
+iterations are those of a solve in one process with as many subdomains, to rounding, and the
+field written is the one ``rigidcells.solve_files(..., subdomains=k)`` writes. A worker lost
+mid-solve ends the call with an error that says so, and the field and report are not written.
 
 Outputs are written atomically (a temporary file renamed over the target) and are a
 deterministic function of the field and the tile, so a task that a worker's loss or a passing
@@ -13,9 +27,147 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Iterable, List, Optional, Union
+from typing import Any, Iterable, List, Optional, Union
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+
+class WorkerLost(RuntimeError):
+    """A worker holding subdomains failed mid-solve; nothing was written."""
+
+
+class _Blocks:
+    """An actor on one worker: the factors of the subdomains' blocks sent to it."""
+
+    def __init__(self) -> None:
+        self._factors: list = []
+
+    def factor(self, blocks: list) -> int:
+        from rigidcells import _rigidcells
+
+        self._factors = [_rigidcells.BlockFactor(*b) for b in blocks]
+        return sum(len(f) for f in self._factors)
+
+    def solve(self, rhs: list) -> list:
+        return [f.solve(r) for f, r in zip(self._factors, rhs)]
+
+
+class _Factored:
+    """The blocks of one system, factored by actors: block ``k`` lives on actor
+    ``k % len(actors)``."""
+
+    def __init__(self, actors: list) -> None:
+        self._actors = actors
+
+    def solve(self, rhs: list) -> list:
+        n = len(self._actors)
+        answers = _on_actors(self._actors, "solve", [rhs[i::n] for i in range(n)])
+        out: list = [None] * len(rhs)
+        for i, solved in enumerate(answers):
+            out[i::n] = solved
+        return out
+
+
+def _on_actors(actors: list, method: str, arguments: list) -> list:
+    """``actor.method(argument)`` on every actor at once, their results in order; a lost
+    worker raised as ``WorkerLost``."""
+    try:
+        calls = [getattr(a, method)(x) for a, x in zip(actors, arguments)]
+        return [c.result() for c in calls]
+    except ValueError:  # a block the library refused, raised on its worker
+        raise
+    except Exception as e:  # the worker's process or connection is gone
+        raise WorkerLost(
+            f"a Dask worker holding subdomains was lost mid-solve ({type(e).__name__}: {e}); "
+            "the field was not written"
+        ) from e
+
+
+class _Workers:
+    """The cluster's workers as the solver's subdomain workers: one actor per worker, made
+    anew for each system the solve factors."""
+
+    def __init__(self, client: Any) -> None:
+        self._client = client
+        self.addresses = sorted(client.scheduler_info()["workers"])
+        if not self.addresses:
+            raise ValueError("the Dask client has no workers")
+
+    def factor(self, blocks: list) -> _Factored:
+        n = min(len(self.addresses), len(blocks)) or 1
+        futures = [
+            self._client.submit(_Blocks, actor=True, workers=[a], pure=False)
+            for a in self.addresses[:n]
+        ]
+        try:
+            actors = [f.result() for f in futures]
+        except Exception as e:
+            raise WorkerLost(f"a Dask worker did not take its subdomains ({e})") from e
+        _on_actors(actors, "factor", [blocks[i::n] for i in range(n)])
+        return _Factored(actors)
+
+
+def _own_client(client: Any, n_workers: Optional[int] = None) -> Any:
+    """``client``, the current one, or a new ``LocalCluster`` of worker processes (returned
+    second, to close)."""
+    from dask.distributed import Client, LocalCluster, get_client
+
+    if client is not None:
+        return client, None
+    try:
+        return get_client(), None
+    except ValueError:
+        own = Client(LocalCluster(processes=True, n_workers=n_workers, threads_per_worker=1))
+        return own, own
+
+
+def _close(own: Any) -> None:
+    if own is not None:
+        cluster = own.cluster
+        own.close()
+        cluster.close()
+
+
+def solve_tiles(
+    tiles: Union[PathLike, Iterable[PathLike]],
+    spec: Any,
+    save_field: PathLike,
+    client: Any = None,
+    *,
+    subdomains: Optional[int] = None,
+    **arguments: Any,
+) -> Any:
+    """``rigidcells.solve_files(tiles, spec, save_field, subdomains=..., **arguments)`` with
+    the subdomains' blocks factored and solved by the workers of a ``dask.distributed``
+    cluster (see the module's docs); returns its ``Report``.
+
+    ``client``: a ``dask.distributed.Client``; ``None`` takes the current one, or starts a
+    ``LocalCluster`` of worker processes for the call. ``subdomains``: how many (default: the
+    workers' count, at least 2); each worker holds an equal share of them. ``arguments``: those
+    of ``solve_files`` (``report``, ``cell_size``, ``memory_limit``, ``progress``, ...), but
+    ``solver``, which is local-global here. A worker lost mid-solve raises ``WorkerLost``, and
+    nothing is written.
+    """
+    import inspect
+
+    import rigidcells
+
+    if "solver" in arguments and arguments["solver"] not in (None, "local-global"):
+        raise ValueError(
+            f"solver={arguments['solver']!r}: solve_tiles solves by local-global iterations"
+        )
+    client, own = _own_client(client)
+    try:
+        workers = _Workers(client)
+        if subdomains is None:
+            subdomains = max(2, len(workers.addresses))
+        bound = inspect.signature(rigidcells.solve_files).bind(
+            tiles, spec, save_field, subdomains=subdomains, **arguments
+        )
+        bound.apply_defaults()
+        return rigidcells._solve_files(dict(bound.arguments), workers)
+    finally:
+        _close(own)
 
 
 class _Refused:
@@ -56,7 +208,7 @@ def apply_tiles(
     library refused (a ``ValueError`` or ``TypeError``) at once, any other after ``retries``
     more tries; the tiles still running are cancelled.
     """
-    from dask.distributed import Client, LocalCluster, as_completed, get_client
+    from dask.distributed import as_completed
 
     tiles = [os.fspath(t) for t in tiles]
     out = Path(out_dir)
@@ -64,12 +216,7 @@ def apply_tiles(
     outputs = [os.fspath(out / Path(t).name) for t in tiles]
     if len(set(outputs)) != len(outputs):
         raise ValueError("two tiles have the same file name; their outputs would collide")
-    own: Optional[Client] = None
-    if client is None:
-        try:
-            client = get_client()
-        except ValueError:
-            own = client = Client(LocalCluster(processes=True))
+    client, own = _own_client(client)
     try:
         futures = client.map(
             _apply_one,
@@ -90,7 +237,4 @@ def apply_tiles(
             raise
         return client.gather(futures)
     finally:
-        if own is not None:
-            cluster = own.cluster
-            own.close()
-            cluster.close()
+        _close(own)

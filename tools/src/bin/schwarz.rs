@@ -83,12 +83,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ] {
             let start = Instant::now();
             let sub = schwarz::Subdomains::split(&complex, &row, k);
-            let m =
-                schwarz::Schwarz::new(&l, &sub, overlap, aggregate).ok_or("a block is singular")?;
+            let m = schwarz::Schwarz::new(&l, &sub, overlap, aggregate, None)?
+                .ok_or("a block is singular")?;
             let setup = start.elapsed().as_secs_f64();
             let start = Instant::now();
             let mut x = vec![0.0; 3 * rows];
-            let solved = schwarz::solve(&l, &m, &b, &mut x, 1e-8, 2000);
+            let solved = schwarz::solve(&l, &m, &b, &mut x, 1e-8, 2000)?;
             let seconds = start.elapsed().as_secs_f64();
             let difference = x
                 .iter()
