@@ -663,6 +663,7 @@ fn subdomains_reach_the_minimum_here_and_on_workers() {
     )
     .unwrap();
     assert_eq!(there.motions, here.motions);
+    assert_eq!(there.info.linear_solver(), "local-global");
     assert!(workers.0.load(std::sync::atomic::Ordering::Relaxed) >= 4);
     let refused = solve_bar(
         &complex,

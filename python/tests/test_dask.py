@@ -16,6 +16,7 @@ import rigidcells
 from test_rigidcells import ROOT, SHARED, cli
 
 distributed = pytest.importorskip("dask.distributed")
+import dask  # noqa: E402
 pytest.importorskip("laspy")
 sys.path.insert(0, str(ROOT / "tools" / "python"))
 from tiles import cut as cut_tiles  # noqa: E402
@@ -110,6 +111,10 @@ def test_solve_tiles_on_worker_processes_gives_the_one_process_field(tmp_path):
             report = rigidcells.dask.solve_tiles(
                 tiles, AUTZEN_BEND, tmp_path / "dask.field", client, subdomains=4, **common
             )
+            with pytest.raises(ValueError, match="subdomains must be 1 or more, got 0"):
+                rigidcells.dask.solve_tiles(
+                    tiles, AUTZEN_BEND, tmp_path / "no.field", client, subdomains=0
+                )
     assert report.linear_solver == "local-global"
     rigidcells.solve_files(tiles, AUTZEN_BEND, tmp_path / "here.field", subdomains=4, **common)
     default = rigidcells.solve_files(tiles, AUTZEN_BEND, tmp_path / "default.field", **common)
@@ -125,7 +130,9 @@ def test_solve_tiles_on_worker_processes_gives_the_one_process_field(tmp_path):
 def test_a_worker_lost_mid_solve_ends_it_with_nothing_written(tmp_path):
     src = SHARED / "las" / "autzen_trim.laz"
     field = tmp_path / "lost.field"
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster:
+    # A dead worker's connection is given up after 3 s, not Dask's default 30.
+    quick = dask.config.set({"distributed.comm.timeouts.connect": "3s"})
+    with quick, distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster:
         with distributed.Client(cluster) as client:
             victim = sorted(client.scheduler_info()["workers"])[1]
             killed = []

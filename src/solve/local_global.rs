@@ -568,13 +568,14 @@ impl Rate {
 
 /// Minimizes the glue energy at full load by local-global iterations from `start` (the
 /// prescribed cells are set to their prescribed motions first, the free positions to their
-/// optimum). Returns the motions and what was done. See the module docs.
+/// optimum). Returns the motions and what was done; an error where the energy stops being a
+/// number or the global step by subdomains fails. See the module docs.
 pub fn minimize_local_global<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
     start: &[Motion<D>],
     params: &LocalGlobalParams,
-) -> (Vec<Motion<D>>, LocalGlobalInfo)
+) -> Result<(Vec<Motion<D>>, LocalGlobalInfo)>
 where
     Dim<D>: Rigid<D>,
 {
@@ -588,11 +589,9 @@ where
         pins: &pins,
         targets: &targets,
     };
-    // Blocks solved in this process: nothing but workers can fail.
     let positions = match params.subdomains {
         0 => Positions::new(complex, constraints),
-        k => Positions::by_subdomains(complex, constraints, k, None)
-            .unwrap_or_else(|_| Positions::new(complex, constraints)),
+        k => Positions::by_subdomains(complex, constraints, k, None)?,
     };
     info.seconds_factor = clock.elapsed().as_secs_f64();
     let layout = Layout::new(complex, constraints);
@@ -601,8 +600,7 @@ where
         .iter()
         .map(|&c| motions[c as usize].rot)
         .collect();
-    // The one-process global step does not fail (see above).
-    let _ = layout.global((complex, constraints, &positions), &mut motions, &rots, &to);
+    layout.global((complex, constraints, &positions), &mut motions, &rots, &to)?;
     let energy = total_energy(complex, constraints, &motions, &targets);
     info.energies.push(energy);
     info.seconds.push(clock.elapsed().as_secs_f64());
@@ -627,12 +625,10 @@ where
         Ok(stalled)
     };
     let parts = (complex, constraints, &positions, &layout);
-    // `each` does not fail; a non-finite energy ends the run at the last finite motions, which
-    // are what is returned.
-    let _ = iterate(parts, &mut motions, &to, energy, &stop, &mut each);
+    iterate(parts, &mut motions, &to, energy, &stop, &mut each)?;
     info.iterations = info.energies.len() - 1;
     info.seconds_per_iteration = loop_start.elapsed().as_secs_f64() / info.iterations.max(1) as f64;
-    (motions, info)
+    Ok((motions, info))
 }
 
 /// The rotations' entries, one after another.
@@ -794,7 +790,8 @@ mod tests {
                 anderson,
                 subdomains,
             };
-            let (motions, info) = minimize_local_global(complex, constraints, &rest, &params);
+            let (motions, info) =
+                minimize_local_global(complex, constraints, &rest, &params).unwrap();
             for w in info.energies.windows(2) {
                 assert!(
                     w[1] <= w[0],

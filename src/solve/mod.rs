@@ -99,6 +99,7 @@ mod steps;
 mod system;
 pub mod trend;
 pub mod turns;
+mod workers;
 
 use std::time::Instant;
 

@@ -33,6 +33,7 @@ use super::schwarz::{self, Schwarz, Subdomains, Workers};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
+use crate::said::{Opt, Said};
 
 /// The position system of one topology, ready to solve.
 pub(crate) struct Positions {
@@ -85,7 +86,9 @@ impl Positions {
 
     /// The system split into `subdomains` ([`super::schwarz`]), each block factored alone
     /// (by `workers` where given, else here), solved by preconditioned conjugate gradients.
-    /// An error where the workers fail.
+    /// An error where the workers fail, or where free cells have nothing holding their
+    /// positions (the one factor's path leaves such a system to Gauss-Newton; a split asked
+    /// for is refused instead of dropped).
     pub fn by_subdomains<const D: usize>(
         complex: &CellComplex<D>,
         constraints: &Constraints<D>,
@@ -93,20 +96,34 @@ impl Positions {
         workers: Option<&dyn Workers>,
     ) -> Result<Self> {
         let (row, n, triplets) = laplacian(complex, constraints);
-        let mut solver = None;
-        if held(&triplets) {
-            let matrix = Laplacian::from_lower(n, &triplets);
-            let split = Subdomains::split(complex, &row, subdomains);
-            let aggregate = schwarz::aggregate_size(n);
-            let preconditioner =
-                Schwarz::new(&matrix, &split, schwarz::OVERLAP, aggregate, workers)?;
-            solver = preconditioner.map(|preconditioner| {
-                Solver::Subdomains(Box::new(Split {
-                    matrix,
-                    preconditioner,
-                }))
+        if n == 0 {
+            return Ok(Self {
+                row,
+                n,
+                solver: None,
             });
         }
+        let singular = || {
+            Error::param(
+                Said::new()
+                    .set(Opt::Subdomains, subdomains)
+                    .text(": a free part of the cells has nothing holding its position, so the ")
+                    .text("global step has no single solution to split; solve without ")
+                    .opt(Opt::Subdomains),
+            )
+        };
+        if !held(&triplets) {
+            return Err(singular());
+        }
+        let matrix = Laplacian::from_lower(n, &triplets);
+        let split = Subdomains::split(complex, &row, subdomains);
+        let aggregate = schwarz::aggregate_size(n);
+        let preconditioner = Schwarz::new(&matrix, &split, schwarz::OVERLAP, aggregate, workers)?
+            .ok_or_else(singular)?;
+        let solver = Some(Solver::Subdomains(Box::new(Split {
+            matrix,
+            preconditioner,
+        })));
         Ok(Self { row, n, solver })
     }
 
@@ -193,7 +210,8 @@ impl Positions {
                 }
                 let solved =
                     schwarz::solve(l, m, &b, &mut x, SUBDOMAIN_TOLERANCE, SUBDOMAIN_ITERATIONS)?;
-                if solved.residual > SUBDOMAIN_TOLERANCE {
+                let reached = solved.residual.is_finite() && solved.residual <= SUBDOMAIN_TOLERANCE;
+                if !reached || x.iter().any(|v| !v.is_finite()) {
                     return Err(Error::solver(format!(
                         "the global step by {} subdomains reached a residual of {:.0e}, not \
                          {SUBDOMAIN_TOLERANCE:.0e}, in {} conjugate-gradient iterations",

@@ -41,14 +41,15 @@
 //! far faster (3.1 s to factor and 0.4 s to solve at 1.25 m, against 13 s of iterations): the
 //! split is for a solve whose matrix one process cannot hold.
 
-use std::sync::{Arc, Mutex};
-
 use faer::prelude::*;
 use faer::sparse::Triplet;
 use faer::sparse::linalg::solvers::Llt;
 use rayon::prelude::*;
 
 use super::laplacian::{Laplacian, factor};
+pub use super::workers::{
+    Block, BlockFactor, BlockSolves, Registration, Workers, WorkersId, register, registered,
+};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 
@@ -114,160 +115,24 @@ impl Subdomains {
     }
 }
 
-/// One subdomain's block as the process that holds it receives it: the lower triangle of
-/// `A_k = R_k L R_kᵀ` in the block's own numbering (`rows[t] ≥ cols[t]`).
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Block {
-    /// Rows (and columns) of the block.
-    pub size: usize,
-    /// Each entry's row.
-    pub rows: Vec<u32>,
-    /// Each entry's column.
-    pub cols: Vec<u32>,
-    /// Each entry's value.
-    pub values: Vec<f64>,
-}
-
-impl Block {
-    /// `l`'s principal block on `rows` (ascending).
-    fn of(l: &Laplacian, rows: &[u32]) -> Self {
-        let mut block = Self {
-            size: rows.len(),
-            ..Self::default()
-        };
-        for (i, &r) in rows.iter().enumerate() {
-            for (c, v) in l.row(r as usize) {
-                if let Ok(j) = rows.binary_search(&(c as u32))
-                    && j <= i
-                {
-                    block.rows.push(i as u32);
-                    block.cols.push(j as u32);
-                    block.values.push(v);
-                }
+/// `l`'s principal block on `rows` (ascending), as a worker receives it.
+fn block_of(l: &Laplacian, rows: &[u32]) -> Block {
+    let mut block = Block {
+        size: rows.len(),
+        ..Block::default()
+    };
+    for (i, &r) in rows.iter().enumerate() {
+        for (c, v) in l.row(r as usize) {
+            if let Ok(j) = rows.binary_search(&(c as u32))
+                && j <= i
+            {
+                block.rows.push(i as u32);
+                block.cols.push(j as u32);
+                block.values.push(v);
             }
         }
-        block
     }
-
-    /// Its Cholesky factor; `None` where the block is not positive definite, or an entry
-    /// lies outside it or above its diagonal.
-    pub fn factor(&self) -> Option<BlockFactor> {
-        let n = self.size;
-        let mut lower = Vec::with_capacity(self.values.len());
-        for ((&i, &j), &v) in self.rows.iter().zip(&self.cols).zip(&self.values) {
-            let (i, j) = (i as usize, j as usize);
-            if i >= n || j > i || !v.is_finite() {
-                return None;
-            }
-            lower.push(Triplet::new(i, j, v));
-        }
-        let factor = factor(n, &lower)?;
-        Some(BlockFactor { factor, n })
-    }
-}
-
-/// A block's Cholesky factor, held by the process that solves it.
-pub struct BlockFactor {
-    factor: Llt<usize, f64>,
-    n: usize,
-}
-
-impl BlockFactor {
-    /// Rows of the block.
-    pub fn len(&self) -> usize {
-        self.n
-    }
-
-    /// Whether the block has no rows.
-    pub fn is_empty(&self) -> bool {
-        self.n == 0
-    }
-
-    /// `A⁻¹ b` for `b` of columns of `len()` each, column after column; `None` where `b` is
-    /// not whole columns.
-    pub fn solve(&self, b: &[f64]) -> Option<Vec<f64>> {
-        let n = self.n;
-        if b.is_empty() {
-            return Some(Vec::new());
-        }
-        if n == 0 || !b.len().is_multiple_of(n) {
-            return None;
-        }
-        let d = b.len() / n;
-        let mut x = Mat::<f64>::from_fn(n, d, |i, a| b[a * n + i]);
-        crate::with_faer(|| self.factor.solve_in_place(x.as_mut()));
-        Some((0..n * d).map(|k| x[(k % n, k / n)]).collect())
-    }
-}
-
-/// Processes that hold the subdomains' blocks, one block each or several: each factors its
-/// blocks once per system and solves them for the right-hand sides sent to it, so that no
-/// process but its own holds a block's factor. Without workers this process factors and
-/// solves every block itself. The Python package's Dask layer is one.
-pub trait Workers: Send + Sync {
-    /// Sends every block to the worker that will hold it, to factor; the answer solves them.
-    /// An error (a block not positive definite, a worker lost) ends the solve.
-    fn factor(&self, blocks: Vec<Block>) -> Result<Box<dyn BlockSolves>>;
-}
-
-/// The blocks factored by [`Workers`].
-pub trait BlockSolves: Send + Sync {
-    /// `A_k⁻¹ r_k` for every block `k`, in the blocks' order, each right-hand side of whole
-    /// columns (column after column) and each answer the same shape. An error ends the solve.
-    fn solve(&self, rhs: Vec<Vec<f64>>) -> Result<Vec<Vec<f64>>>;
-}
-
-/// Workers registered for the length of a call ([`register`]): what a solve's parameters
-/// name them by, so that the parameters stay plain values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct WorkersId(u64);
-
-/// The last id given, and the workers registered now by id.
-struct Registry {
-    last: u64,
-    workers: Vec<(u64, Arc<dyn Workers>)>,
-}
-
-static REGISTERED: Mutex<Registry> = Mutex::new(Registry {
-    last: 0,
-    workers: Vec::new(),
-});
-
-/// Registers `workers` until the answer is dropped; its [`Registration::id`] goes in the solve's
-/// parameters.
-pub fn register(workers: Arc<dyn Workers>) -> Registration {
-    let mut r = REGISTERED.lock().unwrap_or_else(|e| e.into_inner());
-    r.last += 1;
-    let id = r.last;
-    r.workers.push((id, workers));
-    Registration(WorkersId(id))
-}
-
-/// Keeps workers registered ([`register`]) while it lives.
-pub struct Registration(WorkersId);
-
-impl Registration {
-    /// The id the solve's parameters name the workers by.
-    pub fn id(&self) -> WorkersId {
-        self.0
-    }
-}
-
-impl Drop for Registration {
-    fn drop(&mut self) {
-        let mut r = REGISTERED.lock().unwrap_or_else(|e| e.into_inner());
-        r.workers.retain(|(id, _)| *id != (self.0).0);
-    }
-}
-
-/// The workers registered as `id`; an error once they are no longer registered.
-pub fn registered(id: WorkersId) -> Result<Arc<dyn Workers>> {
-    let r = REGISTERED.lock().unwrap_or_else(|e| e.into_inner());
-    r.workers
-        .iter()
-        .find(|(k, _)| *k == id.0)
-        .map(|(_, w)| Arc::clone(w))
-        .ok_or_else(|| Error::solver("the workers given for the subdomains are gone"))
+    block
 }
 
 /// Where the subdomains' blocks are factored and solved.
@@ -309,7 +174,7 @@ impl Schwarz {
             .par_iter()
             .map(|part| grown(l, part, overlap))
             .collect();
-        let blocks = rows.par_iter().map(|r| Block::of(l, r));
+        let blocks = rows.par_iter().map(|r| block_of(l, r));
         let local = match workers {
             None => match blocks.map(|b| b.factor()).collect::<Option<Vec<_>>>() {
                 Some(factors) => Local::Here(factors),
@@ -381,21 +246,18 @@ impl Schwarz {
                 .zip(factors)
                 .map(|(rows, f)| f.solve(&restricted(rows)).unwrap_or_default())
                 .collect(),
-            Local::Workers(solves) => {
-                let answers = solves.solve(self.rows.iter().map(restricted).collect())?;
-                let whole = answers.len() == self.rows.len()
-                    && answers
-                        .iter()
-                        .zip(&self.rows)
-                        .all(|(x, rows)| x.len() == rows.len() * d);
-                if !whole {
-                    return Err(Error::solver(
-                        "a worker answered a subdomain's solve with the wrong number of values",
-                    ));
-                }
-                answers
-            }
+            Local::Workers(solves) => solves.solve(self.rows.iter().map(restricted).collect())?,
         };
+        let whole = solved.len() == self.rows.len()
+            && solved
+                .iter()
+                .zip(&self.rows)
+                .all(|(x, rows)| x.len() == rows.len() * d);
+        if !whole {
+            return Err(Error::solver(
+                "a subdomain's solve gave the wrong number of values",
+            ));
+        }
         let mut z = vec![0.0; n * d];
         for (rows, x) in self.rows.iter().zip(&solved) {
             for (k, v) in x.iter().enumerate() {
@@ -524,12 +386,13 @@ impl Factored {
     /// The factor of `l`; `None` where `l` is singular.
     pub fn new(l: &Laplacian) -> Option<Self> {
         let all: Vec<u32> = (0..l.n as u32).collect();
-        Block::of(l, &all).factor().map(Self)
+        block_of(l, &all).factor().map(Self)
     }
 
-    /// `L⁻¹ b` for `b` of `D` columns of `n` each (column after column).
-    pub fn solve(&self, b: &[f64]) -> Vec<f64> {
-        self.0.solve(b).unwrap_or_default()
+    /// `L⁻¹ b` for `b` of `D` columns of `n` each (column after column); `None` where `b` is
+    /// not whole columns.
+    pub fn solve(&self, b: &[f64]) -> Option<Vec<f64>> {
+        self.0.solve(b)
     }
 }
 
@@ -627,6 +490,7 @@ mod tests {
     use crate::rigid::Vect;
     use crate::solve::constraints::{Constraints, Role};
     use rand::{Rng, SeedableRng, rngs::StdRng};
+    use std::sync::{Arc, Mutex};
 
     /// A plate of cells over a wavy ground, its west end fixed: the global step's matrix.
     fn plate() -> (Laplacian, CellComplex<3>, Vec<Option<u32>>) {
@@ -681,7 +545,7 @@ mod tests {
         assert!(n > 2000, "{n} free cells");
         let mut rng = StdRng::seed_from_u64(3);
         let b: Vec<f64> = (0..3 * n).map(|_| rng.random_range(-1.0..1.0)).collect();
-        let exact = Factored::new(&l).unwrap().solve(&b);
+        let exact = Factored::new(&l).unwrap().solve(&b).unwrap();
         let scale = exact.iter().fold(0.0f64, |s, v| s.max(v.abs()));
         let mut iterations = Vec::new();
         for k in [4, 16] {
@@ -885,5 +749,23 @@ mod tests {
         let mut x = vec![0.0; 3 * n];
         let e = solve(&l, &m, &b, &mut x, 1e-10, 500).unwrap_err();
         assert!(e.to_string().contains("worker lost"), "{e}");
+
+        // Answers of the wrong length are an error, not a preconditioner that adds nothing.
+        struct Short;
+        impl Workers for Short {
+            fn factor(&self, _: Vec<Block>) -> Result<Box<dyn BlockSolves>> {
+                Ok(Box::new(Short))
+            }
+        }
+        impl BlockSolves for Short {
+            fn solve(&self, rhs: Vec<Vec<f64>>) -> Result<Vec<Vec<f64>>> {
+                Ok(rhs.iter().map(|r| r[1..].to_vec()).collect())
+            }
+        }
+        let m = Schwarz::new(&l, &sub, OVERLAP, aggregate_size(n), Some(&Short))
+            .unwrap()
+            .unwrap();
+        let e = solve(&l, &m, &b, &mut x, 1e-10, 500).unwrap_err();
+        assert!(e.to_string().contains("wrong number of values"), "{e}");
     }
 }

@@ -25,6 +25,7 @@ task returns the error instead of raising it, and ``apply_tiles`` raises it at o
 
 from __future__ import annotations
 
+import asyncio
 import os
 from pathlib import Path
 from typing import Any, Iterable, List, Optional, Union
@@ -52,62 +53,76 @@ class _Blocks:
         return [f.solve(r) for f, r in zip(self._factors, rhs)]
 
 
+# Errors by which Dask says a worker or its connection is gone (an actor whose worker died, a
+# closed comm, a call that outlived its timeout); what an actor's own method raises passes
+# through as it was raised.
+_LOST = (RuntimeError, OSError, TimeoutError, asyncio.TimeoutError, asyncio.CancelledError)
+
+
 class _Factored:
     """The blocks of one system, factored by actors: block ``k`` lives on actor
     ``k % len(actors)``."""
 
-    def __init__(self, actors: list) -> None:
-        self._actors = actors
+    def __init__(self, actors: list, timeout: float) -> None:
+        self._actors, self._timeout = actors, timeout
 
     def solve(self, rhs: list) -> list:
         n = len(self._actors)
-        answers = _on_actors(self._actors, "solve", [rhs[i::n] for i in range(n)])
+        answers = _on_actors(self._actors, "solve", [rhs[i::n] for i in range(n)], self._timeout)
         out: list = [None] * len(rhs)
         for i, solved in enumerate(answers):
             out[i::n] = solved
         return out
 
 
-def _on_actors(actors: list, method: str, arguments: list) -> list:
+def _lost(e: BaseException) -> "WorkerLost":
+    return WorkerLost(
+        f"a Dask worker holding subdomains was lost mid-solve ({type(e).__name__}: {e}); "
+        "the field was not written"
+    )
+
+
+def _on_actors(actors: list, method: str, arguments: list, timeout: float) -> list:
     """``actor.method(argument)`` on every actor at once, their results in order; a lost
-    worker raised as ``WorkerLost``."""
+    worker, or a call past ``timeout`` seconds, raised as ``WorkerLost``."""
     try:
         calls = [getattr(a, method)(x) for a, x in zip(actors, arguments)]
-        return [c.result() for c in calls]
-    except ValueError:  # a block the library refused, raised on its worker
-        raise
-    except Exception as e:  # the worker's process or connection is gone
-        raise WorkerLost(
-            f"a Dask worker holding subdomains was lost mid-solve ({type(e).__name__}: {e}); "
-            "the field was not written"
-        ) from e
+        return [c.result(timeout=timeout) for c in calls]
+    except _LOST as e:
+        raise _lost(e) from e
 
 
 class _Workers:
-    """The cluster's workers as the solver's subdomain workers: one actor per worker, made
-    anew for each system the solve factors."""
+    """The cluster's workers as the solver's subdomain workers: one actor on each worker
+    alive when a system is factored, made anew for each system."""
 
-    def __init__(self, client: Any) -> None:
-        self._client = client
-        self.addresses = sorted(client.scheduler_info()["workers"])
-        if not self.addresses:
-            raise ValueError("the Dask client has no workers")
+    def __init__(self, client: Any, timeout: float) -> None:
+        self._client, self._timeout = client, timeout
+        self.addresses()
+
+    def addresses(self) -> List[str]:
+        """The workers alive now."""
+        addresses = sorted(self._client.scheduler_info()["workers"])
+        if not addresses:
+            raise WorkerLost("the Dask cluster has no workers")
+        return addresses
 
     def factor(self, blocks: list) -> _Factored:
-        n = min(len(self.addresses), len(blocks)) or 1
+        addresses = self.addresses()
+        n = min(len(addresses), len(blocks)) or 1
         futures = [
             self._client.submit(_Blocks, actor=True, workers=[a], pure=False)
-            for a in self.addresses[:n]
+            for a in addresses[:n]
         ]
         try:
-            actors = [f.result() for f in futures]
-        except Exception as e:
-            raise WorkerLost(f"a Dask worker did not take its subdomains ({e})") from e
-        _on_actors(actors, "factor", [blocks[i::n] for i in range(n)])
-        return _Factored(actors)
+            actors = [f.result(timeout=self._timeout) for f in futures]
+        except _LOST as e:
+            raise _lost(e) from e
+        _on_actors(actors, "factor", [blocks[i::n] for i in range(n)], self._timeout)
+        return _Factored(actors, self._timeout)
 
 
-def _own_client(client: Any, n_workers: Optional[int] = None) -> Any:
+def _own_client(client: Any) -> Any:
     """``client``, the current one, or a new ``LocalCluster`` of worker processes (returned
     second, to close)."""
     from dask.distributed import Client, LocalCluster, get_client
@@ -117,7 +132,7 @@ def _own_client(client: Any, n_workers: Optional[int] = None) -> Any:
     try:
         return get_client(), None
     except ValueError:
-        own = Client(LocalCluster(processes=True, n_workers=n_workers, threads_per_worker=1))
+        own = Client(LocalCluster(processes=True))
         return own, own
 
 
@@ -135,6 +150,7 @@ def solve_tiles(
     client: Any = None,
     *,
     subdomains: Optional[int] = None,
+    timeout: float = 600.0,
     **arguments: Any,
 ) -> Any:
     """``rigidcells.solve_files(tiles, spec, save_field, subdomains=..., **arguments)`` with
@@ -142,11 +158,12 @@ def solve_tiles(
     cluster (see the module's docs); returns its ``Report``.
 
     ``client``: a ``dask.distributed.Client``; ``None`` takes the current one, or starts a
-    ``LocalCluster`` of worker processes for the call. ``subdomains``: how many (default: the
-    workers' count, at least 2); each worker holds an equal share of them. ``arguments``: those
-    of ``solve_files`` (``report``, ``cell_size``, ``memory_limit``, ``progress``, ...), but
-    ``solver``, which is local-global here. A worker lost mid-solve raises ``WorkerLost``, and
-    nothing is written.
+    ``LocalCluster`` of worker processes for the call. ``subdomains``: how many, 1 or more
+    (default: the workers' count, at least 2); block ``k`` goes to the ``k mod W``-th of the
+    ``W`` workers alive when a system is factored. ``timeout``: seconds a worker may take to
+    answer one call before it counts as lost. ``arguments``: those of ``solve_files``
+    (``report``, ``cell_size``, ``memory_limit``, ``progress``, ...), but ``solver``, which is
+    local-global here. A worker lost mid-solve raises ``WorkerLost``, and nothing is written.
     """
     import inspect
 
@@ -156,11 +173,17 @@ def solve_tiles(
         raise ValueError(
             f"solver={arguments['solver']!r}: solve_tiles solves by local-global iterations"
         )
+    if subdomains is not None and (isinstance(subdomains, bool) or not isinstance(subdomains, int)):
+        raise TypeError(f"subdomains must be a whole number, got {type(subdomains).__name__}")
+    if subdomains is not None and subdomains < 1:
+        raise ValueError(f"subdomains must be 1 or more, got {subdomains}")
+    if not timeout > 0:
+        raise ValueError(f"timeout must be a number of seconds above 0, got {timeout}")
     client, own = _own_client(client)
     try:
-        workers = _Workers(client)
+        workers = _Workers(client, timeout)
         if subdomains is None:
-            subdomains = max(2, len(workers.addresses))
+            subdomains = max(2, len(workers.addresses()))
         bound = inspect.signature(rigidcells.solve_files).bind(
             tiles, spec, save_field, subdomains=subdomains, **arguments
         )

@@ -183,7 +183,7 @@ fn compare(
             anderson,
             subdomains,
         };
-        let (_, lg) = solve::minimize_local_global(complex, constraints, start, &params);
+        let (_, lg) = solve::minimize_local_global(complex, constraints, start, &params)?;
         let monotone = lg.energies.windows(2).all(|w| w[1] <= w[0]);
         let per = |s: f64| s * 1e3 / lg.iterations.max(1) as f64;
         let split = format!(

@@ -66,7 +66,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let direct = schwarz::Factored::new(&l).ok_or("the matrix is singular")?;
         let setup = start.elapsed().as_secs_f64();
         let start = Instant::now();
-        let exact = direct.solve(&b);
+        let exact = direct
+            .solve(&b)
+            .ok_or("the right-hand side is not whole columns")?;
         let seconds = start.elapsed().as_secs_f64();
         drop(direct);
         println!(
