@@ -248,7 +248,7 @@ fn the_server_says_what_it_does() {
     let saved = format!("saved {}", dir.path().join("ends.edit.toml").display());
     let expected = [
         "page loaded",
-        "refused GET /scene.json: without this session's token, or from another host or page",
+        "refused GET /scene.json: without the editor's token, or from another host or page",
         "not found: /nothing",
         "page connected",
         saved.as_str(),

@@ -396,7 +396,7 @@ fn connection(
     }
     if !admitted || upgrade {
         log(&format!(
-            "refused GET {path}: without this session's token, or from another host or page"
+            "refused GET {path}: without the editor's token, or from another host or page"
         ));
         return respond(
             &mut stream,

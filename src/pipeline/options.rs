@@ -154,6 +154,8 @@ impl Options {
             Some(size) => solve::adaptive(size, &params.build, &params.solve)?,
             None => (params.build, params.solve),
         };
+        // The solver's own checks, here too so that every face refuses before any work.
+        solve::check_params(&solve)?;
         Ok(DeformParams {
             build,
             solve,
@@ -318,6 +320,11 @@ mod tests {
             },
             Options {
                 rbf_tolerance: Some(0.01),
+                ..Default::default()
+            },
+            Options {
+                subdomains: 4,
+                solver: Method::Direct,
                 ..Default::default()
             },
         ] {

@@ -129,7 +129,7 @@ use crate::rigid::{Dim, Motion, Rigid};
 use crate::said::{Opt, Said};
 use newton::{cells_advice, check_solver_memory, minimize_with, refine_advice, timed};
 pub use newton::{minimize, minimize_from, total_energy};
-use params::check_params;
+pub(crate) use params::check_params;
 pub use params::{
     ADAPTIVE_FRACTION, ADAPTIVE_LEVELS, Method, REFINE_GROWTH, Solution, SolveParams, SolverInfo,
     adaptive,

@@ -234,7 +234,7 @@ impl<const D: usize> Solution<D> {
 }
 
 /// Refuses parameters no solve can take.
-pub(super) fn check_params(params: &SolveParams) -> Result<()> {
+pub(crate) fn check_params(params: &SolveParams) -> Result<()> {
     if params.subdomains > 0 && matches!(params.method, Method::Direct | Method::Multilevel) {
         return Err(Error::param(
             Said::new()
