@@ -4,7 +4,7 @@
 
 use faer::Side;
 use faer::sparse::linalg::cholesky::{
-    SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
+    SymbolicCholesky, SymbolicCholeskyRaw, SymmetricOrdering, factorize_symbolic_cholesky,
 };
 use faer::sparse::{Pair, SymbolicSparseColMat};
 
@@ -87,23 +87,7 @@ pub(crate) fn graph_fill(nodes: usize, edges: &[[u32; 2]], dof: usize) -> Option
     if nodes == 0 {
         return Some(Fill::default());
     }
-    let mut indices: Vec<Pair<u32, u32>> =
-        (0..nodes as u32).map(|k| Pair { row: k, col: k }).collect();
-    indices.extend(edges.iter().map(|&[a, b]| Pair {
-        row: a.max(b),
-        col: a.min(b),
-    }));
-    let (sym, _) = SymbolicSparseColMat::try_new_from_indices(nodes, nodes, &indices).ok()?;
-    drop(indices);
-    let llt = crate::with_faer(|| {
-        factorize_symbolic_cholesky(
-            sym.as_ref(),
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            Default::default(),
-        )
-    })
-    .ok()?;
+    let llt = analyse_graph::<u32>(nodes, edges)?;
     let d = dof as f64;
     let mut fill = Fill {
         nodes_len: llt.len_val() as f64,
@@ -136,4 +120,32 @@ pub(crate) fn graph_fill(nodes: usize, edges: &[[u32; 2]], dof: usize) -> Option
         }
     }
     Some(fill)
+}
+
+/// The symbolic Cholesky factorization of the graph of `nodes` nodes and `edges` (either
+/// order, no self-edge) in AMD's order, or `None` where faer cannot analyse it: the fill of a
+/// block matrix of that graph ([`graph_fill`]) and the order of its nodes
+/// (`blocks::CoarseFactor`) are read from it, at a `dof²`-th of the scalar pattern's work.
+pub(crate) fn analyse_graph<I: faer::Index>(
+    nodes: usize,
+    edges: &[[u32; 2]],
+) -> Option<SymbolicCholesky<I>> {
+    let at = |k: u32| I::truncate(k as usize);
+    let mut indices: Vec<Pair<I, I>> = (0..nodes as u32).map(|k| Pair::new(at(k), at(k))).collect();
+    indices.extend(
+        edges
+            .iter()
+            .map(|&[a, b]| Pair::new(at(a.max(b)), at(a.min(b)))),
+    );
+    let (sym, _) = SymbolicSparseColMat::try_new_from_indices(nodes, nodes, &indices).ok()?;
+    drop(indices);
+    crate::with_faer(|| {
+        factorize_symbolic_cholesky(
+            sym.as_ref(),
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            Default::default(),
+        )
+    })
+    .ok()
 }

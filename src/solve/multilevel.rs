@@ -13,7 +13,8 @@
 //!   a pinned cell takes only `Ω`). On the first level this tentative prolongation `P₀` is
 //!   smoothed once, `P = (I − 4/(3λ) D⁻¹H) P₀`; further levels use `P₀` itself. Each coarse
 //!   matrix is the Galerkin product `Pᵀ H P`; levels are added until one has at most
-//!   [`FACTORED`] nodes, which faer's sparse Cholesky factors.
+//!   [`FACTORED`] nodes, which faer's sparse Cholesky factors in AMD's order of the nodes'
+//!   graph, each node's unknowns together (`blocks::CoarseFactor`).
 //! - **Smoothing.** A Chebyshev polynomial of degree [`SMOOTH_DEGREE`] in the block-Jacobi
 //!   preconditioned matrix over `[λ/RATIO, λ]`, `λ` its largest eigenvalue by power iteration,
 //!   the same before and after the coarse correction (a symmetric positive preconditioner).
@@ -41,7 +42,6 @@
 //! groups).
 //! Other coarse spaces and cycles measured slower (BENCHMARKS.md §13).
 
-use faer::prelude::*;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
@@ -201,7 +201,7 @@ impl Hierarchy {
     /// factor freed first: the next one is made before this one would be dropped).
     pub fn into_coarsest(self) -> Option<CoarseFactor> {
         self.coarsest.map(|mut f| {
-            f.llt = None;
+            f.values = None;
             f
         })
     }
@@ -274,14 +274,10 @@ impl Hierarchy {
     }
 
     fn coarse_solve(&self, b: &[f64]) -> Vec<f64> {
-        match self.coarsest.as_ref().and_then(|f| f.llt.as_ref()) {
-            Some(llt) => {
-                let rhs = Mat::<f64>::from_fn(b.len(), 1, |r, _| b[r]);
-                let x = crate::with_faer(|| llt.solve(&rhs));
-                (0..b.len()).map(|r| x[(r, 0)]).collect()
-            }
-            None => vec![0.0; b.len()],
-        }
+        self.coarsest
+            .as_ref()
+            .and_then(|f| f.solve(b))
+            .unwrap_or_else(|| vec![0.0; b.len()])
     }
 }
 
@@ -928,7 +924,7 @@ mod tests {
             Hierarchy::new(matrix, nodes, 1.0, [100, 60], reuse)
         };
         let earlier = build(1.0, None).into_coarsest();
-        assert!(earlier.as_ref().is_some_and(|f| f.llt.is_none()));
+        assert!(earlier.as_ref().is_some_and(|f| f.values.is_none()));
         let fresh = build(3.0, None);
         // The same coarsest edges: the analysis is taken over, not made again.
         let edges = |h: &Hierarchy| h.coarsest.as_ref().map(|f| f.edges.clone());
