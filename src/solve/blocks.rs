@@ -252,13 +252,18 @@ pub(crate) struct CoarseFactor {
     pub(super) edges: Vec<[u32; 2]>,
     /// The lower triangle's scalar pattern, by columns.
     pattern: SymbolicSparseColMat<usize>,
-    /// Below each node, the blocks of its column: `(edge, whether the edge's first node is
-    /// this one)`, in the order of the nodes below, `below[start[j]..start[j + 1]]`.
-    start: Vec<usize>,
-    below: Vec<(u32, bool)>,
+    /// Where the blocks below the diagonal come from.
+    below: Below,
     symbolic: SymbolicCholesky<usize>,
     /// The factor's values (`None`: the matrix was not positive definite).
     pub(super) values: Option<Vec<f64>>,
+}
+
+/// Below each node `j`, the blocks of its column, `below[start[j]..start[j + 1]]`: `(node
+/// below, edge, whether the edge's first node is `j`)`, in the order of the nodes below.
+struct Below {
+    start: Vec<usize>,
+    below: Vec<(u32, u32, bool)>,
 }
 
 impl CoarseFactor {
@@ -289,13 +294,9 @@ fn analyse_by_nodes(
     edges: &[[u32; 2]],
 ) -> Option<SymbolicCholesky<usize>> {
     let nodes = super::auto::analyse_graph::<usize>(n, edges)?;
-    let order: Vec<usize> = match nodes.perm() {
-        Some(perm) => perm.arrays().0.to_vec(),
-        None => (0..n).collect(),
-    };
-    let forward: Vec<usize> = order
-        .iter()
-        .flat_map(|&k| (0..d).map(move |r| k * d + r))
+    let node = |i: usize| nodes.perm().map_or(i, |perm| perm.arrays().0[i]);
+    let forward: Vec<usize> = (0..n)
+        .flat_map(|i| (0..d).map(move |r| node(i) * d + r))
         .collect();
     let mut inverse = vec![0usize; forward.len()];
     for (i, &f) in forward.iter().enumerate() {
@@ -315,66 +316,48 @@ fn analyse_by_nodes(
 
 /// The lower triangle's scalar pattern of `a` by columns, with where each column's blocks
 /// below the diagonal come from ([`CoarseFactor::below`]): built from the edges directly
-/// (each node's neighbors sorted), without sorting every scalar entry. `None` for an edge
-/// given twice or from a node to itself.
-#[allow(clippy::type_complexity)]
-fn lower_pattern(
-    a: &BlockMatrix,
-) -> Option<(SymbolicSparseColMat<usize>, Vec<usize>, Vec<(u32, bool)>)> {
+/// (each node's neighbors sorted in place), without sorting every scalar entry. `None` for an
+/// edge given twice or from a node to itself.
+fn lower_pattern(a: &BlockMatrix) -> Option<(SymbolicSparseColMat<usize>, Below)> {
     let (n, d) = (a.n, a.dof);
-    // The nodes below each node, with their edges, in increasing order.
-    let mut count = vec![0usize; n + 1];
+    let mut start = vec![0usize; n + 1];
     for e in &a.edges {
         if e[0] == e[1] {
             return None;
         }
-        count[e[0].min(e[1]) as usize + 1] += 1;
+        start[e[0].min(e[1]) as usize + 1] += 1;
     }
     for j in 0..n {
-        count[j + 1] += count[j];
+        start[j + 1] += start[j];
     }
-    let start = count;
     let mut next = start.clone();
-    let mut below = vec![(0u32, false); a.edges.len()];
-    let mut lower = vec![0u32; a.edges.len()];
+    let mut below = vec![(0u32, 0u32, false); a.edges.len()];
     for (k, e) in a.edges.iter().enumerate() {
-        let (lo, hi) = (e[0].min(e[1]) as usize, e[0].max(e[1]));
-        let at = &mut next[lo];
-        below[*at] = (k as u32, e[0] as usize == lo);
-        lower[*at] = hi;
-        *at += 1;
+        let lo = e[0].min(e[1]) as usize;
+        below[next[lo]] = (e[0].max(e[1]), k as u32, e[0] as usize == lo);
+        next[lo] += 1;
     }
     for j in 0..n {
-        let range = start[j]..start[j + 1];
-        let mut pairs: Vec<(u32, (u32, bool))> = lower[range.clone()]
-            .iter()
-            .copied()
-            .zip(below[range.clone()].iter().copied())
-            .collect();
-        pairs.sort_unstable_by_key(|p| p.0);
-        if pairs.windows(2).any(|w| w[0].0 == w[1].0) {
+        let column = &mut below[start[j]..start[j + 1]];
+        column.sort_unstable_by_key(|b| b.0);
+        if column.windows(2).any(|w| w[0].0 == w[1].0) {
             return None;
         }
-        for (slot, (k, b)) in range.clone().zip(pairs) {
-            lower[slot] = k;
-            below[slot] = b;
-        }
     }
-    let entries = n * d * (d + 1) / 2 + a.edges.len() * d * d;
     let mut col_ptr = Vec::with_capacity(n * d + 1);
-    let mut row_idx = Vec::with_capacity(entries);
+    let mut row_idx = Vec::with_capacity(n * d * (d + 1) / 2 + a.edges.len() * d * d);
     col_ptr.push(0);
     for j in 0..n {
         for c in 0..d {
             row_idx.extend((c..d).map(|r| j * d + r));
-            for &k in &lower[start[j]..start[j + 1]] {
+            for &(k, _, _) in &below[start[j]..start[j + 1]] {
                 row_idx.extend((0..d).map(|r| k as usize * d + r));
             }
             col_ptr.push(row_idx.len());
         }
     }
     let pattern = SymbolicSparseColMat::new_checked(n * d, n * d, col_ptr, None, row_idx);
-    Some((pattern, start, below))
+    Some((pattern, Below { start, below }))
 }
 
 /// The factor of `a`, reusing the analysis of `reuse` when it was made for the same nodes and
@@ -387,12 +370,12 @@ pub(super) fn factor_coarsest(
     let bb = d * d;
     let n = a.len();
     let reuse = reuse.filter(|f| f.n == n && f.dof == d && f.edges == a.edges);
-    let (pattern, start, below, symbolic) = match reuse {
-        Some(f) => (f.pattern, f.start, f.below, f.symbolic),
+    let (pattern, below, symbolic) = match reuse {
+        Some(f) => (f.pattern, f.below, f.symbolic),
         None => {
-            let (pattern, start, below) = lower_pattern(a)?;
+            let (pattern, below) = lower_pattern(a)?;
             let symbolic = analyse_by_nodes(&pattern, a.n, d, &a.edges)?;
-            (pattern, start, below, symbolic)
+            (pattern, below, symbolic)
         }
     };
     // The entries in the pattern's order: each column's part of its diagonal block, then the
@@ -402,7 +385,7 @@ pub(super) fn factor_coarsest(
     for j in 0..a.n {
         for c in 0..d {
             values.extend((c..d).map(|r| a.diag[j * bb + r * d + c]));
-            for &(k, first) in &below[start[j]..start[j + 1]] {
+            for &(_, k, first) in &below.below[below.start[j]..below.start[j + 1]] {
                 let block = &a.blocks[k as usize * bb..][..bb];
                 if first {
                     values.extend((0..d).map(|r| block[c * d + r]));
@@ -442,7 +425,6 @@ pub(super) fn factor_coarsest(
         dof: d,
         edges: a.edges.clone(),
         pattern,
-        start,
         below,
         symbolic,
         values: positive.then_some(factor),
@@ -581,7 +563,7 @@ mod tests {
             assert!(err < 1e-10, "n {n} d {d}: residual {err:e}");
             // The nodes' order fills in about as little as AMD on the scalars (a permutation
             // taken the wrong way round would still solve, with more fill).
-            let (pattern, _, _) = lower_pattern(&a).unwrap();
+            let (pattern, _) = lower_pattern(&a).unwrap();
             let scalar = factorize_symbolic_cholesky(
                 pattern.as_ref(),
                 Side::Lower,
