@@ -65,6 +65,8 @@ options! {
     Shell => "shell",
     /// The inside classification of empty cells (`--inside`).
     Inside => "inside",
+    /// The glue of the cells inside the shape, against its surface's (`--interior-stiffness`).
+    InteriorStiffness => "interior-stiffness",
     /// How the Gauss-Newton systems are solved (`--solver`).
     Solver => "solver",
     /// The global step solved by subdomains (`--subdomains`).
@@ -127,6 +129,7 @@ impl Opt {
             Opt::CellSize => "cell_size",
             Opt::MinCellSize => "min_cell_size",
             Opt::MaxLevel => "max_level",
+            Opt::InteriorStiffness => "interior_stiffness",
             Opt::LooseParts => "loose_parts",
             Opt::RefineStrain => "refine_strain",
             Opt::RbfTolerance => "rbf_tolerance",

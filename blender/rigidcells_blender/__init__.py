@@ -233,6 +233,17 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
         min=0,
         description="About this many cells, their size found to match (0: the cell size decides)",
     )
+    interior_stiffness: FloatProperty(
+        name="Interior stiffness",
+        default=1.0,
+        min=1e-4,
+        max=1e4,
+        soft_min=0.01,
+        soft_max=1.0,
+        description="How stiff the cells inside the mesh are against those on its surface: 1 "
+        "keeps a bend's volume as a solid does; below 1 a turned head twists the whole neck as "
+        "a surface would instead of its thinnest part (0.1: a bend keeps a little less volume)",
+    )
     memory_limit: FloatProperty(
         name="Memory limit",
         default=0.0,
@@ -275,6 +286,7 @@ def options(settings: RigidCellsSettings) -> dict:
     return {
         "cell_size": _typed(settings.cell_size) or None,
         "cells": settings.cells or None,
+        "interior_stiffness": _typed(settings.interior_stiffness),
         "memory_limit": memory or None,
         "transfer": settings.transfer,
     }
@@ -830,6 +842,7 @@ class VIEW3D_PT_rigidcells(bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(s, "cell_size")
         col.prop(s, "cells")
+        col.prop(s, "interior_stiffness")
         col.prop(s, "memory_limit")
         col.prop(s, "transfer", text="")
         col = layout.column(align=True)

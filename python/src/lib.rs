@@ -156,6 +156,7 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
             "max_level" => o.max_level = Some(level(whole("a whole number of levels")?, 30)?),
             "shell" => o.shell = flag()?,
             "inside" => o.inside = named("inside", name()?, Inside::Auto)?,
+            "interior_stiffness" => o.interior_stiffness = number()?,
             "solver" => o.solver = named("solver", name()?, Method::Auto)?,
             "subdomains" => {
                 o.subdomains =

@@ -42,6 +42,10 @@ def test_version():
             ["--solver", "multilevel", "--tolerance", "0", "--coarse-levels", "0"],
         ),
         (
+            {"interior_stiffness": 0.1},
+            ["--interior-stiffness", "0.1"],
+        ),
+        (
             {"cells": 400, "inside": "flood", "loose_parts": "rest", "transfer": "blend"},
             ["--cells", "400", "--inside", "flood", "--loose-parts", "rest", "--transfer", "blend"],
         ),
@@ -242,6 +246,8 @@ BAD_OPTIONS = [
     ({"max_level": 99}, "max_level"),
     ({"shell": True, "inside": "winding"}, "inside"),
     ({"inside": "outside"}, "inside"),
+    ({"interior_stiffness": 0}, "interior_stiffness"),
+    ({"shell": True, "interior_stiffness": 0.1}, "interior_stiffness"),
     ({"solver": "fast"}, "solver"),
     ({"tolerance": -1}, "tolerance"),
     ({"coarse_levels": 9}, "coarse_levels"),

@@ -454,6 +454,11 @@ struct CellArgs {
     /// clouds with normals, exterior flood fill for point clouds without (auto), or as named.
     #[arg(long, value_parser = choice::<Inside>(), default_value_t = Inside::Auto)]
     inside: Inside,
+    /// Stiffness of the cells inside the shape against those on its surface: 1 is the paper's
+    /// solid, whose bends keep their volume; below 1 a twist spreads along a thin neck as on a
+    /// surface (0.1: a bent solid keeps a little less volume), down to 0.0001.
+    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    interior_stiffness: f64,
     /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
     /// conjugate gradients with a rigid-motion multigrid (the same minimum, memory linear in
     /// the cells; BENCHMARKS.md says which is faster where).
@@ -517,6 +522,7 @@ impl CellArgs {
             max_level: self.max_level,
             shell: self.shell,
             inside: self.inside,
+            interior_stiffness: self.interior_stiffness,
             solver: self.solver,
             subdomains: self.subdomains,
             tolerance: self.tolerance,

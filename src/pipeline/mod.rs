@@ -60,6 +60,9 @@ pub struct DeformParams {
     /// With the RBF transfer: evaluate positions through its far field, each coordinate
     /// within this length of the exact sum's ([`crate::field::Rbf::with_tolerance`]).
     pub(crate) rbf_tolerance: Option<f64>,
+    /// The stiffness of the cells inside the shape against the surface's
+    /// ([`crate::solve::Constraints::scale_interior`]).
+    pub(crate) interior_stiffness: f64,
     /// The most samples in the proxy of [`deform_file`], for its fold-over check, its report's
     /// residuals and a preview (`None`: [`FOLDOVER_SAMPLES`], as the command line checks a
     /// run without a preview; `Some(0)`: no proxy, for a run that moves no samples).
@@ -96,6 +99,12 @@ impl DeformParams {
     /// The RBF's far-field tolerance, when given.
     pub fn rbf_tolerance(&self) -> Option<f64> {
         self.rbf_tolerance
+    }
+
+    /// The stiffness of the cells inside the shape against the surface's (1: the paper's
+    /// volumetric solid).
+    pub fn interior_stiffness(&self) -> f64 {
+        self.interior_stiffness
     }
 
     /// Whether the control points' leave-one-out check runs.

@@ -17,13 +17,14 @@ use super::DeformParams;
 /// Every option of [`Options`], by the command line's name without its dashes (the Python
 /// package's keyword is the same with `_` for `-`): the one list the faces are checked against
 /// (the command line's flags and the Python package's keywords and stub, by tests).
-pub const OPTION_NAMES: [&str; 16] = [
+pub const OPTION_NAMES: [&str; 17] = [
     "cell-size",
     "cells",
     "min-cell-size",
     "max-level",
     "shell",
     "inside",
+    "interior-stiffness",
     "solver",
     "subdomains",
     "tolerance",
@@ -51,6 +52,9 @@ pub struct Options {
     pub shell: bool,
     /// The inside classification of empty cells (`--inside`).
     pub inside: Inside,
+    /// The stiffness of the cells inside the shape (those holding no samples) against the
+    /// surface's, 1 the paper's volumetric solid (`--interior-stiffness`).
+    pub interior_stiffness: f64,
     /// How the Gauss-Newton systems are solved (`--solver`).
     pub solver: Method,
     /// Local-global iterations with the global step solved by this many subdomains
@@ -84,6 +88,7 @@ impl Default for Options {
             max_level: None,
             shell: false,
             inside: Inside::Auto,
+            interior_stiffness: 1.0,
             solver: Method::Auto,
             subdomains: 0,
             tolerance: solve::MOVE_TOLERANCE,
@@ -139,6 +144,28 @@ impl Options {
                     .text(" asks for one: give one"),
             ));
         }
+        let s = self.interior_stiffness;
+        if !(s.is_finite() && (MIN_INTERIOR_STIFFNESS..=MAX_INTERIOR_STIFFNESS).contains(&s)) {
+            return Err(Error::param(
+                Said::new().set(Opt::InteriorStiffness, s).text(format!(
+                    ": a scale of the inside's stiffness, from {MIN_INTERIOR_STIFFNESS} \
+                         to {MAX_INTERIOR_STIFFNESS} (1: a solid's)"
+                )),
+            ));
+        }
+        if s != 1.0 && (self.shell || self.inside == Inside::None) {
+            let shell = if self.shell {
+                Said::new().opt(Opt::Shell)
+            } else {
+                Said::new().set(Opt::Inside, self.inside)
+            };
+            return Err(Error::param(
+                shell
+                    .text(" keeps no cells inside for ")
+                    .set(Opt::InteriorStiffness, s)
+                    .text(" to scale: give one"),
+            ));
+        }
         if let Some(s) = self.refine_strain
             && !(s.is_finite() && s >= 0.0)
         {
@@ -191,6 +218,12 @@ impl Options {
         }
         if self.inside != d.inside {
             flag("inside", Some(self.inside.to_string()));
+        }
+        if self.interior_stiffness != d.interior_stiffness {
+            flag(
+                "interior-stiffness",
+                Some(format!("{:?}", self.interior_stiffness)),
+            );
         }
         if self.solver != d.solver {
             flag("solver", Some(self.solver.to_string()));
@@ -250,12 +283,21 @@ impl Options {
             solve,
             transfer: self.transfer,
             rbf_tolerance: self.rbf_tolerance,
+            interior_stiffness: self.interior_stiffness,
             proxy_samples: None,
             check_control_points: self.check_control_points,
             memory: Budget::given(self.memory_limit),
         }
     }
 }
+
+/// The softest interior [`Options::interior_stiffness`] takes: a ten-thousandth of the surface's
+/// glue still ties every inside cell to its neighbors (a cell with no glue would float free
+/// and leave the system singular).
+pub const MIN_INTERIOR_STIFFNESS: f64 = 1e-4;
+/// The stiffest: ten thousand times the surface's, past which the inside is as good as rigid
+/// and the systems' conditioning suffers for nothing.
+pub const MAX_INTERIOR_STIFFNESS: f64 = 1e4;
 
 /// `bytes` in the largest of the units `--memory-limit` reads (K, M, G, T) that divides it.
 fn size_words(bytes: u64) -> String {
@@ -327,6 +369,24 @@ mod tests {
                 solver: Method::Direct,
                 ..Default::default()
             },
+            Options {
+                interior_stiffness: 0.0,
+                ..Default::default()
+            },
+            Options {
+                interior_stiffness: f64::INFINITY,
+                ..Default::default()
+            },
+            Options {
+                interior_stiffness: 0.5,
+                inside: Inside::None,
+                ..Default::default()
+            },
+            Options {
+                interior_stiffness: 0.5,
+                shell: true,
+                ..Default::default()
+            },
         ] {
             assert!(
                 matches!(options.params(), Err(Error::Param(_))),
@@ -352,6 +412,7 @@ mod tests {
                 "--max-level" => o.max_level = Some(value().parse().unwrap()),
                 "--shell" => o.shell = true,
                 "--inside" => o.inside = value().parse().unwrap(),
+                "--interior-stiffness" => o.interior_stiffness = value().parse().unwrap(),
                 "--solver" => o.solver = value().parse().unwrap(),
                 "--subdomains" => o.subdomains = value().parse().unwrap(),
                 "--tolerance" => o.tolerance = value().parse().unwrap(),
@@ -379,6 +440,7 @@ mod tests {
             min_cell_size: Some(0.1 + 0.2),
             max_level: Some(3),
             shell: true,
+            interior_stiffness: 0.1,
             solver: Method::LocalGlobal,
             subdomains: 4,
             tolerance: 0.05,

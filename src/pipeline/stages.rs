@@ -157,10 +157,11 @@ pub(crate) fn constraints<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let constraints = match selected {
+    let mut constraints = match selected {
         Selected::Samples { points, classes } => solve::resolve(complex, spec, points, classes)?,
         Selected::Gathered(selections) => solve::resolve_selected(complex, spec, selections)?,
     };
+    constraints.scale_interior(complex, params.interior_stiffness);
     check_rbf_memory::<D>(complex.len(), params)?;
     Ok(constraints)
 }

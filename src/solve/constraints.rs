@@ -14,7 +14,9 @@
 //!   relative to the glue between two finest cells: `λ · S^(D−1)` with `S` the finest size, so a
 //!   weight of 1 pulls as hard as one face of glue whatever the units.
 //! - stiffness scales multiply on cells in several regions; a pair's scale is the geometric mean
-//!   of its cells' scales.
+//!   of its cells' scales. The cells inside the shape (holding no samples) can be scaled as a
+//!   whole ([`Constraints::scale_interior`]): part of the way to the paper's shell (its Fig. 10
+//!   removes them).
 //! - a connected component of cells with no constraint at all keeps its rest pose during the
 //!   solve; afterwards it rides along rigidly with the nearest cell of a constrained part
 //!   ([`super::carry_loose`], the default) or stays at rest, with a warning either way; no
@@ -149,6 +151,25 @@ impl<const D: usize> Constraints<D>
 where
     Dim<D>: Rigid<D>,
 {
+    /// Scales the stiffness of the cells inside the shape (those holding no samples:
+    /// [`crate::cells::CellKind::Interior`]) by `scale`, on top of the spec's stiffness regions:
+    /// a face between two of them weighs `scale`, one between an inside and a surface cell
+    /// `√scale`. Softer than 1, a twist spreads along a thin part as it does on a surface
+    /// instead of gathering where the part is thinnest (a solid's torsion grows as the fourth
+    /// power of its radius, a surface's as the third), at the cost of some of a solid's volume
+    /// where it bends (BENCHMARKS.md, "Where the regions end": at a tenth, a bent cylinder keeps
+    /// 96.5 % of its volume against 98.2 %).
+    pub fn scale_interior(&mut self, complex: &CellComplex<D>, scale: f64) {
+        if scale == 1.0 {
+            return;
+        }
+        for (s, cell) in self.stiffness.iter_mut().zip(&complex.cells) {
+            if cell.kind == crate::cells::CellKind::Interior {
+                *s *= scale;
+            }
+        }
+    }
+
     /// These constraints without target `i`: a part of the shape held by that target alone
     /// keeps its rest pose. `None` when nothing else constrains any part.
     pub fn without_target(&self, complex: &CellComplex<D>, i: usize) -> Option<Self> {

@@ -115,6 +115,24 @@ def test_the_shape_key_is_the_librarys_deformation():
     assert np.abs(vertices(obj, "RigidCells") - got).max() < 1e-6
 
 
+def test_the_panels_interior_stiffness_is_the_packages():
+    """A softer inside, set on the panel, gives the package's deformation with the same
+    keyword, and another shape than the solid's: the closed bar has cells inside at 0.25."""
+    obj, empty = setup_bar()
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    solid = vertices(obj, "RigidCells")
+    obj.rigidcells.interior_stiffness = 0.1
+    assert addon.options(obj.rigidcells)["interior_stiffness"] == 0.1
+    assert bpy.ops.object.rigidcells_deform() == {"FINISHED"}
+    got = vertices(obj, "RigidCells")
+    points, triangles, spec = addon.inputs(obj)
+    want, _ = rigidcells.deform(
+        points, spec, triangles=triangles, cell_size=0.25, interior_stiffness=0.1, progress=False
+    )
+    assert np.abs(got - want).max() < 1e-6
+    assert np.abs(got - solid).max() > 1e-3
+
+
 def test_deform_in_edit_mode_keeps_its_key_and_returns_to_edit_mode():
     """Run from Edit Mode, Deform writes its key out of it (Edit Mode would write its own copy of
     the mesh back over the key when it ends) and enters it again; after Tab the key is still the

@@ -331,7 +331,9 @@ _OPTIONS_DOC = """
     this many cells, within 2 % where the counts allow, else ``report.warnings`` gives the
     count; not with ``cell_size``), ``min_cell_size`` (adaptive cells
     down to this size), ``max_level`` (octree levels above the finest cells), ``shell`` (occupied
-    cells only), ``inside`` (``"auto"``, ``"winding"``, ``"flood"``, ``"none"``), ``solver``
+    cells only), ``inside`` (``"auto"``, ``"winding"``, ``"flood"``, ``"none"``),
+    ``interior_stiffness`` (the cells inside the shape against those on its surface: 1, the
+    default, a solid's; below 1 a twist spreads along a thin neck as on a surface), ``solver``
     (``"auto"``, ``"direct"``, ``"multilevel"``, ``"local-global"``), ``subdomains``
     (local-global iterations with each global step split into this many subdomains, each
     block factored alone; ``rigidcells.dask.solve_tiles`` gives the blocks to Dask workers;
@@ -358,7 +360,8 @@ def _options(**given: Any) -> dict:
 
 # The keyword arguments that are options of a deformation (the command line's names).
 _OPTION_NAMES = (
-    "cell_size", "cells", "min_cell_size", "max_level", "shell", "inside", "solver",
+    "cell_size", "cells", "min_cell_size", "max_level", "shell", "inside", "interior_stiffness",
+    "solver",
     "subdomains", "tolerance", "coarse_levels", "loose_parts", "refine_strain", "transfer",
     "rbf_tolerance", "check_gcp", "memory_limit",
 )
@@ -432,6 +435,7 @@ def deform(
     max_level: Optional[int] = None,
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
+    interior_stiffness: Optional[float] = None,
     solver: Optional[str] = None,
     subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
@@ -566,6 +570,7 @@ class Session:
         max_level: Optional[int] = None,
         shell: Optional[bool] = None,
         inside: Optional[str] = None,
+        interior_stiffness: Optional[float] = None,
         solver: Optional[str] = None,
         subdomains: Optional[int] = None,
         tolerance: Optional[float] = None,
@@ -729,6 +734,7 @@ def solve(
     max_level: Optional[int] = None,
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
+    interior_stiffness: Optional[float] = None,
     solver: Optional[str] = None,
     subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
@@ -794,6 +800,7 @@ def estimate(
     max_level: Optional[int] = None,
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
+    interior_stiffness: Optional[float] = None,
     solver: Optional[str] = None,
     subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
@@ -838,6 +845,7 @@ def deform_file(
     max_level: Optional[int] = None,
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
+    interior_stiffness: Optional[float] = None,
     solver: Optional[str] = None,
     subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,
@@ -927,6 +935,7 @@ def solve_files(
     max_level: Optional[int] = None,
     shell: Optional[bool] = None,
     inside: Optional[str] = None,
+    interior_stiffness: Optional[float] = None,
     solver: Optional[str] = None,
     subdomains: Optional[int] = None,
     tolerance: Optional[float] = None,

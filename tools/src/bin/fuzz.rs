@@ -1375,6 +1375,7 @@ fn mutate_param(command: &str, rng: &mut StdRng) -> Vec<String> {
             "--max-level",
             "--memory-limit",
             "--inside",
+            "--interior-stiffness",
             "--solver",
         ],
         _ => vec![],
