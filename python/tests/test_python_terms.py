@@ -9,6 +9,7 @@ import signal
 import subprocess
 import threading
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -40,10 +41,6 @@ def test_version():
         (
             {"solver": "multilevel", "tolerance": 0.0, "coarse_levels": 0},
             ["--solver", "multilevel", "--tolerance", "0", "--coarse-levels", "0"],
-        ),
-        (
-            {"interior_stiffness": 0.1},
-            ["--interior-stiffness", "0.1"],
         ),
         (
             {"cells": 400, "inside": "flood", "loose_parts": "rest", "transfer": "blend"},
@@ -235,6 +232,38 @@ def test_options_are_checked_by_name():
     # A file name keeps its dashes.
     with pytest.raises(OSError, match="no--such--file.laz"):
         rigidcells.deform_file("no--such--file.laz", "out.laz", BEND)
+
+
+def test_a_softer_inside_gives_the_command_lines_bytes_and_another_shape(tmp_path):
+    """The hollow bar (its surface's points) has cells inside at 0.25, found by the flood fill:
+    `interior_stiffness` reaches them as `--interior-stiffness` does, and bends the bar
+    otherwise than the solid's default."""
+    pts = bar_points()
+    hollow = pts[(np.isin(pts[:, 0], [0.0, 10.0])) | np.any(np.isin(pts[:, 1:], [0.0, 1.0]), axis=1)]
+    xyz = tmp_path / "hollow.xyz"
+    xyz.write_text("".join(f"{x:.17e} {y:.17e} {z:.17e}\n" for x, y, z in hollow))
+    edit = tmp_path / "bend.toml"
+    edit.write_text(BEND)
+    solid, out, ours = tmp_path / "solid.xyz", tmp_path / "cli.xyz", tmp_path / "py.xyz"
+    run = [cli(), "deform", str(xyz), "--edit", str(edit), "-q", "--cell-size", "0.25"]
+    subprocess.run([*run, "-o", str(solid)], check=True)
+    subprocess.run([*run, "-o", str(out), "--interior-stiffness", "0.1"], check=True)
+    rigidcells.deform_file(
+        xyz, ours, edit, cell_size=0.25, interior_stiffness=0.1, progress=False
+    )
+    assert ours.read_bytes() == out.read_bytes()
+    a = np.loadtxt(out)
+    b = np.loadtxt(solid)
+    assert np.abs(a - b).max() > 1e-3
+    # The estimate counts the cells the run starts from: adaptive cells merge only cells of one
+    # stiffness, so a softer inside keeps more of them (629 against the solid's 92).
+    for stiffness in (1.0, 0.1):
+        options = {"min_cell_size": 0.25, "interior_stiffness": stiffness}
+        estimate = rigidcells.estimate(hollow, BEND, **options)
+        with warnings.catch_warnings():  # the solid's refinement stops at 8× its cells
+            warnings.simplefilter("ignore", rigidcells.RigidCellsWarning)
+            _, report = rigidcells.deform(hollow, BEND, progress=False, **options)
+        assert estimate.cells == report.cells_initial, stiffness
 
 
 BAD_OPTIONS = [

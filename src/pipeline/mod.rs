@@ -465,7 +465,9 @@ pub fn estimate(
         }
         (Err(e), _) => return Err(e),
     };
-    let constraints = crate::solve::resolve(&complex, spec, points, classes)?;
+    let mut constraints = crate::solve::resolve(&complex, spec, points, classes)?;
+    // As the run will scale it: coarsening merges only cells of one stiffness.
+    constraints.scale_interior(&complex, params.interior_stiffness);
     let (complex, constraints) = match params.solve.coarsen_levels {
         0 => (complex, constraints),
         levels => crate::solve::coarsen(&complex, &constraints, levels),

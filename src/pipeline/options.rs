@@ -378,6 +378,14 @@ mod tests {
                 ..Default::default()
             },
             Options {
+                interior_stiffness: MAX_INTERIOR_STIFFNESS * 1.0001,
+                ..Default::default()
+            },
+            Options {
+                interior_stiffness: f64::NAN,
+                ..Default::default()
+            },
+            Options {
                 interior_stiffness: 0.5,
                 inside: Inside::None,
                 ..Default::default()
@@ -394,6 +402,24 @@ mod tests {
             );
         }
         let params = DeformParams::default();
+        // The inside's scale at either end of its range, and a shell at the solid's 1.
+        for options in [
+            Options {
+                interior_stiffness: MIN_INTERIOR_STIFFNESS,
+                ..Default::default()
+            },
+            Options {
+                interior_stiffness: MAX_INTERIOR_STIFFNESS,
+                ..Default::default()
+            },
+            Options {
+                shell: true,
+                ..Default::default()
+            },
+        ] {
+            let params = options.params().unwrap();
+            assert_eq!(params.interior_stiffness(), options.interior_stiffness);
+        }
         assert!(params.with_proxy_samples(0).is_err());
         assert_eq!(params.with_proxy_samples(5).unwrap().proxy_samples, Some(5));
     }
