@@ -586,3 +586,53 @@ fn deform_takes_every_option_of_the_librarys_list() {
         );
     }
 }
+
+/// Options the cells leave without effect are said, in the report's warnings: a winding-number
+/// inside asked of points without normals (the flood fill found it instead), and an inside's
+/// stiffness with no cell inside to scale; where the flood fill closes an inside, the
+/// stiffness scales it without a word.
+#[test]
+fn options_the_cells_leave_without_effect_are_said() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mesh, _, edit) = common::lifted_bar(dir.path(), 6.0);
+    let points = dir.path().join("bar.xyz");
+    let text: String = Document::read(&mesh)
+        .unwrap()
+        .positions()
+        .iter()
+        .map(|p| format!("{} {} {}\n", p.x, p.y, p.z))
+        .collect();
+    std::fs::write(&points, text).unwrap();
+    let report = dir.path().join("report.json");
+    let warnings = |extra: &[&str]| -> Vec<String> {
+        let mut args = extra.to_vec();
+        args.extend(["--report", report.to_str().unwrap()]);
+        let r = deform(&points, &dir.path().join("out.xyz"), &edit, &args);
+        assert_eq!(r.code, 0, "{extra:?}: {}", r.stderr);
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        json["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|w| w.as_str().unwrap().to_string())
+            .collect()
+    };
+    let said = warnings(&["--cell-size", "0.25", "--inside", "winding"]);
+    assert!(
+        said.iter().any(|w| w.starts_with(
+            "--inside winding needs a mesh's triangles or the points' normals"
+        ) && w.ends_with("found by --inside flood")),
+        "{said:?}"
+    );
+    // Two cells across the bar: every one holds points, none lies inside.
+    let said = warnings(&["--cell-size", "0.6", "--interior-stiffness", "0.1"]);
+    assert!(
+        said.iter().any(|w| w
+            == "--interior-stiffness 0.1 scales nothing: no cell lies inside the shape \
+                (--inside flood found none)"),
+        "{said:?}"
+    );
+    let said = warnings(&["--cell-size", "0.25", "--interior-stiffness", "0.1"]);
+    assert!(said.iter().all(|w| !w.contains("scales nothing")), "{said:?}");
+}

@@ -456,7 +456,7 @@ struct CellArgs {
     inside: Inside,
     /// Stiffness of the cells inside the shape against those on its surface: 1 is the paper's
     /// solid, whose bends keep their volume; below 1 a twist spreads along a thin neck as on a
-    /// surface (0.1: a bent solid keeps a little less volume); 0.0001 to 10000.
+    /// surface (0.1: a bent solid keeps a little less volume); 0.0001 to 10000, not with --shell.
     #[arg(long, value_name = "S", default_value_t = 1.0)]
     interior_stiffness: f64,
     /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or

@@ -564,7 +564,7 @@ pub fn file_cells(
         &mut notes,
         observer,
     )?;
-    let mut warnings = stages::build_warnings(&info, &complex, params.build.target_cells.is_some());
+    let mut warnings = stages::build_warnings(&info, &complex, params);
     warnings.extend(notes);
     let Some(spec) = spec else {
         return Ok((complex, info, None, warnings));

@@ -276,7 +276,7 @@ impl Live {
                     &self.complex,
                     session.solution_constraints(),
                     &solver,
-                    self.params.build.target_cells.is_some(),
+                    &self.params,
                 );
                 warnings.extend(crate::cells::shortfall(
                     self.params.build.target_cells,
@@ -496,7 +496,7 @@ impl Live {
             &solution.complex,
             &solution.constraints,
             &solution.info,
-            self.params.build.target_cells.is_some(),
+            &self.params,
         );
         warnings.extend(crate::cells::shortfall(
             self.params.build.target_cells,

@@ -17,7 +17,7 @@
 
 use std::time::Instant;
 
-use crate::cells::{BuildInfo, CellComplex, build_checked};
+use crate::cells::{BuildInfo, CellComplex, Inside, build_checked};
 use crate::control::ControlPoint;
 use crate::error::Result;
 use crate::field::{Field, Outside, Rbf, SavedField, Transfer, Warp, apply, apply_into};
@@ -120,7 +120,7 @@ where
         &solution.complex,
         &solution.constraints,
         &solution.info,
-        params.build.target_cells.is_some(),
+        params,
     );
     warnings.extend(sizing);
     let transfer_start = Instant::now();
@@ -206,29 +206,50 @@ pub(crate) fn check_rbf_memory<const D: usize>(cells: usize, params: &DeformPara
     )
 }
 
-/// The warnings of a solve, in order: the cell construction's, the constraints', the solver's;
-/// `by_count`: the cells were sized by a count (`--cells`), which their advice names.
+/// The warnings of a solve with `params`, in order: the cell construction's, the constraints',
+/// the solver's.
 pub(crate) fn warnings<const D: usize>(
     build: &BuildInfo,
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
     solver: &SolverInfo,
-    by_count: bool,
+    params: &DeformParams,
 ) -> Vec<Said> {
-    let mut out = build_warnings(build, complex, by_count);
+    let mut out = build_warnings(build, complex, params);
     out.extend_from_slice(&constraints.warnings);
     out.extend(solver.warnings());
     out
 }
 
-/// The warnings of the cell construction; `by_count`: the cells were sized by a count
-/// (`--cells`), so that the advice asks for more of them rather than a smaller size.
+/// The warnings of the cell construction with `params`: parts glued by the finest cells (the
+/// advice asks for more cells where a count sized them, `--cells`, else a smaller size), and
+/// options the cells leave without effect — a winding-number inside asked of points with
+/// neither triangles nor normals (the flood fill found it), an inside's stiffness with no
+/// cell inside to scale.
 pub(crate) fn build_warnings<const D: usize>(
     build: &BuildInfo,
     complex: &CellComplex<D>,
-    by_count: bool,
+    params: &DeformParams,
 ) -> Vec<Said> {
+    let by_count = params.build.target_cells.is_some();
     let mut out = Vec::new();
+    if params.build.inside == Inside::Winding && build.inside != Inside::Winding {
+        out.push(
+            Said::new()
+                .set(Opt::Inside, Inside::Winding)
+                .text(" needs a mesh's triangles or the points' normals, and these points have neither: the inside was found by ")
+                .set(Opt::Inside, build.inside),
+        );
+    }
+    if params.interior_stiffness != 1.0 && build.interior_cells == 0 {
+        out.push(
+            Said::new()
+                .set(Opt::InteriorStiffness, params.interior_stiffness)
+                .text(" scales nothing: no cell lies inside the shape (")
+                .set(Opt::Inside, build.inside)
+                .text(" found none)"),
+        );
+    }
     if build.glued_cells > 0 {
         let size = complex.grid.finest_size();
         let said = Said::from(format!(
