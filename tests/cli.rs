@@ -620,19 +620,23 @@ fn options_the_cells_leave_without_effect_are_said() {
     };
     let said = warnings(&["--cell-size", "0.25", "--inside", "winding"]);
     assert!(
-        said.iter().any(|w| w.starts_with(
-            "--inside winding needs a mesh's triangles or the points' normals"
-        ) && w.ends_with("found by --inside flood")),
+        said.iter().any(|w| w
+            .starts_with("--inside winding needs a mesh's triangles or the points' normals")
+            && w.ends_with("found by --inside flood")),
         "{said:?}"
     );
     // Two cells across the bar: every one holds points, none lies inside.
     let said = warnings(&["--cell-size", "0.6", "--interior-stiffness", "0.1"]);
     assert!(
         said.iter().any(|w| w
-            == "--interior-stiffness 0.1 scales nothing: no cell lies inside the shape \
-                (--inside flood found none)"),
+            == "--interior-stiffness 0.1 scales nothing: no cell lies inside the shape (a \
+                flood fill from outside found none: an open surface, or points with gaps wider \
+                than a cell)"),
         "{said:?}"
     );
     let said = warnings(&["--cell-size", "0.25", "--interior-stiffness", "0.1"]);
-    assert!(said.iter().all(|w| !w.contains("scales nothing")), "{said:?}");
+    assert!(
+        said.iter().all(|w| !w.contains("scales nothing")),
+        "{said:?}"
+    );
 }

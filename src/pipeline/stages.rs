@@ -246,8 +246,14 @@ pub(crate) fn build_warnings<const D: usize>(
             Said::new()
                 .set(Opt::InteriorStiffness, params.interior_stiffness)
                 .text(" scales nothing: no cell lies inside the shape (")
-                .set(Opt::Inside, build.inside)
-                .text(" found none)"),
+                .text(match build.inside {
+                    Inside::Winding => "its winding numbers found none: an open surface",
+                    _ => {
+                        "a flood fill from outside found none: an open surface, or points \
+                         with gaps wider than a cell"
+                    }
+                })
+                .text(")"),
         );
     }
     if build.glued_cells > 0 {
