@@ -465,9 +465,9 @@ pub fn estimate(
         }
         (Err(e), _) => return Err(e),
     };
-    let mut constraints = crate::solve::resolve(&complex, spec, points, classes)?;
-    // As the run will scale it: coarsening merges only cells of one stiffness.
-    constraints.scale_interior(&complex, params.interior_stiffness);
+    // The stiffness as the run sets it: coarsening merges only cells of one stiffness.
+    let selected = stages::Selected::Samples { points, classes };
+    let constraints = stages::resolved(&complex, spec, selected, params)?;
     let (complex, constraints) = match params.solve.coarsen_levels {
         0 => (complex, constraints),
         levels => crate::solve::coarsen(&complex, &constraints, levels),

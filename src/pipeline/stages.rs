@@ -157,12 +157,27 @@ pub(crate) fn constraints<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
+    let constraints = resolved(complex, spec, selected, params)?;
+    check_rbf_memory::<D>(complex.len(), params)?;
+    Ok(constraints)
+}
+
+/// The spec resolved onto `complex` with the cells' stiffness as `params` set it (the inside's
+/// scale on the spec's regions): what a run solves and what the estimate forecasts.
+pub(crate) fn resolved<const D: usize>(
+    complex: &CellComplex<D>,
+    spec: &EditSpec<D>,
+    selected: Selected<'_, D>,
+    params: &DeformParams,
+) -> Result<Constraints<D>>
+where
+    Dim<D>: Rigid<D>,
+{
     let mut constraints = match selected {
         Selected::Samples { points, classes } => solve::resolve(complex, spec, points, classes)?,
         Selected::Gathered(selections) => solve::resolve_selected(complex, spec, selections)?,
     };
     constraints.scale_interior(complex, params.interior_stiffness);
-    check_rbf_memory::<D>(complex.len(), params)?;
     Ok(constraints)
 }
 

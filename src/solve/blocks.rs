@@ -294,7 +294,8 @@ fn analyse_by_nodes(
     edges: &[[u32; 2]],
 ) -> Option<SymbolicCholesky<usize>> {
     let nodes = super::auto::analyse_graph::<usize>(n, edges)?;
-    let node = |i: usize| nodes.perm().map_or(i, |perm| perm.arrays().0[i]);
+    let perm = nodes.perm().map(|perm| perm.arrays().0);
+    let node = |i: usize| perm.map_or(i, |perm| perm[i]);
     let forward: Vec<usize> = (0..n)
         .flat_map(|i| (0..d).map(move |r| node(i) * d + r))
         .collect();
