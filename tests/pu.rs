@@ -129,6 +129,34 @@ fn is_smooth_across_patch_borders() {
     );
 }
 
+/// The closed-form Jacobian (the fold-over check's and the normals') is the map's: central
+/// differences agree with it along lines through many patch borders, where the weights' slopes
+/// matter, and far from every cell, where the nearest patch's fit alone moves space.
+#[test]
+fn the_jacobian_in_closed_form_is_the_maps() {
+    let f = bent_bar(0.125);
+    let pu = PuRbf::new(&f).unwrap();
+    let h = 1e-5 * pu.patch_edge();
+    let mut worst = 0.0f64;
+    let mut slopes = 0.0f64;
+    let mut points = vec![Vect::<3>::new(40.0, 30.0, -20.0)];
+    let mut x = -4.5;
+    while x < 4.5 {
+        for (y, z) in [(0.0, 0.0), (0.31, -0.2), (-0.45, 0.45), (1.3, 0.9)] {
+            points.push(Vect::<3>::new(x, y, z));
+        }
+        x += 0.0137;
+    }
+    for p in &points {
+        let closed = pu.jacobian(p);
+        let central = rigidcells::internal::field::central_jacobian(&pu, p, h);
+        worst = worst.max((closed - central).norm() / central.norm());
+        slopes = slopes.max((closed - nalgebra::Matrix3::identity()).norm());
+    }
+    assert!(worst < 1e-6, "closed form and differences {worst:e} apart");
+    assert!(slopes > 0.5, "the bend should turn space: {slopes}");
+}
+
 /// Runs of samples (four at a time through each patch) give the bits of one sample at a time.
 #[test]
 fn runs_give_the_bits_of_single_samples() {

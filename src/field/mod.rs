@@ -220,7 +220,7 @@ pub trait Warp<const D: usize>: Sync {
 }
 
 /// The Jacobian of `warp` at the local point `x` by central differences of step `h`.
-pub(crate) fn central_jacobian<const D: usize>(
+pub fn central_jacobian<const D: usize>(
     warp: &(impl Warp<D> + ?Sized),
     x: &Vect<D>,
     h: f64,
@@ -317,7 +317,7 @@ impl<const D: usize> Warp<D> for Deformer<D> {
         match self {
             Self::Blend(b) => b.jacobian(x, h),
             Self::Rbf(r) => Warp::jacobian(r, x, h),
-            Self::Pu(p) => p.jacobian(x, h),
+            Self::Pu(p) => p.jacobian(x),
         }
     }
 }

@@ -200,6 +200,17 @@ fn wendland(t: f64) -> f64 {
     }
 }
 
+/// The slope of [`wendland`]: `−20 t (1 − t)³`, zero at both ends.
+#[inline]
+fn wendland_slope(t: f64) -> f64 {
+    if t >= 1.0 {
+        0.0
+    } else {
+        let u = 1.0 - t;
+        -20.0 * t * u * u * u
+    }
+}
+
 impl<const D: usize> PuRbf<D> {
     /// Cuts the field into patches and fits each (in parallel).
     pub fn new(field: &Field<D>) -> Result<Self> {
@@ -517,6 +528,57 @@ impl<const D: usize> PuRbf<D> {
         self.blend(x, &around[..n])
     }
 
+    /// The Jacobian of the map `x ↦ x + displacement(x)` at the local point `x`, in closed
+    /// form. With `W = Σ w_p` over the patches fitted around `x` and `d = Σ w_p d_p / W` their
+    /// blend, `∂d = Σ (w_p ∂d_p + (d_p − d) ∇w_pᵀ) / W`: each fit's own Jacobian
+    /// ([`Rbf::jacobian`]) and the slopes of the weights (products of [`wendland`] along the
+    /// axes). Where no fitted patch weighs `x`, the nearest fit's.
+    pub fn jacobian(&self, x: &Vect<D>) -> nalgebra::SMatrix<f64, D, D> {
+        let (home, side) = self.boxes_of(x);
+        let candidates = self.candidates(&home, &side);
+        let ((around, n), which) = self.weigh(x, &candidates);
+        let identity = nalgebra::SMatrix::<f64, D, D>::identity();
+        let mut total = 0.0;
+        let mut slopes = Vect::<D>::zeros();
+        let mut sum = Vect::<D>::zeros();
+        let mut inner = nalgebra::SMatrix::<f64, D, D>::zeros();
+        for (&(p, w), &k) in around[..n].iter().zip(&which[..n]) {
+            let Some(fit) = self.fit(p) else {
+                continue;
+            };
+            let slope = self.weight_slope(x, &candidates, candidates.patches[k as usize].1);
+            let d = fit.displacement(x);
+            total += w;
+            slopes += slope;
+            sum += d * w;
+            inner += (fit.jacobian(x) - identity) * w + d * slope.transpose();
+        }
+        if total > 0.0 {
+            return identity + (inner - (sum / total) * slopes.transpose()) / total;
+        }
+        self.nearest(x).map_or(identity, |fit| fit.jacobian(x))
+    }
+
+    /// The gradient at `x` of the weight of the candidate whose axes' bits are `bits` (the
+    /// neighbor's box along a set bit, the home box's along the others), as [`PuRbf::weigh`]
+    /// weighs it.
+    fn weight_slope(&self, x: &Vect<D>, c: &Candidates<D>, bits: u8) -> Vect<D> {
+        let parts: [(f64, f64); D] = std::array::from_fn(|a| {
+            let k = c.home[a] + if bits >> a & 1 == 1 { c.side[a] } else { 0 };
+            let offset = x[a] - (self.lower[a] + (k as f64 + 0.5) * self.edge);
+            let t = offset.abs() * self.inv_reach;
+            (
+                wendland(t),
+                wendland_slope(t) * offset.signum() * self.inv_reach,
+            )
+        });
+        Vect::<D>::from_fn(|a, _| {
+            (0..D)
+                .map(|b| if b == a { parts[b].1 } else { parts[b].0 })
+                .product()
+        })
+    }
+
     /// The weighted mean of the fits of `around` at `x` (the nearest patch's fit where none
     /// holds `x`, or none of them could be fitted).
     fn blend(&self, x: &Vect<D>, around: &[(u32, f64)]) -> Vect<D> {
@@ -757,10 +819,14 @@ impl<const D: usize> Warp<D> for PuRbf<D> {
         }
     }
 
-    /// The normal mapped by the inverse transpose of the Jacobian (central differences of a
-    /// thousandth of a patch), with its length.
+    /// The closed form ([`PuRbf::jacobian`]); `h` is not used.
+    fn jacobian(&self, x: &Vect<D>, _h: f64) -> nalgebra::SMatrix<f64, D, D> {
+        PuRbf::jacobian(self, x)
+    }
+
+    /// The normal mapped by the inverse transpose of the Jacobian, with its length.
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
-        let j = super::central_jacobian(self, x, 1e-3 * self.edge);
+        let j = PuRbf::jacobian(self, x);
         let mapped = j.try_inverse().map(|inv| inv.transpose() * n).unwrap_or(*n);
         normal_like(mapped, n)
     }
