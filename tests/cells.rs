@@ -294,16 +294,18 @@ fn cells_option_says_when_the_count_misses() {
 
 /// The `--cells` search ends on a try within 2 % of the count asked; that try's complex is
 /// kept rather than built again, and it is the complex a build given the chosen size makes.
+/// (2,000 cells: a count the dragon's sizes reach within 2 %; near 1,200 its count jumps by
+/// 5 % as the grid's alignment changes, and the search may end on the nearest try instead.)
 #[test]
 fn cells_search_keeps_the_complex_a_build_at_its_size_makes() {
     let (dragon, tris) = mesh("dragon_11k_binary.ply");
     let asked = BuildParams {
-        target_cells: Some(1200),
+        target_cells: Some(2000),
         ..Default::default()
     };
     let (kept, _) = build(&dragon, &tris, &asked, Budget::default()).unwrap();
     let size =
-        rigidcells::internal::cells::cell_size_for(&dragon, &tris, &asked, 1200, Budget::default())
+        rigidcells::internal::cells::cell_size_for(&dragon, &tris, &asked, 2000, Budget::default())
             .unwrap();
     let given = BuildParams {
         cell_size: Some(size),
@@ -312,7 +314,7 @@ fn cells_search_keeps_the_complex_a_build_at_its_size_makes() {
     };
     let (made, _) = build(&dragon, &tris, &given, Budget::default()).unwrap();
     assert!(
-        (kept.len() as f64 / 1200.0 - 1.0).abs() <= 0.02,
+        (kept.len() as f64 / 2000.0 - 1.0).abs() <= 0.02,
         "{}",
         kept.len()
     );
