@@ -16,9 +16,11 @@ use crate::solve::Solution;
 pub const FOLDOVER_SAMPLES: usize = 100_000;
 
 /// The fold-overs of `warp` at up to [`FOLDOVER_SAMPLES`] of the world-coordinate `samples`
-/// (every k-th), with central differences of a tenth of the finest cell, with a warning when
-/// there are any: how many samples were checked, and the indices in `samples` of those that
-/// fold over, in order.
+/// (every k-th), with a warning when there are any: how many samples were checked, and the
+/// indices in `samples` of those that fold over, in order. The RBF and PU transfers, smooth,
+/// give their Jacobians in closed form; the blend's, and the map's in the band where a fixed or
+/// handle region blends into the field, are taken by central differences of a tenth of the
+/// finest cell.
 ///
 /// Why a tenth: the blend is continuous but not smooth. Its weights have kinks where neighbor
 /// sets change, and at points equidistant from five or more centers (the corners of a regular
