@@ -284,6 +284,19 @@ fn deform_writes_a_report_with_the_stable_keys() {
     assert!(json["residual_samples"].as_u64().unwrap() > 100);
     assert!((0.0..0.125).contains(&residual), "residual {residual}");
     assert_eq!(json["foldovers"].as_u64(), Some(0));
+    // The options as given, by the Python package's keywords: every one of them, the ones
+    // left to the run null, so that the spec and these run it again.
+    let options = json["options"].as_object().unwrap();
+    let mut names: Vec<String> = rigidcells::internal::pipeline::OPTION_NAMES
+        .iter()
+        .map(|n| n.replace('-', "_"))
+        .collect();
+    names.sort();
+    assert_eq!(options.keys().cloned().collect::<Vec<_>>(), names);
+    assert_eq!(options["cell_size"].as_f64(), Some(0.25));
+    assert_eq!(options["transfer"].as_str(), Some("blend"));
+    assert_eq!(options["interior_stiffness"].as_f64(), Some(1.0));
+    assert!(options["cells"].is_null() && options["memory_limit"].is_null());
     let t = &json["timings_s"];
     let stage = |k: &str| t[k].as_f64().unwrap_or_else(|| panic!("timings_s.{k}"));
     let parts: f64 = ["read", "voxelize", "solve", "transfer", "write"]

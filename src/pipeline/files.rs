@@ -196,6 +196,7 @@ pub(super) fn deform_in(
     info.outside = outside;
     info.seconds_write = t2.elapsed().as_secs_f64();
     info.deform = DeformInfo::of(
+        params,
         build,
         &solution.info,
         transfer_start,
@@ -371,6 +372,7 @@ pub(super) fn solve_in(
     let mut warnings = solved.warnings;
     warnings.splice(0..0, crs_warnings);
     info.deform = DeformInfo::of(
+        params,
         solved.build,
         &solved.solution.info,
         solved.transfer_start,

@@ -476,6 +476,7 @@ impl Live {
         let Some(session) = self.session.as_mut() else {
             let info = DeformInfo {
                 build: self.build.clone(),
+                options: self.params.options,
                 ..Default::default()
             };
             return Ok((self.points.clone(), normals.to_vec(), None, info));

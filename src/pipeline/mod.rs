@@ -71,6 +71,9 @@ pub struct DeformParams {
     pub(crate) check_control_points: bool,
     /// The memory budget of every stage: the cells, the solver, the RBF.
     pub(crate) memory: Budget,
+    /// The options these parameters were made of, as the user gave them (the report's
+    /// `options`).
+    pub(crate) options: Options,
 }
 
 impl Default for DeformParams {
@@ -213,6 +216,8 @@ pub struct DeformInfo {
     pub control_rounding: Option<String>,
     /// Messages for the user.
     pub warnings: Vec<Said>,
+    /// The options of the run, as given ([`Options::recorded`] in the report).
+    pub options: Options,
 }
 
 impl DeformInfo {
@@ -220,6 +225,7 @@ impl DeformInfo {
     /// `transfer_start` (less those of the control points' check), the fold-overs, the control
     /// points with the seconds of their check, and the warnings.
     fn of(
+        params: &DeformParams,
         build: BuildInfo,
         solver: &SolverInfo,
         transfer_start: Instant,
@@ -237,6 +243,7 @@ impl DeformInfo {
             control_points,
             control_rounding: None,
             warnings,
+            options: params.options,
         }
     }
 }
@@ -418,6 +425,7 @@ pub fn solve_points(
     };
     let saved = SavedField::new(field, params.transfer, rbf);
     let info = DeformInfo::of(
+        params,
         build,
         &solution.info,
         transfer_start,

@@ -190,6 +190,38 @@ impl Options {
         })
     }
 
+    /// These options as a run's report records them (`options`): each of [`OPTION_NAMES`] by
+    /// the Python package's keyword (`-` as `_`), with the value the run took it at — `null`
+    /// where it was not given and the run decided (the cells' size, a level count, the
+    /// machine's memory).
+    pub fn recorded(&self) -> std::collections::BTreeMap<String, serde_json::Value> {
+        use serde_json::json;
+        let values = [
+            json!(self.cell_size),
+            json!(self.cells),
+            json!(self.min_cell_size),
+            json!(self.max_level),
+            json!(self.shell),
+            json!(self.inside.to_string()),
+            json!(self.interior_stiffness),
+            json!(self.solver.to_string()),
+            json!(self.subdomains),
+            json!(self.tolerance),
+            json!(self.coarse_levels),
+            json!(self.loose_parts.to_string()),
+            json!(self.refine_strain),
+            json!(self.transfer.to_string()),
+            json!(self.rbf_tolerance),
+            json!(self.check_control_points),
+            json!(self.memory_limit),
+        ];
+        OPTION_NAMES
+            .iter()
+            .map(|name| name.replace('-', "_"))
+            .zip(values)
+            .collect()
+    }
+
     /// These options as the words of `rigidcells deform`'s command line, each flag then its
     /// value: options at their defaults are left out, the transfer is always named (it is what
     /// the user reads first). Numbers are written as the shortest text that reads back to the
@@ -287,6 +319,7 @@ impl Options {
             proxy_samples: None,
             check_control_points: self.check_control_points,
             memory: Budget::given(self.memory_limit),
+            options: *self,
         }
     }
 }

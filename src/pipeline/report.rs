@@ -129,6 +129,10 @@ pub struct Report {
     /// The checkpoints' accuracy (rows marked `check`: RMSE x, y, horizontal and height, and
     /// at 95 % as ASPRS and the NSSDA state it; absent without checkpoints).
     pub checkpoints: Option<crate::control::CheckAccuracy>,
+    /// The options the run took, by the Python package's keywords (`cell_size`,
+    /// `interior_stiffness`, …), each at the value given or `null` where the run decided
+    /// ([`crate::pipeline::Options::recorded`]): with the spec, what runs it again.
+    pub options: BTreeMap<String, serde_json::Value>,
 }
 
 /// The solve's estimate in the report.
@@ -317,6 +321,7 @@ impl Report {
             control_rmse_left_out: crate::control::rmse_left_out(&d.control_points),
             control_trend: d.solver.trend.map(|t| t.to_string()),
             checkpoints: crate::control::check_accuracy(&d.control_points),
+            options: d.options.recorded(),
         }
     }
 

@@ -352,6 +352,7 @@ where
     let (checked, folded) = check_foldovers(&deformer, &solution, points, &mut warnings);
     let controls = control_results(spec, &solution, &deformer, params, observer)?;
     let mut info = DeformInfo::of(
+        params,
         build,
         &solution.info,
         transfer_start,

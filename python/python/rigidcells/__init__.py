@@ -185,6 +185,10 @@ class Report:
     """The checkpoints' accuracy (rows marked ``check``; None without any): ``count``,
     ``rmse_x``, ``rmse_y``, ``rmse_r``, ``rmse_z``, and ``accuracy_r_95`` and
     ``accuracy_z_95`` as ASPRS and the NSSDA state them."""
+    options: Dict[str, Any]
+    """The options the run took, by this package's keywords (``cell_size``,
+    ``interior_stiffness``, ...), each at the value given or None where the run decided: with
+    the spec, what runs it again."""
     normals: Optional[np.ndarray] = None
     """The turned normals, when normals were given."""
 
