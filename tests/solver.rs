@@ -665,6 +665,19 @@ fn subdomains_reach_the_minimum_here_and_on_workers() {
     assert_eq!(there.motions, here.motions);
     assert_eq!(there.info.linear_solver(), "local-global");
     assert!(workers.0.load(std::sync::atomic::Ordering::Relaxed) >= 4);
+    // More subdomains than cells: one a cell (thousands of blocks factored and solved in
+    // parallel, which once overflowed a thread's stack), the same minimum.
+    let each = solve_bar(
+        &complex,
+        &constraints,
+        &SolveParams {
+            subdomains: 100_000,
+            ..split
+        },
+    )
+    .unwrap();
+    let e1 = *each.info.energies.last().unwrap();
+    assert!((e1 - e0).abs() <= 1e-6 * e0, "a cell each {e1}, default {e0}");
     let refused = solve_bar(
         &complex,
         &constraints,

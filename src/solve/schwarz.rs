@@ -176,10 +176,15 @@ impl Schwarz {
             .collect();
         let blocks = rows.par_iter().map(|r| block_of(l, r));
         let local = match workers {
-            None => match blocks.map(|b| b.factor()).collect::<Option<Vec<_>>>() {
-                Some(factors) => Local::Here(factors),
-                None => return Ok(None),
-            },
+            // On faer's pool, where each block's factor runs inline: from the global pool each
+            // would wait for faer's, taking other blocks' factors onto its stack meanwhile, and
+            // thousands of small blocks overflowed it.
+            None => {
+                match crate::with_faer(|| blocks.map(|b| b.factor()).collect::<Option<Vec<_>>>()) {
+                    Some(factors) => Local::Here(factors),
+                    None => return Ok(None),
+                }
+            }
             Some(workers) => Local::Workers(workers.factor(blocks.collect())?),
         };
         let size = aggregate.max(1);
@@ -240,12 +245,14 @@ impl Schwarz {
                 .collect()
         };
         let solved: Vec<Vec<f64>> = match &self.local {
-            Local::Here(factors) => self
-                .rows
-                .par_iter()
-                .zip(factors)
-                .map(|(rows, f)| f.solve(&restricted(rows)).unwrap_or_default())
-                .collect(),
+            // On faer's pool, as the factors were made.
+            Local::Here(factors) => crate::with_faer(|| {
+                self.rows
+                    .par_iter()
+                    .zip(factors)
+                    .map(|(rows, f)| f.solve(&restricted(rows)).unwrap_or_default())
+                    .collect()
+            }),
             Local::Workers(solves) => solves.solve(self.rows.iter().map(restricted).collect())?,
         };
         let whole = solved.len() == self.rows.len()
