@@ -310,10 +310,18 @@ fn spec_said(
     }
 }
 
+/// Counts past a trillion as a power of ten (a cell size of 1e-300 gives about 1e300 cells
+/// along the extent, not 39 digits of a saturated counter).
 fn grid_too_large(cell_size: f64, cells: u128, max: u128) -> Said {
+    let cells = match u64::try_from(cells) {
+        Ok(n) if n < 1_000_000_000_000 => crate::human::count(n),
+        _ => format!("more than 1e{}", (cells as f64).log10().floor() as i64),
+    };
     Said::from(format!(
-        "the cell size {cell_size} gives {cells} finest cells along the input's extent, more \
-         than the {max} a cell's coordinates can hold; use a larger "
+        "the cell size {} gives {cells} finest cells along the input's extent, more than the {} \
+         a cell's coordinates can hold; use a larger ",
+        crate::human::typed(cell_size),
+        crate::human::count(max as u64)
     ))
     .opt(Opt::CellSize)
 }

@@ -55,6 +55,23 @@ pub fn figure(v: f64) -> String {
     }
 }
 
+/// A number the user typed, as typed: the shortest text that reads back to it, without a
+/// trailing `.0` (−1 → `-1`, 1e-300 → `1e-300`, not three hundred digits; 0.25 → `0.25`), and
+/// `nan`, `inf` as the command line reads them.
+pub fn typed(v: f64) -> String {
+    if v.is_nan() {
+        return "nan".into();
+    }
+    if v.is_infinite() {
+        return if v > 0.0 { "inf" } else { "-inf" }.into();
+    }
+    let text = format!("{v:?}");
+    match text.strip_suffix(".0") {
+        Some(whole) => whole.into(),
+        None => text,
+    }
+}
+
 /// An angle in degrees as people write it, with its sign: to a thousandth of a degree at
 /// most, without trailing zeros (180.00000000000003 → `180°`, 22.25 → `22.25°`, −90 → `-90°`).
 /// Round an angle measured more coarsely before (a matrix's turn to 0.1°, a held turn to 1°).

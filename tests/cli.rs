@@ -653,3 +653,32 @@ fn options_the_cells_leave_without_effect_are_said() {
         "{said:?}"
     );
 }
+
+/// Numbers in refusals are said as the user typed them, a negative value reaches the check of
+/// its option (not the command line's syntax), and a level count past the octree's is refused
+/// by the flag's name.
+#[test]
+fn refused_numbers_are_said_as_typed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (input, output, edit) = lifted_bar(dir.path(), 2.0);
+    for (args, said) in [
+        (
+            &["--cell-size", "-1"][..],
+            "--cell-size -1 must be positive",
+        ),
+        (&["--cell-size=-1"][..], "--cell-size -1 must be positive"),
+        (
+            &["--cell-size", "1e-300"][..],
+            "the cell size 1e-300 gives more than 1e38",
+        ),
+        (
+            &["--max-level", "60"][..],
+            "--max-level 60: at most 20 levels",
+        ),
+    ] {
+        let r = deform(&input, &output, &edit, args);
+        assert_eq!(r.code, 4, "{args:?}: {}", r.stderr);
+        assert!(r.stderr.contains(said), "{args:?}: {}", r.stderr);
+        assert!(!r.stderr.contains("000000000"), "{args:?}: {}", r.stderr);
+    }
+}

@@ -677,7 +677,10 @@ fn subdomains_reach_the_minimum_here_and_on_workers() {
     )
     .unwrap();
     let e1 = *each.info.energies.last().unwrap();
-    assert!((e1 - e0).abs() <= 1e-6 * e0, "a cell each {e1}, default {e0}");
+    assert!(
+        (e1 - e0).abs() <= 1e-6 * e0,
+        "a cell each {e1}, default {e0}"
+    );
     let refused = solve_bar(
         &complex,
         &constraints,

@@ -153,7 +153,10 @@ fn options(d: Option<&Bound<'_, PyDict>>) -> PyResult<Options> {
                 n => o.cells = Some(usize::try_from(n).unwrap_or(usize::MAX)),
             },
             "min_cell_size" => o.min_cell_size = Some(number()?),
-            "max_level" => o.max_level = Some(level(whole("a whole number of levels")?, 30)?),
+            "max_level" => {
+                let most = u64::from(rigidcells::internal::cells::MAX_LEVEL);
+                o.max_level = Some(level(whole("a whole number of levels")?, most)?)
+            }
             "shell" => o.shell = flag()?,
             "inside" => o.inside = named("inside", name()?, Inside::Auto)?,
             "interior_stiffness" => o.interior_stiffness = number()?,

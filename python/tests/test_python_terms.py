@@ -536,9 +536,9 @@ def test_mistakes_are_said_in_python_terms(tmp_path):
         rigidcells.deform(np.zeros((0, 3)), BEND)
     with pytest.raises(ValueError, match="^tolerance=-1: a number of finest cell sizes"):
         rigidcells.deform(pts, BEND, tolerance=-1)
-    with pytest.raises(ValueError, match="^min_cell_size=-1.0 must be positive"):
+    with pytest.raises(ValueError, match="^min_cell_size=-1 must be positive"):
         rigidcells.deform(pts, BEND, min_cell_size=-1)
-    with pytest.raises(ValueError, match="^cell_size=-1.0 must be positive"):
+    with pytest.raises(ValueError, match="^cell_size=-1 must be positive"):
         rigidcells.deform(pts, BEND, cell_size=-1)
     with pytest.raises(ValueError, match='^shell keeps no inside; inside="winding" asks for one'):
         rigidcells.deform(pts, BEND, shell=True, inside="winding")

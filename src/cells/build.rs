@@ -488,8 +488,8 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
     let shortest = extent.min();
     let size = finest(params.cell_size, longest)?;
     let levels = match params.max_level {
-        Some(l) if l <= 20 => l,
-        Some(l) => return Err(Error::param(format!("max level {l} is above 20"))),
+        Some(l) if l <= MAX_LEVEL => l,
+        Some(l) => return Err(Error::param(max_level_refused(l))),
         // An interior cell lies inside the shape, so no leaf is larger than the box's shortest
         // extent: coarser levels would only make the finest grid a cube over the longest
         // extent (a 2 km terrain 110 m high at 2.5 m cells: 1024³ finest cells instead of
@@ -509,6 +509,7 @@ fn frame<const D: usize>(lo: &Vect<D>, hi: &Vect<D>, params: &BuildParams) -> Re
         if along * block > max_axis(D) as f64 {
             return Err(Error::GridTooLarge {
                 cell_size: size,
+                // A count past u128 (a size of 1e-300) saturates; the message says its power.
                 cells: (along * block).min(u128::MAX as f64) as u128,
                 max: max_axis(D) as u128,
             });
@@ -579,8 +580,9 @@ fn triangle_cells<const D: usize>(
         .sum();
     crate::memory::check(
         format!(
-            "rasterizing {} triangles into cells of size {size}",
-            triangles.len()
+            "rasterizing {} triangles into cells of size {}",
+            crate::human::count(triangles.len() as u64),
+            crate::human::length(size, size)
         ),
         candidates * 8.0,
         limit,
@@ -642,6 +644,17 @@ fn smaller_cells() -> Said {
         .text(" (or fewer ")
         .opt(Opt::Cells)
         .text(")")
+}
+
+/// The most octree levels above the finest cells (`--max-level`): a root cell 2²⁰ finest cells
+/// wide.
+pub const MAX_LEVEL: u8 = 20;
+
+/// The refusal of `--max-level l` past [`MAX_LEVEL`], in every face's words.
+pub(crate) fn max_level_refused(l: u8) -> Said {
+    Said::new().set(Opt::MaxLevel, l).text(format!(
+        ": at most {MAX_LEVEL} levels above the finest cells"
+    ))
 }
 
 #[cfg(test)]

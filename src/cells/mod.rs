@@ -29,7 +29,8 @@ pub(crate) use export::BOX_QUADS;
 mod tri_box;
 mod winding;
 
-pub use build::{Forecast, Occupancy};
+pub(crate) use build::max_level_refused;
+pub use build::{Forecast, MAX_LEVEL, Occupancy};
 pub(crate) use decimate::Decimation;
 pub use export::{Pose, write_cells_ply};
 pub use size::{DEFAULT_DIVISIONS, cell_size_for};

@@ -35,8 +35,8 @@ pub(crate) fn check_size(size: f64, what: Option<Opt>) -> Result<f64> {
         return Ok(size);
     }
     let said = match what {
-        Some(o) => Said::new().set(o, format!("{size:?}")),
-        None => Said::from(format!("cell size {size:?}")),
+        Some(o) => Said::new().set(o, crate::human::typed(size)),
+        None => Said::from(format!("cell size {}", crate::human::typed(size))),
     };
     Err(Error::param(said.text(format!(
         " must be positive and at most {:e}",

@@ -226,7 +226,7 @@ struct DeformArgs {
     #[command(flatten)]
     tolerance: ToleranceArg,
     /// Split cells whose strain exceeds this threshold, and solve again.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     refine_strain: Option<f64>,
     /// Also write the solved field to this file, for `rigidcells apply`.
     #[arg(long)]
@@ -365,7 +365,7 @@ struct ToleranceArg {
     /// exact RBF's. On real models that is only far outside the model (90 extents away at 1 %
     /// of the extent on the dragon, BENCHMARKS.md); elsewhere every cell is summed exactly, at
     /// the same speed.
-    #[arg(long, value_name = "LENGTH")]
+    #[arg(long, value_name = "LENGTH", allow_negative_numbers = true)]
     rbf_tolerance: Option<f64>,
 }
 
@@ -432,7 +432,7 @@ impl ViewArgs {
 #[derive(clap::Args)]
 struct CellArgs {
     /// Edge length of the finest cells, in input units [default: longest extent / 32].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     cell_size: Option<f64>,
     /// About this many cells: picks the finest cell size.
     #[arg(long, conflicts_with = "cell_size")]
@@ -440,7 +440,7 @@ struct CellArgs {
     /// Adaptive cells: built at this size, merged up to 8× it wherever one role holds (the
     /// edit's regions keep their borders), solved, and split again, round by round, where the
     /// solved strain is high (above a quarter of the largest), down to this size.
-    #[arg(long, value_name = "S", conflicts_with_all = ["cell_size", "cells"])]
+    #[arg(long, value_name = "S", conflicts_with_all = ["cell_size", "cells"], allow_negative_numbers = true)]
     min_cell_size: Option<f64>,
     /// Octree levels above the finest cells [default: enough for the largest cell that fits the
     /// input's shortest extent]. Fewer make the largest cells smaller than the shape, and its
@@ -457,7 +457,12 @@ struct CellArgs {
     /// Stiffness of the cells inside the shape against those on its surface: 1 is the paper's
     /// solid, whose bends keep their volume; below 1 a twist spreads along a thin neck as on a
     /// surface (0.1: a bent solid keeps a little less volume); 0.0001 to 10000, not with --shell.
-    #[arg(long, value_name = "S", default_value_t = 1.0)]
+    #[arg(
+        long,
+        value_name = "S",
+        default_value_t = 1.0,
+        allow_negative_numbers = true
+    )]
     interior_stiffness: f64,
     /// How the solver's Gauss-Newton systems are solved: a sparse Cholesky factorization, or
     /// conjugate gradients with a rigid-motion multigrid (the same minimum, memory linear in
@@ -475,7 +480,12 @@ struct CellArgs {
     /// cell by more than this many finest cell sizes, or that lowers the energy by less than a
     /// millionth of it (a thousandth in the load steps before the last); 0 keeps only the
     /// energy test.
-    #[arg(long, value_name = "F", default_value_t = rigidcells::internal::solve::MOVE_TOLERANCE)]
+    #[arg(
+        long,
+        value_name = "F",
+        default_value_t = rigidcells::internal::solve::MOVE_TOLERANCE,
+        allow_negative_numbers = true
+    )]
     tolerance: f64,
     /// Solve this many coarser complexes first (each cell's parents, then theirs), each
     /// starting the next finer one at its solution, so that the cells' own Gauss-Newton

@@ -128,10 +128,13 @@ impl Options {
         if let Some(size) = self.min_cell_size {
             crate::cells::check_size(size, Some(Opt::MinCellSize))?;
         }
+        if let Some(l) = self.max_level.filter(|&l| l > crate::cells::MAX_LEVEL) {
+            return Err(Error::param(crate::cells::max_level_refused(l)));
+        }
         if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
             return Err(Error::param(
                 Said::new()
-                    .set(Opt::Tolerance, self.tolerance)
+                    .set(Opt::Tolerance, crate::human::typed(self.tolerance))
                     .text(": a number of finest cell sizes, 0 or more"),
             ));
         }
@@ -147,10 +150,12 @@ impl Options {
         let s = self.interior_stiffness;
         if !(s.is_finite() && (MIN_INTERIOR_STIFFNESS..=MAX_INTERIOR_STIFFNESS).contains(&s)) {
             return Err(Error::param(
-                Said::new().set(Opt::InteriorStiffness, s).text(format!(
-                    ": a scale of the inside's stiffness, from {MIN_INTERIOR_STIFFNESS} \
+                Said::new()
+                    .set(Opt::InteriorStiffness, crate::human::typed(s))
+                    .text(format!(
+                        ": a scale of the inside's stiffness, from {MIN_INTERIOR_STIFFNESS} \
                          to {MAX_INTERIOR_STIFFNESS} (1: a solid's)"
-                )),
+                    )),
             ));
         }
         if s != 1.0 && (self.shell || self.inside == Inside::None) {
@@ -162,7 +167,7 @@ impl Options {
             return Err(Error::param(
                 shell
                     .text(" keeps no cells inside for ")
-                    .set(Opt::InteriorStiffness, s)
+                    .set(Opt::InteriorStiffness, crate::human::typed(s))
                     .text(" to scale: give one"),
             ));
         }
@@ -171,7 +176,7 @@ impl Options {
         {
             return Err(Error::param(
                 Said::new()
-                    .set(Opt::RefineStrain, s)
+                    .set(Opt::RefineStrain, crate::human::typed(s))
                     .text(": a strain, 0 or more"),
             ));
         }
@@ -234,13 +239,13 @@ impl Options {
             out.extend(value);
         };
         if let Some(size) = self.cell_size {
-            flag("cell-size", Some(format!("{size:?}")));
+            flag("cell-size", Some(crate::human::typed(size)));
         }
         if let Some(cells) = self.cells {
             flag("cells", Some(cells.to_string()));
         }
         if let Some(size) = self.min_cell_size {
-            flag("min-cell-size", Some(format!("{size:?}")));
+            flag("min-cell-size", Some(crate::human::typed(size)));
         }
         if let Some(levels) = self.max_level {
             flag("max-level", Some(levels.to_string()));
@@ -254,7 +259,7 @@ impl Options {
         if self.interior_stiffness != d.interior_stiffness {
             flag(
                 "interior-stiffness",
-                Some(format!("{:?}", self.interior_stiffness)),
+                Some(crate::human::typed(self.interior_stiffness)),
             );
         }
         if self.solver != d.solver {
@@ -264,7 +269,7 @@ impl Options {
             flag("subdomains", Some(self.subdomains.to_string()));
         }
         if self.tolerance != d.tolerance {
-            flag("tolerance", Some(format!("{:?}", self.tolerance)));
+            flag("tolerance", Some(crate::human::typed(self.tolerance)));
         }
         if let Some(levels) = self.coarse_levels {
             flag("coarse-levels", Some(levels.to_string()));
@@ -273,11 +278,11 @@ impl Options {
             flag("loose-parts", Some(self.loose_parts.to_string()));
         }
         if let Some(strain) = self.refine_strain {
-            flag("refine-strain", Some(format!("{strain:?}")));
+            flag("refine-strain", Some(crate::human::typed(strain)));
         }
         flag("transfer", Some(self.transfer.to_string()));
         if let Some(tolerance) = self.rbf_tolerance {
-            flag("rbf-tolerance", Some(format!("{tolerance:?}")));
+            flag("rbf-tolerance", Some(crate::human::typed(tolerance)));
         }
         if self.check_control_points {
             flag("check-gcp", None);

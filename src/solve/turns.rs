@@ -84,10 +84,13 @@ pub struct HandleTurn {
 }
 
 impl HandleTurn {
-    /// Whether the turn taken differs from the one asked by more than a tenth of it.
+    /// Whether the turn taken differs from the one asked by more than a tenth of it, and by
+    /// a degree at least (a turn asked of nothing — a quaternion typed at 720°, the identity —
+    /// is not missed by the cells' fraction of a degree).
     pub fn differs(&self) -> bool {
-        self.taken_degrees
-            .is_some_and(|t| (t - self.asked_degrees).abs() > 0.1 * self.asked_degrees.abs())
+        self.taken_degrees.is_some_and(|t| {
+            (t - self.asked_degrees).abs() > (0.1 * self.asked_degrees.abs()).max(1.0)
+        })
     }
 
     /// The warning for a turn that [`HandleTurn::differs`], naming the handle as the command
@@ -376,6 +379,20 @@ mod tests {
             "the handle on line 3 of the edit spec twists by 33.25°, but the cells between it \
              and the fixed cells carry -327°: the shape did not twist as asked"
         );
+        // No turn asked (a quaternion typed at 720°) is not missed by a fraction of a degree;
+        // a small turn missed by more than a degree is.
+        let nothing = HandleTurn {
+            asked_degrees: 1e-14,
+            taken_degrees: Some(0.4),
+            ..turn
+        };
+        assert_eq!(nothing.warning(), None);
+        let missed = HandleTurn {
+            asked_degrees: 5.0,
+            taken_degrees: Some(3.5),
+            ..turn
+        };
+        assert!(missed.warning().is_some());
         let matrix = "matrix = [[-1, 1e-7, 0, 12], [-1e-7, -1, 0, 4], [0, 0, 1, 0], [0, 0, 0, 1]]";
         let (complex, constraints) = row(matrix);
         let refusal = TurnRefusal::new(&complex, &constraints, 0, 0.5);
