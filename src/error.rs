@@ -423,7 +423,7 @@ impl TurnRefusal {
                 "{word} it the other way round instead (by {other}, to the same pose)"
             ));
         }
-        advice.push(format!("{word} it less (by {held} at most)"));
+        advice.push(format!("{word} it well short of {held}"));
         if self.kind == TurnKind::Twist {
             advice.push("twist a longer span (the fixed and handle regions farther apart)".into());
         }

@@ -16,7 +16,11 @@
 //!   them) and its coarsest level analysed the same way, for every stage coarse to fine
 //!   (`coarsen`). These counts are priced in bytes and seconds with the constants below, for
 //!   the path `--solver auto` takes; a run over the budget is refused there, before any coarse
-//!   stage is solved.
+//!   stage is solved. `auto` starts with local-global iterations and may switch to
+//!   Gauss-Newton's system, but only where that fits the budget: its memory is priced for that
+//!   system where it fits (an upper bound: the bust at cells of 0.01 is priced at 1.9 GB and
+//!   runs local-global in 320 MB), else for the local-global iterations (451 MB under a 1 GiB
+//!   limit), and its seconds for whichever is the sooner (`LOCAL_GLOBAL_PER_NEWTON`).
 //!
 //! The prices are the constants below, measured on the development machine (2 cores, release
 //! build; BENCHMARKS.md, "What a run will take"). They assume that machine's speed: the
@@ -31,8 +35,8 @@ use crate::error::Result;
 use crate::memory::Budget;
 use crate::said::{Opt, Said};
 
-/// The linear solver a solve takes: what `--solver auto` comes to for its cells
-/// (`solve::Method`'s `Direct` or `Multilevel`).
+/// The linear solver a solve's memory is priced for: what `--solver auto` comes to for its
+/// cells (`solve::Method`'s `Direct`, `Multilevel` or `LocalGlobal`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Solver {
     /// The sparse Cholesky factorization.
@@ -217,6 +221,11 @@ pub(crate) const ITERATIONS_PER_LOAD_STEP: f64 = 3.0;
 /// Gauss-Newton iterations each finer stage of a solve coarse to fine takes (the cells' own:
 /// one more).
 pub(crate) const ITERATIONS_PER_STAGE: f64 = 2.0;
+/// Accelerated local-global iterations that do what one Gauss-Newton iteration of the counts
+/// above does, where a solve takes those: with 20 the seconds came within 0.6–2.2 times the
+/// run's on the bust at cells of 0.01–0.04 and the bar at 0.05 (BENCHMARKS.md, "What a run
+/// will take").
+pub(crate) const LOCAL_GLOBAL_PER_NEWTON: f64 = 20.0;
 
 /// Refuses a run whose forecast cells ([`Forecast`]) cannot be solved within `budget` by any
 /// path (by the direct one with `direct`, `--solver direct`): the cells' construction, or the

@@ -345,3 +345,36 @@ fn a_whole_turn_of_a_short_bar_is_refused_from_its_coarse_cells() {
         "{text}"
     );
 }
+
+/// A turn asked a little past where a short bar gives way, solved from rest on its cells (too
+/// few for coarse stages): each load step that leaves the branch stops there and is taken
+/// again in halves, instead of iterating on until the bar has untwisted, and the run is
+/// refused in the words of a twist.
+#[test]
+fn a_step_that_leaves_its_branch_stops_there() {
+    let (points, triangles) = bar([2.0, 1.0, 1.0]);
+    let text = "[[fixed]]\nbox = { min = [-0.1, -0.1, -0.1], max = [0.2, 1.1, 1.1] }\n\
+                [[handle]]\nbox = { min = [1.8, -0.1, -0.1], max = [2.1, 1.1, 1.1] }\n\
+                rotate = { axis = [1, 0, 0], degrees = 250 }\n";
+    let spec = parse_spec::<3>(text, ".".as_ref(), "twist.toml".as_ref()).unwrap();
+    let params = Options {
+        cell_size: Some(0.125),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let spent = Spent::default();
+    let e = pipeline::deform(&points, &triangles, &spec, &params, &spent).unwrap_err();
+    let Error::TurnNotHeld(refusal) = &e else {
+        panic!("{e}");
+    };
+    assert_eq!(refusal.kind, TurnKind::Twist);
+    assert!(
+        refusal.held_degrees > 150.0 && refusal.held_degrees < 250.0,
+        "{e}"
+    );
+    let (runs, _, iterations) = *spent.0.lock().unwrap();
+    assert_eq!(runs, 1, "{e}");
+    // 28 where the steps stop as they leave the branch, 53 where they iterate on.
+    assert!(iterations < 40, "{iterations} iterations");
+}

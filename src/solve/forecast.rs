@@ -33,6 +33,8 @@ where
     Dim<D>: Rigid<D>,
 {
     let load_steps = load_steps(complex, constraints, params)? as f64;
+    // `auto` takes whichever of local-global iterations and Gauss-Newton's is the sooner.
+    let sooner = params.method == Method::Auto && params.subdomains == 0 && held(constraints);
     let fine = stage(complex, constraints, params, budget);
     let mut stages: Vec<(SolveCounts, Method)> = Vec::new();
     for k in (1..=coarse::levels(complex.len(), params)).rev() {
@@ -43,7 +45,12 @@ where
         }
         stages.push(stage(&parents, &on_parents, params, budget));
     }
-    Ok(solve_estimate(&stages, &fine, load_steps, budget.limit()))
+    Ok(solve_estimate(
+        &stages,
+        &fine,
+        (load_steps, sooner),
+        budget.limit(),
+    ))
 }
 
 /// [`forecast()`] of what `solve` is about to solve, refused past `budget` (the cells'
@@ -82,8 +89,7 @@ pub(super) fn newton_in_local_global<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let params = SolveParams::default();
-    let (counts, method) = stage(complex, constraints, &params, budget);
+    let (counts, method) = newton_path(complex, constraints, Method::Auto, budget);
     let (iteration, setup) = counts.iteration_seconds(method);
     let symbolic = match method {
         Method::Multilevel => 0.0,
@@ -99,13 +105,46 @@ where
 /// from 1k to 5.5k cells of the tube, the bar and the vegetation strip.
 const LOCAL_GLOBAL_SHARE: f64 = 0.1;
 
-/// The counts of one stage's solve and the path it takes: `params.method`, or for
-/// [`Method::Auto`] what `System::new` decides (the multilevel path for many cells of one
-/// size or a dense factor, else the direct path where it fits `budget`).
+/// The counts of one stage's solve and the path its memory is priced by: `params.method`,
+/// or for [`Method::Auto`] Gauss-Newton's system ([`newton_path`]) where it fits `budget`
+/// (`auto` starts with local-global iterations where something holds the cells, and may
+/// switch to it where their rate says so), else the local-global iterations it then keeps
+/// to ([`newton_fits`]).
 fn stage<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
     params: &SolveParams,
+    budget: Budget,
+) -> (SolveCounts, Method)
+where
+    Dim<D>: Rigid<D>,
+{
+    // Subdomains solve by local-global iterations; their blocks' factors hold about what the
+    // whole factor does.
+    let asked = match params.subdomains > 0 {
+        true => Method::LocalGlobal,
+        false => params.method,
+    };
+    if asked == Method::LocalGlobal {
+        return (counts(complex, constraints).0, asked);
+    }
+    let (counts, method) = newton_path(complex, constraints, asked, budget);
+    if asked != Method::Auto || !held(constraints) {
+        return (counts, method);
+    }
+    match counts.base_bytes() + counts.path_bytes(method) <= budget.limit() as f64 {
+        true => (counts, method),
+        false => (counts, Method::LocalGlobal),
+    }
+}
+
+/// The counts of a stage's Gauss-Newton solve and the linear solver it takes: `asked`, or for
+/// [`Method::Auto`] what `System::set_up_auto` decides (the multilevel path for many cells of
+/// one size or a dense factor, else the direct path where it fits `budget`).
+fn newton_path<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    asked: Method,
     budget: Budget,
 ) -> (SolveCounts, Method)
 where
@@ -124,17 +163,9 @@ where
     };
     let fill = counts.factor.nodes_len * counts.dof / counts.free.max(1.0);
     let free = counts.free as usize;
-    // Subdomains solve by local-global iterations; their blocks' factors hold about what the
-    // whole factor does.
-    let asked = if params.subdomains > 0 {
-        Method::LocalGlobal
-    } else {
-        params.method
-    };
     let method = match asked {
-        Method::Direct => Method::Direct,
+        Method::Direct | Method::LocalGlobal => Method::Direct,
         Method::Multilevel => Method::Multilevel,
-        Method::LocalGlobal => Method::LocalGlobal,
         Method::Auto if uniform && free > auto::MULTILEVEL_FROM => Method::Multilevel,
         Method::Auto if uniform && free > COARSEST && fill > auto::MULTILEVEL_FILL as f64 => {
             Method::Multilevel
@@ -144,9 +175,33 @@ where
     };
     match method {
         Method::Multilevel => (with_hierarchy(counts, complex, constraints), method),
-        Method::LocalGlobal => (counts, method),
         _ => (counts, Method::Direct),
     }
+}
+
+/// Whether Gauss-Newton's system on `complex`, set up as [`Method::Auto`] sets it up, fits
+/// `budget` by this forecast: where it does not, `auto` stays with local-global iterations
+/// instead of switching to it.
+pub(super) fn newton_fits<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    budget: Budget,
+) -> bool
+where
+    Dim<D>: Rigid<D>,
+{
+    let (counts, method) = newton_path(complex, constraints, Method::Auto, budget);
+    counts.base_bytes() + counts.path_bytes(method) <= budget.limit() as f64
+}
+
+/// Whether something holds the free cells in place (a fixed or handle cell, a pin or a
+/// target), so that the position Laplacian local-global iterations solve is factored.
+fn held<const D: usize>(constraints: &Constraints<D>) -> bool {
+    !constraints.targets.is_empty()
+        || constraints
+            .roles
+            .iter()
+            .any(|r| !matches!(r, Role::Free | Role::Rest | Role::Carried(_)))
 }
 
 /// The counts of every path but the multilevel hierarchy's, and whether the cells are all of
@@ -308,11 +363,28 @@ impl SolveCounts {
             + coarsest
     }
 
-    /// Seconds of one Gauss-Newton iteration on these cells by `method`, and of a multilevel
+    /// The bytes of the linear solver `method` takes, beside [`Self::base_bytes`].
+    pub fn path_bytes(&self, method: Method) -> f64 {
+        match method {
+            Method::Multilevel => self.multilevel_bytes(),
+            Method::LocalGlobal => self.local_global_bytes(),
+            _ => self.direct_bytes(),
+        }
+    }
+
+    /// Seconds of one Gauss-Newton iteration on these cells by `method` (by local-global
+    /// iterations: the [`LOCAL_GLOBAL_PER_NEWTON`] that stand for one), and of a multilevel
     /// hierarchy's construction.
     pub fn iteration_seconds(&self, method: Method) -> (f64, f64) {
         let common = ITERATION_SECONDS_PER_ENTRY * (self.cells + self.coupled);
         match method {
+            Method::LocalGlobal => {
+                // The local step's pass over the cells and pairs, and the global step's
+                // back substitution for each coordinate.
+                let one = LOCAL_GLOBAL_SHARE * common
+                    + self.dof.min(3.0) * SOLVE_SECONDS_PER_FACTOR_ENTRY * self.factor.nodes_len;
+                (LOCAL_GLOBAL_PER_NEWTON * one, 0.0)
+            }
             Method::Multilevel => {
                 let blocks = self.fine_blocks + self.prolongation;
                 let cg = CG_ITERATIONS
@@ -344,24 +416,24 @@ impl SolveCounts {
 fn solve_estimate(
     stages: &[(SolveCounts, Method)],
     (fine, method): &(SolveCounts, Method),
-    load_steps: f64,
+    (load_steps, sooner): (f64, bool),
     limit: u64,
 ) -> Estimate {
-    let bytes_of = |(c, m): &(SolveCounts, Method)| {
-        c.base_bytes()
-            + match m {
-                Method::Multilevel => c.multilevel_bytes(),
-                Method::LocalGlobal => c.local_global_bytes(),
-                _ => c.direct_bytes(),
-            }
-    };
-    let seconds_of = |(c, m): &(SolveCounts, Method), iterations: f64, builds: f64| {
-        let (iteration, setup) = c.iteration_seconds(*m);
+    let bytes_of = |(c, m): &(SolveCounts, Method)| c.base_bytes() + c.path_bytes(*m);
+    let by = |c: &SolveCounts, m: Method, iterations: f64, builds: f64| {
+        let (iteration, setup) = c.iteration_seconds(m);
         let symbolic = match m {
             Method::Multilevel => 0.0,
             _ => SYMBOLIC_SECONDS_PER_ENTRY * c.entries,
         };
         iterations * iteration + builds * setup + symbolic
+    };
+    let seconds_of = |(c, m): &(SolveCounts, Method), iterations: f64, builds: f64| {
+        let priced = by(c, *m, iterations, builds);
+        match sooner {
+            true => priced.min(by(c, Method::LocalGlobal, iterations, builds)),
+            false => priced,
+        }
     };
     let coarsest_iterations = ITERATIONS_PER_LOAD_STEP * load_steps + 1.0;
     let mut bytes = bytes_of(&(*fine, *method));

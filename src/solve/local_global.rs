@@ -313,7 +313,7 @@ pub(crate) fn iterate<const D: usize>(
     to: &Destinations<D>,
     mut energy: f64,
     stop: &Stop,
-    each: &mut dyn FnMut(&Iterate) -> Result<bool>,
+    each: &mut dyn FnMut(&Iterate, &[Motion<D>]) -> Result<bool>,
 ) -> Result<(usize, bool)>
 where
     Dim<D>: Rigid<D>,
@@ -386,16 +386,19 @@ where
         let largest_move = super::largest_corner_move(complex, motions, &trial) / size;
         moves.push(largest_move);
         let (global, energy_spent) = (global_time.get() - global0, energy_time.get() - energy0);
-        let enough = each(&Iterate {
-            energy_before: energy,
-            energy: e,
-            largest_move,
-            accelerated,
-            seconds_local: t.elapsed().as_secs_f64() - global - energy_spent,
-            seconds_global: global,
-            seconds_energy: energy_spent,
-            rate,
-        })?;
+        let enough = each(
+            &Iterate {
+                energy_before: energy,
+                energy: e,
+                largest_move,
+                accelerated,
+                seconds_local: t.elapsed().as_secs_f64() - global - energy_spent,
+                seconds_global: global,
+                seconds_energy: energy_spent,
+                rate,
+            },
+            &trial,
+        )?;
         motions.copy_from_slice(&trial);
         x = rots;
         energy = e;
@@ -423,7 +426,7 @@ pub(super) fn logged<const D: usize>(
     constraints: &Constraints<D>,
     (motions, energy, floor): (&mut [Motion<D>], f64, f64),
     to: &Destinations<D>,
-    (params, newton): (&super::SolveParams, Option<&dyn Fn() -> f64>),
+    (params, newton, off_branch): (&super::SolveParams, Option<&dyn Fn() -> f64>, OffBranch<D>),
     info: &mut super::SolverInfo,
     observer: &dyn crate::progress::Observer,
 ) -> Result<(usize, Outcome)>
@@ -442,7 +445,7 @@ where
     let load_step = info.step_starts.len() - 1;
     let (mut done, mut newton_estimate) = (0usize, None);
     let mut slower = false;
-    let mut each = |it: &Iterate| {
+    let mut each = |it: &Iterate, motions: &[Motion<D>]| {
         let log = super::IterationLog {
             method: match it.accelerated {
                 true => super::IterationMethod::Anderson,
@@ -471,6 +474,10 @@ where
         }
         crate::progress::stop_if_cancelled(observer)?;
         done += 1;
+        // A load step that left its branch is taken again in halves: no use converging it.
+        if done.is_multiple_of(RATE_WINDOW) && off_branch(motions) {
+            return Ok(true);
+        }
         // Once the rate is known, and then every window: would Gauss-Newton be sooner?
         if let Some(newton) = newton
             && done >= 2 * RATE_WINDOW
@@ -492,6 +499,12 @@ where
     info.converged = outcome == Outcome::Converged;
     Ok((iterations, outcome))
 }
+
+/// Whether a load step's iterate has left the branch its load path is on (the caller takes
+/// the step again in halves, so the step's iterations stop there); `|_| false` where nothing
+/// watches.
+pub(in crate::internal::solve) type OffBranch<'a, const D: usize> =
+    &'a dyn Fn(&[Motion<D>]) -> bool;
 
 /// How a run of [`logged`] iterations ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -613,7 +626,7 @@ where
         anderson: params.anderson,
     };
     let mut last = energy;
-    let mut each = |it: &Iterate| {
+    let mut each = |it: &Iterate, _: &[Motion<D>]| {
         info.energies.push(it.energy);
         info.seconds.push(clock.elapsed().as_secs_f64());
         info.accelerated += it.accelerated as usize;

@@ -774,8 +774,10 @@ class Estimate(NamedTuple):
 
     ``cells``: the cells; ``bytes``: the run's peak memory; ``seconds``: the whole run (the
     cells as built, the solve and the transfer as estimated, on the development machine's two
-    cores: scale by the cores); ``solve_seconds``: the solve alone; ``solver``: ``"direct"``
-    or ``"multilevel"``, the path the solve takes; ``limit``: the memory budget
+    cores: scale by the cores); ``solve_seconds``: the solve alone; ``solver``: ``"direct"``,
+    ``"multilevel"`` or ``"local-global"``, the path the memory is priced for (with
+    ``solver="auto"``: Gauss-Newton's system where it fits the budget, which the run may
+    switch to, else the local-global iterations it keeps to); ``limit``: the memory budget
     (``memory_limit``, else three quarters of the machine's memory); ``fits``: whether
     ``bytes`` fit it (a ``deform`` that does not is refused with a ``ValueError``);
     ``complete``: False where the cells were only forecast, because they cannot fit the

@@ -10,7 +10,7 @@ use crate::rigid::Motion;
 use crate::rigid::{Dim, Rigid};
 use crate::said::Said;
 use crate::solve::constraints::Constraints;
-use crate::solve::local_global::{self, Destinations, Layout};
+use crate::solve::local_global::{self, Destinations, Layout, OffBranch};
 use crate::solve::multilevel::COARSEST;
 use crate::solve::positions::Positions;
 use crate::solve::total_energy;
@@ -99,7 +99,7 @@ pub(in crate::internal::solve) fn first<const D: usize>(
     constraints: &Constraints<D>,
     state: (&mut [Motion<D>], f64, f64),
     to: &Destinations<D>,
-    params: &crate::solve::SolveParams,
+    (params, off_branch): (&crate::solve::SolveParams, OffBranch<D>),
     info: &mut crate::solve::SolverInfo,
     observer: &dyn crate::progress::Observer,
 ) -> Result<(usize, Option<f64>)>
@@ -111,8 +111,19 @@ where
             system.switch_to_gauss_newton(complex)
         })
     };
+    // Whether Gauss-Newton's system fits the budget: checked where `auto` would switch to
+    // it (once a system), and where it does not, local-global iterations to the end.
+    let fits = |system: &mut System<D>| {
+        let fits = system.deferred.as_ref().is_some_and(|(budget, _)| {
+            crate::solve::forecast::newton_fits(complex, constraints, *budget)
+        });
+        if !fits {
+            system.deferred = None;
+        }
+        fits
+    };
     // A strip that converged slowly on coarser cells converges more slowly on these.
-    if info.newton_sooner && system.can_switch() {
+    if info.newton_sooner && system.can_switch() && fits(system) {
         switch(system, info)?;
     }
     let (motions, energy, floor) = state;
@@ -127,13 +138,14 @@ where
         || crate::solve::forecast::newton_in_local_global(complex, constraints, Budget::default());
     let newton = can_switch.then_some(&newton as &dyn Fn() -> f64);
     let run = (&mut *motions, energy, floor);
+    let watched = (params, newton, off_branch);
     let (it, outcome) = local_global::logged(
         parts,
         complex,
         constraints,
         run,
         to,
-        (params, newton),
+        watched,
         info,
         observer,
     )?;
@@ -141,6 +153,25 @@ where
         return Ok((it, None));
     }
     info.newton_sooner = true;
+    if !fits(system) {
+        let energy = total_energy(complex, constraints, motions, to.targets);
+        let Some(parts) = system.local_global_parts(complex, constraints) else {
+            return Ok((it, Some(energy)));
+        };
+        let run = (&mut *motions, energy, floor);
+        let watched = (params, None, off_branch);
+        let (more, _) = local_global::logged(
+            parts,
+            complex,
+            constraints,
+            run,
+            to,
+            watched,
+            info,
+            observer,
+        )?;
+        return Ok((it + more, None));
+    }
     switch(system, info)?;
     Ok((
         it,
