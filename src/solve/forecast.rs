@@ -80,7 +80,8 @@ const NEWTON_ITERATIONS: f64 = 4.0;
 /// minimum, by the path [`Method::Auto`] takes (its symbolic analysis, a hierarchy's
 /// construction and [`NEWTON_ITERATIONS`] iterations), in accelerated local-global iterations
 /// on the same cells: what local-global iterations are measured against ([`Method::Auto`]).
-/// Estimated from the counts, not timed, so that a solve is the same every run.
+/// Estimated from the counts, not timed, so that a solve is the same every run. Infinite where
+/// that path does not fit `budget`: `auto` then keeps to local-global iterations.
 pub(super) fn newton_in_local_global<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
@@ -90,6 +91,9 @@ where
     Dim<D>: Rigid<D>,
 {
     let (counts, method) = newton_path(complex, constraints, Method::Auto, budget);
+    if !counts.fit(method, budget) {
+        return f64::INFINITY;
+    }
     let (iteration, setup) = counts.iteration_seconds(method);
     let symbolic = match method {
         Method::Multilevel => 0.0,
@@ -132,7 +136,7 @@ where
     if asked != Method::Auto || !held(constraints) {
         return (counts, method);
     }
-    match counts.base_bytes() + counts.path_bytes(method) <= budget.limit() as f64 {
+    match counts.fit(method, budget) {
         true => (counts, method),
         false => (counts, Method::LocalGlobal),
     }
@@ -191,7 +195,7 @@ where
     Dim<D>: Rigid<D>,
 {
     let (counts, method) = newton_path(complex, constraints, Method::Auto, budget);
-    counts.base_bytes() + counts.path_bytes(method) <= budget.limit() as f64
+    counts.fit(method, budget)
 }
 
 /// Whether something holds the free cells in place (a fixed or handle cell, a pin or a
@@ -361,6 +365,11 @@ impl SolveCounts {
             + self.first_coarse_edges * bb * 8.0 * 3.0
             + self.coarse_blocks * bb * 12.0
             + coarsest
+    }
+
+    /// Whether a stage's solve by `method` fits `budget`.
+    pub fn fit(&self, method: Method, budget: Budget) -> bool {
+        self.base_bytes() + self.path_bytes(method) <= budget.limit() as f64
     }
 
     /// The bytes of the linear solver `method` takes, beside [`Self::base_bytes`].

@@ -111,8 +111,8 @@ where
             system.switch_to_gauss_newton(complex)
         })
     };
-    // Whether Gauss-Newton's system fits the budget: checked where `auto` would switch to
-    // it (once a system), and where it does not, local-global iterations to the end.
+    // Whether Gauss-Newton's system fits the budget, checked before a switch its iterations'
+    // rate did not ask for: where it does not, local-global iterations to the end.
     let fits = |system: &mut System<D>| {
         let fits = system.deferred.as_ref().is_some_and(|(budget, _)| {
             crate::solve::forecast::newton_fits(complex, constraints, *budget)
@@ -130,13 +130,15 @@ where
     if !system.is_local_global() {
         return Ok((0, Some(energy)));
     }
-    let can_switch = system.can_switch();
+    let budget = system.deferred.as_ref().map(|(budget, _)| *budget);
     let Some(parts) = system.local_global_parts(complex, constraints) else {
         return Ok((0, Some(energy)));
     };
+    // Infinite where Gauss-Newton's system does not fit the budget: no rate is slower.
     let newton =
-        || crate::solve::forecast::newton_in_local_global(complex, constraints, Budget::default());
-    let newton = can_switch.then_some(&newton as &dyn Fn() -> f64);
+        |budget| crate::solve::forecast::newton_in_local_global(complex, constraints, budget);
+    let newton = budget.map(|budget| move || newton(budget));
+    let newton = newton.as_ref().map(|f| f as &dyn Fn() -> f64);
     let run = (&mut *motions, energy, floor);
     let watched = (params, newton, off_branch);
     let (it, outcome) = local_global::logged(
@@ -153,25 +155,6 @@ where
         return Ok((it, None));
     }
     info.newton_sooner = true;
-    if !fits(system) {
-        let energy = total_energy(complex, constraints, motions, to.targets);
-        let Some(parts) = system.local_global_parts(complex, constraints) else {
-            return Ok((it, Some(energy)));
-        };
-        let run = (&mut *motions, energy, floor);
-        let watched = (params, None, off_branch);
-        let (more, _) = local_global::logged(
-            parts,
-            complex,
-            constraints,
-            run,
-            to,
-            watched,
-            info,
-            observer,
-        )?;
-        return Ok((it + more, None));
-    }
     switch(system, info)?;
     Ok((
         it,
