@@ -17,10 +17,12 @@
 //!   (`coarsen`). These counts are priced in bytes and seconds with the constants below, for
 //!   the path `--solver auto` takes; a run over the budget is refused there, before any coarse
 //!   stage is solved. `auto` starts with local-global iterations and may switch to
-//!   Gauss-Newton's system, but only where that fits the budget: its memory is priced for that
-//!   system where it fits (an upper bound: the bust at cells of 0.01 is priced at 1.9 GB and
-//!   runs local-global in 320 MB), else for the local-global iterations (451 MB under a 1 GiB
-//!   limit), and its seconds for whichever is the sooner (`LOCAL_GLOBAL_PER_NEWTON`).
+//!   Gauss-Newton's system, but only where that fits the budget: its memory and seconds are
+//!   priced for that system where it fits (an upper bound where the run does not switch: the
+//!   bust at cells of 0.01 is priced at 1.9 GB and 44 s and runs local-global in 320 MB and
+//!   9 s; pricing the seconds of the sooner of the two instead said 47 s for the bar at 0.02,
+//!   which switched and took over 130 s), else for the local-global iterations (451 MB and
+//!   16.5 s under a 1 GiB limit; `LOCAL_GLOBAL_PER_NEWTON`).
 //!
 //! The prices are the constants below, measured on the development machine (2 cores, release
 //! build; BENCHMARKS.md, "What a run will take"). They assume that machine's speed: the
@@ -222,9 +224,9 @@ pub(crate) const ITERATIONS_PER_LOAD_STEP: f64 = 3.0;
 /// one more).
 pub(crate) const ITERATIONS_PER_STAGE: f64 = 2.0;
 /// Accelerated local-global iterations that do what one Gauss-Newton iteration of the counts
-/// above does, where a solve takes those: with 20 the seconds came within 0.6–2.2 times the
-/// run's on the bust at cells of 0.01–0.04 and the bar at 0.05 (BENCHMARKS.md, "What a run
-/// will take").
+/// above does, where a solve takes those: with 20 the seconds came 1.3 and 1.7 times the
+/// run's on the bar at 0.05 and the bust at 0.01, each kept to them by its budget
+/// (BENCHMARKS.md, "What a run will take").
 pub(crate) const LOCAL_GLOBAL_PER_NEWTON: f64 = 20.0;
 
 /// Refuses a run whose forecast cells ([`Forecast`]) cannot be solved within `budget` by any

@@ -33,8 +33,6 @@ where
     Dim<D>: Rigid<D>,
 {
     let load_steps = load_steps(complex, constraints, params)? as f64;
-    // `auto` takes whichever of local-global iterations and Gauss-Newton's is the sooner.
-    let sooner = params.method == Method::Auto && params.subdomains == 0 && held(constraints);
     let fine = stage(complex, constraints, params, budget);
     let mut stages: Vec<(SolveCounts, Method)> = Vec::new();
     for k in (1..=coarse::levels(complex.len(), params)).rev() {
@@ -45,12 +43,7 @@ where
         }
         stages.push(stage(&parents, &on_parents, params, budget));
     }
-    Ok(solve_estimate(
-        &stages,
-        &fine,
-        (load_steps, sooner),
-        budget.limit(),
-    ))
+    Ok(solve_estimate(&stages, &fine, load_steps, budget.limit()))
 }
 
 /// [`forecast()`] of what `solve` is about to solve, refused past `budget` (the cells'
@@ -109,11 +102,12 @@ where
 /// from 1k to 5.5k cells of the tube, the bar and the vegetation strip.
 const LOCAL_GLOBAL_SHARE: f64 = 0.1;
 
-/// The counts of one stage's solve and the path its memory is priced by: `params.method`,
-/// or for [`Method::Auto`] Gauss-Newton's system ([`newton_path`]) where it fits `budget`
-/// (`auto` starts with local-global iterations where something holds the cells, and may
-/// switch to it where their rate says so), else the local-global iterations it then keeps
-/// to ([`newton_fits`]).
+/// The counts of one stage's solve and the path its memory and seconds are priced by:
+/// `params.method`, or for [`Method::Auto`] Gauss-Newton's system ([`newton_path`]) where it
+/// fits `budget` (`auto` starts with local-global iterations where something holds the cells,
+/// and may switch to it where their rate says so: then it takes about that system's time, and
+/// where it does not switch, less), else the local-global iterations it then keeps to
+/// ([`newton_fits`]).
 fn stage<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
@@ -425,24 +419,17 @@ impl SolveCounts {
 fn solve_estimate(
     stages: &[(SolveCounts, Method)],
     (fine, method): &(SolveCounts, Method),
-    (load_steps, sooner): (f64, bool),
+    load_steps: f64,
     limit: u64,
 ) -> Estimate {
     let bytes_of = |(c, m): &(SolveCounts, Method)| c.base_bytes() + c.path_bytes(*m);
-    let by = |c: &SolveCounts, m: Method, iterations: f64, builds: f64| {
-        let (iteration, setup) = c.iteration_seconds(m);
+    let seconds_of = |(c, m): &(SolveCounts, Method), iterations: f64, builds: f64| {
+        let (iteration, setup) = c.iteration_seconds(*m);
         let symbolic = match m {
             Method::Multilevel => 0.0,
             _ => SYMBOLIC_SECONDS_PER_ENTRY * c.entries,
         };
         iterations * iteration + builds * setup + symbolic
-    };
-    let seconds_of = |(c, m): &(SolveCounts, Method), iterations: f64, builds: f64| {
-        let priced = by(c, *m, iterations, builds);
-        match sooner {
-            true => priced.min(by(c, Method::LocalGlobal, iterations, builds)),
-            false => priced,
-        }
     };
     let coarsest_iterations = ITERATIONS_PER_LOAD_STEP * load_steps + 1.0;
     let mut bytes = bytes_of(&(*fine, *method));
