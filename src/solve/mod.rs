@@ -23,9 +23,9 @@
 //! iterating on while the part untwists: a 2 × 1 × 1 bar twisted 247° at its default cells,
 //! a little past where it gives way, is refused in 12.5 s instead of 33.6 s, at 221° in 19 s
 //! instead of 76 s. A turn that still gives way at the smallest step is refused
-//! ([`Error::TurnNotHeld`], exit 4) rather than returned untwisted; a large complex's coarse cells refuse it before the
-//! cells themselves are solved where the turn asked is far past what they held (the `coarse`
-//! module).
+//! ([`Error::TurnNotHeld`], exit 4) rather than returned untwisted; a large complex's coarse
+//! cells refuse it before the cells themselves are solved where the turn asked is far past
+//! what they held (the `coarse` module).
 //!
 //! **Half turns.** A bend by a half turn has two answers too: the part bent one way round or
 //! the other, both reaching the handle's pose. Written as `rotate`, the sign says which; a
