@@ -116,6 +116,20 @@ impl Budget {
         Self(bytes)
     }
 
+    /// [`Budget::given`], refused where it is no memory at all: every face takes a limit of 0
+    /// as typed and refuses it in its own words, as no run fits in it.
+    pub fn checked(bytes: Option<u64>) -> Result<Self> {
+        if bytes == Some(0) {
+            return Err(Error::param(
+                Said::new().set(crate::said::Opt::MemoryLimit, 0).text(
+                    ": no run fits in no memory; give a size such as 8G, or leave it out for three \
+                 quarters of this machine's memory",
+                ),
+            ));
+        }
+        Ok(Self(bytes))
+    }
+
     /// The budget in bytes.
     pub fn limit(self) -> u64 {
         self.0.unwrap_or_else(default_limit)
@@ -188,7 +202,8 @@ pub fn parse_size(text: &str) -> std::result::Result<u64, String> {
         }
     };
     let bytes = value * scale;
-    if !(1.0..1.8e19).contains(&bytes) {
+    // Zero is a size; the budget refuses it (`Budget::checked`) in the face's words.
+    if bytes != 0.0 && !(1.0..1.8e19).contains(&bytes) {
         return Err(format!("`{text}` is not a usable size"));
     }
     Ok(bytes as u64)
@@ -206,7 +221,10 @@ mod tests {
         assert_eq!(parse_size("2.5g"), Ok((2.5 * 1073741824.0) as u64));
         assert!(parse_size("lots").is_err());
         assert!(parse_size("8Q").is_err());
-        assert!(parse_size("0").is_err());
+        assert_eq!(parse_size("0"), Ok(0));
+        assert!(parse_size("0.5").is_err());
+        assert!(Budget::checked(Some(0)).is_err());
+        assert_eq!(Budget::checked(Some(1)).ok(), Some(Budget::bytes(1)));
         assert_eq!(format_bytes(1.5 * 1073741824.0), "1.5 GiB");
         assert!(default_limit() > 1 << 20);
         let e = check("the RBF", 2e9, 1 << 30, "use --transfer blend")

@@ -173,6 +173,10 @@ pub enum Part {
         /// The kind given.
         found: Kind,
     },
+    /// Words a face says only where it has every option they name ([`Terms::has`]): another
+    /// way out (`" or --min-cell-size"`) that a face without that option leaves unsaid, so
+    /// that it never advises a setting its user cannot reach.
+    Aside(Said),
 }
 
 /// The kind of a value of the edit spec, as [`Part::Mismatch`] names it.
@@ -287,6 +291,26 @@ impl Said {
         self
     }
 
+    /// The message with `aside` added, said only by a face that has every option it names
+    /// ([`Part::Aside`]).
+    pub fn aside(mut self, aside: Said) -> Self {
+        self.parts.push(Part::Aside(aside));
+        self
+    }
+
+    /// The options the message names, its asides' among them.
+    pub fn options(&self) -> Vec<Opt> {
+        let mut out = Vec::new();
+        for p in &self.parts {
+            match p {
+                Part::Opt(o) | Part::Set(o, _) => out.push(*o),
+                Part::Aside(aside) => out.extend(aside.options()),
+                _ => {}
+            }
+        }
+        out
+    }
+
     /// The message with `other` added.
     pub fn then(mut self, other: Said) -> Self {
         for p in other.parts {
@@ -365,6 +389,13 @@ pub trait Terms {
     /// Option `o` named.
     fn option(&self, o: Opt) -> String;
 
+    /// Whether this face's user can set option `o` (every option, unless a face says
+    /// otherwise): a [`Part::Aside`] naming one it lacks is left unsaid.
+    fn has(&self, o: Opt) -> bool {
+        let _ = o;
+        true
+    }
+
     /// Option `o` given `value` (`--cell-size 0.02`, `cell_size=0.02`).
     fn set(&self, o: Opt, value: &str) -> String {
         format!("{} {value}", self.option(o))
@@ -402,6 +433,10 @@ pub trait Terms {
             Part::Line(n) => self.line(*n),
             Part::Entry { kind, index, line } => self.entry(kind, *index, *line),
             Part::Mismatch { expected, found } => self.mismatch(expected, found),
+            Part::Aside(aside) => match aside.options().into_iter().all(|o| self.has(o)) {
+                true => self.render(aside),
+                false => String::new(),
+            },
         }
     }
 
@@ -466,6 +501,29 @@ mod tests {
             }
         }
         assert_eq!(Page.render(&said), "handle 2 selects no cell");
+    }
+
+    #[test]
+    fn an_aside_is_said_only_where_its_options_are_had() {
+        let said = Said::from("use a larger ")
+            .opt(Opt::CellSize)
+            .aside(Said::from(" or ").opt(Opt::MinCellSize))
+            .text(".");
+        assert_eq!(
+            said.to_string(),
+            "use a larger --cell-size or --min-cell-size."
+        );
+        assert_eq!(said.options(), [Opt::CellSize, Opt::MinCellSize]);
+        struct Panel;
+        impl Terms for Panel {
+            fn option(&self, o: Opt) -> String {
+                format!("\"{}\"", o.keyword())
+            }
+            fn has(&self, o: Opt) -> bool {
+                o == Opt::CellSize
+            }
+        }
+        assert_eq!(Panel.render(&said), "use a larger \"cell_size\".");
     }
 
     #[test]

@@ -675,6 +675,10 @@ fn refused_numbers_are_said_as_typed() {
             &["--max-level", "60"][..],
             "--max-level 60: at most 20 levels",
         ),
+        (
+            &["--memory-limit", "0"][..],
+            "--memory-limit 0: no run fits in no memory",
+        ),
     ] {
         let r = deform(&input, &output, &edit, args);
         assert_eq!(r.code, 4, "{args:?}: {}", r.stderr);

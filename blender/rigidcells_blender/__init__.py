@@ -461,12 +461,14 @@ def _entry_said(kind: str, index: int) -> str:
     return f"{kind} {index + 1}"
 
 
-def _option_said(keyword: str, value: Optional[str]) -> str:
-    """A library option as the panel names it (`"Cell size" 0.02`); one the panel does not
-    have as the Python keyword (`memory_limit`)."""
+def _option_said(keyword: str, value: Optional[str]) -> Optional[str]:
+    """A library option as the panel names it (`"Cell size" 0.02`); None for one the panel
+    does not have, which the package then says by its keyword (`min_cell_size`), leaving
+    unsaid any advice to set it."""
     prop = RigidCellsSettings.bl_rna.properties.get(keyword)
-    name = f'"{prop.name}"' if prop is not None else keyword
-    return name if value is None else f"{name} {value}"
+    if prop is None:
+        return None
+    return f'"{prop.name}"' if value is None else f'"{prop.name}" {value}'
 
 
 def _status(context: Any, text: Optional[str]) -> None:

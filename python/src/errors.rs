@@ -71,7 +71,8 @@ pub(crate) fn python_terms(said: &Said) -> String {
 /// A message as a list of the package's words (`str`), the spec's lines (`int`), the
 /// options it names (`(keyword, value, said)`: the value a `str` as the user would write it,
 /// or None, and the package's way of saying both) and the spec entries it names (a `dict` of
-/// `entry` (the kind), `index`, `line` and `said`), for the package to say each line and entry
+/// `entry` (the kind), `index`, `line` and `said`), an aside ([`Part::Aside`]) as a list of
+/// its own parts, for the package to say each line and entry
 /// as a dict spec's key path or as `line N`, and for the Blender add-on to say an option and an
 /// entry by its panel's names.
 pub(crate) fn parts<'py>(py: Python<'py>, said: &Said) -> PyResult<Bound<'py, PyList>> {
@@ -86,6 +87,7 @@ pub(crate) fn parts<'py>(py: Python<'py>, said: &Said) -> PyResult<Bound<'py, Py
             Part::Set(o, v) => (o.keyword(), Some(v.as_str()), Package.set(*o, v))
                 .into_pyobject(py)?
                 .into_any(),
+            Part::Aside(aside) => parts(py, aside)?.into_any(),
             Part::Entry { kind, index, line } => {
                 let entry = PyDict::new(py);
                 entry.set_item("entry", *kind)?;

@@ -690,9 +690,10 @@ fn apply_file<'py>(
             .transpose()?,
         rbf_tolerance,
         outside: named("outside", outside, Outside::Refuse)?,
-        memory: rigidcells::internal::memory::Budget::given(
+        memory: rigidcells::internal::memory::Budget::checked(
             memory_limit.map(|m| self::memory_limit(&m)).transpose()?,
-        ),
+        )
+        .map_err(errors::py_err)?,
         same_crs,
     };
     let chunk = self::chunk(chunk)?;

@@ -291,6 +291,8 @@ BAD_OPTIONS = [
     ({"transfer": "rbf", "rbf_tolerance": -1}, "rbf_tolerance"),
     ({"memory_limit": "lots"}, "memory_limit"),
     ({"memory_limit": -5}, "memory_limit"),
+    ({"memory_limit": 0}, "memory_limit=0: no run fits"),
+    ({"memory_limit": "0G"}, "memory_limit=0: no run fits"),
     ({"chunk": 0}, "chunk"),
     ({"chunk": -1}, "chunk"),
     ({"outside": "sideways"}, "outside"),

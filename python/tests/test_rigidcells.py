@@ -106,6 +106,11 @@ def test_estimate_counts_the_cells_a_deformation_makes():
     assert abs(tight.cells / e.cells - 1) < 0.03
     with pytest.raises(ValueError, match="memory_limit"):
         rigidcells.deform(pts, BEND, cell_size=0.25, memory_limit="2M", progress=False)
+    # A budget too small even to find the occupied cells leaves nothing to estimate from: the
+    # refusal deform gives, naming what shrinks the run.
+    for run in (rigidcells.estimate, rigidcells.deform):
+        with pytest.raises(ValueError, match=r"over the memory limit .*\(memory_limit\): use a larger cell_size"):
+            run(pts, BEND, cell_size=0.001, memory_limit="64K")
 
 
 def test_normals_turn_with_the_bend():

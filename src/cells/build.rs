@@ -639,8 +639,7 @@ fn triangle_cells<const D: usize>(
 fn smaller_cells() -> Said {
     Said::from("use a larger ")
         .opt(Opt::CellSize)
-        .text(" or ")
-        .opt(Opt::MinCellSize)
+        .aside(Said::from(" or ").opt(Opt::MinCellSize))
         .text(" (or fewer ")
         .opt(Opt::Cells)
         .text(")")

@@ -513,8 +513,8 @@ struct MemoryArg {
 }
 
 impl MemoryArg {
-    fn budget(self) -> Budget {
-        Budget::given(self.memory_limit)
+    fn budget(self) -> anyhow::Result<Budget> {
+        Ok(Budget::checked(self.memory_limit)?)
     }
 }
 
@@ -566,16 +566,16 @@ pub(crate) fn main() -> ExitCode {
             same_crs,
             memory,
             quiet,
-        } => {
+        } => memory.budget().and_then(|memory| {
             let params = pipeline::ApplyParams {
                 transfer,
                 rbf_tolerance: tolerance.rbf_tolerance,
                 outside,
-                memory: memory.budget(),
+                memory,
                 same_crs,
             };
             run_apply(&field, &input, &output, &params, quiet)
-        }
+        }),
         Command::Grid {
             field,
             output,
@@ -590,7 +590,7 @@ pub(crate) fn main() -> ExitCode {
                 spacing,
                 extent,
                 height,
-                memory: memory.budget(),
+                memory: memory.budget()?,
             };
             run_grid(&field, &output, &params, epsg, quiet)
         }),

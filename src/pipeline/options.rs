@@ -128,6 +128,7 @@ impl Options {
         if let Some(size) = self.min_cell_size {
             crate::cells::check_size(size, Some(Opt::MinCellSize))?;
         }
+        Budget::checked(self.memory_limit)?;
         if let Some(l) = self.max_level.filter(|&l| l > crate::cells::MAX_LEVEL) {
             return Err(Error::param(crate::cells::max_level_refused(l)));
         }

@@ -20,11 +20,13 @@ pub enum LooseParts {
 /// The end of the warning once [`carry_loose`] moved them.
 fn carried_warning() -> Said {
     Said::from(
-        "have no constraint and ride along rigidly with the nearest cell of a constrained part \
-         (",
+        "have no constraint and ride along rigidly with the nearest cell of a constrained part",
     )
-    .set(Opt::LooseParts, "rest")
-    .text(" keeps them at rest)")
+    .aside(
+        Said::from(" (")
+            .set(Opt::LooseParts, "rest")
+            .text(" keeps them at rest)"),
+    )
 }
 
 /// Moves every cell at rest (in a part without constraints) rigidly with the nearest cell of a

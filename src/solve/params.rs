@@ -179,11 +179,7 @@ impl SolverInfo {
     /// What the user should hear about the solve: refinement that stopped early, and handles
     /// whose turn the cells did not carry.
     pub fn warnings(&self) -> Vec<Said> {
-        let turns = self
-            .turns
-            .iter()
-            .filter_map(HandleTurn::warning)
-            .map(Said::from);
+        let turns = self.turns.iter().filter_map(HandleTurn::warning);
         self.refinement_stopped
             .iter()
             .cloned()

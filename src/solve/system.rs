@@ -966,7 +966,6 @@ fn past_indices(what: String, advice: &Said) -> Error {
     Error::solver(
         Said::from(format!("{what} 32-bit indices: "))
             .then(advice.clone())
-            .text(", or ")
-            .set(Opt::Solver, "multilevel"),
+            .aside(Said::from(", or ").set(Opt::Solver, "multilevel")),
     )
 }

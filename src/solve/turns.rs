@@ -93,11 +93,15 @@ impl HandleTurn {
         })
     }
 
-    /// The warning for a turn that [`HandleTurn::differs`], naming the handle as the command
-    /// line does.
-    pub fn warning(&self) -> Option<String> {
-        self.said()
-            .map(|said| format!("{} {said}", handle_on_line(self.line)))
+    /// The warning for a turn that [`HandleTurn::differs`], the handle named as each face
+    /// names its spec's entries ([`crate::said::Part::Entry`]: `handle #1 (line 3)` on the
+    /// command line, `spec["handle"][0]` in Python, the handle group in Blender).
+    pub fn warning(&self) -> Option<crate::said::Said> {
+        self.said().map(|said| {
+            crate::said::Said::new()
+                .entry("handle", self.handle, self.line)
+                .text(format!(" {said}"))
+        })
     }
 
     /// The warning for a turn that [`HandleTurn::differs`] after the handle's name (a face
@@ -375,9 +379,24 @@ mod tests {
             taken_degrees: Some(-326.7499),
         };
         assert_eq!(
-            turn.warning().unwrap(),
-            "the handle on line 3 of the edit spec twists by 33.25°, but the cells between it \
-             and the fixed cells carry -327°: the shape did not twist as asked"
+            turn.warning().unwrap().to_string(),
+            "handle #1 (line 3) twists by 33.25°, but the cells between it and the fixed \
+             cells carry -327°: the shape did not twist as asked"
+        );
+        // Each face names the handle its own way, as it names its spec's entries.
+        struct Panel;
+        impl crate::said::Terms for Panel {
+            fn option(&self, o: crate::said::Opt) -> String {
+                o.keyword().into()
+            }
+            fn entry(&self, kind: &str, _: usize, _: usize) -> String {
+                format!("the {kind} group")
+            }
+        }
+        let said = crate::said::Terms::render(&Panel, &turn.warning().unwrap());
+        assert!(
+            said.starts_with("the handle group twists by 33.25°"),
+            "{said}"
         );
         // No turn asked (a quaternion typed at 720°) is not missed by a fraction of a degree;
         // a small turn missed by more than a degree is.

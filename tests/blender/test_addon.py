@@ -450,6 +450,12 @@ def test_the_panel_estimates_and_takes_a_cell_count_and_a_memory_limit():
     assert "over the memory limit" in s.estimate, s.estimate
     with pytest.raises(RuntimeError, match=refusal):
         bpy.ops.object.rigidcells_deform()
+    # Cells too fine to rasterize in it: the advice names the panel's settings and leaves out
+    # the library's options the panel lacks (the command line adds --min-cell-size).
+    s.cells, s.cell_size = 0, 0.001
+    with pytest.raises(RuntimeError, match=r'\("Memory limit"\): use a larger "Cell size" \(or fewer "Cells"\)') as e:
+        bpy.ops.object.rigidcells_deform()
+    assert "min_cell_size" not in str(e.value), e.value
 
 
 def test_a_soup_of_loose_cubes_bends_with_every_cube_carried():

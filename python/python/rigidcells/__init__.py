@@ -228,8 +228,9 @@ class Report:
         """The warnings in another face's terms: each option the library names as
         ``option(keyword, value)`` says it (``value`` a ``str`` as typed, or None), each entry
         of the spec as ``entry(kind, index)`` says it (``"handle"``, 0 for the first), each
-        either left in the package's terms when not given. The Blender add-on names its
-        panel's settings and groups so."""
+        either left in the package's terms when not given. Where ``option`` gives None the
+        face lacks that option: it is said by its keyword, and advice to set it is left out.
+        The Blender add-on names its panel's settings and groups so."""
         parts = getattr(self, "_warning_parts", None)
         if parts is None:
             return list(self.warnings)
@@ -822,7 +823,10 @@ def estimate(
     """What ``deform`` (or ``solve``) of ``points`` under ``spec`` with these options will
     take, without solving: the cells are built and the spec resolved on them (cells that
     cannot fit the budget are only forecast, in about the time their occupied cells take to
-    find), and the solve is counted, not run. Returns an ``Estimate``."""
+    find), and the solve is counted, not run. Returns an ``Estimate``; its ``fits`` says
+    whether the run fits ``memory_limit``. A budget too small even to find the occupied cells
+    (or to hold the ``cells`` asked for) leaves nothing to estimate from: that raises the
+    ``ValueError`` ``deform`` would, naming the arguments that shrink the run."""
     options = _picked(locals())
     p = _Points(points, scale, offset)
     text, base, paths = _spec(spec)

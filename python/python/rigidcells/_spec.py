@@ -101,13 +101,16 @@ def _spec(spec: Spec) -> Tuple[str, str, Optional[List[str]]]:
 def _said(
     parts: Any, paths: Optional[List[str]], option: Any = None, entry: Any = None
 ) -> str:
-    """A message of the library, given as its parts (the package's words; the spec's lines as
-    numbers; the options it names as ``(keyword, value or None, how the package says both)``;
-    the spec entries it names as dicts of ``entry`` (the kind: ``handle``), ``index`` (from 0),
-    ``line`` and ``said``), with each line and entry said as a dict spec's key path, or as
-    ``line N`` and ``handle #2 (line 17)`` for a spec written as TOML, each option as
-    ``option(keyword, value)`` says it (default: the package's way) and each entry as
-    ``entry(kind, index)`` says it where given. A message that is already text is kept."""
+    """A message of the library, given as its parts, as text. The parts: the package's words;
+    the spec's lines as numbers; the options it names as ``(keyword, value or None, how the
+    package says both)``; the spec entries it names as dicts of ``entry`` (the kind:
+    ``handle``), ``index`` (from 0), ``line`` and ``said``; asides as nested lists of parts.
+    Each line and entry is said as a dict spec's key path, or as ``line N`` and ``handle #2
+    (line 17)`` for a spec written as TOML; each entry as ``entry(kind, index)`` says it where
+    given; each option as ``option(keyword, value)`` says it where given (default: the
+    package's way). Where ``option`` gives None the face lacks that option: it is said in the
+    package's words, and an aside naming it is left unsaid. A message that is already text is
+    kept."""
     if isinstance(parts, str):
         return parts
 
@@ -119,9 +122,18 @@ def _said(
     def one(p: Any) -> str:
         if isinstance(p, str):
             return p
+        if isinstance(p, list):
+            # An aside: said only where every option it names is one the face has.
+            named = [q for q in p if isinstance(q, tuple)]
+            if option is not None and any(option(k, v) is None for k, v, _ in named):
+                return ""
+            return "".join(one(q) for q in p)
         if isinstance(p, tuple):
             keyword, value, said = p
-            return option(keyword, value) if option is not None else said
+            if option is None:
+                return said
+            mine = option(keyword, value)
+            return said if mine is None else mine
         if isinstance(p, dict):
             if entry is not None:
                 return entry(p["entry"], p["index"])
