@@ -702,9 +702,8 @@ impl Anderson {
             return None;
         }
         let f: Vec<f64> = g.iter().zip(x).map(|(g, x)| g - x).collect();
-        let Some((f0, g0)) = self.newest.replace((f, g.to_vec())) else {
-            return None;
-        };
+        // The first push after a clear has nothing to take differences from.
+        let (f0, g0) = self.newest.replace((f, g.to_vec()))?;
         let (f, g) = self.newest.as_ref()?;
         if self.df.len() == self.depth {
             self.df.pop_front();

@@ -823,10 +823,9 @@ def estimate(
     """What ``deform`` (or ``solve``) of ``points`` under ``spec`` with these options will
     take, without solving: the cells are built and the spec resolved on them (cells that
     cannot fit the budget are only forecast, in about the time their occupied cells take to
-    find), and the solve is counted, not run. Returns an ``Estimate``; its ``fits`` says
-    whether the run fits ``memory_limit``. A budget too small even to find the occupied cells
-    (or to hold the ``cells`` asked for) leaves nothing to estimate from: that raises the
-    ``ValueError`` ``deform`` would, naming the arguments that shrink the run."""
+    find), and the solve is counted, not run. Returns an ``Estimate`` (``fits``: whether it
+    fits ``memory_limit``). A budget too small even to find the occupied cells, or to hold the
+    ``cells`` asked for, raises the ``ValueError`` ``deform`` would, naming what to change."""
     options = _picked(locals())
     p = _Points(points, scale, offset)
     text, base, paths = _spec(spec)
