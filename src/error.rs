@@ -382,9 +382,11 @@ impl TurnKind {
     }
 }
 
-/// The command line's name for the handle on `line` of the edit spec.
-pub fn handle_on_line(line: usize) -> String {
-    format!("the handle on line {line} of the edit spec")
+/// The command line's name for the `handle`-th handle (from 0), on `line` of the edit spec:
+/// `handle #1 (line 3)`, as it names every entry of the spec ([`crate::said::Part::Entry`]).
+pub fn handle_named(handle: usize, line: usize) -> String {
+    use crate::said::Terms;
+    crate::said::Cli.entry("handle", handle, line)
 }
 
 /// A turn the shape gives way under ([`crate::Error::TurnNotHeld`]): past `held_degrees` the
@@ -444,8 +446,13 @@ impl TurnRefusal {
 }
 
 impl std::fmt::Display for TurnRefusal {
-    /// The message as the command line says it: the handle named by its line.
+    /// The message as the command line says it: the handle named by its place and line.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} {}", handle_on_line(self.line), self.said())
+        write!(
+            f,
+            "{} {}",
+            handle_named(self.handle, self.line),
+            self.said()
+        )
     }
 }

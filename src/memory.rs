@@ -116,14 +116,15 @@ impl Budget {
         Self(bytes)
     }
 
-    /// [`Budget::given`], refused where it is no memory at all: every face takes a limit of 0
-    /// as typed and refuses it in its own words, as no run fits in it.
+    /// [`Budget::given`], refused where it is no memory at all (no run fits in it): the command
+    /// line and Python refuse a limit of 0, in their own words. (The Blender panel's 0 is its
+    /// "automatic", as its cell size's 0 is: it gives no limit.)
     pub fn checked(bytes: Option<u64>) -> Result<Self> {
         if bytes == Some(0) {
             return Err(Error::param(
-                Said::new().set(crate::said::Opt::MemoryLimit, 0).text(
-                    ": no run fits in no memory; give a size such as 8G, or leave it out for three \
-                 quarters of this machine's memory",
+                Said::new().opt(crate::said::Opt::MemoryLimit).text(
+                    " under a byte: no run fits in it; give a size such as 8G, or leave it out for \
+                 three quarters of this machine's memory",
                 ),
             ));
         }
@@ -202,8 +203,9 @@ pub fn parse_size(text: &str) -> std::result::Result<u64, String> {
         }
     };
     let bytes = value * scale;
-    // Zero is a size; the budget refuses it (`Budget::checked`) in the face's words.
-    if bytes != 0.0 && !(1.0..1.8e19).contains(&bytes) {
+    // A size under a byte is a size, which the budget refuses (`Budget::checked`) as a value,
+    // in the face's words.
+    if !(0.0..1.8e19).contains(&bytes) {
         return Err(format!("`{text}` is not a usable size"));
     }
     Ok(bytes as u64)
@@ -222,7 +224,7 @@ mod tests {
         assert!(parse_size("lots").is_err());
         assert!(parse_size("8Q").is_err());
         assert_eq!(parse_size("0"), Ok(0));
-        assert!(parse_size("0.5").is_err());
+        assert_eq!(parse_size("0.5"), Ok(0));
         assert!(Budget::checked(Some(0)).is_err());
         assert_eq!(Budget::checked(Some(1)).ok(), Some(Budget::bytes(1)));
         assert_eq!(format_bytes(1.5 * 1073741824.0), "1.5 GiB");

@@ -677,7 +677,11 @@ fn refused_numbers_are_said_as_typed() {
         ),
         (
             &["--memory-limit", "0"][..],
-            "--memory-limit 0: no run fits in no memory",
+            "--memory-limit under a byte: no run fits in it",
+        ),
+        (
+            &["--memory-limit", "0.5"][..],
+            "--memory-limit under a byte: no run fits in it",
         ),
     ] {
         let r = deform(&input, &output, &edit, args);

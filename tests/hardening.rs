@@ -967,7 +967,9 @@ fn motions_far_past_the_shapes_size_are_refused_unless_the_shape_moves_whole() {
     let r = deform(&input, &out, &edit, &["--cell-size", "0.5"]);
     assert_eq!(r.code, 4, "{}", r.stderr);
     assert!(
-        r.stderr.contains("the handle on line 3") && r.stderr.contains("times the shape's size"),
+        r.stderr
+            .contains("handle #1 (line 3) of the edit spec moves")
+            && r.stderr.contains("times the shape's size"),
         "{}",
         r.stderr
     );

@@ -338,7 +338,7 @@ fn a_whole_turn_of_a_short_bar_is_refused_from_its_coarse_cells() {
     assert!(iterations < 90, "{iterations} iterations");
     let text = e.to_string();
     assert!(
-        text.starts_with("the handle on line 3 of the edit spec twists by 360°, but")
+        text.starts_with("handle #1 (line 3) twists by 360°, but")
             && text.contains(&format!("gives way past {}°", refusal.held_degrees))
             && text.contains("twist a longer span")
             && !text.contains("bend"),

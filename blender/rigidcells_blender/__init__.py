@@ -282,7 +282,9 @@ def _typed(value: float) -> float:
 
 def options(settings: RigidCellsSettings) -> dict:
     """The library's keyword options the settings give."""
-    memory = int(_typed(settings.memory_limit) * 2**30)
+    # A positive limit is at least a byte: only the panel's 0 is its "automatic".
+    gib = _typed(settings.memory_limit)
+    memory = max(1, int(gib * 2**30)) if gib > 0 else 0
     return {
         "cell_size": _typed(settings.cell_size) or None,
         "cells": settings.cells or None,

@@ -224,11 +224,10 @@ impl<const D: usize> Occupancy<D> {
                 ))
                 .set(Opt::MaxLevel, self.grid.max_level),
                 Said::from("use a larger ")
-                    .opt(Opt::MaxLevel)
-                    .text(
-                        " (or leave it out: by default the largest cells are as large as the \
-                         shape's thinnest extent), or a larger ",
-                    )
+                    .aside(Said::new().opt(Opt::MaxLevel).text(
+                        " (or leave it out: by default the largest cells are as large as \
+                             the shape's thinnest extent), or a larger ",
+                    ))
                     .opt(Opt::CellSize),
             ),
         };

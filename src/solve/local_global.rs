@@ -33,12 +33,11 @@
 //!
 //! One load step at full load, from the motions given; 3D and 2D share the code.
 
-use std::collections::VecDeque;
 use std::time::Instant;
 
-use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
+use super::anderson::Anderson;
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
 use super::positions::Positions;
@@ -659,92 +658,6 @@ where
     x.par_chunks(D * D)
         .map(|c| <Dim<D> as Rigid<D>>::nearest_rotation(&Mat::<D>::from_column_slice(c)))
         .collect()
-}
-
-/// Anderson acceleration's history (Walker and Ni's type II, as Peng et al. apply it to
-/// local-global solvers): the newest residual `f = G(x) − x` and map value `g`, and the
-/// differences of the last `depth + 1` of each, with the residual differences' Gram matrix
-/// kept as they come and go: a step costs `O(depth · n)`, not `O(depth² · n)`.
-struct Anderson {
-    depth: usize,
-    /// The newest residual and map value.
-    newest: Option<(Vec<f64>, Vec<f64>)>,
-    /// Differences of consecutive residuals (`df`) and map values (`dg`), oldest first.
-    df: VecDeque<Vec<f64>>,
-    dg: VecDeque<Vec<f64>>,
-    /// `gram[i][j] = df[i] · df[j]`.
-    gram: VecDeque<VecDeque<f64>>,
-}
-
-impl Anderson {
-    fn new(depth: usize) -> Self {
-        Self {
-            depth,
-            newest: None,
-            df: VecDeque::new(),
-            dg: VecDeque::new(),
-            gram: VecDeque::new(),
-        }
-    }
-
-    fn clear(&mut self) {
-        self.newest = None;
-        self.df.clear();
-        self.dg.clear();
-        self.gram.clear();
-    }
-
-    /// Records `x` and `g = G(x)` and returns the accelerated iterate, once there are two:
-    /// `g − Σ θᵢ Δgᵢ`, with `θ` the least-squares fit of the newest residual by the residual
-    /// differences (normal equations, lightly regularized).
-    fn push(&mut self, x: &[f64], g: &[f64]) -> Option<Vec<f64>> {
-        if self.depth == 0 {
-            return None;
-        }
-        let f: Vec<f64> = g.iter().zip(x).map(|(g, x)| g - x).collect();
-        // The first push after a clear has nothing to take differences from.
-        let (f0, g0) = self.newest.replace((f, g.to_vec()))?;
-        let (f, g) = self.newest.as_ref()?;
-        if self.df.len() == self.depth {
-            self.df.pop_front();
-            self.dg.pop_front();
-            self.gram.pop_front();
-            for row in &mut self.gram {
-                row.pop_front();
-            }
-        }
-        let df: Vec<f64> = f.iter().zip(&f0).map(|(a, b)| a - b).collect();
-        let dg: Vec<f64> = g.iter().zip(&g0).map(|(a, b)| a - b).collect();
-        let dots: Vec<f64> = self.df.iter().map(|d| dot(d, &df)).collect();
-        for (row, &d) in self.gram.iter_mut().zip(&dots) {
-            row.push_back(d);
-        }
-        let mut row: VecDeque<f64> = dots.into();
-        row.push_back(dot(&df, &df));
-        self.gram.push_back(row);
-        self.df.push_back(df);
-        self.dg.push_back(dg);
-        let m = self.df.len();
-        let mut normal = DMatrix::from_fn(m, m, |i, j| self.gram[i][j]);
-        let scale = normal.diagonal().max().max(f64::MIN_POSITIVE);
-        for i in 0..m {
-            normal[(i, i)] += 1e-10 * scale;
-        }
-        let rhs = DVector::from_iterator(m, self.df.iter().map(|d| dot(d, f)));
-        let theta = normal.cholesky()?.solve(&rhs);
-        let mut out = g.clone();
-        for (t, dg) in theta.iter().zip(&self.dg) {
-            for (o, d) in out.iter_mut().zip(dg) {
-                *o -= t * d;
-            }
-        }
-        out.iter().all(|v| v.is_finite()).then_some(out)
-    }
-}
-
-/// `a · b`.
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(a, b)| a * b).sum()
 }
 
 #[cfg(test)]

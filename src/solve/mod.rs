@@ -81,6 +81,7 @@
 //! [`minimize_local_global`] minimizes the same energy by local-global iterations on one constant
 //! matrix (the `local_global` module); `solve` does not use it yet (BENCHMARKS.md: where it wins).
 
+mod anderson;
 mod auto;
 mod blocks;
 mod coarse;

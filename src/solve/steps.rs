@@ -39,7 +39,7 @@ where
         for (c, role) in constraints.roles.iter().enumerate() {
             if *role == Role::Handle(k as u32) {
                 let x = complex.cells[c].center;
-                moves.push((map.apply(&x) - x, format!("the handle on line {}", h.line)));
+                moves.push((map.apply(&x) - x, crate::error::handle_named(k, h.line)));
             }
         }
     }

@@ -34,7 +34,7 @@ use crate::human::degrees;
 use crate::rigid::{Dim, Motion, Rigid};
 
 use super::constraints::{Constraints, Role, in_3d};
-pub use crate::error::{TurnKind, TurnRefusal, handle_on_line};
+pub use crate::error::{TurnKind, TurnRefusal, handle_named};
 
 /// A turn is a twist where its axis lies within this angle (45°) of the direction from the fixed
 /// cells to the handle's cells, else a bend.
@@ -363,7 +363,7 @@ mod tests {
         let refusal = TurnRefusal::new(&complex, &constraints, 0, 0.9);
         let text = refusal.to_string();
         assert!(
-            text.starts_with("the handle on line 3 of the edit spec bends by 180°")
+            text.starts_with("handle #1 (line 3) bends by 180°")
                 && text.contains("gives way past 162°")
                 && text.contains("by -180°, to the same pose")
                 && !text.contains("twist"),

@@ -123,9 +123,9 @@ def _said(
         if isinstance(p, str):
             return p
         if isinstance(p, list):
-            # An aside: said only where every option it names is one the face has.
-            named = [q for q in p if isinstance(q, tuple)]
-            if option is not None and any(option(k, v) is None for k, v, _ in named):
+            # An aside: said only where every option it names, its own asides' among them,
+            # is one the face has (as the library's `Said::options`).
+            if option is not None and any(option(k, v) is None for k, v, _ in _options(p)):
                 return ""
             return "".join(one(q) for q in p)
         if isinstance(p, tuple):
@@ -141,6 +141,17 @@ def _said(
         return path(p) or f"line {p}"
 
     return "".join(one(p) for p in parts)
+
+
+def _options(parts: List[Any]) -> List[Any]:
+    """The options (``(keyword, value, said)``) that ``parts`` name, its asides' among them."""
+    out: List[Any] = []
+    for p in parts:
+        if isinstance(p, tuple):
+            out.append(p)
+        elif isinstance(p, list):
+            out.extend(_options(p))
+    return out
 
 
 def _lines_said(messages: List[Any], paths: Optional[List[str]]) -> List[str]:
