@@ -189,6 +189,12 @@ impl<const D: usize> Occupancy<D> {
         Ok(outside)
     }
 
+    /// The occupied finest cells so far (sorted and deduplicated first).
+    pub(crate) fn occupied_len(&mut self) -> Result<usize> {
+        self.compact()?;
+        Ok(self.occupied.len())
+    }
+
     /// Sorts and deduplicates the occupied codes, and checks what the build will need for them
     /// against the budget.
     fn compact(&mut self) -> Result<()> {
@@ -553,25 +559,38 @@ fn triangle_cells<const D: usize>(
             std::array::from_fn(|a| if a < D { p[a] } else { 0.0 })
         })
     };
-    // The closed cells touching a triangle's box, i·s ≤ max and (i + 1)·s ≥ min, with a margin
-    // against rounding (the exact test decides).
-    let range = |tri: &[[f64; 3]; 3]| -> ([i64; 3], [i64; 3]) {
-        let mut lo = [0i64; 3];
-        let mut hi = [0i64; 3];
+    // The closed cells touching each vertex, i·s ≤ x and (i + 1)·s ≥ x, with a margin against
+    // rounding (the exact test decides): a triangle's box touches the cells from the least
+    // of its vertices' first cells to the greatest of their last, the same cells as its box's
+    // corners give (each bound is a nondecreasing function of the coordinate), found once a
+    // vertex rather than once for each of its triangles.
+    let mut spans = vec![[[0i32; 3]; 2]; n];
+    crate::memory::check(
+        format!("the cells of {} vertices", crate::human::count(n as u64)),
+        (n * std::mem::size_of::<[[i32; 3]; 2]>()) as f64,
+        limit,
+        smaller_cells(),
+    )?;
+    spans.par_iter_mut().zip(points).for_each(|(span, p)| {
+        let p = p - grid.origin;
         for a in 0..D {
-            let (mn, mx) = tri
-                .iter()
-                .fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p[a]), h.max(p[a])));
+            let t = (p[a] - grid.lower[a]) / size;
             // ⌈t⌉ − 1 = −⌊−t⌋ − 1 (libm's floor and ceil are calls on baseline x86-64).
-            lo[a] = (-floor(-((mn - grid.lower[a]) / size - 1e-9)) - 1).max(0);
-            hi[a] = floor((mx - grid.lower[a]) / size + 1e-9).min(dims[a] - 1);
+            span[0][a] = (-floor(-(t - 1e-9)) - 1).clamp(0, dims[a] - 1) as i32;
+            span[1][a] = floor(t + 1e-9).clamp(0, dims[a] - 1) as i32;
         }
-        (lo, hi)
+    });
+    let range = |t: &[u32; 3]| -> ([i64; 3], [i64; 3]) {
+        let [a, b, c] = t.map(|v| &spans[v as usize]);
+        (
+            std::array::from_fn(|k| a[0][k].min(b[0][k]).min(c[0][k]) as i64),
+            std::array::from_fn(|k| a[1][k].max(b[1][k]).max(c[1][k]) as i64),
+        )
     };
     let candidates: f64 = triangles
         .par_iter()
         .map(|t| {
-            let (lo, hi) = range(&local(t));
+            let (lo, hi) = range(t);
             (0..3)
                 .map(|a| (hi[a] - lo[a] + 1).max(1) as f64)
                 .product::<f64>()
@@ -597,8 +616,7 @@ fn triangle_cells<const D: usize>(
     let cells: Vec<u64> = triangles
         .par_iter()
         .fold(Vec::new, |mut out, t| {
-            let tri = local(t);
-            let (lo, hi) = range(&tri);
+            let (lo, hi) = range(t);
             if lo == hi {
                 // The triangle's box lies in this one cell (a small triangle); runs of
                 // triangles in one cell (a mesh's order) are stored once.
@@ -609,6 +627,7 @@ fn triangle_cells<const D: usize>(
                 }
                 return out;
             }
+            let tri = local(t);
             for x in lo[0]..=hi[0] {
                 for y in lo[1]..=hi[1] {
                     for z in lo[2]..=hi[2] {
