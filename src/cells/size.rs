@@ -119,12 +119,12 @@ pub(crate) fn shortfall(target: Option<usize>, cells: usize) -> Option<Said> {
 /// Each try is a whole build, so few are made: the count of a surface's cells goes about as
 /// `size⁻²`, so a mesh's first try is the size at which its area holds
 /// `target / CELLS_PER_SQUARE` squares of that size (points start from the default size),
-/// or for a dense mesh ([`DENSE`]) the size at which the cells holding its vertices number
-/// `target` (counted without a build); the search then steps by the secant of `log count`
-/// against `log size` through the last two tries, kept inside the bracket of sizes known to
-/// give too many and too few cells (and halving it in log space where the secant would leave
-/// it): 3.1 builds on average over twelve meshes at counts from 700 to 50,000 (3.6 from the
-/// default size), where a bisection takes 20.
+/// or for a dense mesh (16 vertices or more for each cell asked) the size at which the cells
+/// holding its vertices number `target` (counted without a build); the search then steps by
+/// the secant of `log count` against `log size` through the last two tries, kept inside the
+/// bracket of sizes known to give too many and too few cells (and halving it in log space
+/// where the secant would leave it): 3.1 builds on average over twelve meshes at counts from
+/// 700 to 50,000 (3.6 from the default size), where a bisection takes 20.
 ///
 /// Counting every candidate level from one pyramid would be cheaper, but a pyramid counts the
 /// cells at sizes `2^k s₀` only, a factor of about 4 in count apart, while `--cells N` asks for
@@ -229,8 +229,8 @@ fn vertex_sized<const D: usize>(
 /// The 480k-vertex tube at 5,500 cells: sized by its vertices, its first build is within 2 %;
 /// sized by its area, 32 % short, and a second build of 0.25 s follows. Where triangles cross
 /// cells between vertices or the mesh has an inside, the build has more cells than its
-/// vertices do and the secant takes it from there (3.1 builds a search on the meshes above,
-/// against 3.0 from the area alone).
+/// vertices do and the secant takes it from there (3.1 builds a search on the twelve meshes
+/// of [`cell_size_for`], against 3.0 from the area alone).
 const DENSE: usize = 16;
 
 /// Counts of the cells holding the vertices at most: each is a sort of the vertices' cells.
