@@ -111,8 +111,8 @@ pub use field::{FieldMap, Outside, SavedField, Transfer};
 pub use memory::Budget;
 pub use pipeline::report::Report;
 pub use pipeline::{
-    ApplyParams, DeformInfo, DeformParams, FileInfo, Live, Options, Outputs, Step, apply_file,
-    deform, deform_file, deform_file_with, solve_files, solve_points,
+    ApplyParams, DEFAULT_INTERIOR_STIFFNESS, DeformInfo, DeformParams, FileInfo, Live, Options,
+    Outputs, Step, apply_file, deform, deform_file, deform_file_with, solve_files, solve_points,
 };
 pub use progress::{Observer, Silent};
 pub use render::View;

@@ -295,7 +295,10 @@ fn deform_writes_a_report_with_the_stable_keys() {
     assert_eq!(options.keys().cloned().collect::<Vec<_>>(), names);
     assert_eq!(options["cell_size"].as_f64(), Some(0.25));
     assert_eq!(options["transfer"].as_str(), Some("blend"));
-    assert_eq!(options["interior_stiffness"].as_f64(), Some(1.0));
+    assert_eq!(
+        options["interior_stiffness"].as_f64(),
+        Some(rigidcells::DEFAULT_INTERIOR_STIFFNESS)
+    );
     assert!(options["cells"].is_null() && options["memory_limit"].is_null());
     let t = &json["timings_s"];
     let stage = |k: &str| t[k].as_f64().unwrap_or_else(|| panic!("timings_s.{k}"));

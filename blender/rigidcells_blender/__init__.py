@@ -235,14 +235,15 @@ class RigidCellsSettings(bpy.types.PropertyGroup):
     )
     interior_stiffness: FloatProperty(
         name="Interior stiffness",
-        default=1.0,
+        default=0.05,
         min=1e-4,
         max=1e4,
         soft_min=0.01,
         soft_max=1.0,
-        description="How stiff the cells inside the mesh are against those on its surface: 1 "
-        "keeps a bend's volume as a solid does; below 1 a turned head twists the whole neck as "
-        "a surface would instead of its thinnest part (0.1: a bend keeps a little less volume)",
+        description="How stiff the cells inside the mesh are against those on its surface: at "
+        "0.05 a turned head twists the whole neck as a surface would and a bend keeps most of "
+        "its volume; 1, a uniform solid, keeps a bend's volume best and gathers a twist in the "
+        "neck's thinnest part",
     )
     memory_limit: FloatProperty(
         name="Memory limit",

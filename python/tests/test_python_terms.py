@@ -197,7 +197,7 @@ def test_the_report_is_typed_and_says_what_the_cli_report_says(tmp_path):
     assert report["cells"] == report.cells and "energy" in report
     # The options as given, by this package's keywords; None where the run decided.
     assert report.options["cells"] == 600 and report.options["cell_size"] is None
-    assert report.options["transfer"] == "pu" and report.options["interior_stiffness"] == 1.0
+    assert report.options["transfer"] == "pu" and report.options["interior_stiffness"] == 0.05
     assert r2.options["cell_size"] == report.cell_size and r2.options["cells"] is None
     # A count the search cannot reach within 2 % is said, in Python's terms.
     thin = np.random.default_rng(0).uniform([0, 0, 0], [10, 1, 1], (20_000, 3))

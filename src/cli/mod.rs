@@ -454,13 +454,14 @@ struct CellArgs {
     /// clouds with normals, exterior flood fill for point clouds without (auto), or as named.
     #[arg(long, value_parser = choice::<Inside>(), default_value_t = Inside::Auto)]
     inside: Inside,
-    /// Stiffness of the cells inside the shape against those on its surface: 1 is the paper's
-    /// solid, whose bends keep their volume; below 1 a twist spreads along a thin neck as on a
-    /// surface (0.1: a bent solid keeps a little less volume); 0.0001 to 10000, not with --shell.
+    /// Stiffness of the cells inside the shape against those on its surface: the default 0.05
+    /// spreads a twist along a thin neck as a surface does and keeps most of a bend's volume;
+    /// 1 is the paper's uniform solid, whose bends keep their volume best and whose twists
+    /// gather where it is thinnest; 0.0001 to 10000, not with --shell.
     #[arg(
         long,
         value_name = "S",
-        default_value_t = 1.0,
+        default_value_t = rigidcells::DEFAULT_INTERIOR_STIFFNESS,
         allow_negative_numbers = true
     )]
     interior_stiffness: f64,

@@ -25,7 +25,7 @@ pub use files::{
 };
 pub use grid::grid_file;
 pub use live::{Live, Step};
-pub use options::{OPTION_NAMES, Options};
+pub use options::{DEFAULT_INTERIOR_STIFFNESS, OPTION_NAMES, Options};
 pub use outputs::{Outputs, deform_file_with, solve_files};
 
 use std::path::Path;

@@ -256,7 +256,9 @@ pub(crate) fn build_warnings<const D: usize>(
                 .set(Opt::Inside, build.inside),
         );
     }
-    if params.interior_stiffness != 1.0 && build.interior_cells == 0 {
+    if params.interior_stiffness != super::options::DEFAULT_INTERIOR_STIFFNESS
+        && build.interior_cells == 0
+    {
         out.push(
             Said::new()
                 .set(Opt::InteriorStiffness, params.interior_stiffness)

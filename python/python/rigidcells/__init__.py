@@ -337,9 +337,9 @@ _OPTIONS_DOC = """
     count; not with ``cell_size``), ``min_cell_size`` (adaptive cells
     down to this size), ``max_level`` (octree levels above the finest cells), ``shell`` (occupied
     cells only), ``inside`` (``"auto"``, ``"winding"``, ``"flood"``, ``"none"``),
-    ``interior_stiffness`` (the cells inside the shape against those on its surface: 1, the
-    default, a solid's; below 1 a twist spreads along a thin neck as on a surface; 0.0001 to
-    10000, not with ``shell``), ``solver``
+    ``interior_stiffness`` (the cells inside the shape against those on its surface: 0.05 by
+    default, a twist spreads along a thin neck as on a surface; 1, a uniform solid's, keeps a
+    bend's volume best; 0.0001 to 10000, not with ``shell``), ``solver``
     (``"auto"``, ``"direct"``, ``"multilevel"``, ``"local-global"``), ``subdomains``
     (local-global iterations with each global step split into this many subdomains, each
     block factored alone; ``rigidcells.dask.solve_tiles`` gives the blocks to Dask workers;
