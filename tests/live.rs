@@ -408,3 +408,47 @@ fn a_pose_a_whole_turn_from_the_last_keeps_its_winding() {
     let on = live.solve(twist(370.0), 1, &Silent).unwrap().unwrap();
     assert!(!on.from_rest);
 }
+
+/// A drag that twists the bar on past where the default soft inside gives way stiffens the
+/// session's inside to a solid's, as `deform` does for the whole turn: dragged in 15° poses to
+/// 720° and refined, a converged pose says so, and the release is the same drag's with a solid
+/// inside asked for (`interior_stiffness` 1), which says nothing.
+#[test]
+fn a_drag_past_where_the_soft_inside_gives_way_stiffens_it() {
+    let (points, triangles) = bar();
+    let twist = |degrees: f64| {
+        let text = format!(
+            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }}\n\
+             [[handle]]\nbox = {{ min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
+             rotate = {{ axis = [1.0, 0.0, 0.0], degrees = {degrees:?} }}\n\
+             pivot = [9.75, 0.5, 0.5]\n"
+        );
+        parse_spec::<3>(&text, Path::new("."), Path::new("live.toml")).unwrap()
+    };
+    let drag = |params: DeformParams| {
+        let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+        let mut said = false;
+        for k in 0..=48 {
+            let step = live
+                .solve(twist(15.0 * k as f64), 1, &Silent)
+                .unwrap()
+                .unwrap();
+            said |= step.solver.inside_stiffened.is_some();
+        }
+        while let Some(step) = live.refine().unwrap() {
+            said |= step.solver.inside_stiffened.is_some();
+        }
+        (live.release(&[], &Silent).unwrap().0, said)
+    };
+    let (soft, said) = drag(params());
+    assert!(said, "no pose stiffened the inside");
+    let solid = Options {
+        cell_size: Some(0.25),
+        interior_stiffness: 1.0,
+        ..Default::default()
+    };
+    let (solid, said) = drag(solid.params().unwrap());
+    assert!(!said);
+    let off = farthest(&soft, &solid);
+    assert!(off < 1e-6, "the release is {off} from the solid drag's");
+}

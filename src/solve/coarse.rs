@@ -161,7 +161,10 @@ where
             Err(Error::TurnNotHeld(r)) => {
                 let coarse = (parents.len(), k, &r);
                 let at = (complex, constraints);
+                // A soft inside by default is given up for a solid one at once, on these cells
+                // as on the caller's (`SolveParams::soft_inside`).
                 let refused = either_way.get(r.handle) == Some(&true)
+                    || params.soft_inside.is_some()
                     || confirmed(at, coarse, &stage_params, budget, observer)?;
                 // Else the cells themselves are solved from rest, and say for themselves
                 // whether they hold the turn.

@@ -53,6 +53,20 @@
 //! Turning in several runs, each deforming the last output, does carry the turn (the rest shape
 //! then holds the turn so far).
 //!
+//! **A soft inside gives way sooner.** The inside's default stiffness is a twentieth of the
+//! surface's ([`crate::DEFAULT_INTERIOR_STIFFNESS`]: a turned head twists a neck as a surface
+//! does), and the inside is also what keeps a twisted part's section from folding in: the
+//! 10 × 1 × 1 bar in cells of 0.25 twisted by 720° gives way past about 705° with it, and holds
+//! with a solid inside (in cells of 0.125, past 690°; a solid holds from an inside of 0.3 on).
+//! Where a turn gives way under the default ([`SolveParams::soft_inside`]), the solve starts
+//! over from rest with the inside a solid's and says so ([`SolverInfo::inside_stiffened`]): a
+//! step that leaves its branch again at half its length gives the soft inside up at once,
+//! since near where it gives way each try takes tens of iterations, and a coarse stage that
+//! gives way gives it up at once. The 720° bar then takes 4.9 s instead of 1.0 s, and a turn
+//! the solid refuses too is refused after both, up to a second later (BENCHMARKS.md, "Half
+//! turns, and refusing early"). A session's drag that loses a turn stiffens its inside the same
+//! way (`Session`). An inside's stiffness given by the user is kept.
+//!
 //! **Newton's curvature.** The glue energy is not a small-residual problem once a shape is
 //! bent: the pairs' residuals stay large at the minimum, and Gauss-Newton, which leaves out
 //! their second-order term, converges only linearly (the 480k-vertex tube bent by 90°: 9, 17
@@ -284,14 +298,26 @@ where
         .iter()
         .map(|h| h.motion.undirected())
         .collect();
+    let mut params = *params;
+    let mut stiffened = None;
     loop {
-        match from_rest(complex, constraints, params, budget, observer, &either_way) {
+        match from_rest(complex, constraints, &params, budget, observer, &either_way) {
             Err(Error::TurnNotHeld(r)) if either_way[r.handle] => {
                 either_way[r.handle] = false;
                 let h = &mut constraints.handles[r.handle];
                 h.motion = h.motion.the_other_way();
             }
-            done => return done,
+            // A soft inside by default gives way: the solid's may hold the turn.
+            Err(Error::TurnNotHeld(r)) if params.soft_inside.is_some() => {
+                let scale = params.soft_inside.take().expect("soft");
+                constraints.scale_interior(complex, 1.0 / scale);
+                stiffened = Some((r, scale));
+            }
+            Ok((system, motions, mut info)) => {
+                info.inside_stiffened = stiffened;
+                return Ok((system, motions, info));
+            }
+            failed => return failed,
         }
     }
 }
@@ -447,6 +473,18 @@ where
             observer,
         )?;
         let (lost, jumped) = (lost(motions).map(|&k| (k, f)), jumped(motions));
+        // A soft inside by default whose step leaves the branch again at half its length is
+        // given up for the solid's at once ([`SolveParams::soft_inside`]), not halved down to
+        // its smallest step: near where it gives way each try takes tens of iterations.
+        if params.soft_inside.is_some()
+            && halvings >= SOFT_HALVINGS
+            && let Some(k) = lost
+                .map(|l| l.0)
+                .or(jumped.then(|| turning.first().copied()).flatten())
+        {
+            let refusal = TurnRefusal::new(complex, constraints, k, f);
+            return Err(Error::TurnNotHeld(refusal));
+        }
         if (lost.is_some() || jumped) && retried {
             motions.copy_from_slice(&start);
             info.energies.truncate(marks.0);
@@ -475,6 +513,10 @@ where
     info.load_steps = accepted;
     Ok(())
 }
+
+/// The halvings in a row after which a soft inside by default whose step still leaves its branch
+/// is given up for a solid one: a step that leaves its branch once may only have been too long.
+const SOFT_HALVINGS: u32 = 1;
 
 /// The tolerance of the load steps before the last.
 const INTERMEDIATE_TOLERANCE: f64 = 1e-3;

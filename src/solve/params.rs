@@ -4,7 +4,7 @@
 use super::constraints::{Constraints, Role};
 use super::iteration::{self, IterationLog, IterationMethod, MOVE_TOLERANCE};
 use super::local_global::LOCAL_GLOBAL_PER_ITERATION;
-use super::turns::HandleTurn;
+use super::turns::{HandleTurn, TurnRefusal};
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
 use crate::rigid::{Motion, Vect};
@@ -63,6 +63,12 @@ pub struct SolveParams {
     /// Who factors and solves the subdomains' blocks ([`super::schwarz::register`]); `None`
     /// (default): this process.
     pub workers: Option<super::schwarz::WorkersId>,
+    /// The scale of the inside's stiffness that the constraints carry by default, not as asked
+    /// (`--interior-stiffness` unset): where a turn gives way under it, the solve starts over
+    /// with the inside a solid's (1), which holds turns a soft inside cannot (a soft inside
+    /// resists a part's section folding in as little as it resists a twist), and says so
+    /// ([`SolverInfo::inside_stiffened`]). `None` (default): the stiffness is as asked.
+    pub soft_inside: Option<f64>,
 }
 
 /// How the Gauss-Newton normal equations are solved.
@@ -105,6 +111,7 @@ impl Default for SolveParams {
             carry_loose: true,
             subdomains: 0,
             workers: None,
+            soft_inside: None,
         }
     }
 }
@@ -142,6 +149,9 @@ pub struct SolverInfo {
     /// Why refinement stopped before every cell over the threshold was split, if it did (the
     /// bound it hit).
     pub refinement_stopped: Option<Said>,
+    /// The turn the inside's default soft stiffness gave way under, where the solve started
+    /// over with a solid inside ([`SolveParams::soft_inside`]), and that scale.
+    pub inside_stiffened: Option<(TurnRefusal, f64)>,
     /// Unknowns of the last system.
     pub unknowns: usize,
     /// Seconds spent in symbolic analysis.
@@ -180,9 +190,29 @@ impl SolverInfo {
     /// whose turn the cells did not carry.
     pub fn warnings(&self) -> Vec<Said> {
         let turns = self.turns.iter().filter_map(HandleTurn::warning);
+        let stiffened = self.inside_stiffened.map(|(r, scale)| {
+            // A drag knows that the pose gave way, not where.
+            let held = match (r.held_degrees - r.asked_degrees).abs() < 0.5 {
+                true => String::new(),
+                false => format!("past {} ", crate::human::degrees(r.held_degrees)),
+            };
+            Said::new()
+                .entry("handle", r.handle, r.line)
+                .text(format!(
+                    " {}s by {}, {held}where the inside at its default stiffness gives way: \
+                     solved with a solid inside, as ",
+                    r.kind.name(),
+                    crate::human::degrees(r.asked_degrees),
+                ))
+                .set(Opt::InteriorStiffness, 1)
+                .text(format!(
+                    " does (the default, {scale}, twists a thin neck as a surface does)"
+                ))
+        });
         self.refinement_stopped
             .iter()
             .cloned()
+            .chain(stiffened)
             .chain(turns)
             .collect()
     }

@@ -50,6 +50,10 @@ pub struct Session<const D: usize> {
     /// The roles the loose parts were last found for, and their anchors
     /// ([`super::constraints::loose_anchors`]): the same while the roles stay.
     anchors: Option<(Vec<Role>, Vec<[u32; 2]>)>,
+    /// The inside's default soft scale the first solve gave up for a solid inside
+    /// ([`SolverInfo::inside_stiffened`]): the constraints of every later pose are stiffened
+    /// the same way, so that a pose solves as a whole run of it does.
+    stiffened: Option<(super::TurnRefusal, f64)>,
 }
 
 /// Local-global iterations a drag's step takes for each Gauss-Newton iteration it is given
@@ -166,6 +170,7 @@ where
             stale_system: false,
             carried: None,
             anchors: None,
+            stiffened: info.inside_stiffened,
         };
         let info = session.finished(info, start);
         Ok((session, info))
@@ -187,6 +192,7 @@ where
         constraints: Constraints<D>,
         max_iterations: usize,
     ) -> Result<SolverInfo> {
+        let constraints = self.as_first_solved(constraints);
         self.update_steps(constraints, (max_iterations, DRAG_LOCAL_GLOBAL))
     }
 
@@ -198,7 +204,8 @@ where
     }
 
     /// [`Session::update_with`], a step short of the solver's limit taking `per_step`
-    /// local-global iterations for each of `max_iterations`.
+    /// local-global iterations for each of `max_iterations`, on `constraints` as the session
+    /// solves them ([`Session::as_first_solved`]).
     fn update_steps(
         &mut self,
         constraints: Constraints<D>,
@@ -247,6 +254,11 @@ where
                 .project_positions(complex, constraints, &mut self.motions, &targets)?;
             self.dragged = false;
         }
+        let before = self
+            .params
+            .soft_inside
+            .is_some()
+            .then(|| self.motions.clone());
         let (complex, constraints) = (&self.complex, &self.constraints);
         let cells = (
             &mut self.system,
@@ -255,7 +267,62 @@ where
             &mut self.motions[..],
         );
         warm_steps(cells, &self.params, (max_iterations, per_step), &mut info)?;
+        if let Some(before) = before
+            && self.stiffen_where_given_way(&mut info)?
+        {
+            // The pose again from where it started, with the solid inside.
+            self.motions = before;
+            let (complex, constraints) = (&self.complex, &self.constraints);
+            let cells = (
+                &mut self.system,
+                complex,
+                constraints,
+                &mut self.motions[..],
+            );
+            warm_steps(cells, &self.params, (max_iterations, per_step), &mut info)?;
+        }
         Ok(self.finished(info, start))
+    }
+
+    /// Where the session's inside is still the default soft one and a converged pose has lost a
+    /// handle's turn (the cells carry it more than a quarter turn off, as a load step that left
+    /// its branch does), stiffens the inside to a solid's as a whole run does
+    /// ([`super::SolveParams::soft_inside`]), for this pose and every later one: whether it
+    /// did.
+    fn stiffen_where_given_way(&mut self, info: &mut SolverInfo) -> Result<bool> {
+        // A pose not yet converged may only lag the handle (a drag takes one iteration a pose).
+        let (Some(scale), None, true) = (self.params.soft_inside, self.stiffened, info.converged)
+        else {
+            return Ok(false);
+        };
+        let gauge = TurnGauge::new(&self.complex);
+        let lost = super::turns::turning(&self.constraints).find(|&k| {
+            gauge
+                .taken(&self.constraints, &self.motions, k)
+                .is_some_and(|taken| {
+                    (taken - self.constraints.handles[k].motion.turn.1).abs() > super::BRANCH_JUMP
+                })
+        });
+        let Some(k) = lost else {
+            return Ok(false);
+        };
+        let refusal = super::TurnRefusal::new(&self.complex, &self.constraints, k, 1.0);
+        self.stiffened = Some((refusal, scale));
+        self.constraints.scale_interior(&self.complex, 1.0 / scale);
+        self.drag = None;
+        self.system = self.system_for(&self.complex, &self.constraints, info)?;
+        info.inside_stiffened = self.stiffened;
+        Ok(true)
+    }
+
+    /// `constraints` with the inside as stiff as the first solve left it.
+    fn as_first_solved(&self, mut constraints: Constraints<D>) -> Constraints<D> {
+        if let Some((_, scale)) = self.stiffened
+            && constraints.roles.len() == self.complex.len()
+        {
+            constraints.scale_interior(&self.complex, 1.0 / scale);
+        }
+        constraints
     }
 
     /// One step of a drag toward `constraints` (at most `max_iterations` Gauss-Newton
@@ -295,6 +362,7 @@ where
         if constraints.roles.len() != self.complex.len() {
             return self.update_with(constraints, max_iterations);
         }
+        let constraints = self.as_first_solved(constraints);
         let (start, mut info) = (Instant::now(), self.warm_info());
         // The stage was made for the last constraints' structure (an update that changed it
         // dropped the stage).
@@ -307,7 +375,7 @@ where
             _ => {
                 let (complex, on_parents) = drag_parents(&self.complex, &constraints);
                 if 3 * complex.len() > 2 * self.complex.len() {
-                    return self.update_with(constraints, max_iterations);
+                    return self.update_steps(constraints, (max_iterations, DRAG_LOCAL_GLOBAL));
                 }
                 let system = self.system_for(&complex, &on_parents, &mut info)?;
                 let holders = holders(&complex, &self.complex);
@@ -349,6 +417,7 @@ where
         SolverInfo {
             cells_initial: self.complex.len(),
             load_steps: 1,
+            inside_stiffened: self.stiffened,
             ..Default::default()
         }
     }
