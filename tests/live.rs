@@ -411,8 +411,8 @@ fn a_pose_a_whole_turn_from_the_last_keeps_its_winding() {
 
 /// A drag that twists the bar on past where the default soft inside gives way stiffens the
 /// session's inside to a solid's, as `deform` does for the whole turn: dragged in 15° poses to
-/// 720° and refined, a converged pose says so, and the release is the same drag's with a solid
-/// inside asked for (`interior_stiffness` 1), which says nothing.
+/// 720° and refined, a converged pose says so, and after more poses the release is the same
+/// drag's with a solid inside asked for (`interior_stiffness` 1), which says nothing.
 #[test]
 fn a_drag_past_where_the_soft_inside_gives_way_stiffens_it() {
     let (points, triangles) = bar();
@@ -438,6 +438,11 @@ fn a_drag_past_where_the_soft_inside_gives_way_stiffens_it() {
         while let Some(step) = live.refine().unwrap() {
             said |= step.solver.inside_stiffened.is_some();
         }
+        // Poses after the stiffening keep the solid inside, stiffened once.
+        for degrees in [705.0, 690.0, 720.0] {
+            live.solve(twist(degrees), 1, &Silent).unwrap().unwrap();
+        }
+        while live.refine().unwrap().is_some() {}
         (live.release(&[], &Silent).unwrap().0, said)
     };
     let (soft, said) = drag(params());

@@ -315,7 +315,9 @@ impl Options {
             move_tolerance: self.tolerance,
             coarse_levels: self.coarse_levels,
             refine_strain: self.refine_strain,
-            soft_inside: (self.interior_stiffness == DEFAULT_INTERIOR_STIFFNESS)
+            soft_inside: (self.interior_stiffness == DEFAULT_INTERIOR_STIFFNESS
+                && !self.shell
+                && self.inside != Inside::None)
                 .then_some(DEFAULT_INTERIOR_STIFFNESS),
             ..Default::default()
         };

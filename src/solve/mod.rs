@@ -65,7 +65,8 @@
 //! gives way gives it up at once. The 720° bar then takes 4.9 s instead of 1.0 s, and a turn
 //! the solid refuses too is refused after both, up to a second later (BENCHMARKS.md, "Half
 //! turns, and refusing early"). A session's drag that loses a turn stiffens its inside the same
-//! way (`Session`). An inside's stiffness given by the user is kept.
+//! way (`Session`). An inside's stiffness other than the default is kept, and a shape with no
+//! inside (an open surface, `--shell`) refuses a turn as it always has.
 //!
 //! **Newton's curvature.** The glue energy is not a small-residual problem once a shape is
 //! bent: the pairs' residuals stay large at the minimum, and Gauss-Newton, which leaves out
@@ -140,7 +141,7 @@ pub use session::{
 };
 pub use sight::{Sight, seen};
 
-use crate::cells::CellComplex;
+use crate::cells::{CellComplex, CellKind};
 use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::progress::Observer;
@@ -299,19 +300,24 @@ where
         .map(|h| h.motion.undirected())
         .collect();
     let mut params = *params;
+    if !complex.cells.iter().any(|c| c.kind == CellKind::Interior) {
+        // No inside to stiffen: a turn that gives way is refused as it always is.
+        params.soft_inside = None;
+    }
     let mut stiffened = None;
     loop {
         match from_rest(complex, constraints, &params, budget, observer, &either_way) {
-            Err(Error::TurnNotHeld(r)) if either_way[r.handle] => {
-                either_way[r.handle] = false;
-                let h = &mut constraints.handles[r.handle];
-                h.motion = h.motion.the_other_way();
-            }
-            // A soft inside by default gives way: the solid's may hold the turn.
+            // A soft inside by default gives way: the solid's may hold the turn (tried before
+            // the other way round, which is then tried with the solid inside too).
             Err(Error::TurnNotHeld(r)) if params.soft_inside.is_some() => {
                 let scale = params.soft_inside.take().expect("soft");
                 constraints.scale_interior(complex, 1.0 / scale);
                 stiffened = Some((r, scale));
+            }
+            Err(Error::TurnNotHeld(r)) if either_way[r.handle] => {
+                either_way[r.handle] = false;
+                let h = &mut constraints.handles[r.handle];
+                h.motion = h.motion.the_other_way();
             }
             Ok((system, motions, mut info)) => {
                 info.inside_stiffened = stiffened;
@@ -449,6 +455,18 @@ where
                 })
             })
         };
+        // The turning handle whose turn the cells carry farthest from the step's.
+        let farthest = |motions: &[Motion<D>]| {
+            let off = |k: usize| {
+                gauge.taken(constraints, motions, k).map_or(0.0, |taken| {
+                    (taken - to * constraints.handles[k].motion.turn.1).abs()
+                })
+            };
+            turning
+                .iter()
+                .copied()
+                .max_by(|&a, &b| off(a).total_cmp(&off(b)))
+        };
         // Whether a cell ended far from its predicted rotation.
         let jumped = |motions: &[Motion<D>]| {
             predicted.as_ref().is_some_and(|p| {
@@ -480,7 +498,7 @@ where
             && halvings >= SOFT_HALVINGS
             && let Some(k) = lost
                 .map(|l| l.0)
-                .or(jumped.then(|| turning.first().copied()).flatten())
+                .or(jumped.then(|| farthest(motions)).flatten())
         {
             let refusal = TurnRefusal::new(complex, constraints, k, f);
             return Err(Error::TurnNotHeld(refusal));

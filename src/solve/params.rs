@@ -63,11 +63,12 @@ pub struct SolveParams {
     /// Who factors and solves the subdomains' blocks ([`super::schwarz::register`]); `None`
     /// (default): this process.
     pub workers: Option<super::schwarz::WorkersId>,
-    /// The scale of the inside's stiffness that the constraints carry by default, not as asked
-    /// (`--interior-stiffness` unset): where a turn gives way under it, the solve starts over
-    /// with the inside a solid's (1), which holds turns a soft inside cannot (a soft inside
-    /// resists a part's section folding in as little as it resists a twist), and says so
-    /// ([`SolverInfo::inside_stiffened`]). `None` (default): the stiffness is as asked.
+    /// The scale of the inside's stiffness that the constraints carry by default
+    /// (`--interior-stiffness` at its default): where a turn gives way under it, the solve
+    /// starts over with the inside a solid's (1), which holds turns a soft inside cannot (a
+    /// soft inside resists a part's section folding in as little as it resists a twist), and
+    /// says so ([`SolverInfo::inside_stiffened`]); a complex with no inside refuses the turn
+    /// as it is. `None` (default): the stiffness is as asked.
     pub soft_inside: Option<f64>,
 }
 

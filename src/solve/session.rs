@@ -17,7 +17,7 @@ use super::{
     Constraints, Role, Solution, SolveParams, SolverInfo, cells_advice, coarsen,
     from_rest_either_way, minimize_with, prescribe, targets_at, timed,
 };
-use crate::cells::CellComplex;
+use crate::cells::{CellComplex, CellKind};
 use crate::error::{Error, Result};
 use crate::memory::Budget;
 use crate::progress::Observer;
@@ -254,34 +254,28 @@ where
                 .project_positions(complex, constraints, &mut self.motions, &targets)?;
             self.dragged = false;
         }
-        let before = self
-            .params
-            .soft_inside
-            .is_some()
-            .then(|| self.motions.clone());
-        let (complex, constraints) = (&self.complex, &self.constraints);
-        let cells = (
-            &mut self.system,
-            complex,
-            constraints,
-            &mut self.motions[..],
-        );
-        warm_steps(cells, &self.params, (max_iterations, per_step), &mut info)?;
+        let soft = self.params.soft_inside.is_some() && self.stiffened.is_none();
+        let before = soft.then(|| self.motions.clone());
+        self.warm((max_iterations, per_step), &mut info)?;
         if let Some(before) = before
             && self.stiffen_where_given_way(&mut info)?
         {
             // The pose again from where it started, with the solid inside.
             self.motions = before;
-            let (complex, constraints) = (&self.complex, &self.constraints);
-            let cells = (
-                &mut self.system,
-                complex,
-                constraints,
-                &mut self.motions[..],
-            );
-            warm_steps(cells, &self.params, (max_iterations, per_step), &mut info)?;
+            self.warm((max_iterations, per_step), &mut info)?;
         }
         Ok(self.finished(info, start))
+    }
+
+    /// [`warm_steps`] on the session's cells from its motions.
+    fn warm(&mut self, steps: (usize, usize), info: &mut SolverInfo) -> Result<()> {
+        let cells = (
+            &mut self.system,
+            &self.complex,
+            &self.constraints,
+            &mut self.motions[..],
+        );
+        warm_steps(cells, &self.params, steps, info)
     }
 
     /// Where the session's inside is still the default soft one and a converged pose has lost a
@@ -295,6 +289,14 @@ where
         else {
             return Ok(false);
         };
+        if !self
+            .complex
+            .cells
+            .iter()
+            .any(|c| c.kind == CellKind::Interior)
+        {
+            return Ok(false);
+        }
         let gauge = TurnGauge::new(&self.complex);
         let lost = super::turns::turning(&self.constraints).find(|&k| {
             gauge
@@ -317,8 +319,10 @@ where
 
     /// `constraints` with the inside as stiff as the first solve left it.
     fn as_first_solved(&self, mut constraints: Constraints<D>) -> Constraints<D> {
+        // The session's own constraints, given back (as the live faces do), are stiffened.
         if let Some((_, scale)) = self.stiffened
             && constraints.roles.len() == self.complex.len()
+            && constraints.stiffness != self.constraints.stiffness
         {
             constraints.scale_interior(&self.complex, 1.0 / scale);
         }
