@@ -448,12 +448,9 @@ where
         let marks = (info.energies.len(), info.step_starts.len(), info.log.len());
         // The turning handle whose turn the cells no longer carry, if any.
         let lost = |motions: &[Motion<D>]| {
-            turning.iter().find(|&&k| {
-                gauge.taken(constraints, motions, k).is_some_and(|taken| {
-                    let asked = constraints.handles[k].motion.turn.1;
-                    (taken - to * asked).abs() > BRANCH_JUMP
-                })
-            })
+            turning
+                .iter()
+                .find(|&&k| turns::turn_lost(&gauge, constraints, motions, k, to))
         };
         // The turning handle whose turn the cells carry farthest from the step's.
         let farthest = |motions: &[Motion<D>]| {

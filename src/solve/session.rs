@@ -158,12 +158,18 @@ where
             from_rest_either_way(&complex, &mut constraints, params, budget, observer)?;
         observer.finish();
         info.turns = TurnGauge::new(&complex).turns(&complex, &constraints, &motions);
+        let soft = info.inside_stiffened.is_none()
+            && complex.cells.iter().any(|c| c.kind == CellKind::Interior);
         let mut session = Self {
             complex,
             constraints,
             system,
             motions,
-            params: *params,
+            params: SolveParams {
+                // No inside to stiffen, or stiffened already: no pose looks for a lost turn.
+                soft_inside: params.soft_inside.filter(|_| soft),
+                ..*params
+            },
             budget,
             drag: None,
             dragged: false,
@@ -289,22 +295,9 @@ where
         else {
             return Ok(false);
         };
-        if !self
-            .complex
-            .cells
-            .iter()
-            .any(|c| c.kind == CellKind::Interior)
-        {
-            return Ok(false);
-        }
         let gauge = TurnGauge::new(&self.complex);
-        let lost = super::turns::turning(&self.constraints).find(|&k| {
-            gauge
-                .taken(&self.constraints, &self.motions, k)
-                .is_some_and(|taken| {
-                    (taken - self.constraints.handles[k].motion.turn.1).abs() > super::BRANCH_JUMP
-                })
-        });
+        let lost = super::turns::turning(&self.constraints)
+            .find(|&k| super::turns::turn_lost(&gauge, &self.constraints, &self.motions, k, 1.0));
         let Some(k) = lost else {
             return Ok(false);
         };

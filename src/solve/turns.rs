@@ -277,6 +277,23 @@ impl TurnGauge {
     }
 }
 
+/// Whether the cells carry handle `k`'s turn at load fraction `to` more than a quarter turn off
+/// (`super::BRANCH_JUMP`): the part has left the branch the load path was on.
+pub(crate) fn turn_lost<const D: usize>(
+    gauge: &TurnGauge,
+    constraints: &Constraints<D>,
+    motions: &[Motion<D>],
+    k: usize,
+    to: f64,
+) -> bool
+where
+    Dim<D>: Rigid<D>,
+{
+    gauge.taken(constraints, motions, k).is_some_and(|taken| {
+        (taken - to * constraints.handles[k].motion.turn.1).abs() > super::BRANCH_JUMP
+    })
+}
+
 /// The handles that turn.
 pub(crate) fn turning<const D: usize>(
     constraints: &Constraints<D>,
