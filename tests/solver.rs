@@ -95,6 +95,7 @@ fn collapse_and_recover<const D: usize>(
         warnings: vec![],
         trend: Default::default(),
         trend_kind: Default::default(),
+        shapes: Default::default(),
     };
     let mut rng = StdRng::seed_from_u64(11);
     let point = Vect::<D>::from_fn(|_, _| rng.random_range(-0.1..0.1));

@@ -4,7 +4,7 @@
 //! output bit for bit:
 //!
 //! ```text
-//! "RCFIELD\0"  u32 version (5)  u32 D
+//! "RCFIELD\0"  u32 version (6)  u32 D
 //! u8 transfer                        0 blend, 1 blend-idw, 2 rbf, 3 pu (version 2),
 //!                                    + 128 when the field keeps heights (version 4),
 //!                                    + 64 when a trend follows (version 4):
@@ -24,6 +24,10 @@
 //! u8 has_crs (v5), then if 1: the CRS of the input the field was solved on
 //!     (crate::crs::Crs::to_bytes: u8 source, u32 EPSG, u32 vertical EPSG,
 //!      5 × (u32 length, UTF-8): name, WKT, unit, vertical unit, where the unit was read)
+//! u32 s (v6), then s × (u32 map, shape)          the regions held to their own border
+//!     (super::Shape::write: u8 tag, then 0 box f64[D] min, f64[D] max; 1 sphere f64[D],
+//!      f64; 2 half-space f64[D] point, f64[D] normal; 3 prism u8 has_z [f64 z0, f64 z1],
+//!      u32 rings, each u32 k, k × f64[2]; 4 all / 6 any: u32 parts, the parts; 5 not: a part)
 //! ```
 //!
 //! **Applying to a tile reads what the tile needs** (version 3, for the PU transfer). The
@@ -41,6 +45,10 @@
 //!
 //! The RBF coefficients are stored rather than recomputed, because a parallel dense
 //! factorization need not give the same last bits on another machine or thread count.
+//!
+//! Version 6 added the regions a field holds exact to their own border ([`super::Prescribed::shapes`]):
+//! a map with a shape is exact for the samples inside it, whatever cell holds them, and blends
+//! out from the region itself. Earlier files have none: their prescribed cells are exact whole.
 //!
 //! Version 5 added the coordinate reference system of the input the field was solved on
 //! ([`SavedField::crs`]; `apply` refuses a file in another, [`crate::crs::check`]): earlier
@@ -67,7 +75,7 @@ use crate::solve::trend::TrendMap;
 use crate::spec::LARGEST;
 
 const MAGIC: &[u8; 8] = b"RCFIELD\0";
-const VERSION: u32 = 5;
+const VERSION: u32 = 6;
 
 /// The transfer byte's flag of a field that keeps heights (version 4).
 const HEIGHTS_KEPT: u8 = 128;
@@ -249,6 +257,11 @@ where
                 out.push(1);
                 out.extend_from_slice(&crs.to_bytes());
             }
+        }
+        out.extend_from_slice(&(prescribed.shapes.len() as u32).to_le_bytes());
+        for (m, shape) in &prescribed.shapes {
+            out.extend_from_slice(&m.to_le_bytes());
+            shape.write(&mut out);
         }
         Ok(out)
     }
@@ -433,6 +446,17 @@ where
                 b => return Err(Error::format(path, format!("the CRS flag is {b}"))),
             },
         };
+        let mut shapes = Vec::new();
+        if version >= 6 {
+            let count = r.u32()? as usize;
+            for _ in 0..count {
+                let m = r.u32()?;
+                let shape = super::Shape::read(bytes, &mut r.at)
+                    .filter(|_| (m as usize) < maps.len())
+                    .ok_or_else(|| Error::format(path, "a region's border is damaged"))?;
+                shapes.push((m, shape));
+            }
+        }
         if r.at != bytes.len() {
             return Err(Error::format(path, "trailing bytes after the field"));
         }
@@ -500,6 +524,7 @@ where
             trend,
         };
         field.prescribed.maps = maps.clone();
+        field.prescribed.shapes = shapes;
         for i in chosen {
             let (c, h, m) = cell(i)?;
             field.centers.push(c);

@@ -16,6 +16,24 @@ fn field() -> Field<3> {
         .collect();
     let mut prescribed = super::super::Prescribed::default();
     prescribed.set(0, 8, Affine::identity());
+    let lifted = Affine {
+        linear: Mat::<3>::identity(),
+        translation: Vect::<3>::new(0.0, 0.0, 0.25),
+    };
+    let top = super::super::Shape::Any(vec![
+        super::super::Shape::Part(Box::new(crate::spec::Region::Box {
+            min: Vect::<3>::new(1e6 - 1.0, 2e6 - 1.0, 0.75),
+            max: Vect::<3>::new(1e6 + 1.0, 2e6 + 1.0, 2.0),
+        })),
+        super::super::Shape::Not(Box::new(super::super::Shape::Part(Box::new(
+            crate::spec::Region::Sphere {
+                center: Vect::<3>::new(1e6, 2e6, 0.0),
+                radius: 3.0,
+            },
+        )))),
+    ]);
+    let k = prescribed.shaped(lifted, top);
+    prescribed.put(7, 8, k);
     Field {
         origin: Vect::<3>::new(1e6, 2e6, 0.0),
         halves: vec![0.5; 8],
@@ -71,6 +89,12 @@ fn loads_version_1_files() {
     assert_eq!(bytes[cells..cells + 8], 0u64.to_le_bytes(), "no maps");
     bytes.drain(cells..cells + 8);
     bytes.remove(16);
+    let shapes = bytes.split_off(bytes.len() - 4);
+    assert_eq!(
+        shapes,
+        0u32.to_le_bytes(),
+        "no regions' borders (version 6)"
+    );
     assert_eq!(bytes.pop(), Some(0), "no CRS (version 5)");
     assert_eq!(bytes.pop(), Some(0), "no window section (version 3)");
     let v1 = dir.path().join("v1.field");
@@ -79,10 +103,10 @@ fn loads_version_1_files() {
     assert_eq!(back.transfer, Transfer::Rbf);
     assert_eq!(back.field, f);
     assert!(back.rbf.is_some());
-    bytes[8..12].copy_from_slice(&6u32.to_le_bytes());
+    bytes[8..12].copy_from_slice(&7u32.to_le_bytes());
     std::fs::write(&v1, &bytes).unwrap();
     let e = SavedField::<3>::load(&v1).err().unwrap().to_string();
-    assert!(e.contains("version 6"), "{e}");
+    assert!(e.contains("version 7"), "{e}");
 }
 
 fn crs() -> Crs {
@@ -121,10 +145,11 @@ fn saves_and_loads_the_crs() {
         assert_eq!(window.crs, crs);
         // A damaged CRS section is a format error naming the file.
         let mut bytes = std::fs::read(&path).unwrap();
+        let end = bytes.len() - shapes_len(&field());
         if crs.is_some() {
-            bytes.truncate(bytes.len() - 3);
+            bytes.drain(end - 3..end);
         } else {
-            *bytes.last_mut().unwrap() = 7;
+            bytes[end - 1] = 7;
         }
         std::fs::write(&path, &bytes).unwrap();
         let e = SavedField::<3>::load(&path).err().unwrap();
@@ -135,21 +160,33 @@ fn saves_and_loads_the_crs() {
     }
 }
 
+/// The bytes of a field's last section, the regions' borders (version 6).
+fn shapes_len(f: &Field<3>) -> usize {
+    let mut out = Vec::new();
+    for (_, shape) in &f.prescribed.shapes {
+        shape.write(&mut out);
+    }
+    4 + 4 * f.prescribed.shapes.len() + out.len()
+}
+
 /// A version-4 file (no CRS section) still loads, as a field with no CRS recorded.
 #[test]
 fn loads_version_4_files_without_a_crs() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("v4.field");
-    let mut bytes = SavedField::new(field(), Transfer::Blend, None)
+    let mut f = field();
+    f.prescribed.shapes.clear();
+    let mut bytes = SavedField::new(f.clone(), Transfer::Blend, None)
         .to_bytes()
         .unwrap();
+    bytes.truncate(bytes.len() - shapes_len(&f));
     assert_eq!(bytes.pop(), Some(0), "the CRS flag of a field without one");
     bytes[8..12].copy_from_slice(&4u32.to_le_bytes());
     std::fs::write(&path, &bytes).unwrap();
     let back = SavedField::<3>::load(&path).unwrap();
     assert_eq!(
         (back.crs, back.field, back.transfer),
-        (None, field(), Transfer::Blend)
+        (None, f, Transfer::Blend)
     );
     // A version-4 file with a CRS section has a byte too many.
     bytes.push(0);

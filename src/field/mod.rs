@@ -13,6 +13,7 @@
 //! over a slice of world-coordinate samples in parallel, so in-memory and streaming callers give
 //! identical results.
 
+mod band;
 mod blend;
 mod domain;
 mod exact;
@@ -27,6 +28,7 @@ mod pu;
 mod rbf;
 mod simd;
 
+pub use crate::spec::Shape;
 pub use blend::{Blend, Weights};
 pub use exact::{FieldMap, Frame, Outside, OutsideTally, Prescribed, UNPRESCRIBED};
 pub use file::SavedField;
@@ -105,9 +107,42 @@ impl<const D: usize> Field<D> {
             .map(|k| constraints.handle_map(k, 1.0))
             .collect();
         let mut prescribed = Prescribed::default();
+        // The regions with a border take the cells whose centers they hold (the module docs of
+        // `exact`); a role's other cells (of a connected part where its region holds no
+        // center) are held whole.
+        let origin = solution.complex.grid.origin;
+        let roles =
+            std::iter::once(Role::Fixed).chain((0..maps.len()).map(|k| Role::Handle(k as u32)));
+        let shaped: Vec<Option<u32>> = roles
+            .map(|role| {
+                let map = match role {
+                    Role::Handle(k) => maps[k as usize],
+                    _ => Affine::identity(),
+                };
+                let shape = constraints.shape_of(role)?;
+                Some(prescribed.shaped(map, shape.clone()))
+            })
+            .collect();
+        let inside = |role: Role, c: usize| {
+            let k = match role {
+                Role::Handle(k) => 1 + k as usize,
+                _ => 0,
+            };
+            let shape = constraints.shape_of(role)?;
+            let center = solution.complex.cells[c].center + origin;
+            shaped[k].filter(|_| shape.contains(&center))
+        };
         for (c, role) in constraints.roles.iter().enumerate() {
             match role {
-                Role::Fixed | Role::Rest => prescribed.set(c, n, Affine::identity()),
+                Role::Fixed => match inside(*role, c) {
+                    Some(k) => prescribed.put(c, n, k),
+                    None => prescribed.set(c, n, Affine::identity()),
+                },
+                Role::Handle(k) => match inside(*role, c) {
+                    Some(m) => prescribed.put(c, n, m),
+                    None => prescribed.set(c, n, maps[*k as usize]),
+                },
+                Role::Rest => prescribed.set(c, n, Affine::identity()),
                 Role::Carried(_) | Role::Pin(_) => {
                     // The cell's rigid motion, exactly: A(x) = R (x − c) + p, after the trend.
                     let m = &solution.motions[c];
@@ -124,7 +159,6 @@ impl<const D: usize> Field<D> {
                     };
                     prescribed.set(c, n, map);
                 }
-                Role::Handle(k) => prescribed.set(c, n, maps[*k as usize]),
                 Role::Free => {}
             }
         }

@@ -1,14 +1,17 @@
 //! Maps the edit spec onto the cells (paper §4): "surface constraints mapped to the cells that
 //! intersect them".
 //!
-//! A cell gets a region's constraint when it holds a sample the region selects or, for the
-//! geometric regions (box, sphere, half-space), when its center lies in the region — so that a
-//! box around the end of a solid fixes the interior cells there too, not only the surface layer.
-//! A screen selection of the visible samples (`visible = true`) is a selection of samples: a
+//! A cell gets a region's constraint, for a region of space (box, sphere, half-space, polygon
+//! and their combinations: [`Shape`]), when its center lies in the region — so that a box
+//! around the end of a solid fixes the interior cells there too, and the cells that straddle
+//! its border stay free: the field keeps the region's samples exact to its own border
+//! ([`Shapes`], `field::FieldMap`). In a connected part of the shape where the region holds
+//! no cell's center (a thin part, a loose piece), the cells holding its samples take it. A
+//! selection of samples (indices, classes) constrains the cells that hold them. A screen selection of the visible samples (`visible = true`) is a selection of samples: a
 //! cell gets it when it holds a selected sample and the camera sees it ([`super::Sight`]).
 //!
-//! - `fixed` and `handle` cells are prescribed (0 DoF); a cell claimed by two different hard
-//!   constraints is an error that names both and the cell.
+//! - `fixed` and `handle` cells are prescribed (0 DoF); a cell two different hard constraints
+//!   reach (hold a sample of, or have their center in) is an error that names both and the cell.
 //! - a `pin` prescribes one point of the cell containing it; the cell may rotate about it.
 //! - a `target` adds a soft residual on the cell containing its `from` point. Its weight is
 //!   relative to the glue between two finest cells: `λ · S^(D−1)` with `S` the finest size, so a
@@ -30,7 +33,7 @@ use crate::cells::{CellComplex, CellKey};
 use crate::error::{Error, Result};
 use crate::rigid::{Affine, Dim, Mat, Motion, Rigid, Vect};
 use crate::said::Said;
-use crate::spec::{EditSpec, HandleMotion, Region, Trend};
+use crate::spec::{EditSpec, HandleMotion, Region, Shape, Trend};
 
 use super::sight::seen_cells;
 
@@ -145,6 +148,33 @@ pub struct Constraints<const D: usize> {
     /// The kind of trend the spec asked for (fitted again without a point by
     /// [`Constraints::without_target`]).
     pub trend_kind: Trend,
+    /// The regions of space that the fixed cells and each handle's hold to their own border.
+    pub shapes: Shapes<D>,
+}
+
+/// The regions of space (input coordinates) that the fixed role and each handle hold to their
+/// own border: the field keeps a sample inside exact and blends out from the region itself,
+/// while the role's cells are those whose centers lie inside (see the module docs). `None`
+/// where the role is a selection of samples (indices, classes, what a camera sees), whose
+/// cells are every cell holding one of them.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Shapes<const D: usize> {
+    /// The fixed entries' regions together, when every one of them is a region of space.
+    pub fixed: Option<Shape<D>>,
+    /// Each handle's region, when it is one.
+    pub handles: Vec<Option<Shape<D>>>,
+}
+
+impl<const D: usize> Constraints<D> {
+    /// The region with a border that `role` holds ([`Shapes`]): the fixed entries' or a
+    /// handle's, when it is one.
+    pub fn shape_of(&self, role: Role) -> Option<&Shape<D>> {
+        match role {
+            Role::Fixed => self.shapes.fixed.as_ref(),
+            Role::Handle(k) => self.shapes.handles.get(k as usize)?.as_ref(),
+            _ => None,
+        }
+    }
 }
 
 impl<const D: usize> Constraints<D>
@@ -424,9 +454,12 @@ where
     let mut stiffness = vec![1.0f64; n];
     let mut warnings = Vec::new();
 
-    // Cells selected by a region: through samples, or by center for geometric regions; of
-    // the visible samples, those in the cells the camera sees.
-    let select = |k: usize, region: &Region<D>| -> (Vec<bool>, Vect<D>, u64) {
+    let mut taken: Vec<Option<Role>> = vec![None; n];
+    let components = std::cell::OnceCell::new();
+    // Cells selected by a region: the cells it takes (`Taken::cells`) and those it reaches
+    // (`Taken::reach`: a cell holding a selected sample, or for a geometric region a cell whose
+    // center lies in it), whose claims must not conflict.
+    let select = |k: usize, region: &Region<D>| -> Taken<D> {
         let acc = &selections.regions[k];
         let mut hit = vec![false; n];
         if let (Some(view), Some(per_cell)) = (region.visible_from(), &acc.per_cell) {
@@ -441,19 +474,45 @@ where
                     count += m;
                 }
             }
-            return (hit, sum, count);
+            return Taken::whole(hit, sum, count);
         }
         for coord in &acc.cells {
             if let Some(c) = complex.finest_cell(coord) {
                 hit[c] = true;
             }
         }
-        if region.is_geometric() {
-            for (c, cell) in complex.cells.iter().enumerate() {
-                hit[c] |= region.contains_point(&(cell.center + origin));
-            }
+        if !region.is_geometric() {
+            return Taken::whole(hit, acc.sum, acc.count);
         }
-        (hit, acc.sum, acc.count)
+        let centered: Vec<bool> = complex
+            .cells
+            .iter()
+            .map(|cell| region.contains_point(&(cell.center + origin)))
+            .collect();
+        let shape = Shape::of(region);
+        let cells = match shape {
+            // A region with a border takes the cells whose centers it holds, and in a connected
+            // part where it holds none, the cells of its samples there.
+            Some(_) => {
+                let (part, parts) = components.get_or_init(|| complex.components());
+                let mut centered_part = vec![false; *parts];
+                for c in (0..n).filter(|&c| centered[c]) {
+                    centered_part[part[c] as usize] = true;
+                }
+                (0..n)
+                    .map(|c| centered[c] || (hit[c] && !centered_part[part[c] as usize]))
+                    .collect()
+            }
+            None => (0..n).map(|c| centered[c] || hit[c]).collect(),
+        };
+        let reach = (0..n).map(|c| centered[c] || hit[c]).collect();
+        Taken {
+            cells,
+            reach,
+            shape,
+            sum: acc.sum,
+            count: acc.count,
+        }
     };
     let (nf, nh) = (spec.fixed.len(), spec.handles.len());
 
@@ -461,8 +520,9 @@ where
     let mut handles = Vec::new();
     let mut handle_hits = Vec::new();
     for (k, e) in spec.handles.iter().enumerate() {
-        let (hit, sum, count) = select(nf + k, &e.region);
-        if !hit.iter().any(|&h| h) {
+        let hit = select(nf + k, &e.region);
+        let (sum, count) = (hit.sum, hit.count);
+        if !hit.reach.iter().any(|&h| h) {
             warnings.push(entry_named("handle", k, e.line).text(" selects no cell"));
         }
         let pivot = match e.value.pivot {
@@ -470,7 +530,7 @@ where
             _ if count > 0 => sum / count as f64,
             _ => {
                 let (s, m) = (0..n)
-                    .filter(|&c| hit[c])
+                    .filter(|&c| hit.cells[c])
                     .fold((Vect::<D>::zeros(), 0usize), |(s, m), c| {
                         (s + complex.cells[c].center + origin, m + 1)
                     });
@@ -516,21 +576,33 @@ where
         }
     };
 
+    let mut fixed_shapes = Some(Vec::new());
     for (k, e) in spec.fixed.iter().enumerate() {
         let name = entry_named("fixed", k, e.line);
-        let (hit, _, _) = select(k, &e.region);
-        if !hit.iter().any(|&h| h) {
+        let hit = select(k, &e.region);
+        if !hit.reach.iter().any(|&h| h) {
             warnings.push(name.clone().text(" selects no cell"));
         }
-        for c in (0..n).filter(|&c| hit[c]) {
+        for c in (0..n).filter(|&c| hit.reach[c]) {
             claim(c, &name, Role::Fixed)?;
         }
+        hit.take(&mut taken, Role::Fixed);
+        fixed_shapes = fixed_shapes.zip(hit.shape).map(|(mut all, s)| {
+            all.push(s);
+            all
+        });
     }
-    for (k, hit) in handle_hits.iter().enumerate() {
+    let mut shapes = Shapes {
+        fixed: fixed_shapes.filter(|s| !s.is_empty()).map(Shape::Any),
+        handles: Vec::new(),
+    };
+    for (k, hit) in handle_hits.into_iter().enumerate() {
         let name = entry_named("handle", k, handles[k].line);
-        for c in (0..n).filter(|&c| hit[c]) {
+        for c in (0..n).filter(|&c| hit.reach[c]) {
             claim(c, &name, Role::Handle(k as u32))?;
         }
+        hit.take(&mut taken, Role::Handle(k as u32));
+        shapes.handles.push(hit.shape);
     }
     let locate = |x: &Vect<D>, what: Said, hint: &str| {
         complex.locate(&(x - origin)).ok_or_else(|| {
@@ -544,6 +616,7 @@ where
     for (k, p) in spec.pins.iter().enumerate() {
         let cell = locate(&p.point, entry_named("pin", k, p.line), "")?;
         claim(cell, &entry_named("pin", k, p.line), Role::Pin(k as u32))?;
+        taken[cell] = Some(Role::Pin(k as u32));
         pins.push(PinLocal {
             point: p.point - origin,
             to: p.to - origin,
@@ -589,6 +662,7 @@ where
         let what = format!("exact control point {} ({})", t.id, t.place);
         let cell = locate(&(local.from + origin), Said::from(&what), "")?;
         claim(cell, &Said::from(&what), Role::Pin(pins.len() as u32))?;
+        taken[cell] = Some(Role::Pin(pins.len() as u32));
         pins.push(PinLocal {
             point: local.from,
             to: local.wanted,
@@ -598,16 +672,13 @@ where
         });
     }
     for (k, e) in spec.stiffness.iter().enumerate() {
-        let (hit, _, _) = select(nf + nh + k, &e.region);
-        for c in (0..n).filter(|&c| hit[c]) {
+        let hit = select(nf + nh + k, &e.region);
+        for c in (0..n).filter(|&c| hit.reach[c]) {
             stiffness[c] *= e.value;
         }
     }
 
-    let mut roles: Vec<Role> = owner
-        .into_iter()
-        .map(|o| o.map_or(Role::Free, |(_, r)| r))
-        .collect();
+    let mut roles: Vec<Role> = taken.into_iter().map(|r| r.unwrap_or(Role::Free)).collect();
     let (parts, count, loose) = anchor(complex, &mut roles, &targets);
     if parts == count {
         return Err(Error::NoConstraints);
@@ -623,12 +694,47 @@ where
         warnings,
         trend: TrendMap::default(),
         trend_kind: Trend::None,
+        shapes,
     };
     constraints.fit_trend(spec.trend);
     for k in 0..constraints.handles.len() {
         constraints.handles[k].motion = constraints.directed(complex, k);
     }
     Ok(constraints)
+}
+
+/// The cells a region selects ([`resolve_selected`]).
+struct Taken<const D: usize> {
+    /// The cells that take its role.
+    cells: Vec<bool>,
+    /// The cells it reaches: those that take its role, and the cells of its samples whose
+    /// centers lie outside a region with a border. Two roles that reach one cell conflict.
+    reach: Vec<bool>,
+    /// Its border, when it has one.
+    shape: Option<Shape<D>>,
+    /// The sum and count of its samples (a handle's pivot).
+    sum: Vect<D>,
+    count: u64,
+}
+
+impl<const D: usize> Taken<D> {
+    /// A selection whose cells are the cells it reaches.
+    fn whole(hit: Vec<bool>, sum: Vect<D>, count: u64) -> Self {
+        Self {
+            cells: hit.clone(),
+            reach: hit,
+            shape: None,
+            sum,
+            count,
+        }
+    }
+
+    /// Gives its cells `role` in `taken`.
+    fn take(&self, taken: &mut [Option<Role>], role: Role) {
+        for (t, _) in taken.iter_mut().zip(&self.cells).filter(|(_, c)| **c) {
+            *t = Some(role);
+        }
+    }
 }
 
 /// An entry of the edit spec as its messages name it ([`crate::said::Part::Entry`]):
@@ -688,6 +794,7 @@ pub fn inherit<const D: usize>(
         warnings: old.warnings.clone(),
         trend: old.trend.clone(),
         trend_kind: old.trend_kind,
+        shapes: old.shapes.clone(),
     }
 }
 

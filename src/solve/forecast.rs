@@ -501,6 +501,7 @@ mod tests {
             warnings: vec![],
             trend: Default::default(),
             trend_kind: crate::spec::Trend::None,
+            shapes: Default::default(),
         };
         let (counts, uniform) = counts(&complex, &constraints);
         assert!(!uniform && counts.free as usize == n - 1);

@@ -253,10 +253,26 @@ pub struct Solution<const D: usize> {
 }
 
 impl<const D: usize> Solution<D> {
-    /// The role of the cell holding the world point `p`, if a cell holds it.
+    /// The constraint that holds the world point `p` as the field does, if a cell holds it: a
+    /// region with a border ([`super::Shapes`]) holds the points inside it whatever cell holds
+    /// them, and a cell of any other role the points in it ([`Role::Free`] for a point outside
+    /// its region in one of its cells).
     pub fn role_at(&self, p: &Vect<D>) -> Option<Role> {
         let c = self.complex.locate(&(p - self.constraints.origin))?;
-        Some(self.constraints.roles[c])
+        let constraints = &self.constraints;
+        let roles = std::iter::once(Role::Fixed)
+            .chain((0..constraints.handles.len()).map(|k| Role::Handle(k as u32)));
+        for role in roles {
+            if constraints.shape_of(role).is_some_and(|s| s.contains(p)) {
+                return Some(role);
+            }
+        }
+        let role = constraints.roles[c];
+        let center = self.complex.cells[c].center + constraints.origin;
+        match constraints.shape_of(role) {
+            Some(shape) if shape.contains(&center) => Some(Role::Free),
+            _ => Some(role),
+        }
     }
 }
 

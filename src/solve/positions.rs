@@ -289,6 +289,7 @@ mod tests {
             warnings: vec![],
             trend: Default::default(),
             trend_kind: crate::spec::Trend::None,
+            shapes: Default::default(),
         };
         let mut motions: Vec<Motion<3>> = complex
             .cells

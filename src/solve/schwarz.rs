@@ -540,6 +540,7 @@ mod tests {
             warnings: vec![],
             trend: Default::default(),
             trend_kind: crate::spec::Trend::None,
+            shapes: Default::default(),
         }
     }
 

@@ -53,6 +53,7 @@ mod geojson;
 mod parse;
 mod region;
 mod scan;
+mod shape;
 mod validate;
 
 pub use control_points::{ControlRow, read_control_points};
@@ -61,3 +62,4 @@ pub use entries::{
 };
 pub use parse::{LARGEST, MAX_TURN_DEGREES, parse_poses, parse_spec, read_spec};
 pub use region::{Polygon, Region};
+pub use shape::Shape;
