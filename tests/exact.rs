@@ -446,6 +446,49 @@ fn a_region_is_exact_to_its_own_border_not_its_cells() {
     assert!(worst < 1.5, "the worst edge strain is {worst:.3}");
 }
 
+/// A box among fixed entries that select samples (indices here) is still exact: the role is
+/// held by the cells its entries reach, so every vertex in the box, and the listed one, keeps
+/// its coordinates while the far end turns.
+#[test]
+fn a_fixed_box_beside_a_selection_of_samples_is_exact() {
+    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
+    let points: Vec<Vect<3>> = bar
+        .vertices
+        .iter()
+        .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
+        .collect();
+    let listed = points.iter().position(|p| p.x > 4.9 && p.x < 5.1).unwrap();
+    let spec = parse_spec::<3>(
+        &format!(
+            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [2.3, 1.1, 1.1] }}\n\
+             [[fixed]]\nindices = [{listed}]\n\
+             [[handle]]\nbox = {{ min = [7.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
+             rotate = {{ axis = [1.0, 0.0, 0.0], degrees = 40.0 }}\npivot = [8.75, 0.5, 0.5]\n"
+        ),
+        Path::new("."),
+        Path::new("edit.toml"),
+    )
+    .unwrap();
+    let params = Options {
+        cell_size: Some(0.25),
+        ..Default::default()
+    }
+    .params()
+    .unwrap();
+    let (moved, _, _) = pipeline::deform(&points, &bar.triangles, &spec, &params, &Silent).unwrap();
+    for (i, (p, q)) in points.iter().zip(&moved).enumerate() {
+        if p.x <= 2.3 || i == listed {
+            assert_eq!(p, q, "vertex {i} moved");
+        }
+    }
+    assert!(
+        moved
+            .iter()
+            .zip(&points)
+            .any(|(q, p)| p.x > 9.0 && (q - p).norm() > 0.1)
+    );
+}
+
 /// The turn of each cross-section of the bar about its axis, from the fixed end to the handle,
 /// unwrapped from section to section.
 fn section_turns(before: &[Vect<3>], after: &[Vect<3>]) -> Vec<f64> {

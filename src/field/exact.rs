@@ -61,15 +61,17 @@
 //! (over two cells it would reach 1.61 where the border falls just short of a cell's center).
 //! On a bust with its neck's lowest fifth fixed and everything above 0.55 of its height turned
 //! 30°, the largest edge strain fell from 1.62 to 1.44, and the 99.9th percentile from 1.397
-//! to 1.355 (BENCHMARKS.md). The selections of samples (indices, classes, what a camera sees) keep the
-//! cells' weight below.
+//! to 1.355 (BENCHMARKS.md). The selections of samples (indices, classes, what a camera sees),
+//! pins and carried parts keep the cells' weight above: their cells are held whole.
 //!
-//! Inside a prescribed cell the sample goes to `A_r(x)` itself: a fixed sample keeps its
-//! coordinates bit for bit, a handle sample follows the handle's transform to rounding. Where the
-//! bands of two regions meet, their weights are scaled down together to sum to at most 1
-//! (continuous, with a kink where the sum reaches 1); regions that touch blend into each other
-//! only through the field between them, and a sample is exact for the cell that holds it.
-//! Soft targets are points, not regions, and are left to the transfer.
+//! Inside a cell held whole the sample goes to its map `A_r(x)` itself, and inside a region with
+//! a border (a cell held whole first) to the region's: a fixed sample keeps its coordinates bit
+//! for bit, a handle sample follows the handle's transform to rounding. Where the bands of
+//! regions meet, each region's weight counts as `w_r Π_{q≠r} (1 − w_q)` and the field's as
+//! `Π_q (1 − w_q)`, over their sum: a region's map has the whole weight at its own border
+//! whatever the others' bands (so the map is continuous there), and where one band alone
+//! reaches its weight is as above. Regions that touch blend into each other only through the
+//! field between them. Soft targets are points, not regions, and are left to the transfer.
 //!
 //! The band is where the transfer's misfit to a region's map is paid: where the transfer
 //! compresses space and misses the map by a good part of a cell, the band can fold space over.
@@ -242,7 +244,8 @@ pub(super) enum Class {
     Exact(u32),
     /// Among the cells, beyond every band.
     Free,
-    /// Among the cells or within the margin, within two voxels of a prescribed cell.
+    /// Among the cells or within the margin, within two voxels of a cell held whole or within a
+    /// band of a region with a border.
     Band,
     /// Beyond the margin.
     Outside,
@@ -579,9 +582,10 @@ where
         (out, n)
     }
 
-    /// The regions' weights at `x` in voxel `v` from its masks (see the module docs): up to four
-    /// regions with a positive weight, scaled down together where they add up to more than 1.
-    fn weights(&self, x: &Vect<D>, masks: &Masks) -> ([(u32, f64); 8], usize) {
+    /// The regions' weights at `x` (local; `world` in the input's coordinates, as the spec's
+    /// regions are) from its masks (see the module docs): up to eight regions with a positive
+    /// weight, combined where their bands meet.
+    fn weights(&self, x: &Vect<D>, world: &Vect<D>, masks: &Masks) -> ([(u32, f64); 8], usize) {
         let v = self.leaves.voxel(x);
         // The kernel's mass over the voxel below, this one and the one above, per axis.
         let mass: [[f64; SIDE]; D] = std::array::from_fn(|a| {
@@ -594,14 +598,13 @@ where
         let mut sums = [(0u32, 0.0f64); 8];
         let mut n = 0;
         if !self.shapes.is_empty() {
-            let world = x + self.origin;
             for (m, shape) in &self.shapes {
-                if shape.contains(&world) {
+                if shape.contains(world) {
                     sums[0] = (*m, 1.0);
                     return (sums, 1);
                 }
-                let u = shape.signed_distance(&world) / self.shape_band();
-                if u < 1.0 && n < 4 {
+                let u = shape.signed_distance(world) / self.shape_band();
+                if u < 1.0 && n < 8 - masks.1 {
                     sums[n] = (*m, 1.0 - profile(u.max(0.0), 1.0 / SHAPE_BAND));
                     n += 1;
                 }
@@ -630,11 +633,38 @@ where
                 n += 1;
             }
         }
-        let total: f64 = sums[..n].iter().map(|s| s.1).sum();
-        if total > 1.0 {
-            for s in &mut sums[..n] {
-                s.1 /= total;
+        if n > 1 {
+            // Where bands meet, each region's weight `w_r` counts as `w_r Π_{q≠r} (1 − w_q)`
+            // and the field's as `Π_q (1 − w_q)`, over their sum: 1 for a region at its own
+            // border whatever the others' (so the map is continuous there), the weights
+            // themselves where one band alone reaches.
+            let rest: f64 = sums[..n].iter().map(|s| 1.0 - s.1).product();
+            let mut share = [0.0f64; 8];
+            for i in 0..n {
+                share[i] = sums[i].1
+                    * (0..n)
+                        .filter(|&j| j != i)
+                        .map(|j| 1.0 - sums[j].1)
+                        .product::<f64>();
             }
+            let total = rest + share[..n].iter().sum::<f64>();
+            for i in 0..n {
+                sums[i].1 = if total > 0.0 {
+                    share[i] / total
+                } else {
+                    // Two regions whole at once (their borders touch): shared evenly.
+                    f64::from(u8::from(sums[i].1 == 1.0))
+                        / sums[..n].iter().filter(|s| s.1 == 1.0).count() as f64
+                };
+            }
+            let mut kept = 0;
+            for i in 0..n {
+                if sums[i].1 > 0.0 {
+                    sums[kept] = sums[i];
+                    kept += 1;
+                }
+            }
+            n = kept;
         }
         (sums, n)
     }
@@ -648,8 +678,8 @@ where
     }
 
     /// `F(x) + Σ w_r (A_r(x) − F(x))` for the band weights at `x`, given `F(x)`.
-    fn banded(&self, x: &Vect<D>, masks: &Masks, f: Vect<D>) -> Vect<D> {
-        let (w, n) = self.weights(x, masks);
+    fn banded(&self, x: &Vect<D>, world: &Vect<D>, masks: &Masks, f: Vect<D>) -> Vect<D> {
+        let (w, n) = self.weights(x, world, masks);
         if let Some(m) = self.whole(&w[..n]) {
             return self.prescribed.maps[m as usize].apply(x);
         }
@@ -670,8 +700,15 @@ where
     }
 
     /// The normal in a band: the transfer's and the maps' blended by the weights.
-    fn banded_normal(&self, x: &Vect<D>, masks: &Masks, f: Vect<D>, n: &Vect<D>) -> Vect<D> {
-        let (w, k) = self.weights(x, masks);
+    fn banded_normal(
+        &self,
+        x: &Vect<D>,
+        world: &Vect<D>,
+        masks: &Masks,
+        f: Vect<D>,
+        n: &Vect<D>,
+    ) -> Vect<D> {
+        let (w, k) = self.weights(x, world, masks);
         if let Some(m) = self.whole(&w[..k]) {
             return self.exact_normal(m, n);
         }
@@ -773,7 +810,12 @@ where
             Class::Exact(m) if self.identity[m as usize] => *x,
             Class::Exact(m) => self.prescribed.maps[m as usize].apply(x),
             Class::Free => self.field(x),
-            Class::Band => self.banded(x, &self.masks(&self.leaves.voxel(x)), self.field(x)),
+            Class::Band => self.banded(
+                x,
+                &(x + self.origin),
+                &self.masks(&self.leaves.voxel(x)),
+                self.field(x),
+            ),
             Class::Outside => match self.outside {
                 Outside::Extend => self.field(x),
                 _ => *x,
@@ -794,7 +836,7 @@ where
             Class::Free => self.field_normal(x, n),
             Class::Band => {
                 let masks = self.masks(&self.leaves.voxel(x));
-                self.banded_normal(x, &masks, self.field_normal(x, n), n)
+                self.banded_normal(x, &(x + self.origin), &masks, self.field_normal(x, n), n)
             }
             Class::Outside => match self.outside {
                 Outside::Extend => self.field_normal(x, n),
@@ -814,9 +856,10 @@ where
             Class::Band => {
                 let masks = self.masks(&self.leaves.voxel(x));
                 let (f, fnormal) = self.field_with_normal(x, n);
+                let world = x + self.origin;
                 (
-                    self.banded(x, &masks, f),
-                    self.banded_normal(x, &masks, fnormal, n),
+                    self.banded(x, &world, &masks, f),
+                    self.banded_normal(x, &world, &masks, fnormal, n),
                 )
             }
             Class::Outside => {
@@ -859,7 +902,7 @@ where
             let still = match class {
                 Class::Exact(m) => self.identity[m as usize],
                 Class::Band => {
-                    let (w, k) = self.weights(&x, &self.masks(&self.leaves.voxel(&x)));
+                    let (w, k) = self.weights(&x, p, &self.masks(&self.leaves.voxel(&x)));
                     self.whole(&w[..k])
                         .is_some_and(|m| self.identity[m as usize])
                 }
@@ -929,11 +972,11 @@ where
                             m
                         }
                     };
-                    let (w, n) = self.weights(&x, &masks);
+                    let (w, n) = self.weights(&x, p, &masks);
                     match self.whole(&w[..n]) {
                         // A sample the identity has whole keeps its bits.
                         Some(m) if self.identity[m as usize] => *p,
-                        _ => self.banded(&x, &masks, self.field(&x)) + origin,
+                        _ => self.banded(&x, p, &masks, self.field(&x)) + origin,
                     }
                 }
                 _ => {

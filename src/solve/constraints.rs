@@ -5,9 +5,11 @@
 //! and their combinations: [`Shape`]), when its center lies in the region — so that a box
 //! around the end of a solid fixes the interior cells there too, and the cells that straddle
 //! its border stay free: the field keeps the region's samples exact to its own border
-//! ([`Shapes`], `field::FieldMap`). In a connected part of the shape where the region holds
-//! no cell's center (a thin part, a loose piece), the cells holding its samples take it. A
-//! selection of samples (indices, classes) constrains the cells that hold them. A screen selection of the visible samples (`visible = true`) is a selection of samples: a
+//! ([`Shapes`], `field::FieldMap`). The cells holding its samples two face steps or more from
+//! those (a sliver, a thin part, a loose piece where it holds no cell's center) take it too.
+//! The fixed entries are one role: when one of them is a selection of samples, every fixed
+//! entry takes the cells it reaches, as a selection does. A selection of samples (indices,
+//! classes) constrains the cells that hold them. A screen selection of the visible samples (`visible = true`) is a selection of samples: a
 //! cell gets it when it holds a selected sample and the camera sees it ([`super::Sight`]).
 //!
 //! - `fixed` and `handle` cells are prescribed (0 DoF); a cell two different hard constraints
@@ -455,7 +457,16 @@ where
     let mut warnings = Vec::new();
 
     let mut taken: Vec<Option<Role>> = vec![None; n];
-    let components = std::cell::OnceCell::new();
+    // Whether a face neighbor of each cell is marked.
+    let beside = |centered: &[bool]| {
+        let mut near = vec![false; n];
+        for p in &complex.pairs {
+            let (i, j) = (p.i as usize, p.j as usize);
+            near[i] |= centered[j];
+            near[j] |= centered[i];
+        }
+        near
+    };
     // Cells selected by a region: the cells it takes (`Taken::cells`) and those it reaches
     // (`Taken::reach`: a cell holding a selected sample, or for a geometric region a cell whose
     // center lies in it), whose claims must not conflict.
@@ -491,16 +502,15 @@ where
             .collect();
         let shape = Shape::of(region);
         let cells = match shape {
-            // A region with a border takes the cells whose centers it holds, and in a connected
-            // part where it holds none, the cells of its samples there.
+            // A region with a border takes the cells whose centers it holds, and the cells of
+            // its samples two face steps or more from those (a sliver, or a part where it holds
+            // no center).
             Some(_) => {
-                let (part, parts) = components.get_or_init(|| complex.components());
-                let mut centered_part = vec![false; *parts];
-                for c in (0..n).filter(|&c| centered[c]) {
-                    centered_part[part[c] as usize] = true;
-                }
+                let one = beside(&centered);
+                let within: Vec<bool> = (0..n).map(|c| one[c] || centered[c]).collect();
+                let near = beside(&within);
                 (0..n)
-                    .map(|c| centered[c] || (hit[c] && !centered_part[part[c] as usize]))
+                    .map(|c| centered[c] || (hit[c] && !near[c]))
                     .collect()
             }
             None => (0..n).map(|c| centered[c] || hit[c]).collect(),
@@ -576,7 +586,9 @@ where
         }
     };
 
-    let mut fixed_shapes = Some(Vec::new());
+    // The fixed entries are one role: held to their own border when every one of them is a
+    // region of space, else every entry by the cells it reaches.
+    let mut fixed_hits = Vec::new();
     for (k, e) in spec.fixed.iter().enumerate() {
         let name = entry_named("fixed", k, e.line);
         let hit = select(k, &e.region);
@@ -586,14 +598,19 @@ where
         for c in (0..n).filter(|&c| hit.reach[c]) {
             claim(c, &name, Role::Fixed)?;
         }
+        fixed_hits.push(hit);
+    }
+    let bordered = fixed_hits.iter().all(|h| h.shape.is_some());
+    let mut fixed_shapes = Vec::new();
+    for mut hit in fixed_hits {
+        match hit.shape.take() {
+            Some(shape) if bordered => fixed_shapes.push(shape),
+            _ => hit.cells.clone_from(&hit.reach),
+        }
         hit.take(&mut taken, Role::Fixed);
-        fixed_shapes = fixed_shapes.zip(hit.shape).map(|(mut all, s)| {
-            all.push(s);
-            all
-        });
     }
     let mut shapes = Shapes {
-        fixed: fixed_shapes.filter(|s| !s.is_empty()).map(Shape::Any),
+        fixed: (!fixed_shapes.is_empty()).then_some(Shape::Any(fixed_shapes)),
         handles: Vec::new(),
     };
     for (k, hit) in handle_hits.into_iter().enumerate() {
@@ -758,6 +775,34 @@ pub fn inherit<const D: usize>(
 ) -> Constraints<D> {
     let mut roles: Vec<Role> = parent.iter().map(|&p| old.roles[p as usize]).collect();
     let stiffness = parent.iter().map(|&p| old.stiffness[p as usize]).collect();
+    // A region with a border holds the children whose centers it holds, as it held the parents
+    // whose centers it held (a parent's center: the mean of its children's).
+    let mut sums = vec![(Vect::<D>::zeros(), 0.0); old.roles.len()];
+    for (c, &p) in parent.iter().enumerate() {
+        sums[p as usize].0 += complex.cells[c].center;
+        sums[p as usize].1 += 1.0;
+    }
+    let bordered: Vec<Role> = std::iter::once(Role::Fixed)
+        .chain((0..old.handles.len()).map(|k| Role::Handle(k as u32)))
+        .filter(|&r| old.shape_of(r).is_some())
+        .collect();
+    for (c, role) in roles.iter_mut().enumerate() {
+        let center = complex.cells[c].center + old.origin;
+        let (sum, count) = sums[parent[c] as usize];
+        let was = sum / count + old.origin;
+        match old.shape_of(*role) {
+            Some(shape) if shape.contains(&was) && !shape.contains(&center) => *role = Role::Free,
+            None if *role == Role::Free => {
+                if let Some(&r) = bordered
+                    .iter()
+                    .find(|&&r| old.shape_of(r).is_some_and(|s| s.contains(&center)))
+                {
+                    *role = r;
+                }
+            }
+            _ => {}
+        }
+    }
     let mut pins = old.pins.clone();
     for (k, pin) in pins.iter_mut().enumerate() {
         let cell = complex

@@ -254,12 +254,21 @@ pub struct Solution<const D: usize> {
 
 impl<const D: usize> Solution<D> {
     /// The constraint that holds the world point `p` as the field does, if a cell holds it: a
-    /// region with a border ([`super::Shapes`]) holds the points inside it whatever cell holds
-    /// them, and a cell of any other role the points in it ([`Role::Free`] for a point outside
-    /// its region in one of its cells).
+    /// cell held whole holds the points in it (a pin's, a carried part's, a selection's of
+    /// samples, a region's beyond its border), else a region with a border
+    /// ([`super::Shapes`]) holds the points inside it whatever cell holds them, else
+    /// [`Role::Free`].
     pub fn role_at(&self, p: &Vect<D>) -> Option<Role> {
         let c = self.complex.locate(&(p - self.constraints.origin))?;
         let constraints = &self.constraints;
+        let role = constraints.roles[c];
+        let center = self.complex.cells[c].center + constraints.origin;
+        let bordered = constraints
+            .shape_of(role)
+            .is_some_and(|s| s.contains(&center));
+        if role != Role::Free && !bordered {
+            return Some(role);
+        }
         let roles = std::iter::once(Role::Fixed)
             .chain((0..constraints.handles.len()).map(|k| Role::Handle(k as u32)));
         for role in roles {
@@ -267,12 +276,7 @@ impl<const D: usize> Solution<D> {
                 return Some(role);
             }
         }
-        let role = constraints.roles[c];
-        let center = self.complex.cells[c].center + constraints.origin;
-        match constraints.shape_of(role) {
-            Some(shape) if shape.contains(&center) => Some(Role::Free),
-            _ => Some(role),
-        }
+        Some(Role::Free)
     }
 }
 

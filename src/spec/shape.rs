@@ -43,17 +43,39 @@ impl<const D: usize> Shape<D> {
     /// The shape of `region`, when it is a region of space with a border: not a selection of
     /// samples (indices, classes, what a camera sees) nor a polygon on a screen.
     pub fn of(region: &Region<D>) -> Option<Self> {
+        // Only what a field file takes back (finite numbers among them): a field that `deform`
+        // saves, `apply` reads.
+        let shape = Self::part_of(region)?;
+        let mut bytes = Vec::new();
+        shape.write(&mut bytes);
+        Self::read(&bytes, &mut 0).filter(|back| *back == shape)
+    }
+
+    fn part_of(region: &Region<D>) -> Option<Self> {
         Some(match region {
-            Region::Box { .. } | Region::Sphere { .. } => Self::Part(Box::new(region.clone())),
+            // What `Shape::read` takes back.
+            Region::Box { min, max } if (0..D).all(|a| min[a] <= max[a]) => {
+                Self::Part(Box::new(region.clone()))
+            }
+            Region::Sphere { radius, .. } if *radius >= 0.0 => Self::Part(Box::new(region.clone())),
             Region::Plane { normal, .. } if normal.norm() > 0.0 => {
                 Self::Part(Box::new(region.clone()))
             }
             // The rings and heights alone: where they were read from is the spec's to say.
-            Region::Polygon(p) if p.rings.iter().any(|r| r.len() >= 3) => Self::Part(Box::new(
-                Region::Polygon(Polygon::new(p.rings.clone(), p.z)),
-            )),
-            Region::All(parts) => Self::All(parts.iter().map(Self::of).collect::<Option<_>>()?),
-            Region::Not(part) => Self::Not(Box::new(Self::of(part)?)),
+            Region::Polygon(p)
+                if !p.rings.is_empty()
+                    && p.rings.iter().all(|r| r.len() >= 3)
+                    && !p.z.is_some_and(|[z0, z1]| z0 > z1) =>
+            {
+                Self::Part(Box::new(Region::Polygon(Polygon::new(
+                    p.rings.clone(),
+                    p.z,
+                ))))
+            }
+            Region::All(parts) => {
+                Self::All(parts.iter().map(Self::part_of).collect::<Option<_>>()?)
+            }
+            Region::Not(part) => Self::Not(Box::new(Self::part_of(part)?)),
             _ => return None,
         })
     }
@@ -218,18 +240,24 @@ impl<const D: usize> Shape<D> {
                 .collect()
         };
         Some(match *take(at, 1)?.first()? {
-            0 => Self::Part(Box::new(Region::Box {
-                min: vect(at)?,
-                max: vect(at)?,
-            })),
-            1 => Self::Part(Box::new(Region::Sphere {
-                center: vect(at)?,
-                radius: f64_at(at)?,
-            })),
-            2 => Self::Part(Box::new(Region::Plane {
-                point: vect(at)?,
-                normal: vect(at)?,
-            })),
+            // What the spec accepts and no more: a box with its corners in order, a radius not
+            // negative, a normal not zero, a polygon's heights in order and rings of three
+            // points or more.
+            0 => {
+                let (min, max) = (vect(at)?, vect(at)?);
+                (0..D).all(|a| min[a] <= max[a]).then_some(())?;
+                Self::Part(Box::new(Region::Box { min, max }))
+            }
+            1 => {
+                let (center, radius) = (vect(at)?, f64_at(at)?);
+                (radius >= 0.0).then_some(())?;
+                Self::Part(Box::new(Region::Sphere { center, radius }))
+            }
+            2 => {
+                let (point, normal) = (vect(at)?, vect(at)?);
+                (normal.norm() > 0.0).then_some(())?;
+                Self::Part(Box::new(Region::Plane { point, normal }))
+            }
             3 => {
                 let z = match *take(at, 1)?.first()? {
                     0 => None,
@@ -243,7 +271,10 @@ impl<const D: usize> Shape<D> {
                             .collect::<Option<Vec<_>>>()
                     })
                     .collect::<Option<Vec<_>>>()?;
-                if rings.is_empty() || rings.iter().any(|r| r.is_empty()) {
+                if rings.is_empty()
+                    || rings.iter().any(|r| r.len() < 3)
+                    || z.is_some_and(|[z0, z1]| z0 > z1)
+                {
                     return None;
                 }
                 Self::Part(Box::new(Region::Polygon(Polygon::new(rings, z))))
