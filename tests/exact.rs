@@ -159,15 +159,21 @@ fn fixed_and_handle_samples_are_exact_on_copc() {
     );
 }
 
-/// The field of a 10 × 1 × 1 bar solved at cells of `cell`, its end x < 2.5 fixed and its end
-/// x > 7.5 a handle moved by `motion` (the handle's lines of a spec).
-fn solved_bar(motion: &str, cell: f64) -> Field<3> {
+/// The 10 × 1 × 1 bar of the tests (8 vertices a unit), and its vertices as points.
+fn test_bar() -> (data_gen::Mesh, Vec<Vect<3>>) {
     let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
-    let points: Vec<Vect<3>> = bar
+    let points = bar
         .vertices
         .iter()
         .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
         .collect();
+    (bar, points)
+}
+
+/// The field of a 10 × 1 × 1 bar solved at cells of `cell`, its end x < 2.5 fixed and its end
+/// x > 7.5 a handle moved by `motion` (the handle's lines of a spec).
+fn solved_bar(motion: &str, cell: f64) -> Field<3> {
+    let (bar, points) = test_bar();
     let spec = parse_spec::<3>(
         &format!(
             "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [2.5, 1.1, 1.1] }}\n\
@@ -451,12 +457,7 @@ fn a_region_is_exact_to_its_own_border_not_its_cells() {
 /// its coordinates while the far end turns.
 #[test]
 fn a_fixed_box_beside_a_selection_of_samples_is_exact() {
-    let bar = data_gen::bar([10.0, 1.0, 1.0], 8.0);
-    let points: Vec<Vect<3>> = bar
-        .vertices
-        .iter()
-        .map(|p| Vect::<3>::new(p[0], p[1], p[2]))
-        .collect();
+    let (bar, points) = test_bar();
     let listed = points.iter().position(|p| p.x > 4.9 && p.x < 5.1).unwrap();
     let spec = parse_spec::<3>(
         &format!(
