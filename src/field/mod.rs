@@ -111,9 +111,8 @@ impl<const D: usize> Field<D> {
         // `exact`); a role's other cells (of a connected part where its region holds no
         // center) are held whole.
         let origin = solution.complex.grid.origin;
-        let roles =
-            std::iter::once(Role::Fixed).chain((0..maps.len()).map(|k| Role::Handle(k as u32)));
-        let shaped: Vec<Option<u32>> = roles
+        let shaped: Vec<Option<u32>> = constraints
+            .region_roles()
             .map(|role| {
                 let map = match role {
                     Role::Handle(k) => maps[k as usize],

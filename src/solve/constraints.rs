@@ -168,6 +168,11 @@ pub struct Shapes<const D: usize> {
 }
 
 impl<const D: usize> Constraints<D> {
+    /// The roles a region of the spec holds: fixed, then each handle.
+    pub fn region_roles(&self) -> impl Iterator<Item = Role> + '_ {
+        std::iter::once(Role::Fixed).chain((0..self.handles.len()).map(|k| Role::Handle(k as u32)))
+    }
+
     /// The region with a border that `role` holds ([`Shapes`]): the fixed entries' or a
     /// handle's, when it is one.
     pub fn shape_of(&self, role: Role) -> Option<&Shape<D>> {
@@ -782,8 +787,8 @@ pub fn inherit<const D: usize>(
         sums[p as usize].0 += complex.cells[c].center;
         sums[p as usize].1 += 1.0;
     }
-    let bordered: Vec<Role> = std::iter::once(Role::Fixed)
-        .chain((0..old.handles.len()).map(|k| Role::Handle(k as u32)))
+    let bordered: Vec<Role> = old
+        .region_roles()
         .filter(|&r| old.shape_of(r).is_some())
         .collect();
     for (c, role) in roles.iter_mut().enumerate() {

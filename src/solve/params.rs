@@ -269,9 +269,7 @@ impl<const D: usize> Solution<D> {
         if role != Role::Free && !bordered {
             return Some(role);
         }
-        let roles = std::iter::once(Role::Fixed)
-            .chain((0..constraints.handles.len()).map(|k| Role::Handle(k as u32)));
-        for role in roles {
+        for role in constraints.region_roles() {
             if constraints.shape_of(role).is_some_and(|s| s.contains(p)) {
                 return Some(role);
             }
