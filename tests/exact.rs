@@ -173,11 +173,17 @@ fn test_bar() -> (data_gen::Mesh, Vec<Vect<3>>) {
 /// The field of a 10 × 1 × 1 bar solved at cells of `cell`, its end x < 2.5 fixed and its end
 /// x > 7.5 a handle moved by `motion` (the handle's lines of a spec).
 fn solved_bar(motion: &str, cell: f64) -> Field<3> {
+    solved_bar_ends(motion, cell, 2.5)
+}
+
+/// [`solved_bar`] with ends of length `end` fixed and moved.
+fn solved_bar_ends(motion: &str, cell: f64, end: f64) -> Field<3> {
     let (bar, points) = test_bar();
     let spec = parse_spec::<3>(
         &format!(
-            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [2.5, 1.1, 1.1] }}\n\
-             [[handle]]\nbox = {{ min = [7.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n{motion}"
+            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [{end}, 1.1, 1.1] }}\n\
+             [[handle]]\nbox = {{ min = [{}, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n{motion}",
+            10.0 - end
         ),
         Path::new("."),
         Path::new("edit.toml"),
@@ -235,6 +241,41 @@ fn exact_regions_blend_smoothly_into_the_field() {
             let p = Vect::<3>::new(2.4, y, z) - field.origin;
             assert_eq!(map.warp(&p), p);
         }
+    }
+}
+
+/// Asking for normals leaves the positions as they are, bit for bit, with every transfer: in
+/// the bands by the regions' borders too, where the weights read each sample's coordinates.
+#[test]
+fn normals_leave_the_positions_as_they_are() {
+    let field = solved_bar_ends(
+        "translate = [-3.4, 0.0, 5.9]\nrotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\n",
+        0.25,
+        0.5,
+    );
+    // Six points a unit: coordinates that do not come back bit for bit through the field's
+    // local frame.
+    let points: Vec<Vect<3>> = (0..=60)
+        .flat_map(|i| (0..=6).flat_map(move |j| (0..=6).map(move |k| (i, j, k))))
+        .map(|(i, j, k)| Vect::<3>::new(f64::from(i) / 6.0, f64::from(j) / 6.0, f64::from(k) / 6.0))
+        .collect();
+    let normals = vec![Vect::<3>::new(0.0, 0.0, 1.0); points.len()];
+    for transfer in [Transfer::Rbf, Transfer::Pu, Transfer::Blend] {
+        let map = FieldMap::new(
+            &field,
+            Deformer::new(&field, transfer).unwrap(),
+            Outside::Extend,
+        )
+        .unwrap();
+        let mut alone = vec![Vect::<3>::zeros(); points.len()];
+        map.warp_run(&field.origin, &points, &mut alone);
+        let (mut moved, mut turned) = (alone.clone(), normals.clone());
+        map.warp_run_with_normals(&field.origin, &points, &normals, &mut moved, &mut turned);
+        let differ = alone.iter().zip(&moved).filter(|(a, b)| a != b).count();
+        assert_eq!(
+            differ, 0,
+            "{transfer:?}: {differ} positions change with normals"
+        );
     }
 }
 

@@ -161,6 +161,44 @@ pub(super) fn bands<const D: usize>(leaves: &Leaves<D>, cells: &[u32]) -> Bands<
     }
 }
 
+/// The weights of the `n` regions whose bands meet at one point, combined: each region's
+/// weight `w_r` counts as `w_r Π_{q≠r} (1 − w_q)` and the field's as `Π_q (1 − w_q)`, over
+/// their sum. A region at its own border (`w_r = 1`) then has the whole weight whatever the
+/// others' (so its map is continuous there), and where one band alone reaches its weight is
+/// its own. Returns how many weights stay positive, moved to the front.
+pub(super) fn combine(sums: &mut [(u32, f64); 8], n: usize) -> usize {
+    if n < 2 {
+        return n;
+    }
+    let rest: f64 = sums[..n].iter().map(|s| 1.0 - s.1).product();
+    let mut share = [0.0f64; 8];
+    for i in 0..n {
+        share[i] = sums[i].1
+            * (0..n)
+                .filter(|&j| j != i)
+                .map(|j| 1.0 - sums[j].1)
+                .product::<f64>();
+    }
+    let total = rest + share[..n].iter().sum::<f64>();
+    for i in 0..n {
+        sums[i].1 = if total > 0.0 {
+            share[i] / total
+        } else {
+            // Two regions whole at once (their borders touch): shared evenly.
+            f64::from(u8::from(sums[i].1 == 1.0))
+                / sums[..n].iter().filter(|s| s.1 == 1.0).count() as f64
+        };
+    }
+    let mut kept = 0;
+    for i in 0..n {
+        if sums[i].1 > 0.0 {
+            sums[kept] = sums[i];
+            kept += 1;
+        }
+    }
+    kept
+}
+
 #[cfg(test)]
 #[path = "band_tests.rs"]
 mod tests;

@@ -102,7 +102,8 @@ use std::sync::Mutex;
 use rustc_hash::FxHashSet;
 
 use super::band::{
-    Bands, GROW, Masks, NEIGHBORS, SHAPE_BAND, SIDE, bands, fall, neighbor, profile, smooth,
+    Bands, GROW, Masks, NEIGHBORS, SHAPE_BAND, SIDE, bands, combine, fall, neighbor, profile,
+    smooth,
 };
 use super::leaves::Leaves;
 use super::{Deformer, Field, Shape, Warp, normal_like};
@@ -633,39 +634,7 @@ where
                 n += 1;
             }
         }
-        if n > 1 {
-            // Where bands meet, each region's weight `w_r` counts as `w_r Π_{q≠r} (1 − w_q)`
-            // and the field's as `Π_q (1 − w_q)`, over their sum: 1 for a region at its own
-            // border whatever the others' (so the map is continuous there), the weights
-            // themselves where one band alone reaches.
-            let rest: f64 = sums[..n].iter().map(|s| 1.0 - s.1).product();
-            let mut share = [0.0f64; 8];
-            for i in 0..n {
-                share[i] = sums[i].1
-                    * (0..n)
-                        .filter(|&j| j != i)
-                        .map(|j| 1.0 - sums[j].1)
-                        .product::<f64>();
-            }
-            let total = rest + share[..n].iter().sum::<f64>();
-            for i in 0..n {
-                sums[i].1 = if total > 0.0 {
-                    share[i] / total
-                } else {
-                    // Two regions whole at once (their borders touch): shared evenly.
-                    f64::from(u8::from(sums[i].1 == 1.0))
-                        / sums[..n].iter().filter(|s| s.1 == 1.0).count() as f64
-                };
-            }
-            let mut kept = 0;
-            for i in 0..n {
-                if sums[i].1 > 0.0 {
-                    sums[kept] = sums[i];
-                    kept += 1;
-                }
-            }
-            n = kept;
-        }
+        let n = combine(&mut sums, n);
         (sums, n)
     }
 
@@ -795,6 +764,53 @@ where
         }
     }
 
+    /// [`Warp::warp`] at the local point `x` whose input coordinates are `world`.
+    fn warp_at(&self, x: &Vect<D>, world: &Vect<D>) -> Vect<D> {
+        let mut y = match self.class_of(x) {
+            Class::Exact(m) if self.identity[m as usize] => *x,
+            Class::Exact(m) => self.prescribed.maps[m as usize].apply(x),
+            Class::Free => self.field(x),
+            Class::Band => self.banded(x, world, &self.masks(&self.leaves.voxel(x)), self.field(x)),
+            Class::Outside => match self.outside {
+                Outside::Extend => self.field(x),
+                _ => *x,
+            },
+        };
+        if self.heights_kept {
+            y[D - 1] = x[D - 1];
+        }
+        y
+    }
+
+    /// [`Warp::warp_with_normal`] at the local point `x` whose input coordinates are `world`
+    /// (a run passes its sample itself, so a band's weights read the same numbers as in
+    /// [`Warp::warp_run`]).
+    fn warp_with_normal_at(&self, x: &Vect<D>, world: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
+        if self.heights_kept {
+            return (self.warp_at(x, world), self.level_normal(x, n));
+        }
+        let class = self.class_of(x);
+        match class {
+            Class::Exact(_) => (self.warp_at(x, world), self.warp_normal(x, n)),
+            Class::Free => self.field_with_normal(x, n),
+            Class::Band => {
+                let masks = self.masks(&self.leaves.voxel(x));
+                let (f, fnormal) = self.field_with_normal(x, n);
+                (
+                    self.banded(x, world, &masks, f),
+                    self.banded_normal(x, world, &masks, fnormal, n),
+                )
+            }
+            Class::Outside => {
+                self.count_outside(x);
+                match self.outside {
+                    Outside::Extend => self.field_with_normal(x, n),
+                    _ => (*x, *n),
+                }
+            }
+        }
+    }
+
     fn count_outside(&self, x: &Vect<D>) {
         let d = self.distance(x);
         self.tally.lock().expect("not poisoned").add(x, d);
@@ -806,25 +822,7 @@ where
     Dim<D>: Rigid<D>,
 {
     fn warp(&self, x: &Vect<D>) -> Vect<D> {
-        let mut y = match self.class_of(x) {
-            Class::Exact(m) if self.identity[m as usize] => *x,
-            Class::Exact(m) => self.prescribed.maps[m as usize].apply(x),
-            Class::Free => self.field(x),
-            Class::Band => self.banded(
-                x,
-                &(x + self.origin),
-                &self.masks(&self.leaves.voxel(x)),
-                self.field(x),
-            ),
-            Class::Outside => match self.outside {
-                Outside::Extend => self.field(x),
-                _ => *x,
-            },
-        };
-        if self.heights_kept {
-            y[D - 1] = x[D - 1];
-        }
-        y
+        self.warp_at(x, &(x + self.origin))
     }
 
     fn warp_normal(&self, x: &Vect<D>, n: &Vect<D>) -> Vect<D> {
@@ -846,30 +844,7 @@ where
     }
 
     fn warp_with_normal(&self, x: &Vect<D>, n: &Vect<D>) -> (Vect<D>, Vect<D>) {
-        if self.heights_kept {
-            return (self.warp(x), self.level_normal(x, n));
-        }
-        let class = self.class_of(x);
-        match class {
-            Class::Exact(_) => (self.warp(x), self.warp_normal(x, n)),
-            Class::Free => self.field_with_normal(x, n),
-            Class::Band => {
-                let masks = self.masks(&self.leaves.voxel(x));
-                let (f, fnormal) = self.field_with_normal(x, n);
-                let world = x + self.origin;
-                (
-                    self.banded(x, &world, &masks, f),
-                    self.banded_normal(x, &world, &masks, fnormal, n),
-                )
-            }
-            Class::Outside => {
-                self.count_outside(x);
-                match self.outside {
-                    Outside::Extend => self.field_with_normal(x, n),
-                    _ => (*x, *n),
-                }
-            }
-        }
+        self.warp_with_normal_at(x, &(x + self.origin), n)
     }
 
     fn jacobian(&self, x: &Vect<D>, h: f64) -> nalgebra::SMatrix<f64, D, D> {
@@ -915,7 +890,7 @@ where
                 }
                 (*o, *on) = (*p, *n);
             } else {
-                let (y, m) = self.warp_with_normal(&x, n);
+                let (y, m) = self.warp_with_normal_at(&x, p, n);
                 (*o, *on) = (y + origin, m);
             }
         }
