@@ -409,22 +409,58 @@ fn a_pose_a_whole_turn_from_the_last_keeps_its_winding() {
     assert!(!on.from_rest);
 }
 
+/// The bar's middle nine units twisted by `degrees` about its axis.
+fn long_twist(degrees: f64) -> EditSpec<3> {
+    let text = format!(
+        "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }}\n\
+         [[handle]]\nbox = {{ min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
+         rotate = {{ axis = [1.0, 0.0, 0.0], degrees = {degrees:?} }}\n\
+         pivot = [9.75, 0.5, 0.5]\n"
+    );
+    parse_spec::<3>(&text, Path::new("."), Path::new("live.toml")).unwrap()
+}
+
+/// A drag that outruns its cells keeps the turn: twisted on by 15° a pose with one iteration
+/// each (a hand faster than the solver), the cells would fall a half turn behind the handle and
+/// converge the short way round; a pose more than a load step from the one the session last
+/// converged on converges the last pose first, so the release is `deform`'s 540° twist.
+#[test]
+fn a_drag_that_outruns_its_cells_keeps_the_turn() {
+    let (points, triangles) = bar();
+    let params = params();
+    let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
+    for k in 0..=36 {
+        let step = live
+            .solve(long_twist(15.0 * k as f64), 1, &Silent)
+            .unwrap()
+            .unwrap();
+        assert!(
+            k == 0 || !step.from_rest,
+            "the pose at {}° solved from rest",
+            15 * k
+        );
+    }
+    while live.refine().unwrap().is_some() {}
+    let (moved, _, _, info) = live.release(&[], &Silent).unwrap();
+    let taken = info.solver.turns[0].taken_degrees;
+    assert!(taken.is_some_and(|t| (t - 540.0).abs() < 1e-6), "{taken:?}");
+    let (expected, _, _) =
+        pipeline::deform(&points, &triangles, &long_twist(540.0), &params, &Silent).unwrap();
+    // Converged from another start: to the solver's stopping rule, which along a long twist's
+    // soft modes leaves some hundredths of a cell.
+    let off = farthest(&moved, &expected);
+    assert!(off < 0.1 * 0.25, "the release is {off} from deform's twist");
+}
+
 /// A drag that twists the bar on past where the default soft inside gives way stiffens the
 /// session's inside to a solid's, as `deform` does for the whole turn: dragged in 15° poses to
-/// 720° and refined, a converged pose says so, and after more poses the release is the same
-/// drag's with a solid inside asked for (`interior_stiffness` 1), which says nothing.
+/// 720° and refined, a converged pose says so and starts again from the last pose whose turn
+/// the cells held, and after more poses the release holds the whole 720° as the same drag with
+/// a solid inside asked for (`interior_stiffness` 1) does, which says nothing.
 #[test]
 fn a_drag_past_where_the_soft_inside_gives_way_stiffens_it() {
     let (points, triangles) = bar();
-    let twist = |degrees: f64| {
-        let text = format!(
-            "[[fixed]]\nbox = {{ min = [-0.1, -0.1, -0.1], max = [0.5, 1.1, 1.1] }}\n\
-             [[handle]]\nbox = {{ min = [9.5, -0.1, -0.1], max = [10.1, 1.1, 1.1] }}\n\
-             rotate = {{ axis = [1.0, 0.0, 0.0], degrees = {degrees:?} }}\n\
-             pivot = [9.75, 0.5, 0.5]\n"
-        );
-        parse_spec::<3>(&text, Path::new("."), Path::new("live.toml")).unwrap()
-    };
+    let twist = long_twist;
     let drag = |params: DeformParams| {
         let mut live = Live::new(points.clone(), &triangles, Vec::new(), params).unwrap();
         let mut said = false;
@@ -443,7 +479,10 @@ fn a_drag_past_where_the_soft_inside_gives_way_stiffens_it() {
             live.solve(twist(degrees), 1, &Silent).unwrap().unwrap();
         }
         while live.refine().unwrap().is_some() {}
-        (live.release(&[], &Silent).unwrap().0, said)
+        let (moved, _, _, info) = live.release(&[], &Silent).unwrap();
+        let taken = info.solver.turns[0].taken_degrees;
+        assert!(taken.is_some_and(|t| (t - 720.0).abs() < 1e-6), "{taken:?}");
+        (moved, said)
     };
     let (soft, said) = drag(params());
     assert!(said, "no pose stiffened the inside");
@@ -454,6 +493,11 @@ fn a_drag_past_where_the_soft_inside_gives_way_stiffens_it() {
     };
     let (solid, said) = drag(solid.params().unwrap());
     assert!(!said);
+    // Both converged on the solid's 720° twist from other starts: to the solver's stopping
+    // rule, which along a long twist's soft modes leaves some hundredths of a cell.
     let off = farthest(&soft, &solid);
-    assert!(off < 1e-6, "the release is {off} from the solid drag's");
+    assert!(
+        off < 0.1 * 0.25,
+        "the release is {off} from the solid drag's"
+    );
 }

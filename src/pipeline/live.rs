@@ -4,7 +4,10 @@
 //! [`Live`] builds the cells once. Each [`Live::solve`] takes the whole edit spec: when only
 //! the handles' poses and the pins' destinations changed since the last one, the session goes
 //! on warm from its current motions for a few iterations ([`Session::drag`], a short step per
-//! pose while dragging); otherwise the spec is resolved again and solved from rest.
+//! pose while dragging); otherwise the spec is resolved again and solved from rest. Like a
+//! solve's load steps, a warm pose goes at most a load step past the pose the session last
+//! converged on (the last pose is converged first): a hand faster than the solver would
+//! otherwise leave the cells half a turn behind a twist, and they would untwist.
 //! [`Live::preview`] blends the cells' current motions at the samples (cheap, for every pose);
 //! [`Live::release`] converges and runs the chosen transfer with its exact constraints, as
 //! [`super::deform`] does.
@@ -63,6 +66,8 @@ pub struct Live {
     tied: Vec<(usize, usize)>,
     /// Each handle's selection centroid where the spec it was resolved from gave no pivot.
     centroids: Vec<Option<Vect<3>>>,
+    /// The handles' poses the session last converged on (see [`Live::solve`]).
+    settled: Vec<HandleMotion<3>>,
     /// Each sample's four nearest cells and blend weights, made at the first preview.
     blend: Option<BlendWeights>,
 }
@@ -125,6 +130,7 @@ impl Live {
             warm: false,
             tied: Vec::new(),
             centroids: Vec::new(),
+            settled: Vec::new(),
             blend: None,
         })
     }
@@ -200,52 +206,75 @@ impl Live {
                 },
             )
             .collect();
+        let step = self.params.solve.max_step_degrees;
+        let poses: Vec<HandleMotion<3>> = spec.handles.iter().map(|h| h.value).collect();
         let warm = match (&mut self.session, &self.spec, pivots) {
             (Some(session), Some(last), Some(pivots))
-                if same_but_poses(last, &spec)
-                    && still_tied(&spec)
-                    && !turns_past_a_step(last, &spec, self.params.solve.max_step_degrees) =>
+                if same_but_poses(last, &spec) && still_tied(&spec) =>
             {
-                let mut constraints = session.constraints().clone();
-                for ((handle, entry), pivot) in constraints
-                    .handles
-                    .iter_mut()
-                    .zip(&spec.handles)
-                    .zip(pivots)
-                {
-                    handle.motion = entry.value;
-                    if let Some(p) = pivot {
-                        handle.pivot = p;
+                // A warm step goes at most a load step from the poses the session last
+                // converged on, as a solve's load steps go from the last step's: a drag that
+                // outruns its cells (a handle turned on a step a pose while the cells take two
+                // iterations of it) would otherwise leave them behind by a half turn and more,
+                // and converge the short way round. Past a step, the last pose (within a step)
+                // is converged first; a pose past a step even from there is solved from rest.
+                if turns_past_a_step(&self.settled, &poses, step) && !self.info.converged {
+                    let converged = match session.update(session.constraints().clone()) {
+                        Ok(solver) => solver.converged,
+                        Err(e) => {
+                            self.session = None;
+                            self.spec = None;
+                            return Err(e);
+                        }
+                    };
+                    if converged {
+                        self.settled = last.handles.iter().map(|h| h.value).collect();
                     }
                 }
-                let origin = self.complex.grid.origin;
-                for (pin, entry) in constraints.pins.iter_mut().zip(&spec.pins) {
-                    pin.wanted = entry.to - origin;
-                    pin.to = constraints.trend.back(&pin.wanted).unwrap_or(pin.wanted);
-                }
-                for (target, entry) in constraints.targets.iter_mut().zip(&spec.targets) {
-                    let mut to = entry.to - origin;
-                    if entry.horizontal {
-                        // Its height is the snapped sample's, as it was resolved.
-                        to[2] = target.wanted[2];
-                    }
-                    target.wanted = to;
-                    target.to = constraints.trend.back(&to).unwrap_or(to);
-                }
-                // A drag's step (which may move the cells' ancestors), or the whole solve.
-                let stepped = if max_iterations < self.params.solve.max_iterations {
-                    session.drag(constraints, max_iterations)
+                if turns_past_a_step(&self.settled, &poses, step) {
+                    None
                 } else {
-                    session.update(constraints)
-                };
-                match stepped {
-                    Ok(solver) => Some(solver),
-                    Err(e) => {
-                        // The session may hold constraints it did not solve: the next spec
-                        // starts from rest.
-                        self.session = None;
-                        self.spec = None;
-                        return Err(e);
+                    let mut constraints = session.constraints().clone();
+                    for ((handle, entry), pivot) in constraints
+                        .handles
+                        .iter_mut()
+                        .zip(&spec.handles)
+                        .zip(pivots)
+                    {
+                        handle.motion = entry.value;
+                        if let Some(p) = pivot {
+                            handle.pivot = p;
+                        }
+                    }
+                    let origin = self.complex.grid.origin;
+                    for (pin, entry) in constraints.pins.iter_mut().zip(&spec.pins) {
+                        pin.wanted = entry.to - origin;
+                        pin.to = constraints.trend.back(&pin.wanted).unwrap_or(pin.wanted);
+                    }
+                    for (target, entry) in constraints.targets.iter_mut().zip(&spec.targets) {
+                        let mut to = entry.to - origin;
+                        if entry.horizontal {
+                            // Its height is the snapped sample's, as it was resolved.
+                            to[2] = target.wanted[2];
+                        }
+                        target.wanted = to;
+                        target.to = constraints.trend.back(&to).unwrap_or(to);
+                    }
+                    // A drag's step (which may move the cells' ancestors), or the whole solve.
+                    let stepped = if max_iterations < self.params.solve.max_iterations {
+                        session.drag(constraints, max_iterations)
+                    } else {
+                        session.update(constraints)
+                    };
+                    match stepped {
+                        Ok(solver) => Some(solver),
+                        Err(e) => {
+                            // The session may hold constraints it did not solve: the next spec
+                            // starts from rest.
+                            self.session = None;
+                            self.spec = None;
+                            return Err(e);
+                        }
                     }
                 }
             }
@@ -303,6 +332,9 @@ impl Live {
                 }
             }
         };
+        if step.from_rest || step.solver.converged {
+            self.settled = poses;
+        }
         self.spec = Some(spec);
         self.info = step.solver.clone();
         self.warm = !step.from_rest;
@@ -377,6 +409,9 @@ impl Live {
             return Ok(None);
         };
         let solver = session.refine()?;
+        if let (true, Some(spec)) = (solver.converged, &self.spec) {
+            self.settled = spec.handles.iter().map(|h| h.value).collect();
+        }
         self.info = solver.clone();
         self.warm = true;
         Ok(Some(Step {
@@ -521,21 +556,21 @@ impl Live {
 /// Whether `b` is `a` with only its handles' poses and its pins' destinations changed: the
 /// same regions, pinned points, targets and stiffness, so that the resolved constraints hold
 /// with new handle maps and pin destinations.
-/// Whether a handle of `b` turns from its pose in `a` by more than `step` degrees: a warm
-/// step from there would take the short way round (a pose typed at 360° from rest is the
-/// identity to a rotation matrix), so the pose is solved from rest in load steps, with its
-/// winding.
-fn turns_past_a_step(a: &EditSpec<3>, b: &EditSpec<3>, step: f64) -> bool {
-    a.handles.iter().zip(&b.handles).any(|(h, k)| {
-        let ((axis_a, angle_a), (axis_b, angle_b)) = (h.value.turn, k.value.turn);
-        let apart = if axis_a.dot(&axis_b) >= 1.0 - 1e-9 {
-            (angle_b - angle_a).abs()
-        } else {
-            <Dim<3> as Rigid<3>>::angle(&(k.value.rotation * h.value.rotation.transpose()))
-                .max((angle_b.abs() - angle_a.abs()).abs())
-        };
-        apart.to_degrees() > step
-    })
+/// Whether a handle posed `b` turns from its pose `a` by more than `step` degrees (or the
+/// handles differ in number): a warm step from there could take the short way round (a pose
+/// typed at 360° from rest is the identity to a rotation matrix).
+fn turns_past_a_step(a: &[HandleMotion<3>], b: &[HandleMotion<3>], step: f64) -> bool {
+    a.len() != b.len()
+        || a.iter().zip(b).any(|(h, k)| {
+            let ((axis_a, angle_a), (axis_b, angle_b)) = (h.turn, k.turn);
+            let apart = if axis_a.dot(&axis_b) >= 1.0 - 1e-9 {
+                (angle_b - angle_a).abs()
+            } else {
+                <Dim<3> as Rigid<3>>::angle(&(k.rotation * h.rotation.transpose()))
+                    .max((angle_b.abs() - angle_a.abs()).abs())
+            };
+            apart.to_degrees() > step
+        })
 }
 
 fn same_but_poses(a: &EditSpec<3>, b: &EditSpec<3>) -> bool {

@@ -65,7 +65,7 @@
 //! gives way gives it up at once. The 720° bar then takes 4.9 s instead of 1.0 s, and a turn
 //! the solid refuses too is refused after both, up to a second later (BENCHMARKS.md, "Half
 //! turns, and refusing early"). A session's drag that loses a turn stiffens its inside the same
-//! way (`Session`). An inside's stiffness other than the default is kept, and a shape with no
+//! way (`Session`), and takes the pose again from the last pose whose turn its cells held. An inside's stiffness other than the default is kept, and a shape with no
 //! inside (an open surface, `--shell`) refuses a turn as it always has.
 //!
 //! **Newton's curvature.** The glue energy is not a small-residual problem once a shape is

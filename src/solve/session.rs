@@ -54,6 +54,10 @@ pub struct Session<const D: usize> {
     /// ([`SolverInfo::inside_stiffened`]): the constraints of every later pose are stiffened
     /// the same way, so that a pose solves as a whole run of it does.
     stiffened: Option<(super::TurnRefusal, f64)>,
+    /// While the inside is the default soft one: the motions of the last converged pose whose
+    /// turns the cells held, where a pose that loses its turn starts again with the inside
+    /// stiffened (the steps between may have begun to give way before one converged).
+    held: Option<Vec<Motion<D>>>,
 }
 
 /// Local-global iterations a drag's step takes for each Gauss-Newton iteration it is given
@@ -177,7 +181,11 @@ where
             carried: None,
             anchors: None,
             stiffened: info.inside_stiffened,
+            held: None,
         };
+        if session.params.soft_inside.is_some() && session.stiffened.is_none() {
+            session.held = Some(session.motions.clone());
+        }
         let info = session.finished(info, start);
         Ok((session, info))
     }
@@ -261,14 +269,17 @@ where
             self.dragged = false;
         }
         let soft = self.params.soft_inside.is_some() && self.stiffened.is_none();
-        let before = soft.then(|| self.motions.clone());
         self.warm((max_iterations, per_step), &mut info)?;
-        if let Some(before) = before
-            && self.stiffen_where_given_way(&mut info)?
-        {
-            // The pose again from where it started, with the solid inside.
-            self.motions = before;
-            self.warm((max_iterations, per_step), &mut info)?;
+        if soft {
+            if self.stiffen_where_given_way(&mut info)? {
+                // The pose again from the last one the cells held, with the solid inside.
+                if let Some(held) = self.held.take() {
+                    self.motions = held;
+                }
+                self.warm((max_iterations, per_step), &mut info)?;
+            } else if info.converged {
+                self.held = Some(self.motions.clone());
+            }
         }
         Ok(self.finished(info, start))
     }
