@@ -200,6 +200,20 @@ fn solved_bar_ends(motion: &str, cell: f64, end: f64) -> Field<3> {
     Field::from_solution(&solution)
 }
 
+/// `field` under each transfer, extended past its margin.
+fn every_map(field: &Field<3>) -> Vec<(Transfer, FieldMap<3>)> {
+    [Transfer::Rbf, Transfer::Pu, Transfer::Blend]
+        .into_iter()
+        .map(|transfer| {
+            let inner = Deformer::new(field, transfer).unwrap();
+            (
+                transfer,
+                FieldMap::new(field, inner, Outside::Extend).unwrap(),
+            )
+        })
+        .collect()
+}
+
 /// The map is continuous across a fixed region's border and a handle's: along lines through
 /// both, no small step moves the image much more than the step (the RBF is smooth; the blend
 /// has steps of its own at the corners of its cells, which the exact regions do not add to).
@@ -209,13 +223,7 @@ fn exact_regions_blend_smoothly_into_the_field() {
         "translate = [0.0, 0.0, 3.0]\nrotate = { axis = [0.0, 1.0, 0.0], degrees = -20.0 }\n",
         0.25,
     );
-    for transfer in [Transfer::Rbf, Transfer::Pu, Transfer::Blend] {
-        let map = FieldMap::new(
-            &field,
-            Deformer::new(&field, transfer).unwrap(),
-            Outside::Extend,
-        )
-        .unwrap();
+    for (transfer, map) in every_map(&field) {
         let step = 2.5e-4;
         for (y, z) in [(0.0, 0.0), (0.5, 0.5), (1.0, 0.3)] {
             let slope = |warp: &dyn Fn(&Vect<3>) -> Vect<3>| {
@@ -260,13 +268,7 @@ fn normals_leave_the_positions_as_they_are() {
         .map(|(i, j, k)| Vect::<3>::new(f64::from(i) / 6.0, f64::from(j) / 6.0, f64::from(k) / 6.0))
         .collect();
     let normals = vec![Vect::<3>::new(0.0, 0.0, 1.0); points.len()];
-    for transfer in [Transfer::Rbf, Transfer::Pu, Transfer::Blend] {
-        let map = FieldMap::new(
-            &field,
-            Deformer::new(&field, transfer).unwrap(),
-            Outside::Extend,
-        )
-        .unwrap();
+    for (transfer, map) in every_map(&field) {
         let mut alone = vec![Vect::<3>::zeros(); points.len()];
         map.warp_run(&field.origin, &points, &mut alone);
         let (mut moved, mut turned) = (alone.clone(), normals.clone());
