@@ -219,7 +219,7 @@ impl Live {
                 // and converge the short way round. Past a step, the last pose (within a step)
                 // is converged first; a pose past a step even from there is solved from rest.
                 if turns_past_a_step(&self.settled, &poses, step) && !self.info.converged {
-                    let converged = match session.update(session.constraints().clone()) {
+                    let converged = match session.converge() {
                         Ok(solver) => solver.converged,
                         Err(e) => {
                             self.session = None;
@@ -519,7 +519,7 @@ impl Live {
         // A warm step that stopped short is converged; a solve from rest is taken as it ended,
         // as `deform` takes it.
         if self.warm && !self.info.converged {
-            self.info = session.update(session.constraints().clone())?;
+            self.info = session.converge()?;
         }
         // The turns the cells carry now, and the warnings of this pose (a drag may have
         // turned a handle further than the solve from rest did).

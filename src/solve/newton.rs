@@ -199,8 +199,9 @@ where
             break;
         }
         let t0 = Instant::now();
-        // Newton's curvature once Gauss-Newton has brought the load step near its minimum.
-        let newton = params.newton && iterations > 0;
+        // Newton's curvature once Gauss-Newton has brought the load step near its minimum
+        // (or from the start, where it starts there).
+        let newton = params.newton && (iterations > 0 || params.newton_at_start);
         let (delta, cost) =
             system.step(complex, constraints, motions, &targets_to, newton, settled)?;
         info.seconds_factor += t0.elapsed().as_secs_f64();

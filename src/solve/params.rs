@@ -56,6 +56,11 @@ pub struct SolveParams {
     /// After a load step's first iteration, add the rotations' second-order term to the
     /// Gauss-Newton matrix (Newton's method; see the module docs). Default `true`.
     pub newton: bool,
+    /// Newton's curvature from a load step's first iteration on (with `newton`): for motions
+    /// already converged near this step's minimum (a session converging its pose in place),
+    /// where a first Gauss-Newton step lowers the energy by less than `tolerance` some
+    /// hundredths of a cell short of the minimum along a long twist. Default `false`.
+    pub newton_at_start: bool,
     /// Local-global iterations with the global step solved by this many subdomains
     /// ([`super::schwarz`]): what a solve spread over processes does. 0 (default): as
     /// `method` says. Past 0 it takes the place of `method`'s Gauss-Newton systems.
@@ -109,6 +114,7 @@ impl Default for SolveParams {
             coarse_levels: None,
             method: Method::Auto,
             newton: true,
+            newton_at_start: false,
             carry_loose: true,
             subdomains: 0,
             workers: None,

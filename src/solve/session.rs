@@ -207,23 +207,36 @@ where
         max_iterations: usize,
     ) -> Result<SolverInfo> {
         let constraints = self.as_first_solved(constraints);
-        self.update_steps(constraints, (max_iterations, DRAG_LOCAL_GLOBAL))
+        self.update_steps(constraints, (max_iterations, DRAG_LOCAL_GLOBAL), false)
     }
 
     /// One step more on the current constraints while nothing moves (an idle face's
-    /// refinement): one Gauss-Newton iteration, or [`IDLE_LOCAL_GLOBAL`] local-global ones.
+    /// refinement): one Newton iteration (its curvature from the first, as in
+    /// [`Session::converge`]), or [`IDLE_LOCAL_GLOBAL`] local-global ones.
     pub fn refine(&mut self) -> Result<SolverInfo> {
         let constraints = self.constraints.clone();
-        self.update_steps(constraints, (1, IDLE_LOCAL_GLOBAL))
+        self.update_steps(constraints, (1, IDLE_LOCAL_GLOBAL), true)
+    }
+
+    /// The current constraints solved to convergence from the current motions (a release, or
+    /// a pose converged before a drag goes on): as [`Session::update`] with the same
+    /// constraints, its Gauss-Newton iterations Newton's from the first, as the motions are
+    /// near the minimum already (the last load step of [`super::solve`] ends on Newton's).
+    pub fn converge(&mut self) -> Result<SolverInfo> {
+        let constraints = self.constraints.clone();
+        let steps = (self.params.max_iterations, DRAG_LOCAL_GLOBAL);
+        self.update_steps(constraints, steps, true)
     }
 
     /// [`Session::update_with`], a step short of the solver's limit taking `per_step`
     /// local-global iterations for each of `max_iterations`, on `constraints` as the session
-    /// solves them ([`Session::as_first_solved`]).
+    /// solves them ([`Session::as_first_solved`]); `in_place` where they are the session's
+    /// own, the motions near their minimum (Newton's iterations from the first).
     fn update_steps(
         &mut self,
         constraints: Constraints<D>,
         (max_iterations, per_step): (usize, usize),
+        in_place: bool,
     ) -> Result<SolverInfo> {
         if constraints.roles.len() != self.complex.len() {
             return Err(Error::solver(format!(
@@ -260,6 +273,8 @@ where
                 &stage.holders,
             );
         }
+        // Motions carried down from a drag's ancestors are not near the cells' minimum.
+        let in_place = in_place && !self.dragged;
         if self.dragged {
             prescribe(&self.complex, &self.constraints, &mut self.motions, 1.0);
             let targets = targets_at(&self.constraints, 1.0);
@@ -269,14 +284,14 @@ where
             self.dragged = false;
         }
         let soft = self.params.soft_inside.is_some() && self.stiffened.is_none();
-        self.warm((max_iterations, per_step), &mut info)?;
+        self.warm((max_iterations, per_step), in_place, &mut info)?;
         if soft {
             if self.stiffen_where_given_way(&mut info)? {
                 // The pose again from the last one the cells held, with the solid inside.
                 if let Some(held) = self.held.take() {
                     self.motions = held;
                 }
-                self.warm((max_iterations, per_step), &mut info)?;
+                self.warm((max_iterations, per_step), false, &mut info)?;
             } else if info.converged {
                 self.held = Some(self.motions.clone());
             }
@@ -284,15 +299,20 @@ where
         Ok(self.finished(info, start))
     }
 
-    /// [`warm_steps`] on the session's cells from its motions.
-    fn warm(&mut self, steps: (usize, usize), info: &mut SolverInfo) -> Result<()> {
+    /// [`warm_steps`] on the session's cells from its motions (`in_place`: near their
+    /// minimum, [`SolveParams::newton_at_start`]).
+    fn warm(&mut self, steps: (usize, usize), in_place: bool, info: &mut SolverInfo) -> Result<()> {
         let cells = (
             &mut self.system,
             &self.complex,
             &self.constraints,
             &mut self.motions[..],
         );
-        warm_steps(cells, &self.params, steps, info)
+        let params = SolveParams {
+            newton_at_start: in_place,
+            ..self.params
+        };
+        warm_steps(cells, &params, steps, info)
     }
 
     /// Where the session's inside is still the default soft one and a converged pose has lost a
@@ -383,7 +403,8 @@ where
             _ => {
                 let (complex, on_parents) = drag_parents(&self.complex, &constraints);
                 if 3 * complex.len() > 2 * self.complex.len() {
-                    return self.update_steps(constraints, (max_iterations, DRAG_LOCAL_GLOBAL));
+                    let steps = (max_iterations, DRAG_LOCAL_GLOBAL);
+                    return self.update_steps(constraints, steps, false);
                 }
                 let system = self.system_for(&complex, &on_parents, &mut info)?;
                 let holders = holders(&complex, &self.complex);
