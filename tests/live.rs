@@ -453,6 +453,23 @@ fn a_drag_that_outruns_its_cells_keeps_the_turn() {
     assert!(off < 1e-4, "the release is {off} from deform's twist");
 }
 
+/// A release converges its pose, and the drag goes on warm from there: a pose a few degrees
+/// past the released one is a warm step, however far it is from the last pose converged before.
+#[test]
+fn a_drag_goes_on_warm_after_a_release() {
+    let (points, triangles) = bar();
+    let mut live = Live::new(points, &triangles, Vec::new(), params()).unwrap();
+    live.solve(long_twist(0.0), 1, &Silent).unwrap().unwrap();
+    let step = live.solve(long_twist(25.0), 1, &Silent).unwrap().unwrap();
+    assert!(!step.from_rest && !step.solver.converged);
+    live.release(&[], &Silent).unwrap();
+    let step = live.solve(long_twist(35.0), 1, &Silent).unwrap().unwrap();
+    assert!(
+        !step.from_rest,
+        "the pose after the release solved from rest"
+    );
+}
+
 /// A drag that twists the bar on past where the default soft inside gives way stiffens the
 /// session's inside to a solid's, as `deform` does for the whole turn: dragged in 15° poses to
 /// 720° and refined, a converged pose says so and starts again from the last pose whose turn

@@ -218,18 +218,25 @@ impl Live {
                 // iterations of it) would otherwise leave them behind by a half turn and more,
                 // and converge the short way round. Past a step, the last pose (within a step)
                 // is converged first; a pose past a step even from there is solved from rest.
-                if turns_past_a_step(&self.settled, &poses, step) && !self.info.converged {
-                    let converged = match session.converge() {
-                        Ok(solver) => solver.converged,
+                let last_poses: Vec<HandleMotion<3>> =
+                    last.handles.iter().map(|h| h.value).collect();
+                let mut converged_first = None;
+                if turns_past_a_step(&self.settled, &poses, step)
+                    && !self.info.converged
+                    && !turns_past_a_step(&last_poses, &poses, step)
+                {
+                    let solver = match session.converge() {
+                        Ok(solver) => solver,
                         Err(e) => {
                             self.session = None;
                             self.spec = None;
                             return Err(e);
                         }
                     };
-                    if converged {
-                        self.settled = last.handles.iter().map(|h| h.value).collect();
+                    if solver.converged {
+                        self.settled = last_poses;
                     }
+                    converged_first = Some(solver);
                 }
                 if turns_past_a_step(&self.settled, &poses, step) {
                     None
@@ -267,7 +274,13 @@ impl Live {
                         session.update(constraints)
                     };
                     match stepped {
-                        Ok(solver) => Some(solver),
+                        Ok(mut solver) => {
+                            // The step's report counts the converge before it too.
+                            if let Some(first) = converged_first {
+                                solver.iterations += first.iterations;
+                            }
+                            Some(solver)
+                        }
                         Err(e) => {
                             // The session may hold constraints it did not solve: the next spec
                             // starts from rest.
@@ -520,6 +533,9 @@ impl Live {
         // as `deform` takes it.
         if self.warm && !self.info.converged {
             self.info = session.converge()?;
+            if let (true, Some(spec)) = (self.info.converged, &self.spec) {
+                self.settled = spec.handles.iter().map(|h| h.value).collect();
+            }
         }
         // The turns the cells carry now, and the warnings of this pose (a drag may have
         // turned a handle further than the solve from rest did).
@@ -553,9 +569,6 @@ impl Live {
     }
 }
 
-/// Whether `b` is `a` with only its handles' poses and its pins' destinations changed: the
-/// same regions, pinned points, targets and stiffness, so that the resolved constraints hold
-/// with new handle maps and pin destinations.
 /// Whether a handle posed `b` turns from its pose `a` by more than `step` degrees (or the
 /// handles differ in number): a warm step from there could take the short way round (a pose
 /// typed at 360° from rest is the identity to a rotation matrix).
@@ -573,6 +586,9 @@ fn turns_past_a_step(a: &[HandleMotion<3>], b: &[HandleMotion<3>], step: f64) ->
         })
 }
 
+/// Whether `b` is `a` with only its handles' poses and its pins' destinations changed: the
+/// same regions, pinned points, targets and stiffness, so that the resolved constraints hold
+/// with new handle maps and pin destinations.
 fn same_but_poses(a: &EditSpec<3>, b: &EditSpec<3>) -> bool {
     a.fixed == b.fixed
         && a.pins.len() == b.pins.len()

@@ -65,8 +65,9 @@
 //! gives way gives it up at once. The 720° bar then takes 4.9 s instead of 1.0 s, and a turn
 //! the solid refuses too is refused after both, up to a second later (BENCHMARKS.md, "Half
 //! turns, and refusing early"). A session's drag that loses a turn stiffens its inside the same
-//! way (`Session`), and takes the pose again from the last pose whose turn its cells held. An inside's stiffness other than the default is kept, and a shape with no
-//! inside (an open surface, `--shell`) refuses a turn as it always has.
+//! way (`Session`), and takes the pose again from the last pose whose turn its cells held. An
+//! inside's stiffness other than the default is kept, and a shape with no inside (an open
+//! surface, `--shell`) refuses a turn as it always has.
 //!
 //! **Newton's curvature.** The glue energy is not a small-residual problem once a shape is
 //! bent: the pairs' residuals stay large at the minimum, and Gauss-Newton, which leaves out
@@ -79,7 +80,10 @@
 //! factorization fails and the step falls back to the term's positive part per cell, which
 //! keeps the matrix positive definite (the multilevel path, whose conjugate gradients then
 //! fail, falls back to plain Gauss-Newton). The first iteration of each load step, which starts
-//! where the handles jumped, uses the positive part too. A load step before the last only
+//! where the handles jumped, uses the positive part alone; a session converging its pose in
+//! place (its release, an idle refinement), whose motions are near the minimum already, takes
+//! the whole term from the first ([`SolveParams::newton_at_start`]: a first Gauss-Newton step there lowered the
+//! energy by less than the tolerance 0.07 cells short of the minimum along a twist). A load step before the last only
 //! has to bring the motions near the path's minimum (so that the next starts on the right
 //! side of a saddle): it stops at `INTERMEDIATE_TOLERANCE` or after
 //! `INTERMEDIATE_ITERATIONS`. On the tube: 42 iterations and 5.6 s became 11 iterations and

@@ -55,8 +55,9 @@ pub struct Session<const D: usize> {
     /// the same way, so that a pose solves as a whole run of it does.
     stiffened: Option<(super::TurnRefusal, f64)>,
     /// While the inside is the default soft one: the motions of the last converged pose whose
-    /// turns the cells held, where a pose that loses its turn starts again with the inside
-    /// stiffened (the steps between may have begun to give way before one converged).
+    /// turns the cells held (under constraints of the present structure), where a pose that
+    /// loses its turn starts again with the inside stiffened (the steps between may have begun
+    /// to give way before one converged).
     held: Option<Vec<Motion<D>>>,
 }
 
@@ -251,6 +252,8 @@ where
             self.drag = None;
             self.stale_system = false;
             self.system = self.system_for(&self.complex, &constraints, &mut info)?;
+            // Motions held under other roles, stiffness or targets are no start for these.
+            self.held = None;
         }
         self.constraints = constraints;
         // A whole solve after a drag on the ancestors starts coarse to fine: the ancestors
@@ -284,12 +287,14 @@ where
             self.dragged = false;
         }
         let soft = self.params.soft_inside.is_some() && self.stiffened.is_none();
+        let before = (soft && self.held.is_none()).then(|| self.motions.clone());
         self.warm((max_iterations, per_step), in_place, &mut info)?;
         if soft {
             if self.stiffen_where_given_way(&mut info)? {
-                // The pose again from the last one the cells held, with the solid inside.
-                if let Some(held) = self.held.take() {
-                    self.motions = held;
+                // The pose again from the last one the cells held (or, held none under these
+                // constraints, from where it started), with the solid inside.
+                if let Some(start) = self.held.take().or(before) {
+                    self.motions = start;
                 }
                 self.warm((max_iterations, per_step), false, &mut info)?;
             } else if info.converged {

@@ -856,8 +856,8 @@ def live_ends_on_deforms_shape(obj, empty, turns, angles):
     """Live from the rest pose on `obj`, its Empty typed to each of `angles` in turn, then
     Enter: the exact shape of the last pose is Deform's (its shape key now, with the turns
     `turns` along the bar). Converged from the dragged cells, not from rest by load steps, it
-    stops at the solver's move test (a thousandth of a cell) from another start: 2.5 to 2.8
-    thousandths of a cell apart in runs here, so allow ten (0.004 on the 10-unit bar), and the
+    ends by Newton's iterations as Deform's last load step does, from another start: about
+    1e-4 of a cell apart in runs here; allow a hundredth (0.004 on the 10-unit bar), and the
     turns along the bar within a tenth of a degree."""
     want = vertices(obj, "RigidCells")
     obj.shape_key_clear()
