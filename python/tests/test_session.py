@@ -33,15 +33,19 @@ def test_a_drag_ends_on_the_shape_deform_gives():
     assert live.last.from_rest and live.last.converged and live.cells > 100
     assert np.abs(live.preview() - pts).max() < 1e-12
     tip = int(np.argmax(pts[:, 0] + pts[:, 2]))
-    rises = []
+    rises, iterations = [], []
     for k in range(1, 13):
         f = k / 12
         step = live.drag({"rotate": {"axis": [0, 1, 0], "degrees": -40 * f},
                           "translate": [0, 0, 3 * f], "pivot": [10.0, 0.5, 0.5]})
-        # A short step: one Gauss-Newton iteration, or two local-global ones.
-        assert not step.from_rest and 1 <= step.iterations <= 4
+        assert not step.from_rest and step.iterations >= 1
+        iterations.append(step.iterations)
         rises.append(live.preview()[tip, 2] - pts[tip, 2])
     assert all(b > a for a, b in zip(rises, rises[1:])), rises
+    # Short steps (one Gauss-Newton iteration, or two local-global ones), but for the one pose
+    # that goes more than a load step (30°) past the rest pose: the pose before it is converged
+    # first, and that step counts its iterations.
+    assert sum(n > 4 for n in iterations) == 1 and iterations[-1] <= 4, iterations
     while live.refine():
         pass
     assert live.converged
