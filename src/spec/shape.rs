@@ -43,8 +43,9 @@ impl<const D: usize> Shape<D> {
     /// The shape of `region`, when it is a region of space with a border: not a selection of
     /// samples (indices, classes, what a camera sees) nor a polygon on a screen.
     pub fn of(region: &Region<D>) -> Option<Self> {
-        // Only what a field file takes back (finite numbers among them): a field that `deform`
-        // saves, `apply` reads.
+        // Only what a field file takes back (`Shape::read` refuses what the spec could not
+        // have made: corners out of order, a zero normal, a ring of two points, non-finite
+        // numbers): a field that `deform` saves, `apply` reads.
         let shape = Self::part_of(region)?;
         let mut bytes = Vec::new();
         shape.write(&mut bytes);
@@ -53,25 +54,14 @@ impl<const D: usize> Shape<D> {
 
     fn part_of(region: &Region<D>) -> Option<Self> {
         Some(match region {
-            // What `Shape::read` takes back.
-            Region::Box { min, max } if (0..D).all(|a| min[a] <= max[a]) => {
-                Self::Part(Box::new(region.clone()))
-            }
-            Region::Sphere { radius, .. } if *radius >= 0.0 => Self::Part(Box::new(region.clone())),
-            Region::Plane { normal, .. } if normal.norm() > 0.0 => {
+            Region::Box { .. } | Region::Sphere { .. } | Region::Plane { .. } => {
                 Self::Part(Box::new(region.clone()))
             }
             // The rings and heights alone: where they were read from is the spec's to say.
-            Region::Polygon(p)
-                if !p.rings.is_empty()
-                    && p.rings.iter().all(|r| r.len() >= 3)
-                    && !p.z.is_some_and(|[z0, z1]| z0 > z1) =>
-            {
-                Self::Part(Box::new(Region::Polygon(Polygon::new(
-                    p.rings.clone(),
-                    p.z,
-                ))))
-            }
+            Region::Polygon(p) => Self::Part(Box::new(Region::Polygon(Polygon::new(
+                p.rings.clone(),
+                p.z,
+            )))),
             Region::All(parts) => {
                 Self::All(parts.iter().map(Self::part_of).collect::<Option<_>>()?)
             }
