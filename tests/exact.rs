@@ -11,8 +11,10 @@ use rigidcells::Silent;
 use rigidcells::internal::field::{Deformer, Field, FieldMap, Outside, Transfer, Warp};
 use rigidcells::internal::io::{Document, LasHeader};
 use rigidcells::internal::pipeline::{self, Options};
+use rigidcells::internal::rigid::Affine;
+use rigidcells::internal::solve::trend::TrendMap;
 use rigidcells::parse_spec;
-use rigidcells::{Dim, Rigid, Vect};
+use rigidcells::{Dim, Mat, Rigid, Vect};
 
 /// Deforms the LAS/LAZ `input` under `edit` with each of `transfers` and checks that every
 /// sample west of `fixed_x` keeps its record's bytes and every sample east of `handle_x` lands
@@ -268,7 +270,15 @@ fn normals_leave_the_positions_as_they_are() {
         .map(|(i, j, k)| Vect::<3>::new(f64::from(i) / 6.0, f64::from(j) / 6.0, f64::from(k) / 6.0))
         .collect();
     let normals = vec![Vect::<3>::new(0.0, 0.0, 1.0); points.len()];
-    for (transfer, map) in every_map(&field) {
+    // And under a control points' trend (here an affine one), which the transfer's values go
+    // through.
+    let mut trended = field.clone();
+    trended.trend = TrendMap::affine(Affine {
+        linear: Mat::<3>::new(1.01, 0.02, 0.0, -0.02, 0.99, 0.01, 0.0, 0.0, 1.0),
+        translation: Vect::<3>::new(0.3, -0.7, 0.1),
+    });
+    let maps = every_map(&field).into_iter().chain(every_map(&trended));
+    for (transfer, map) in maps {
         let mut alone = vec![Vect::<3>::zeros(); points.len()];
         map.warp_run(&field.origin, &points, &mut alone);
         let mut moved = vec![Vect::<3>::repeat(f64::NAN); points.len()];

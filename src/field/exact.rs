@@ -734,12 +734,19 @@ where
         }
     }
 
-    /// The transfer's run of samples (world coordinates), after the trend.
+    /// The transfer's run of samples (world coordinates), after the trend. Under a trend the
+    /// transfer runs on the local points and the trend takes its local values, as for a single
+    /// sample ([`Self::field_with_normal`]): a world value taken back to the local frame would
+    /// not round-trip bit for bit.
     fn field_run(&self, origin: &Vect<D>, points: &[Vect<D>], out: &mut [Vect<D>]) {
-        self.inner.warp_run(origin, points, out);
-        if let Some(t) = &self.trend {
-            for o in out.iter_mut() {
-                *o = t.apply(&(*o - origin)) + origin;
+        match &self.trend {
+            None => self.inner.warp_run(origin, points, out),
+            Some(t) => {
+                let local: Vec<Vect<D>> = points.iter().map(|p| p - origin).collect();
+                self.inner.warp_run(&Vect::<D>::zeros(), &local, out);
+                for o in out.iter_mut() {
+                    *o = t.apply(o) + origin;
+                }
             }
         }
     }
