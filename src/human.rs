@@ -72,16 +72,26 @@ pub fn typed(v: f64) -> String {
     }
 }
 
-/// An angle in degrees as people write it, with its sign: to a thousandth of a degree at
-/// most, without trailing zeros (180.00000000000003 → `180°`, 22.25 → `22.25°`, −90 → `-90°`).
-/// Round an angle measured more coarsely before (a matrix's turn to 0.1°, a held turn to 1°).
+/// An angle in degrees as people write it, with its sign: as typed where its shortest text has
+/// six decimals or fewer (−199.99999 → `-199.99999°`, 22.25 → `22.25°`, −90 → `-90°`), else to
+/// a thousandth of a degree at most, without trailing zeros (180.00000000000003 → `180°`, a
+/// single-precision 180° read back as 179.9999950954438 → `180°`). Round an angle measured
+/// more coarsely before (a matrix's turn to 0.1°, a held turn to 1°).
 pub fn degrees(v: f64) -> String {
-    let text = format!("{v:.3}");
-    let text = match text.contains('.') {
-        true => text.trim_end_matches('0').trim_end_matches('.'),
-        false => &text,
+    let shortest = typed(v);
+    let short = shortest
+        .split_once('.')
+        .is_none_or(|(_, decimals)| decimals.len() <= 6);
+    let text = if v.is_finite() && short && !shortest.contains('e') {
+        shortest
+    } else {
+        let text = format!("{v:.3}");
+        match text.contains('.') {
+            true => text.trim_end_matches('0').trim_end_matches('.').into(),
+            false => text,
+        }
     };
-    match text {
+    match text.as_str() {
         "-0" => "0°".into(),
         t => format!("{t}°"),
     }
@@ -138,7 +148,10 @@ mod tests {
         assert_eq!(degrees(179.9999950954438), "180°");
         assert_eq!(degrees(22.25), "22.25°");
         assert_eq!(degrees(-90.0), "-90°");
-        assert_eq!(degrees(-0.0001), "0°");
+        assert_eq!(degrees(-0.0001), "-0.0001°");
+        assert_eq!(degrees(-1e-8), "0°");
+        assert_eq!(degrees(-199.99999), "-199.99999°");
+        assert_eq!(degrees(1e-14), "0°");
         assert_eq!(degrees(720.0), "720°");
     }
 

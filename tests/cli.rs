@@ -646,8 +646,8 @@ fn options_the_cells_leave_without_effect_are_said() {
     assert!(
         said.iter().any(|w| w
             == "--interior-stiffness 0.1 scales nothing: no cell lies inside the shape (a \
-                flood fill from outside found none: an open surface, or points with gaps wider \
-                than a cell)"),
+                flood fill from outside found none: an open surface, points with gaps wider \
+                than a cell, or a shape no thicker than two cells)"),
         "{said:?}"
     );
     let said = warnings(&["--cell-size", "0.25", "--interior-stiffness", "0.1"]);

@@ -264,10 +264,13 @@ pub(crate) fn build_warnings<const D: usize>(
                 .set(Opt::InteriorStiffness, params.interior_stiffness)
                 .text(" scales nothing: no cell lies inside the shape (")
                 .text(match build.inside {
-                    Inside::Winding => "its winding numbers found none: an open surface",
+                    Inside::Winding => {
+                        "its winding numbers found none: an open surface, or a shape no \
+                         thicker than two cells, whose every cell holds part of its surface"
+                    }
                     _ => {
-                        "a flood fill from outside found none: an open surface, or points \
-                         with gaps wider than a cell"
+                        "a flood fill from outside found none: an open surface, points \
+                         with gaps wider than a cell, or a shape no thicker than two cells"
                     }
                 })
                 .text(")"),

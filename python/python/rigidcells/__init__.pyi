@@ -21,11 +21,11 @@ class FormatError(ValueError):
 
 class TurnNotHeldError(ValueError):
     """A handle's turn that the shape gives way under: `handle` is its index in the spec's
-    handles (`spec["handle"][handle]`), `line` its line in a TOML spec, `kind` "bend" or
-    "twist", `said` the message after the handle's name."""
+    handles (`spec["handle"][handle]`), `line` its line in a TOML spec (None for a dict spec),
+    `kind` "bend" or "twist", `said` the message after the handle's name."""
 
     handle: int
-    line: int
+    line: Optional[int]
     kind: Literal["bend", "twist"]
     asked_degrees: float
     held_degrees: float

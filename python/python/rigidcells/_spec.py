@@ -195,7 +195,10 @@ def _call(paths: Optional[List[str]], f: Any, *args: Any) -> Any:
 
 
 def _turn_said(error: TurnNotHeldError, name: str) -> TurnNotHeldError:
-    """The refusal with the handle called ``name`` (``spec["handle"][0]``), its fields kept."""
+    """The refusal with the handle called ``name`` (``spec["handle"][0]``), its fields kept but
+    ``line`` (None: a dict spec has no lines)."""
     said = TurnNotHeldError(f"{name} {error.said}")
     said.__dict__.update(error.__dict__)
+    # The line is the TOML's the package wrote, not one the user did.
+    said.line = None
     return said
