@@ -72,6 +72,12 @@ pub fn typed(v: f64) -> String {
     }
 }
 
+/// Numbers the user typed, as a list as typed: `[0, 0.5, -1]` (each as [`typed`] says it).
+pub fn list(v: &[f64]) -> String {
+    let items: Vec<String> = v.iter().map(|&x| typed(x)).collect();
+    format!("[{}]", items.join(", "))
+}
+
 /// An angle in degrees as people write it, with its sign: as typed where its shortest text has
 /// six decimals or fewer (−199.99999 → `-199.99999°`, 22.25 → `22.25°`, −90 → `-90°`), else to
 /// a thousandth of a degree at most, without trailing zeros (180.00000000000003 → `180°`, a
@@ -153,6 +159,7 @@ mod tests {
         assert_eq!(degrees(-199.99999), "-199.99999°");
         assert_eq!(degrees(1e-14), "0°");
         assert_eq!(degrees(720.0), "720°");
+        assert_eq!(list(&[0.0, 0.5, -1.0, f64::NAN]), "[0, 0.5, -1, nan]");
     }
 
     #[test]

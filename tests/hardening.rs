@@ -883,7 +883,7 @@ fn an_extreme_allowed_motion_writes_a_las_that_reads_back() {
     .unwrap();
     let r = deform(&input, &out, &edit, &["--cells", "300"]);
     assert_eq!(r.code, 4, "{}", r.stderr);
-    assert!(r.stderr.contains("times the shape's size"), "{}", r.stderr);
+    assert!(r.stderr.contains("times the cells' extent"), "{}", r.stderr);
 }
 
 /// A tiny `--refine-strain` split every cell round after round (minutes on the tube): the
@@ -969,7 +969,7 @@ fn motions_far_past_the_shapes_size_are_refused_unless_the_shape_moves_whole() {
     assert!(
         r.stderr
             .contains("handle #1 (line 3) of the edit spec moves")
-            && r.stderr.contains("times the shape's size"),
+            && r.stderr.contains("times the cells' extent"),
         "{}",
         r.stderr
     );

@@ -244,7 +244,7 @@ fn spec_errors_name_the_line_of_the_element() {
         (
             3,
             "[0, 0, 1, 1]",
-            "line 9: `matrix` must be finite with last row [0 … 0 1], got [0.0, 0.0, 1.0, 1.0]",
+            "line 9: `matrix` must be finite with last row [0 … 0 1], got [0, 0, 1, 1]",
         ),
     ] {
         let mut rows = id;

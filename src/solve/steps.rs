@@ -79,7 +79,7 @@ where
         let farthest = farthest.map_or("a constraint", |f| f.1.as_str());
         return Err(Error::param(format!(
             "{farthest} of the edit spec moves {} relative to the rest of the edit, {:.0} times \
-             the shape's size of {}: more than {MAX_TRAVEL} times is refused (it tears the shape \
+             the cells' extent ({}): more than {MAX_TRAVEL} times is refused (it tears the shape \
              apart); check the spec's units and coordinates",
             crate::human::length(travel, extent),
             travel / extent,

@@ -151,8 +151,8 @@ fn finite_vector<const D: usize>(v: &Vect<D>, what: &str) -> std::result::Result
     match v.iter().all(|x| x.is_finite() && x.abs() <= LARGEST) {
         true => Ok(()),
         false => Err(format!(
-            "{what} must be {D} finite numbers of at most {LARGEST:e}, got {:?}",
-            v.as_slice()
+            "{what} must be {D} finite numbers of at most {LARGEST:e}, got {}",
+            crate::human::list(v.as_slice())
         )),
     }
 }
@@ -164,12 +164,15 @@ fn check_region<const D: usize>(region: &Region<D>) -> std::result::Result<(), S
     let finite = |v: &Vect<D>, what: &str| match v.iter().all(|x| x.is_finite()) {
         true => Ok(()),
         false => Err(format!(
-            "{what} must be {D} finite numbers, got {:?}",
-            v.as_slice()
+            "{what} must be {D} finite numbers, got {}",
+            crate::human::list(v.as_slice())
         )),
     };
     let numbers = |v: &Vect<D>, what: &str| match v.iter().any(|x| x.is_nan()) {
-        true => Err(format!("{what} is not a number: {:?}", v.as_slice())),
+        true => Err(format!(
+            "{what} is not a number: {}",
+            crate::human::list(v.as_slice())
+        )),
         false => Ok(()),
     };
     let rings = |polygon: &super::Polygon| {

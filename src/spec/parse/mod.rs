@@ -473,7 +473,10 @@ impl<'a> Ctx<'a> {
         if v.len() != D || !v.iter().all(|x| x.is_finite()) {
             return Err(self.error(
                 self.at(line, key),
-                format!("`{key}` must be {D} finite numbers, got {v:?}"),
+                format!(
+                    "`{key}` must be {D} finite numbers, got {}",
+                    crate::human::list(v)
+                ),
             ));
         }
         Ok(Vect::<D>::from_column_slice(v))

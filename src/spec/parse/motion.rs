@@ -113,8 +113,8 @@ impl Ctx<'_> {
             return Err(self.error(
                 self.at_element(line, "matrix", &[D]),
                 format!(
-                    "`matrix` must be finite with last row [0 … 0 1], got {:?}",
-                    m[D]
+                    "`matrix` must be finite with last row [0 … 0 1], got {}",
+                    crate::human::list(&m[D])
                 ),
             ));
         }

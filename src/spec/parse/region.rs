@@ -251,9 +251,9 @@ impl Ctx<'_> {
             return Err(self.error(
                 self.at_element(line, key, &[i]),
                 format!(
-                    "`{key}` point {} is {:?}: a point is [x, y], two finite numbers",
+                    "`{key}` point {} is {}: a point is [x, y], two finite numbers",
                     i + 1,
-                    v[i]
+                    crate::human::list(&v[i])
                 ),
             ));
         }
