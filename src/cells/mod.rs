@@ -22,6 +22,7 @@ mod build;
 mod decimate;
 mod export;
 mod morton;
+mod raster;
 pub(crate) use morton::morton as morton_code;
 mod size;
 #[cfg(test)]

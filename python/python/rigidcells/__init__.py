@@ -216,11 +216,9 @@ class Report:
         turns = [dict(t) for t in info.get("handle_turns", [])]
         if paths is not None:
             for t in turns:
-                n = t["line"]
+                n, t["line"] = t["line"], None  # a key path, not a line of the package's TOML
                 if 0 < n <= len(paths):
                     t["key"] = paths[n - 1]
-                # The line is the TOML's the package wrote, not one the user did.
-                t["line"] = None
         known["handle_turns"] = turns
         report = Report(**known)
         report._warning_parts = list(info.get("warnings", []))
@@ -479,10 +477,9 @@ def deform(
 
     ``report.warnings`` are also emitted as ``RigidCellsWarning`` warnings.
     ``report.handle_turns``: per turning handle, its ``line`` in a TOML spec (a dict spec's
-    ``key`` instead, ``spec["handle"][0]``, and ``line`` None), the turn asked and
-    the turn the cells carry from the fixed cells to it; ``report.warnings`` says when they
-    differ by more than a tenth. A turn the shape cannot carry (a whole turn of a part as short
-    as it is wide) is a ``ValueError`` rather than a part untwisted the short way round.
+    ``key``, ``line`` None), the turn asked and the turn the cells carry from the fixed cells
+    to it; ``report.warnings`` says when they differ by more than a tenth. A turn the shape
+    cannot carry (a whole turn of a part as short as it is wide) is a ``TurnNotHeldError``.
     """
     options = _picked(locals())
     p = _Points(points, scale, offset)
