@@ -91,6 +91,7 @@ fn collapse_and_recover<const D: usize>(
         pins: vec![],
         targets: vec![],
         stiffness: vec![1.0; complex.len()],
+        inside: 1.0,
         origin: complex.grid.origin,
         warnings: vec![],
         trend: Default::default(),
@@ -876,6 +877,47 @@ fn coarsened_cells_keep_their_roles_and_adaptive_refines_where_it_bends() {
             _ => {}
         }
     }
+}
+
+/// A soft inside (the default) merges with the surface for a coarse stage: a parent of
+/// surface and inside cells takes their mean stiffness, so the stage is as coarse as a uniform
+/// solid's. The cells an adaptive solve starts from keep the two apart, each cell with the
+/// stiffness of the cells it stands for.
+#[test]
+fn a_soft_inside_merges_with_the_surface_for_a_coarse_stage() {
+    use rigidcells::internal::cells::CellKind;
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let fine = cells(&pts, &triangles, 0.125);
+    assert!(fine.cells.iter().any(|c| c.kind == CellKind::Interior));
+    let spec = bar_ends("rotate = { axis = [1.0, 0.0, 0.0], degrees = 90.0 }");
+    let solid = resolved(&fine, &pts, &spec);
+    let mut soft = solid.clone();
+    soft.scale_interior(&fine, 0.05);
+    let (solid_stage, _) = solve::coarsen_stage(&fine, &solid, 1);
+    let (stage, merged) = solve::coarsen_stage(&fine, &soft, 1);
+    assert_eq!(stage.len(), solid_stage.len());
+    let (apart, kept) = solve::coarsen(&fine, &soft, 1);
+    assert!(
+        apart.len() > stage.len() + stage.len() / 2,
+        "{} against {}",
+        apart.len(),
+        stage.len()
+    );
+    let mut sums = vec![(0.0, 0.0); stage.len()];
+    for (c, cell) in fine.cells.iter().enumerate() {
+        let k = stage.locate(&cell.center).unwrap();
+        sums[k].0 += soft.stiffness[c];
+        sums[k].1 += 1.0;
+        let j = apart.locate(&cell.center).unwrap();
+        assert_eq!(kept.stiffness[j], soft.stiffness[c], "fine cell {c}");
+    }
+    let mixed = sums
+        .iter()
+        .zip(&merged.stiffness)
+        .inspect(|((sum, n), s)| assert!((*s - sum / n).abs() < 1e-12, "{s} against {}", sum / n))
+        .filter(|(_, s)| **s > 0.05 && **s < 1.0)
+        .count();
+    assert!(mixed > 0);
 }
 
 /// A part kept at rest on the fine cells only for want of a constraint (a speck above the

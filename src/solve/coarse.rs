@@ -1,7 +1,7 @@
 //! Coarse to fine: a large complex is solved first on its parents, and the fine solve starts
 //! from that solution carried down, so that its Gauss-Newton iterations only correct.
 //!
-//! [`coarsen`](super::coarsen) merges sibling cells of one role into their parent, one level at
+//! [`coarsen_stage`](super::coarsen_stage) merges sibling cells of one role into their parent, one level at
 //! a time (cells along a region's border, and the cells of pins and targets, stay as they
 //! are). The coarsest complex goes through the load steps from rest; every finer one starts at
 //! full load from its parents' motions ([`prolong`]): a fine cell takes the rigid motion of
@@ -56,7 +56,7 @@ use rayon::prelude::*;
 use super::system::System;
 use super::turns::TurnRefusal;
 use super::{
-    Constraints, SolveParams, SolverInfo, cells_advice, coarsen, from_rest, minimize_with,
+    Constraints, SolveParams, SolverInfo, cells_advice, coarsen_stage, from_rest, minimize_with,
     prescribe, targets_at, timed,
 };
 
@@ -140,7 +140,7 @@ where
     };
     let mut solved: Option<(CellComplex<D>, Vec<Motion<D>>, SolverInfo)> = None;
     for k in (1..=levels).rev() {
-        let (parents, on_parents) = coarsen(complex, constraints, k);
+        let (parents, on_parents) = coarsen_stage(complex, constraints, k);
         // A stage between the last one and the cells themselves, or none.
         let coarser = solved.as_ref().map_or(0, |s| s.0.len());
         if parents.len() >= complex.len() || parents.len() <= coarser {
@@ -203,7 +203,7 @@ where
     if r.asked_degrees.abs() - r.held_degrees.abs() <= COARSE_REFUSAL_MARGIN {
         return Ok(false);
     }
-    let (coarser, on_coarser) = coarsen(at.0, at.1, k + 1);
+    let (coarser, on_coarser) = coarsen_stage(at.0, at.1, k + 1);
     if coarser.len() >= cells {
         return Ok(false);
     }

@@ -9,7 +9,7 @@
 //! graph by `multilevel::shape`, with its coarsest level analysed the same way.
 
 use super::auto::{self, Fill, graph_fill};
-use super::constraints::{Constraints, Role, coarsen};
+use super::constraints::{Constraints, Role, coarsen_stage};
 use super::multilevel::{self, COARSEST, FACTORED};
 use super::{Method, SolveParams, cells_advice, check_params, coarse, load_steps};
 use crate::cells::CellComplex;
@@ -20,7 +20,7 @@ use crate::progress::Observer;
 use crate::rigid::{Dim, Rigid};
 
 /// The estimate of solving `complex` under `constraints` with `params` within `budget`: the
-/// stages coarse to fine as `coarse::coarse_to_fine` makes them (`coarsen`), each by the path
+/// stages coarse to fine as `coarse::coarse_to_fine` makes them (`coarsen_stage`), each by the path
 /// `params.method` takes for it ([`Method::Auto`]: the direct path where its factor fits the
 /// budget, as `System::new` decides). Counted, not checked: [`Estimate::check`] refuses it.
 pub fn forecast<const D: usize>(
@@ -36,7 +36,7 @@ where
     let fine = stage(complex, constraints, params, budget);
     let mut stages: Vec<(SolveCounts, Method)> = Vec::new();
     for k in (1..=coarse::levels(complex.len(), params)).rev() {
-        let (parents, on_parents) = coarsen(complex, constraints, k);
+        let (parents, on_parents) = coarsen_stage(complex, constraints, k);
         let coarser = stages.last().map_or(0, |s| s.0.cells as usize);
         if parents.len() >= complex.len() || parents.len() <= coarser {
             continue;
@@ -497,6 +497,7 @@ mod tests {
             pins: vec![],
             targets: vec![],
             stiffness: vec![1.0; n],
+            inside: 1.0,
             origin: complex.grid.origin,
             warnings: vec![],
             trend: Default::default(),

@@ -129,7 +129,8 @@ use std::time::Instant;
 
 pub use coarse::{COARSE_FROM, COARSE_STAGE, MAX_COARSE_LEVELS};
 pub use constraints::{
-    Constraints, Role, Shapes, coarsen, inherit, resolve, resolve_selected, sample_cell,
+    Constraints, Role, Shapes, coarsen, coarsen_stage, inherit, resolve, resolve_selected,
+    sample_cell,
 };
 pub use energy::{cell_strain, glue_energy, pair_energy};
 pub use forecast::forecast;

@@ -285,6 +285,7 @@ mod tests {
             pins: vec![],
             targets: vec![target],
             stiffness: (0..n).map(|k| 1.0 + (k % 3) as f64).collect(),
+            inside: 1.0,
             origin: complex.grid.origin,
             warnings: vec![],
             trend: Default::default(),

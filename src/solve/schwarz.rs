@@ -536,6 +536,7 @@ mod tests {
             handles: vec![],
             pins: vec![],
             targets: vec![],
+            inside: 1.0,
             origin: complex.grid.origin,
             warnings: vec![],
             trend: Default::default(),

@@ -14,7 +14,7 @@ use super::loose::{carry_with, loose_anchors};
 use super::system::System;
 use super::turns::TurnGauge;
 use super::{
-    Constraints, Role, Solution, SolveParams, SolverInfo, cells_advice, coarsen,
+    Constraints, Role, Solution, SolveParams, SolverInfo, cells_advice, coarsen_stage,
     from_rest_either_way, minimize_with, prescribe, targets_at, timed,
 };
 use crate::cells::{CellComplex, CellKind};
@@ -106,12 +106,12 @@ fn drag_parents<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let mut stage = coarsen(complex, constraints, 1);
+    let mut stage = coarsen_stage(complex, constraints, 1);
     for k in 2..=DRAG_MOST_LEVELS {
         if stage.0.len() <= DRAG_STAGE_CELLS {
             break;
         }
-        let older = coarsen(complex, constraints, k);
+        let older = coarsen_stage(complex, constraints, k);
         if 4 * older.0.len() > 3 * stage.0.len() {
             break;
         }
