@@ -9,7 +9,8 @@
 //! graph by `multilevel::shape`, with its coarsest level analysed the same way.
 
 use super::auto::{self, Fill, graph_fill};
-use super::constraints::{Constraints, Role, coarsen_stage};
+use super::constraints::{Constraints, Role};
+use super::merge::coarsen_stage;
 use super::multilevel::{self, COARSEST, FACTORED};
 use super::{Method, SolveParams, cells_advice, check_params, coarse, load_steps};
 use crate::cells::CellComplex;

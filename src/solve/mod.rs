@@ -111,6 +111,7 @@ mod iteration;
 pub mod laplacian;
 mod local_global;
 mod loose;
+mod merge;
 mod multilevel;
 mod newton;
 mod params;
@@ -128,10 +129,7 @@ mod workers;
 use std::time::Instant;
 
 pub use coarse::{COARSE_FROM, COARSE_STAGE, MAX_COARSE_LEVELS};
-pub use constraints::{
-    Constraints, Role, Shapes, coarsen, coarsen_stage, inherit, resolve, resolve_selected,
-    sample_cell,
-};
+pub use constraints::{Constraints, Role, Shapes, resolve, resolve_selected, sample_cell};
 pub use energy::{cell_strain, glue_energy, pair_energy};
 pub use forecast::forecast;
 use iteration::largest_corner_move;
@@ -140,6 +138,7 @@ pub use local_global::{
     LOCAL_GLOBAL_PER_ITERATION, LocalGlobalInfo, LocalGlobalParams, minimize_local_global,
 };
 pub use loose::{LooseParts, carry_loose};
+pub use merge::{coarsen, coarsen_stage, inherit};
 pub use selections::Selections;
 pub use session::{
     DRAG_COARSE_FROM, DRAG_FACTOR_MOST, DRAG_LOCAL_GLOBAL, IDLE_LOCAL_GLOBAL, Session,
