@@ -28,6 +28,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from .scene import key_points
+
 # The object's name -> its session and what it was last solved for.
 _sessions: Dict[str, "Followed"] = {}
 # Set while the handlers write keys: the updates that writing makes are not new poses.
@@ -305,7 +307,7 @@ def bake(obj: bpy.types.Object, scene: Any, start: int, end: int) -> int:
         follow_now(obj)
         for other in objects:
             co = np.empty(3 * len(other.data.vertices), dtype=np.float32)
-            _keys(other)[SHAPE_KEY].data.foreach_get("co", co)
+            key_points(_keys(other)[SHAPE_KEY]).foreach_get("co", co)
             shapes[other.name].append(co)
     _sessions.pop(obj.name, None)
     _writing = True
@@ -330,7 +332,7 @@ def _key_frames(obj: bpy.types.Object, shapes: list, start: int) -> None:
         if old is not None:
             obj.shape_key_remove(old)
         key = obj.shape_key_add(name=name, from_mix=False)
-        key.data.foreach_set("co", co.ravel())
+        key_points(key).foreach_set("co", co.ravel())
         for f, v in ((frame - 1, 0.0), (frame, 1.0), (frame + 1, 0.0)):
             key.value = v
             key.keyframe_insert("value", frame=f)

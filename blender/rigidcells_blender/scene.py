@@ -49,13 +49,21 @@ def _frame(obj: bpy.types.Object, other: bpy.types.Object) -> np.ndarray:
     return np.linalg.inv(world) @ np.array(other.matrix_world, dtype=np.float64)
 
 
+def key_points(key: bpy.types.ShapeKey) -> Any:
+    """A shape key's points for `foreach_get` and `foreach_set`: `points` where Blender has it
+    (4.1 and later: one copy of a contiguous array, 0.03 ms for the 36k vertices of the
+    Stanford bunny), else `data` (an item at a time, 3.7-7 ms: half of a Live shape's time on
+    the main thread)."""
+    return getattr(key, "points", None) or key.data
+
+
 def _rest_vertices(mesh: bpy.types.Mesh) -> np.ndarray:
     """The base shape's vertices ((n, 3) float64): the reference shape key's where there are
     shape keys, so a deformation never stacks on the last one."""
     co = np.empty(3 * len(mesh.vertices), dtype=np.float32)
     keys = mesh.shape_keys
     if keys is not None and keys.reference_key is not None:
-        keys.reference_key.data.foreach_get("co", co)
+        key_points(keys.reference_key).foreach_get("co", co)
     else:
         mesh.vertices.foreach_get("co", co)
     return co.reshape(-1, 3).astype(np.float64)
@@ -290,7 +298,7 @@ def write_shape_key(obj: bpy.types.Object, moved: np.ndarray) -> bpy.types.Shape
     key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
     if key is None:
         key = obj.shape_key_add(name=SHAPE_KEY, from_mix=False)
-    key.data.foreach_set("co", moved.astype(np.float32).ravel())
+    key_points(key).foreach_set("co", moved.astype(np.float32).ravel())
     key.value = 1.0
     obj.data.update()
     return key
@@ -380,7 +388,7 @@ class KeyBefore:
         self.shape: Optional[Tuple[np.ndarray, float]] = None
         if key is not None:
             co = np.empty(3 * len(key.data), dtype=np.float32)
-            key.data.foreach_get("co", co)
+            key_points(key).foreach_get("co", co)
             self.shape = (co, key.value)
 
     def restore(self, obj: bpy.types.Object) -> None:
@@ -396,6 +404,6 @@ class KeyBefore:
             key = obj.data.shape_keys.key_blocks.get(SHAPE_KEY)
             if key is None:
                 key = obj.shape_key_add(name=SHAPE_KEY, from_mix=False)
-            key.data.foreach_set("co", co)
+            key_points(key).foreach_set("co", co)
             key.value = value
         obj.data.update()

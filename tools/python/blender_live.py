@@ -1,11 +1,11 @@
 """Live in Blender, timed as an artist drags: a mesh from ../shared/data with its lowest tenth
 fixed and its highest tenth on the handle Empty, sized to about CELLS cells; the Empty moves
-along a bend for SECONDS while a 60 Hz timer does what the Live operator's timer does (hand
-the Empty's pose to the session, write the newest shape into the shape key). Prints the
-shapes written a second while the Empty moves, the time from a pose to its shape, and the
-release once it rests.
+along a bend for SECONDS while a timer does what the Live operator's timer does, at its rate
+(`LIVE_RATE`, or RATE a second: hand the Empty's pose to the session, write the newest shape
+into the shape key). Prints the shapes written a second while the Empty moves, the time from
+a pose to its shape, and the release once it rests.
 
-    python tools/python/blender_live.py [MESH.ply] [CELLS] [SECONDS]
+    python tools/python/blender_live.py [MESH.ply] [CELLS] [SECONDS] [RATE]
 
 (in a venv with `bpy` and `rigidcells`; MESH defaults to the dragon soup, 3,484 loose
 triangles.)
@@ -67,7 +67,7 @@ def main() -> None:
           f"cell size {obj.rigidcells.cell_size:.4g}; ready in {ready:.2f} s")
     written, moved_at, lags = [], {}, []
     steps0, t0 = state.worker.steps, time.perf_counter()
-    tick = 1 / 60
+    tick = 1 / (float(sys.argv[4]) if len(sys.argv) > 4 else addon.LIVE_RATE)
     while (now := time.perf_counter()) - t0 < seconds:
         f = (now - t0) / seconds
         # Along a bend: up by half the height, across by a third, turned by 40°.
