@@ -105,9 +105,9 @@ pub fn coarsen<const D: usize>(
 /// [`coarsen`] for a stage that only starts the cells' own solve (a coarse-to-fine stage, a
 /// drag's ancestors): the inside's scale ([`Constraints::inside`]) does not keep siblings
 /// apart, a parent of surface and inside cells taking their mean stiffness. Kept apart, a
-/// soft inside left the cells along the surface at their size: the bust's 14,962 cells
-/// merged to 11,618 a level up instead of 3,912, and neither its coarse stage nor a drag's
-/// ancestors were coarse (a drag at 15,000 cells 63 ms instead of 15).
+/// soft inside leaves the cells along the surface at their size: the bust's 14,962 cells
+/// merge to 11,618 a level up instead of 3,912, and neither its coarse stage nor a drag's
+/// ancestors are coarse (a drag at 15,000 cells takes 63 ms instead of 15).
 pub fn coarsen_stage<const D: usize>(
     complex: &CellComplex<D>,
     constraints: &Constraints<D>,
