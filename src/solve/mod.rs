@@ -468,7 +468,10 @@ where
                 .copied()
                 .max_by(|&a, &b| off(a).total_cmp(&off(b)))
         };
-        // Whether a cell ended far from its predicted rotation.
+        // Whether a cell ended far from its predicted rotation. Any cell: a few cells of a thin
+        // feature flipping over make the steps near where a part gives way creep at their
+        // smallest, but counting only a share of the cells refused sooner in some runs and
+        // later in others (BENCHMARKS.md §13, "A few flipping cells").
         let jumped = |motions: &[Motion<D>]| {
             predicted.as_ref().is_some_and(|p| {
                 constraints.roles.iter().enumerate().any(|(c, role)| {
