@@ -11,7 +11,7 @@
 use super::auto::{self, Fill, graph_fill};
 use super::constraints::{Constraints, Role};
 use super::merge::coarsen_stage;
-use super::multilevel::{self, COARSEST, FACTORED};
+use super::multilevel::{self, COARSEST, LIMITS};
 use super::{Method, SolveParams, cells_advice, check_params, coarse, load_steps};
 use crate::cells::CellComplex;
 use crate::error::Result;
@@ -270,7 +270,7 @@ where
         .map(|&c| complex.cells[c as usize].center)
         .collect();
     let size = complex.grid.finest_size();
-    let shape = multilevel::shape(rest, &edges, size, [COARSEST, FACTORED]);
+    let shape = multilevel::shape(rest, &edges, size, LIMITS);
     let &(nodes, coarse_edges) = shape.levels.last().expect("the finest level");
     let coarsest = match shape.levels.len() {
         1 => counts.factor,

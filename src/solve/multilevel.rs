@@ -13,7 +13,8 @@
 //!   a pinned cell takes only `Ω`). On the first level this tentative prolongation `P₀` is
 //!   smoothed once, `P = (I − 4/(3λ) D⁻¹H) P₀`; further levels use `P₀` itself. Each coarse
 //!   matrix is the Galerkin product `Pᵀ H P`; levels are added until one has at most
-//!   [`FACTORED`] nodes, which faer's sparse Cholesky factors in AMD's order of the nodes'
+//!   [`FACTORED`] nodes, or at most four times as many and a factor of at most
+//!   [`FACTOR_WORK`] multiply-adds, which faer's sparse Cholesky factors in AMD's order of the nodes'
 //!   graph, each node's unknowns together, in `f32` (in `f64` where `f32` breaks down;
 //!   `blocks::CoarseFactor`).
 //! - **Smoothing.** A Chebyshev polynomial of degree [`SMOOTH_DEGREE`] in the block-Jacobi
@@ -38,7 +39,9 @@
 //! unsmoothed levels below the first keep the stencil and the iteration count (12–16 per step
 //! against 10–13): 115 s and 4.4 GB instead of 10.5. A fourth unsmoothed level (2.8k groups)
 //! doubled the iterations; so the coarsening stops at [`FACTORED`] nodes, as few unsmoothed
-//! levels as the factor's cost allows. Geometric nested dissection of the coarse level, tried
+//! levels as the factor's cost allows — and sooner where the factor's work, counted on the
+//! level's graph, is small (a terrain one cell thick, whose levels are nearly planar: there
+//! one unsmoothed level can take the iterations from 7 to 100). Geometric nested dissection of the coarse level, tried
 //! instead of faer's AMD, gave a factor half as large again (77M entries against 49M at 13.7k
 //! groups).
 //! Other coarse spaces and cycles measured slower (BENCHMARKS.md §13).
@@ -57,6 +60,33 @@ pub(crate) const COARSEST: usize = 2000;
 /// unsmoothed level costs iterations: on the 10M-point terrain at 123k cells, a third level
 /// below a first coarse level of 20k groups took 224 CG iterations where two levels took 26.
 pub(crate) const FACTORED: usize = 30_000;
+/// A coarse level of up to four times [`FACTORED`] nodes is factored all the same where its
+/// factor takes at most this many multiply-adds (counted on its graph, `auto::graph_fill`):
+/// one more unsmoothed level can cost far more than a larger factor. The 10M-point terrain at
+/// 3.9 m cells (206k free cells, a plate about one cell thick) groups into 52,968 nodes; a third
+/// level below them took 96–105 conjugate-gradient iterations a step, the factor of those
+/// nodes (1.5e8 entries, 4–5 s in `f32`) 6–7 (BENCHMARKS.md §3, "A larger coarsest level
+/// where its factor is cheap").
+pub(crate) const FACTOR_WORK: f64 = 2.5e11;
+
+/// Where a hierarchy stops coarsening: [`LIMITS`] but in tests.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Limits {
+    /// A finest level of at most this many nodes is factored as it is.
+    pub coarsest: usize,
+    /// A coarse level of at most this many nodes is factored.
+    pub factored: usize,
+    /// A coarse level of at most four times `factored` nodes is factored where its factor
+    /// takes at most this many multiply-adds.
+    pub work: f64,
+}
+
+/// The limits every solve takes.
+pub(crate) const LIMITS: Limits = Limits {
+    coarsest: COARSEST,
+    factored: FACTORED,
+    work: FACTOR_WORK,
+};
 /// The Chebyshev smoother's degree.
 const SMOOTH_DEGREE: usize = 2;
 /// The smoother targets the upper `1/RATIO` of the spectrum of `D⁻¹H`.
@@ -110,15 +140,15 @@ pub(crate) struct Nodes<const D: usize> {
 
 impl Hierarchy {
     /// The hierarchy of `matrix`, whose nodes are `nodes`; `size` is the finest cell size. A
-    /// matrix of at most `coarsest` nodes is factored as it is; otherwise levels are added until
-    /// one has at most `factored` nodes ([`COARSEST`] and [`FACTORED`] but in tests). `reuse`:
+    /// matrix of at most `limits.coarsest` nodes is factored as it is; otherwise levels are
+    /// added until one is factored by `limits` ([`LIMITS`] but in tests). `reuse`:
     /// an earlier hierarchy's coarsest factor ([`Hierarchy::into_coarsest`]), whose analysis
     /// serves again where the coarsest level has the same nodes and edges.
     pub fn new<const D: usize>(
         matrix: BlockMatrix,
         nodes: Nodes<D>,
         size: f64,
-        [coarsest, factored]: [usize; 2],
+        limits: Limits,
         reuse: Option<CoarseFactor>,
     ) -> Self
     where
@@ -126,13 +156,7 @@ impl Hierarchy {
     {
         let mut levels: Vec<Level> = Vec::new();
         let (mut matrix, mut nodes, mut step) = (matrix, nodes, 2.0 * size);
-        while matrix.n
-            > if levels.is_empty() {
-                coarsest
-            } else {
-                factored
-            }
-        {
+        while !factors(matrix.n, &matrix.edges, matrix.dof, levels.len(), limits) {
             // Groups of a grid twice as coarse as the last; where that merges too little (large
             // interior cells), the step doubles again.
             let (group, count) = loop {
@@ -375,7 +399,7 @@ pub(crate) struct Shape {
 }
 
 /// The [`Shape`] of the hierarchy of nodes at `rest` (the free cells' rest centers) coupled by
-/// `edges`, for finest cells of `size`, under the limits [`Hierarchy::new`] takes: the same
+/// `edges`, for finest cells of `size`, under the `limits` [`Hierarchy::new`] takes: the same
 /// groups, and each coarse level's edges as its Galerkin product makes them (the first through
 /// the smoothed prolongation, whose coarse node reaches the members of its group and their
 /// neighbors; the others through the groups alone).
@@ -383,20 +407,23 @@ pub(crate) fn shape<const D: usize>(
     rest: Vec<Vect<D>>,
     edges: &[[u32; 2]],
     size: f64,
-    [coarsest, factored]: [usize; 2],
-) -> Shape {
+    limits: Limits,
+) -> Shape
+where
+    Dim<D>: Rigid<D>,
+{
     let mut shape = Shape {
         levels: vec![(rest.len(), edges.len())],
         ..Default::default()
     };
     let (mut rest, mut edges, mut step) = (rest, edges.to_vec(), 2.0 * size);
-    while rest.len()
-        > if shape.levels.len() == 1 {
-            coarsest
-        } else {
-            factored
-        }
-    {
+    while !factors(
+        rest.len(),
+        &edges,
+        <Dim<D> as Rigid<D>>::DOF,
+        shape.levels.len() - 1,
+        limits,
+    ) {
         let n = rest.len();
         let (group, count) = loop {
             let (group, count) = group_by_grid(&rest, step);
@@ -436,6 +463,20 @@ pub(crate) fn shape<const D: usize>(
     }
     shape.coarsest_edges = edges;
     shape
+}
+
+/// Whether level `depth` (0 the finest) of `n` nodes of `dof` unknowns joined by `edges` is
+/// factored rather than coarsened again ([`Limits`]).
+fn factors(n: usize, edges: &[[u32; 2]], dof: usize, depth: usize, limits: Limits) -> bool {
+    match depth {
+        0 => n <= limits.coarsest,
+        _ => {
+            n <= limits.factored
+                || n <= 4 * limits.factored
+                    && super::auto::graph_fill(n, edges, dof)
+                        .is_some_and(|fill| fill.flops <= limits.work)
+        }
+    }
 }
 
 /// The coarse edges of the Galerkin product through the smoothed prolongation of `group`, as
@@ -780,198 +821,5 @@ fn galerkin(a: &BlockMatrix, p: &Prolongation) -> BlockMatrix {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The Gauss-Newton matrix of a `w × h` lattice of 2D cells glued to their right and upper
-    /// neighbors at two points of each shared face, the left column glued to the ground;
-    /// `stiff` scales the horizontal glue.
-    fn lattice(w: usize, h: usize, stiff: f64) -> (BlockMatrix, Nodes<2>) {
-        let at = |i: usize, j: usize| Vect::<2>::new(i as f64, j as f64);
-        // Velocity at `q` of a cell centered at `y`: rows of `v + ω perp(q − y)`.
-        let jac = |q: Vect<2>, y: Vect<2>| [[1.0, 0.0, -(q - y)[1]], [0.0, 1.0, (q - y)[0]]];
-        let prod = |a: [[f64; 3]; 2], b: [[f64; 3]; 2], w: f64| {
-            let mut m = [0.0; 9];
-            for r in 0..3 {
-                for c in 0..3 {
-                    m[r * 3 + c] = w * (a[0][r] * b[0][c] + a[1][r] * b[1][c]);
-                }
-            }
-            m
-        };
-        let n = w * h;
-        let mut diag = vec![0.0; n * 9];
-        let (mut edges, mut blocks) = (Vec::new(), Vec::new());
-        for j in 0..h {
-            for i in 0..w {
-                let a = j * w + i;
-                let mut faces = vec![];
-                if i + 1 < w {
-                    faces.push((a + 1, Vect::<2>::new(0.5, 0.0), stiff));
-                }
-                if j + 1 < h {
-                    faces.push((a + w, Vect::<2>::new(0.0, 0.5), 1.0));
-                }
-                for (b, half, k) in faces {
-                    let (ya, yb) = (at(i, j), at(b % w, b / w));
-                    let mid = ya + half;
-                    let along = Vect::<2>::new(-half[1], half[0]);
-                    let mut hab = [0.0; 9];
-                    for q in [mid + along, mid - along] {
-                        let (ja, jb) = (jac(q, ya), jac(q, yb));
-                        add(&mut diag[a * 9..a * 9 + 9], &prod(ja, ja, k));
-                        add(&mut diag[b * 9..b * 9 + 9], &prod(jb, jb, k));
-                        add(&mut hab, &prod(ja, jb, -k));
-                    }
-                    edges.push([a as u32, b as u32]);
-                    blocks.extend_from_slice(&hab);
-                }
-                if i == 0 {
-                    let y = at(i, j);
-                    for q in [
-                        y + Vect::<2>::new(-0.5, 0.5),
-                        y + Vect::<2>::new(-0.5, -0.5),
-                    ] {
-                        add(
-                            &mut diag[a * 9..a * 9 + 9],
-                            &prod(jac(q, y), jac(q, y), 1.0),
-                        );
-                    }
-                }
-            }
-        }
-        let rest: Vec<Vect<2>> = (0..n).map(|a| at(a % w, a / w)).collect();
-        let nodes = Nodes {
-            deformed: rest.clone(),
-            rest,
-            pinned: vec![false; n],
-        };
-        (BlockMatrix::new(3, n, diag, edges, blocks), nodes)
-    }
-
-    fn residual(a: &BlockMatrix, x: &[f64], b: &[f64]) -> f64 {
-        let mut ax = vec![0.0; b.len()];
-        a.mul(x, &mut ax);
-        ax.iter()
-            .zip(b)
-            .map(|(p, q)| (p - q).powi(2))
-            .sum::<f64>()
-            .sqrt()
-            / norm(b)
-    }
-
-    /// Four levels (a smoothed one, unsmoothed ones, a factored one) solve a thin lattice
-    /// plate to the tolerance in a bounded number of iterations; kept coarse levels with a
-    /// renewed finest one still solve a changed matrix.
-    /// The hierarchy's shape counted on the graph alone is the hierarchy's: the same nodes
-    /// and edges on every level, the same smoothed prolongation.
-    #[test]
-    fn the_shape_counted_on_the_graph_is_the_hierarchys() {
-        let (matrix, nodes) = lattice(96, 24, 1.0);
-        let (rest, edges) = (nodes.rest.clone(), matrix.edges.clone());
-        let h = Hierarchy::new(matrix, nodes, 1.0, [100, 60], None);
-        let mut levels: Vec<(usize, usize)> = h
-            .levels
-            .iter()
-            .map(|l| (l.smoother.n, l.smoother.edges.len()))
-            .collect();
-        let coarsest = h.coarsest.as_ref().unwrap();
-        let nodes = h.levels.last().unwrap().prolongation.coarse;
-        levels.push((nodes, coarsest.edges.len()));
-        let shape = shape(rest, &edges, 1.0, [100, 60]);
-        assert!(levels.len() >= 4, "{levels:?}");
-        assert_eq!(shape.levels, levels);
-        assert_eq!(shape.prolongation, h.levels[0].prolongation.to.len());
-        let mut edges = coarsest.edges.clone();
-        edges.sort_unstable();
-        assert_eq!(shape.coarsest_edges, edges);
-    }
-
-    #[test]
-    fn deep_hierarchy_solves_and_survives_a_refresh() {
-        let (matrix, nodes) = lattice(96, 24, 1.0);
-        let b: Vec<f64> = (0..matrix.len())
-            .map(|i| ((i * 7919) % 13) as f64 - 6.0)
-            .collect();
-        let (check, _) = lattice(96, 24, 1.0);
-        let mut h = Hierarchy::new(matrix, nodes, 1.0, [100, 60], None);
-        assert!(h.depth() >= 4, "{} levels", h.depth());
-        let (x, iterations) = h.solve(&b).unwrap();
-        assert!(iterations <= 20, "{iterations} iterations");
-        assert!(
-            residual(&check, &x, &b) <= TOLERANCE,
-            "{}",
-            residual(&check, &x, &b)
-        );
-
-        let (changed, _) = lattice(96, 24, 3.0);
-        let (check, _) = lattice(96, 24, 3.0);
-        h.shed_finest();
-        h.refresh(changed);
-        let (x, again) = h.solve(&b).unwrap();
-        assert!(again <= 30, "{again} iterations after the refresh");
-        assert!(residual(&check, &x, &b) <= TOLERANCE);
-    }
-
-    /// A hierarchy built on an earlier one's coarsest analysis (the same groups, other values)
-    /// solves with the same bits as one built from nothing; a coarsest level of other edges
-    /// is analysed anew.
-    #[test]
-    fn a_reused_coarse_analysis_gives_the_same_bits() {
-        let b: Vec<f64> = (0..96 * 24 * 3)
-            .map(|i| ((i * 31) % 17) as f64 - 8.0)
-            .collect();
-        let build = |stiff: f64, reuse| {
-            let (matrix, nodes) = lattice(96, 24, stiff);
-            Hierarchy::new(matrix, nodes, 1.0, [100, 60], reuse)
-        };
-        let earlier = build(1.0, None).into_coarsest();
-        assert!(earlier.as_ref().is_some_and(|f| f.values.is_none()));
-        let fresh = build(3.0, None);
-        // The same coarsest edges: the analysis is taken over, not made again.
-        let edges = |h: &Hierarchy| h.coarsest.as_ref().map(|f| f.edges.clone());
-        assert_eq!(edges(&fresh), earlier.as_ref().map(|f| f.edges.clone()));
-        let reused = build(3.0, earlier);
-        assert_eq!(fresh.solve(&b).unwrap(), reused.solve(&b).unwrap());
-        let (small, nodes) = lattice(48, 24, 3.0);
-        let other = Hierarchy::new(
-            small,
-            nodes,
-            1.0,
-            [100, 60],
-            build(1.0, None).into_coarsest(),
-        );
-        let (check, _) = lattice(48, 24, 3.0);
-        let b = &b[..check.len()];
-        let (x, _) = other.solve(b).unwrap();
-        assert!(residual(&check, &x, b) <= TOLERANCE);
-    }
-
-    /// The solve gives the same bits on one thread and on three (fixed summation orders).
-    #[test]
-    fn solves_the_same_on_any_number_of_threads() {
-        let b: Vec<f64> = (0..96 * 24 * 3)
-            .map(|i| ((i * 31) % 17) as f64 - 8.0)
-            .collect();
-        let solve = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| {
-                let (matrix, nodes) = lattice(96, 24, 1.0);
-                Hierarchy::new(matrix, nodes, 1.0, [100, 60], None)
-                    .solve(&b)
-                    .unwrap()
-            })
-        };
-        let (one, three) = (solve(1), solve(3));
-        assert_eq!(one.1, three.1);
-        assert!(
-            one.0
-                .iter()
-                .zip(&three.0)
-                .all(|(x, y)| x.to_bits() == y.to_bits())
-        );
-    }
-}
+#[path = "multilevel_tests.rs"]
+mod tests;

@@ -514,12 +514,11 @@ where
                 (h, Some(first))
             }
             kept => {
-                let limits = [super::multilevel::COARSEST, super::multilevel::FACTORED];
                 let size = complex.grid.finest_size();
                 let aged = ml.analysis.lock().unwrap_or_else(|e| e.into_inner()).take();
                 let reuse = kept.and_then(|(h, _)| h.into_coarsest()).or(aged);
                 (
-                    Hierarchy::new::<D>(matrix, nodes, size, limits, reuse),
+                    Hierarchy::new::<D>(matrix, nodes, size, super::multilevel::LIMITS, reuse),
                     None,
                 )
             }
