@@ -14,9 +14,9 @@
 //!   smoothed once, `P = (I − 4/(3λ) D⁻¹H) P₀`; further levels use `P₀` itself. Each coarse
 //!   matrix is the Galerkin product `Pᵀ H P`; levels are added until one has at most
 //!   [`FACTORED`] nodes, or at most four times as many and a factor of at most
-//!   [`FACTOR_WORK`] multiply-adds, which faer's sparse Cholesky factors in AMD's order of the nodes'
-//!   graph, each node's unknowns together, in `f32` (in `f64` where `f32` breaks down;
-//!   `blocks::CoarseFactor`).
+//!   [`FACTOR_WORK`] multiply-adds, which faer's sparse Cholesky factors in AMD's order of
+//!   the nodes' graph, each node's unknowns together, in `f32` (in `f64` where `f32` breaks
+//!   down; `blocks::CoarseFactor`).
 //! - **Smoothing.** A Chebyshev polynomial of degree [`SMOOTH_DEGREE`] in the block-Jacobi
 //!   preconditioned matrix over `[λ/RATIO, λ]`, `λ` its largest eigenvalue by power iteration,
 //!   the same before and after the coarse correction (a symmetric positive preconditioner).
@@ -41,9 +41,9 @@
 //! doubled the iterations; so the coarsening stops at [`FACTORED`] nodes, as few unsmoothed
 //! levels as the factor's cost allows — and sooner where the factor's work, counted on the
 //! level's graph, is small (a terrain one cell thick, whose levels are nearly planar: there
-//! one unsmoothed level can take the iterations from 7 to 100). Geometric nested dissection of the coarse level, tried
-//! instead of faer's AMD, gave a factor half as large again (77M entries against 49M at 13.7k
-//! groups).
+//! one unsmoothed level can take the iterations from 7 to 100). Geometric nested dissection
+//! of the coarse level, tried instead of faer's AMD, gave a factor half as large again (77M
+//! entries against 49M at 13.7k groups).
 //! Other coarse spaces and cycles measured slower (BENCHMARKS.md §13).
 
 use rayon::prelude::*;
@@ -56,15 +56,15 @@ use crate::rigid::{Dim, MAX_DOF, Rigid, Vect};
 pub(crate) const COARSEST: usize = 2000;
 /// Levels past the first are coarsened until they have at most this many nodes; the last is
 /// factored directly (0.35–0.45 s in `f32` at the hilly strip's 13.9k nodes with the first
-/// level's wide stencil, 33M entries). Each
-/// unsmoothed level costs iterations: on the 10M-point terrain at 123k cells, a third level
-/// below a first coarse level of 20k groups took 224 CG iterations where two levels took 26.
+/// level's wide stencil, 33M entries). Each unsmoothed level costs iterations: on the
+/// 10M-point terrain at 123k cells, a third level below a first coarse level of 20k groups
+/// took 224 CG iterations where two levels took 26.
 pub(crate) const FACTORED: usize = 30_000;
 /// A coarse level of up to four times [`FACTORED`] nodes is factored all the same where its
 /// factor takes at most this many multiply-adds (counted on its graph, `auto::graph_fill`):
 /// one more unsmoothed level can cost far more than a larger factor. The 10M-point terrain at
-/// 3.9 m cells (206k free cells, a plate about one cell thick) groups into 52,968 nodes; a third
-/// level below them took 96–105 conjugate-gradient iterations a step, the factor of those
+/// 3.9 m cells (206k free cells, a plate about one cell thick) groups into 52,968 nodes; a
+/// third level below them took 96–105 conjugate-gradient iterations a step, the factor of those
 /// nodes (1.5e8 entries, 4–5 s in `f32`) 6–7 (BENCHMARKS.md §3, "A larger coarsest level
 /// where its factor is cheap").
 pub(crate) const FACTOR_WORK: f64 = 2.5e11;
