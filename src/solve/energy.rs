@@ -10,8 +10,9 @@
 //!
 //! The closed form holds because `T_i − T_j` is affine: on a box of half size `h` centered at
 //! `c`, the integral of `|M (x − c) + d|²` is `V (|d|² + h²/3 |M|²_F)`. The same integral is
-//! computed exactly by the `2^D` points `c ± h/√3` per axis with equal weights, which turns the
-//! energy into a sum of squared residuals — the form the Gauss-Newton solver works on.
+//! computed exactly by a few points ([`quadrature`]: `D + 1` of them, with the union's mean and
+//! covariance), which turns the energy into a sum of squared residuals — the form the
+//! Gauss-Newton solver works on.
 
 use crate::cells::{Cell, CellComplex};
 use crate::rigid::{Motion, Vect};
@@ -31,25 +32,64 @@ pub fn pair_energy<const D: usize>(
     (term(ci) + term(cj)) / (ci.volume() + cj.volume())
 }
 
-/// The quadrature points of `E_ij` and their weights: `2^D` points `c_k ± h_k/√3` in each
-/// cell, each weighted `V_k / ((V_i + V_j) 2^D)`, so that
-/// `E_ij = Σ weight · |T_i(q) − T_j(q)|²` exactly.
-pub fn quadrature<'a, const D: usize>(
-    ci: &'a Cell<D>,
-    cj: &'a Cell<D>,
-) -> impl Iterator<Item = (Vect<D>, f64)> + 'a {
-    let total = ci.volume() + cj.volume();
-    let corners = 1usize << D;
-    [ci, cj].into_iter().flat_map(move |c| {
-        let off = c.half / 3f64.sqrt();
-        let w = c.volume() / (total * corners as f64);
-        (0..corners).map(move |bits| {
-            let q = Vect::<D>::from_fn(|a, _| {
-                c.center[a] + if (bits >> a) & 1 == 1 { off } else { -off }
-            });
-            (q, w)
-        })
+/// The quadrature points of `E_ij` and their weights: `D + 1` points of weight `1/(D + 1)`,
+/// so that `E_ij = Σ weight · |T_i(q) − T_j(q)|²` exactly.
+///
+/// Every integrand the solver takes over `C_i ∪ C_j` (the residual's square, the Jacobians'
+/// products, Newton's curvature) is a product of two maps affine in `x`, so its integral
+/// depends on the union's mass, mean `μ` and covariance `Σ` alone; any rule with those three
+/// moments is exact. The union, the two boxes weighted by volume (`w_k = V_k / (V_i + V_j)`),
+/// has `Σ = α I + w_i w_j d dᵀ` with `α = (w_i h_i² + w_j h_j²) / 3` and `d = c_j − c_i`, whose
+/// symmetric square root is `L = √α I + γ d̂ d̂ᵀ`, `(√α + γ)² = α + w_i w_j |d|²`. The points
+/// are `μ + L s_k` for the vertices `s_k` of a regular simplex with `Σ s_k = 0` and
+/// `Σ s_k s_kᵀ = (D + 1) I`: four points where the two boxes' Gauss points are sixteen (in
+/// 3D), so a Gauss-Newton assembly does a quarter of the work for the same sums.
+pub fn quadrature<const D: usize>(
+    ci: &Cell<D>,
+    cj: &Cell<D>,
+) -> impl Iterator<Item = (Vect<D>, f64)> + use<D> {
+    let (vi, vj) = (ci.volume(), cj.volume());
+    let (wi, wj) = (vi / (vi + vj), vj / (vi + vj));
+    let mean = ci.center * wi + cj.center * wj;
+    let d = cj.center - ci.center;
+    let alpha = (wi * ci.half * ci.half + wj * cj.half * cj.half) / 3.0;
+    let (root, len2) = (alpha.sqrt(), d.norm_squared());
+    // `γ / |d|²`, written so that it stays finite (and small) as `d` vanishes.
+    let gamma = wi * wj / ((alpha + wi * wj * len2).sqrt() + root);
+    let weight = 1.0 / (D + 1) as f64;
+    (0..=D).map(move |k| {
+        let s = simplex::<D>(k);
+        (mean + s * root + d * (gamma * d.dot(&s)), weight)
     })
+}
+
+/// Vertex `k` of the regular simplex of [`quadrature`] in `D` dimensions (`D` is 2 or 3):
+/// `Σ s_k = 0`, `Σ s_k s_kᵀ = (D + 1) I`.
+fn simplex<const D: usize>(k: usize) -> Vect<D> {
+    match D {
+        // The tetrahedron of alternate corners of the cube `[−1, 1]³`.
+        3 => {
+            const CORNERS: [[f64; 3]; 4] = [
+                [1.0, 1.0, 1.0],
+                [1.0, -1.0, -1.0],
+                [-1.0, 1.0, -1.0],
+                [-1.0, -1.0, 1.0],
+            ];
+            Vect::<D>::from_fn(|a, _| CORNERS[k][a])
+        }
+        // The triangle on the circle of radius √2.
+        _ => {
+            let angle = k as f64 * 2.0 * std::f64::consts::PI / 3.0;
+            let r = std::f64::consts::SQRT_2;
+            Vect::<D>::from_fn(|a, _| {
+                if a == 0 {
+                    r * angle.cos()
+                } else {
+                    r * angle.sin()
+                }
+            })
+        }
+    }
 }
 
 /// The glue energy `E = Σ s_ij w_ij E_ij` of the whole complex, where `s_ij` is the geometric
@@ -103,7 +143,7 @@ pub fn cell_strain<const D: usize>(complex: &CellComplex<D>, motions: &[Motion<D
 mod tests {
     use super::*;
     use crate::cells::{CellKey, CellKind};
-    use crate::rigid::{Dim, Rigid};
+    use crate::rigid::{Dim, Mat, Rigid};
     use rand::{Rng, SeedableRng, rngs::StdRng};
 
     fn cell<const D: usize>(center: Vect<D>, half: f64) -> Cell<D> {
@@ -184,6 +224,51 @@ mod tests {
                 assert!((closed - gauss).abs() <= 1e-12 * closed);
             }
         }
+    }
+
+    /// The rule's mass, mean and second moment are the union's (each box's moments summed,
+    /// weighted by volume), for cells of any sizes and any offset.
+    fn moments<const D: usize>()
+    where
+        Dim<D>: Rigid<D>,
+    {
+        let mut rng = StdRng::seed_from_u64(11);
+        for _ in 0..50 {
+            let hi = rng.random_range(0.1..2.0);
+            let hj = hi * [1.0, 0.5, 0.25, 2.0][rng.random_range(0..4)];
+            let ci = cell(Vect::<D>::from_fn(|_, _| rng.random_range(-5.0..5.0)), hi);
+            let off = if rng.random_bool(0.2) {
+                Vect::<D>::zeros()
+            } else {
+                Vect::<D>::from_fn(|_, _| rng.random_range(-3.0..3.0))
+            };
+            let cj = cell(ci.center + off, hj);
+            let total = ci.volume() + cj.volume();
+            let (mut mass, mut first, mut second) = (0.0, Vect::<D>::zeros(), Mat::<D>::zeros());
+            for (q, w) in quadrature(&ci, &cj) {
+                mass += w;
+                first += q * w;
+                second += q * q.transpose() * w;
+            }
+            let (mut want_first, mut want_second) = (Vect::<D>::zeros(), Mat::<D>::zeros());
+            for c in [&ci, &cj] {
+                let w = c.volume() / total;
+                want_first += c.center * w;
+                want_second += (c.center * c.center.transpose()
+                    + Mat::<D>::identity() * (c.half * c.half / 3.0))
+                    * w;
+            }
+            let scale = want_second.norm();
+            assert!((mass - 1.0).abs() < 1e-14);
+            assert!((first - want_first).norm() <= 1e-13 * scale.sqrt().max(1.0));
+            assert!((second - want_second).norm() <= 1e-13 * scale, "D={D}");
+        }
+    }
+
+    #[test]
+    fn the_rule_has_the_unions_moments() {
+        moments::<3>();
+        moments::<2>();
     }
 
     #[test]
