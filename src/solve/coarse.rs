@@ -115,7 +115,8 @@ pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
 /// ([`Error::TurnNotHeld`]) that is not [`confirmed`]: the caller then solves from rest. A
 /// confirmed refusal, or one of a handle marked in `either_way` (a half turn still to be tried
 /// the other way round), is the error. The returned
-/// [`SolverInfo`] holds every stage's iterations (the load steps are the coarsest's).
+/// [`SolverInfo`] holds every stage's iterations (the load steps are the coarsest's) and
+/// `fits`, what a forecast found of the stages ([`SolverInfo::newton_fits`]).
 #[allow(clippy::type_complexity)]
 pub(super) fn coarse_to_fine<const D: usize>(
     complex: &CellComplex<D>,
@@ -124,7 +125,7 @@ pub(super) fn coarse_to_fine<const D: usize>(
     params: &SolveParams,
     budget: Budget,
     observer: &dyn Observer,
-    either_way: &[bool],
+    (either_way, fits): (&[bool], &[(usize, bool)]),
 ) -> Result<Option<(System<D>, Vec<Motion<D>>, SolverInfo)>>
 where
     Dim<D>: Rigid<D>,
@@ -148,7 +149,7 @@ where
         }
         let at = (&parents, &on_parents);
         let done = match solved.take() {
-            None => from_rest(at.0, at.1, &stage_params, budget, observer, &[])
+            None => from_rest(at.0, at.1, &stage_params, budget, observer, (&[], fits))
                 .map(|(_, motions, info)| (motions, info)),
             Some((coarse, motions, mut info)) => {
                 let coarse = (&coarse, motions.as_slice());
@@ -208,7 +209,7 @@ where
         return Ok(false);
     }
     let checking = Checking(observer, coarser.len());
-    match from_rest(&coarser, &on_coarser, params, budget, &checking, &[]) {
+    match from_rest(&coarser, &on_coarser, params, budget, &checking, (&[], &[])) {
         Err(Error::TurnNotHeld(c)) => Ok(c.handle == r.handle
             && c.held_degrees.abs() >= r.held_degrees.abs() - COARSE_REFUSAL_MARGIN),
         Ok(_) => Ok(false),

@@ -183,9 +183,9 @@ where
         0 => (complex, constraints),
         levels => coarsen(&complex, &constraints, levels),
     };
-    let estimate = forecast::announce(&complex, &constraints, params, budget, observer)?;
+    let (estimate, fits) = forecast::announce(&complex, &constraints, params, budget, observer)?;
     let (mut system, mut motions, mut info) =
-        from_rest_either_way(&complex, &mut constraints, params, budget, observer)?;
+        from_rest_either_way(&complex, &mut constraints, params, budget, observer, &fits)?;
     info.estimate = Some(estimate);
     info.trend = (!constraints.trend.is_identity()).then_some(constraints.trend_kind);
     if params.refine_strain.is_some() || params.refine_fraction.is_some() {
@@ -284,7 +284,7 @@ where
 /// is the one solved. The first way's refusal on coarse cells is final, so that the other way
 /// is tried at once: the dragon's head bent by a half turn about its neck gives way at 163°
 /// one way round and holds the other, solved in 3 s instead of 12 s when the cells
-/// themselves had to give way first.
+/// themselves had to give way first. `fits`: what a forecast found of the stages, or none.
 #[allow(clippy::type_complexity)]
 fn from_rest_either_way<const D: usize>(
     complex: &CellComplex<D>,
@@ -292,6 +292,7 @@ fn from_rest_either_way<const D: usize>(
     params: &SolveParams,
     budget: Budget,
     observer: &dyn Observer,
+    fits: &[(usize, bool)],
 ) -> Result<(System<D>, Vec<Motion<D>>, SolverInfo)>
 where
     Dim<D>: Rigid<D>,
@@ -310,7 +311,14 @@ where
     }
     let mut stiffened = None;
     loop {
-        match from_rest(complex, constraints, &params, budget, observer, &either_way) {
+        match from_rest(
+            complex,
+            constraints,
+            &params,
+            budget,
+            observer,
+            (&either_way, fits),
+        ) {
             // A soft inside by default gives way: the solid's may hold the turn (tried before
             // the other way round, which is then tried with the solid inside too).
             Err(Error::TurnNotHeld(r)) if params.soft_inside.is_some() => {
@@ -334,7 +342,8 @@ where
 
 /// The solve from rest through its load steps: the sparse system, the motions and what was
 /// done so far. A coarse stage's refusal of the turn of a handle marked in `either_way` is
-/// final ([`coarse::coarse_to_fine`]).
+/// final ([`coarse::coarse_to_fine`]); `fits` is what a forecast found of the stages
+/// ([`SolverInfo::newton_fits`]).
 #[allow(clippy::type_complexity)]
 fn from_rest<const D: usize>(
     complex: &CellComplex<D>,
@@ -342,7 +351,7 @@ fn from_rest<const D: usize>(
     params: &SolveParams,
     budget: Budget,
     observer: &dyn Observer,
-    either_way: &[bool],
+    (either_way, fits): (&[bool], &[(usize, bool)]),
 ) -> Result<(System<D>, Vec<Motion<D>>, SolverInfo)>
 where
     Dim<D>: Rigid<D>,
@@ -359,7 +368,7 @@ where
             params,
             budget,
             observer,
-            either_way,
+            (either_way, fits),
         )?
     {
         return Ok(staged);
@@ -367,6 +376,7 @@ where
     let mut info = SolverInfo {
         cells_initial: complex.len(),
         load_steps: steps,
+        newton_fits: fits.to_vec(),
         ..Default::default()
     };
     let mut motions: Vec<Motion<D>> = complex

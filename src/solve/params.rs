@@ -190,6 +190,8 @@ pub struct SolverInfo {
     /// Gauss-Newton from their start (a strip that converges slowly on its coarse cells
     /// converges more slowly on its finer ones).
     pub newton_sooner: bool,
+    /// What the solve's forecast found of its stages ([`super::forecast::StageFits`]).
+    pub(crate) newton_fits: super::forecast::StageFits,
 }
 
 impl SolverInfo {

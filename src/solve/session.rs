@@ -160,7 +160,7 @@ where
     ) -> Result<(Self, SolverInfo)> {
         let start = Instant::now();
         let (system, motions, mut info) =
-            from_rest_either_way(&complex, &mut constraints, params, budget, observer)?;
+            from_rest_either_way(&complex, &mut constraints, params, budget, observer, &[])?;
         observer.finish();
         info.turns = TurnGauge::new(&complex).turns(&complex, &constraints, &motions);
         let soft = info.inside_stiffened.is_none()

@@ -112,10 +112,18 @@ where
         })
     };
     // Whether Gauss-Newton's system fits the budget, checked before a switch its iterations'
-    // rate did not ask for: where it does not, local-global iterations to the end.
+    // rate did not ask for: where it does not, local-global iterations to the end. The
+    // solve's forecast counted it already for its stages.
+    let known = info
+        .newton_fits
+        .iter()
+        .find(|(cells, _)| *cells == complex.len())
+        .map(|&(_, fits)| fits);
     let fits = |system: &mut System<D>| {
         let fits = system.deferred.as_ref().is_some_and(|(budget, _)| {
-            crate::solve::forecast::newton_fits(complex, constraints, *budget)
+            known.unwrap_or_else(|| {
+                crate::solve::forecast::newton_fits(complex, constraints, *budget)
+            })
         });
         if !fits {
             system.deferred = None;
