@@ -43,7 +43,8 @@ pub fn pair_energy<const D: usize>(
 /// symmetric square root is `L = √α I + γ d̂ d̂ᵀ`, `(√α + γ)² = α + w_i w_j |d|²`. The points
 /// are `μ + L s_k` for the vertices `s_k` of a regular simplex with `Σ s_k = 0` and
 /// `Σ s_k s_kᵀ = (D + 1) I`: four points where the two boxes' Gauss points are sixteen (in
-/// 3D), so a Gauss-Newton assembly does a quarter of the work for the same sums.
+/// 3D), the same sums from a quarter of the evaluations (a Gauss-Newton assembly of the hilly
+/// strip took half its time, BENCHMARKS.md §3).
 pub fn quadrature<const D: usize>(
     ci: &Cell<D>,
     cj: &Cell<D>,
