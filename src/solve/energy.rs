@@ -67,29 +67,22 @@ pub fn quadrature<const D: usize>(
 /// Vertex `k` of the regular simplex of [`quadrature`] in `D` dimensions (`D` is 2 or 3):
 /// `Σ s_k = 0`, `Σ s_k s_kᵀ = (D + 1) I`.
 fn simplex<const D: usize>(k: usize) -> Vect<D> {
+    // The tetrahedron of alternate corners of the cube `[−1, 1]³`; the triangle on the circle
+    // of radius √2 (at 0°, 120° and 240°).
+    const TETRAHEDRON: [[f64; 3]; 4] = [
+        [1.0, 1.0, 1.0],
+        [1.0, -1.0, -1.0],
+        [-1.0, 1.0, -1.0],
+        [-1.0, -1.0, 1.0],
+    ];
+    const TRIANGLE: [[f64; 2]; 3] = [
+        [std::f64::consts::SQRT_2, 0.0],
+        [-std::f64::consts::FRAC_1_SQRT_2, 1.224_744_871_391_589],
+        [-std::f64::consts::FRAC_1_SQRT_2, -1.224_744_871_391_589],
+    ];
     match D {
-        // The tetrahedron of alternate corners of the cube `[−1, 1]³`.
-        3 => {
-            const CORNERS: [[f64; 3]; 4] = [
-                [1.0, 1.0, 1.0],
-                [1.0, -1.0, -1.0],
-                [-1.0, 1.0, -1.0],
-                [-1.0, -1.0, 1.0],
-            ];
-            Vect::<D>::from_fn(|a, _| CORNERS[k][a])
-        }
-        // The triangle on the circle of radius √2.
-        _ => {
-            let angle = k as f64 * 2.0 * std::f64::consts::PI / 3.0;
-            let r = std::f64::consts::SQRT_2;
-            Vect::<D>::from_fn(|a, _| {
-                if a == 0 {
-                    r * angle.cos()
-                } else {
-                    r * angle.sin()
-                }
-            })
-        }
+        3 => Vect::<D>::from_fn(|a, _| TETRAHEDRON[k][a]),
+        _ => Vect::<D>::from_fn(|a, _| TRIANGLE[k][a]),
     }
 }
 
