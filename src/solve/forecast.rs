@@ -567,4 +567,75 @@ mod tests {
         let error = refused.check(tight, &cells_advice()).unwrap_err();
         assert!(error.to_string().contains("--cell-size"), "{error}");
     }
+
+    /// What the forecast says of each stage's Gauss-Newton system (`StageFits`, which a solve
+    /// looks up instead of counting again) is what counting it again says, under a budget it
+    /// fits and one it does not; the stages are the ones `coarse_to_fine` solves, the cells
+    /// themselves last.
+    #[test]
+    fn the_stages_fits_are_counted_as_again() {
+        let pts: Vec<Vect<3>> = (0..40_000)
+            .map(|k| {
+                let (u, v) = (k as f64 * 0.618_034 % 1.0, k as f64 / 40_000.0);
+                Vect::<3>::new(8.0 * u, 2.0 * v, 0.05 * (7.0 * u).sin())
+            })
+            .collect();
+        let params = BuildParams {
+            cell_size: Some(0.05),
+            ..Default::default()
+        };
+        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
+        let n = complex.len();
+        let mut roles = vec![Role::Free; n];
+        for (c, cell) in complex.cells.iter().enumerate() {
+            if cell.center.x < 0.5 {
+                roles[c] = Role::Fixed;
+            }
+        }
+        let constraints = Constraints {
+            roles,
+            handles: vec![],
+            pins: vec![],
+            targets: vec![],
+            stiffness: vec![1.0; n],
+            inside: 1.0,
+            origin: complex.grid.origin,
+            warnings: vec![],
+            trend: Default::default(),
+            trend_kind: crate::spec::Trend::None,
+            shapes: Default::default(),
+        };
+        let solve = SolveParams::default();
+        let levels = coarse::levels(n, &solve);
+        assert!(levels >= 1, "{n} cells");
+        let mut stages: Vec<(CellComplex<3>, Constraints<3>)> = Vec::new();
+        for k in (1..=levels).rev() {
+            let (parents, on_parents) = coarsen_stage(&complex, &constraints, k);
+            let coarser = stages.last().map_or(0, |s| s.0.len());
+            if parents.len() < n && parents.len() > coarser {
+                stages.push((parents, on_parents));
+            }
+        }
+        let (e, _) = forecast_stages(&complex, &constraints, &solve, Budget::default()).unwrap();
+        let mut answers = [false, false];
+        for (k, budget) in [Budget::default(), Budget::bytes(e.bytes / 4)]
+            .into_iter()
+            .enumerate()
+        {
+            let (_, fits) = forecast_stages(&complex, &constraints, &solve, budget).unwrap();
+            let counted: Vec<(usize, bool)> = stages
+                .iter()
+                .map(|(c, k)| (c, k))
+                .chain(std::iter::once((&complex, &constraints)))
+                .map(|(c, k)| (c.len(), newton_fits(c, k, budget)))
+                .collect();
+            assert_eq!(fits, counted);
+            answers[k] = fits.last().unwrap().1;
+        }
+        assert_eq!(
+            answers,
+            [true, false],
+            "one budget fits the cells' system, one does not"
+        );
+    }
 }
