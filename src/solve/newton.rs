@@ -261,7 +261,7 @@ where
         info.iterations += 1;
         info.energies.push(energy);
         let log = IterationLog {
-            method: match newton {
+            method: match cost.newton {
                 true => IterationMethod::Newton,
                 false => IterationMethod::GaussNewton,
             },

@@ -97,6 +97,9 @@ pub struct StepCost {
     pub setup: f64,
     /// The triangular solves, or the preconditioned conjugate gradients.
     pub linear: f64,
+    /// Whether the step kept Newton's exact curvature (it was asked for and left the matrix
+    /// positive definite); else it was a Gauss-Newton step.
+    pub newton: bool,
 }
 
 /// The multilevel path's view of the unknowns: node `k` is the free cell `free_cells[k]`; the
@@ -834,6 +837,7 @@ where
                     settled && mu == 0.0,
                     cost,
                 ) {
+                    cost.newton = newton;
                     return Ok(step);
                 }
                 if newton {
@@ -885,6 +889,7 @@ where
             if let Ok(x) = solved {
                 let step: Vec<f64> = (0..self.n).map(|r| x[(r, 0)]).collect();
                 if step.iter().all(|v| v.is_finite()) {
+                    cost.newton = newton;
                     return Ok(step);
                 }
             }
