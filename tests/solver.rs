@@ -817,6 +817,55 @@ translate = [-2.5, 0.0, 4.0]",
     }
 }
 
+/// A finer stage starts at its parents' minimum carried down, at full load: every one of its
+/// iterations, the first too, takes Newton's curvature (by the factor and by the multilevel
+/// path alike), and it reaches the minimum from rest.
+#[test]
+fn a_finer_stage_takes_newtons_curvature_from_its_first_iteration() {
+    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
+    let complex = cells(&pts, &triangles, 0.125);
+    let constraints = resolved(
+        &complex,
+        &pts,
+        &bar_ends(
+            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }
+translate = [-2.5, 0.0, 4.0]",
+        ),
+    );
+    let energy = |s: &solve::Solution<3>| *s.info.energies.last().unwrap();
+    for method in [solve::Method::Direct, solve::Method::Multilevel] {
+        let run = |coarse_levels| {
+            let params = SolveParams {
+                coarse_levels,
+                method,
+                ..Default::default()
+            };
+            solve_bar(&complex, &constraints, &params).unwrap()
+        };
+        let (rest, staged) = (run(Some(0)), run(Some(1)));
+        let fine: Vec<_> = staged
+            .info
+            .log
+            .iter()
+            .filter(|l| l.cells == complex.len())
+            .collect();
+        assert!(!fine.is_empty(), "{method:?}: {:?}", staged.info.log);
+        assert!(
+            fine.iter()
+                .all(|l| l.method == solve::IterationMethod::Newton),
+            "{method:?}: {fine:?}"
+        );
+        // From rest each load step starts by Gauss-Newton, where the handles jumped.
+        assert_eq!(
+            rest.info.log[0].method,
+            solve::IterationMethod::GaussNewton,
+            "{method:?}"
+        );
+        let (a, b) = (energy(&staged), energy(&rest));
+        assert!((a - b).abs() <= 1e-6 * b, "{method:?}: {a} against {b}");
+    }
+}
+
 /// Merging sibling cells of one role keeps every fine cell's role (a region
 /// ends where it ended), and the adaptive solve splits the strained cells again, meeting the
 /// handle exactly with fewer cells than the uniform complex.

@@ -45,6 +45,17 @@
 //! vegetation scans of BENCHMARKS.md: the fine minimum holds detail the parents could not. Each
 //! fine cell starts from its parent's motion as it is (smoother starts measured saved no
 //! iteration; BENCHMARKS.md §13).
+//!
+//! **Newton from the first iteration.** A finer stage starts at full load, where no handle
+//! jumps, so its first iteration takes Newton's whole curvature, not Gauss-Newton's matrix
+//! ([`SolveParams::newton_at_start`]). Where a bend leaves the pairs' residuals large this is
+//! what the first step needs: the bent plate of BENCHMARKS.md §3 (313k cells, turned 10°) went
+//! from its carried-down start to 96.06 by a Gauss-Newton step and to 87.54 by Newton's (the
+//! minimum 87.17), and the Gauss-Newton step's multilevel hierarchy, refreshed for the Newton
+//! steps after it, missed their curvature (34 conjugate-gradient iterations, then built again):
+//! five iterations and 47 s became four and 34 s. Where the first Gauss-Newton step already
+//! did as well (the 1 km strips, the 10M-point terrain, the paper's models) the iterations
+//! are the same.
 
 use crate::cells::CellComplex;
 use crate::error::{Error, Result};
@@ -264,6 +275,13 @@ where
     let targets = targets_at(constraints, 1.0);
     system.project_positions(complex, constraints, &mut motions, &targets)?;
     observer.stage(&format!("solving {} cells", complex.len()), 1);
+    // The cells start at full load, where their parents' minimum puts them: near their own,
+    // with no handle jumping, so Newton's curvature is taken from the first iteration
+    // ([`SolveParams::newton_at_start`]; the module docs say what it saved).
+    let params = &SolveParams {
+        newton_at_start: true,
+        ..*params
+    };
     let it = minimize_with(
         &mut system,
         complex,

@@ -80,10 +80,12 @@
 //! factorization fails and the step falls back to the term's positive part per cell, which
 //! keeps the matrix positive definite (the multilevel path, whose conjugate gradients then
 //! fail, falls back to plain Gauss-Newton). The first iteration of each load step, which starts
-//! where the handles jumped, uses the positive part alone; a session converging its pose in
-//! place (its release, an idle refinement), whose motions are near the minimum already, takes
-//! the whole term from the first ([`SolveParams::newton_at_start`]: a first Gauss-Newton step there lowered the
-//! energy by less than the tolerance 0.07 cells short of the minimum along a twist). A load step before the last only
+//! where the handles jumped, uses the positive part alone. Motions near the minimum already
+//! take the whole term from the first ([`SolveParams::newton_at_start`]): a session converging
+//! its pose in place (its release, an idle refinement), where a first Gauss-Newton step lowered
+//! the energy by less than the tolerance 0.07 cells short of the minimum along a twist, and
+//! each finer stage of coarse to fine, which starts at its parents' minimum carried down (the
+//! `coarse` module). A load step before the last only
 //! has to bring the motions near the path's minimum (so that the next starts on the right
 //! side of a saddle): it stops at `INTERMEDIATE_TOLERANCE` or after
 //! `INTERMEDIATE_ITERATIONS`. On the tube: 42 iterations and 5.6 s became 11 iterations and

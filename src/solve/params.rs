@@ -57,9 +57,10 @@ pub struct SolveParams {
     /// Gauss-Newton matrix (Newton's method; see the module docs). Default `true`.
     pub newton: bool,
     /// Newton's curvature from a load step's first iteration on (with `newton`): for motions
-    /// already converged near this step's minimum (a session converging its pose in place),
-    /// where a first Gauss-Newton step lowers the energy by less than `tolerance` some
-    /// hundredths of a cell short of the minimum along a long twist. Default `false`.
+    /// already near this step's minimum (a session converging its pose in place, where a first
+    /// Gauss-Newton step lowers the energy by less than `tolerance` some hundredths of a cell
+    /// short of the minimum along a long twist). Default `false`; coarse to fine sets it for
+    /// every finer stage, which starts at its parents' minimum carried down.
     pub newton_at_start: bool,
     /// Local-global iterations with the global step solved by this many subdomains
     /// ([`super::schwarz`]): what a solve spread over processes does. 0 (default): as
