@@ -539,10 +539,14 @@ where
     );
 }
 
-/// The 8-long bar in cells of 0.25, its first 1.0 fixed and its last 1.0 moved by `motion`.
-fn bent_bar(motion: &str) -> (CellComplex<3>, solve::Constraints<3>) {
+/// The end of the bar of [`bent_bar`] bent by −90° about y and moved by (−2.5, 0, 4).
+const BEND: &str = "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }
+translate = [-2.5, 0.0, 4.0]";
+
+/// The 8-long bar in cells of `cell`, its first 1.0 fixed and its last 1.0 moved by `motion`.
+fn bent_bar(motion: &str, cell: f64) -> (CellComplex<3>, solve::Constraints<3>) {
     let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
-    let complex = cells(&pts, &triangles, 0.25);
+    let complex = cells(&pts, &triangles, cell);
     let constraints = resolved(&complex, &pts, &bar_ends(motion));
     (complex, constraints)
 }
@@ -567,9 +571,7 @@ fn solve_bar(
 /// and Gauss-Newton converges only linearly.
 #[test]
 fn newton_reaches_the_gauss_newton_minimum_in_fewer_iterations() {
-    let (complex, constraints) = bent_bar(
-        "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]",
-    );
+    let (complex, constraints) = bent_bar(BEND, 0.25);
     let solved = |newton| {
         let params = SolveParams {
             newton,
@@ -634,9 +636,7 @@ impl schwarz::BlockSolves for Factors {
 /// subdomains with a Gauss-Newton solver are refused.
 #[test]
 fn subdomains_reach_the_minimum_here_and_on_workers() {
-    let (complex, constraints) = bent_bar(
-        "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }\ntranslate = [-2.5, 0.0, 4.0]",
-    );
+    let (complex, constraints) = bent_bar(BEND, 0.25);
     let default = solve_bar(&complex, &constraints, &SolveParams::default()).unwrap();
     let split = SolveParams {
         subdomains: 4,
@@ -708,6 +708,7 @@ fn subdomains_reach_the_minimum_here_and_on_workers() {
 fn the_iteration_log_says_why_each_load_step_stopped() {
     let (complex, constraints) = bent_bar(
         "rotate = { axis = [0.0, 1.0, 0.0], degrees = -60.0 }\ntranslate = [-1.0, 0.0, 2.0]",
+        0.25,
     );
     // Gauss-Newton's: local-global iterations stop by the distance left to move, not by the
     // last one.
@@ -769,16 +770,7 @@ fn the_iteration_log_says_why_each_load_step_stopped() {
 /// rest; the automatic choice takes one stage for a complex of this size (4k cells).
 #[test]
 fn coarse_to_fine_reaches_the_minimum_from_rest_in_fewer_fine_iterations() {
-    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
-    let complex = cells(&pts, &triangles, 0.125);
-    let constraints = resolved(
-        &complex,
-        &pts,
-        &bar_ends(
-            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }
-translate = [-2.5, 0.0, 4.0]",
-        ),
-    );
+    let (complex, constraints) = bent_bar(BEND, 0.125);
     let run = |coarse_levels| {
         let params = SolveParams {
             coarse_levels,
@@ -822,16 +814,7 @@ translate = [-2.5, 0.0, 4.0]",
 /// path alike), and it reaches the minimum from rest.
 #[test]
 fn a_finer_stage_takes_newtons_curvature_from_its_first_iteration() {
-    let (pts, triangles) = bar([8.0, 1.0, 1.0], 12.0);
-    let complex = cells(&pts, &triangles, 0.125);
-    let constraints = resolved(
-        &complex,
-        &pts,
-        &bar_ends(
-            "rotate = { axis = [0.0, 1.0, 0.0], degrees = -90.0 }
-translate = [-2.5, 0.0, 4.0]",
-        ),
-    );
+    let (complex, constraints) = bent_bar(BEND, 0.125);
     let energy = |s: &solve::Solution<3>| *s.info.energies.last().unwrap();
     for method in [solve::Method::Direct, solve::Method::Multilevel] {
         let run = |coarse_levels| {

@@ -34,7 +34,7 @@
 //! Conjugate gradients stop at a relative residual between [`LOOSEST`] and [`TOLERANCE`] of the
 //! right-hand side, as the system's forcing term says (inexact Newton: the first system of a
 //! solve to [`LOOSEST`], each later one as far as the gradient's fall says its step is worth;
-//! `system::forcing`). Gauss-Newton needs a descent direction, and its line search and energy
+//! [`forcing`]). Gauss-Newton needs a descent direction, and its line search and energy
 //! test are unchanged, so it reaches the direct solve's minimum (tested in `tests/solver.rs`;
 //! the levels and the refresh on a lattice plate in this module's tests).
 //!
@@ -100,7 +100,7 @@ const RATIO: f64 = 12.0;
 /// The tightest relative residual conjugate gradients solve to (the forcing term's floor).
 pub(crate) const TOLERANCE: f64 = 1e-4;
 /// The loosest relative residual a Gauss-Newton system is solved to: the first of a solve, and
-/// the forcing term's ceiling after it (`System`'s inexact Newton steps).
+/// the forcing term's ceiling after it ([`forcing`]).
 pub(crate) const LOOSEST: f64 = 1e-2;
 /// Conjugate-gradient iterations at most.
 const MAX_ITERATIONS: usize = 300;
@@ -116,6 +116,23 @@ struct Level {
     lambda: f64,
     /// The prolongation to this level from the next coarser one.
     prolongation: Prolongation,
+}
+
+/// The relative residual to which conjugate gradients solve a Newton system whose gradient has
+/// the norm `gradient`, after one of `previous = (gradient, residual)` (inexact Newton with
+/// Eisenstat and Walker's second forcing term, γ = 0.9 and α = 2): a system is solved only as
+/// far as its step is worth, `0.9 (‖g‖ / ‖g_previous‖)²`, between [`TOLERANCE`] and
+/// [`LOOSEST`], and the first of a solve to [`LOOSEST`]. Far from the minimum the quadratic
+/// model a step solves is itself rough, so a tighter solve there buys nothing; where Newton
+/// converges fast the gradient falls fast, and the solves tighten to [`TOLERANCE`] by the last
+/// steps, which decide where the solve stops (BENCHMARKS.md §3, "Inexact Newton steps").
+pub(crate) fn forcing(gradient: f64, previous: Option<(f64, f64)>) -> f64 {
+    match previous {
+        Some((last, _)) if last > 0.0 => {
+            (0.9 * (gradient / last).powi(2)).clamp(TOLERANCE, LOOSEST)
+        }
+        _ => LOOSEST,
+    }
 }
 
 /// What [`Hierarchy::solve_to`] found: the solution, its conjugate-gradient iterations, and

@@ -1,5 +1,5 @@
 //! Tests of the multilevel hierarchy: its levels, their shape counted on the graph, the
-//! solve and the refresh, the reused coarse analysis, and threads.
+//! solve and the refresh, the reused coarse analysis, threads, and the forcing term.
 
 use super::*;
 
@@ -236,4 +236,16 @@ fn solves_the_same_on_any_number_of_threads() {
             .zip(&three.0)
             .all(|(x, y)| x.to_bits() == y.to_bits())
     );
+}
+
+/// The first system of a solve is solved loosely, later ones as far as the gradient's fall
+/// says (0.9 times its square), never looser than the first nor tighter than the floor.
+#[test]
+fn the_forcing_term_follows_the_gradients_fall() {
+    assert_eq!(forcing(3.0, None), LOOSEST);
+    assert_eq!(forcing(3.0, Some((2.0, LOOSEST))), LOOSEST);
+    let tenth = forcing(0.1, Some((1.0, LOOSEST)));
+    assert!((tenth - 0.009).abs() < 1e-15, "{tenth}");
+    assert_eq!(forcing(1e-3, Some((1.0, 0.009))), TOLERANCE);
+    assert_eq!(forcing(1.0, Some((0.0, LOOSEST))), LOOSEST);
 }

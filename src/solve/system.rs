@@ -117,28 +117,9 @@ struct Multilevel {
     kept: std::sync::Mutex<Option<(Hierarchy, usize)>>,
     /// The coarsest analysis of a hierarchy dropped for its age, for the next one.
     analysis: std::sync::Mutex<Option<CoarseFactor>>,
-    /// The last solved system's gradient norm and relative residual ([`forcing`]).
+    /// The last solved system's gradient norm and relative residual
+    /// ([`forcing`](super::multilevel::forcing)).
     forcing: std::sync::Mutex<Option<(f64, f64)>>,
-}
-
-/// The relative residual to which conjugate gradients solve a Newton system whose gradient has
-/// the norm `gradient`, after one of `previous = (gradient, residual)` (inexact Newton with
-/// Eisenstat and Walker's second forcing term, γ = 0.9 and α = 2): a system is solved only as
-/// far as its step is worth, `0.9 (‖g‖ / ‖g_previous‖)²`, between [`TOLERANCE`] and
-/// [`LOOSEST`], and the first of a solve to [`LOOSEST`]. Far from the minimum the quadratic
-/// model a step solves is itself rough, so a tighter solve there buys nothing; where Newton
-/// converges fast the gradient falls fast, and the solves tighten to [`TOLERANCE`] by the last
-/// steps, which decide where the solve stops (BENCHMARKS.md §3, "Inexact Newton steps").
-///
-/// [`TOLERANCE`]: super::multilevel::TOLERANCE
-fn forcing(gradient: f64, previous: Option<(f64, f64)>) -> f64 {
-    use super::multilevel::{LOOSEST, TOLERANCE};
-    match previous {
-        Some((last, _)) if last > 0.0 => {
-            (0.9 * (gradient / last).powi(2)).clamp(TOLERANCE, LOOSEST)
-        }
-        _ => LOOSEST,
-    }
 }
 
 /// The storage of an iteration: the assembled values (one slot per block entry), the numeric
@@ -560,7 +541,7 @@ where
         let solving = std::time::Instant::now();
         let gradient = rhs.iter().map(|v| v * v).sum::<f64>().sqrt();
         let forced = ml.forcing.lock().unwrap_or_else(|e| e.into_inner());
-        let tolerance = forcing(gradient, *forced);
+        let tolerance = super::multilevel::forcing(gradient, *forced);
         drop(forced);
         let solved = hierarchy.solve_to(&rhs, tolerance);
         cost.linear += solving.elapsed().as_secs_f64();
@@ -1006,22 +987,4 @@ fn past_indices(what: String, advice: &Said) -> Error {
             .then(advice.clone())
             .aside(Said::from(", or ").set(Opt::Solver, "multilevel")),
     )
-}
-
-#[cfg(test)]
-mod forcing_tests {
-    use super::forcing;
-    use crate::solve::multilevel::{LOOSEST, TOLERANCE};
-
-    /// The first system of a solve is solved loosely, later ones as far as the gradient's fall
-    /// says (0.9 times its square), never looser than the first nor tighter than the floor.
-    #[test]
-    fn the_forcing_term_follows_the_gradients_fall() {
-        assert_eq!(forcing(3.0, None), LOOSEST);
-        assert_eq!(forcing(3.0, Some((2.0, LOOSEST))), LOOSEST);
-        let tenth = forcing(0.1, Some((1.0, LOOSEST)));
-        assert!((tenth - 0.009).abs() < 1e-15, "{tenth}");
-        assert_eq!(forcing(1e-3, Some((1.0, 0.009))), TOLERANCE);
-        assert_eq!(forcing(1.0, Some((0.0, LOOSEST))), LOOSEST);
-    }
 }
