@@ -187,6 +187,25 @@ impl<const D: usize> Constraints<D> {
             _ => None,
         }
     }
+
+    /// Constraints that only hold `complex`'s cells in their `roles` (no handles, pins or
+    /// targets; every cell's stiffness 1): what the solver's tests build by hand.
+    #[cfg(test)]
+    pub(crate) fn held(complex: &crate::cells::CellComplex<D>, roles: Vec<Role>) -> Self {
+        Self {
+            stiffness: vec![1.0; roles.len()],
+            roles,
+            handles: vec![],
+            pins: vec![],
+            targets: vec![],
+            inside: 1.0,
+            origin: complex.grid.origin,
+            warnings: vec![],
+            trend: Default::default(),
+            trend_kind: crate::spec::Trend::None,
+            shapes: Default::default(),
+        }
+    }
 }
 
 impl<const D: usize> Constraints<D>

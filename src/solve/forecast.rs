@@ -519,19 +519,7 @@ mod tests {
         let n = complex.len();
         let mut roles = vec![Role::Free; n];
         roles[0] = Role::Fixed;
-        let constraints = Constraints {
-            roles,
-            handles: vec![],
-            pins: vec![],
-            targets: vec![],
-            stiffness: vec![1.0; n],
-            inside: 1.0,
-            origin: complex.grid.origin,
-            warnings: vec![],
-            trend: Default::default(),
-            trend_kind: crate::spec::Trend::None,
-            shapes: Default::default(),
-        };
+        let constraints = Constraints::held(&complex, roles);
         let (counts, uniform) = counts(&complex, &constraints);
         assert!(!uniform && counts.free as usize == n - 1);
         let system = System::new(
@@ -592,19 +580,7 @@ mod tests {
                 roles[c] = Role::Fixed;
             }
         }
-        let constraints = Constraints {
-            roles,
-            handles: vec![],
-            pins: vec![],
-            targets: vec![],
-            stiffness: vec![1.0; n],
-            inside: 1.0,
-            origin: complex.grid.origin,
-            warnings: vec![],
-            trend: Default::default(),
-            trend_kind: crate::spec::Trend::None,
-            shapes: Default::default(),
-        };
+        let constraints = Constraints::held(&complex, roles);
         let solve = SolveParams::default();
         let levels = coarse::levels(n, &solve);
         assert!(levels >= 1, "{n} cells");

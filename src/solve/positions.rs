@@ -280,17 +280,9 @@ mod tests {
             mask: Vect::<3>::repeat(1.0),
         };
         let constraints = Constraints {
-            roles,
-            handles: vec![],
-            pins: vec![],
             targets: vec![target],
             stiffness: (0..n).map(|k| 1.0 + (k % 3) as f64).collect(),
-            inside: 1.0,
-            origin: complex.grid.origin,
-            warnings: vec![],
-            trend: Default::default(),
-            trend_kind: crate::spec::Trend::None,
-            shapes: Default::default(),
+            ..Constraints::held(&complex, roles)
         };
         let mut motions: Vec<Motion<3>> = complex
             .cells

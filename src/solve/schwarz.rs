@@ -524,25 +524,8 @@ mod tests {
                 }
             })
             .collect();
-        let (l, row) = Laplacian::of(&complex, &held(&complex, roles));
+        let (l, row) = Laplacian::of(&complex, &Constraints::held(&complex, roles));
         (l, complex, row)
-    }
-
-    /// Constraints of these roles alone.
-    fn held(complex: &CellComplex<3>, roles: Vec<Role>) -> Constraints<3> {
-        Constraints {
-            stiffness: vec![1.0; roles.len()],
-            roles,
-            handles: vec![],
-            pins: vec![],
-            targets: vec![],
-            inside: 1.0,
-            origin: complex.grid.origin,
-            warnings: vec![],
-            trend: Default::default(),
-            trend_kind: crate::spec::Trend::None,
-            shapes: Default::default(),
-        }
     }
 
     /// The preconditioned solve equals the factored one, and its iterations barely grow from 4
@@ -649,7 +632,7 @@ mod tests {
     fn no_free_cell_leaves_nothing_to_solve() {
         let (_, complex, _) = plate();
         let n = complex.len();
-        let constraints = held(&complex, vec![Role::Fixed; n]);
+        let constraints = Constraints::held(&complex, vec![Role::Fixed; n]);
         let (l, row) = Laplacian::of(&complex, &constraints);
         assert_eq!(l.n, 0);
         assert!(
