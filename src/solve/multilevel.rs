@@ -119,18 +119,16 @@ struct Level {
 }
 
 /// The relative residual to which conjugate gradients solve a Newton system whose gradient has
-/// the norm `gradient`, after one of `previous = (gradient, residual)` (inexact Newton with
+/// the norm `gradient`, after one whose gradient had the norm `previous` (inexact Newton with
 /// Eisenstat and Walker's second forcing term, γ = 0.9 and α = 2): a system is solved only as
 /// far as its step is worth, `0.9 (‖g‖ / ‖g_previous‖)²`, between [`TOLERANCE`] and
 /// [`LOOSEST`], and the first of a solve to [`LOOSEST`]. Far from the minimum the quadratic
 /// model a step solves is itself rough, so a tighter solve there buys nothing; where Newton
 /// converges fast the gradient falls fast, and the solves tighten to [`TOLERANCE`] by the last
 /// steps, which decide where the solve stops (BENCHMARKS.md §3, "Inexact Newton steps").
-pub(crate) fn forcing(gradient: f64, previous: Option<(f64, f64)>) -> f64 {
+pub(crate) fn forcing(gradient: f64, previous: Option<f64>) -> f64 {
     match previous {
-        Some((last, _)) if last > 0.0 => {
-            (0.9 * (gradient / last).powi(2)).clamp(TOLERANCE, LOOSEST)
-        }
+        Some(last) if last > 0.0 => (0.9 * (gradient / last).powi(2)).clamp(TOLERANCE, LOOSEST),
         _ => LOOSEST,
     }
 }

@@ -243,9 +243,9 @@ fn solves_the_same_on_any_number_of_threads() {
 #[test]
 fn the_forcing_term_follows_the_gradients_fall() {
     assert_eq!(forcing(3.0, None), LOOSEST);
-    assert_eq!(forcing(3.0, Some((2.0, LOOSEST))), LOOSEST);
-    let tenth = forcing(0.1, Some((1.0, LOOSEST)));
+    assert_eq!(forcing(3.0, Some(2.0)), LOOSEST);
+    let tenth = forcing(0.1, Some(1.0));
     assert!((tenth - 0.009).abs() < 1e-15, "{tenth}");
-    assert_eq!(forcing(1e-3, Some((1.0, 0.009))), TOLERANCE);
-    assert_eq!(forcing(1.0, Some((0.0, LOOSEST))), LOOSEST);
+    assert_eq!(forcing(1e-3, Some(1.0)), TOLERANCE);
+    assert_eq!(forcing(1.0, Some(0.0)), LOOSEST);
 }

@@ -117,9 +117,8 @@ struct Multilevel {
     kept: std::sync::Mutex<Option<(Hierarchy, usize)>>,
     /// The coarsest analysis of a hierarchy dropped for its age, for the next one.
     analysis: std::sync::Mutex<Option<CoarseFactor>>,
-    /// The last solved system's gradient norm and relative residual
-    /// ([`forcing`](super::multilevel::forcing)).
-    forcing: std::sync::Mutex<Option<(f64, f64)>>,
+    /// The last solved system's gradient norm ([`forcing`](super::multilevel::forcing)).
+    forcing: std::sync::Mutex<Option<f64>>,
 }
 
 /// The storage of an iteration: the assembled values (one slot per block entry), the numeric
@@ -540,9 +539,8 @@ where
         cost.setup += setting_up.elapsed().as_secs_f64();
         let solving = std::time::Instant::now();
         let gradient = rhs.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let forced = ml.forcing.lock().unwrap_or_else(|e| e.into_inner());
-        let tolerance = super::multilevel::forcing(gradient, *forced);
-        drop(forced);
+        let previous = *ml.forcing.lock().unwrap_or_else(|e| e.into_inner());
+        let tolerance = super::multilevel::forcing(gradient, previous);
         let solved = hierarchy.solve_to(&rhs, tolerance);
         cost.linear += solving.elapsed().as_secs_f64();
         let super::multilevel::Solved {
@@ -550,7 +548,7 @@ where
             iterations,
             to_loosest,
         } = solved?;
-        *ml.forcing.lock().unwrap_or_else(|e| e.into_inner()) = Some((gradient, tolerance));
+        *ml.forcing.lock().unwrap_or_else(|e| e.into_inner()) = Some(gradient);
         ml.iterations.store(iterations, Ordering::Relaxed);
         ml.levels.store(hierarchy.depth(), Ordering::Relaxed);
         // Kept for the next step unless it has aged: three times the iterations it first took
