@@ -5,9 +5,15 @@
 //! conjugate gradients preconditioned with a smoothed-aggregation multigrid whose coarse space
 //! is the rigid motions themselves:
 //!
-//! - **Groups.** Cells are grouped by the blocks of a regular grid of twice the finest cell
-//!   size (rest centers); where that merges too little (large interior cells) the step doubles.
-//!   Each further level groups the last one's groups by a grid twice as coarse again.
+//! - **Groups.** Cells are grouped by the blocks of a regular grid (rest centers), from twice
+//!   the finest cell size grown by a quarter a try until the groups hold [`MEMBERS`] cells on
+//!   average, and on (to at most [`MAX_MEMBERS`]) until their level is small enough to factor
+//!   ([`FACTORED`]). Each further level groups the last one's groups by a grid twice as coarse
+//!   again (doubled where that merges too little). Groups of twice the cell size (four cells on
+//!   a terrain one cell thick) made a coarse level that cost more to build and factor than the
+//!   iterations it saved: on the 2.5 m hilly strip 13.9k groups against 5.6k, 1.3–1.4 s of a
+//!   hierarchy against 0.55; on the bent plate they took half the iterations, and that one scene
+//!   is slower by 7 % (BENCHMARKS.md §3, "Groups of eight").
 //! - **Coarse space.** A group moves rigidly: a velocity `(V, Ω)` about its deformed centroid `Z`
 //!   gives each member `ω_i = Ω`, `v_i = V + Ω × (y_i − Z)` (`y_i` the member's deformed center;
 //!   a pinned cell takes only `Ω`). On the first level this tentative prolongation `P₀` is
@@ -56,7 +62,7 @@ use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 use super::blocks::*;
-use crate::rigid::{Dim, MAX_DOF, Rigid, Vect};
+use crate::rigid::{Dim, Rigid, Vect};
 
 /// A system of at most this many nodes is factored directly, without a hierarchy.
 pub(crate) const COARSEST: usize = 2000;
@@ -93,6 +99,13 @@ pub(crate) const LIMITS: Limits = Limits {
     factored: FACTORED,
     work: FACTOR_WORK,
 };
+/// The first level's groups hold this many nodes on average.
+const MEMBERS: f64 = 8.0;
+/// The first level's groups hold at most this many nodes on average where more would be
+/// needed to make their level small enough to factor.
+const MAX_MEMBERS: f64 = 24.0;
+/// The first level's grid grows by this factor a try.
+const GROW: f64 = 1.25;
 /// The Chebyshev smoother's degree.
 const SMOOTH_DEGREE: usize = 2;
 /// The smoother targets the upper `1/RATIO` of the spectrum of `D⁻¹H`.
@@ -189,16 +202,11 @@ impl Hierarchy {
         let mut levels: Vec<Level> = Vec::new();
         let (mut matrix, mut nodes, mut step) = (matrix, nodes, 2.0 * size);
         while !factors(matrix.n, &matrix.edges, matrix.dof, levels.len(), limits) {
-            // Groups of a grid twice as coarse as the last; where that merges too little (large
-            // interior cells), the step doubles again.
-            let (group, count) = loop {
-                let (group, count) = group_by_grid(&nodes.rest, step);
-                if (count as f64) < 0.7 * matrix.n as f64 || step > 1e300 {
-                    break (group, count);
-                }
-                step *= 2.0;
-            };
-            step *= 2.0;
+            let (group, count) = groups(
+                &nodes.rest,
+                &mut step,
+                levels.is_empty().then_some(limits.factored),
+            );
             let coarse = coarse_nodes(&nodes, &group, count);
             let tentative = prolongation::<D>(&nodes, &coarse.deformed, &group);
             let inverse = matrix.block_inverses();
@@ -474,14 +482,11 @@ where
         limits,
     ) {
         let n = rest.len();
-        let (group, count) = loop {
-            let (group, count) = group_by_grid(&rest, step);
-            if (count as f64) < 0.7 * n as f64 || step > 1e300 {
-                break (group, count);
-            }
-            step *= 2.0;
-        };
-        step *= 2.0;
+        let (group, count) = groups(
+            &rest,
+            &mut step,
+            (shape.levels.len() == 1).then_some(limits.factored),
+        );
         let mut sum = vec![(Vect::<D>::zeros(), 0u32); count];
         for (p, &g) in rest.iter().zip(&group) {
             sum[g as usize].0 += p;
@@ -594,6 +599,34 @@ fn smoothed_pattern(n: usize, edges: &[[u32; 2]], group: &[u32]) -> (Vec<u64>, u
     coarse.par_sort_unstable();
     coarse.dedup();
     (coarse, blocks)
+}
+
+/// The groups of a level's nodes at `rest`, and the step of the grid the next level starts
+/// from. The first level's grid (`factored`: [`Limits::factored`]) grows from `step` until its
+/// groups hold [`MEMBERS`] nodes on average, and on until they are few enough to be factored
+/// or hold [`MAX_MEMBERS`]; each further level's doubles until it merges the nodes to at most
+/// 0.7 of them.
+fn groups<const D: usize>(
+    rest: &[Vect<D>],
+    step: &mut f64,
+    first: Option<usize>,
+) -> (Vec<u32>, usize) {
+    let n = rest.len() as f64;
+    loop {
+        let (group, count) = group_by_grid(rest, *step);
+        let enough = match first {
+            Some(factored) => {
+                count as f64 * MEMBERS <= n
+                    && (count <= factored || count as f64 * MAX_MEMBERS <= n)
+            }
+            None => (count as f64) < 0.7 * n,
+        };
+        if enough || *step > 1e300 {
+            *step *= 2.0;
+            return (group, count);
+        }
+        *step *= if first.is_some() { GROW } else { 2.0 };
+    }
 }
 
 /// Groups the points by the cells of a grid of step `step`: the group of every point and the
@@ -746,39 +779,89 @@ fn smoothed(
     let d = a.dof;
     let bb = d * d;
     let omega = 4.0 / (3.0 * lambda);
-    let rows: Vec<Vec<(u32, Block)>> = (0..a.n)
-        .into_par_iter()
-        .map(|i| {
-            let mut row: Vec<(u32, Block)> = Vec::with_capacity(4);
-            let t = |j: usize| &tentative[j * bb..(j + 1) * bb];
-            let dinv = &inverse[i * bb..(i + 1) * bb];
-            // H_ii: D⁻¹ D P₀ = P₀, so the own group gets (1 − ω) P₀ᵢ.
-            let mut own = [0.0; MAX_DOF * MAX_DOF];
-            own[..bb]
-                .iter_mut()
-                .zip(t(i))
-                .for_each(|(o, v)| *o = (1.0 - omega) * v);
-            accumulate(&mut row, group[i], &own);
-            for (j, hij) in a.row(i) {
-                let mut m = matmul(dinv, &matmul(&hij, t(j), d), d);
-                m.iter_mut().for_each(|v| *v *= -omega);
-                accumulate(&mut row, group[j], &m);
+    // The groups fine node `i` reaches, `S(i)`: its own first, then its neighbors' as met.
+    let reach = |i: usize, out: &mut Vec<u32>| {
+        out.clear();
+        out.push(group[i]);
+        for &e in &a.incident[a.start[i] as usize..a.start[i + 1] as usize] {
+            let (k, side) = ((e >> 1) as usize, (e & 1) as usize);
+            let g = group[a.edges[k][1 - side] as usize];
+            if !out.contains(&g) {
+                out.push(g);
             }
-            row
+        }
+    };
+    let counts: Vec<u32> = (0..a.n)
+        .into_par_iter()
+        .map_init(Vec::new, |out, i| {
+            reach(i, out);
+            out.len() as u32
         })
         .collect();
     let mut start = Vec::with_capacity(a.n + 1);
     start.push(0u32);
-    let mut to = Vec::new();
-    let mut blocks = Vec::new();
-    for row in rows {
-        for (g, m) in row {
-            to.push(g);
-            blocks.extend_from_slice(&m[..bb]);
-        }
-        start.push(to.len() as u32);
+    for c in &counts {
+        start.push(start.last().copied().unwrap_or(0) + c);
     }
+    let total = start[a.n] as usize;
+    let mut to = vec![0u32; total];
+    let mut blocks = vec![0.0; total * bb];
+    // Rows in chunks, each chunk writing its own stretch of `to` and `blocks`.
+    let chunk = 2048;
+    let mut pieces = Vec::with_capacity(a.n.div_ceil(chunk));
+    let (mut to_rest, mut blocks_rest) = (&mut to[..], &mut blocks[..]);
+    for c in 0..a.n.div_ceil(chunk) {
+        let (lo, hi) = (c * chunk, ((c + 1) * chunk).min(a.n));
+        let len = (start[hi] - start[lo]) as usize;
+        let (t, rest) = std::mem::take(&mut to_rest).split_at_mut(len);
+        let (b, brest) = std::mem::take(&mut blocks_rest).split_at_mut(len * bb);
+        (to_rest, blocks_rest) = (rest, brest);
+        pieces.push((lo..hi, t, b));
+    }
+    pieces.into_par_iter().for_each(|(rows, to, blocks)| {
+        let t = |j: usize| &tentative[j * bb..(j + 1) * bb];
+        let mut groups = Vec::new();
+        let mut at = 0;
+        for i in rows {
+            reach(i, &mut groups);
+            let row = &mut blocks[at * bb..(at + groups.len()) * bb];
+            to[at..at + groups.len()].copy_from_slice(&groups);
+            // The neighbors' `H_ij P₀_j` summed by group (`P₀_j` is mostly zeros), then
+            // `-ω D⁻¹` once a group: most neighbors share a group.
+            for (j, hij) in a.row(i) {
+                let k = groups.iter().position(|&g| g == group[j]).unwrap_or(0);
+                mul_add_sparse_right(&mut row[k * bb..(k + 1) * bb], &hij, t(j), d);
+            }
+            let dinv = &inverse[i * bb..(i + 1) * bb];
+            for sum in row.chunks_mut(bb) {
+                let mut m = matmul(dinv, sum, d);
+                m.iter_mut().for_each(|v| *v *= -omega);
+                sum.copy_from_slice(&m[..bb]);
+            }
+            // H_ii: D⁻¹ D P₀ = P₀, so the own group gets (1 − ω) P₀ᵢ more.
+            row[..bb]
+                .iter_mut()
+                .zip(t(i))
+                .for_each(|(o, v)| *o += (1.0 - omega) * v);
+            at += groups.len();
+        }
+    });
     Prolongation::new(start, to, blocks, coarse)
+}
+
+/// `out += x y` for `d × d` blocks stored row by row, skipping the zero entries of `y` (a
+/// rigid prolongation block: an identity and a lever's cross product).
+fn mul_add_sparse_right(out: &mut [f64], x: &[f64], y: &[f64], d: usize) {
+    for k in 0..d {
+        for c in 0..d {
+            let v = y[k * d + c];
+            if v != 0.0 {
+                for r in 0..d {
+                    out[r * d + c] += x[r * d + k] * v;
+                }
+            }
+        }
+    }
 }
 
 /// The Galerkin product `Pᵀ H P`.

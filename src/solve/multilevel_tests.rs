@@ -92,7 +92,7 @@ fn residual(a: &BlockMatrix, x: &[f64], b: &[f64]) -> f64 {
 /// and edges on every level, the same smoothed prolongation.
 #[test]
 fn the_shape_counted_on_the_graph_is_the_hierarchys() {
-    let (matrix, nodes) = lattice(96, 24, 1.0);
+    let (matrix, nodes) = lattice(192, 48, 1.0);
     let (rest, edges) = (nodes.rest.clone(), matrix.edges.clone());
     let h = Hierarchy::new(matrix, nodes, 1.0, TEST_LIMITS, None);
     let mut levels: Vec<(usize, usize)> = h
@@ -110,6 +110,35 @@ fn the_shape_counted_on_the_graph_is_the_hierarchys() {
     let mut edges = coarsest.edges.clone();
     edges.sort_unstable();
     assert_eq!(shape.coarsest_edges, edges);
+}
+
+/// The first level's groups hold eight cells on average (a grid of twice the cell size holds
+/// four on a plate one cell thick), and more where that many groups are too many to factor,
+/// up to twenty-four.
+#[test]
+fn the_first_groups_hold_eight_cells_or_more() {
+    let first_groups = |factored: usize| {
+        let (matrix, nodes) = lattice(96, 24, 1.0);
+        let limits = Limits {
+            factored,
+            ..TEST_LIMITS
+        };
+        Hierarchy::new(matrix, nodes, 1.0, limits, None).levels[0]
+            .prolongation
+            .coarse
+    };
+    let n = 96 * 24;
+    let roomy = first_groups(1000);
+    assert!(
+        roomy * 8 <= n && roomy * 16 > n,
+        "{roomy} groups of {n} cells"
+    );
+    let tight = first_groups(60);
+    assert!(
+        tight < roomy,
+        "{tight} groups, {roomy} where more may be factored"
+    );
+    assert!(tight * 24 <= n, "{tight} groups of {n} cells");
 }
 
 /// A coarse level past `factored` nodes (at most four times as many) is factored where its
@@ -152,11 +181,11 @@ fn a_cheap_coarse_level_is_factored_rather_than_coarsened() {
 /// renewed finest one still solve a changed matrix.
 #[test]
 fn deep_hierarchy_solves_and_survives_a_refresh() {
-    let (matrix, nodes) = lattice(96, 24, 1.0);
+    let (matrix, nodes) = lattice(192, 48, 1.0);
     let b: Vec<f64> = (0..matrix.len())
         .map(|i| ((i * 7919) % 13) as f64 - 6.0)
         .collect();
-    let (check, _) = lattice(96, 24, 1.0);
+    let (check, _) = lattice(192, 48, 1.0);
     let mut h = Hierarchy::new(matrix, nodes, 1.0, TEST_LIMITS, None);
     assert!(h.depth() >= 4, "{} levels", h.depth());
     let (x, iterations) = h.solve(&b).unwrap();
@@ -167,8 +196,8 @@ fn deep_hierarchy_solves_and_survives_a_refresh() {
         residual(&check, &x, &b)
     );
 
-    let (changed, _) = lattice(96, 24, 3.0);
-    let (check, _) = lattice(96, 24, 3.0);
+    let (changed, _) = lattice(192, 48, 3.0);
+    let (check, _) = lattice(192, 48, 3.0);
     h.shed_finest();
     h.refresh(changed);
     let (x, again) = h.solve(&b).unwrap();
