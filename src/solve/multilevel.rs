@@ -12,8 +12,9 @@
 //!   again (doubled where that merges too little). Groups of twice the cell size (four cells on
 //!   a terrain one cell thick) made a coarse level that cost more to build and factor than the
 //!   iterations it saved: on the 2.5 m hilly strip 13.9k groups against 5.6k, 1.3–1.4 s of a
-//!   hierarchy against 0.55; on the bent plate they took half the iterations, and that one scene
-//!   is slower by 7 % (BENCHMARKS.md §3, "Groups of eight").
+//!   hierarchy against 0.55. The bent plate is the exception: groups of four take half the
+//!   conjugate-gradient iterations of eight there, and it is 7–15 % slower with eight
+//!   (BENCHMARKS.md §3, "Groups of eight").
 //! - **Coarse space.** A group moves rigidly: a velocity `(V, Ω)` about its deformed centroid `Z`
 //!   gives each member `ω_i = Ω`, `v_i = V + Ω × (y_i − Z)` (`y_i` the member's deformed center;
 //!   a pinned cell takes only `Ω`). On the first level this tentative prolongation `P₀` is
@@ -818,6 +819,8 @@ fn smoothed(
         (to_rest, blocks_rest) = (rest, brest);
         pieces.push((lo..hi, t, b));
     }
+    // Each row's groups are found again here rather than kept from the count above: a short
+    // scan of its neighbors, against a vector a row.
     pieces.into_par_iter().for_each(|(rows, to, blocks)| {
         let t = |j: usize| &tentative[j * bb..(j + 1) * bb];
         let mut groups = Vec::new();
@@ -829,6 +832,7 @@ fn smoothed(
             // The neighbors' `H_ij P₀_j` summed by group (`P₀_j` is mostly zeros), then
             // `-ω D⁻¹` once a group: most neighbors share a group.
             for (j, hij) in a.row(i) {
+                // `reach` put every neighbor's group in the row.
                 let k = groups.iter().position(|&g| g == group[j]).unwrap_or(0);
                 mul_add_sparse_right(&mut row[k * bb..(k + 1) * bb], &hij, t(j), d);
             }
