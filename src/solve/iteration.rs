@@ -34,6 +34,33 @@ pub(crate) fn newton_converged(
         && tail(now.decrease, before.decrease).is_some_and(|d| d <= tolerance)
 }
 
+/// The loosest relative residual at which the linear solve of the step after `now` still
+/// places it within a tenth of `move_tolerance` (finest cells): the step expected from the last
+/// move `m`, solved to `0.1·move_tolerance / (m·r)` of itself. `r` is the rate of the last two
+/// moves where `before` (the iteration before `now`, in the same load step, both full steps)
+/// says it and they contract by at least half — a linear rate, which Newton's outruns near a
+/// minimum — and 1 (the step no longer than the last) otherwise. The step is still taken and
+/// its move measured: the stopping rule reads the move as solved, within a tenth of the
+/// tolerance of the exact step's.
+pub(crate) fn enough_residual(
+    before: Option<&IterationLog>,
+    now: &IterationLog,
+    move_tolerance: f64,
+) -> f64 {
+    let rate = before.map_or(1.0, |before| {
+        let r = now.largest_move / before.largest_move;
+        let contracting = before.load_step == now.load_step
+            && before.step_length == 1.0
+            && now.step_length == 1.0
+            && r < 0.5;
+        if contracting { r } else { 1.0 }
+    });
+    match now.step_length == 1.0 && now.largest_move > 0.0 {
+        true => 0.1 * move_tolerance / (now.largest_move * rate),
+        false => 0.0,
+    }
+}
+
 /// Which kind of iteration an [`IterationLog`] records.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -202,5 +229,36 @@ mod newton_tests {
         assert!(!newton_converged(&gn, &other, 1e-6, 1e-3));
         // A tail over the move tolerance goes on.
         assert!(!newton_converged(&gn, &newton, 1e-6, 1e-5));
+    }
+
+    /// The plate's finest stage (BENCHMARKS.md §3): moves of 0.876 and 0.103 cells, so the next
+    /// step is expected at 0.103 · 0.118 and needs solving only to 1e-4 / 0.0121 of itself.
+    #[test]
+    fn a_step_expected_small_is_solved_as_far_as_the_move_tolerance_needs() {
+        let before = log(IterationMethod::Newton, 5e-3, 0.876);
+        let now = log(IterationMethod::Newton, 2e-5, 0.103);
+        let enough = enough_residual(Some(&before), &now, 1e-3);
+        let expected = 0.103 * (0.103 / 0.876);
+        assert!((enough - 1e-4 / expected).abs() < 1e-12, "{enough}");
+        // Without the rate (a stage's first step, moves that do not contract by half, or
+        // another load step before), the step is expected no longer than the last.
+        assert!((enough_residual(None, &now, 1e-3) - 1e-4 / 0.103).abs() < 1e-15);
+        let slow = log(IterationMethod::Newton, 0.2, 0.15);
+        assert!((enough_residual(Some(&slow), &now, 1e-3) - 1e-4 / 0.103).abs() < 1e-15);
+        let other = IterationLog {
+            load_step: 1,
+            ..before
+        };
+        assert!((enough_residual(Some(&other), &now, 1e-3) - 1e-4 / 0.103).abs() < 1e-15);
+        // A step the line search shortened says nothing of the next one's length.
+        let short = IterationLog {
+            step_length: 0.5,
+            ..now
+        };
+        assert_eq!(enough_residual(Some(&before), &short, 1e-3), 0.0);
+        assert_eq!(
+            enough_residual(None, &log(IterationMethod::Newton, 0.0, 0.0), 1e-3),
+            0.0
+        );
     }
 }

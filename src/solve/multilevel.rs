@@ -139,12 +139,19 @@ struct Level {
 /// [`LOOSEST`], and the first of a solve to [`LOOSEST`]. Far from the minimum the quadratic
 /// model a step solves is itself rough, so a tighter solve there buys nothing; where Newton
 /// converges fast the gradient falls fast, and the solves tighten to [`TOLERANCE`] by the last
-/// steps, which decide where the solve stops (BENCHMARKS.md §3, "Inexact Newton steps").
-pub(crate) fn forcing(gradient: f64, previous: Option<f64>) -> f64 {
-    match previous {
+/// steps (BENCHMARKS.md §3, "Inexact Newton steps").
+///
+/// Those last steps are expected to move the cells by little, and a relative residual only has
+/// to place a step within a fraction of the move tolerance: `enough` (the caller's estimate of
+/// the loosest residual that does, [`super::iteration::enough_residual`]; 0 where it has none)
+/// loosens the forcing term up to [`LOOSEST`]. On the bent plate the step that confirms the
+/// solve has stopped moved 0.001 cells and took 47 iterations at [`TOLERANCE`].
+pub(crate) fn forcing(gradient: f64, previous: Option<f64>, enough: f64) -> f64 {
+    let forcing = match previous {
         Some(last) if last > 0.0 => (0.9 * (gradient / last).powi(2)).clamp(TOLERANCE, LOOSEST),
         _ => LOOSEST,
-    }
+    };
+    forcing.max(enough.min(LOOSEST))
 }
 
 /// What [`Hierarchy::solve_to`] found: the solution, its conjugate-gradient iterations, and

@@ -268,13 +268,17 @@ fn solves_the_same_on_any_number_of_threads() {
 }
 
 /// The first system of a solve is solved loosely, later ones as far as the gradient's fall
-/// says (0.9 times its square), never looser than the first nor tighter than the floor.
+/// says (0.9 times its square), never looser than the first nor tighter than the floor; a step
+/// the caller expects to be small is solved only as far as it asks, up to the loosest.
 #[test]
 fn the_forcing_term_follows_the_gradients_fall() {
-    assert_eq!(forcing(3.0, None), LOOSEST);
-    assert_eq!(forcing(3.0, Some(2.0)), LOOSEST);
-    let tenth = forcing(0.1, Some(1.0));
+    assert_eq!(forcing(3.0, None, 0.0), LOOSEST);
+    assert_eq!(forcing(3.0, Some(2.0), 0.0), LOOSEST);
+    let tenth = forcing(0.1, Some(1.0), 0.0);
     assert!((tenth - 0.009).abs() < 1e-15, "{tenth}");
-    assert_eq!(forcing(1e-3, Some(1.0)), TOLERANCE);
-    assert_eq!(forcing(1.0, Some(0.0)), LOOSEST);
+    assert_eq!(forcing(1e-3, Some(1.0), 0.0), TOLERANCE);
+    assert_eq!(forcing(1.0, Some(0.0), 0.0), LOOSEST);
+    assert_eq!(forcing(1e-3, Some(1.0), 2e-3), 2e-3);
+    assert_eq!(forcing(1e-3, Some(1.0), 0.5), LOOSEST);
+    assert!((forcing(0.1, Some(1.0), 1e-3) - 0.009).abs() < 1e-15);
 }

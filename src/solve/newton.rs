@@ -8,7 +8,7 @@ use std::time::Instant;
 use super::iteration::{self, largest_corner_move};
 use super::local_global::{self, OffBranch};
 use super::steps::{prescribe, targets_at};
-use super::system::System;
+use super::system::{Ask, System};
 use super::{
     Constraints, IterationLog, IterationMethod, Method, Role, SolveParams, SolverInfo, glue_energy,
     system,
@@ -202,8 +202,19 @@ where
         // Newton's curvature once Gauss-Newton has brought the load step near its minimum
         // (or from the start, where it starts there).
         let newton = params.newton && (iterations > 0 || params.newton_at_start);
-        let (delta, cost) =
-            system.step(complex, constraints, motions, &targets_to, newton, settled)?;
+        // How loosely the multilevel path may solve a step expected to move the cells by
+        // little: the last two iterations' moves say how far.
+        let enough = match (iterations, info.log.len()) {
+            (0, _) => 0.0,
+            (1, n) => iteration::enough_residual(None, &info.log[n - 1], params.move_tolerance),
+            (_, n) => iteration::enough_residual(
+                Some(&info.log[n - 2]),
+                &info.log[n - 1],
+                params.move_tolerance,
+            ),
+        };
+        let ask = Ask { settled, enough };
+        let (delta, cost) = system.step(complex, constraints, motions, &targets_to, newton, ask)?;
         info.seconds_factor += t0.elapsed().as_secs_f64();
         let mut linear_iterations = 0;
         if let Some((linear, levels)) = system.multilevel_stats() {

@@ -86,6 +86,17 @@ pub(crate) struct System<const D: usize> {
     deferred: Option<(Budget, Said)>,
 }
 
+/// What the iteration asking for a step knows that the multilevel path can use.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Ask {
+    /// The last step lowered the energy by less than half: the coarse levels built for it may
+    /// be kept ([`super::multilevel`], "Kept between steps").
+    pub settled: bool,
+    /// The loosest relative residual that still solves the step well within the move
+    /// tolerance ([`super::iteration::enough_residual`]); 0 where nothing is known.
+    pub enough: f64,
+}
+
 /// Where one Gauss-Newton step's time went, in seconds (damping retries included).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StepCost {
@@ -439,7 +450,7 @@ where
         motions: &[Motion<D>],
         mu: f64,
         floor: f64,
-        settled: bool,
+        ask: Ask,
         cost: &mut StepCost,
     ) -> Option<Vec<f64>> {
         let assembling = std::time::Instant::now();
@@ -515,7 +526,7 @@ where
         let setting_up = std::time::Instant::now();
         let kept = ml.kept.lock().unwrap_or_else(|e| e.into_inner()).take();
         let (hierarchy, first) = match kept {
-            Some((mut h, first)) if settled => {
+            Some((mut h, first)) if ask.settled => {
                 h.refresh(matrix);
                 (h, Some(first))
             }
@@ -540,7 +551,7 @@ where
         let solving = std::time::Instant::now();
         let gradient = rhs.iter().map(|v| v * v).sum::<f64>().sqrt();
         let previous = *ml.forcing.lock().unwrap_or_else(|e| e.into_inner());
-        let tolerance = super::multilevel::forcing(gradient, previous);
+        let tolerance = super::multilevel::forcing(gradient, previous, ask.enough);
         let solved = hierarchy.solve_to(&rhs, tolerance);
         cost.linear += solving.elapsed().as_secs_f64();
         let super::multilevel::Solved {
@@ -684,7 +695,7 @@ where
         motions: &[Motion<D>],
         targets_to: &[Vect<D>],
         newton: bool,
-        settled: bool,
+        ask: Ask,
     ) -> Result<(Vec<f64>, StepCost)> {
         let cell_part = self.free_cells.len() * Self::CELL_SLOT;
         let mut cost = StepCost::default();
@@ -697,7 +708,7 @@ where
             motions,
             targets_to,
             newton,
-            settled,
+            ask,
             &mut cost,
         );
         self.buffers = buffers;
@@ -714,7 +725,7 @@ where
         motions: &[Motion<D>],
         targets_to: &[Vect<D>],
         newton: bool,
-        settled: bool,
+        ask: Ask,
         cost: &mut StepCost,
     ) -> Result<Vec<f64>> {
         let started = std::time::Instant::now();
@@ -847,7 +858,10 @@ where
                     motions,
                     mu,
                     scale_floor,
-                    settled && mu == 0.0,
+                    Ask {
+                        settled: ask.settled && mu == 0.0,
+                        ..ask
+                    },
                     cost,
                 ) {
                     cost.newton = newton;
