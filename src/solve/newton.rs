@@ -192,6 +192,8 @@ where
     // Whether the last step lowered the energy by less than half: the multilevel path may
     // keep its hierarchy (coarse levels built at motions that have hardly moved since).
     let mut settled = false;
+    // The last Newton step was no descent direction: the next is Gauss-Newton's.
+    let mut newton_failed = false;
     info.converged = false;
     while iterations < params.max_iterations {
         if energy <= floor {
@@ -201,7 +203,7 @@ where
         let t0 = Instant::now();
         // Newton's curvature once Gauss-Newton has brought the load step near its minimum
         // (or from the start, where it starts there).
-        let newton = params.newton && (iterations > 0 || params.newton_at_start);
+        let newton = params.newton && (iterations > 0 || params.newton_at_start) && !newton_failed;
         // How loosely the multilevel path may solve a step expected to move the cells by
         // little: the last two iterations' moves say how far.
         let enough = match (iterations, info.log.len()) {
@@ -258,10 +260,22 @@ where
             }
         }
         let Some((trial, e)) = accepted else {
+            // A Newton step along which the energy rises at once: its matrix was indefinite
+            // and the solve did not say so (the multilevel path's factor of a small level, or
+            // conjugate gradients that met no negative curvature), so the step is no descent
+            // direction and says nothing of a minimum. The iteration is taken again with
+            // Gauss-Newton's matrix, which is positive definite: on the dragon twisted by 360°
+            // at cells of 3 (`--solver multilevel`), six load steps each ended after one such
+            // step, the cells carrying the predictor's twist, and the finest stage untwisted.
+            if cost.newton {
+                newton_failed = true;
+                continue;
+            }
             // No step lowers the energy: a minimum to machine precision.
             info.converged = true;
             break;
         };
+        newton_failed = false;
         let largest_move = largest_corner_move(complex, motions, &trial) / size;
         motions.copy_from_slice(&trial);
         let decrease = energy - e;
