@@ -502,8 +502,11 @@ fn multilevel_solve_reaches_the_direct_minimum() {
     );
 }
 
-/// Solves `spec` on the cells of `pts` directly and by the multilevel path, and checks that both
-/// reach the same energy and that the multilevel path really ran on two levels.
+/// Solves `spec` on the cells of `pts` directly and by the multilevel path, and checks that the
+/// multilevel path reaches the direct minimum or one lower, within a thousandth of it, and
+/// really ran on two levels. Lower: their load steps take different paths, and on the 2D blob
+/// turned 90° the multilevel path ends at 5.4791 where the direct one stops at 5.4815, its last
+/// step lowering the energy by less than the tolerance while moving cells by 0.12.
 fn same_minimum<const D: usize>(pts: &[Vect<D>], triangles: &[[u32; 3]], cell: f64, spec: &str)
 where
     Dim<D>: Rigid<D>,
@@ -534,7 +537,7 @@ where
         "{D}D: {info:?}"
     );
     assert!(
-        (multi - direct).abs() <= 1e-4 * direct,
+        multi <= (1.0 + 1e-4) * direct && multi >= (1.0 - 1e-3) * direct,
         "{D}D: multilevel {multi} vs direct {direct}"
     );
 }
