@@ -34,6 +34,17 @@ pub(crate) fn newton_converged(
         && tail(now.decrease, before.decrease).is_some_and(|d| d <= tolerance)
 }
 
+/// What the iteration asking for a step knows that the multilevel path can use.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Ask {
+    /// The last step lowered the energy by less than half: the coarse levels built for it may
+    /// be kept (`multilevel` module, "Kept between steps").
+    pub settled: bool,
+    /// The loosest relative residual that still solves the step well within the move
+    /// tolerance ([`enough_residual`]); 0 where nothing is known.
+    pub enough: f64,
+}
+
 /// The loosest relative residual at which the linear solve of the step after `now` still
 /// places it within a tenth of `move_tolerance` (finest cells): the step expected from the last
 /// move `m`, solved to `0.1·move_tolerance / (m·r)` of itself. `r` is the rate of the last two

@@ -5,10 +5,10 @@
 
 use std::time::Instant;
 
-use super::iteration::{self, largest_corner_move};
+use super::iteration::{self, Ask, largest_corner_move};
 use super::local_global::{self, OffBranch};
 use super::steps::{prescribe, targets_at};
-use super::system::{Ask, System};
+use super::system::System;
 use super::{
     Constraints, IterationLog, IterationMethod, Method, Role, SolveParams, SolverInfo, glue_energy,
     system,

@@ -35,6 +35,7 @@ use rayon::prelude::*;
 use super::blocks::{BlockMatrix, CoarseFactor};
 use super::constraints::{Constraints, Role};
 use super::energy::quadrature;
+use super::iteration::Ask;
 use super::local_global::Layout;
 use super::multilevel::{Hierarchy, Nodes};
 use super::positions::Positions;
@@ -84,17 +85,6 @@ pub(crate) struct System<const D: usize> {
     /// The budget and advice Gauss-Newton's system is to be set up with, where
     /// [`Method::Auto`] took local-global iterations first.
     deferred: Option<(Budget, Said)>,
-}
-
-/// What the iteration asking for a step knows that the multilevel path can use.
-#[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct Ask {
-    /// The last step lowered the energy by less than half: the coarse levels built for it may
-    /// be kept ([`super::multilevel`], "Kept between steps").
-    pub settled: bool,
-    /// The loosest relative residual that still solves the step well within the move
-    /// tolerance ([`super::iteration::enough_residual`]); 0 where nothing is known.
-    pub enough: f64,
 }
 
 /// Where one Gauss-Newton step's time went, in seconds (damping retries included).
