@@ -79,7 +79,10 @@
 //! quadratically convergent. Where that matrix is indefinite (far from the minimum) its
 //! factorization fails and the step falls back to the term's positive part per cell, which
 //! keeps the matrix positive definite (the multilevel path, whose conjugate gradients then
-//! fail, falls back to plain Gauss-Newton). The first iteration of each load step, which starts
+//! fail, falls back to plain Gauss-Newton). A Newton step along which the energy rises at once
+//! (an indefinite matrix that no solve reported) is taken again with Gauss-Newton's matrix
+//! rather than read as a minimum (BENCHMARKS.md §3, "Newton steps that are no descent
+//! direction"). The first iteration of each load step, which starts
 //! where the handles jumped, uses the positive part alone. Motions near the minimum already
 //! take the whole term from the first ([`SolveParams::newton_at_start`]): a session converging
 //! its pose in place (its release, an idle refinement), where a first Gauss-Newton step lowered
