@@ -46,6 +46,15 @@
 //! fine cell starts from its parent's motion as it is (smoother starts measured saved no
 //! iteration; BENCHMARKS.md §13).
 //!
+//! **A finer stage that loses the turn.** Coarse cells may carry a turn that the cells
+//! themselves do not hold: the dragon's body (`dragon_11k_binary.ply`, fixed below y = −720,
+//! the part above −620 turned about y) twisted by 320° at cells of 3 is held by its 2,318
+//! coarse cells (they give way past 345°), and its 10,245 cells, started there, untwisted to
+//! −40°. A finer stage that ends with a turn more than a quarter turn off the one asked
+//! (`untwisted`) is therefore given up like an unconfirmed refusal: the cells are solved from
+//! rest through the load steps, and hold the turn or refuse it (the dragon: refused past 311°,
+//! where before it was returned untwisted with a warning).
+//!
 //! **Newton from the first iteration.** A finer stage starts at full load, where no handle
 //! jumps, so its first iteration takes Newton's whole curvature, not Gauss-Newton's matrix
 //! ([`SolveParams::newton_at_start`]). Where a bend leaves the pairs' residuals large this is
@@ -65,7 +74,7 @@ use crate::rigid::{Dim, Motion, Rigid};
 use rayon::prelude::*;
 
 use super::system::System;
-use super::turns::TurnRefusal;
+use super::turns::{self, TurnGauge, TurnRefusal};
 use super::{
     Constraints, SolveParams, SolverInfo, cells_advice, coarsen_stage, from_rest, minimize_with,
     prescribe, targets_at, timed,
@@ -160,13 +169,20 @@ where
         }
         let at = (&parents, &on_parents);
         let done = match solved.take() {
-            None => from_rest(at.0, at.1, &stage_params, budget, observer, (&[], fits))
-                .map(|(_, motions, info)| (motions, info)),
+            None => Some(
+                from_rest(at.0, at.1, &stage_params, budget, observer, (&[], fits))
+                    .map(|(_, motions, info)| (motions, info)),
+            ),
             Some((coarse, motions, mut info)) => {
                 let coarse = (&coarse, motions.as_slice());
                 stage(at, coarse, &stage_params, budget, &mut info, observer)
-                    .map(|(_, motions)| (motions, info))
+                    .map(|staged| staged.map(|(_, motions)| (motions, info)))
+                    .transpose()
             }
+        };
+        // A stage that lost a turn its parents carried: the cells are solved from rest.
+        let Some(done) = done else {
+            return Ok(None);
         };
         match done {
             Ok((motions, info)) => solved = Some((parents, motions, info)),
@@ -192,9 +208,11 @@ where
         return Ok(None);
     };
     let at = (complex, constraints);
-    let (system, motions) = stage(at, (&coarse, &motions), params, budget, &mut info, observer)?;
-    info.cells_initial = complex.len();
-    Ok(Some((system, motions, info)))
+    let staged = stage(at, (&coarse, &motions), params, budget, &mut info, observer)?;
+    Ok(staged.map(|(system, motions)| {
+        info.cells_initial = complex.len();
+        (system, motions, info)
+    }))
 }
 
 /// Whether the refusal `r` of the cells of `at` coarsened by `k` levels (`cells` of them) is the
@@ -255,7 +273,8 @@ impl Observer for Checking<'_> {
 
 /// One finer stage: the cells of `at` start at the `coarse` solution carried down
 /// ([`prolong`]; the free cells' positions the optimum for its rotations) and are minimized
-/// at full load. Returns their system and motions; `info` gets the stage's iterations.
+/// at full load. Returns their system and motions, or `None` where they lost a turn their
+/// parents carried ([`untwisted`]); `info` gets the stage's iterations.
 fn stage<const D: usize>(
     (complex, constraints): (&CellComplex<D>, &Constraints<D>),
     coarse: (&CellComplex<D>, &[Motion<D>]),
@@ -263,7 +282,7 @@ fn stage<const D: usize>(
     budget: Budget,
     info: &mut SolverInfo,
     observer: &dyn Observer,
-) -> Result<(System<D>, Vec<Motion<D>>)>
+) -> Result<Option<(System<D>, Vec<Motion<D>>)>>
 where
     Dim<D>: Rigid<D>,
 {
@@ -294,7 +313,29 @@ where
     )?;
     info.iterations_per_step.push(it);
     observer.advance(1);
-    Ok((system, motions))
+    if untwisted(complex, constraints, &motions) {
+        return Ok(None);
+    }
+    Ok(Some((system, motions)))
+}
+
+/// Whether the cells carry some turning handle's turn more than a quarter turn off the turn
+/// asked (`turns::turn_lost` at full load): a finer stage started where its parents carried the
+/// turn and untwisted the short way round, the turn being more than the cells hold.
+fn untwisted<const D: usize>(
+    complex: &CellComplex<D>,
+    constraints: &Constraints<D>,
+    motions: &[Motion<D>],
+) -> bool
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut turning = turns::turning(constraints).peekable();
+    if turning.peek().is_none() {
+        return false;
+    }
+    let gauge = TurnGauge::new(complex);
+    turning.any(|k| turns::turn_lost(&gauge, constraints, motions, k, 1.0))
 }
 
 /// The cell of `coarse`, a coarsening of the complex of `cell`, that holds `cell` (itself or an
@@ -359,6 +400,74 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cells::{BuildParams, build};
+    use crate::rigid::Vect;
+    use crate::solve::resolve;
+    use crate::spec::parse_spec;
+
+    /// A solid block 2 × 1 × 1 in cells of 0.25, the cells below x = 0.3 fixed and those past
+    /// 1.7 turned by `degrees` about the block's axis.
+    fn short_bar(degrees: f64) -> (CellComplex<3>, Constraints<3>) {
+        let pts: Vec<Vect<3>> = (0..=40)
+            .flat_map(|i| (0..=20).flat_map(move |j| (0..=20).map(move |k| (i, j, k))))
+            .map(|(i, j, k)| Vect::<3>::new(i as f64, j as f64, k as f64) * 0.05)
+            .collect();
+        let params = BuildParams {
+            cell_size: Some(0.25),
+            ..Default::default()
+        };
+        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
+        let text = format!(
+            "[[fixed]]\nbox = {{ min = [-1, -1, -1], max = [0.3, 2, 2] }}\n\
+             [[handle]]\nbox = {{ min = [1.7, -1, -1], max = [3, 2, 2] }}\n\
+             rotate = {{ axis = [1, 0, 0], degrees = {degrees} }}\npivot = [2, 0.5, 0.5]\n"
+        );
+        let spec = parse_spec::<3>(&text, ".".as_ref(), "t.toml".as_ref()).unwrap();
+        let constraints = resolve(&complex, &spec, &pts, None).unwrap();
+        (complex, constraints)
+    }
+
+    /// A finer stage that starts where its parents carry a turn the cells cannot hold, and
+    /// untwists, is no solution: the cells are then solved from rest. The same start at a turn
+    /// they hold is.
+    #[test]
+    fn a_finer_stage_that_loses_the_turn_is_given_up() {
+        for (degrees, held) in [(60.0, true), (400.0, false)] {
+            let (complex, constraints) = short_bar(degrees);
+            let (parents, on_parents) = coarsen_stage(&complex, &constraints, 1);
+            assert!(parents.len() < complex.len());
+            // The parents carry the turn evenly along the free span.
+            let origin = on_parents.origin;
+            let motions: Vec<Motion<3>> = parents
+                .cells
+                .iter()
+                .map(|c| {
+                    let along = ((c.center.x + origin.x - 0.3) / 1.4).clamp(0.0, 1.0);
+                    let rot = <Dim<3> as Rigid<3>>::axis_angle(
+                        &Vect::<3>::x(),
+                        (degrees * along).to_radians(),
+                    );
+                    // The point of the block's axis level with the cell.
+                    let on_axis = Vect::<3>::new(c.center.x, 0.5 - origin.y, 0.5 - origin.z);
+                    Motion {
+                        rot,
+                        pos: on_axis + rot * (c.center - on_axis),
+                    }
+                })
+                .collect();
+            let mut info = SolverInfo::default();
+            let staged = stage(
+                (&complex, &constraints),
+                (&parents, &motions),
+                &SolveParams::default(),
+                Budget::default(),
+                &mut info,
+                &crate::progress::Silent,
+            )
+            .unwrap();
+            assert_eq!(staged.is_some(), held, "{degrees}°");
+        }
+    }
 
     #[test]
     fn automatic_levels_follow_the_cells() {
