@@ -51,7 +51,7 @@
 //! the part above −620 turned about y) twisted by 320° at cells of 3 is held by its 2,318
 //! coarse cells (they give way past 345°), and its 10,245 cells, started there, untwisted to
 //! −40°. A finer stage that carries a turn more than a quarter turn off the one asked
-//! (`turns::turn_lost`) is therefore stopped there and given up like an unconfirmed refusal:
+//! (`turns::lost_turn`) is therefore stopped there and given up like an unconfirmed refusal:
 //! the cells are solved from rest through the load steps, and hold the turn or refuse it (the
 //! dragon: refused past 311°, where before it was returned untwisted with a warning).
 //!
@@ -275,7 +275,7 @@ impl Observer for Checking<'_> {
 /// ([`prolong`]; the free cells' positions the optimum for its rotations) and are minimized
 /// at full load. Returns their system and motions, or `None` where they lost a turn their
 /// parents carried (some turning handle's turn carried more than a quarter turn off the turn
-/// asked, `turns::turn_lost` at full load); `info` gets the stage's iterations.
+/// asked, `turns::lost_turn` at full load); `info` gets the stage's iterations.
 fn stage<const D: usize>(
     (complex, constraints): (&CellComplex<D>, &Constraints<D>),
     coarse: (&CellComplex<D>, &[Motion<D>]),
@@ -308,10 +308,10 @@ where
         .next()
         .map(|_| TurnGauge::new(complex));
     let untwisted = |motions: &[Motion<D>]| {
-        gauge.as_ref().is_some_and(|gauge| {
-            turns::turning(constraints)
-                .any(|k| turns::turn_lost(gauge, constraints, motions, k, 1.0))
-        })
+        gauge
+            .as_ref()
+            .and_then(|gauge| turns::lost_turn(gauge, constraints, motions, 1.0))
+            .is_some()
     };
     let it = minimize_watched(
         &mut system,

@@ -466,11 +466,7 @@ where
         };
         let marks = (info.energies.len(), info.step_starts.len(), info.log.len());
         // The turning handle whose turn the cells no longer carry, if any.
-        let lost = |motions: &[Motion<D>]| {
-            turning
-                .iter()
-                .find(|&&k| turns::turn_lost(&gauge, constraints, motions, k, to))
-        };
+        let lost = |motions: &[Motion<D>]| turns::lost_turn(&gauge, constraints, motions, to);
         // The turning handle whose turn the cells carry farthest from the step's.
         let farthest = |motions: &[Motion<D>]| {
             let off = |k: usize| {
@@ -509,7 +505,7 @@ where
             info,
             observer,
         )?;
-        let (lost, jumped) = (lost(motions).map(|&k| (k, f)), jumped(motions));
+        let (lost, jumped) = (lost(motions).map(|k| (k, f)), jumped(motions));
         // A soft inside by default whose step leaves the branch again at half its length is
         // given up for the solid's at once ([`SolveParams::soft_inside`]), not halved down to
         // its smallest step: near where it gives way each try takes tens of iterations.

@@ -332,8 +332,7 @@ where
             return Ok(false);
         };
         let gauge = TurnGauge::new(&self.complex);
-        let lost = super::turns::turning(&self.constraints)
-            .find(|&k| super::turns::turn_lost(&gauge, &self.constraints, &self.motions, k, 1.0));
+        let lost = super::turns::lost_turn(&gauge, &self.constraints, &self.motions, 1.0);
         let Some(k) = lost else {
             return Ok(false);
         };

@@ -277,20 +277,22 @@ impl TurnGauge {
     }
 }
 
-/// Whether the cells carry handle `k`'s turn at load fraction `to` more than a quarter turn off
-/// (`super::BRANCH_JUMP`): the part has left the branch the load path was on.
-pub(crate) fn turn_lost<const D: usize>(
+/// The first turning handle whose turn the cells carry at load fraction `to` more than a
+/// quarter turn off (`super::BRANCH_JUMP`), if any: the part has left the branch the load path
+/// was on.
+pub(crate) fn lost_turn<const D: usize>(
     gauge: &TurnGauge,
     constraints: &Constraints<D>,
     motions: &[Motion<D>],
-    k: usize,
     to: f64,
-) -> bool
+) -> Option<usize>
 where
     Dim<D>: Rigid<D>,
 {
-    gauge.taken(constraints, motions, k).is_some_and(|taken| {
-        (taken - to * constraints.handles[k].motion.turn.1).abs() > super::BRANCH_JUMP
+    turning(constraints).find(|&k| {
+        gauge.taken(constraints, motions, k).is_some_and(|taken| {
+            (taken - to * constraints.handles[k].motion.turn.1).abs() > super::BRANCH_JUMP
+        })
     })
 }
 
