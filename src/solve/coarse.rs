@@ -53,7 +53,7 @@
 //! −40°. A finer stage that carries a turn more than a quarter turn off the one asked
 //! (`turns::lost_turn`) is therefore stopped there and given up like an unconfirmed refusal:
 //! the cells are solved from rest through the load steps, and hold the turn or refuse it (the
-//! dragon: refused past 311°, where before it was returned untwisted with a warning).
+//! dragon: refused past 311°; BENCHMARKS.md, "A finer stage that loses the turn").
 //!
 //! **Newton from the first iteration.** A finer stage starts at full load, where no handle
 //! jumps, so its first iteration takes Newton's whole curvature, not Gauss-Newton's matrix
@@ -131,8 +131,9 @@ pub(super) fn levels(cells: usize, params: &SolveParams) -> u8 {
 /// The solve of `complex` coarse to fine over `levels` coarse stages: the coarsest
 /// ([`coarsen`] by `levels`) from rest through the load steps, each finer one (by one level
 /// fewer, down to `complex` itself) from the last one's motions at full load. `None` where no
-/// coarsening merges a cell, or where a coarse stage gives way to a turn
-/// ([`Error::TurnNotHeld`]) that is not [`confirmed`]: the caller then solves from rest. A
+/// coarsening merges a cell, where a coarse stage gives way to a turn
+/// ([`Error::TurnNotHeld`]) that is not [`confirmed`], or where a finer stage loses a turn its
+/// parents carried ([`stage`]): the caller then solves from rest. A
 /// confirmed refusal, or one of a handle marked in `either_way` (a half turn still to be tried
 /// the other way round), is the error. The returned
 /// [`SolverInfo`] holds every stage's iterations (the load steps are the coarsest's) and
@@ -420,8 +421,9 @@ mod tests {
     }
 
     /// A finer stage that starts where its parents carry a turn the cells cannot hold, and
-    /// untwists, is no solution: the cells are then solved from rest. The same start at a turn
-    /// they hold is.
+    /// untwists, is no solution (`None`: the caller solves the cells from rest), and stops at
+    /// the first iteration that loses the turn. The same start at a turn they hold is a
+    /// solution.
     #[test]
     fn a_finer_stage_that_loses_the_turn_is_given_up() {
         for (degrees, held) in [(60.0, true), (400.0, false)] {
@@ -458,6 +460,42 @@ mod tests {
             )
             .unwrap();
             assert_eq!(staged.is_some(), held, "{degrees}°");
+            if held {
+                continue;
+            }
+            // Unwatched, the same start iterates on to the untwisted minimum.
+            let params = SolveParams {
+                newton_at_start: true,
+                ..Default::default()
+            };
+            let mut start = prolong(&parents, &motions, &complex);
+            let mut system = System::new(
+                &complex,
+                &constraints,
+                &params,
+                Budget::default(),
+                &cells_advice(),
+            )
+            .unwrap();
+            prescribe(&complex, &constraints, &mut start, 1.0);
+            let targets = targets_at(&constraints, 1.0);
+            system
+                .project_positions(&complex, &constraints, &mut start, &targets)
+                .unwrap();
+            let mut whole = SolverInfo::default();
+            let unwatched = super::super::minimize_with(
+                &mut system,
+                &complex,
+                &constraints,
+                &mut start,
+                1.0,
+                &params,
+                &mut whole,
+                &crate::progress::Silent,
+            )
+            .unwrap();
+            let watched = info.iterations_per_step[0];
+            assert!(watched < unwatched, "{watched} of {unwatched} iterations");
         }
     }
 
