@@ -25,7 +25,8 @@
 //! instead of 76 s. A turn that still gives way at the smallest step is refused
 //! ([`Error::TurnNotHeld`], exit 4) rather than returned untwisted; a large complex's coarse
 //! cells refuse it before the cells themselves are solved where the turn asked is far past
-//! what they held (the `coarse` module).
+//! what they held, and a finer stage that loses a turn its coarse cells carried sends the
+//! cells to be solved from rest (the `coarse` module).
 //!
 //! **Half turns.** A bend by a half turn has two answers too: the part bent one way round or
 //! the other, both reaching the handle's pose. Written as `rotate`, the sign says which; a
