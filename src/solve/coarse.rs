@@ -393,10 +393,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cells::{BuildParams, build};
     use crate::rigid::Vect;
-    use crate::solve::resolve;
-    use crate::spec::parse_spec;
 
     /// A solid block 2 × 1 × 1 in cells of 0.25, the cells below x = 0.3 fixed and those past
     /// 1.7 turned by `degrees` about the block's axis.
@@ -405,19 +402,12 @@ mod tests {
             .flat_map(|i| (0..=20).flat_map(move |j| (0..=20).map(move |k| (i, j, k))))
             .map(|(i, j, k)| Vect::<3>::new(i as f64, j as f64, k as f64) * 0.05)
             .collect();
-        let params = BuildParams {
-            cell_size: Some(0.25),
-            ..Default::default()
-        };
-        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
         let text = format!(
             "[[fixed]]\nbox = {{ min = [-1, -1, -1], max = [0.3, 2, 2] }}\n\
              [[handle]]\nbox = {{ min = [1.7, -1, -1], max = [3, 2, 2] }}\n\
              rotate = {{ axis = [1, 0, 0], degrees = {degrees} }}\npivot = [2, 0.5, 0.5]\n"
         );
-        let spec = parse_spec::<3>(&text, ".".as_ref(), "t.toml".as_ref()).unwrap();
-        let constraints = resolve(&complex, &spec, &pts, None).unwrap();
-        (complex, constraints)
+        super::super::turns::tests::edited(&pts, 0.25, &text)
     }
 
     /// A finer stage that starts where its parents carry a turn the cells cannot hold, and

@@ -304,7 +304,7 @@ pub(crate) fn turning<const D: usize>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::cells::{BuildParams, build};
     use crate::memory::Budget;
@@ -318,17 +318,26 @@ mod tests {
         let pts: Vec<Vect<3>> = (0..=240)
             .map(|i| Vect::<3>::new(0.05 * i as f64, 0.1, 0.1))
             .collect();
-        let params = BuildParams {
-            cell_size: Some(0.25),
-            ..Default::default()
-        };
-        let complex = build(&pts, &[], &params, Budget::default()).unwrap().0;
         let text = format!(
             "[[fixed]]\nbox = {{ min = [-1, -1, -1], max = [1, 1, 1] }}\n\
              [[handle]]\nbox = {{ min = [11, -1, -1], max = [13, 1, 1] }}\n{motion}\n"
         );
-        let spec = parse_spec::<3>(&text, ".".as_ref(), "t.toml".as_ref()).unwrap();
-        let constraints = resolve(&complex, &spec, &pts, None).unwrap();
+        edited(&pts, 0.25, &text)
+    }
+
+    /// The cells of size `cell` holding `pts`, and the constraints of the edit spec `text`.
+    pub(in crate::internal::solve) fn edited(
+        pts: &[Vect<3>],
+        cell: f64,
+        text: &str,
+    ) -> (CellComplex<3>, Constraints<3>) {
+        let params = BuildParams {
+            cell_size: Some(cell),
+            ..Default::default()
+        };
+        let complex = build(pts, &[], &params, Budget::default()).unwrap().0;
+        let spec = parse_spec::<3>(text, ".".as_ref(), "t.toml".as_ref()).unwrap();
+        let constraints = resolve(&complex, &spec, pts, None).unwrap();
         (complex, constraints)
     }
 
