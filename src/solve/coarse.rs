@@ -288,13 +288,8 @@ fn stage<const D: usize>(
 where
     Dim<D>: Rigid<D>,
 {
-    let mut motions = prolong(coarse.0, coarse.1, complex);
-    let mut system = timed(&mut info.seconds_symbolic, || {
-        System::new(complex, constraints, params, budget, &cells_advice())
-    })?;
-    prescribe(complex, constraints, &mut motions, 1.0);
-    let targets = targets_at(constraints, 1.0);
-    system.project_positions(complex, constraints, &mut motions, &targets)?;
+    let (mut system, mut motions) =
+        carried_down((complex, constraints), coarse, params, budget, info)?;
     observer.stage(&format!("solving {} cells", complex.len()), 1);
     // The cells start at full load, where their parents' minimum puts them: near their own,
     // with no handle jumping, so Newton's curvature is taken from the first iteration
@@ -329,6 +324,29 @@ where
         return Ok(None);
     }
     Ok(Some((system, motions)))
+}
+
+/// A finer stage's start: the system of the cells of `at`, and their motions carried down from
+/// the `coarse` solution ([`prolong`]) at full load, the free cells' positions the optimum for
+/// their rotations.
+fn carried_down<const D: usize>(
+    (complex, constraints): (&CellComplex<D>, &Constraints<D>),
+    coarse: (&CellComplex<D>, &[Motion<D>]),
+    params: &SolveParams,
+    budget: Budget,
+    info: &mut SolverInfo,
+) -> Result<(System<D>, Vec<Motion<D>>)>
+where
+    Dim<D>: Rigid<D>,
+{
+    let mut motions = prolong(coarse.0, coarse.1, complex);
+    let system = timed(&mut info.seconds_symbolic, || {
+        System::new(complex, constraints, params, budget, &cells_advice())
+    })?;
+    prescribe(complex, constraints, &mut motions, 1.0);
+    let targets = targets_at(constraints, 1.0);
+    system.project_positions(complex, constraints, &mut motions, &targets)?;
+    Ok((system, motions))
 }
 
 /// The cell of `coarse`, a coarsening of the complex of `cell`, that holds `cell` (itself or an
@@ -458,21 +476,15 @@ mod tests {
                 newton_at_start: true,
                 ..Default::default()
             };
-            let mut start = prolong(&parents, &motions, &complex);
-            let mut system = System::new(
-                &complex,
-                &constraints,
+            let mut whole = SolverInfo::default();
+            let (mut system, mut start) = carried_down(
+                (&complex, &constraints),
+                (&parents, &motions),
                 &params,
                 Budget::default(),
-                &cells_advice(),
+                &mut whole,
             )
             .unwrap();
-            prescribe(&complex, &constraints, &mut start, 1.0);
-            let targets = targets_at(&constraints, 1.0);
-            system
-                .project_positions(&complex, &constraints, &mut start, &targets)
-                .unwrap();
-            let mut whole = SolverInfo::default();
             let unwatched = super::super::minimize_with(
                 &mut system,
                 &complex,
