@@ -59,11 +59,14 @@
 //! entries against 49M at 13.7k groups).
 //! Other coarse spaces and cycles measured slower (BENCHMARKS.md §13).
 
+mod smoothing;
+
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 use super::blocks::*;
 use crate::rigid::{Dim, Rigid, Vect};
+use smoothing::{Work, chebyshev, largest_eigenvalue};
 
 /// A system of at most this many nodes is factored directly, without a hierarchy.
 pub(crate) const COARSEST: usize = 2000;
@@ -312,8 +315,10 @@ impl Hierarchy {
             return solved(x, 0, 0);
         }
         let mut to_loosest = None;
+        let mut work = self.work();
         let mut r = b.to_vec();
-        let mut z = self.cycle(0, &r);
+        let mut z = vec![0.0; n];
+        self.cycle(0, &r, &mut z, &mut work);
         let mut p = z.clone();
         let mut rz = par_dot(&r, &z);
         let mut q = vec![0.0; n];
@@ -333,7 +338,7 @@ impl Hierarchy {
             if residual <= tolerance * norm_b || it == MAX_ITERATIONS {
                 return solved(x, it, to_loosest.unwrap_or(it));
             }
-            z = self.cycle(0, &r);
+            self.cycle(0, &r, &mut z, &mut work);
             let rz_new = par_dot(&r, &z);
             let beta = rz_new / rz;
             rz = rz_new;
@@ -344,24 +349,48 @@ impl Hierarchy {
         None
     }
 
-    /// One V-cycle from level `l` for the right-hand side `b`, from a zero guess: smoothing,
-    /// the coarse correction, smoothing.
-    fn cycle(&self, l: usize, b: &[f64]) -> Vec<f64> {
-        let Some(level) = self.levels.get(l) else {
-            return self.coarse_solve(b);
+    /// The buffers of a V-cycle, one set a level: allocated once a solve, not once a cycle (at a
+    /// million cells each is 55 MB, which the kernel would map and zero anew every
+    /// conjugate-gradient iteration).
+    fn work(&self) -> Vec<Work> {
+        self.levels
+            .iter()
+            .map(|level| {
+                let n = level.smoother.len();
+                let coarse = level.prolongation.coarse * level.smoother.dof;
+                Work {
+                    residual: vec![0.0; n],
+                    smoothing: vec![0.0; n],
+                    direction: vec![0.0; n],
+                    product: vec![0.0; n],
+                    preconditioned: vec![0.0; n],
+                    coarse_b: vec![0.0; coarse],
+                    coarse_x: vec![0.0; coarse],
+                }
+            })
+            .collect()
+    }
+
+    /// One V-cycle from level `l` for the right-hand side `b`, from a zero guess, into `x`:
+    /// smoothing, the coarse correction, smoothing. `work`: the buffers of level `l` and on.
+    fn cycle(&self, l: usize, b: &[f64], x: &mut [f64], work: &mut [Work]) {
+        let (Some(level), Some((w, coarser))) = (self.levels.get(l), work.split_first_mut()) else {
+            x.copy_from_slice(&self.coarse_solve(b));
+            return;
         };
         let a = &level.smoother;
         let d = a.dof;
-        let mut x = vec![0.0; b.len()];
-        chebyshev(level, b, &mut x);
-        let mut r = vec![0.0; b.len()];
-        a.mul(&x, &mut r);
-        r.par_iter_mut().zip(b).for_each(|(r, b)| *r = b - *r);
-        let rc = level.prolongation.restrict(&r, d);
-        let xc = self.cycle(l + 1, &rc);
-        level.prolongation.prolong(&xc, &mut x, d);
-        chebyshev(level, b, &mut x);
-        x
+        x.fill(0.0);
+        chebyshev(level, b, x, true, w);
+        a.mul(x, &mut w.residual);
+        w.residual
+            .par_iter_mut()
+            .zip(b)
+            .for_each(|(r, b)| *r = b - *r);
+        level.prolongation.restrict(&w.residual, d, &mut w.coarse_b);
+        self.cycle(l + 1, &w.coarse_b, &mut w.coarse_x, coarser);
+        level.prolongation.prolong(&w.coarse_x, x, d);
+        chebyshev(level, b, x, false, w);
     }
 
     fn coarse_solve(&self, b: &[f64]) -> Vec<f64> {
@@ -369,84 +398,6 @@ impl Hierarchy {
             .as_ref()
             .and_then(|f| f.solve(b))
             .unwrap_or_else(|| vec![0.0; b.len()])
-    }
-}
-
-/// Chebyshev smoothing of `H x = b` from `x` (Saad, Algorithm 12.1, with the block-Jacobi
-/// preconditioner).
-fn chebyshev(level: &Level, b: &[f64], x: &mut [f64]) {
-    let a = &level.smoother;
-    let (hi, lo) = (level.lambda, level.lambda / RATIO);
-    let theta = 0.5 * (hi + lo);
-    let delta = 0.5 * (hi - lo);
-    let sigma = theta / delta;
-    let mut rho = 1.0 / sigma;
-    // From a zero guess (the pre-smoothing of a cycle) the residual is `b` itself.
-    let mut r = b.to_vec();
-    if x.iter().any(|&v| v != 0.0) {
-        let mut hx = vec![0.0; b.len()];
-        a.mul(x, &mut hx);
-        r.iter_mut().zip(&hx).for_each(|(r, hx)| *r -= hx);
-    }
-    let mut d = precondition(a, &level.inverse, &r);
-    d.par_iter_mut().for_each(|v| *v /= theta);
-    let mut ad = vec![0.0; b.len()];
-    for k in 0..SMOOTH_DEGREE {
-        x.par_iter_mut().zip(&d).for_each(|(x, d)| *x += d);
-        if k + 1 == SMOOTH_DEGREE {
-            break;
-        }
-        a.mul(&d, &mut ad);
-        r.par_iter_mut().zip(&ad).for_each(|(r, ad)| *r -= ad);
-        let z = precondition(a, &level.inverse, &r);
-        let rho_next = 1.0 / (2.0 * sigma - rho);
-        let (c1, c2) = (rho_next * rho, 2.0 * rho_next / delta);
-        d.par_iter_mut()
-            .zip(&z)
-            .for_each(|(d, z)| *d = c1 * *d + c2 * z);
-        rho = rho_next;
-    }
-}
-
-/// `D⁻¹ r` with the diagonal blocks' inverses.
-fn precondition<S: Entry>(a: &BlockMatrix<S>, inverse: &[f64], r: &[f64]) -> Vec<f64> {
-    let d = a.dof;
-    let bb = d * d;
-    let mut z = vec![0.0; r.len()];
-    z.par_chunks_mut(d).enumerate().for_each(|(i, zi)| {
-        let m = &inverse[i * bb..(i + 1) * bb];
-        let ri = &r[i * d..(i + 1) * d];
-        for row in 0..d {
-            zi[row] = dot(&m[row * d..(row + 1) * d], ri);
-        }
-    });
-    z
-}
-
-/// The largest eigenvalue of `D⁻¹H` by power iteration, with a 10 % margin.
-fn largest_eigenvalue(a: &BlockMatrix, inverse: &[f64]) -> f64 {
-    let n = a.len();
-    // A fixed, non-smooth start vector (reproducible runs).
-    let mut v: Vec<f64> = (0..n)
-        .map(|i| ((i as u64).wrapping_mul(2654435761) % 1000) as f64 / 1000.0 - 0.5)
-        .collect();
-    let mut hv = vec![0.0; n];
-    let mut lambda = 1.0;
-    for _ in 0..12 {
-        let nv = norm(&v);
-        if nv == 0.0 || !nv.is_finite() {
-            break;
-        }
-        v.iter_mut().for_each(|x| *x /= nv);
-        a.mul(&v, &mut hv);
-        let w = precondition(a, inverse, &hv);
-        lambda = norm(&w);
-        v = w;
-    }
-    if lambda.is_finite() && lambda > 0.0 {
-        1.1 * lambda
-    } else {
-        2.0
     }
 }
 
@@ -733,10 +684,10 @@ impl Prolongation {
         }
     }
 
-    /// `Pᵀ r`, each coarse row summed over its entries in fine node order.
-    fn restrict(&self, r: &[f64], d: usize) -> Vec<f64> {
+    /// `rc = Pᵀ r`, each coarse row summed over its entries in fine node order.
+    fn restrict(&self, r: &[f64], d: usize, rc: &mut [f64]) {
         let bb = d * d;
-        let mut rc = vec![0.0; self.coarse * d];
+        rc.fill(0.0);
         rc.par_chunks_mut(d).enumerate().for_each(|(g, out)| {
             for &[e, i] in &self.entries[self.from[g] as usize..self.from[g + 1] as usize] {
                 let (e, i) = (e as usize, i as usize);
@@ -752,7 +703,6 @@ impl Prolongation {
                 }
             }
         });
-        rc
     }
 
     /// `x += P xc`.
