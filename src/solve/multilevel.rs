@@ -264,14 +264,15 @@ impl Hierarchy {
         }
     }
 
-    /// Frees the finest level's matrix and smoother while the hierarchy waits for
-    /// [`Hierarchy::refresh`] (the next Gauss-Newton step assembles its own).
-    pub fn shed_finest(&mut self) {
-        if let Some(fine) = self.levels.first_mut() {
-            fine.matrix = BlockMatrix::empty(fine.matrix.dof);
-            fine.smoother = BlockMatrix::empty(fine.matrix.dof);
-            fine.inverse = Vec::new();
-        }
+    /// Frees the finest level's smoother while the hierarchy waits for [`Hierarchy::refresh`]
+    /// and hands back its matrix, whose storage the next Gauss-Newton step assembles its own
+    /// into.
+    pub fn shed_finest(&mut self) -> Option<BlockMatrix> {
+        let fine = self.levels.first_mut()?;
+        let dof = fine.matrix.dof;
+        fine.smoother = BlockMatrix::empty(dof);
+        fine.inverse = Vec::new();
+        Some(std::mem::replace(&mut fine.matrix, BlockMatrix::empty(dof)))
     }
 
     /// The coarsest level's analysis, for the next hierarchy of the same cells (its numeric

@@ -120,6 +120,9 @@ struct Multilevel {
     analysis: std::sync::Mutex<Option<CoarseFactor>>,
     /// The last solved system's gradient norm ([`forcing`](super::multilevel::forcing)).
     forcing: std::sync::Mutex<Option<f64>>,
+    /// The last step's matrix, whose storage the next step's is assembled into (2.3 GB at a
+    /// million cells, which the kernel would otherwise map and zero anew every step).
+    spare: std::sync::Mutex<Option<BlockMatrix>>,
 }
 
 /// The storage of an iteration: the assembled values (one slot per block entry), the numeric
@@ -431,6 +434,7 @@ where
             kept: std::sync::Mutex::new(None),
             analysis: std::sync::Mutex::new(None),
             forcing: std::sync::Mutex::new(None),
+            spare: std::sync::Mutex::new(None),
         }
     }
 
@@ -467,8 +471,14 @@ where
                 }
             }
         };
-        let mut blocks = vec![0.0; self.free_cells.len() * bb];
+        let n = self.free_cells.len();
+        let spare = ml.spare.lock().unwrap_or_else(|e| e.into_inner()).take();
+        let (mut blocks, mut edge_blocks) = match spare {
+            Some(m) if m.n == n && m.edges.len() == ml.edges.len() => (m.diag, m.blocks),
+            _ => (vec![0.0; n * bb], vec![0.0; ml.edges.len() * bb]),
+        };
         blocks.par_chunks_mut(bb).enumerate().for_each(|(k, out)| {
+            out.fill(0.0);
             unpack(
                 out,
                 &cell_vals[k * Self::CELL_SLOT..(k + 1) * Self::CELL_SLOT],
@@ -488,7 +498,6 @@ where
                 };
             }
         });
-        let mut edge_blocks = vec![0.0; ml.edges.len() * bb];
         edge_blocks
             .par_chunks_mut(bb)
             .zip(&ml.edge_pairs)
@@ -496,13 +505,7 @@ where
                 let at = p as usize * Self::PAIR_SLOT + 2 * Self::CELL_SLOT;
                 out.copy_from_slice(&pair_vals[at..at + bb]);
             });
-        let matrix = BlockMatrix::new(
-            dof,
-            self.free_cells.len(),
-            blocks,
-            ml.edges.clone(),
-            edge_blocks,
-        );
+        let matrix = BlockMatrix::new(dof, n, blocks, ml.edges.clone(), edge_blocks);
         let nodes = Nodes {
             rest: self
                 .free_cells
@@ -564,9 +567,9 @@ where
         // to the residual every solve reaches ([`LOOSEST`](super::multilevel::LOOSEST)), plus
         // two.
         let first = first.unwrap_or(to_loosest);
+        let mut hierarchy = hierarchy;
+        *ml.spare.lock().unwrap_or_else(|e| e.into_inner()) = hierarchy.shed_finest();
         if to_loosest <= 3 * first + 2 {
-            let mut hierarchy = hierarchy;
-            hierarchy.shed_finest();
             *ml.kept.lock().unwrap_or_else(|e| e.into_inner()) = Some((hierarchy, first));
         } else {
             *ml.analysis.lock().unwrap_or_else(|e| e.into_inner()) = hierarchy.into_coarsest();
