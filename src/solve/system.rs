@@ -47,9 +47,11 @@ use crate::rigid::{Dim, MAX_DOF, Motion, Rigid, Vect};
 use crate::said::{Opt, Said};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+mod buffers;
 mod paths;
 mod terms;
 
+use buffers::Buffers;
 pub(super) use paths::first;
 use terms::{accumulate_curvature, accumulate_diag, positive_part};
 
@@ -123,37 +125,6 @@ struct Multilevel {
     /// The last step's matrix, whose storage the next step's is assembled into (2.3 GB at a
     /// million cells, which the kernel would otherwise map and zero anew every step).
     spare: std::sync::Mutex<Option<BlockMatrix>>,
-}
-
-/// The storage of an iteration: the assembled values (one slot per block entry), the numeric
-/// factor and faer's scratch. Kept with the system: allocating the factor (45 MB at 29k
-/// unknowns) and its scratch anew each iteration faulted its pages in every time, and the step
-/// took 119 ms instead of 87–94.
-struct Buffers {
-    values: Vec<f64>,
-    factor: Vec<f64>,
-    scratch: MemBuffer,
-    /// The matrix's sparsity, moved into each iteration's matrix and taken back from it (a
-    /// clone per iteration held 0.3 GiB more at the peak at 1.14M cells).
-    pattern: Option<SymbolicSparseColMat<u32>>,
-    /// Each pair's gradient and curvature terms for its two cells, summed into the cells'
-    /// after the pairs' parallel pass (0.2 KB a pair, 0.6 GB at a million cells: kept, like the
-    /// values, so that their pages are not mapped and zeroed anew every iteration).
-    pair_grad: Vec<f64>,
-    pair_curv: Vec<[f64; 6]>,
-}
-
-impl Default for Buffers {
-    fn default() -> Self {
-        Self {
-            values: Vec::new(),
-            factor: Vec::new(),
-            scratch: MemBuffer::new(faer::dyn_stack::StackReq::EMPTY),
-            pattern: None,
-            pair_grad: Vec::new(),
-            pair_curv: Vec::new(),
-        }
-    }
 }
 
 /// Entries of a diagonal block's lower triangle, and of a full block, for `DOF` unknowns.
