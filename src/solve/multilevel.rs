@@ -264,9 +264,9 @@ impl Hierarchy {
         }
     }
 
-    /// Frees the finest level's smoother while the hierarchy waits for [`Hierarchy::refresh`]
-    /// and hands back its matrix, whose storage the next Gauss-Newton step assembles its own
-    /// into.
+    /// Frees the finest level's smoother and block inverses while the hierarchy waits for
+    /// [`Hierarchy::refresh`] and hands back its matrix, whose storage the next Gauss-Newton
+    /// step assembles its own into (`None` for a hierarchy that is only its coarsest factor).
     pub fn shed_finest(&mut self) -> Option<BlockMatrix> {
         let fine = self.levels.first_mut()?;
         let dof = fine.matrix.dof;
@@ -350,9 +350,9 @@ impl Hierarchy {
         None
     }
 
-    /// The buffers of a V-cycle, one set a level: allocated once a solve, not once a cycle (at a
-    /// million cells each is 55 MB, which the kernel would map and zero anew every
-    /// conjugate-gradient iteration).
+    /// The buffers of a V-cycle, one set a level, allocated once a solve: each is 55 MB on the
+    /// finest level at the 1.14M cells of BENCHMARKS.md §4, which the kernel would map and zero
+    /// anew if every conjugate-gradient iteration allocated it.
     fn work(&self) -> Vec<Work> {
         self.levels
             .iter()

@@ -205,6 +205,29 @@ fn deep_hierarchy_solves_and_survives_a_refresh() {
     assert!(residual(&check, &x, &b) <= TOLERANCE);
 }
 
+/// The matrix a waiting hierarchy hands back ([`Hierarchy::shed_finest`]), its blocks written
+/// over with the next system's, solves with the same bits as that system assembled anew: what
+/// the Gauss-Newton steps of one minimization assemble into.
+#[test]
+fn a_matrix_assembled_into_the_shed_one_gives_the_same_bits() {
+    let b: Vec<f64> = (0..96 * 24 * 3)
+        .map(|i| ((i * 13) % 11) as f64 - 5.0)
+        .collect();
+    let build = || {
+        let (matrix, nodes) = lattice(96, 24, 1.0);
+        Hierarchy::new(matrix, nodes, 1.0, TEST_LIMITS, None)
+    };
+    let (mut reused, mut fresh) = (build(), build());
+    let (next, _) = lattice(96, 24, 3.0);
+    let mut spare = reused.shed_finest().expect("a level below the coarsest");
+    spare.diag.copy_from_slice(&next.diag);
+    spare.blocks.copy_from_slice(&next.blocks);
+    reused.refresh(spare);
+    fresh.shed_finest();
+    fresh.refresh(next);
+    assert_eq!(reused.solve(&b).unwrap(), fresh.solve(&b).unwrap());
+}
+
 /// A hierarchy built on an earlier one's coarsest analysis (the same groups, other values)
 /// solves with the same bits as one built from nothing; a coarsest level of other edges
 /// is analysed anew.

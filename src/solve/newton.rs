@@ -130,8 +130,27 @@ where
 /// branch (checked after every Gauss-Newton iteration and every few local-global ones): the
 /// load steps then take the step again in halves, and the iterations that would carry the
 /// part over to the other branch — on a short bar twisted past what it holds, 39 of them at
-/// 0.4 s each — are not spent.
+/// 0.4 s each — are not spent. What the system keeps only from one iteration to the next is
+/// freed at the end ([`System::release_spare`]): a session holds its system between poses.
 pub(super) fn minimize_watched<const D: usize>(
+    system: &mut System<D>,
+    at: (&CellComplex<D>, &Constraints<D>),
+    motions: &mut [Motion<D>],
+    f: f64,
+    watch: (&SolveParams, OffBranch<D>),
+    info: &mut SolverInfo,
+    observer: &dyn Observer,
+) -> Result<usize>
+where
+    Dim<D>: Rigid<D>,
+{
+    let result = iterate(system, at, motions, f, watch, info, observer);
+    system.release_spare();
+    result
+}
+
+/// [`minimize_watched`]'s iterations.
+fn iterate<const D: usize>(
     system: &mut System<D>,
     (complex, constraints): (&CellComplex<D>, &Constraints<D>),
     motions: &mut [Motion<D>],

@@ -122,8 +122,9 @@ struct Multilevel {
     analysis: std::sync::Mutex<Option<CoarseFactor>>,
     /// The last solved system's gradient norm ([`forcing`](super::multilevel::forcing)).
     forcing: std::sync::Mutex<Option<f64>>,
-    /// The last step's matrix, whose storage the next step's is assembled into (2.3 GB at a
-    /// million cells, which the kernel would otherwise map and zero anew every step).
+    /// The last step's matrix, whose storage the next step of the same minimization is
+    /// assembled into (288 bytes a block: 2.3 GB at the 1.14M cells of BENCHMARKS.md §4,
+    /// which the kernel would otherwise map and zero anew every step).
     spare: std::sync::Mutex<Option<BlockMatrix>>,
 }
 
@@ -444,6 +445,7 @@ where
         };
         let n = self.free_cells.len();
         let spare = ml.spare.lock().unwrap_or_else(|e| e.into_inner()).take();
+        // A spare of another shape is dropped before the new matrix is allocated.
         let (mut blocks, mut edge_blocks) = match spare {
             Some(m) if m.n == n && m.edges.len() == ml.edges.len() => (m.diag, m.blocks),
             _ => (vec![0.0; n * bb], vec![0.0; ml.edges.len() * bb]),
@@ -551,6 +553,16 @@ where
             step[s.offset..s.offset + s.len].copy_from_slice(&x[k * dof..k * dof + s.len]);
         }
         Some(step)
+    }
+
+    /// Frees what an iteration keeps only for the next one: the pairs' terms and the finest
+    /// multilevel matrix's storage (the values and the kept hierarchy stay).
+    pub fn release_spare(&mut self) {
+        self.buffers.pair_grad = Vec::new();
+        self.buffers.pair_curv = Vec::new();
+        if let Some(ml) = &self.multilevel {
+            *ml.spare.lock().unwrap_or_else(|e| e.into_inner()) = None;
+        }
     }
 
     /// The (row, column) of every value slot, lower triangle; unused slots point at (0, 0) and

@@ -15,8 +15,9 @@ pub(super) struct Buffers {
     /// clone per iteration held 0.3 GiB more at the peak at 1.14M cells).
     pub(super) pattern: Option<SymbolicSparseColMat<u32>>,
     /// Each pair's gradient and curvature terms for its two cells, summed into the cells'
-    /// after the pairs' parallel pass (0.2 KB a pair, 0.6 GB at a million cells: kept, like the
-    /// values, so that their pages are not mapped and zeroed anew every iteration).
+    /// after the pairs' parallel pass (192 bytes a pair: kept from one iteration of a
+    /// minimization to the next, so that their pages are not mapped and zeroed anew every
+    /// iteration).
     pub(super) pair_grad: Vec<f64>,
     pub(super) pair_curv: Vec<[f64; 6]>,
 }
