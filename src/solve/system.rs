@@ -444,11 +444,12 @@ where
             }
         };
         let n = self.free_cells.len();
-        let spare = ml.spare.lock().unwrap_or_else(|e| e.into_inner()).take();
-        // A spare of another shape is dropped before the new matrix is allocated.
+        // A spare of another shape is dropped (by `filter`) before a new matrix is allocated.
+        let spare = (ml.spare.lock().unwrap_or_else(|e| e.into_inner()).take())
+            .filter(|m| m.n == n && m.edges.len() == ml.edges.len());
         let (mut blocks, mut edge_blocks) = match spare {
-            Some(m) if m.n == n && m.edges.len() == ml.edges.len() => (m.diag, m.blocks),
-            _ => (vec![0.0; n * bb], vec![0.0; ml.edges.len() * bb]),
+            Some(m) => (m.diag, m.blocks),
+            None => (vec![0.0; n * bb], vec![0.0; ml.edges.len() * bb]),
         };
         blocks.par_chunks_mut(bb).enumerate().for_each(|(k, out)| {
             out.fill(0.0);
