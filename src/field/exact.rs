@@ -99,12 +99,11 @@
 
 use std::sync::Mutex;
 
-use rustc_hash::FxHashSet;
-
 use super::band::{
     Bands, GROW, Masks, NEIGHBORS, SHAPE_BAND, SIDE, bands, combine, fall, neighbor, profile,
     smooth,
 };
+use super::domain::Margin;
 use super::leaves::Leaves;
 use super::{Deformer, Field, Shape, Warp, normal_like};
 use crate::error::{Error, Result};
@@ -269,9 +268,8 @@ pub struct FieldMap<const D: usize> {
     identity: Vec<bool>,
     leaves: Leaves<D>,
     bands: Bands<D>,
-    /// Margin voxels (of `2^margin_shift` voxels) within the margin of the cells.
-    margin_voxels: FxHashSet<[i64; D]>,
-    margin_shift: u32,
+    /// The voxels (of `2^margin.shift` voxels) within the margin of the cells.
+    margin: Margin<D>,
     /// The cells' bounding box (local).
     bounds: (Vect<D>, Vect<D>),
     outside: Outside,
@@ -394,7 +392,7 @@ where
             .collect();
         let bands = bands(&leaves, &whole_cells);
         let shapes = prescribed.shapes.clone();
-        let (margin_voxels, margin_shift) = super::domain::margin(&leaves, margin_shift);
+        let margin = Margin::new(&leaves, margin_shift);
         Ok(Self {
             inner,
             origin: field.origin,
@@ -406,8 +404,7 @@ where
             identity,
             leaves,
             bands,
-            margin_voxels,
-            margin_shift,
+            margin,
             bounds,
             outside,
             tally: Mutex::new(OutsideTally::default()),
@@ -423,7 +420,7 @@ where
         Frame {
             lower: self.leaves.lower,
             edge: self.leaves.edge,
-            margin_shift: self.margin_shift,
+            margin_shift: self.margin.shift,
             bounds: self.bounds,
             largest_half: self.halves.iter().cloned().fold(0.0, f64::max),
         }
@@ -457,7 +454,7 @@ where
     /// The margin: samples within this distance of a cell (in each axis) are inside the
     /// field's domain.
     pub fn margin(&self) -> f64 {
-        self.leaves.edge * f64::from(1u32 << self.margin_shift.min(31))
+        self.leaves.edge * f64::from(1u32 << self.margin.shift.min(31))
     }
 
     /// World position of the field's local frame.
@@ -505,9 +502,7 @@ where
                 Some(&m) if m != UNPRESCRIBED => return Class::Exact(m),
                 _ => true,
             },
-            None => self
-                .margin_voxels
-                .contains(&v.map(|c| c >> self.margin_shift)),
+            None => self.margin.contains(&v.map(|c| c >> self.margin.shift)),
         };
         if !among {
             return Class::Outside;
