@@ -34,11 +34,13 @@ pub(crate) fn frame_of<const D: usize>(field: &Field<D>) -> Result<Frame<D>> {
 /// that such a cell lies in.
 ///
 /// It keeps the margin voxels the boundary cells lie in, and a lookup looks for one among the
-/// 3^D around a voxel: a deformation's samples all lie in the cells they made, so lookups are
-/// few, while the grown set would be counted for every field (on a terrain one cell thick,
-/// whose every cell is on the boundary, the 1.14M cells at 2 m grow to 3.6M margin voxels: a
-/// second to count).
+/// 3^D around a voxel (at most 3^D probes, for a sample in no cell within the cells' box; a
+/// transfer looks up each run of samples in one voxel once). A deformation's samples all lie
+/// in the cells they made, so its lookups are few, while the grown set was counted for every
+/// field: on a terrain one cell thick, whose every cell is on the boundary, the 1.14M cells
+/// at 2 m grow to 3.6M margin voxels, 1.4 s to count (BENCHMARKS.md §4).
 pub(super) struct Margin<const D: usize> {
+    /// The margin voxels' size, as a shift of the leaves' voxels.
     pub shift: u32,
     /// The margin voxels the boundary cells lie in (each at most a margin voxel's size).
     seeds: FxHashSet<[i64; D]>,
