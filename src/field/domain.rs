@@ -28,10 +28,10 @@ pub(crate) fn frame_of<const D: usize>(field: &Field<D>) -> Result<Frame<D>> {
     })
 }
 
-/// The margin of a field's cells: the margin voxels' size (as a shift of the voxels), the size
-/// of the largest cell on the complex's outer boundary (a cell with a face that no leaf of its
-/// size or larger covers), and the margin voxels, every one within one voxel of a margin voxel
-/// that such a cell lies in.
+/// The margin of a field's cells: the voxels within which a sample in no cell still counts as
+/// inside. Margin voxels are the size of the largest cell on the complex's outer boundary (a
+/// cell with a face that no leaf of its size or larger covers), and the margin is every margin
+/// voxel within one of a margin voxel that such a cell lies in.
 ///
 /// It keeps the margin voxels the boundary cells lie in, and a lookup looks for one among the
 /// 3^D around a voxel (at most 3^D probes, for a sample in no cell within the cells' box; a
@@ -83,13 +83,14 @@ impl<const D: usize> Margin<D> {
         }
     }
 
-    /// Whether the margin voxel `v` is within the margin: within one voxel of a boundary
-    /// cell's.
-    pub fn contains(&self, v: &[i64; D]) -> bool {
+    /// Whether the leaf voxel `voxel` (of [`Leaves::voxel`]) is within the margin: its margin
+    /// voxel within one of a boundary cell's.
+    pub fn holds(&self, voxel: &[i64; D]) -> bool {
+        let v = voxel.map(|k| k >> self.shift);
         if (0..D).any(|a| v[a] < self.lo[a] || v[a] > self.hi[a]) {
             return false;
         }
-        if self.seeds.contains(v) {
+        if self.seeds.contains(&v) {
             return true;
         }
         let mut found = false;
@@ -155,10 +156,11 @@ mod tests {
                 });
             }
             assert!(grown.len() > 9, "{fixed:?}: {}", grown.len());
-            for x in -8..12 {
-                for y in -8..12 {
-                    let v = [x, y];
-                    assert_eq!(margin.contains(&v), grown.contains(&v), "{fixed:?} {v:?}");
+            for x in -16..24 {
+                for y in -16..24 {
+                    let voxel = [x, y];
+                    let v = voxel.map(|k| k >> margin.shift);
+                    assert_eq!(margin.holds(&voxel), grown.contains(&v), "{fixed:?} {v:?}");
                 }
             }
         }

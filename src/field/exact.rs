@@ -268,7 +268,7 @@ pub struct FieldMap<const D: usize> {
     identity: Vec<bool>,
     leaves: Leaves<D>,
     bands: Bands<D>,
-    /// The voxels (of `2^margin.shift` voxels) within the margin of the cells.
+    /// The voxels within the margin of the cells.
     margin: Margin<D>,
     /// The cells' bounding box (local).
     bounds: (Vect<D>, Vect<D>),
@@ -502,7 +502,7 @@ where
                 Some(&m) if m != UNPRESCRIBED => return Class::Exact(m),
                 _ => true,
             },
-            None => self.margin.contains(&v.map(|c| c >> self.margin.shift)),
+            None => self.margin.holds(v),
         };
         if !among {
             return Class::Outside;
